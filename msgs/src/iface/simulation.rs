@@ -1,0 +1,87 @@
+//! `simulation`: inspect and change the simulated world by model name.
+
+use serde::{Deserialize, Serialize};
+
+use crate::iface::common::Ack;
+use crate::{message, Color, Pose2d};
+
+/// Asks for the pose of model `name`.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct GetPose2d {
+    /// Model name as in the world file.
+    pub name: String,
+}
+message!(GetPose2d, "simulation/get_pose2d@1", req "get_pose2d" -> Pose2dOf);
+
+/// A model's pose.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Pose2dOf {
+    /// Model name.
+    pub name: String,
+    /// World pose.
+    pub pose: Pose2d,
+}
+message!(Pose2dOf, "simulation/pose2d@1");
+
+/// Moves model `name` to `pose`.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct SetPose2d {
+    /// Model name.
+    pub name: String,
+    /// New world pose.
+    pub pose: Pose2d,
+}
+message!(SetPose2d, "simulation/set_pose2d@1", req "set_pose2d" -> Ack);
+
+/// A property value.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum Value {
+    /// A colour (`"color"`).
+    Color(Color),
+    /// A number.
+    Number(f64),
+    /// An integer.
+    Int(i64),
+    /// A string.
+    Text(String),
+}
+
+impl Default for Value {
+    fn default() -> Self {
+        Value::Number(0.0)
+    }
+}
+
+/// Asks for property `prop` of model `name`.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct GetProperty {
+    /// Model name.
+    pub name: String,
+    /// Property name (`"color"`, …).
+    pub prop: String,
+}
+message!(GetProperty, "simulation/get_property@1", req "get_property" -> Property);
+
+/// A model's property.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Property {
+    /// Model name.
+    pub name: String,
+    /// Property name.
+    pub prop: String,
+    /// Its value.
+    pub value: Value,
+}
+message!(Property, "simulation/property@1");
+
+/// Sets property `prop` of model `name`.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct SetProperty {
+    /// Model name.
+    pub name: String,
+    /// Property name.
+    pub prop: String,
+    /// New value.
+    pub value: Value,
+}
+message!(SetProperty, "simulation/set_property@1", req "set_property" -> Ack);

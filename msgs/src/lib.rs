@@ -1,0 +1,49 @@
+//! Troupe's messages: Player's interfaces as typed Rust values.
+//!
+//! - [`addr`]: Player device addresses (`key:host:robot:interface:index`) and
+//!   interface codes;
+//! - [`keys`]: the Zenoh key expressions, the only place keys are spelled;
+//! - [`codec`]: the postcard codec, whose payloads carry a schema tag;
+//! - one module per interface (`position2d`, `laser`, `map`, …) with its data,
+//!   commands and requests, in SI units and radians, with Player's meaning;
+//! - [`decode_any`]: decodes any payload by its tag, for tools like `troupe echo`.
+//!
+//! This crate depends on serde, postcard and thiserror only: never on Zenoh or tokio.
+#![warn(missing_docs)]
+
+pub mod addr;
+pub mod codec;
+pub mod keys;
+
+mod any;
+mod geometry;
+mod iface;
+
+pub use addr::{AddrError, DevAddr, Device, Interface, DEFAULT_ROBOT};
+pub use any::{decode_any, AnyMsg, SCHEMAS};
+pub use codec::{decode, encode, Command, DecodeError, Message, Request, Stamped};
+pub use geometry::{Color, Pose2d, Pose3d, Size2d, Size3d};
+pub use iface::*;
+
+/// Implements [`Message`] (and optionally [`Command`] or [`Request`]) for a type.
+macro_rules! message {
+    ($ty:ty, $schema:literal) => {
+        impl $crate::codec::Message for $ty {
+            const SCHEMA: &'static str = $schema;
+        }
+    };
+    ($ty:ty, $schema:literal, cmd $name:literal) => {
+        $crate::message!($ty, $schema);
+        impl $crate::codec::Command for $ty {
+            const NAME: &'static str = $name;
+        }
+    };
+    ($ty:ty, $schema:literal, req $name:literal -> $reply:ty) => {
+        $crate::message!($ty, $schema);
+        impl $crate::codec::Request for $ty {
+            const NAME: &'static str = $name;
+            type Reply = $reply;
+        }
+    };
+}
+pub(crate) use message;
