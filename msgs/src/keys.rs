@@ -48,6 +48,11 @@ pub fn token(dev: &Device, driver: &str) -> String {
     format!("{}/driver/{driver}", data(dev))
 }
 
+/// Liveliness selector for the token of `dev`, whichever driver provides it.
+pub fn token_any(dev: &Device) -> String {
+    format!("{}/driver/*", data(dev))
+}
+
 /// Liveliness selector for every device token, or those of one robot.
 pub fn tokens(robot: Option<u32>) -> String {
     match robot {

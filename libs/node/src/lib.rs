@@ -1,1 +1,32 @@
-//! placeholder
+//! The runtime every Troupe driver runs on.
+//!
+//! - [`args`]: the Zenoh flags every process shares ([`ZenohArgs`]) and logging;
+//! - [`Section`]: a driver's `.cfg` section (provides, requires, options);
+//! - [`Driver`]: the trait a Player driver implements, with its [`Event`]s;
+//! - [`Ctx`]: what a driver may do inside a hook (publish, subscribe,
+//!   command, request, read the [`Clock`]);
+//! - [`run`]/[`spawn`]: the Zenoh-backed runtime (liveliness per provided
+//!   device, latest-value queryables, request queryables, sim clock, signals);
+//! - [`testing::Harness`]: the same driver, driven by hand without the network.
+//!
+//! Depends on troupe-msgs and Zenoh; never on a node crate.
+#![warn(missing_docs)]
+
+pub mod args;
+mod clock;
+mod ctx;
+mod driver;
+mod error;
+mod inbox;
+mod runtime;
+mod section;
+pub mod testing;
+
+pub use args::{init_logging, Mode, ZenohArgs, DEFAULT_ROUTER};
+pub use clock::Clock;
+pub use ctx::{Ctx, REQUEST_TIMEOUT};
+pub use driver::{Driver, Event, Reply, Request, RequestError, RequestId, Responder, Sample};
+pub use error::{BoxError, NodeError, Result};
+pub use runtime::{run, spawn, NodeConfig, NodeHandle, Stop};
+pub use section::{NoOptions, Section, Slot};
+pub use zenoh;

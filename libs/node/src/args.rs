@@ -1,0 +1,206 @@
+//! The Zenoh flags every `troupe` process shares, and how they become a session.
+
+use std::path::PathBuf;
+
+use clap::{Args, ValueEnum};
+use zenoh::{Config, Session, Wait};
+
+use crate::error::{NodeError, Result};
+
+/// Where a process finds its router when nothing else is said: the embedded
+/// router of `troupe launch`, or `troupe router` on this host.
+pub const DEFAULT_ROUTER: &str = "tcp/127.0.0.1:7447";
+
+/// Zenoh's session modes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Mode {
+    /// Talks to other peers directly and through routers (default).
+    Peer,
+    /// Talks only through the router it connects to.
+    Client,
+    /// Routes for others (what `troupe router` runs).
+    Router,
+}
+
+impl Mode {
+    fn as_str(self) -> &'static str {
+        match self {
+            Mode::Peer => "peer",
+            Mode::Client => "client",
+            Mode::Router => "router",
+        }
+    }
+}
+
+/// Flags shared by every command that opens a Zenoh session.
+#[derive(Debug, Clone, Default, Args)]
+pub struct ZenohArgs {
+    /// Endpoint to connect to (repeatable), e.g. `tcp/10.0.0.2:7447`.
+    /// Default: the local router at tcp/127.0.0.1:7447, unless --zenoh-config says otherwise.
+    #[arg(long, value_name = "ENDPOINT", global = true)]
+    pub connect: Vec<String>,
+
+    /// Endpoint to listen on (repeatable), e.g. `tcp/127.0.0.1:0`.
+    #[arg(long, value_name = "ENDPOINT", global = true)]
+    pub listen: Vec<String>,
+
+    /// Session mode.
+    #[arg(long, value_enum, global = true)]
+    pub mode: Option<Mode>,
+
+    /// Prefix every key with this namespace: isolates a fleet or a test on a shared network.
+    #[arg(long, value_name = "NS", global = true, env = "TROUPE_NAMESPACE")]
+    pub namespace: Option<String>,
+
+    /// A Zenoh JSON5 config file (TLS, authentication, access control…);
+    /// the flags above override it.
+    #[arg(long, value_name = "FILE", global = true)]
+    pub zenoh_config: Option<PathBuf>,
+
+    /// Turn off multicast scouting: find others only through --connect.
+    #[arg(long, global = true)]
+    pub no_multicast: bool,
+}
+
+impl ZenohArgs {
+    /// The Zenoh config these flags describe, in `default_mode` unless --mode says otherwise.
+    ///
+    /// # Errors
+    ///
+    /// [`NodeError::Config`] naming the flag or file that Zenoh rejected.
+    pub fn config(&self, default_mode: Mode) -> Result<Config> {
+        let bad = |what: String| NodeError::config("zenoh", what);
+        let mut c = match &self.zenoh_config {
+            Some(p) => Config::from_file(p)
+                .map_err(|e| bad(format!("--zenoh-config {}: {e}", p.display())))?,
+            None => Config::default(),
+        };
+        let mode = self.mode.unwrap_or(default_mode);
+        let set = |c: &mut Config, key: &str, json: String| {
+            c.insert_json5(key, &json)
+                .map_err(|e| bad(format!("{key} = {json}: {e}")))
+        };
+        set(&mut c, "mode", json_str(mode.as_str()))?;
+        let connect =
+            if self.connect.is_empty() && self.zenoh_config.is_none() && mode != Mode::Router {
+                vec![DEFAULT_ROUTER.to_owned()]
+            } else {
+                self.connect.clone()
+            };
+        if !connect.is_empty() {
+            set(&mut c, "connect/endpoints", json_list(&connect))?;
+        }
+        if !self.listen.is_empty() {
+            set(&mut c, "listen/endpoints", json_list(&self.listen))?;
+        }
+        if self.no_multicast {
+            set(&mut c, "scouting/multicast/enabled", "false".into())?;
+        }
+        if let Some(ns) = &self.namespace {
+            set(&mut c, "namespace", json_str(ns))?;
+        }
+        Ok(c)
+    }
+
+    /// Opens a session in `default_mode` (unless --mode says otherwise).
+    ///
+    /// # Errors
+    ///
+    /// [`NodeError::Zenoh`] when the session cannot be opened (a listen address
+    /// in use, a bad config).
+    pub fn open(&self, default_mode: Mode) -> Result<Session> {
+        let config = self.config(default_mode)?;
+        zenoh::open(config)
+            .wait()
+            .map_err(|e| NodeError::zenoh("opening the session", e))
+    }
+
+    /// The flags to hand a child process so it joins the same network.
+    pub fn to_child_args(&self) -> Vec<String> {
+        let mut v = Vec::new();
+        for e in &self.connect {
+            v.extend(["--connect".to_owned(), e.clone()]);
+        }
+        if let Some(ns) = &self.namespace {
+            v.extend(["--namespace".to_owned(), ns.clone()]);
+        }
+        if let Some(p) = &self.zenoh_config {
+            v.extend(["--zenoh-config".to_owned(), p.display().to_string()]);
+        }
+        if self.no_multicast {
+            v.push("--no-multicast".to_owned());
+        }
+        v
+    }
+}
+
+fn json_str(s: &str) -> String {
+    serde_json::Value::String(s.to_owned()).to_string()
+}
+
+fn json_list(v: &[String]) -> String {
+    serde_json::Value::from(v.to_vec()).to_string()
+}
+
+/// Starts logging to stderr: `filter` (or `RUST_LOG`, or `info`), Zenoh kept quiet.
+pub fn init_logging(filter: Option<&str>) {
+    use tracing_subscriber::EnvFilter;
+    let spec = filter
+        .map(str::to_owned)
+        .or_else(|| std::env::var("RUST_LOG").ok())
+        .unwrap_or_else(|| "info".to_owned());
+    let spec = if spec.contains("zenoh") {
+        spec
+    } else {
+        format!("{spec},zenoh=warn,zenoh_transport=warn,zenoh_link_tcp=warn")
+    };
+    let filter = EnvFilter::try_new(&spec).unwrap_or_else(|_| EnvFilter::new("info"));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .try_init();
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn flags_reach_the_zenoh_config() {
+        let a = ZenohArgs {
+            connect: vec!["tcp/127.0.0.1:9".into()],
+            namespace: Some("t1".into()),
+            no_multicast: true,
+            ..Default::default()
+        };
+        let c = a.config(Mode::Peer).unwrap();
+        assert_eq!(
+            c.get_json("connect/endpoints").unwrap(),
+            r#"["tcp/127.0.0.1:9"]"#
+        );
+        assert_eq!(c.get_json("namespace").unwrap(), r#""t1""#);
+        assert_eq!(c.get_json("scouting/multicast/enabled").unwrap(), "false");
+        let d = ZenohArgs::default().config(Mode::Peer).unwrap();
+        assert_eq!(
+            d.get_json("connect/endpoints").unwrap(),
+            format!("[\"{DEFAULT_ROUTER}\"]")
+        );
+    }
+
+    #[test]
+    fn a_bad_endpoint_or_namespace_names_the_flag() {
+        let a = ZenohArgs {
+            namespace: Some("a/*".into()),
+            ..Default::default()
+        };
+        let e = a.config(Mode::Peer).unwrap_err().to_string();
+        assert!(e.contains("namespace"), "{e}");
+        let a = ZenohArgs {
+            zenoh_config: Some("/nonexistent/z.json5".into()),
+            ..Default::default()
+        };
+        let e = a.config(Mode::Peer).unwrap_err().to_string();
+        assert!(e.contains("/nonexistent/z.json5"), "{e}");
+    }
+}

@@ -1,0 +1,127 @@
+//! [`Ctx`]: a driver's handle on the world during a hook.
+
+use std::time::Duration;
+
+use troupe_msgs::{codec, Command, Device, Message, Request};
+
+use crate::clock::Clock;
+use crate::driver::RequestId;
+use crate::error::{NodeError, Result};
+
+/// How long a request waits for its answer: libplayerc's default.
+pub const REQUEST_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// The transport under a [`Ctx`]: Zenoh in a node, a recorder in the harness.
+pub(crate) trait Bus: Send {
+    fn publish(&mut self, dev: &Device, payload: Vec<u8>) -> Result<()>;
+    fn subscribe(&mut self, dev: &Device) -> Result<()>;
+    fn command(&mut self, dev: &Device, name: &str, payload: Vec<u8>) -> Result<()>;
+    fn request(
+        &mut self,
+        id: RequestId,
+        dev: &Device,
+        name: &str,
+        payload: Vec<u8>,
+        timeout: Duration,
+    ) -> Result<()>;
+}
+
+/// What a driver may do from inside a hook: publish, subscribe, command,
+/// request, read the clock and set its tick.
+pub struct Ctx {
+    driver: &'static str,
+    clock: Clock,
+    bus: Box<dyn Bus>,
+    provided: Vec<Device>,
+    next_id: u64,
+    pub(crate) tick: Option<Duration>,
+}
+
+impl Ctx {
+    pub(crate) fn new(
+        driver: &'static str,
+        clock: Clock,
+        bus: Box<dyn Bus>,
+        provided: Vec<Device>,
+    ) -> Self {
+        Ctx {
+            driver,
+            clock,
+            bus,
+            provided,
+            next_id: 0,
+            tick: None,
+        }
+    }
+
+    /// The node's time in seconds: simulation time under a simulator, else wall time.
+    pub fn now(&self) -> f64 {
+        self.clock.now()
+    }
+
+    /// The node's clock, to hand to code that needs time outside a hook.
+    pub fn clock(&self) -> &Clock {
+        &self.clock
+    }
+
+    /// Publishes `msg` as data of the provided device `dev`, stamped now.
+    ///
+    /// # Errors
+    ///
+    /// [`NodeError::NotProvided`] if `dev` is not in the section's `provides`;
+    /// [`NodeError::Zenoh`] if the sample could not be sent.
+    pub fn publish<M: Message>(&mut self, dev: &Device, msg: &M) -> Result<()> {
+        if !self.provided.contains(dev) {
+            return Err(NodeError::NotProvided {
+                driver: self.driver.to_owned(),
+                device: *dev,
+            });
+        }
+        self.bus.publish(dev, codec::encode(msg, self.clock.now()))
+    }
+
+    /// Delivers `dev`'s data as [`crate::Event::Data`] from now on (and its
+    /// latest sample, if its driver keeps one).
+    ///
+    /// # Errors
+    ///
+    /// [`NodeError::Zenoh`] if the subscription could not be declared.
+    pub fn subscribe(&mut self, dev: &Device) -> Result<()> {
+        self.bus.subscribe(dev)
+    }
+
+    /// Sends command `cmd` to `dev`.
+    ///
+    /// # Errors
+    ///
+    /// [`NodeError::Zenoh`] if it could not be sent.
+    pub fn command<C: Command>(&mut self, dev: &Device, cmd: &C) -> Result<()> {
+        self.bus
+            .command(dev, C::NAME, codec::encode(cmd, self.clock.now()))
+    }
+
+    /// Sends request `req` to `dev`; its answer arrives as [`crate::Event::Reply`]
+    /// with the returned id, within [`REQUEST_TIMEOUT`].
+    ///
+    /// # Errors
+    ///
+    /// [`NodeError::Zenoh`] if it could not be sent.
+    pub fn request<R: Request>(&mut self, dev: &Device, req: &R) -> Result<RequestId> {
+        self.next_id += 1;
+        let id = RequestId(self.next_id);
+        let payload = codec::encode(req, self.clock.now());
+        self.bus
+            .request(id, dev, R::NAME, payload, REQUEST_TIMEOUT)?;
+        Ok(id)
+    }
+
+    /// Delivers [`crate::Event::Tick`] every `period` of the node's clock (`None` stops it).
+    pub fn set_tick(&mut self, period: Option<Duration>) {
+        self.tick = period.filter(|p| !p.is_zero());
+    }
+
+    /// The devices this driver provides.
+    pub fn provided(&self) -> &[Device] {
+        &self.provided
+    }
+}

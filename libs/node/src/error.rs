@@ -1,0 +1,82 @@
+//! The runtime's error type.
+
+use std::time::Duration;
+
+use troupe_msgs::{AddrError, DecodeError, Device};
+
+/// A boxed error from Zenoh or from a driver's own code.
+pub type BoxError = Box<dyn std::error::Error + Send + Sync>;
+
+/// What can go wrong in a node; every variant names the thing at fault.
+#[derive(Debug, thiserror::Error)]
+pub enum NodeError {
+    /// The driver's section or options are wrong; fix the cfg.
+    #[error("configuration of driver `{driver}`: {reason}")]
+    Config {
+        /// The driver.
+        driver: String,
+        /// What is wrong and what is expected.
+        reason: String,
+    },
+    /// Zenoh refused an operation.
+    #[error("zenoh: {what}")]
+    Zenoh {
+        /// What the node was doing.
+        what: String,
+        /// Zenoh's error.
+        #[source]
+        source: BoxError,
+    },
+    /// A required device never came up.
+    #[error("required device {device} did not come up within {waited:?}; is its driver running and connected to the same router?")]
+    RequiresTimeout {
+        /// The device waited for.
+        device: Device,
+        /// How long.
+        waited: Duration,
+    },
+    /// A sample or request payload did not decode.
+    #[error("malformed payload on `{key}`: {source}")]
+    Decode {
+        /// The key it arrived on.
+        key: String,
+        /// Why.
+        #[source]
+        source: DecodeError,
+    },
+    /// A bad device address or key.
+    #[error(transparent)]
+    Addr(#[from] AddrError),
+    /// A driver published on a device its section does not provide.
+    #[error("driver `{driver}` published on {device}, which its section does not provide")]
+    NotProvided {
+        /// The driver.
+        driver: String,
+        /// The device.
+        device: Device,
+    },
+    /// The driver failed; the node stops and the supervisor may restart it.
+    #[error("driver failed: {0}")]
+    Driver(BoxError),
+}
+
+impl NodeError {
+    /// A [`NodeError::Config`] for `driver`.
+    pub fn config(driver: &str, reason: impl Into<String>) -> Self {
+        NodeError::Config {
+            driver: driver.to_owned(),
+            reason: reason.into(),
+        }
+    }
+
+    /// A [`NodeError::Zenoh`] saying what was being done.
+    pub fn zenoh(what: impl Into<String>, source: BoxError) -> Self {
+        NodeError::Zenoh {
+            what: what.into(),
+            source,
+        }
+    }
+}
+
+/// The runtime's result type.
+pub type Result<T, E = NodeError> = std::result::Result<T, E>;

@@ -1,0 +1,641 @@
+//! The node runtime: one driver, one Zenoh session, one event loop.
+//!
+//! Zenoh's callbacks push [`Event`]s into an [`Inbox`]; one thread pops them
+//! and calls the driver's hooks, so drivers are plain synchronous code. The
+//! runtime also declares what the section provides:
+//!
+//! - a publisher on each data key, and a queryable on the same key that
+//!   answers with the latest sample of each message type (late joiners get
+//!   geometry, map info or the last scan at once, as Player gave new
+//!   subscribers the current state);
+//! - a subscriber on `…/cmd/*` and a queryable on `…/req/*` of each device;
+//! - after `setup` succeeds, one liveliness token per device that names the
+//!   driver: what `troupe list` shows.
+
+use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use troupe_msgs::{codec, keys, sim, Device};
+use zenoh::bytes::ZBytes;
+use zenoh::liveliness::LivelinessToken;
+use zenoh::pubsub::{Publisher, Subscriber};
+use zenoh::query::{Query, Queryable};
+use zenoh::{Session, Wait};
+
+use crate::args::{Mode, ZenohArgs};
+use crate::clock::Clock;
+use crate::ctx::{Bus, Ctx};
+use crate::driver::{
+    nack_reason, Driver, Event, Reply, ReplySink, Request, RequestError, RequestId, Responder,
+    Sample,
+};
+use crate::error::{NodeError, Result};
+use crate::inbox::{Inbox, Popped};
+use crate::section::Section;
+
+/// How a node runs, beyond its section.
+#[derive(Debug, Clone)]
+pub struct NodeConfig {
+    /// Follow `sim/clock` instead of wall time.
+    pub sim_time: bool,
+    /// How long to wait for each required device before giving up.
+    pub requires_timeout: Duration,
+}
+
+impl Default for NodeConfig {
+    fn default() -> Self {
+        NodeConfig {
+            sim_time: false,
+            requires_timeout: Duration::from_secs(30),
+        }
+    }
+}
+
+fn z<T>(what: impl FnOnce() -> String) -> impl FnOnce(zenoh::Error) -> NodeError {
+    move |e| NodeError::zenoh(what(), e)
+}
+
+/// Runs driver `D` in this process until SIGINT or SIGTERM.
+///
+/// # Errors
+///
+/// Any error of [`spawn`], or the fatal error that stopped the driver.
+pub fn run<D: Driver>(section: Section, zargs: &ZenohArgs, cfg: &NodeConfig) -> Result<()> {
+    let session = zargs.open(Mode::Peer)?;
+    let stop = Stop::default();
+    install_signal_handlers(stop.clone())?;
+    let handle = spawn::<D>(session.clone(), section, cfg, stop)?;
+    let result = handle.join();
+    session
+        .close()
+        .wait()
+        .map_err(z::<()>(|| "closing the session".into()))?;
+    result
+}
+
+/// A handle that asks a running node to stop.
+#[derive(Clone, Default)]
+pub struct Stop(Arc<Mutex<Option<Arc<Inbox>>>>, Arc<AtomicBool>);
+
+impl Stop {
+    /// Asks the node to stop: it runs `shutdown` and exits its loop.
+    pub fn stop(&self) {
+        self.1.store(true, Ordering::Release);
+        if let Some(inbox) = &*self.0.lock().unwrap_or_else(|p| p.into_inner()) {
+            inbox.shutdown();
+        }
+    }
+
+    fn attach(&self, inbox: Arc<Inbox>) {
+        if self.1.load(Ordering::Acquire) {
+            inbox.shutdown();
+        }
+        *self.0.lock().unwrap_or_else(|p| p.into_inner()) = Some(inbox);
+    }
+}
+
+fn install_signal_handlers(stop: Stop) -> Result<()> {
+    use tokio::signal::unix::{signal, SignalKind};
+    let io =
+        |e: std::io::Error| NodeError::Driver(format!("installing signal handlers: {e}").into());
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(io)?;
+    let (mut term, mut int) = {
+        let _guard = rt.enter();
+        (
+            signal(SignalKind::terminate()).map_err(io)?,
+            signal(SignalKind::interrupt()).map_err(io)?,
+        )
+    };
+    std::thread::Builder::new()
+        .name("signals".into())
+        .spawn(move || {
+            rt.block_on(async {
+                tokio::select! {
+                    _ = term.recv() => tracing::info!("SIGTERM: stopping"),
+                    _ = int.recv() => tracing::info!("SIGINT: stopping"),
+                }
+            });
+            stop.stop();
+        })
+        .map_err(io)?;
+    Ok(())
+}
+
+/// A driver running on its own thread.
+pub struct NodeHandle {
+    thread: JoinHandle<Result<()>>,
+    stop: Stop,
+}
+
+impl NodeHandle {
+    /// Asks the node to stop (as SIGTERM would) and waits for it.
+    ///
+    /// # Errors
+    ///
+    /// The error that stopped the driver, if any.
+    pub fn stop(self) -> Result<()> {
+        self.stop.stop();
+        self.join()
+    }
+
+    /// Waits for the node to stop.
+    ///
+    /// # Errors
+    ///
+    /// The error that stopped the driver, if any.
+    pub fn join(self) -> Result<()> {
+        self.thread
+            .join()
+            .unwrap_or_else(|_| Err(NodeError::Driver("the driver panicked".into())))
+    }
+}
+
+/// Builds driver `D`, waits for its required devices, runs `setup`, announces
+/// its devices and returns with the driver running on its own thread.
+///
+/// # Errors
+///
+/// [`NodeError::Config`] for a bad section, [`NodeError::RequiresTimeout`]
+/// when a required device never appears, or what `setup` returned.
+pub fn spawn<D: Driver>(
+    session: Session,
+    section: Section,
+    cfg: &NodeConfig,
+    stop: Stop,
+) -> Result<NodeHandle> {
+    let driver = build::<D>(&section)?;
+    let inbox = Arc::new(Inbox::default());
+    stop.attach(inbox.clone());
+
+    let ticks = Arc::new(SimTicks::default());
+    let (clock, _clock_sub) = if cfg.sim_time {
+        let clock = Clock::manual(0.0);
+        let sub = sim_clock(&session, clock.clone(), inbox.clone(), ticks.clone())?;
+        (clock, Some(sub))
+    } else {
+        (Clock::wall(), None)
+    };
+
+    for slot in section.required() {
+        wait_live(&session, &slot.device, cfg.requires_timeout)?;
+    }
+
+    let provided: Vec<Device> = section.provided().into_iter().map(|s| s.device).collect();
+    let mut bus = ZenohBus {
+        session: session.clone(),
+        inbox: inbox.clone(),
+        publishers: HashMap::new(),
+        latest: Arc::new(Mutex::new(HashMap::new())),
+        subscribers: Vec::new(),
+        queryables: Vec::new(),
+    };
+    for dev in &provided {
+        bus.provide(dev, &clock, D::NAME)?;
+    }
+    let mut ctx = Ctx::new(D::NAME, clock, Box::new(bus), provided.clone());
+    let thread_session = session.clone();
+    let thread = std::thread::Builder::new()
+        .name(format!("driver {}", D::NAME))
+        .spawn(move || run_loop(driver, &mut ctx, &inbox, &ticks, &thread_session, &provided))
+        .map_err(|e| NodeError::Driver(format!("starting the driver thread: {e}").into()))?;
+    Ok(NodeHandle { thread, stop })
+}
+
+/// Builds the driver from its section, warning about unused options.
+pub(crate) fn build<D: Driver>(section: &Section) -> Result<D> {
+    if section.name != D::NAME {
+        return Err(NodeError::config(
+            D::NAME,
+            format!("section is for driver `{}`", section.name),
+        ));
+    }
+    let (options, unused) = section.options::<D::Options>()?;
+    for o in unused {
+        tracing::warn!(
+            driver = D::NAME,
+            "option `{o}` is not used by driver `{}`",
+            D::NAME
+        );
+    }
+    tracing::debug!(driver = D::NAME, ?options, "options");
+    D::new(section, options)
+}
+
+fn run_loop<D: Driver>(
+    mut driver: D,
+    ctx: &mut Ctx,
+    inbox: &Inbox,
+    ticks: &SimTicks,
+    session: &Session,
+    provided: &[Device],
+) -> Result<()> {
+    driver.setup(ctx)?;
+    let mut tokens: Vec<LivelinessToken> = Vec::new();
+    for dev in provided {
+        let key = keys::token(dev, D::NAME);
+        let token = session
+            .liveliness()
+            .declare_token(&key)
+            .wait()
+            .map_err(z::<()>(|| format!("declaring liveliness {key}")))?;
+        tokens.push(token);
+    }
+    tracing::info!(
+        driver = D::NAME,
+        "ready: provides {}",
+        provided
+            .iter()
+            .map(ToString::to_string)
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+
+    let mut stats = Stats::default();
+    let mut next_tick: Option<Instant> = None;
+    let result = loop {
+        let sim = ctx.clock().is_manual();
+        ticks.set_period(if sim { ctx.tick } else { None });
+        next_tick = match (ctx.tick, next_tick) {
+            (Some(p), None) if !sim => Some(Instant::now() + p),
+            (Some(_), t) if !sim => t,
+            _ => None,
+        };
+        let event = match inbox.pop(next_tick) {
+            Popped::Shutdown => break Ok(()),
+            Popped::Timeout => {
+                if let (Some(p), Some(t)) = (ctx.tick, next_tick) {
+                    // Keep the phase; skip ticks missed while a hook ran long.
+                    let mut n = t + p;
+                    while n <= Instant::now() {
+                        n += p;
+                    }
+                    next_tick = Some(n);
+                }
+                Event::Tick
+            }
+            Popped::Event(e) => e,
+        };
+        if let Err(e) = dispatch(&mut driver, ctx, event, &mut stats) {
+            break Err(e);
+        }
+    };
+    drop(tokens);
+    if let Err(e) = &result {
+        tracing::error!(driver = D::NAME, "stopping after a fatal error: {e}");
+    }
+    let down = driver.shutdown(ctx);
+    tracing::info!(
+        driver = D::NAME,
+        events = stats.events,
+        malformed = stats.malformed,
+        replaced = inbox.replaced(),
+        "stopped"
+    );
+    result.and(down)
+}
+
+#[derive(Default)]
+pub(crate) struct Stats {
+    pub(crate) events: u64,
+    pub(crate) malformed: u64,
+}
+
+/// Calls the driver's hook for one event with the runtime's error policy.
+pub(crate) fn dispatch<D: Driver>(
+    driver: &mut D,
+    ctx: &mut Ctx,
+    event: Event,
+    stats: &mut Stats,
+) -> Result<()> {
+    stats.events += 1;
+    match driver.on_event(ctx, event) {
+        Err(NodeError::Decode { key, source }) => {
+            stats.malformed += 1;
+            tracing::warn!(
+                driver = D::NAME,
+                malformed = stats.malformed,
+                "dropped a malformed message on `{key}`: {source}"
+            );
+            Ok(())
+        }
+        other => other,
+    }
+}
+
+fn wait_live(session: &Session, dev: &Device, timeout: Duration) -> Result<()> {
+    let key = keys::token_any(dev);
+    let sub = session
+        .liveliness()
+        .declare_subscriber(&key)
+        .history(true)
+        .wait()
+        .map_err(z::<()>(|| format!("watching liveliness of {dev}")))?;
+    tracing::info!("waiting for required device {dev}");
+    let deadline = Instant::now() + timeout;
+    loop {
+        match sub.recv_deadline(deadline) {
+            Ok(Some(s)) if s.kind() == zenoh::sample::SampleKind::Put => return Ok(()),
+            Ok(Some(_)) => continue,
+            Ok(None) | Err(_) => {
+                return Err(NodeError::RequiresTimeout {
+                    device: *dev,
+                    waited: timeout,
+                })
+            }
+        }
+    }
+}
+
+/// Tick generation on simulation time: `sim/clock` samples push a tick each
+/// time the clock crosses the next multiple of the period.
+#[derive(Default)]
+struct SimTicks {
+    period: AtomicU64,
+    next: Mutex<f64>,
+}
+
+impl SimTicks {
+    fn set_period(&self, p: Option<Duration>) {
+        let bits = p.map(|p| p.as_secs_f64()).unwrap_or(0.0).to_bits();
+        self.period.store(bits, Ordering::Release);
+    }
+
+    fn due(&self, now: f64) -> bool {
+        let period = f64::from_bits(self.period.load(Ordering::Acquire));
+        if period <= 0.0 {
+            return false;
+        }
+        let mut next = self.next.lock().unwrap_or_else(|p| p.into_inner());
+        if now + 1e-9 < *next {
+            return false;
+        }
+        *next = if *next == 0.0 || now - *next > period {
+            now + period
+        } else {
+            *next + period
+        };
+        true
+    }
+}
+
+fn sim_clock(
+    session: &Session,
+    clock: Clock,
+    inbox: Arc<Inbox>,
+    ticks: Arc<SimTicks>,
+) -> Result<Subscriber<()>> {
+    session
+        .declare_subscriber(keys::SIM_CLOCK)
+        .callback(
+            move |s| match codec::decode::<sim::Clock>(&s.payload().to_bytes()) {
+                Ok(c) => {
+                    clock.set(c.msg.time);
+                    if ticks.due(c.msg.time) {
+                        inbox.push(Event::Tick);
+                    }
+                }
+                Err(e) => tracing::warn!("dropped a malformed sim/clock sample: {e}"),
+            },
+        )
+        .wait()
+        .map_err(z::<()>(|| "subscribing to sim/clock".into()))
+}
+
+struct ZenohBus {
+    session: Session,
+    inbox: Arc<Inbox>,
+    publishers: HashMap<Device, Publisher<'static>>,
+    /// Latest payload of each schema published on each provided device.
+    latest: Arc<Mutex<HashMap<Device, Vec<ZBytes>>>>,
+    subscribers: Vec<Subscriber<()>>,
+    queryables: Vec<Queryable<()>>,
+}
+
+struct ZenohSink(Query);
+
+impl ReplySink for ZenohSink {
+    fn send(self: Box<Self>, reply: std::result::Result<Vec<u8>, Vec<u8>>) {
+        let q = self.0;
+        let sent = match reply {
+            Ok(p) => q.reply(q.key_expr().clone(), p).wait(),
+            Err(p) => q.reply_err(p).wait(),
+        };
+        if let Err(e) = sent {
+            tracing::warn!("could not answer request on `{}`: {e}", q.key_expr());
+        }
+    }
+}
+
+impl ZenohBus {
+    fn provide(&mut self, dev: &Device, clock: &Clock, driver: &'static str) -> Result<()> {
+        let s = &self.session;
+        let data = keys::data(dev);
+        let publisher = s
+            .declare_publisher(data.clone())
+            .wait()
+            .map_err(z::<()>(|| format!("declaring publisher {data}")))?;
+        self.publishers.insert(*dev, publisher);
+
+        let latest = self.latest.clone();
+        let d = *dev;
+        let q = s
+            .declare_queryable(data.clone())
+            .callback(move |q: Query| {
+                let held = latest
+                    .lock()
+                    .unwrap_or_else(|p| p.into_inner())
+                    .get(&d)
+                    .cloned()
+                    .unwrap_or_default();
+                for p in held {
+                    if let Err(e) = q.reply(q.key_expr().clone(), p).wait() {
+                        tracing::debug!("latest-value reply failed: {e}");
+                    }
+                }
+            })
+            .wait()
+            .map_err(z::<()>(|| format!("declaring queryable {data}")))?;
+        self.queryables.push(q);
+
+        let inbox = self.inbox.clone();
+        let sub = s
+            .declare_subscriber(keys::cmd_any(dev))
+            .callback(move |sample| {
+                let key = sample.key_expr().to_string();
+                inbox.push(Event::Command(Sample::new(
+                    d,
+                    key,
+                    sample.payload().clone(),
+                )));
+            })
+            .wait()
+            .map_err(z::<()>(|| format!("subscribing to commands of {d}")))?;
+        self.subscribers.push(sub);
+
+        let inbox = self.inbox.clone();
+        let clock = clock.clone();
+        let q = s
+            .declare_queryable(keys::req_any(dev))
+            .callback(move |query: Query| {
+                let key = query.key_expr().to_string();
+                let name = match keys::parse_named(&key, "req") {
+                    Ok((_, n)) => n,
+                    Err(e) => return tracing::warn!("ignored request: {e}"),
+                };
+                let payload = query.payload().cloned().unwrap_or_default();
+                let what = format!("request `{name}` to {d} ({driver})");
+                let responder = Responder::new(Box::new(ZenohSink(query)), clock.clone(), what);
+                inbox.push(Event::Request(Request {
+                    sample: Sample::new(d, key, payload),
+                    name,
+                    responder,
+                }));
+            })
+            .wait()
+            .map_err(z::<()>(|| format!("declaring request queryable of {d}")))?;
+        self.queryables.push(q);
+        Ok(())
+    }
+}
+
+impl Bus for ZenohBus {
+    fn publish(&mut self, dev: &Device, payload: Vec<u8>) -> Result<()> {
+        let bytes = ZBytes::from(payload);
+        {
+            let tag = codec::schema_of(&bytes.to_bytes())
+                .unwrap_or("?")
+                .to_owned();
+            let mut latest = self.latest.lock().unwrap_or_else(|p| p.into_inner());
+            let held = latest.entry(*dev).or_default();
+            match held
+                .iter_mut()
+                .find(|b| codec::schema_of(&b.to_bytes()).ok() == Some(tag.as_str()))
+            {
+                Some(slot) => *slot = bytes.clone(),
+                None => held.push(bytes.clone()),
+            }
+        }
+        let publisher = self
+            .publishers
+            .get(dev)
+            .ok_or_else(|| NodeError::config("?", format!("{dev} is not provided")))?;
+        publisher
+            .put(bytes)
+            .wait()
+            .map_err(z::<()>(|| format!("publishing on {dev}")))
+    }
+
+    fn subscribe(&mut self, dev: &Device) -> Result<()> {
+        let key = keys::data(dev);
+        let d = *dev;
+        let seen = Arc::new(AtomicBool::new(false));
+        let (inbox, live) = (self.inbox.clone(), seen.clone());
+        let sub = self
+            .session
+            .declare_subscriber(key.clone())
+            .callback(move |s| {
+                live.store(true, Ordering::Release);
+                let k = s.key_expr().to_string();
+                inbox.push(Event::Data(Sample::new(d, k, s.payload().clone())));
+            })
+            .wait()
+            .map_err(z::<()>(|| format!("subscribing to {key}")))?;
+        self.subscribers.push(sub);
+        // The latest samples the provider holds, unless live data got here first.
+        let inbox = self.inbox.clone();
+        self.session
+            .get(key.clone())
+            .callback(move |r| {
+                if let Ok(s) = r.result() {
+                    if !seen.load(Ordering::Acquire) {
+                        let k = s.key_expr().to_string();
+                        inbox.push(Event::Data(Sample::new(d, k, s.payload().clone())));
+                    }
+                }
+            })
+            .wait()
+            .map_err(z::<()>(|| format!("fetching the latest {key}")))
+    }
+
+    fn command(&mut self, dev: &Device, name: &str, payload: Vec<u8>) -> Result<()> {
+        let key = keys::cmd(dev, name);
+        self.session
+            .put(key.clone(), payload)
+            .wait()
+            .map_err(z::<()>(|| format!("sending command {key}")))
+    }
+
+    fn request(
+        &mut self,
+        id: RequestId,
+        dev: &Device,
+        name: &str,
+        payload: Vec<u8>,
+        timeout: Duration,
+    ) -> Result<()> {
+        let key = keys::req(dev, name);
+        let once = ReplyOnce {
+            id,
+            device: *dev,
+            inbox: self.inbox.clone(),
+            started: Instant::now(),
+            timeout,
+            done: AtomicBool::new(false),
+        };
+        self.session
+            .get(key.clone())
+            .payload(payload)
+            .timeout(timeout)
+            .callback(move |r| {
+                let k = r
+                    .result()
+                    .map(|s| s.key_expr().to_string())
+                    .unwrap_or_default();
+                once.deliver(match r.into_result() {
+                    Ok(s) => Ok(Sample::new(once.device, k, s.payload().clone())),
+                    Err(e) => Err(RequestError::Nack(nack_reason(&e.payload().to_bytes()))),
+                })
+            })
+            .wait()
+            .map_err(z::<()>(|| format!("sending request {key}")))
+    }
+}
+
+/// Delivers exactly one [`Reply`] per request: the first answer, or — when
+/// Zenoh drops the callback with no answer — a timeout or "no replier".
+struct ReplyOnce {
+    id: RequestId,
+    device: Device,
+    inbox: Arc<Inbox>,
+    started: Instant,
+    timeout: Duration,
+    done: AtomicBool,
+}
+
+impl ReplyOnce {
+    fn deliver(&self, result: std::result::Result<Sample, RequestError>) {
+        if !self.done.swap(true, Ordering::AcqRel) {
+            self.inbox.push(Event::Reply(Reply {
+                id: self.id,
+                result,
+            }));
+        }
+    }
+}
+
+impl Drop for ReplyOnce {
+    fn drop(&mut self) {
+        let err = if self.started.elapsed() + Duration::from_millis(50) >= self.timeout {
+            RequestError::Timeout(self.timeout)
+        } else {
+            RequestError::NoReplier
+        };
+        self.deliver(Err(err));
+    }
+}

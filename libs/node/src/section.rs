@@ -1,0 +1,219 @@
+//! A driver's section: what a `driver ( … )` block of a Player `.cfg` says.
+//!
+//! The launcher hands each node its section as JSON:
+//!
+//! ```json
+//! {"name": "rangertolaser", "provides": ["laser:0"], "requires": ["ranger:0"],
+//!  "robot": 6665, "options": {"rate": 10}}
+//! ```
+//!
+//! `robot` is the default robot field (Player's `-p PORT`) for addresses that
+//! give none. Options keep Player's names; unknown ones are warned about, as
+//! Player warned about unused options.
+
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
+use troupe_msgs::{DevAddr, Device, Interface, DEFAULT_ROBOT};
+
+use crate::error::{NodeError, Result};
+
+/// A driver's section.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Section {
+    /// The driver's Player name (`name "sicklms200"`).
+    pub name: String,
+    /// Devices this driver provides.
+    #[serde(default)]
+    pub provides: Vec<DevAddr>,
+    /// Devices this driver requires.
+    #[serde(default)]
+    pub requires: Vec<DevAddr>,
+    /// Robot field for addresses that give none.
+    #[serde(default = "default_robot")]
+    pub robot: u32,
+    /// Driver-specific options, by Player's names.
+    #[serde(default)]
+    pub options: serde_json::Map<String, serde_json::Value>,
+}
+
+fn default_robot() -> u32 {
+    DEFAULT_ROBOT
+}
+
+/// A device named in `provides` or `requires`, resolved.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Slot {
+    /// Its key (`odometry`, `input`, …) if the cfg gave one.
+    pub key: Option<String>,
+    /// The concrete device.
+    pub device: Device,
+}
+
+impl Section {
+    /// A section for `name` with no devices or options.
+    pub fn new(name: &str) -> Self {
+        Section {
+            name: name.to_owned(),
+            provides: Vec::new(),
+            requires: Vec::new(),
+            robot: DEFAULT_ROBOT,
+            options: Default::default(),
+        }
+    }
+
+    /// Parses a section from JSON.
+    ///
+    /// # Errors
+    ///
+    /// [`NodeError::Config`] quoting serde's reason (line and column included).
+    pub fn from_json(text: &str) -> Result<Self> {
+        serde_json::from_str(text).map_err(|e| NodeError::config("?", format!("section JSON: {e}")))
+    }
+
+    /// The provided devices, resolved against the section's robot.
+    pub fn provided(&self) -> Vec<Slot> {
+        self.slots(&self.provides)
+    }
+
+    /// The required devices, resolved against the section's robot.
+    pub fn required(&self) -> Vec<Slot> {
+        self.slots(&self.requires)
+    }
+
+    fn slots(&self, list: &[DevAddr]) -> Vec<Slot> {
+        list.iter()
+            .map(|a| Slot {
+                key: a.key.clone(),
+                device: a.device(self.robot),
+            })
+            .collect()
+    }
+
+    /// The one provided device of `interface` (with `key`, if given).
+    ///
+    /// # Errors
+    ///
+    /// [`NodeError::Config`] when there is none, or more than one.
+    pub fn provided_one(&self, interface: Interface, key: Option<&str>) -> Result<Device> {
+        self.one(&self.provided(), "provides", interface, key)
+    }
+
+    /// The one required device of `interface` (with `key`, if given).
+    ///
+    /// # Errors
+    ///
+    /// [`NodeError::Config`] when there is none, or more than one.
+    pub fn required_one(&self, interface: Interface, key: Option<&str>) -> Result<Device> {
+        self.one(&self.required(), "requires", interface, key)
+    }
+
+    fn one(&self, slots: &[Slot], field: &str, i: Interface, key: Option<&str>) -> Result<Device> {
+        let found: Vec<&Slot> = slots
+            .iter()
+            .filter(|s| s.device.interface == i && (key.is_none() || s.key.as_deref() == key))
+            .collect();
+        let what = match key {
+            Some(k) => format!("`{k}:::{i}:N`"),
+            None => format!("`{i}:N`"),
+        };
+        match found.as_slice() {
+            [one] => Ok(one.device),
+            [] => Err(NodeError::config(
+                &self.name,
+                format!(
+                    "`{field}` needs a {what} device; it has {:?}",
+                    self.list(field)
+                ),
+            )),
+            _ => Err(NodeError::config(
+                &self.name,
+                format!(
+                    "`{field}` has more than one {what} device: {:?}",
+                    self.list(field)
+                ),
+            )),
+        }
+    }
+
+    fn list(&self, field: &str) -> Vec<String> {
+        let l = if field == "provides" {
+            &self.provides
+        } else {
+            &self.requires
+        };
+        l.iter().map(ToString::to_string).collect()
+    }
+
+    /// Decodes the options as `O`, returning the names of options `O` does not use.
+    ///
+    /// # Errors
+    ///
+    /// [`NodeError::Config`] naming the option with the wrong type.
+    pub fn options<O: DeserializeOwned>(&self) -> Result<(O, Vec<String>)> {
+        let mut unused = Vec::new();
+        let value = serde_json::Value::Object(self.options.clone());
+        let o = serde_ignored::deserialize(value, |path| unused.push(path.to_string()))
+            .map_err(|e| NodeError::config(&self.name, format!("option {e}")))?;
+        Ok((o, unused))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(Debug, Default, Deserialize, PartialEq)]
+    #[serde(default)]
+    struct Opts {
+        rate: f64,
+    }
+
+    #[test]
+    fn parses_and_resolves_addresses() {
+        let s = Section::from_json(
+            r#"{"name":"amcl","robot":7000,
+                "provides":["localize:0","6666:position2d:2"],
+                "requires":["odometry::position2d:0","laser:0","laser:::map:0"]}"#,
+        )
+        .unwrap();
+        assert_eq!(
+            s.provided()[1].device,
+            Device::new(6666, Interface::Position2d, 2)
+        );
+        assert_eq!(
+            s.required_one(Interface::Position2d, Some("odometry"))
+                .unwrap(),
+            Device::new(7000, Interface::Position2d, 0)
+        );
+        let e = s
+            .required_one(Interface::Ranger, None)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("`requires` needs a `ranger:N` device"), "{e}");
+    }
+
+    #[test]
+    fn unknown_options_are_reported_and_bad_types_named() {
+        let mut s = Section::new("dummy");
+        s.options.insert("rate".into(), 5.into());
+        s.options.insert("colour".into(), "red".into());
+        let (o, unused): (Opts, _) = s.options().unwrap();
+        assert_eq!(o.rate, 5.0);
+        assert_eq!(unused, vec!["colour".to_owned()]);
+        s.options.insert("rate".into(), "fast".into());
+        let e = s.options::<Opts>().unwrap_err().to_string();
+        assert!(e.contains("dummy") && e.contains("fast"), "{e}");
+    }
+
+    #[test]
+    fn malformed_section_json_is_an_error() {
+        assert!(Section::from_json(r#"{"name":"x","provides":["laser:x"]}"#).is_err());
+        assert!(Section::from_json(r#"{"name":"x","bogus":1}"#).is_err());
+        assert!(Section::from_json("{").is_err());
+    }
+}
+
+/// Options of a driver that takes none: every option given is reported unused.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+pub struct NoOptions {}
