@@ -131,6 +131,19 @@ impl Sample {
         })
     }
 
+    /// The error for a sample of a type the driver does not take; the runtime
+    /// logs and counts it like a malformed one.
+    pub fn unexpected(&self) -> crate::NodeError {
+        let source = match codec::schema_of(&self.payload.to_bytes()) {
+            Ok(tag) => DecodeError::UnknownSchema(tag.to_owned()),
+            Err(e) => e,
+        };
+        crate::NodeError::Decode {
+            key: self.key.clone(),
+            source,
+        }
+    }
+
     /// The raw payload.
     pub fn payload(&self) -> &ZBytes {
         &self.payload

@@ -1,0 +1,265 @@
+//! Player's `dummy` driver: publishes fixed data at a fixed rate on any
+//! interface it supports, takes every command, refuses every request.
+//!
+//! ```text
+//! driver ( name "dummy" provides ["laser:0"] rate 75 )
+//! ```
+//!
+//! | | |
+//! |---|---|
+//! | provides | any number of `laser`, `ranger`, `position2d`, `ptz`, `blobfinder`, `power`, `fiducial`, `dio`, `aio` devices |
+//! | requires | nothing |
+//! | option `rate` | float, Hz, default 10 |
+//!
+//! The data are Player's: a 361-beam laser scan at 8 m over ±90°, 361 ranger
+//! ranges of 8 m, a position2d at (1, 1, 1) moving at (1, 1, 1), and so on.
+//! Useful to test clients, tools and pipelines without a robot.
+
+use std::time::Duration;
+
+use serde::Deserialize;
+use troupe_msgs::{aio, blobfinder, dio, fiducial, laser, position2d, power, ptz, ranger};
+use troupe_msgs::{Device, Interface, Pose2d, Pose3d};
+use troupe_node::{Ctx, Driver, Event, NodeError, Result, Section};
+
+/// The interfaces `dummy` can provide.
+pub const INTERFACES: &[Interface] = &[
+    Interface::Laser,
+    Interface::Ranger,
+    Interface::Position2d,
+    Interface::Ptz,
+    Interface::Blobfinder,
+    Interface::Power,
+    Interface::Fiducial,
+    Interface::Dio,
+    Interface::Aio,
+];
+
+/// Options of the dummy driver.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(default)]
+pub struct Options {
+    /// Data rate, Hz.
+    pub rate: f64,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options { rate: 10.0 }
+    }
+}
+
+/// The dummy driver.
+pub struct Dummy {
+    devices: Vec<Device>,
+    period: Duration,
+}
+
+impl Driver for Dummy {
+    const NAME: &'static str = "dummy";
+    type Options = Options;
+
+    fn new(section: &Section, options: Options) -> Result<Self> {
+        if !(options.rate.is_finite() && options.rate > 0.0 && options.rate <= 10_000.0) {
+            return Err(NodeError::config(
+                Self::NAME,
+                format!(
+                    "option `rate` must be in (0, 10000] Hz, got {}",
+                    options.rate
+                ),
+            ));
+        }
+        let devices: Vec<Device> = section.provided().into_iter().map(|s| s.device).collect();
+        if devices.is_empty() {
+            return Err(NodeError::config(Self::NAME, "`provides` is empty"));
+        }
+        if let Some(d) = devices.iter().find(|d| !INTERFACES.contains(&d.interface)) {
+            let names: Vec<&str> = INTERFACES.iter().map(|i| i.name()).collect();
+            return Err(NodeError::config(
+                Self::NAME,
+                format!("cannot provide {d}: dummy supports {}", names.join(", ")),
+            ));
+        }
+        Ok(Dummy {
+            devices,
+            period: Duration::from_secs_f64(1.0 / options.rate),
+        })
+    }
+
+    fn setup(&mut self, ctx: &mut Ctx) -> Result<()> {
+        ctx.set_tick(Some(self.period));
+        Ok(())
+    }
+
+    fn on_event(&mut self, ctx: &mut Ctx, event: Event) -> Result<()> {
+        match event {
+            Event::Tick => {
+                for d in &self.devices {
+                    publish(ctx, d)?;
+                }
+                Ok(())
+            }
+            Event::Request(r) => {
+                r.nack("the dummy driver refuses every request");
+                Ok(())
+            }
+            Event::Command(_) | Event::Data(_) | Event::Reply(_) => Ok(()),
+        }
+    }
+}
+
+fn publish(ctx: &mut Ctx, d: &Device) -> Result<()> {
+    match d.interface {
+        Interface::Laser => ctx.publish(
+            d,
+            &laser::Scan {
+                min_angle: -std::f32::consts::FRAC_PI_2,
+                max_angle: std::f32::consts::FRAC_PI_2,
+                resolution: 0.5f32.to_radians(),
+                max_range: 8.0,
+                ranges: vec![8.0; 361],
+                intensity: vec![1; 361],
+                id: 1,
+            },
+        ),
+        Interface::Ranger => ctx.publish(
+            d,
+            &ranger::Ranges {
+                ranges: vec![8.0; 361],
+            },
+        ),
+        Interface::Position2d => ctx.publish(
+            d,
+            &position2d::Data {
+                pose: Pose2d::new(1.0, 1.0, 1.0),
+                vel: Pose2d::new(1.0, 1.0, 1.0),
+                stall: false,
+            },
+        ),
+        Interface::Ptz => ctx.publish(
+            d,
+            &ptz::Data {
+                pan: 1.0,
+                tilt: 1.0,
+                zoom: 1.0,
+                panspeed: 1.0,
+                tiltspeed: 1.0,
+            },
+        ),
+        Interface::Blobfinder => ctx.publish(
+            d,
+            &blobfinder::Data {
+                width: 320,
+                height: 240,
+                blobs: (0..2)
+                    .map(|b| blobfinder::Blob {
+                        id: b,
+                        color: b,
+                        area: b,
+                        x: b,
+                        y: b,
+                        left: b,
+                        right: b,
+                        top: b,
+                        bottom: b,
+                        range: b as f32,
+                    })
+                    .collect(),
+            },
+        ),
+        Interface::Power => ctx.publish(
+            d,
+            &power::Data {
+                valid: 0xFF,
+                volts: 1.0,
+                percent: 1.0,
+                joules: 1.0,
+                watts: 1.0,
+                charging: true,
+            },
+        ),
+        Interface::Fiducial => ctx.publish(
+            d,
+            &fiducial::Data {
+                fiducials: (0..5)
+                    .map(|i| {
+                        let v = f64::from(i);
+                        let p = Pose3d {
+                            x: v,
+                            y: v,
+                            z: v,
+                            roll: v,
+                            pitch: v,
+                            yaw: v,
+                        };
+                        fiducial::Item {
+                            id: i,
+                            pose: p,
+                            upose: p,
+                        }
+                    })
+                    .collect(),
+            },
+        ),
+        Interface::Dio => ctx.publish(
+            d,
+            &dio::Data {
+                count: 8,
+                bits: 0xAA,
+            },
+        ),
+        Interface::Aio => ctx.publish(
+            d,
+            &aio::Data {
+                voltages: (0..5).map(|i| i as f32).collect(),
+            },
+        ),
+        // INVARIANT: `new` only accepts devices of INTERFACES.
+        other => Err(NodeError::config(
+            Dummy::NAME,
+            format!("cannot publish {other}"),
+        )),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use troupe_node::testing::Harness;
+
+    #[test]
+    fn publishes_players_fixed_data_every_tick() {
+        let mut h = Harness::<Dummy>::from_json(
+            r#"{"name":"dummy","provides":["ranger:0","position2d:1"],"options":{"rate":20}}"#,
+        )
+        .unwrap();
+        assert_eq!(h.tick_period(), Some(Duration::from_millis(50)));
+        h.tick().unwrap();
+        h.tick().unwrap();
+        let r = h.published::<ranger::Ranges>(Device::new(6665, Interface::Ranger, 0));
+        assert_eq!(r.len(), 2);
+        assert_eq!(r[0].ranges, vec![8.0; 361]);
+        let p = h.published::<position2d::Data>(Device::new(6665, Interface::Position2d, 1));
+        assert_eq!(p[1].pose, Pose2d::new(1.0, 1.0, 1.0));
+    }
+
+    #[test]
+    fn refuses_requests_and_takes_commands() {
+        let mut h =
+            Harness::<Dummy>::from_json(r#"{"name":"dummy","provides":["position2d:0"]}"#).unwrap();
+        let d = Device::new(6665, Interface::Position2d, 0);
+        h.command(d, &position2d::CmdVel::default()).unwrap();
+        let p = h.request(d, &position2d::GetGeom).unwrap();
+        assert!(h.reply::<position2d::Geom>(p).unwrap().is_err());
+    }
+
+    #[test]
+    fn bad_sections_are_refused_with_reasons() {
+        let e = |j: &str| Harness::<Dummy>::from_json(j).err().unwrap().to_string();
+        assert!(e(r#"{"name":"dummy","provides":["map:0"]}"#).contains("cannot provide 6665:map:0"));
+        assert!(
+            e(r#"{"name":"dummy","provides":["laser:0"],"options":{"rate":0}}"#).contains("rate")
+        );
+        assert!(e(r#"{"name":"dummy"}"#).contains("provides"));
+    }
+}
