@@ -1,1 +1,47 @@
-fn main() {}
+//! `troupe`: one binary for every Troupe process and tool.
+//!
+//! `main` parses the command line and hands it to `run`, which dispatches on
+//! the subcommand; errors travel back up as `anyhow` chains and are printed
+//! whole, and the exit code says whether the command succeeded.
+
+mod bench;
+mod cli;
+mod drivers;
+mod tools;
+
+use std::process::ExitCode;
+
+use clap::Parser;
+
+fn main() -> ExitCode {
+    let cli = cli::Cli::parse();
+    troupe_node::init_logging(cli.log.as_deref());
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            if e.chain().any(|c| {
+                c.downcast_ref::<std::io::Error>()
+                    .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+            }) {
+                return ExitCode::SUCCESS;
+            }
+            eprintln!("troupe: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: cli::Cli) -> anyhow::Result<()> {
+    use cli::Command;
+    let z = &cli.zenoh;
+    match cli.command {
+        Command::Node(a) => cli::node(a, z),
+        Command::List(a) => tools::list(a, z),
+        Command::Echo(a) => tools::echo(a, z),
+        Command::Hz(a) => tools::hz(a, z),
+        Command::Router(a) => tools::router(a, z),
+        Command::Drivers => tools::print_drivers(),
+        Command::Interfaces => tools::print_interfaces(),
+        Command::Bench(b) => bench::run(b, z),
+    }
+}

@@ -18,6 +18,15 @@ pub const SIM_CLOCK: &str = "sim/clock";
 
 const ROOT: &str = "robot";
 
+/// `troupe bench latency`: the pinger publishes here…
+pub const BENCH_PING: &str = "bench/ping";
+/// …the ponger answers here…
+pub const BENCH_PONG: &str = "bench/pong";
+/// …serves requests here…
+pub const BENCH_REQ: &str = "bench/req";
+/// …and announces itself with this liveliness token.
+pub const BENCH_READY: &str = "bench/ready";
+
 /// The data key of `dev`: `robot/6665/laser/0`.
 pub fn data(dev: &Device) -> String {
     format!("{ROOT}/{}/{}/{}", dev.robot, dev.interface, dev.index)

@@ -268,7 +268,7 @@ impl Reply {
     pub fn decode<M: Message>(&self) -> Result<M> {
         match &self.result {
             Ok(s) => s.decode::<M>().map(|s| s.msg),
-            Err(e) => Err(crate::NodeError::Driver(e.to_string().into())),
+            Err(e) => Err(crate::NodeError::Request(e.clone())),
         }
     }
 }

@@ -55,6 +55,9 @@ pub enum NodeError {
         /// The device.
         device: Device,
     },
+    /// A request the driver sent got no usable answer.
+    #[error("request failed: {0}")]
+    Request(#[from] crate::driver::RequestError),
     /// The driver failed; the node stops and the supervisor may restart it.
     #[error("driver failed: {0}")]
     Driver(BoxError),

@@ -438,6 +438,7 @@ impl ZenohBus {
         let data = keys::data(dev);
         let publisher = s
             .declare_publisher(data.clone())
+            .express(true)
             .wait()
             .map_err(z::<()>(|| format!("declaring publisher {data}")))?;
         self.publishers.insert(*dev, publisher);

@@ -1,0 +1,221 @@
+//! The command line: every subcommand, its flags and its help.
+
+use std::path::Path;
+use std::time::Duration;
+
+use anyhow::Context;
+use clap::{Args, Parser, Subcommand};
+use troupe_msgs::DevAddr;
+use troupe_node::{NodeConfig, Section, ZenohArgs};
+
+use crate::drivers;
+
+/// Troupe: Player/Stage rebuilt on Zenoh. Every driver is its own process;
+/// devices meet on keys like robot/6665/laser/0.
+#[derive(Debug, Parser)]
+#[command(name = "troupe", version, propagate_version = true)]
+#[command(after_help = "Examples:
+  troupe router                                   # a router for this host (tcp/[::]:7447)
+  troupe node dummy --provides ranger:0 -o rate=10
+  troupe node rangertolaser --requires ranger:0 --provides laser:0
+  troupe list                                     # Player's \"Available devices\"
+  troupe echo laser:0 --count 1
+  troupe hz laser:0")]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+
+    #[command(flatten)]
+    pub zenoh: ZenohArgs,
+
+    /// Log filter (e.g. `debug`, `info,troupe_node=trace`); default `info` or $RUST_LOG.
+    #[arg(long, global = true, value_name = "FILTER")]
+    pub log: Option<String>,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Run one driver as this process.
+    #[command(after_help = "Examples:
+  troupe node dummy --provides ranger:0 -o rate=10
+  troupe node rangertolaser --requires ranger:0 --provides laser:0
+  troupe node rangertolaser --section '{\"name\":\"rangertolaser\",\"requires\":[\"ranger:0\"],\"provides\":[\"laser:0\"]}'
+
+The section is what a `driver ( … )` block of a Player .cfg says; flags add to it.
+The node waits for every required device to be live, then announces its own.")]
+    Node(NodeArgs),
+
+    /// Print the devices live on the network, like Player's \"Available devices\".
+    #[command(after_help = "Example:
+  $ troupe list
+  robot/6665  laser:0       rangertolaser  ready
+  robot/6665  ranger:0      dummy          ready")]
+    List(ListArgs),
+
+    /// Print the samples of a device, decoded (like playerprint).
+    #[command(after_help = "Examples:
+  troupe echo laser:0                 # robot 6665
+  troupe echo 6666:position2d:0 --count 1
+  troupe echo robot/6665/laser/0 --json | jq .msg")]
+    Echo(EchoArgs),
+
+    /// Measure the rate and jitter of a device's samples.
+    #[command(after_help = "Example:
+  $ troupe hz laser:0
+  rate: 10.000 Hz  min: 0.0998 s  max: 0.1003 s  std dev: 0.00012 s  window: 10")]
+    Hz(HzArgs),
+
+    /// Run a Zenoh router, for multi-host setups.
+    #[command(after_help = "Examples:
+  troupe router                                  # listens on tcp/[::]:7447
+  troupe router --listen tcp/127.0.0.1:7447      # this host only
+  troupe router --zenoh-config secure.json5      # TLS, auth, ACLs")]
+    Router(RouterArgs),
+
+    /// List the drivers this build can run.
+    Drivers,
+
+    /// List Player's interfaces and their codes.
+    Interfaces,
+
+    /// Benchmarks that print numbers.
+    #[command(subcommand)]
+    Bench(BenchCmd),
+}
+
+#[derive(Debug, Args)]
+pub struct NodeArgs {
+    /// The Player driver name (see `troupe drivers`).
+    pub driver: String,
+
+    /// The driver's section, as JSON text or a path to a JSON file.
+    #[arg(long, value_name = "JSON|FILE")]
+    pub section: Option<String>,
+
+    /// A device this driver provides (repeatable), e.g. `laser:0`.
+    #[arg(long, value_name = "ADDR")]
+    pub provides: Vec<DevAddr>,
+
+    /// A device this driver requires (repeatable), e.g. `odometry:::position2d:0`.
+    #[arg(long, value_name = "ADDR")]
+    pub requires: Vec<DevAddr>,
+
+    /// An option, by Player's name (repeatable): `-o rate=20`, `-o pose=[0,0,0]`.
+    #[arg(short = 'o', long = "option", value_name = "KEY=VALUE")]
+    pub options: Vec<String>,
+
+    /// Robot field (port) for addresses that give none, as `player -p PORT`.
+    #[arg(short = 'p', long = "robot", value_name = "PORT")]
+    pub robot: Option<u32>,
+
+    /// Follow the simulator's clock (sim/clock) instead of wall time.
+    #[arg(long)]
+    pub sim_time: bool,
+
+    /// Seconds to wait for each required device.
+    #[arg(long, value_name = "SECS", default_value_t = 30.0)]
+    pub requires_timeout: f64,
+}
+
+#[derive(Debug, Args)]
+pub struct ListArgs {
+    /// Only this robot (port).
+    #[arg(short = 'p', long = "robot", value_name = "PORT")]
+    pub robot: Option<u32>,
+    /// One JSON object per device.
+    #[arg(long)]
+    pub json: bool,
+    /// Seconds to wait for answers.
+    #[arg(long, value_name = "SECS", default_value_t = 2.0)]
+    pub wait: f64,
+}
+
+#[derive(Debug, Args)]
+pub struct EchoArgs {
+    /// A device (`laser:0`, `6666:position2d:0`) or a key (`robot/6665/laser/0`, `sim/clock`).
+    pub target: String,
+    /// Robot (port) for a device that names none.
+    #[arg(short = 'p', long = "robot", value_name = "PORT", default_value_t = troupe_msgs::DEFAULT_ROBOT)]
+    pub robot: u32,
+    /// One JSON object per sample, arrays in full.
+    #[arg(long)]
+    pub json: bool,
+    /// Stop after N samples.
+    #[arg(short = 'n', long, value_name = "N")]
+    pub count: Option<u64>,
+    /// Give up after this many seconds without a sample (default: wait forever).
+    #[arg(long, value_name = "SECS")]
+    pub timeout: Option<f64>,
+}
+
+#[derive(Debug, Args)]
+pub struct HzArgs {
+    /// A device (`laser:0`) or a key.
+    pub target: String,
+    /// Robot (port) for a device that names none.
+    #[arg(short = 'p', long = "robot", value_name = "PORT", default_value_t = troupe_msgs::DEFAULT_ROBOT)]
+    pub robot: u32,
+    /// Samples in the moving window.
+    #[arg(long, value_name = "N", default_value_t = 100)]
+    pub window: usize,
+    /// Stop after N reports (one a second).
+    #[arg(short = 'n', long, value_name = "N")]
+    pub count: Option<u64>,
+}
+
+#[derive(Debug, Args)]
+pub struct RouterArgs {}
+
+#[derive(Debug, Subcommand)]
+pub enum BenchCmd {
+    /// Latency of one sample between two processes (put/sub round trip and get/reply).
+    #[command(after_help = "Example:
+  cargo run --release -- bench latency --size 1500 --samples 5000")]
+    Latency(crate::bench::LatencyArgs),
+    /// The echo side of `bench latency` (started by it).
+    #[command(hide = true)]
+    Pong,
+}
+
+/// `troupe node`: builds the section from flags and runs the driver.
+pub fn node(a: NodeArgs, z: &ZenohArgs) -> anyhow::Result<()> {
+    let mut section = match &a.section {
+        None => Section::new(&a.driver),
+        Some(s) => {
+            let text = if s.trim_start().starts_with('{') {
+                s.clone()
+            } else {
+                std::fs::read_to_string(Path::new(s))
+                    .with_context(|| format!("reading section file {s}"))?
+            };
+            Section::from_json(&text)?
+        }
+    };
+    if section.name != a.driver {
+        anyhow::bail!(
+            "the section is for driver `{}`, not `{}`",
+            section.name,
+            a.driver
+        );
+    }
+    section.provides.extend(a.provides);
+    section.requires.extend(a.requires);
+    if let Some(r) = a.robot {
+        section.robot = r;
+    }
+    for o in &a.options {
+        let (k, v) = o
+            .split_once('=')
+            .with_context(|| format!("option `{o}` is not KEY=VALUE"))?;
+        let value = serde_json::from_str(v).unwrap_or_else(|_| serde_json::Value::String(v.into()));
+        section.options.insert(k.to_owned(), value);
+    }
+    if !(a.requires_timeout.is_finite() && a.requires_timeout > 0.0) {
+        anyhow::bail!("--requires-timeout must be a positive number of seconds");
+    }
+    let cfg = NodeConfig {
+        sim_time: a.sim_time,
+        requires_timeout: Duration::from_secs_f64(a.requires_timeout),
+    };
+    drivers::run(&a.driver, section, z, &cfg)
+}

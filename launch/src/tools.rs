@@ -1,0 +1,387 @@
+//! Introspection tools: list, echo, hz, router, drivers, interfaces.
+
+use std::io::Write;
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use troupe_msgs::{decode_any, keys, AddrError, DevAddr, Interface};
+use troupe_node::zenoh::Wait;
+use troupe_node::{Mode, ZenohArgs};
+
+use crate::cli::{EchoArgs, HzArgs, ListArgs, RouterArgs};
+use crate::drivers;
+
+/// A live device, from its liveliness token.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, serde::Serialize)]
+struct Live {
+    #[serde(skip)]
+    order: (u32, u16, u32),
+    robot: u32,
+    device: String,
+    driver: String,
+    state: &'static str,
+}
+
+fn list_devices(z: &ZenohArgs, robot: Option<u32>, wait: Duration) -> anyhow::Result<Vec<Live>> {
+    let session = z.open(Mode::Client)?;
+    let replies = session
+        .liveliness()
+        .get(keys::tokens(robot))
+        .timeout(wait)
+        .wait()
+        .map_err(|e| anyhow::anyhow!("asking for liveliness tokens: {e}"))?;
+    let mut out = Vec::new();
+    while let Ok(r) = replies.recv() {
+        let Ok(sample) = r.result() else { continue };
+        match keys::parse_token(sample.key_expr().as_str()) {
+            Ok((d, driver)) => out.push(Live {
+                order: (d.robot, d.interface.code(), d.index),
+                robot: d.robot,
+                device: format!("{}:{}", d.interface, d.index),
+                driver,
+                state: "ready",
+            }),
+            Err(e) => tracing::warn!("ignored a token: {e}"),
+        }
+    }
+    out.sort();
+    out.dedup();
+    let _ = session.close().wait();
+    Ok(out)
+}
+
+/// `troupe list`.
+pub fn list(a: ListArgs, z: &ZenohArgs) -> anyhow::Result<()> {
+    let devices = list_devices(z, a.robot, Duration::from_secs_f64(a.wait.max(0.01)))?;
+    let mut out = std::io::stdout().lock();
+    if a.json {
+        for d in &devices {
+            writeln!(out, "{}", serde_json::to_string(d)?)?;
+        }
+        return Ok(());
+    }
+    if devices.is_empty() {
+        eprintln!(
+            "no devices found{} (is a router running? nodes connect to {} unless --connect says otherwise)",
+            a.robot.map(|r| format!(" on robot {r}")).unwrap_or_default(),
+            troupe_node::DEFAULT_ROUTER
+        );
+        return Ok(());
+    }
+    let w = devices.iter().map(|d| d.device.len()).max().unwrap_or(0);
+    let wd = devices.iter().map(|d| d.driver.len()).max().unwrap_or(0);
+    for d in &devices {
+        writeln!(
+            out,
+            "robot/{:<5} {:<w$}  {:<wd$}  {}",
+            d.robot, d.device, d.driver, d.state
+        )?;
+    }
+    Ok(())
+}
+
+/// Resolves a command-line target to a key: a device address or a key.
+fn target_key(target: &str, robot: u32) -> anyhow::Result<String> {
+    if target == keys::SIM_CLOCK {
+        return Ok(target.to_owned());
+    }
+    if target.contains('/') {
+        keys::parse_data(target)
+            .or_else(|_| keys::parse_named(target, "cmd").map(|(d, _)| d))
+            .map_err(|_| AddrError::NotADeviceKey {
+                text: target.to_owned(),
+                rest: " or …/cmd/<name>, or sim/clock",
+            })?;
+        return Ok(target.to_owned());
+    }
+    let a: DevAddr = target.parse()?;
+    Ok(keys::data(&a.device(robot)))
+}
+
+/// Shortens arrays for humans: the first 8 elements, then a count.
+fn abbreviate(v: &mut serde_json::Value) {
+    match v {
+        serde_json::Value::Array(a) => {
+            if a.len() > 8 {
+                let more = a.len() - 8;
+                a.truncate(8);
+                a.push(serde_json::Value::String(format!("… {more} more")));
+            }
+            a.iter_mut().for_each(abbreviate);
+        }
+        serde_json::Value::Object(o) => o.values_mut().for_each(abbreviate),
+        _ => {}
+    }
+}
+
+/// One sample, printed.
+fn print_sample(
+    out: &mut impl Write,
+    key: &str,
+    payload: &[u8],
+    json: bool,
+) -> anyhow::Result<bool> {
+    let s = match decode_any(payload) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("troupe echo: malformed sample on `{key}`: {e}");
+            return Ok(false);
+        }
+    };
+    let mut v = serde_json::to_value(&s.msg)?;
+    let (kind, mut body) = match v.as_object_mut().and_then(|o| o.iter_mut().next()) {
+        Some((k, b)) => (k.clone(), b.take()),
+        None => (v.to_string(), serde_json::Value::Null),
+    };
+    if json {
+        let rec = serde_json::json!({"key": key, "stamp": s.stamp, "type": kind, "msg": body});
+        writeln!(out, "{rec}")?;
+    } else {
+        abbreviate(&mut body);
+        writeln!(out, "{key}  t={:.3}  {kind} {body}", s.stamp)?;
+    }
+    Ok(true)
+}
+
+/// `troupe echo`.
+pub fn echo(a: EchoArgs, z: &ZenohArgs) -> anyhow::Result<()> {
+    let key = target_key(&a.target, a.robot)?;
+    let session = z.open(Mode::Client)?;
+    let sub = session
+        .declare_subscriber(&key)
+        .wait()
+        .map_err(|e| anyhow::anyhow!("subscribing to {key}: {e}"))?;
+    let mut out = std::io::stdout().lock();
+    let mut printed = 0u64;
+    let done = |n: u64| a.count.is_some_and(|c| n >= c);
+    // The latest samples the provider holds come first, as Player gave new
+    // subscribers the current state.
+    if !key.contains("/cmd/") {
+        let latest = session
+            .get(&key)
+            .timeout(Duration::from_secs(1))
+            .wait()
+            .map_err(|e| anyhow::anyhow!("asking {key} for its latest samples: {e}"))?;
+        while let Ok(r) = latest.recv() {
+            if done(printed) {
+                break;
+            }
+            if let Ok(s) = r.result() {
+                if print_sample(
+                    &mut out,
+                    s.key_expr().as_str(),
+                    &s.payload().to_bytes(),
+                    a.json,
+                )? {
+                    printed += 1;
+                }
+            }
+        }
+    }
+    let timeout = a.timeout.map(Duration::from_secs_f64);
+    while !done(printed) {
+        let s = match timeout {
+            None => sub.recv().map_err(|e| anyhow::anyhow!("{e}"))?,
+            Some(t) => sub
+                .recv_timeout(t)
+                .map_err(|e| anyhow::anyhow!("{e}"))?
+                .with_context(|| format!("no sample on `{key}` within {t:?}"))?,
+        };
+        if print_sample(
+            &mut out,
+            s.key_expr().as_str(),
+            &s.payload().to_bytes(),
+            a.json,
+        )? {
+            printed += 1;
+        }
+        out.flush()?;
+    }
+    Ok(())
+}
+
+/// Rate statistics over a window of inter-arrival gaps.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Rate {
+    /// Samples per second.
+    pub hz: f64,
+    /// Shortest gap, seconds.
+    pub min: f64,
+    /// Longest gap, seconds.
+    pub max: f64,
+    /// Standard deviation of the gaps, seconds.
+    pub std_dev: f64,
+    /// Gaps in the window.
+    pub window: usize,
+}
+
+/// The rate of samples whose gaps (seconds) are `gaps`; `None` without gaps.
+pub fn rate(gaps: &[f64]) -> Option<Rate> {
+    if gaps.is_empty() {
+        return None;
+    }
+    let n = gaps.len() as f64;
+    let mean = gaps.iter().sum::<f64>() / n;
+    let var = gaps.iter().map(|g| (g - mean).powi(2)).sum::<f64>() / n;
+    Some(Rate {
+        hz: if mean > 0.0 {
+            1.0 / mean
+        } else {
+            f64::INFINITY
+        },
+        min: gaps.iter().copied().fold(f64::INFINITY, f64::min),
+        max: gaps.iter().copied().fold(0.0, f64::max),
+        std_dev: var.sqrt(),
+        window: gaps.len(),
+    })
+}
+
+/// `troupe hz`.
+pub fn hz(a: HzArgs, z: &ZenohArgs) -> anyhow::Result<()> {
+    let key = target_key(&a.target, a.robot)?;
+    let session = z.open(Mode::Client)?;
+    let sub = session
+        .declare_subscriber(&key)
+        .wait()
+        .map_err(|e| anyhow::anyhow!("subscribing to {key}: {e}"))?;
+    let window = a.window.max(2);
+    let mut gaps = std::collections::VecDeque::with_capacity(window);
+    let mut last: Option<Instant> = None;
+    let mut fresh = 0usize;
+    let mut reports = 0u64;
+    let mut next_report = Instant::now() + Duration::from_secs(1);
+    let mut out = std::io::stdout().lock();
+    loop {
+        match sub.recv_deadline(next_report) {
+            Ok(Some(_)) => {
+                let now = Instant::now();
+                if let Some(l) = last {
+                    if gaps.len() == window {
+                        gaps.pop_front();
+                    }
+                    gaps.push_back((now - l).as_secs_f64());
+                }
+                last = Some(now);
+                fresh += 1;
+            }
+            Ok(None) => {
+                next_report += Duration::from_secs(1);
+                let g: Vec<f64> = gaps.iter().copied().collect();
+                match rate(&g) {
+                    Some(r) if fresh > 0 => writeln!(
+                        out,
+                        "rate: {:.3} Hz  min: {:.4} s  max: {:.4} s  std dev: {:.5} s  window: {}",
+                        r.hz, r.min, r.max, r.std_dev, r.window
+                    )?,
+                    _ => writeln!(out, "no new samples on `{key}`")?,
+                }
+                out.flush()?;
+                fresh = 0;
+                reports += 1;
+                if a.count.is_some_and(|c| reports >= c) {
+                    return Ok(());
+                }
+            }
+            Err(e) => anyhow::bail!("subscription to {key} ended: {e}"),
+        }
+    }
+}
+
+/// `troupe router`: a Zenoh router until SIGINT/SIGTERM.
+pub fn router(_: RouterArgs, z: &ZenohArgs) -> anyhow::Result<()> {
+    let mut z = z.clone();
+    if z.listen.is_empty() && z.zenoh_config.is_none() {
+        z.listen.push("tcp/[::]:7447".into());
+    }
+    let session = z.open(Mode::Router)?;
+    let locators = session.info().locators().wait();
+    let list: Vec<String> = locators.iter().map(ToString::to_string).collect();
+    // The first line on stdout is the contract for scripts and tests.
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "troupe router listening on {}", list.join(" "))?;
+    out.flush()?;
+    drop(out);
+    tracing::info!(zid = %session.zid(), "router up");
+    wait_for_signal()?;
+    tracing::info!("router stopping");
+    session
+        .close()
+        .wait()
+        .map_err(|e| anyhow::anyhow!("closing the router: {e}"))?;
+    Ok(())
+}
+
+/// Blocks until SIGINT or SIGTERM.
+pub fn wait_for_signal() -> anyhow::Result<()> {
+    use tokio::signal::unix::{signal, SignalKind};
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()?;
+    rt.block_on(async {
+        let mut term = signal(SignalKind::terminate())?;
+        let mut int = signal(SignalKind::interrupt())?;
+        tokio::select! {
+            _ = term.recv() => {}
+            _ = int.recv() => {}
+        }
+        Ok::<_, std::io::Error>(())
+    })?;
+    Ok(())
+}
+
+/// `troupe drivers`.
+pub fn print_drivers() -> anyhow::Result<()> {
+    let mut out = std::io::stdout().lock();
+    for e in drivers::all() {
+        writeln!(out, "{:<16} {}", e.name, e.about)?;
+    }
+    Ok(())
+}
+
+/// `troupe interfaces`.
+pub fn print_interfaces() -> anyhow::Result<()> {
+    let mut out = std::io::stdout().lock();
+    for i in Interface::ALL {
+        writeln!(out, "{:>3}  {}", i.code(), i.name())?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn targets_resolve_to_keys_or_say_why_not() {
+        assert_eq!(target_key("laser:0", 6665).unwrap(), "robot/6665/laser/0");
+        assert_eq!(
+            target_key("6666:ranger:1", 6665).unwrap(),
+            "robot/6666/ranger/1"
+        );
+        assert_eq!(target_key("robot/7/map/0", 6665).unwrap(), "robot/7/map/0");
+        assert_eq!(target_key("sim/clock", 6665).unwrap(), "sim/clock");
+        let e = target_key("foo/bar", 6665).unwrap_err().to_string();
+        assert!(e.contains("`foo/bar` is not a device key"), "{e}");
+        let e = target_key("laser:x", 6665).unwrap_err().to_string();
+        assert!(e.contains("`x`"), "{e}");
+    }
+
+    #[test]
+    fn rate_of_regular_gaps() {
+        let r = rate(&[0.1, 0.1, 0.1, 0.1]).unwrap();
+        assert!((r.hz - 10.0).abs() < 1e-9);
+        assert!(r.std_dev < 1e-12);
+        assert_eq!(r.window, 4);
+        let r = rate(&[0.05, 0.15]).unwrap();
+        assert!((r.std_dev - 0.05).abs() < 1e-12 && r.min == 0.05 && r.max == 0.15);
+        assert!(rate(&[]).is_none());
+    }
+
+    #[test]
+    fn long_arrays_are_abbreviated_for_humans() {
+        let mut v = serde_json::json!({"ranges": (0..20).collect::<Vec<_>>()});
+        abbreviate(&mut v);
+        assert_eq!(v["ranges"].as_array().unwrap().len(), 9);
+        assert_eq!(v["ranges"][8], "… 12 more");
+    }
+}

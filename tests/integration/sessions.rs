@@ -1,0 +1,306 @@
+//! Drivers as threads with their own Zenoh sessions, a client in another
+//! session, all through a real router on loopback.
+
+use std::time::{Duration, Instant};
+
+use serde::Deserialize;
+use troupe_client::{Client, ClientError, LaserProxy, Position2dProxy, RangerProxy};
+use troupe_msgs::{
+    common, keys, laser, position2d, ranger, Device, Interface, Pose2d, Pose3d, Size3d,
+};
+use troupe_node::zenoh::Wait;
+use troupe_node::{
+    spawn, Ctx, Driver, Event, NodeConfig, NodeError, NodeHandle, Result, Section, Stop,
+};
+use troupe_tests::{TestNet, DEADLINE};
+
+fn start<D: Driver>(net: &TestNet, section: &str) -> NodeHandle {
+    let section = Section::from_json(section).expect("section");
+    spawn::<D>(net.peer(), section, &NodeConfig::default(), Stop::default()).expect("node starts")
+}
+
+fn dummy_and_converter(net: &TestNet) -> (NodeHandle, NodeHandle) {
+    let d = start::<troupe_dummy::Dummy>(
+        net,
+        r#"{"name":"dummy","provides":["ranger:0"],"options":{"rate":50}}"#,
+    );
+    let r = start::<troupe_rangertolaser::RangerToLaser>(
+        net,
+        r#"{"name":"rangertolaser","requires":["ranger:0"],"provides":["laser:0"]}"#,
+    );
+    net.wait_live(&["6665:ranger:0", "6665:laser:0"]);
+    (d, r)
+}
+
+/// Reads until `ok` holds, within the deadline.
+fn read_until(client: &Client, what: &str, ok: impl Fn() -> bool) {
+    let deadline = Instant::now() + DEADLINE;
+    while !ok() {
+        assert!(Instant::now() < deadline, "timed out waiting for {what}");
+        client.read_timeout(DEADLINE).expect("data keeps coming");
+    }
+}
+
+#[test]
+fn ranger_data_flows_through_rangertolaser_to_a_laser_client() {
+    let net = TestNet::new("flow");
+    let (d, r) = dummy_and_converter(&net);
+    let client = Client::with_session(net.client(), 6665);
+    let lp = LaserProxy::new(&client, 0).unwrap();
+    let rp = RangerProxy::new(&client, 0).unwrap();
+    read_until(&client, "a laser scan", || {
+        lp.count() == 361 && rp.count() == 361
+    });
+    assert_eq!(lp.range(360), Some(8.0));
+    // The dummy refuses the config request, so angles are zero, as in Player.
+    assert_eq!(lp.max_angle(), 0.0);
+    r.stop().unwrap();
+    d.stop().unwrap();
+}
+
+#[test]
+fn liveliness_lists_every_device_with_its_driver() {
+    let net = TestNet::new("list");
+    let (_d, _r) = dummy_and_converter(&net);
+    let s = net.client();
+    let replies = s
+        .liveliness()
+        .get(keys::tokens(Some(6665)))
+        .timeout(DEADLINE)
+        .wait()
+        .unwrap();
+    let mut found = Vec::new();
+    while let Ok(r) = replies.recv() {
+        let key = r.result().unwrap().key_expr().to_string();
+        found.push(keys::parse_token(&key).unwrap());
+    }
+    found.sort();
+    assert_eq!(
+        found,
+        vec![
+            (
+                Device::new(6665, Interface::Laser, 0),
+                "rangertolaser".to_owned()
+            ),
+            (Device::new(6665, Interface::Ranger, 0), "dummy".to_owned()),
+        ]
+    );
+}
+
+#[test]
+fn a_nack_travels_back_with_its_reason() {
+    let net = TestNet::new("nack");
+    let (_d, _r) = dummy_and_converter(&net);
+    let client = Client::with_session(net.client(), 6665);
+    let lp = LaserProxy::new(&client, 0).unwrap();
+    // rangertolaser forwards geom to the dummy ranger, which refuses.
+    match lp.request_geom() {
+        Err(ClientError::Nack { reason, .. }) => {
+            assert!(reason.contains("dummy driver refuses"), "{reason}")
+        }
+        other => panic!("expected a NACK, got {other:?}"),
+    }
+}
+
+#[test]
+fn a_request_to_no_device_says_so() {
+    let net = TestNet::new("noreply");
+    let client = Client::with_session(net.client(), 6665);
+    let p = Position2dProxy::new(&client, 3).unwrap();
+    let e = p.request_geom().unwrap_err().to_string();
+    assert!(e.contains("6665:position2d:3"), "{e}");
+}
+
+#[test]
+fn a_missing_requirement_times_out_naming_the_device() {
+    let net = TestNet::new("missing");
+    let section = Section::from_json(
+        r#"{"name":"rangertolaser","requires":["ranger:4"],"provides":["laser:0"]}"#,
+    )
+    .unwrap();
+    let cfg = NodeConfig {
+        requires_timeout: Duration::from_millis(300),
+        ..Default::default()
+    };
+    let e =
+        spawn::<troupe_rangertolaser::RangerToLaser>(net.peer(), section, &cfg, Stop::default())
+            .err()
+            .expect("must time out");
+    assert!(matches!(e, NodeError::RequiresTimeout { .. }), "{e}");
+    assert!(e.to_string().contains("6665:ranger:4"), "{e}");
+}
+
+#[test]
+fn malformed_samples_are_dropped_and_the_node_lives_on() {
+    let net = TestNet::new("malformed");
+    // rangertolaser alone; the test plays the ranger.
+    let s = net.peer();
+    let ranger_dev = Device::new(6665, Interface::Ranger, 0);
+    let _token = s
+        .liveliness()
+        .declare_token(keys::token(&ranger_dev, "test"))
+        .wait()
+        .unwrap();
+    let _cfg = s
+        .declare_queryable(keys::req(&ranger_dev, "get_config"))
+        .callback(|q| {
+            let c = ranger::Config {
+                max_range: 5.0,
+                ..Default::default()
+            };
+            q.reply(q.key_expr().clone(), troupe_msgs::encode(&c, 0.0))
+                .wait()
+                .unwrap();
+        })
+        .wait()
+        .unwrap();
+    let r = start::<troupe_rangertolaser::RangerToLaser>(
+        &net,
+        r#"{"name":"rangertolaser","requires":["ranger:0"],"provides":["laser:0"]}"#,
+    );
+    net.wait_live(&["6665:laser:0"]);
+    let client = Client::with_session(net.client(), 6665);
+    let lp = LaserProxy::new(&client, 0).unwrap();
+    let data = keys::data(&ranger_dev);
+    let publisher = s.declare_publisher(data).wait().unwrap();
+    let deadline = Instant::now() + DEADLINE;
+    // Garbage, a wrong schema, then good data, until a scan comes out.
+    while lp.count() != 3 {
+        assert!(Instant::now() < deadline, "no scan after malformed input");
+        publisher.put(vec![0xffu8, 1, 2]).wait().unwrap();
+        publisher
+            .put(troupe_msgs::encode(&laser::Scan::default(), 0.0))
+            .wait()
+            .unwrap();
+        publisher
+            .put(troupe_msgs::encode(
+                &ranger::Ranges {
+                    ranges: vec![1.0, 2.0, 3.0],
+                },
+                0.0,
+            ))
+            .wait()
+            .unwrap();
+        let _ = client.read_timeout(Duration::from_millis(200));
+    }
+    assert_eq!(lp.max_range(), 5.0);
+    r.stop().unwrap();
+}
+
+/// A unicycle base for tests: integrates velocity commands on each tick.
+struct TestBase {
+    dev: Device,
+    state: position2d::Data,
+    motors: bool,
+    last: f64,
+}
+
+#[derive(Debug, Default, Deserialize)]
+struct NoOpts {}
+
+impl Driver for TestBase {
+    const NAME: &'static str = "testbase";
+    type Options = NoOpts;
+
+    fn new(section: &Section, _: NoOpts) -> Result<Self> {
+        Ok(TestBase {
+            dev: section.provided_one(Interface::Position2d, None)?,
+            state: position2d::Data::default(),
+            motors: false,
+            last: 0.0,
+        })
+    }
+
+    fn setup(&mut self, ctx: &mut Ctx) -> Result<()> {
+        self.last = ctx.now();
+        ctx.set_tick(Some(Duration::from_millis(10)));
+        ctx.publish(&self.dev, &self.state)
+    }
+
+    fn on_event(&mut self, ctx: &mut Ctx, event: Event) -> Result<()> {
+        match event {
+            Event::Command(c) if c.is::<position2d::CmdVel>() => {
+                let v = c.decode::<position2d::CmdVel>()?.msg.vel;
+                self.state.vel = if self.motors { v } else { Pose2d::default() };
+            }
+            Event::Command(c) => return Err(c.unexpected()),
+            Event::Request(r) if r.is::<position2d::MotorPower>() => {
+                self.motors = r.decode::<position2d::MotorPower>()?.state;
+                r.reply(&common::Ack);
+            }
+            Event::Request(r) if r.is::<position2d::GetGeom>() => r.reply(&position2d::Geom {
+                pose: Pose3d::default(),
+                size: Size3d {
+                    width: 0.4,
+                    length: 0.5,
+                    height: 0.2,
+                },
+            }),
+            Event::Request(r) => r.nack("not supported"),
+            Event::Tick => {
+                let now = ctx.now();
+                let dt = now - self.last;
+                self.last = now;
+                let p = &mut self.state.pose;
+                p.x += self.state.vel.x * p.yaw.cos() * dt;
+                p.y += self.state.vel.x * p.yaw.sin() * dt;
+                p.yaw += self.state.vel.yaw * dt;
+                ctx.publish(&self.dev, &self.state)?;
+            }
+            Event::Data(_) | Event::Reply(_) => {}
+        }
+        Ok(())
+    }
+
+    fn shutdown(&mut self, ctx: &mut Ctx) -> Result<()> {
+        self.state.vel = Pose2d::default();
+        ctx.publish(&self.dev, &self.state)
+    }
+}
+
+#[test]
+fn a_client_drives_a_position2d_device_and_reads_its_state_back() {
+    let net = TestNet::new("drive");
+    let base = start::<TestBase>(&net, r#"{"name":"testbase","provides":["position2d:0"]}"#);
+    net.wait_live(&["6665:position2d:0"]);
+    let client = Client::with_session(net.client(), 6665);
+    let pp = Position2dProxy::new(&client, 0).unwrap();
+    // The latest state arrives with the subscription (late joiner).
+    assert!(pp.data().is_some(), "no latest value for a late joiner");
+    let g = pp.request_geom().unwrap();
+    assert_eq!(g.size.length, 0.5);
+    // Motors off: commands do not move the base.
+    pp.set_speed(1.0, 0.0).unwrap();
+    pp.set_motor_enable(true).unwrap();
+    pp.set_speed(1.0, 0.0).unwrap();
+    read_until(&client, "the base to move 5 cm", || pp.x() > 0.05);
+    assert!(pp.x_speed() > 0.99 && !pp.stall());
+    pp.set_speed(0.0, 0.0).unwrap();
+    read_until(&client, "the base to stop", || pp.x_speed() == 0.0);
+    let e = pp.reset_odometry().unwrap_err().to_string();
+    assert!(e.contains("refused `reset_odom`: not supported"), "{e}");
+    base.stop().unwrap();
+}
+
+#[test]
+fn namespaces_keep_tests_apart_on_one_router() {
+    let net = TestNet::new("ns-a");
+    let _a = start::<troupe_dummy::Dummy>(&net, r#"{"name":"dummy","provides":["laser:5"]}"#);
+    net.wait_live(&["6665:laser:5"]);
+    let other = TestNet {
+        router: net.router.clone(),
+        endpoint: net.endpoint.clone(),
+        namespace: troupe_tests::unique_namespace("ns-b"),
+    };
+    let s = other.client();
+    let replies = s
+        .liveliness()
+        .get(keys::tokens(None))
+        .timeout(Duration::from_millis(500))
+        .wait()
+        .unwrap();
+    let seen: Vec<String> = std::iter::from_fn(|| replies.recv().ok())
+        .filter_map(|r| r.result().ok().map(|s| s.key_expr().to_string()))
+        .collect();
+    assert!(seen.is_empty(), "namespace leaked: {seen:?}");
+}

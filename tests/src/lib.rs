@@ -1,0 +1,232 @@
+//! Support for Troupe's integration tests: a router per test on an ephemeral
+//! loopback port, a namespace per test, the `troupe` binary, child processes
+//! that die with the test, and deadlines instead of sleeps.
+
+use std::io::{BufRead, BufReader};
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::{mpsc, Once};
+use std::time::{Duration, Instant};
+
+use troupe_node::zenoh::{Session, Wait};
+use troupe_node::{Mode, ZenohArgs};
+
+/// The longest any single wait in a test may take.
+pub const DEADLINE: Duration = Duration::from_secs(20);
+
+static COUNTER: AtomicU32 = AtomicU32::new(0);
+
+/// A namespace no other test (or test run) uses.
+pub fn unique_namespace(name: &str) -> String {
+    let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+    format!("test-{name}-{}-{n}", std::process::id())
+}
+
+/// A Zenoh router on `tcp/127.0.0.1:<ephemeral>` and a namespace, for one test.
+pub struct TestNet {
+    /// The router's session.
+    pub router: Session,
+    /// Where to connect: the router's real locator.
+    pub endpoint: String,
+    /// This test's namespace.
+    pub namespace: String,
+}
+
+impl TestNet {
+    /// Starts the router.
+    pub fn new(name: &str) -> Self {
+        let args = ZenohArgs {
+            listen: vec!["tcp/127.0.0.1:0".into()],
+            no_multicast: true,
+            ..Default::default()
+        };
+        let router = args.open(Mode::Router).expect("router session");
+        let endpoint = router
+            .info()
+            .locators()
+            .wait()
+            .first()
+            .expect("router locator")
+            .to_string();
+        TestNet {
+            router,
+            endpoint,
+            namespace: unique_namespace(name),
+        }
+    }
+
+    /// Flags that join this test's network and namespace.
+    pub fn args(&self) -> ZenohArgs {
+        ZenohArgs {
+            connect: vec![self.endpoint.clone()],
+            listen: vec!["tcp/127.0.0.1:0".into()],
+            namespace: Some(self.namespace.clone()),
+            no_multicast: true,
+            ..Default::default()
+        }
+    }
+
+    /// The same flags for a child `troupe` process.
+    pub fn child_args(&self) -> Vec<String> {
+        let mut v = self.args().to_child_args();
+        v.extend(["--listen".into(), "tcp/127.0.0.1:0".into()]);
+        v
+    }
+
+    /// A peer session in this test's namespace.
+    pub fn peer(&self) -> Session {
+        self.args().open(Mode::Peer).expect("peer session")
+    }
+
+    /// A client session in this test's namespace.
+    pub fn client(&self) -> Session {
+        let mut a = self.args();
+        a.listen.clear();
+        a.open(Mode::Client).expect("client session")
+    }
+
+    /// Waits until every device in `devices` has a liveliness token.
+    pub fn wait_live(&self, devices: &[&str]) {
+        let s = self.client();
+        let sub = s
+            .liveliness()
+            .declare_subscriber(troupe_msgs::keys::tokens(None))
+            .history(true)
+            .wait()
+            .expect("liveliness subscriber");
+        let deadline = Instant::now() + DEADLINE;
+        let mut missing: Vec<String> = devices.iter().map(|d| d.to_string()).collect();
+        while !missing.is_empty() {
+            let sample = sub
+                .recv_deadline(deadline)
+                .expect("liveliness channel")
+                .unwrap_or_else(|| panic!("devices never came up: {missing:?}"));
+            if let Ok((d, _)) = troupe_msgs::keys::parse_token(sample.key_expr().as_str()) {
+                missing.retain(|m| *m != d.to_string());
+            }
+        }
+    }
+}
+
+/// The `troupe` binary of this build, built once per test run.
+pub fn troupe_bin() -> PathBuf {
+    static BUILD: Once = Once::new();
+    // target/<profile>/deps/integration-… → target/<profile>/troupe
+    let exe = std::env::current_exe().expect("test exe");
+    let dir = exe.parent().and_then(|d| d.parent()).expect("target dir");
+    let profile_release = dir.ends_with("release");
+    BUILD.call_once(|| {
+        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+        let mut cmd = Command::new(cargo);
+        cmd.args(["build", "--quiet", "-p", "troupe", "--bin", "troupe"]);
+        if profile_release {
+            cmd.arg("--release");
+        }
+        let status = cmd.status().expect("running cargo build");
+        assert!(status.success(), "cargo build of troupe failed");
+    });
+    dir.join("troupe")
+}
+
+/// A child process that is killed when dropped, so a failing test leaves no orphan.
+pub struct Proc {
+    /// The child.
+    pub child: Child,
+    /// What it is, for messages.
+    pub name: String,
+}
+
+impl Proc {
+    /// Starts `troupe ARGS…` with piped stdout and stderr.
+    pub fn troupe(name: &str, args: &[String]) -> Proc {
+        let child = Command::new(troupe_bin())
+            .args(args)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("spawning troupe");
+        Proc {
+            child,
+            name: name.to_owned(),
+        }
+    }
+
+    /// The first line the child prints on stdout, within the deadline.
+    pub fn first_line(&mut self) -> String {
+        let out = self.child.stdout.take().expect("stdout piped");
+        let (tx, rx) = mpsc::channel();
+        std::thread::spawn(move || {
+            let mut line = String::new();
+            let _ = BufReader::new(out).read_line(&mut line);
+            let _ = tx.send(line);
+        });
+        rx.recv_timeout(DEADLINE)
+            .unwrap_or_else(|_| panic!("{} printed nothing within {DEADLINE:?}", self.name))
+    }
+
+    /// Sends SIGTERM and waits (within the deadline) for the exit status.
+    pub fn terminate(&mut self) -> std::process::ExitStatus {
+        use nix::sys::signal::{kill, Signal};
+        use nix::unistd::Pid;
+        let pid = Pid::from_raw(i32::try_from(self.child.id()).expect("pid"));
+        kill(pid, Signal::SIGTERM).expect("kill -TERM");
+        self.wait()
+    }
+
+    /// Waits (within the deadline) for the child to exit.
+    pub fn wait(&mut self) -> std::process::ExitStatus {
+        let (tx, rx) = mpsc::channel();
+        let pid = self.child.id();
+        // Child::wait needs &mut; reap it on this thread, watch the clock on another.
+        let watchdog = std::thread::spawn(move || {
+            if rx.recv_timeout(DEADLINE).is_err() {
+                use nix::sys::signal::{kill, Signal};
+                let _ = kill(nix::unistd::Pid::from_raw(pid as i32), Signal::SIGKILL);
+            }
+        });
+        let status = self.child.wait().expect("wait");
+        let _ = tx.send(());
+        let _ = watchdog.join();
+        status
+    }
+
+    /// Everything the child wrote on stderr (after it exited).
+    pub fn stderr(&mut self) -> String {
+        let mut s = String::new();
+        if let Some(mut e) = self.child.stderr.take() {
+            let _ = std::io::Read::read_to_string(&mut e, &mut s);
+        }
+        s
+    }
+}
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        if let Ok(None) = self.child.try_wait() {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}
+
+/// Runs `troupe ARGS…` to completion (within the deadline): status, stdout, stderr.
+pub fn troupe_output(args: &[String]) -> (std::process::ExitStatus, String, String) {
+    let mut p = Proc::troupe("troupe", args);
+    let mut out = p.child.stdout.take().expect("stdout");
+    let reader = std::thread::spawn(move || {
+        let mut s = String::new();
+        let _ = std::io::Read::read_to_string(&mut out, &mut s);
+        s
+    });
+    let status = p.wait();
+    let stdout = reader.join().unwrap_or_default();
+    let stderr = p.stderr();
+    (status, stdout, stderr)
+}
+
+/// `["a", "b"]` as owned strings.
+pub fn strings(v: &[&str]) -> Vec<String> {
+    v.iter().map(|s| (*s).to_owned()).collect()
+}
