@@ -1,6 +1,6 @@
 //! The drivers this binary can run, by Player name.
 
-use troupe_node::{Driver, NodeConfig, Result, Section, ZenohArgs};
+use troupe_node::{Driver, NodeConfig, Result, Section, Unit, ZenohArgs};
 
 /// A driver this build carries.
 pub struct Entry {
@@ -8,6 +8,10 @@ pub struct Entry {
     pub name: &'static str,
     /// One line on what it does.
     pub about: &'static str,
+    /// Options read as lengths or angles.
+    pub units: &'static [(&'static str, Unit)],
+    /// Checks a section without starting anything; returns unused options.
+    pub check: fn(&Section) -> Result<Vec<String>>,
     run: fn(Section, &ZenohArgs, &NodeConfig) -> Result<()>,
 }
 
@@ -15,6 +19,8 @@ fn entry<D: Driver>(about: &'static str) -> Entry {
     Entry {
         name: D::NAME,
         about,
+        units: D::UNITS,
+        check: troupe_node::check::<D>,
         run: troupe_node::run::<D>,
     }
 }
@@ -27,15 +33,20 @@ pub fn all() -> Vec<Entry> {
     ]
 }
 
+/// The driver called `name`.
+pub fn find(name: &str) -> Option<Entry> {
+    all().into_iter().find(|e| e.name == name)
+}
+
+/// `dummy, rangertolaser, …` for messages.
+pub fn names() -> String {
+    all().iter().map(|e| e.name).collect::<Vec<_>>().join(", ")
+}
+
 /// Runs driver `name` in this process until SIGINT/SIGTERM.
 pub fn run(name: &str, section: Section, z: &ZenohArgs, cfg: &NodeConfig) -> anyhow::Result<()> {
-    let all = all();
-    let Some(e) = all.iter().find(|e| e.name == name) else {
-        let names: Vec<&str> = all.iter().map(|e| e.name).collect();
-        anyhow::bail!(
-            "driver `{name}` is not available in Troupe; available: {}",
-            names.join(", ")
-        );
+    let Some(e) = find(name) else {
+        anyhow::bail!("driver `{name}` is not available in Troupe; available: {}", names());
     };
     (e.run)(section, z, cfg)?;
     Ok(())

@@ -5,8 +5,10 @@
 //! whole, and the exit code says whether the command succeeded.
 
 mod bench;
+mod cfg;
 mod cli;
 mod drivers;
+mod plan;
 mod tools;
 
 use std::process::ExitCode;

@@ -26,6 +26,12 @@ pub trait Driver: Sized + Send + 'static {
     /// Typed options under Player's names; `Default` gives Player's defaults.
     type Options: DeserializeOwned + Default + fmt::Debug;
 
+    /// Options that Player reads as lengths or angles (`ReadLength`,
+    /// `ReadAngle`, `ReadTupleLength`…): the `.cfg` translator scales them by
+    /// the file's `unit_length`/`unit_angle` so that options arrive in metres
+    /// and radians.
+    const UNITS: &'static [(&'static str, Unit)] = &[];
+
     /// Builds the driver from its section and options.
     ///
     /// Called once, before any network activity. Fail here on anything wrong
@@ -59,6 +65,21 @@ pub trait Driver: Sized + Send + 'static {
         let _ = ctx;
         Ok(())
     }
+}
+
+/// How the `.cfg` translator converts an option to SI units.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Unit {
+    /// A length: scaled by `unit_length` (default metres).
+    Length,
+    /// An angle: scaled by `unit_angle` (default degrees).
+    Angle,
+    /// A tuple whose elements have these units, e.g. a pose `[Length, Length, Angle]`.
+    Tuple(&'static [Unit]),
+    /// A tuple of any length, every element a length.
+    Lengths,
+    /// A tuple of any length, every element an angle.
+    Angles,
 }
 
 /// Something for a driver to react to.

@@ -54,7 +54,7 @@ impl Default for NodeConfig {
     }
 }
 
-fn z<T>(what: impl FnOnce() -> String) -> impl FnOnce(zenoh::Error) -> NodeError {
+fn z(what: impl FnOnce() -> String) -> impl FnOnce(zenoh::Error) -> NodeError {
     move |e| NodeError::zenoh(what(), e)
 }
 
@@ -72,7 +72,7 @@ pub fn run<D: Driver>(section: Section, zargs: &ZenohArgs, cfg: &NodeConfig) -> 
     session
         .close()
         .wait()
-        .map_err(z::<()>(|| "closing the session".into()))?;
+        .map_err(z(|| "closing the session".into()))?;
     result
 }
 
@@ -207,6 +207,19 @@ pub fn spawn<D: Driver>(
     Ok(NodeHandle { thread, stop })
 }
 
+/// Checks a section for driver `D` without starting it: builds the driver
+/// (which touches no device and no network) and returns the options it does
+/// not use.
+///
+/// # Errors
+///
+/// What building the driver returns: a wrong option type, a missing device.
+pub fn check<D: Driver>(section: &Section) -> Result<Vec<String>> {
+    let (options, unused) = section.options::<D::Options>()?;
+    D::new(section, options)?;
+    Ok(unused)
+}
+
 /// Builds the driver from its section, warning about unused options.
 pub(crate) fn build<D: Driver>(section: &Section) -> Result<D> {
     if section.name != D::NAME {
@@ -243,7 +256,7 @@ fn run_loop<D: Driver>(
             .liveliness()
             .declare_token(&key)
             .wait()
-            .map_err(z::<()>(|| format!("declaring liveliness {key}")))?;
+            .map_err(z(|| format!("declaring liveliness {key}")))?;
         tokens.push(token);
     }
     tracing::info!(
@@ -335,7 +348,7 @@ fn wait_live(session: &Session, dev: &Device, timeout: Duration) -> Result<()> {
         .declare_subscriber(&key)
         .history(true)
         .wait()
-        .map_err(z::<()>(|| format!("watching liveliness of {dev}")))?;
+        .map_err(z(|| format!("watching liveliness of {dev}")))?;
     tracing::info!("waiting for required device {dev}");
     let deadline = Instant::now() + timeout;
     loop {
@@ -404,7 +417,7 @@ fn sim_clock(
             },
         )
         .wait()
-        .map_err(z::<()>(|| "subscribing to sim/clock".into()))
+        .map_err(z(|| "subscribing to sim/clock".into()))
 }
 
 struct ZenohBus {
@@ -440,7 +453,7 @@ impl ZenohBus {
             .declare_publisher(data.clone())
             .express(true)
             .wait()
-            .map_err(z::<()>(|| format!("declaring publisher {data}")))?;
+            .map_err(z(|| format!("declaring publisher {data}")))?;
         self.publishers.insert(*dev, publisher);
 
         let latest = self.latest.clone();
@@ -461,7 +474,7 @@ impl ZenohBus {
                 }
             })
             .wait()
-            .map_err(z::<()>(|| format!("declaring queryable {data}")))?;
+            .map_err(z(|| format!("declaring queryable {data}")))?;
         self.queryables.push(q);
 
         let inbox = self.inbox.clone();
@@ -476,7 +489,7 @@ impl ZenohBus {
                 )));
             })
             .wait()
-            .map_err(z::<()>(|| format!("subscribing to commands of {d}")))?;
+            .map_err(z(|| format!("subscribing to commands of {d}")))?;
         self.subscribers.push(sub);
 
         let inbox = self.inbox.clone();
@@ -499,7 +512,7 @@ impl ZenohBus {
                 }));
             })
             .wait()
-            .map_err(z::<()>(|| format!("declaring request queryable of {d}")))?;
+            .map_err(z(|| format!("declaring request queryable of {d}")))?;
         self.queryables.push(q);
         Ok(())
     }
@@ -529,7 +542,7 @@ impl Bus for ZenohBus {
         publisher
             .put(bytes)
             .wait()
-            .map_err(z::<()>(|| format!("publishing on {dev}")))
+            .map_err(z(|| format!("publishing on {dev}")))
     }
 
     fn subscribe(&mut self, dev: &Device) -> Result<()> {
@@ -546,7 +559,7 @@ impl Bus for ZenohBus {
                 inbox.push(Event::Data(Sample::new(d, k, s.payload().clone())));
             })
             .wait()
-            .map_err(z::<()>(|| format!("subscribing to {key}")))?;
+            .map_err(z(|| format!("subscribing to {key}")))?;
         self.subscribers.push(sub);
         // The latest samples the provider holds, unless live data got here first.
         let inbox = self.inbox.clone();
@@ -561,7 +574,7 @@ impl Bus for ZenohBus {
                 }
             })
             .wait()
-            .map_err(z::<()>(|| format!("fetching the latest {key}")))
+            .map_err(z(|| format!("fetching the latest {key}")))
     }
 
     fn command(&mut self, dev: &Device, name: &str, payload: Vec<u8>) -> Result<()> {
@@ -569,7 +582,7 @@ impl Bus for ZenohBus {
         self.session
             .put(key.clone(), payload)
             .wait()
-            .map_err(z::<()>(|| format!("sending command {key}")))
+            .map_err(z(|| format!("sending command {key}")))
     }
 
     fn request(
@@ -604,7 +617,7 @@ impl Bus for ZenohBus {
                 })
             })
             .wait()
-            .map_err(z::<()>(|| format!("sending request {key}")))
+            .map_err(z(|| format!("sending request {key}")))
     }
 }
 

@@ -1,0 +1,690 @@
+//! Launch plans: what `troupe plan robot.cfg` prints and `troupe launch` runs.
+//!
+//! A plan is one entry per node process: its driver, its options in SI units,
+//! the devices it provides and requires as concrete keys (with Player's keys
+//! such as `odometry` kept as roles), its host, restart policy and start
+//! order. It is written as TOML, meant to be read and edited by people.
+//!
+//! `from_cfg` translates a Player `.cfg`; `check` validates any plan (also
+//! one loaded from TOML): every driver exists and accepts its options, no
+//! device is provided twice, every requirement has exactly one provider or
+//! is declared external, and the start order has no cycle.
+
+use std::collections::{BTreeMap, HashMap};
+use std::fmt::Write as _;
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+use troupe_msgs::{keys, DevAddr, Device};
+use troupe_node::{Section, Unit};
+
+use crate::cfg::{self, CfgFile, Value};
+use crate::drivers;
+
+/// What a node's supervisor does when it exits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum Policy {
+    /// Leave it down.
+    Never,
+    /// Restart it when it fails (non-zero exit or a signal).
+    #[default]
+    OnFailure,
+    /// Restart it whenever it exits.
+    Always,
+}
+
+/// Restart policy of a node.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Restart {
+    /// When to restart.
+    #[serde(default)]
+    pub policy: Policy,
+    /// Give up after this many restarts within `window` seconds.
+    #[serde(default = "default_max")]
+    pub max: u32,
+    /// Seconds.
+    #[serde(default = "default_window")]
+    pub window: f64,
+    /// Seconds before the first restart; doubles on each quick failure, up to 5 s.
+    #[serde(default = "default_backoff")]
+    pub backoff: f64,
+}
+
+fn default_max() -> u32 {
+    5
+}
+fn default_window() -> f64 {
+    60.0
+}
+fn default_backoff() -> f64 {
+    0.1
+}
+
+impl Default for Restart {
+    fn default() -> Self {
+        Restart {
+            policy: Policy::OnFailure,
+            max: default_max(),
+            window: default_window(),
+            backoff: default_backoff(),
+        }
+    }
+}
+
+/// A device a node provides or requires.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DeviceRef {
+    /// Its data key, `robot/6665/laser/0`.
+    pub device: String,
+    /// Player's key for it in this driver (`odometry`, `input`, `laser`…).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub role: Option<String>,
+}
+
+impl DeviceRef {
+    fn parse(&self) -> Result<Device, String> {
+        keys::parse_data(&self.device).map_err(|e| e.to_string())
+    }
+}
+
+/// One node process.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NodeSpec {
+    /// Unique name, used in logs and log files.
+    pub name: String,
+    /// Player driver name.
+    pub driver: String,
+    /// Host that runs it (`troupe launch --host NAME`); none = wherever the plan is launched.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub host: Option<String>,
+    /// Nodes start in increasing order; a node starts once what it requires is live.
+    #[serde(default)]
+    pub start_order: u32,
+    /// Restart policy.
+    #[serde(default)]
+    pub restart: Restart,
+    /// Devices it provides.
+    #[serde(default)]
+    pub provides: Vec<DeviceRef>,
+    /// Devices it requires.
+    #[serde(default)]
+    pub requires: Vec<DeviceRef>,
+    /// Driver options by Player's names, lengths in metres and angles in radians.
+    #[serde(default)]
+    pub options: serde_json::Map<String, serde_json::Value>,
+    /// Where it came from (`robot.cfg:12:1`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub source: Option<String>,
+    /// Where each option was written, for messages.
+    #[serde(skip)]
+    pub option_pos: BTreeMap<String, String>,
+}
+
+impl NodeSpec {
+    /// The node's section, as `troupe node` takes it.
+    pub fn section(&self) -> Result<Section, String> {
+        let addr = |r: &DeviceRef| -> Result<DevAddr, String> {
+            let d = r.parse()?;
+            Ok(DevAddr {
+                key: r.role.clone(),
+                host: None,
+                robot: Some(d.robot),
+                interface: d.interface,
+                index: d.index,
+            })
+        };
+        Ok(Section {
+            name: self.driver.clone(),
+            provides: self.provides.iter().map(addr).collect::<Result<_, _>>()?,
+            requires: self.requires.iter().map(addr).collect::<Result<_, _>>()?,
+            robot: troupe_msgs::DEFAULT_ROBOT,
+            options: self.options.clone(),
+        })
+    }
+}
+
+/// Plan-wide settings.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Meta {
+    /// The file the plan was made from.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub source: Option<String>,
+    /// Devices provided outside this plan (another host, another launch).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub external: Vec<String>,
+}
+
+/// A launch plan.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Plan {
+    /// Plan-wide settings.
+    #[serde(default)]
+    pub launch: Meta,
+    /// The nodes.
+    #[serde(default, rename = "node")]
+    pub nodes: Vec<NodeSpec>,
+}
+
+/// What translating or checking a plan found.
+#[derive(Debug, Default)]
+pub struct Report {
+    /// Problems that stop the plan.
+    pub errors: Vec<String>,
+    /// Things worth saying (unused options, ignored plugins).
+    pub warnings: Vec<String>,
+}
+
+/// Why a plan cannot run: every problem found, one per line.
+#[derive(Debug, thiserror::Error)]
+#[error("{}", .0.join("\n"))]
+pub struct PlanError(pub Vec<String>);
+
+/// Fields every driver section may have that are not driver options.
+const GENERIC: &[&str] = &["name", "provides", "requires", "plugin", "alwayson"];
+
+fn num(text: &str) -> serde_json::Value {
+    if let Ok(i) = text.parse::<i64>() {
+        return i.into();
+    }
+    // INVARIANT: the parser only keeps numbers that parse as f64.
+    serde_json::Number::from_f64(text.parse::<f64>().unwrap_or(0.0))
+        .map_or(serde_json::Value::Null, serde_json::Value::Number)
+}
+
+/// A cfg value as JSON, scaled to SI where the driver reads a length or angle.
+fn to_json(v: &Value, unit: Option<Unit>, units: &cfg::Units) -> Result<serde_json::Value, String> {
+    let scale = |text: &str, factor: f64| -> Result<serde_json::Value, String> {
+        let x: f64 = text.parse().map_err(|_| format!("`{text}` is not a number"))?;
+        serde_json::Number::from_f64(x * factor)
+            .map(serde_json::Value::Number)
+            .ok_or_else(|| format!("`{text}` is not finite"))
+    };
+    Ok(match (v, unit) {
+        (Value::Num(n), Some(Unit::Length)) => scale(n, units.length)?,
+        (Value::Num(n), Some(Unit::Angle)) => scale(n, units.angle)?,
+        (Value::Num(n), _) => num(n),
+        (Value::Str(s) | Value::Word(s), _) => s.clone().into(),
+        (Value::Bool(b), _) => (*b).into(),
+        (Value::Tuple(items), u) => {
+            let each = |i: usize| match u {
+                Some(Unit::Tuple(us)) => us.get(i).copied(),
+                Some(Unit::Lengths) => Some(Unit::Length),
+                Some(Unit::Angles) => Some(Unit::Angle),
+                _ => None,
+            };
+            serde_json::Value::Array(
+                items
+                    .iter()
+                    .enumerate()
+                    .map(|(i, x)| to_json(x, each(i), units))
+                    .collect::<Result<_, _>>()?,
+            )
+        }
+    })
+}
+
+/// Translates a parsed cfg into a plan; `robot` is the default robot field
+/// (`-p PORT`). Problems are collected in the report, not returned early.
+pub fn from_cfg(file: &CfgFile, source: &Path, robot: u32, report: &mut Report) -> Plan {
+    let mut plan = Plan {
+        launch: Meta {
+            source: Some(source.display().to_string()),
+            external: Vec::new(),
+        },
+        nodes: Vec::new(),
+    };
+    for (p, pos) in &file.plugins {
+        report
+            .warnings
+            .push(format!("{pos}: plugin \"{p}\" ignored: Troupe's drivers are built in"));
+    }
+    for g in &file.globals {
+        report.warnings.push(format!("{}: top-level field `{}` is not used", g.pos, g.name));
+    }
+    let mut count: HashMap<String, u32> = HashMap::new();
+    for s in &file.sections {
+        if s.kind != "driver" {
+            report.errors.push(format!(
+                "{}: unknown section type `{}`: a Player .cfg holds `driver ( … )` sections",
+                s.pos, s.kind
+            ));
+            continue;
+        }
+        if let Some(c) = s.children.first() {
+            report
+                .errors
+                .push(format!("{}: section `{}` inside a driver section", c.pos, c.kind));
+            continue;
+        }
+        let Some(name_field) = s.field("name") else {
+            report.errors.push(format!("{}: driver section has no `name` (e.g. name \"sicklms200\")", s.pos));
+            continue;
+        };
+        let Value::Str(driver) = &name_field.value else {
+            report.errors.push(format!("{}: `name` must be a quoted driver name", name_field.pos));
+            continue;
+        };
+        let Some(entry) = drivers::find(driver) else {
+            report.errors.push(format!(
+                "{}: driver `{driver}` is not available in Troupe; available: {}",
+                name_field.pos,
+                drivers::names()
+            ));
+            continue;
+        };
+        let mut refs = |field: &str| -> Option<(Vec<DeviceRef>, Option<String>)> {
+            let Some(f) = s.field(field) else { return Some((Vec::new(), None)) };
+            let Some(list) = f.value.strings() else {
+                report.errors.push(format!("{}: `{field}` must be a list of quoted addresses like [\"laser:0\"]", f.pos));
+                return None;
+            };
+            let mut out = Vec::new();
+            let mut host = None;
+            for text in list {
+                match text.trim().parse::<DevAddr>() {
+                    Ok(a) => {
+                        if a.host.is_some() {
+                            host = a.host.clone();
+                        }
+                        out.push(DeviceRef {
+                            device: keys::data(&a.device(robot)),
+                            role: a.key.clone(),
+                        });
+                    }
+                    Err(e) => {
+                        report.errors.push(format!("{}: {field}: {e}", f.pos));
+                        return None;
+                    }
+                }
+            }
+            Some((out, host))
+        };
+        let (Some((provides, host)), Some((requires, _))) = (refs("provides"), refs("requires")) else {
+            continue;
+        };
+        let mut options = serde_json::Map::new();
+        let mut option_pos = BTreeMap::new();
+        let mut bad = false;
+        for f in &s.fields {
+            if GENERIC.contains(&f.name.as_str()) {
+                continue;
+            }
+            let unit = entry.units.iter().find(|(n, _)| *n == f.name).map(|(_, u)| *u);
+            match to_json(&f.value, unit, &f.units) {
+                Ok(v) => {
+                    options.insert(f.name.clone(), v);
+                    option_pos.insert(f.name.clone(), f.pos.to_string());
+                }
+                Err(e) => {
+                    report.errors.push(format!("{}: option `{}`: {e}", f.pos, f.name));
+                    bad = true;
+                }
+            }
+        }
+        if bad {
+            continue;
+        }
+        let n = count.entry(driver.clone()).or_insert(0);
+        *n += 1;
+        plan.nodes.push(NodeSpec {
+            name: if *n == 1 { driver.clone() } else { format!("{driver}-{n}") },
+            driver: driver.clone(),
+            host,
+            start_order: 0,
+            restart: Restart::default(),
+            provides,
+            requires,
+            options,
+            source: Some(s.pos.to_string()),
+            option_pos,
+        });
+    }
+    plan
+}
+
+/// Checks a plan and fills in start orders. Problems go to the report.
+pub fn check(plan: &mut Plan, report: &mut Report) {
+    let mut names = HashMap::new();
+    for n in &plan.nodes {
+        if names.insert(n.name.clone(), ()).is_some() {
+            report.errors.push(format!("two nodes are called `{}`", n.name));
+        }
+    }
+    // Drivers and options.
+    for n in &plan.nodes {
+        let at = n.source.clone().unwrap_or_else(|| format!("node `{}`", n.name));
+        let Some(entry) = drivers::find(&n.driver) else {
+            report.errors.push(format!(
+                "{at}: driver `{}` is not available in Troupe; available: {}",
+                n.driver,
+                drivers::names()
+            ));
+            continue;
+        };
+        match n.section() {
+            Err(e) => report.errors.push(format!("{at}: {e}")),
+            Ok(section) => match (entry.check)(&section) {
+                Ok(unused) => {
+                    for o in unused {
+                        let place = n.option_pos.get(&o).unwrap_or(&at);
+                        report.warnings.push(format!("{place}: option `{o}` is not used by driver `{}`", n.driver));
+                    }
+                }
+                Err(e) => report.errors.push(format!("{at}: {e}")),
+            },
+        }
+    }
+    // Providers.
+    let mut provider: BTreeMap<Device, usize> = BTreeMap::new();
+    for (i, n) in plan.nodes.iter().enumerate() {
+        for r in &n.provides {
+            let Ok(d) = r.parse() else { continue };
+            if let Some(&j) = provider.get(&d) {
+                let other = &plan.nodes[j];
+                report.errors.push(format!(
+                    "{d} is provided twice: by `{}` ({}) and by `{}` ({})",
+                    other.name,
+                    other.source.as_deref().unwrap_or("plan"),
+                    n.name,
+                    n.source.as_deref().unwrap_or("plan")
+                ));
+            } else {
+                provider.insert(d, i);
+            }
+        }
+    }
+    let external: Vec<Device> = plan
+        .launch
+        .external
+        .iter()
+        .filter_map(|k| match keys::parse_data(k) {
+            Ok(d) => Some(d),
+            Err(e) => {
+                report.errors.push(format!("[launch] external: {e}"));
+                None
+            }
+        })
+        .collect();
+    // Requirements.
+    let mut deps: Vec<Vec<usize>> = vec![Vec::new(); plan.nodes.len()];
+    for (i, n) in plan.nodes.iter().enumerate() {
+        for r in &n.requires {
+            let Ok(d) = r.parse() else { continue };
+            match provider.get(&d) {
+                Some(&j) if j == i => report.errors.push(format!("node `{}` requires {d}, which it provides itself", n.name)),
+                Some(&j) => deps[i].push(j),
+                None if external.contains(&d) => {}
+                None => {
+                    let similar: Vec<String> = provider
+                        .keys()
+                        .filter(|p| p.interface == d.interface || (p.robot == d.robot && p.index == d.index))
+                        .map(ToString::to_string)
+                        .collect();
+                    let hint = if similar.is_empty() {
+                        "no similar device is provided".to_owned()
+                    } else {
+                        format!("similar devices provided: {}", similar.join(", "))
+                    };
+                    report.errors.push(format!(
+                        "{}: node `{}` requires {d}, which nothing provides ({hint}); add a driver that provides it, or declare it in [launch] external if it runs elsewhere",
+                        n.source.as_deref().unwrap_or("plan"),
+                        n.name
+                    ));
+                }
+            }
+        }
+    }
+    // Start order: longest chain of requirements below each node.
+    let mut order = vec![0u32; plan.nodes.len()];
+    let mut state = vec![0u8; plan.nodes.len()]; // 0 new, 1 visiting, 2 done
+    fn visit(i: usize, deps: &[Vec<usize>], order: &mut [u32], state: &mut [u8], path: &mut Vec<usize>) -> Result<u32, Vec<usize>> {
+        match state[i] {
+            2 => return Ok(order[i]),
+            1 => {
+                let at = path.iter().position(|&p| p == i).unwrap_or(0);
+                return Err(path[at..].to_vec());
+            }
+            _ => {}
+        }
+        state[i] = 1;
+        path.push(i);
+        let mut o = 1;
+        for &j in &deps[i] {
+            o = o.max(visit(j, deps, order, state, path)? + 1);
+        }
+        path.pop();
+        state[i] = 2;
+        order[i] = o;
+        Ok(o)
+    }
+    for i in 0..plan.nodes.len() {
+        if let Err(cycle) = visit(i, &deps, &mut order, &mut state, &mut Vec::new()) {
+            let names: Vec<&str> = cycle.iter().map(|&c| plan.nodes[c].name.as_str()).collect();
+            report.errors.push(format!("requirements form a cycle: {} → {}", names.join(" → "), names[0]));
+            return;
+        }
+    }
+    for (n, o) in plan.nodes.iter_mut().zip(order) {
+        n.start_order = o;
+    }
+}
+
+/// Reads a plan from a `.cfg` or a `.toml` file and checks it.
+///
+/// # Errors
+///
+/// Every problem found, each with its place.
+pub fn load(path: &Path, robot: u32) -> Result<(Plan, Vec<String>), PlanError> {
+    let mut report = Report::default();
+    let is_toml = path.extension().is_some_and(|e| e == "toml");
+    let mut plan = if is_toml {
+        let text = std::fs::read_to_string(path).map_err(|e| PlanError(vec![format!("{}: {e}", path.display())]))?;
+        toml::from_str::<Plan>(&text).map_err(|e| PlanError(vec![format!("{}: {e}", path.display())]))?
+    } else {
+        let file = cfg::parse_file(path).map_err(|e| PlanError(vec![e.to_string()]))?;
+        from_cfg(&file, path, robot, &mut report)
+    };
+    if report.errors.is_empty() {
+        check(&mut plan, &mut report);
+    }
+    if report.errors.is_empty() {
+        Ok((plan, report.warnings))
+    } else {
+        Err(PlanError(report.errors))
+    }
+}
+
+fn toml_value(v: &serde_json::Value) -> String {
+    match toml::Value::try_from(v) {
+        Ok(t) => t.to_string(),
+        Err(_) => v.to_string(),
+    }
+}
+
+fn toml_str(s: &str) -> String {
+    toml::Value::String(s.to_owned()).to_string()
+}
+
+fn refs_toml(v: &[DeviceRef]) -> String {
+    let items: Vec<String> = v
+        .iter()
+        .map(|r| match &r.role {
+            Some(role) => format!("{{ device = {}, role = {} }}", toml_str(&r.device), toml_str(role)),
+            None => format!("{{ device = {} }}", toml_str(&r.device)),
+        })
+        .collect();
+    format!("[{}]", items.join(", "))
+}
+
+/// The plan as a commented, human-editable TOML launch file.
+pub fn to_toml(plan: &Plan) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "# Troupe launch plan. Run it with `troupe launch <this file>`; edit freely.");
+    let _ = writeln!(s, "# Options are in SI units (metres, radians); one [[node]] per process.");
+    let _ = writeln!(s, "\n[launch]");
+    if let Some(src) = &plan.launch.source {
+        let _ = writeln!(s, "source = {}", toml_str(src));
+    }
+    let ext: Vec<String> = plan.launch.external.iter().map(|e| toml_str(e)).collect();
+    let _ = writeln!(s, "# Devices provided elsewhere (another host or launch), e.g. \"robot/6665/laser/0\".");
+    let _ = writeln!(s, "external = [{}]", ext.join(", "));
+    for n in &plan.nodes {
+        let _ = writeln!(s, "\n[[node]]");
+        let _ = writeln!(s, "name = {}", toml_str(&n.name));
+        let _ = writeln!(s, "driver = {}", toml_str(&n.driver));
+        if let Some(h) = &n.host {
+            let _ = writeln!(s, "host = {}", toml_str(h));
+        }
+        let _ = writeln!(s, "start_order = {}", n.start_order);
+        let p = match n.restart.policy {
+            Policy::Never => "never",
+            Policy::OnFailure => "on-failure",
+            Policy::Always => "always",
+        };
+        let _ = writeln!(
+            s,
+            "restart = {{ policy = \"{p}\", max = {}, window = {:?}, backoff = {:?} }}",
+            n.restart.max, n.restart.window, n.restart.backoff
+        );
+        let _ = writeln!(s, "provides = {}", refs_toml(&n.provides));
+        let _ = writeln!(s, "requires = {}", refs_toml(&n.requires));
+        if let Some(src) = &n.source {
+            let _ = writeln!(s, "source = {}", toml_str(src));
+        }
+        let _ = writeln!(s, "[node.options]");
+        for (k, v) in &n.options {
+            let key = if k.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-') {
+                k.clone()
+            } else {
+                toml_str(k)
+            };
+            let _ = writeln!(s, "{key} = {}", toml_value(v));
+        }
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn plan_of(text: &str) -> Result<(Plan, Vec<String>), PlanError> {
+        let file = cfg::parse_str(text, Path::new("t.cfg")).map_err(|e| PlanError(vec![e.to_string()]))?;
+        let mut report = Report::default();
+        let mut plan = from_cfg(&file, Path::new("t.cfg"), 6665, &mut report);
+        if report.errors.is_empty() {
+            check(&mut plan, &mut report);
+        }
+        if report.errors.is_empty() {
+            Ok((plan, report.warnings))
+        } else {
+            Err(PlanError(report.errors))
+        }
+    }
+
+    const STACK: &str = "driver( name \"dummy\" provides [\"ranger:0\"] rate 20 colour \"red\" )\n\
+                         driver( name \"rangertolaser\" requires [\"ranger:0\"] provides [\"laser:0\"] )\n";
+
+    #[test]
+    fn a_stack_becomes_ordered_nodes_and_round_trips_through_toml() {
+        let (plan, warnings) = plan_of(STACK).unwrap();
+        assert_eq!(plan.nodes.len(), 2);
+        assert_eq!(plan.nodes[0].start_order, 1);
+        assert_eq!(plan.nodes[1].start_order, 2);
+        assert_eq!(plan.nodes[1].requires[0].device, "robot/6665/ranger/0");
+        assert_eq!(plan.nodes[0].options["rate"], 20);
+        assert_eq!(warnings, vec!["t.cfg:1:52: option `colour` is not used by driver `dummy`".to_owned()]);
+        let text = to_toml(&plan);
+        let back: Plan = toml::from_str(&text).unwrap();
+        let mut plan = plan;
+        plan.nodes.iter_mut().for_each(|n| n.option_pos.clear());
+        assert_eq!(back, plan, "{text}");
+    }
+
+    #[test]
+    fn robot_port_and_roles_are_kept() {
+        let file = cfg::parse_str(
+            "driver( name \"rangertolaser\" requires [\"input::ranger:0\"] provides [\"laser:0\"] )\ndriver( name \"dummy\" provides [\"ranger:0\"] )",
+            Path::new("t.cfg"),
+        )
+        .unwrap();
+        let mut r = Report::default();
+        let mut plan = from_cfg(&file, Path::new("t.cfg"), 7000, &mut r);
+        check(&mut plan, &mut r);
+        assert!(r.errors.is_empty(), "{:?}", r.errors);
+        assert_eq!(plan.nodes[0].requires[0].device, "robot/7000/ranger/0");
+        assert_eq!(plan.nodes[0].requires[0].role.as_deref(), Some("input"));
+        assert_eq!(plan.nodes[0].start_order, 2);
+        let sec = plan.nodes[0].section().unwrap();
+        assert_eq!(sec.requires[0].to_string(), "input::7000:ranger:0");
+    }
+
+    #[test]
+    fn problems_are_all_reported_with_places() {
+        let e = plan_of(
+            "driver( name \"foo\" provides [\"laser:0\"] )\n\
+             driver( name \"rangertolaser\" requires [\"ranger:3\"] provides [\"laser:1\"] )\n\
+             driver( name \"dummy\" provides [\"ranger:0\"] )\n",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("t.cfg:1:9: driver `foo` is not available in Troupe; available: dummy, rangertolaser"), "{e}");
+        let e = plan_of(
+            "driver( name \"rangertolaser\" requires [\"ranger:3\"] provides [\"laser:1\"] )\n\
+             driver( name \"dummy\" provides [\"ranger:0\"] )\n",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("requires 6665:ranger:3, which nothing provides (similar devices provided: 6665:ranger:0)"), "{e}");
+        let e = plan_of("driver( name \"dummy\" provides [\"laser:0\"] )\ndriver( name \"dummy\" provides [\"laser:0\"] )")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("6665:laser:0 is provided twice: by `dummy` (t.cfg:1:1) and by `dummy-2` (t.cfg:2:1)"), "{e}");
+        let e = plan_of("driver( name \"dummy\" provides [\"laser:0\"] rate \"fast\" )").unwrap_err().to_string();
+        assert!(e.contains("t.cfg:1:1: configuration of driver `dummy`: option invalid type: string \"fast\""), "{e}");
+        let e = plan_of("robot( name \"x\" )").unwrap_err().to_string();
+        assert!(e.contains("unknown section type `robot`"), "{e}");
+        let e = plan_of("driver( name \"dummy\" provides [\"lazer:0\"] )").unwrap_err().to_string();
+        assert!(e.contains("t.cfg:1:22: provides: unknown interface `lazer`"), "{e}");
+    }
+
+    #[test]
+    fn external_devices_satisfy_requirements() {
+        let mut plan = plan_of("driver( name \"dummy\" provides [\"laser:0\"] )").unwrap().0;
+        plan.nodes.push(NodeSpec {
+            name: "conv".into(),
+            driver: "rangertolaser".into(),
+            host: Some("b".into()),
+            start_order: 0,
+            restart: Restart::default(),
+            provides: vec![DeviceRef { device: "robot/6665/laser/1".into(), role: None }],
+            requires: vec![DeviceRef { device: "robot/6665/ranger/9".into(), role: None }],
+            options: Default::default(),
+            source: None,
+            option_pos: Default::default(),
+        });
+        let mut r = Report::default();
+        check(&mut plan, &mut r);
+        assert_eq!(r.errors.len(), 1);
+        plan.launch.external.push("robot/6665/ranger/9".into());
+        let mut r = Report::default();
+        check(&mut plan, &mut r);
+        assert!(r.errors.is_empty(), "{:?}", r.errors);
+    }
+
+    #[test]
+    fn units_scale_lengths_and_angles() {
+        let u = cfg::Units { length: 0.01, angle: std::f64::consts::PI / 180.0 };
+        let pose = Value::Tuple(vec![Value::Num("10".into()), Value::Num("0".into()), Value::Num("90".into())]);
+        let j = to_json(&pose, Some(Unit::Tuple(&[Unit::Length, Unit::Length, Unit::Angle])), &u).unwrap();
+        assert_eq!(j[0], 0.1);
+        assert!((j[2].as_f64().unwrap() - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+        assert_eq!(to_json(&Value::Num("3".into()), None, &u).unwrap(), 3);
+    }
+}
