@@ -190,7 +190,11 @@ fn lex(text: &str, file: &Path) -> Result<Vec<Token>, CfgError> {
                 if i < chars.len() && (chars[i] == '\r' || chars[i] == '\n') && chars[i] != c {
                     i += 1;
                 }
-                out.push(Token { tok: Tok::Eol, line, col });
+                out.push(Token {
+                    tok: Tok::Eol,
+                    line,
+                    col,
+                });
                 line += 1;
                 col = 1;
             }
@@ -215,38 +219,73 @@ fn lex(text: &str, file: &Path) -> Result<Vec<Token>, CfgError> {
                 let start = i;
                 while i < chars.len() && chars[i] != '"' {
                     if chars[i] == '\n' || chars[i] == '\r' {
-                        return Err(err(l0, c0, "unterminated string: a string ends with `\"` on its own line".into()));
+                        return Err(err(
+                            l0,
+                            c0,
+                            "unterminated string: a string ends with `\"` on its own line".into(),
+                        ));
                     }
                     i += 1;
                     col += 1;
                 }
                 if i >= chars.len() {
-                    return Err(err(l0, c0, "unterminated string: a string ends with `\"` on its own line".into()));
+                    return Err(err(
+                        l0,
+                        c0,
+                        "unterminated string: a string ends with `\"` on its own line".into(),
+                    ));
                 }
                 let s: String = chars[start..i].iter().collect();
                 i += 1;
                 col += 1;
-                out.push(Token { tok: Tok::Str(s), line: l0, col: c0 });
+                out.push(Token {
+                    tok: Tok::Str(s),
+                    line: l0,
+                    col: c0,
+                });
             }
             c if c.is_ascii_alphabetic() => {
-                let w = take(&|c: char| c.is_ascii_alphanumeric() || ".-_[]:".contains(c), &mut i, &mut col);
+                let w = take(
+                    &|c: char| c.is_ascii_alphanumeric() || ".-_[]:".contains(c),
+                    &mut i,
+                    &mut col,
+                );
                 let tok = match w.as_str() {
                     "true" | "yes" => Tok::Bool(true),
                     "false" | "no" => Tok::Bool(false),
                     _ => Tok::Word(w),
                 };
-                out.push(Token { tok, line: l0, col: c0 });
+                out.push(Token {
+                    tok,
+                    line: l0,
+                    col: c0,
+                });
             }
             c if "+-.0123456789".contains(c) => {
                 let n = take(&|c: char| "+-.0123456789".contains(c), &mut i, &mut col);
-                out.push(Token { tok: Tok::Num(n), line: l0, col: c0 });
+                out.push(Token {
+                    tok: Tok::Num(n),
+                    line: l0,
+                    col: c0,
+                });
             }
             other => {
-                return Err(err(l0, c0, format!("syntax error: unexpected character `{}`", other.escape_default())));
+                return Err(err(
+                    l0,
+                    c0,
+                    format!(
+                        "syntax error: unexpected character `{}`",
+                        other.escape_default()
+                    ),
+                ));
             }
         }
     }
-    out.push(Token { tok: Tok::Eol, line, col });
+    out.push(Token {
+        tok: Tok::Eol,
+        line,
+        col,
+    });
     Ok(out)
 }
 
@@ -314,21 +353,38 @@ impl Parser<'_> {
                 loop {
                     self.skip_eols();
                     match self.peek() {
-                        Some(Token { tok: Tok::TupleClose, .. }) => {
+                        Some(Token {
+                            tok: Tok::TupleClose,
+                            ..
+                        }) => {
                             self.i += 1;
                             return Ok(Value::Tuple(items));
                         }
-                        Some(Token { tok: Tok::Open | Tok::Close, .. }) => {
+                        Some(Token {
+                            tok: Tok::Open | Tok::Close,
+                            ..
+                        }) => {
                             let t = self.toks[self.i].clone();
-                            return Err(self.err(&t, format!("expected `]` to close the tuple opened at line {}", field.line)));
+                            return Err(self.err(
+                                &t,
+                                format!(
+                                    "expected `]` to close the tuple opened at line {}",
+                                    field.line
+                                ),
+                            ));
                         }
                         Some(_) if self.i + 1 < self.toks.len() => items.push(self.value(field)?),
                         _ => return Err(self.err(&t, "missing `]`: tuple never closed")),
                     }
                 }
             }
-            Tok::Eol => Err(self.err(field, "expected a value on the same line as the field name (Player's rule)")),
-            Tok::Open | Tok::Close | Tok::TupleClose => Err(self.err(&t, "expected a value (number, \"string\", word or [tuple])")),
+            Tok::Eol => Err(self.err(
+                field,
+                "expected a value on the same line as the field name (Player's rule)",
+            )),
+            Tok::Open | Tok::Close | Tok::TupleClose => {
+                Err(self.err(&t, "expected a value (number, \"string\", word or [tuple])"))
+            }
         }
     }
 }
@@ -385,7 +441,13 @@ pub fn parse_str(text: &str, path: &Path) -> Result<CfgFile, CfgError> {
     Ok(out)
 }
 
-fn parse_into(path: &Path, out: &mut CfgFile, units: &mut Units, depth: usize, from: Option<&Pos>) -> Result<(), CfgError> {
+fn parse_into(
+    path: &Path,
+    out: &mut CfgFile,
+    units: &mut Units,
+    depth: usize,
+    from: Option<&Pos>,
+) -> Result<(), CfgError> {
     let text = std::fs::read_to_string(path).map_err(|e| CfgError {
         pos: from.cloned().unwrap_or(Pos {
             file: path.to_owned(),
@@ -397,21 +459,41 @@ fn parse_into(path: &Path, out: &mut CfgFile, units: &mut Units, depth: usize, f
     parse_text(&text, path, out, units, depth)
 }
 
-fn parse_text(text: &str, path: &Path, out: &mut CfgFile, units: &mut Units, depth: usize) -> Result<(), CfgError> {
+fn parse_text(
+    text: &str,
+    path: &Path,
+    out: &mut CfgFile,
+    units: &mut Units,
+    depth: usize,
+) -> Result<(), CfgError> {
     let toks = lex(text, path)?;
-    let mut p = Parser { toks: &toks, i: 0, file: path };
+    let mut p = Parser {
+        toks: &toks,
+        i: 0,
+        file: path,
+    };
     loop {
         p.skip_eols();
-        let Some(t) = p.peek().cloned() else { return Ok(()) };
+        let Some(t) = p.peek().cloned() else {
+            return Ok(());
+        };
         p.i += 1;
         let Tok::Word(word) = &t.tok else {
-            return Err(p.err(&t, "expected a section (`driver ( … )`), a field, `include \"file\"` or a comment"));
+            return Err(p.err(
+                &t,
+                "expected a section (`driver ( … )`), a field, `include \"file\"` or a comment",
+            ));
         };
         match word.as_str() {
             "include" => {
                 let f = match p.value(&t)? {
                     Value::Str(s) => s,
-                    _ => return Err(p.err(&t, "`include` takes a quoted file name: include \"other.cfg\"")),
+                    _ => {
+                        return Err(p.err(
+                            &t,
+                            "`include` takes a quoted file name: include \"other.cfg\"",
+                        ))
+                    }
                 };
                 if depth >= MAX_INCLUDE_DEPTH {
                     return Err(p.err(&t, format!("includes nest deeper than {MAX_INCLUDE_DEPTH}: is `{f}` including itself?")));
@@ -423,51 +505,64 @@ fn parse_text(text: &str, path: &Path, out: &mut CfgFile, units: &mut Units, dep
             "define" => {
                 return Err(p.err(&t, "`define` macros are not supported in Troupe .cfg files; write the sections out"));
             }
-            _ => {
-                match p.section_follows() {
-                    true => {
-                        p.skip_eols();
-                        let s = section(&mut p, &t, word, units)?;
-                        out.sections.push(s);
-                    }
-                    false => {
-                        let value = p.value(&t)?;
-                        let f = Field {
-                            name: word.clone(),
-                            value,
-                            pos: p.pos(&t),
-                            units: *units,
-                        };
-                        match word.as_str() {
-                            "unit_length" => {
-                                units.length = match &f.value {
-                                    Value::Str(s) | Value::Word(s) if s == "m" => 1.0,
-                                    Value::Str(s) | Value::Word(s) if s == "cm" => 0.01,
-                                    Value::Str(s) | Value::Word(s) if s == "mm" => 0.001,
-                                    _ => return Err(p.err(&t, "unit_length must be \"m\", \"cm\" or \"mm\"")),
+            _ => match p.section_follows() {
+                true => {
+                    p.skip_eols();
+                    let s = section(&mut p, &t, word, units)?;
+                    out.sections.push(s);
+                }
+                false => {
+                    let value = p.value(&t)?;
+                    let f = Field {
+                        name: word.clone(),
+                        value,
+                        pos: p.pos(&t),
+                        units: *units,
+                    };
+                    match word.as_str() {
+                        "unit_length" => {
+                            units.length = match &f.value {
+                                Value::Str(s) | Value::Word(s) if s == "m" => 1.0,
+                                Value::Str(s) | Value::Word(s) if s == "cm" => 0.01,
+                                Value::Str(s) | Value::Word(s) if s == "mm" => 0.001,
+                                _ => {
+                                    return Err(
+                                        p.err(&t, "unit_length must be \"m\", \"cm\" or \"mm\"")
+                                    )
                                 }
                             }
-                            "unit_angle" => {
-                                units.angle = match &f.value {
-                                    Value::Str(s) | Value::Word(s) if s == "degrees" => std::f64::consts::PI / 180.0,
-                                    Value::Str(s) | Value::Word(s) if s == "radians" => 1.0,
-                                    _ => return Err(p.err(&t, "unit_angle must be \"degrees\" or \"radians\"")),
-                                }
-                            }
-                            "plugin" => match f.value {
-                                Value::Str(s) => out.plugins.push((s, f.pos)),
-                                _ => return Err(p.err(&t, "`plugin` takes a quoted library name")),
-                            },
-                            _ => add_field(&mut out.globals, f),
                         }
+                        "unit_angle" => {
+                            units.angle = match &f.value {
+                                Value::Str(s) | Value::Word(s) if s == "degrees" => {
+                                    std::f64::consts::PI / 180.0
+                                }
+                                Value::Str(s) | Value::Word(s) if s == "radians" => 1.0,
+                                _ => {
+                                    return Err(
+                                        p.err(&t, "unit_angle must be \"degrees\" or \"radians\"")
+                                    )
+                                }
+                            }
+                        }
+                        "plugin" => match f.value {
+                            Value::Str(s) => out.plugins.push((s, f.pos)),
+                            _ => return Err(p.err(&t, "`plugin` takes a quoted library name")),
+                        },
+                        _ => add_field(&mut out.globals, f),
                     }
                 }
-            }
+            },
         }
     }
 }
 
-fn section(p: &mut Parser<'_>, kind_tok: &Token, kind: &str, units: &Units) -> Result<Section, CfgError> {
+fn section(
+    p: &mut Parser<'_>,
+    kind_tok: &Token,
+    kind: &str,
+    units: &Units,
+) -> Result<Section, CfgError> {
     // The `(`.
     p.i += 1;
     let mut s = Section {
@@ -479,7 +574,10 @@ fn section(p: &mut Parser<'_>, kind_tok: &Token, kind: &str, units: &Units) -> R
     loop {
         p.skip_eols();
         let Some(t) = p.peek().cloned() else {
-            return Err(p.err(kind_tok, format!("missing `)`: section `{kind}` is never closed")));
+            return Err(p.err(
+                kind_tok,
+                format!("missing `)`: section `{kind}` is never closed"),
+            ));
         };
         p.i += 1;
         match &t.tok {
@@ -501,7 +599,10 @@ fn section(p: &mut Parser<'_>, kind_tok: &Token, kind: &str, units: &Units) -> R
                 add_field(&mut s.fields, f);
             }
             Tok::Eol => {
-                return Err(p.err(kind_tok, format!("missing `)`: section `{kind}` is never closed")));
+                return Err(p.err(
+                    kind_tok,
+                    format!("missing `)`: section `{kind}` is never closed"),
+                ));
             }
             other => {
                 let what = match other {
@@ -526,7 +627,10 @@ impl Value {
             Value::Str(s) => format!("\"{s}\""),
             Value::Bool(b) => b.to_string(),
             Value::Word(w) => w.clone(),
-            Value::Tuple(v) => format!("[{}]", v.iter().map(Value::describe).collect::<Vec<_>>().join(" ")),
+            Value::Tuple(v) => format!(
+                "[{}]",
+                v.iter().map(Value::describe).collect::<Vec<_>>().join(" ")
+            ),
         }
     }
 
@@ -563,10 +667,17 @@ mod tests {
         assert_eq!(f.sections.len(), 2);
         let s = &f.sections[0];
         assert_eq!(s.kind, "driver");
-        assert_eq!(s.field("name").unwrap().value, Value::Str("sicklms200".into()));
+        assert_eq!(
+            s.field("name").unwrap().value,
+            Value::Str("sicklms200".into())
+        );
         assert_eq!(
             s.field("pose").unwrap().value,
-            Value::Tuple(vec![Value::Num("0.15".into()), Value::Num("0".into()), Value::Num("-90".into())])
+            Value::Tuple(vec![
+                Value::Num("0.15".into()),
+                Value::Num("0".into()),
+                Value::Num("-90".into())
+            ])
         );
         assert_eq!(s.field("alwayson").unwrap().value, Value::Bool(true));
         assert!(s.field("spose[3]").is_some());
@@ -580,24 +691,47 @@ mod tests {
     #[test]
     fn adjacent_strings_are_two_values() {
         let f = parse("driver( name \"stage\" provides [\"7001:ranger:0\" \"7001:ranger:1 \"\"7001:position2d:0\" ] )").unwrap();
-        let v = f.sections[0].field("provides").unwrap().value.strings().unwrap();
-        assert_eq!(v, vec!["7001:ranger:0", "7001:ranger:1 ", "7001:position2d:0"]);
+        let v = f.sections[0]
+            .field("provides")
+            .unwrap()
+            .value
+            .strings()
+            .unwrap();
+        assert_eq!(
+            v,
+            vec!["7001:ranger:0", "7001:ranger:1 ", "7001:position2d:0"]
+        );
     }
 
     #[test]
     fn repeated_fields_merge_element_by_element() {
         let f = parse("driver( provides [\"a:0\" \"b:0\"] provides [\"c:0\"] )").unwrap();
-        let v = f.sections[0].field("provides").unwrap().value.strings().unwrap();
+        let v = f.sections[0]
+            .field("provides")
+            .unwrap()
+            .value
+            .strings()
+            .unwrap();
         assert_eq!(v, vec!["c:0", "b:0"]);
     }
 
     #[test]
     fn units_apply_from_the_directive_on() {
-        let f = parse("driver( a 1 )\nunit_length \"cm\"\nunit_angle \"radians\"\ndriver( b 1 )").unwrap();
+        let f = parse("driver( a 1 )\nunit_length \"cm\"\nunit_angle \"radians\"\ndriver( b 1 )")
+            .unwrap();
         assert_eq!(f.sections[0].fields[0].units, Units::default());
-        assert_eq!(f.sections[1].fields[0].units, Units { length: 0.01, angle: 1.0 });
+        assert_eq!(
+            f.sections[1].fields[0].units,
+            Units {
+                length: 0.01,
+                angle: 1.0
+            }
+        );
         let e = parse("unit_length \"feet\"").unwrap_err();
-        assert_eq!(e.to_string(), "t.cfg:1:1: unit_length must be \"m\", \"cm\" or \"mm\"");
+        assert_eq!(
+            e.to_string(),
+            "t.cfg:1:1: unit_length must be \"m\", \"cm\" or \"mm\""
+        );
     }
 
     #[test]
@@ -605,13 +739,25 @@ mod tests {
         let cases = [
             ("driver(\n  name \"x\n)", "t.cfg:2:8: unterminated string"),
             ("driver(\n  name \"x\"\n", "t.cfg:1:1: missing `)`"),
-            ("driver(\n  provides\n  [\"laser:0\"]\n)", "t.cfg:2:3: expected a value on the same line"),
+            (
+                "driver(\n  provides\n  [\"laser:0\"]\n)",
+                "t.cfg:2:3: expected a value on the same line",
+            ),
             ("driver( pose [1 2 )", "t.cfg:1:19: expected `]`"),
-            ("driver( 5 )", "t.cfg:1:9: expected a field name or `)`, found number `5`"),
-            ("driver( a 1 ) @", "t.cfg:1:15: syntax error: unexpected character `@`"),
+            (
+                "driver( 5 )",
+                "t.cfg:1:9: expected a field name or `)`, found number `5`",
+            ),
+            (
+                "driver( a 1 ) @",
+                "t.cfg:1:15: syntax error: unexpected character `@`",
+            ),
             ("\"x\"", "t.cfg:1:1: expected a section"),
             ("driver( x 1..2 )", "t.cfg:1:11: `1..2` is not a number"),
-            ("define foo driver ( )", "t.cfg:1:1: `define` macros are not supported"),
+            (
+                "define foo driver ( )",
+                "t.cfg:1:1: `define` macros are not supported",
+            ),
             ("include \"nope.cfg\"", "t.cfg:1:1: cannot read nope.cfg"),
         ];
         for (text, want) in cases {
@@ -624,8 +770,16 @@ mod tests {
     fn includes_resolve_relative_to_the_including_file() {
         let dir = std::env::temp_dir().join(format!("troupe-cfg-{}", std::process::id()));
         std::fs::create_dir_all(dir.join("sub")).unwrap();
-        std::fs::write(dir.join("sub/inner.cfg"), "driver( name \"inner\" )\nunit_length \"mm\"\n").unwrap();
-        std::fs::write(dir.join("main.cfg"), "include \"sub/inner.cfg\"\ndriver( name \"outer\" x 1 )\n").unwrap();
+        std::fs::write(
+            dir.join("sub/inner.cfg"),
+            "driver( name \"inner\" )\nunit_length \"mm\"\n",
+        )
+        .unwrap();
+        std::fs::write(
+            dir.join("main.cfg"),
+            "include \"sub/inner.cfg\"\ndriver( name \"outer\" x 1 )\n",
+        )
+        .unwrap();
         std::fs::write(dir.join("loop.cfg"), "include \"loop.cfg\"\n").unwrap();
         let f = parse_file(&dir.join("main.cfg")).unwrap();
         assert_eq!(f.sections.len(), 2);

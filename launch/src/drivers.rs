@@ -46,7 +46,10 @@ pub fn names() -> String {
 /// Runs driver `name` in this process until SIGINT/SIGTERM.
 pub fn run(name: &str, section: Section, z: &ZenohArgs, cfg: &NodeConfig) -> anyhow::Result<()> {
     let Some(e) = find(name) else {
-        anyhow::bail!("driver `{name}` is not available in Troupe; available: {}", names());
+        anyhow::bail!(
+            "driver `{name}` is not available in Troupe; available: {}",
+            names()
+        );
     };
     (e.run)(section, z, cfg)?;
     Ok(())

@@ -200,7 +200,9 @@ fn num(text: &str) -> serde_json::Value {
 /// A cfg value as JSON, scaled to SI where the driver reads a length or angle.
 fn to_json(v: &Value, unit: Option<Unit>, units: &cfg::Units) -> Result<serde_json::Value, String> {
     let scale = |text: &str, factor: f64| -> Result<serde_json::Value, String> {
-        let x: f64 = text.parse().map_err(|_| format!("`{text}` is not a number"))?;
+        let x: f64 = text
+            .parse()
+            .map_err(|_| format!("`{text}` is not a number"))?;
         serde_json::Number::from_f64(x * factor)
             .map(serde_json::Value::Number)
             .ok_or_else(|| format!("`{text}` is not finite"))
@@ -240,14 +242,18 @@ pub fn from_cfg(file: &CfgFile, source: &Path, robot: u32, report: &mut Report) 
         nodes: Vec::new(),
     };
     for (p, pos) in &file.plugins {
-        report
-            .warnings
-            .push(format!("{pos}: plugin \"{p}\" ignored: Troupe's drivers are built in"));
+        report.warnings.push(format!(
+            "{pos}: plugin \"{p}\" ignored: Troupe's drivers are built in"
+        ));
     }
     for g in &file.globals {
-        report.warnings.push(format!("{}: top-level field `{}` is not used", g.pos, g.name));
+        report.warnings.push(format!(
+            "{}: top-level field `{}` is not used",
+            g.pos, g.name
+        ));
     }
     let mut count: HashMap<String, u32> = HashMap::new();
+    let mut unknown: BTreeMap<String, Vec<cfg::Pos>> = BTreeMap::new();
     for s in &file.sections {
         if s.kind != "driver" {
             report.errors.push(format!(
@@ -257,31 +263,35 @@ pub fn from_cfg(file: &CfgFile, source: &Path, robot: u32, report: &mut Report) 
             continue;
         }
         if let Some(c) = s.children.first() {
-            report
-                .errors
-                .push(format!("{}: section `{}` inside a driver section", c.pos, c.kind));
+            report.errors.push(format!(
+                "{}: section `{}` inside a driver section",
+                c.pos, c.kind
+            ));
             continue;
         }
         let Some(name_field) = s.field("name") else {
-            report.errors.push(format!("{}: driver section has no `name` (e.g. name \"sicklms200\")", s.pos));
+            report.errors.push(format!(
+                "{}: driver section has no `name` (e.g. name \"sicklms200\")",
+                s.pos
+            ));
             continue;
         };
         let Value::Str(driver) = &name_field.value else {
-            report.errors.push(format!("{}: `name` must be a quoted driver name", name_field.pos));
-            continue;
-        };
-        let Some(entry) = drivers::find(driver) else {
             report.errors.push(format!(
-                "{}: driver `{driver}` is not available in Troupe; available: {}",
-                name_field.pos,
-                drivers::names()
+                "{}: `name` must be a quoted driver name",
+                name_field.pos
             ));
             continue;
         };
         let mut refs = |field: &str| -> Option<(Vec<DeviceRef>, Option<String>)> {
-            let Some(f) = s.field(field) else { return Some((Vec::new(), None)) };
+            let Some(f) = s.field(field) else {
+                return Some((Vec::new(), None));
+            };
             let Some(list) = f.value.strings() else {
-                report.errors.push(format!("{}: `{field}` must be a list of quoted addresses like [\"laser:0\"]", f.pos));
+                report.errors.push(format!(
+                    "{}: `{field}` must be a list of quoted addresses like [\"laser:0\"]",
+                    f.pos
+                ));
                 return None;
             };
             let mut out = Vec::new();
@@ -305,7 +315,15 @@ pub fn from_cfg(file: &CfgFile, source: &Path, robot: u32, report: &mut Report) 
             }
             Some((out, host))
         };
-        let (Some((provides, host)), Some((requires, _))) = (refs("provides"), refs("requires")) else {
+        let (Some((provides, host)), Some((requires, _))) = (refs("provides"), refs("requires"))
+        else {
+            continue;
+        };
+        let Some(entry) = drivers::find(driver) else {
+            unknown
+                .entry(driver.clone())
+                .or_default()
+                .push(name_field.pos.clone());
             continue;
         };
         let mut options = serde_json::Map::new();
@@ -315,14 +333,20 @@ pub fn from_cfg(file: &CfgFile, source: &Path, robot: u32, report: &mut Report) 
             if GENERIC.contains(&f.name.as_str()) {
                 continue;
             }
-            let unit = entry.units.iter().find(|(n, _)| *n == f.name).map(|(_, u)| *u);
+            let unit = entry
+                .units
+                .iter()
+                .find(|(n, _)| *n == f.name)
+                .map(|(_, u)| *u);
             match to_json(&f.value, unit, &f.units) {
                 Ok(v) => {
                     options.insert(f.name.clone(), v);
                     option_pos.insert(f.name.clone(), f.pos.to_string());
                 }
                 Err(e) => {
-                    report.errors.push(format!("{}: option `{}`: {e}", f.pos, f.name));
+                    report
+                        .errors
+                        .push(format!("{}: option `{}`: {e}", f.pos, f.name));
                     bad = true;
                 }
             }
@@ -333,7 +357,11 @@ pub fn from_cfg(file: &CfgFile, source: &Path, robot: u32, report: &mut Report) 
         let n = count.entry(driver.clone()).or_insert(0);
         *n += 1;
         plan.nodes.push(NodeSpec {
-            name: if *n == 1 { driver.clone() } else { format!("{driver}-{n}") },
+            name: if *n == 1 {
+                driver.clone()
+            } else {
+                format!("{driver}-{n}")
+            },
             driver: driver.clone(),
             host,
             start_order: 0,
@@ -345,6 +373,24 @@ pub fn from_cfg(file: &CfgFile, source: &Path, robot: u32, report: &mut Report) 
             option_pos,
         });
     }
+    for (driver, places) in unknown {
+        let also = match places.len() {
+            1 => String::new(),
+            n => format!(
+                " ({n} sections: lines {})",
+                places
+                    .iter()
+                    .map(|p| p.line.to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        };
+        report.errors.push(format!(
+            "{}: driver `{driver}` is not available in Troupe{also}; available: {}",
+            places[0],
+            drivers::names()
+        ));
+    }
     plan
 }
 
@@ -353,12 +399,17 @@ pub fn check(plan: &mut Plan, report: &mut Report) {
     let mut names = HashMap::new();
     for n in &plan.nodes {
         if names.insert(n.name.clone(), ()).is_some() {
-            report.errors.push(format!("two nodes are called `{}`", n.name));
+            report
+                .errors
+                .push(format!("two nodes are called `{}`", n.name));
         }
     }
     // Drivers and options.
     for n in &plan.nodes {
-        let at = n.source.clone().unwrap_or_else(|| format!("node `{}`", n.name));
+        let at = n
+            .source
+            .clone()
+            .unwrap_or_else(|| format!("node `{}`", n.name));
         let Some(entry) = drivers::find(&n.driver) else {
             report.errors.push(format!(
                 "{at}: driver `{}` is not available in Troupe; available: {}",
@@ -373,7 +424,10 @@ pub fn check(plan: &mut Plan, report: &mut Report) {
                 Ok(unused) => {
                     for o in unused {
                         let place = n.option_pos.get(&o).unwrap_or(&at);
-                        report.warnings.push(format!("{place}: option `{o}` is not used by driver `{}`", n.driver));
+                        report.warnings.push(format!(
+                            "{place}: option `{o}` is not used by driver `{}`",
+                            n.driver
+                        ));
                     }
                 }
                 Err(e) => report.errors.push(format!("{at}: {e}")),
@@ -417,13 +471,18 @@ pub fn check(plan: &mut Plan, report: &mut Report) {
         for r in &n.requires {
             let Ok(d) = r.parse() else { continue };
             match provider.get(&d) {
-                Some(&j) if j == i => report.errors.push(format!("node `{}` requires {d}, which it provides itself", n.name)),
+                Some(&j) if j == i => report.errors.push(format!(
+                    "node `{}` requires {d}, which it provides itself",
+                    n.name
+                )),
                 Some(&j) => deps[i].push(j),
                 None if external.contains(&d) => {}
                 None => {
                     let similar: Vec<String> = provider
                         .keys()
-                        .filter(|p| p.interface == d.interface || (p.robot == d.robot && p.index == d.index))
+                        .filter(|p| {
+                            p.interface == d.interface || (p.robot == d.robot && p.index == d.index)
+                        })
                         .map(ToString::to_string)
                         .collect();
                     let hint = if similar.is_empty() {
@@ -443,7 +502,13 @@ pub fn check(plan: &mut Plan, report: &mut Report) {
     // Start order: longest chain of requirements below each node.
     let mut order = vec![0u32; plan.nodes.len()];
     let mut state = vec![0u8; plan.nodes.len()]; // 0 new, 1 visiting, 2 done
-    fn visit(i: usize, deps: &[Vec<usize>], order: &mut [u32], state: &mut [u8], path: &mut Vec<usize>) -> Result<u32, Vec<usize>> {
+    fn visit(
+        i: usize,
+        deps: &[Vec<usize>],
+        order: &mut [u32],
+        state: &mut [u8],
+        path: &mut Vec<usize>,
+    ) -> Result<u32, Vec<usize>> {
         match state[i] {
             2 => return Ok(order[i]),
             1 => {
@@ -466,7 +531,11 @@ pub fn check(plan: &mut Plan, report: &mut Report) {
     for i in 0..plan.nodes.len() {
         if let Err(cycle) = visit(i, &deps, &mut order, &mut state, &mut Vec::new()) {
             let names: Vec<&str> = cycle.iter().map(|&c| plan.nodes[c].name.as_str()).collect();
-            report.errors.push(format!("requirements form a cycle: {} → {}", names.join(" → "), names[0]));
+            report.errors.push(format!(
+                "requirements form a cycle: {} → {}",
+                names.join(" → "),
+                names[0]
+            ));
             return;
         }
     }
@@ -484,8 +553,10 @@ pub fn load(path: &Path, robot: u32) -> Result<(Plan, Vec<String>), PlanError> {
     let mut report = Report::default();
     let is_toml = path.extension().is_some_and(|e| e == "toml");
     let mut plan = if is_toml {
-        let text = std::fs::read_to_string(path).map_err(|e| PlanError(vec![format!("{}: {e}", path.display())]))?;
-        toml::from_str::<Plan>(&text).map_err(|e| PlanError(vec![format!("{}: {e}", path.display())]))?
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| PlanError(vec![format!("{}: {e}", path.display())]))?;
+        toml::from_str::<Plan>(&text)
+            .map_err(|e| PlanError(vec![format!("{}: {e}", path.display())]))?
     } else {
         let file = cfg::parse_file(path).map_err(|e| PlanError(vec![e.to_string()]))?;
         from_cfg(&file, path, robot, &mut report)
@@ -515,7 +586,11 @@ fn refs_toml(v: &[DeviceRef]) -> String {
     let items: Vec<String> = v
         .iter()
         .map(|r| match &r.role {
-            Some(role) => format!("{{ device = {}, role = {} }}", toml_str(&r.device), toml_str(role)),
+            Some(role) => format!(
+                "{{ device = {}, role = {} }}",
+                toml_str(&r.device),
+                toml_str(role)
+            ),
             None => format!("{{ device = {} }}", toml_str(&r.device)),
         })
         .collect();
@@ -525,14 +600,23 @@ fn refs_toml(v: &[DeviceRef]) -> String {
 /// The plan as a commented, human-editable TOML launch file.
 pub fn to_toml(plan: &Plan) -> String {
     let mut s = String::new();
-    let _ = writeln!(s, "# Troupe launch plan. Run it with `troupe launch <this file>`; edit freely.");
-    let _ = writeln!(s, "# Options are in SI units (metres, radians); one [[node]] per process.");
+    let _ = writeln!(
+        s,
+        "# Troupe launch plan. Run it with `troupe launch <this file>`; edit freely."
+    );
+    let _ = writeln!(
+        s,
+        "# Options are in SI units (metres, radians); one [[node]] per process."
+    );
     let _ = writeln!(s, "\n[launch]");
     if let Some(src) = &plan.launch.source {
         let _ = writeln!(s, "source = {}", toml_str(src));
     }
     let ext: Vec<String> = plan.launch.external.iter().map(|e| toml_str(e)).collect();
-    let _ = writeln!(s, "# Devices provided elsewhere (another host or launch), e.g. \"robot/6665/laser/0\".");
+    let _ = writeln!(
+        s,
+        "# Devices provided elsewhere (another host or launch), e.g. \"robot/6665/laser/0\"."
+    );
     let _ = writeln!(s, "external = [{}]", ext.join(", "));
     for n in &plan.nodes {
         let _ = writeln!(s, "\n[[node]]");
@@ -559,7 +643,10 @@ pub fn to_toml(plan: &Plan) -> String {
         }
         let _ = writeln!(s, "[node.options]");
         for (k, v) in &n.options {
-            let key = if k.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-') {
+            let key = if k
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+            {
                 k.clone()
             } else {
                 toml_str(k)
@@ -575,7 +662,8 @@ mod tests {
     use super::*;
 
     fn plan_of(text: &str) -> Result<(Plan, Vec<String>), PlanError> {
-        let file = cfg::parse_str(text, Path::new("t.cfg")).map_err(|e| PlanError(vec![e.to_string()]))?;
+        let file =
+            cfg::parse_str(text, Path::new("t.cfg")).map_err(|e| PlanError(vec![e.to_string()]))?;
         let mut report = Report::default();
         let mut plan = from_cfg(&file, Path::new("t.cfg"), 6665, &mut report);
         if report.errors.is_empty() {
@@ -599,7 +687,10 @@ mod tests {
         assert_eq!(plan.nodes[1].start_order, 2);
         assert_eq!(plan.nodes[1].requires[0].device, "robot/6665/ranger/0");
         assert_eq!(plan.nodes[0].options["rate"], 20);
-        assert_eq!(warnings, vec!["t.cfg:1:52: option `colour` is not used by driver `dummy`".to_owned()]);
+        assert_eq!(
+            warnings,
+            vec!["t.cfg:1:52: option `colour` is not used by driver `dummy`".to_owned()]
+        );
         let text = to_toml(&plan);
         let back: Plan = toml::from_str(&text).unwrap();
         let mut plan = plan;
@@ -646,25 +737,45 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("6665:laser:0 is provided twice: by `dummy` (t.cfg:1:1) and by `dummy-2` (t.cfg:2:1)"), "{e}");
-        let e = plan_of("driver( name \"dummy\" provides [\"laser:0\"] rate \"fast\" )").unwrap_err().to_string();
-        assert!(e.contains("t.cfg:1:1: configuration of driver `dummy`: option invalid type: string \"fast\""), "{e}");
+        let e = plan_of("driver( name \"dummy\" provides [\"laser:0\"] rate \"fast\" )")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(
+                "t.cfg:1:1: configuration of driver `dummy`: option invalid type: string \"fast\""
+            ),
+            "{e}"
+        );
         let e = plan_of("robot( name \"x\" )").unwrap_err().to_string();
         assert!(e.contains("unknown section type `robot`"), "{e}");
-        let e = plan_of("driver( name \"dummy\" provides [\"lazer:0\"] )").unwrap_err().to_string();
-        assert!(e.contains("t.cfg:1:22: provides: unknown interface `lazer`"), "{e}");
+        let e = plan_of("driver( name \"dummy\" provides [\"lazer:0\"] )")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("t.cfg:1:22: provides: unknown interface `lazer`"),
+            "{e}"
+        );
     }
 
     #[test]
     fn external_devices_satisfy_requirements() {
-        let mut plan = plan_of("driver( name \"dummy\" provides [\"laser:0\"] )").unwrap().0;
+        let mut plan = plan_of("driver( name \"dummy\" provides [\"laser:0\"] )")
+            .unwrap()
+            .0;
         plan.nodes.push(NodeSpec {
             name: "conv".into(),
             driver: "rangertolaser".into(),
             host: Some("b".into()),
             start_order: 0,
             restart: Restart::default(),
-            provides: vec![DeviceRef { device: "robot/6665/laser/1".into(), role: None }],
-            requires: vec![DeviceRef { device: "robot/6665/ranger/9".into(), role: None }],
+            provides: vec![DeviceRef {
+                device: "robot/6665/laser/1".into(),
+                role: None,
+            }],
+            requires: vec![DeviceRef {
+                device: "robot/6665/ranger/9".into(),
+                role: None,
+            }],
             options: Default::default(),
             source: None,
             option_pos: Default::default(),
@@ -680,11 +791,110 @@ mod tests {
 
     #[test]
     fn units_scale_lengths_and_angles() {
-        let u = cfg::Units { length: 0.01, angle: std::f64::consts::PI / 180.0 };
-        let pose = Value::Tuple(vec![Value::Num("10".into()), Value::Num("0".into()), Value::Num("90".into())]);
-        let j = to_json(&pose, Some(Unit::Tuple(&[Unit::Length, Unit::Length, Unit::Angle])), &u).unwrap();
+        let u = cfg::Units {
+            length: 0.01,
+            angle: std::f64::consts::PI / 180.0,
+        };
+        let pose = Value::Tuple(vec![
+            Value::Num("10".into()),
+            Value::Num("0".into()),
+            Value::Num("90".into()),
+        ]);
+        let j = to_json(
+            &pose,
+            Some(Unit::Tuple(&[Unit::Length, Unit::Length, Unit::Angle])),
+            &u,
+        )
+        .unwrap();
         assert_eq!(j[0], 0.1);
         assert!((j[2].as_f64().unwrap() - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
         assert_eq!(to_json(&Value::Num("3".into()), None, &u).unwrap(), 3);
+    }
+}
+
+/// Golden tests: the plan (or the errors) of every cfg in ../shared/compat.
+///
+/// Set `TROUPE_BLESS=1` to rewrite the expected files after a deliberate change.
+#[cfg(test)]
+mod golden {
+    use std::path::{Path, PathBuf};
+
+    fn compat() -> Option<PathBuf> {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/compat");
+        dir.is_dir().then(|| dir.canonicalize().unwrap_or(dir))
+    }
+
+    fn cfgs(dir: &Path, out: &mut Vec<PathBuf>) {
+        let mut entries: Vec<_> = std::fs::read_dir(dir)
+            .unwrap()
+            .flatten()
+            .map(|e| e.path())
+            .collect();
+        entries.sort();
+        for p in entries {
+            if p.is_dir() {
+                cfgs(&p, out);
+            } else if p.extension().is_some_and(|e| e == "cfg") {
+                out.push(p);
+            }
+        }
+    }
+
+    #[test]
+    fn every_compat_cfg_parses_and_plans_or_says_why_not() {
+        let Some(compat) = compat() else {
+            eprintln!("skipping: ../shared/compat is absent");
+            return;
+        };
+        let golden = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden");
+        let bless = std::env::var_os("TROUPE_BLESS").is_some();
+        let mut files = Vec::new();
+        cfgs(&compat, &mut files);
+        assert!(
+            files.len() >= 20,
+            "expected the compat cfgs, found {}",
+            files.len()
+        );
+        let mut failures = Vec::new();
+        for f in files {
+            let rel = f
+                .strip_prefix(&compat)
+                .unwrap()
+                .to_string_lossy()
+                .into_owned();
+            // Every file must parse: syntax is never the reason a compat cfg fails.
+            if let Err(e) = crate::cfg::parse_file(&f) {
+                failures.push(format!("{rel}: does not parse: {e}"));
+                continue;
+            }
+            let got = match super::load(&f, troupe_msgs::DEFAULT_ROBOT) {
+                Ok((plan, warnings)) => {
+                    let mut s = super::to_toml(&plan);
+                    for w in warnings {
+                        s.push_str(&format!("# warning: {w}\n"));
+                    }
+                    s
+                }
+                Err(e) => format!("error:\n{e}\n"),
+            };
+            let got = got.replace(&compat.display().to_string(), "compat");
+            let want_path = golden.join(format!("{}.txt", rel.replace('/', "__")));
+            if bless {
+                std::fs::create_dir_all(&golden).unwrap();
+                std::fs::write(&want_path, &got).unwrap();
+                continue;
+            }
+            match std::fs::read_to_string(&want_path) {
+                Ok(want) if want == got => {}
+                Ok(want) => failures.push(format!(
+                    "{rel}: plan changed\n--- want\n{want}\n--- got\n{got}"
+                )),
+                Err(_) => failures.push(format!(
+                    "{rel}: no golden file {} (run with TROUPE_BLESS=1)",
+                    want_path.display()
+                )),
+            }
+        }
+        assert!(failures.is_empty(), "{}", failures.join("\n\n"));
     }
 }
