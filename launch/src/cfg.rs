@@ -434,6 +434,7 @@ pub fn parse_file(path: &Path) -> Result<CfgFile, CfgError> {
 /// # Errors
 ///
 /// As [`parse_file`].
+#[cfg(test)]
 pub fn parse_str(text: &str, path: &Path) -> Result<CfgFile, CfgError> {
     let mut out = CfgFile::default();
     let mut units = Units::default();
@@ -620,20 +621,6 @@ fn section(
 }
 
 impl Value {
-    /// The value as text, for messages.
-    pub fn describe(&self) -> String {
-        match self {
-            Value::Num(n) => n.clone(),
-            Value::Str(s) => format!("\"{s}\""),
-            Value::Bool(b) => b.to_string(),
-            Value::Word(w) => w.clone(),
-            Value::Tuple(v) => format!(
-                "[{}]",
-                v.iter().map(Value::describe).collect::<Vec<_>>().join(" ")
-            ),
-        }
-    }
-
     /// The strings of a string or a tuple of strings (for `provides`/`requires`).
     pub fn strings(&self) -> Option<Vec<&str>> {
         match self {

@@ -35,6 +35,22 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// Run a robot stack from a Player .cfg or a plan: one process per driver.
+    #[command(after_help = "Examples:
+  troupe launch worlds/laser.cfg                  # like `player worlds/laser.cfg`
+  troupe launch robot.cfg -p 7000                 # default robot port 7000
+  troupe launch plan.toml --host hostb --connect tcp/10.0.0.1:7447
+  troupe launch robot.cfg --dry-run               # print the plan, start nothing
+
+An embedded Zenoh router listens on tcp/127.0.0.1:7447 unless --connect names
+another. Ctrl-C stops the nodes in reverse start order.")]
+    Launch(crate::supervisor::LaunchArgs),
+
+    /// Translate a Player .cfg into a launch plan (TOML) and print it.
+    #[command(after_help = "Example:
+  troupe plan robot.cfg > plan.toml && $EDITOR plan.toml && troupe launch plan.toml")]
+    Plan(crate::supervisor::PlanArgs),
+
     /// Run one driver as this process.
     #[command(after_help = "Examples:
   troupe node dummy --provides ranger:0 -o rate=10
@@ -210,6 +226,7 @@ pub fn node(a: NodeArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         let value = serde_json::from_str(v).unwrap_or_else(|_| serde_json::Value::String(v.into()));
         section.options.insert(k.to_owned(), value);
     }
+    supervised()?;
     if !(a.requires_timeout.is_finite() && a.requires_timeout > 0.0) {
         anyhow::bail!("--requires-timeout must be a positive number of seconds");
     }
@@ -218,4 +235,18 @@ pub fn node(a: NodeArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         requires_timeout: Duration::from_secs_f64(a.requires_timeout),
     };
     drivers::run(&a.driver, section, z, &cfg)
+}
+
+/// Under `troupe launch`: die with the launcher, never outlive it.
+fn supervised() -> anyhow::Result<()> {
+    let Ok(ppid) = std::env::var(crate::supervisor::SUPERVISOR_ENV) else {
+        return Ok(());
+    };
+    nix::sys::prctl::set_pdeathsig(nix::sys::signal::Signal::SIGTERM)
+        .context("asking to be stopped with the launcher")?;
+    // The launcher may have died before the request took effect.
+    if nix::unistd::getppid().as_raw().to_string() != ppid {
+        anyhow::bail!("the launcher (pid {ppid}) is gone");
+    }
+    Ok(())
 }

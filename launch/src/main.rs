@@ -9,8 +9,10 @@ mod cfg;
 mod cli;
 mod drivers;
 mod plan;
+mod supervisor;
 mod tools;
 
+use std::io::Write;
 use std::process::ExitCode;
 
 use clap::Parser;
@@ -27,7 +29,8 @@ fn main() -> ExitCode {
             }) {
                 return ExitCode::SUCCESS;
             }
-            eprintln!("troupe: error: {e:#}");
+            // Ignore a failed write: there is nobody left to tell.
+            let _ = writeln!(std::io::stderr(), "troupe: error: {e:#}");
             ExitCode::FAILURE
         }
     }
@@ -37,6 +40,8 @@ fn run(cli: cli::Cli) -> anyhow::Result<()> {
     use cli::Command;
     let z = &cli.zenoh;
     match cli.command {
+        Command::Launch(a) => supervisor::launch(a, z),
+        Command::Plan(a) => supervisor::print_plan(a),
         Command::Node(a) => cli::node(a, z),
         Command::List(a) => tools::list(a, z),
         Command::Echo(a) => tools::echo(a, z),

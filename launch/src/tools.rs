@@ -61,7 +61,8 @@ pub fn list(a: ListArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     if devices.is_empty() {
-        eprintln!(
+        let _ = writeln!(
+            std::io::stderr(),
             "no devices found{} (is a router running? nodes connect to {} unless --connect says otherwise)",
             a.robot.map(|r| format!(" on robot {r}")).unwrap_or_default(),
             troupe_node::DEFAULT_ROUTER
@@ -124,7 +125,10 @@ fn print_sample(
     let s = match decode_any(payload) {
         Ok(s) => s,
         Err(e) => {
-            eprintln!("troupe echo: malformed sample on `{key}`: {e}");
+            let _ = writeln!(
+                std::io::stderr(),
+                "troupe echo: malformed sample on `{key}`: {e}"
+            );
             return Ok(false);
         }
     };

@@ -1,8 +1,10 @@
+#![allow(clippy::unwrap_used)]
 //! Troupe's integration tests: several sessions in one process (`sessions`),
 //! and several `troupe` processes (`process`). Each test has its own router on
 //! an ephemeral loopback port and its own namespace, so they run in parallel.
 //!
 //! Run with `cargo test -p troupe-tests`.
 
+mod launch;
 mod process;
 mod sessions;

@@ -95,6 +95,12 @@ impl ZenohArgs {
         }
         if self.no_multicast {
             set(&mut c, "scouting/multicast/enabled", "false".into())?;
+            // Without multicast there is nothing to scout: don't wait for it.
+            set(
+                &mut c,
+                "open/return_conditions/connect_scouted",
+                "false".into(),
+            )?;
         }
         if let Some(ns) = &self.namespace {
             set(&mut c, "namespace", json_str(ns))?;
@@ -160,6 +166,8 @@ pub fn init_logging(filter: Option<&str>) {
         .with_writer(std::io::stderr)
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .with_target(false)
+        // A closed stderr (a dead launcher's pipe) must not panic the logger.
+        .log_internal_errors(false)
         .try_init();
 }
 

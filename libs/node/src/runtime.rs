@@ -115,13 +115,15 @@ fn install_signal_handlers(stop: Stop) -> Result<()> {
     std::thread::Builder::new()
         .name("signals".into())
         .spawn(move || {
-            rt.block_on(async {
+            let name = rt.block_on(async {
                 tokio::select! {
-                    _ = term.recv() => tracing::info!("SIGTERM: stopping"),
-                    _ = int.recv() => tracing::info!("SIGINT: stopping"),
+                    _ = term.recv() => "SIGTERM",
+                    _ = int.recv() => "SIGINT",
                 }
             });
+            // Stop first: logging may fail if our stderr's reader is gone.
             stop.stop();
+            tracing::info!("{name}: stopping");
         })
         .map_err(io)?;
     Ok(())

@@ -1,0 +1,590 @@
+//! `troupe launch`: runs a plan as one child process per node.
+//!
+//! The launcher starts an embedded Zenoh router on tcp/127.0.0.1:7447 (unless
+//! `--connect` points at another), then each node of this host's share in
+//! start order, each once the devices it requires from the plan are live. It
+//! watches liveliness to report readiness, prefixes every child's output with
+//! the node's name, restarts nodes by their policy, and on SIGINT/SIGTERM
+//! stops them in reverse start order: SIGTERM, a grace period, SIGKILL.
+//! Children ask the kernel to SIGTERM them if the launcher dies
+//! (PR_SET_PDEATHSIG), so no orphan survives a killed launcher.
+
+use std::collections::BTreeSet;
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::Stdio;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use clap::Args;
+use nix::sys::signal::{kill, Signal};
+use nix::unistd::Pid;
+use tokio::io::{AsyncBufReadExt, BufReader};
+use tokio::process::Command;
+use tokio::sync::watch;
+use troupe_msgs::{keys, Device};
+use troupe_node::zenoh::Wait;
+use troupe_node::{Mode, ZenohArgs};
+
+use crate::plan::{self, NodeSpec, Policy};
+
+/// The environment variable that tells `troupe node` who supervises it.
+pub const SUPERVISOR_ENV: &str = "TROUPE_SUPERVISOR_PID";
+
+/// Flags of `troupe launch`.
+#[derive(Debug, Args)]
+pub struct LaunchArgs {
+    /// A Player .cfg file or a launch plan (.toml from `troupe plan`).
+    pub file: PathBuf,
+    /// Robot field (port) for addresses that give none, as `player -p PORT`.
+    #[arg(short = 'p', long = "robot", value_name = "PORT", default_value_t = troupe_msgs::DEFAULT_ROBOT)]
+    pub robot: u32,
+    /// Start only the nodes placed on this host; the rest run elsewhere.
+    #[arg(long, value_name = "NAME")]
+    pub host: Option<String>,
+    /// Print the plan and exit.
+    #[arg(long)]
+    pub dry_run: bool,
+    /// Also write each node's output to DIR/<node>.log.
+    #[arg(long, value_name = "DIR")]
+    pub log_dir: Option<PathBuf>,
+    /// Seconds to wait for every device to come up before reporting what is missing.
+    #[arg(long, value_name = "SECS", default_value_t = 30.0)]
+    pub ready_timeout: f64,
+    /// Seconds between SIGTERM and SIGKILL when stopping a node.
+    #[arg(long, value_name = "SECS", default_value_t = 5.0)]
+    pub grace: f64,
+}
+
+/// Flags of `troupe plan`.
+#[derive(Debug, Args)]
+pub struct PlanArgs {
+    /// A Player .cfg file (or a plan to check).
+    pub file: PathBuf,
+    /// Robot field (port) for addresses that give none, as `player -p PORT`.
+    #[arg(short = 'p', long = "robot", value_name = "PORT", default_value_t = troupe_msgs::DEFAULT_ROBOT)]
+    pub robot: u32,
+}
+
+/// `troupe plan`: prints the plan as TOML, warnings on stderr.
+pub fn print_plan(a: PlanArgs) -> anyhow::Result<()> {
+    let (plan, warnings) = plan::load(&a.file, a.robot)?;
+    for w in warnings {
+        let _ = writeln!(std::io::stderr(), "warning: {w}");
+    }
+    let mut out = std::io::stdout().lock();
+    out.write_all(plan::to_toml(&plan).as_bytes())?;
+    Ok(())
+}
+
+/// `troupe launch`.
+pub fn launch(a: LaunchArgs, z: &ZenohArgs) -> anyhow::Result<()> {
+    let (plan, warnings) = plan::load(&a.file, a.robot)?;
+    for w in &warnings {
+        tracing::warn!("{w}");
+    }
+    if a.dry_run {
+        std::io::stdout()
+            .lock()
+            .write_all(plan::to_toml(&plan).as_bytes())?;
+        return Ok(());
+    }
+    let nodes: Vec<NodeSpec> = match &a.host {
+        None => plan.nodes.clone(),
+        Some(h) => {
+            let homeless: Vec<&str> = plan
+                .nodes
+                .iter()
+                .filter(|n| n.host.is_none())
+                .map(|n| n.name.as_str())
+                .collect();
+            if !homeless.is_empty() {
+                anyhow::bail!(
+                    "with --host, every node needs a `host`; these have none: {}",
+                    homeless.join(", ")
+                );
+            }
+            plan.nodes
+                .iter()
+                .filter(|n| n.host.as_deref() == Some(h))
+                .cloned()
+                .collect()
+        }
+    };
+    if nodes.is_empty() {
+        anyhow::bail!(
+            "no node of {} runs on host `{}`",
+            a.file.display(),
+            a.host.as_deref().unwrap_or("?")
+        );
+    }
+    if let Some(d) = &a.log_dir {
+        std::fs::create_dir_all(d)
+            .with_context(|| format!("creating --log-dir {}", d.display()))?;
+    }
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()?;
+    rt.block_on(supervise(a, z.clone(), nodes))
+}
+
+/// The shared view of which devices are live.
+#[derive(Default)]
+struct Live {
+    devices: Mutex<BTreeSet<Device>>,
+}
+
+struct NodeState {
+    spec: NodeSpec,
+    pid: Mutex<Option<u32>>,
+    stopping: AtomicBool,
+    failed: AtomicBool,
+}
+
+async fn supervise(a: LaunchArgs, z: ZenohArgs, specs: Vec<NodeSpec>) -> anyhow::Result<()> {
+    let started = Instant::now();
+    // The network: an embedded router unless told to join another.
+    let embedded = z.connect.is_empty() && z.zenoh_config.is_none();
+    let (session, child_net) = if embedded {
+        let listen = if z.listen.is_empty() {
+            vec![troupe_node::DEFAULT_ROUTER.to_owned()]
+        } else {
+            z.listen.clone()
+        };
+        let rz = ZenohArgs {
+            listen: listen.clone(),
+            no_multicast: true,
+            ..Default::default()
+        };
+        let session = rz.open(Mode::Router).with_context(|| {
+            format!(
+                "starting the embedded router on {} (is another `troupe launch` or `troupe router` running? pick another with --listen tcp/127.0.0.1:PORT)",
+                listen.join(", ")
+            )
+        })?;
+        let locators: Vec<String> = session
+            .info()
+            .locators()
+            .wait()
+            .iter()
+            .map(ToString::to_string)
+            .collect();
+        tracing::info!("embedded router listening on {}", locators.join(" "));
+        // A line on stdout for scripts and tests that pass --listen …:0.
+        let mut out = std::io::stdout().lock();
+        writeln!(
+            out,
+            "troupe launch: router listening on {}",
+            locators.join(" ")
+        )?;
+        out.flush()?;
+        drop(out);
+        let mut child = ZenohArgs {
+            connect: locators,
+            no_multicast: true,
+            namespace: z.namespace.clone(),
+            ..Default::default()
+        }
+        .to_child_args();
+        child.extend(["--listen".into(), "tcp/127.0.0.1:0".into()]);
+        (session, child)
+    } else {
+        let session = z.open(Mode::Client)?;
+        (session, z.to_child_args())
+    };
+    // The launcher's view of liveliness, in the plan's namespace.
+    let watcher = match (&z.namespace, embedded) {
+        (Some(_), true) => {
+            let mut w = ZenohArgs::default();
+            w.connect = session
+                .info()
+                .locators()
+                .wait()
+                .iter()
+                .map(ToString::to_string)
+                .collect();
+            w.namespace = z.namespace.clone();
+            w.no_multicast = true;
+            Some(w.open(Mode::Client)?)
+        }
+        _ => None,
+    };
+    let watch_session = watcher.as_ref().unwrap_or(&session);
+    let live = Arc::new(Live::default());
+    let (live_tx, live_rx) = watch::channel(0u64);
+    let l = live.clone();
+    let _liveliness = watch_session
+        .liveliness()
+        .declare_subscriber(keys::tokens(None))
+        .history(true)
+        .callback(move |s| {
+            let Ok((dev, _)) = keys::parse_token(s.key_expr().as_str()) else {
+                return;
+            };
+            let mut set = l.devices.lock().unwrap_or_else(|p| p.into_inner());
+            match s.kind() {
+                troupe_node::zenoh::sample::SampleKind::Put => set.insert(dev),
+                troupe_node::zenoh::sample::SampleKind::Delete => set.remove(&dev),
+            };
+            drop(set);
+            live_tx.send_modify(|g| *g += 1);
+        })
+        .wait()
+        .map_err(|e| anyhow::anyhow!("watching liveliness: {e}"))?;
+
+    let (stop_tx, stop_rx) = watch::channel(false);
+    let states: Vec<Arc<NodeState>> = specs
+        .into_iter()
+        .map(|spec| {
+            Arc::new(NodeState {
+                spec,
+                pid: Mutex::new(None),
+                stopping: AtomicBool::new(false),
+                failed: AtomicBool::new(false),
+            })
+        })
+        .collect();
+    let local: BTreeSet<Device> = states
+        .iter()
+        .flat_map(|s| {
+            s.spec
+                .provides
+                .iter()
+                .filter_map(|r| keys::parse_data(&r.device).ok())
+        })
+        .collect();
+    let exe = std::env::current_exe().context("finding the troupe binary")?;
+    let mut tasks = Vec::new();
+    for st in &states {
+        let ctx = NodeCtx {
+            exe: exe.clone(),
+            net: child_net.clone(),
+            log_dir: a.log_dir.clone(),
+            live: live.clone(),
+            live_rx: live_rx.clone(),
+            stop_rx: stop_rx.clone(),
+            local: local.clone(),
+        };
+        tasks.push(tokio::spawn(run_node(st.clone(), ctx)));
+    }
+    // Readiness report.
+    let all: BTreeSet<Device> = local.clone();
+    let reporter = {
+        let (live, mut rx, states) = (live.clone(), live_rx.clone(), states.clone());
+        let timeout = Duration::from_secs_f64(a.ready_timeout.max(0.1));
+        tokio::spawn(async move {
+            let deadline = tokio::time::Instant::now() + timeout;
+            loop {
+                let missing: Vec<Device> = {
+                    let set = live.devices.lock().unwrap_or_else(|p| p.into_inner());
+                    all.iter().filter(|d| !set.contains(d)).copied().collect()
+                };
+                if missing.is_empty() {
+                    tracing::info!(
+                        "all {} nodes up, {} devices live, {:.2} s after launch",
+                        states.len(),
+                        all.len(),
+                        started.elapsed().as_secs_f64()
+                    );
+                    return;
+                }
+                if tokio::time::timeout_at(deadline, rx.changed())
+                    .await
+                    .is_err()
+                {
+                    for s in &states {
+                        let m: Vec<String> = s
+                            .spec
+                            .provides
+                            .iter()
+                            .filter_map(|r| keys::parse_data(&r.device).ok())
+                            .filter(|d| missing.contains(d))
+                            .map(|d| d.to_string())
+                            .collect();
+                        if !m.is_empty() {
+                            tracing::error!(
+                                "node `{}` has not brought up {} after {:.0} s (see its log lines above)",
+                                s.spec.name,
+                                m.join(", "),
+                                timeout.as_secs_f64()
+                            );
+                        }
+                    }
+                    return;
+                }
+            }
+        })
+    };
+
+    // Wait for a signal, or for every node to be done on its own.
+    let all_done = async {
+        for t in tasks.iter_mut() {
+            let _ = t.await;
+        }
+    };
+    let signalled = tokio::select! {
+        r = wait_signal() => { r?; true }
+        _ = all_done => false,
+    };
+    reporter.abort();
+    if signalled {
+        tracing::info!("stopping {} nodes in reverse start order", states.len());
+        let _ = stop_tx.send(true);
+        let grace = Duration::from_secs_f64(a.grace.max(0.0));
+        let mut orders: Vec<u32> = states.iter().map(|s| s.spec.start_order).collect();
+        orders.sort_unstable();
+        orders.dedup();
+        for o in orders.into_iter().rev() {
+            let group: Vec<&Arc<NodeState>> =
+                states.iter().filter(|s| s.spec.start_order == o).collect();
+            for s in &group {
+                s.stopping.store(true, Ordering::SeqCst);
+                signal(s, Signal::SIGTERM);
+            }
+            let deadline = tokio::time::Instant::now() + grace;
+            for s in &group {
+                while s.pid.lock().unwrap_or_else(|p| p.into_inner()).is_some() {
+                    if tokio::time::Instant::now() >= deadline {
+                        tracing::warn!(
+                            "node `{}` ignored SIGTERM for {:?}; killing it",
+                            s.spec.name,
+                            grace
+                        );
+                        signal(s, Signal::SIGKILL);
+                        s.failed.store(true, Ordering::SeqCst);
+                        break;
+                    }
+                    tokio::time::sleep(Duration::from_millis(20)).await;
+                }
+            }
+        }
+        for t in tasks {
+            let _ = t.await;
+        }
+    }
+    drop(_liveliness);
+    drop(watcher);
+    let _ = session.close().await;
+    let failed: Vec<&str> = states
+        .iter()
+        .filter(|s| s.failed.load(Ordering::SeqCst))
+        .map(|s| s.spec.name.as_str())
+        .collect();
+    if failed.is_empty() {
+        tracing::info!("stack stopped cleanly");
+        Ok(())
+    } else {
+        anyhow::bail!(
+            "the stack did not run cleanly: {} failed",
+            failed.join(", ")
+        )
+    }
+}
+
+fn signal(s: &NodeState, sig: Signal) {
+    if let Some(pid) = *s.pid.lock().unwrap_or_else(|p| p.into_inner()) {
+        if let Ok(p) = i32::try_from(pid) {
+            let _ = kill(Pid::from_raw(p), sig);
+        }
+    }
+}
+
+async fn wait_signal() -> anyhow::Result<()> {
+    use tokio::signal::unix::{signal, SignalKind};
+    let mut term = signal(SignalKind::terminate())?;
+    let mut int = signal(SignalKind::interrupt())?;
+    tokio::select! {
+        _ = term.recv() => tracing::info!("SIGTERM"),
+        _ = int.recv() => tracing::info!("SIGINT"),
+    }
+    Ok(())
+}
+
+struct NodeCtx {
+    exe: PathBuf,
+    net: Vec<String>,
+    log_dir: Option<PathBuf>,
+    live: Arc<Live>,
+    live_rx: watch::Receiver<u64>,
+    stop_rx: watch::Receiver<bool>,
+    local: BTreeSet<Device>,
+}
+
+/// Runs one node: waits for its requirements, starts it, forwards its
+/// output, restarts it by its policy.
+async fn run_node(st: Arc<NodeState>, mut ctx: NodeCtx) {
+    let name = st.spec.name.clone();
+    let needs: Vec<Device> = st
+        .spec
+        .requires
+        .iter()
+        .filter_map(|r| keys::parse_data(&r.device).ok())
+        .filter(|d| ctx.local.contains(d))
+        .collect();
+    // Start order: wait until what we require from this launch is live.
+    loop {
+        let missing = {
+            let set = ctx.live.devices.lock().unwrap_or_else(|p| p.into_inner());
+            needs.iter().any(|d| !set.contains(d))
+        };
+        if !missing || *ctx.stop_rx.borrow() {
+            break;
+        }
+        tokio::select! {
+            _ = ctx.live_rx.changed() => {}
+            _ = ctx.stop_rx.changed() => {}
+        }
+    }
+    let section = match st.spec.section() {
+        Ok(s) => s,
+        Err(e) => {
+            tracing::error!("node `{name}`: {e}");
+            st.failed.store(true, Ordering::SeqCst);
+            return;
+        }
+    };
+    let section_json = serde_json::to_string(&section).unwrap_or_default();
+    let log = ctx.log_dir.as_ref().and_then(|d| {
+        let p = d.join(format!("{name}.log"));
+        match std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&p)
+        {
+            Ok(f) => Some(Arc::new(Mutex::new(f))),
+            Err(e) => {
+                tracing::warn!("cannot write {}: {e}", p.display());
+                None
+            }
+        }
+    });
+    let policy = st.spec.restart.clone();
+    let base_backoff = Duration::from_secs_f64(policy.backoff.clamp(0.0, 60.0));
+    let mut backoff = base_backoff;
+    let mut recent: Vec<Instant> = Vec::new();
+    loop {
+        if st.stopping.load(Ordering::SeqCst) {
+            return;
+        }
+        let mut cmd = Command::new(&ctx.exe);
+        cmd.args(&ctx.net)
+            .args(["node", &st.spec.driver, "--section", &section_json])
+            .env(SUPERVISOR_ENV, std::process::id().to_string())
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            // Its own process group: a terminal's Ctrl-C reaches only the
+            // launcher, which stops nodes in order.
+            .process_group(0)
+            .kill_on_drop(true);
+        let t0 = Instant::now();
+        let mut child = match cmd.spawn() {
+            Ok(c) => c,
+            Err(e) => {
+                tracing::error!("node `{name}`: cannot start: {e}");
+                st.failed.store(true, Ordering::SeqCst);
+                return;
+            }
+        };
+        *st.pid.lock().unwrap_or_else(|p| p.into_inner()) = child.id();
+        tracing::info!(
+            "started node `{name}` ({}) pid {}",
+            st.spec.driver,
+            child.id().unwrap_or(0)
+        );
+        let mut forwarders = Vec::new();
+        if let Some(out) = child.stdout.take() {
+            forwarders.push(tokio::spawn(forward(
+                BufReader::new(out),
+                name.clone(),
+                log.clone(),
+            )));
+        }
+        if let Some(err) = child.stderr.take() {
+            forwarders.push(tokio::spawn(forward(
+                BufReader::new(err),
+                name.clone(),
+                log.clone(),
+            )));
+        }
+        let status = child.wait().await;
+        for f in forwarders {
+            let _ = f.await;
+        }
+        *st.pid.lock().unwrap_or_else(|p| p.into_inner()) = None;
+        let ok = status.as_ref().is_ok_and(|s| s.success());
+        let how = match &status {
+            Ok(s) => s.to_string(),
+            Err(e) => e.to_string(),
+        };
+        if st.stopping.load(Ordering::SeqCst) {
+            if !ok {
+                tracing::warn!("node `{name}` stopped: {how}");
+                st.failed.store(true, Ordering::SeqCst);
+            }
+            return;
+        }
+        let again = match policy.policy {
+            Policy::Never => false,
+            Policy::OnFailure => !ok,
+            Policy::Always => true,
+        };
+        if !again {
+            if ok {
+                tracing::info!("node `{name}` exited ({how})");
+            } else {
+                tracing::error!("node `{name}` failed ({how}); its restart policy is `never`");
+                st.failed.store(true, Ordering::SeqCst);
+            }
+            return;
+        }
+        let now = Instant::now();
+        recent.retain(|t| now.duration_since(*t).as_secs_f64() < policy.window);
+        if recent.len() as u32 >= policy.max {
+            tracing::error!(
+                "node `{name}` ({how}) restarted {} times within {:.0} s; giving up",
+                recent.len(),
+                policy.window
+            );
+            st.failed.store(true, Ordering::SeqCst);
+            return;
+        }
+        recent.push(now);
+        backoff = if t0.elapsed() > Duration::from_secs(10) {
+            base_backoff
+        } else {
+            backoff
+        };
+        tracing::warn!(
+            "node `{name}` {how}; restarting in {:.1} s",
+            backoff.as_secs_f64()
+        );
+        tokio::select! {
+            _ = tokio::time::sleep(backoff) => {}
+            _ = ctx.stop_rx.changed() => return,
+        }
+        backoff = (backoff * 2).min(Duration::from_secs(5));
+    }
+}
+
+/// Copies a child's output lines to our stderr, prefixed by the node name.
+async fn forward<R: tokio::io::AsyncRead + Unpin>(
+    reader: BufReader<R>,
+    name: String,
+    log: Option<Arc<Mutex<std::fs::File>>>,
+) {
+    let mut lines = reader.lines();
+    while let Ok(Some(line)) = lines.next_line().await {
+        // A closed stderr must not stop the forwarding to the log file.
+        let _ = writeln!(std::io::stderr().lock(), "{name:>12} | {line}");
+        if let Some(f) = &log {
+            let mut f = f.lock().unwrap_or_else(|p| p.into_inner());
+            if let Err(e) = writeln!(f, "{line}") {
+                tracing::warn!("log file of `{name}`: {e}");
+            }
+        }
+    }
+}

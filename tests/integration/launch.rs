@@ -1,0 +1,220 @@
+//! `troupe launch` as a user runs it: a cfg becomes processes; killed nodes
+//! come back; SIGTERM stops everything; a killed launcher leaves no orphan.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use troupe_msgs::keys;
+use troupe_node::zenoh::sample::SampleKind;
+use troupe_node::zenoh::Wait;
+use troupe_node::{Mode, ZenohArgs};
+use troupe_tests::{strings, troupe_output, Proc, DEADLINE};
+
+const STACK: &str = "driver ( name \"dummy\" provides [\"ranger:0\"] rate 20 )\n\
+                     driver ( name \"rangertolaser\" requires [\"ranger:0\"] provides [\"laser:0\"] )\n";
+
+fn temp_cfg(name: &str, text: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(troupe_tests::unique_namespace(name));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join("robot.cfg");
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+/// Starts `troupe launch` on an ephemeral port; returns it, its endpoint and namespace.
+fn launch(cfg: &std::path::Path, extra: &[&str]) -> (Proc, String, String) {
+    let ns = troupe_tests::unique_namespace("launch");
+    let mut args = strings(&[
+        "--namespace",
+        &ns,
+        "launch",
+        cfg.to_str().unwrap(),
+        "--listen",
+        "tcp/127.0.0.1:0",
+    ]);
+    args.extend(strings(extra));
+    let mut p = Proc::troupe("launch", &args);
+    let line = p.first_line();
+    let endpoint = line
+        .trim()
+        .strip_prefix("troupe launch: router listening on ")
+        .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
+        .split(' ')
+        .next()
+        .unwrap()
+        .to_owned();
+    (p, endpoint, ns)
+}
+
+fn probe(endpoint: &str, ns: &str) -> troupe_node::zenoh::Session {
+    ZenohArgs {
+        connect: vec![endpoint.to_owned()],
+        namespace: Some(ns.to_owned()),
+        no_multicast: true,
+        ..Default::default()
+    }
+    .open(Mode::Client)
+    .unwrap()
+}
+
+/// Children of `parent` whose command line mentions `word`.
+fn children(parent: u32, word: &str) -> Vec<u32> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir("/proc").unwrap().flatten() {
+        let Ok(pid) = e.file_name().to_string_lossy().parse::<u32>() else {
+            continue;
+        };
+        let Ok(stat) = std::fs::read_to_string(format!("/proc/{pid}/stat")) else {
+            continue;
+        };
+        // The fields after the parenthesised command: state, ppid, …
+        let Some(rest) = stat.rsplit_once(") ").map(|(_, r)| r) else {
+            continue;
+        };
+        let mut f = rest.split(' ');
+        let (state, ppid) = (f.next(), f.next().and_then(|p| p.parse::<u32>().ok()));
+        let cmd = std::fs::read_to_string(format!("/proc/{pid}/cmdline")).unwrap_or_default();
+        if ppid == Some(parent) && state != Some("Z") && cmd.contains(word) {
+            out.push(pid);
+        }
+    }
+    out
+}
+
+/// True once `pid` is gone (or a zombie), within the deadline.
+fn gone(pid: u32) -> bool {
+    let deadline = Instant::now() + DEADLINE;
+    while Instant::now() < deadline {
+        match std::fs::read_to_string(format!("/proc/{pid}/stat")) {
+            Err(_) => return true,
+            Ok(s) if s.rsplit_once(") ").is_some_and(|(_, r)| r.starts_with('Z')) => return true,
+            Ok(_) => std::thread::yield_now(),
+        }
+    }
+    false
+}
+
+#[test]
+fn launch_runs_the_stack_restarts_a_killed_node_and_stops_cleanly() {
+    let cfg = temp_cfg("stack", STACK);
+    let (mut launcher, endpoint, ns) = launch(&cfg, &[]);
+    let s = probe(&endpoint, &ns);
+    let tokens = s
+        .liveliness()
+        .declare_subscriber(keys::tokens(None))
+        .history(true)
+        .wait()
+        .unwrap();
+    let deadline = Instant::now() + DEADLINE;
+    let mut up = std::collections::BTreeSet::new();
+    while up.len() < 2 {
+        let t = tokens
+            .recv_deadline(deadline)
+            .unwrap()
+            .expect("both devices come up");
+        up.insert(t.key_expr().to_string());
+    }
+
+    let net = strings(&["--connect", &endpoint, "--namespace", &ns, "--no-multicast"]);
+    let mut list = net.clone();
+    list.push("list".into());
+    let (st, out, err) = troupe_output(&list);
+    assert!(st.success(), "{err}");
+    assert!(out.contains("laser:0") && out.contains("ranger:0"), "{out}");
+
+    // Kill the converter: its device drops out, then comes back.
+    let pid = launcher.child.id();
+    let victims = children(pid, "rangertolaser");
+    assert_eq!(victims.len(), 1, "one rangertolaser child");
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(victims[0] as i32),
+        nix::sys::signal::Signal::SIGKILL,
+    )
+    .unwrap();
+    let laser = "robot/6665/laser/0/driver/rangertolaser";
+    let mut dropped = false;
+    loop {
+        let t = tokens
+            .recv_deadline(deadline)
+            .unwrap()
+            .expect("the laser comes back");
+        if t.key_expr().as_str() == laser {
+            match t.kind() {
+                SampleKind::Delete => dropped = true,
+                SampleKind::Put if dropped => break,
+                SampleKind::Put => {}
+            }
+        }
+    }
+    let again = children(pid, "rangertolaser");
+    assert_eq!(again.len(), 1);
+    assert_ne!(again[0], victims[0], "a new process serves the laser");
+    let all = children(pid, "troupe");
+
+    assert!(launcher.terminate().success(), "{}", launcher.stderr());
+    for c in all {
+        assert!(gone(c), "child {c} outlived the launcher");
+    }
+}
+
+#[test]
+fn a_killed_launcher_takes_its_nodes_with_it() {
+    let cfg = temp_cfg("orphans", STACK);
+    let (mut launcher, endpoint, ns) = launch(&cfg, &[]);
+    let s = probe(&endpoint, &ns);
+    let tokens = s
+        .liveliness()
+        .declare_subscriber(keys::tokens(None))
+        .history(true)
+        .wait()
+        .unwrap();
+    let deadline = Instant::now() + DEADLINE;
+    for _ in 0..2 {
+        tokens
+            .recv_deadline(deadline)
+            .unwrap()
+            .expect("devices come up");
+    }
+    let kids = children(launcher.child.id(), "troupe");
+    assert_eq!(kids.len(), 2, "{kids:?}");
+    launcher.child.kill().unwrap();
+    launcher.wait();
+    for k in kids {
+        assert!(gone(k), "node {k} survived its launcher");
+    }
+}
+
+#[test]
+fn plan_and_dry_run_print_the_plan_and_bad_cfgs_say_where() {
+    let cfg = temp_cfg("plan", STACK);
+    let (st, out, err) = troupe_output(&strings(&["plan", cfg.to_str().unwrap(), "-p", "7000"]));
+    assert!(st.success(), "{err}");
+    assert!(
+        out.contains("device = \"robot/7000/laser/0\"") && out.contains("start_order = 2"),
+        "{out}"
+    );
+    let plan = cfg.with_file_name("plan.toml");
+    std::fs::write(&plan, &out).unwrap();
+    let (st, again, err) =
+        troupe_output(&strings(&["launch", plan.to_str().unwrap(), "--dry-run"]));
+    assert!(st.success(), "{err}");
+    assert!(again.contains("robot/7000/ranger/0"), "{again}");
+
+    let bad = temp_cfg(
+        "bad",
+        "driver\n(\n  name \"dummy\"\n  provides [\"laser:0\"\n)\n",
+    );
+    let (st, _, err) = troupe_output(&strings(&["launch", bad.to_str().unwrap()]));
+    assert!(!st.success());
+    assert!(err.contains("robot.cfg:5:1: expected `]`"), "{err}");
+    let missing = temp_cfg(
+        "missing",
+        "driver ( name \"rangertolaser\" requires [\"ranger:0\"] provides [\"laser:0\"] )\n",
+    );
+    let (st, _, err) = troupe_output(&strings(&["launch", missing.to_str().unwrap()]));
+    assert!(!st.success());
+    assert!(
+        err.contains("requires 6665:ranger:0, which nothing provides"),
+        "{err}"
+    );
+}
