@@ -198,16 +198,12 @@ async fn supervise(a: LaunchArgs, z: ZenohArgs, specs: Vec<NodeSpec>) -> anyhow:
     // The launcher's view of liveliness, in the plan's namespace.
     let watcher = match (&z.namespace, embedded) {
         (Some(_), true) => {
-            let mut w = ZenohArgs::default();
-            w.connect = session
-                .info()
-                .locators()
-                .wait()
-                .iter()
-                .map(ToString::to_string)
-                .collect();
-            w.namespace = z.namespace.clone();
-            w.no_multicast = true;
+            let w = ZenohArgs {
+                connect: session.info().locators().wait().iter().map(ToString::to_string).collect(),
+                namespace: z.namespace.clone(),
+                no_multicast: true,
+                ..Default::default()
+            };
             Some(w.open(Mode::Client)?)
         }
         _ => None,
