@@ -188,6 +188,10 @@ pub enum BenchCmd {
     #[command(after_help = "Example:
   cargo run --release -- bench latency --size 1500 --samples 5000")]
     Latency(crate::bench::LatencyArgs),
+    /// Time from `troupe launch` to all devices live, and restart after a kill, for a 5-node plan.
+    #[command(after_help = "Example:
+  cargo run --release -- bench launch --runs 5")]
+    Launch(crate::bench::LaunchBenchArgs),
     /// The echo side of `bench latency` (started by it).
     #[command(hide = true)]
     Pong,

@@ -199,7 +199,13 @@ async fn supervise(a: LaunchArgs, z: ZenohArgs, specs: Vec<NodeSpec>) -> anyhow:
     let watcher = match (&z.namespace, embedded) {
         (Some(_), true) => {
             let w = ZenohArgs {
-                connect: session.info().locators().wait().iter().map(ToString::to_string).collect(),
+                connect: session
+                    .info()
+                    .locators()
+                    .wait()
+                    .iter()
+                    .map(ToString::to_string)
+                    .collect(),
                 namespace: z.namespace.clone(),
                 no_multicast: true,
                 ..Default::default()

@@ -89,6 +89,10 @@ impl ZenohArgs {
             };
         if !connect.is_empty() {
             set(&mut c, "connect/endpoints", json_list(&connect))?;
+        } else if self.no_multicast && self.zenoh_config.is_none() {
+            // Nobody to scout for or connect to: Zenoh's start-up wait
+            // (500 ms for a router) would only delay the first node.
+            set(&mut c, "scouting/delay", "0".into())?;
         }
         if !self.listen.is_empty() {
             set(&mut c, "listen/endpoints", json_list(&self.listen))?;
