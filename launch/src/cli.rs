@@ -65,7 +65,8 @@ The node waits for every required device to be live, then announces its own.")]
     #[command(after_help = "Example:
   $ troupe list
   robot/6665  laser:0       rangertolaser  ready
-  robot/6665  ranger:0      dummy          ready")]
+  robot/6665  ranger:0      dummy          ready
+  $ troupe list --watch          # + and - lines as devices come and go")]
     List(ListArgs),
 
     /// Print the samples of a device, decoded (like playerprint).
@@ -144,6 +145,9 @@ pub struct ListArgs {
     /// Seconds to wait for answers.
     #[arg(long, value_name = "SECS", default_value_t = 2.0)]
     pub wait: f64,
+    /// Keep running and print each device as it comes (`+`) and goes (`-`).
+    #[arg(long)]
+    pub watch: bool,
 }
 
 #[derive(Debug, Args)]

@@ -50,8 +50,39 @@ fn list_devices(z: &ZenohArgs, robot: Option<u32>, wait: Duration) -> anyhow::Re
     Ok(out)
 }
 
+/// `troupe list --watch`: one line per device that comes or goes.
+fn watch(robot: Option<u32>, z: &ZenohArgs) -> anyhow::Result<()> {
+    let session = z.open(Mode::Client)?;
+    let sub = session
+        .liveliness()
+        .declare_subscriber(keys::tokens(robot))
+        .history(true)
+        .wait()
+        .map_err(|e| anyhow::anyhow!("watching liveliness: {e}"))?;
+    let mut out = std::io::stdout().lock();
+    while let Ok(s) = sub.recv() {
+        let Ok((d, driver)) = keys::parse_token(s.key_expr().as_str()) else {
+            continue;
+        };
+        let sign = match s.kind() {
+            troupe_node::zenoh::sample::SampleKind::Put => '+',
+            troupe_node::zenoh::sample::SampleKind::Delete => '-',
+        };
+        writeln!(
+            out,
+            "{sign} robot/{:<5} {}:{}  {driver}",
+            d.robot, d.interface, d.index
+        )?;
+        out.flush()?;
+    }
+    Ok(())
+}
+
 /// `troupe list`.
 pub fn list(a: ListArgs, z: &ZenohArgs) -> anyhow::Result<()> {
+    if a.watch {
+        return watch(a.robot, z);
+    }
     let devices = list_devices(z, a.robot, Duration::from_secs_f64(a.wait.max(0.01)))?;
     let mut out = std::io::stdout().lock();
     if a.json {

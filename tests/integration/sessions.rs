@@ -304,3 +304,54 @@ fn namespaces_keep_tests_apart_on_one_router() {
         .collect();
     assert!(seen.is_empty(), "namespace leaked: {seen:?}");
 }
+
+#[test]
+fn under_sim_time_ticks_and_stamps_follow_sim_clock() {
+    let net = TestNet::new("simtime");
+    let section =
+        Section::from_json(r#"{"name":"dummy","provides":["power:0"],"options":{"rate":10}}"#)
+            .unwrap();
+    let cfg = NodeConfig {
+        sim_time: true,
+        ..Default::default()
+    };
+    let node = spawn::<troupe_dummy::Dummy>(net.peer(), section, &cfg, Stop::default()).unwrap();
+    net.wait_live(&["6665:power:0"]);
+    let s = net.peer();
+    let data = s
+        .declare_subscriber(keys::data(&Device::new(6665, Interface::Power, 0)))
+        .wait()
+        .unwrap();
+    let clock = s.declare_publisher(keys::SIM_CLOCK).wait().unwrap();
+    // 0.1 s of sim time per sample at 10 Hz, however fast the clock runs.
+    let mut stamps = Vec::new();
+    let deadline = Instant::now() + DEADLINE;
+    let mut t = 0.0;
+    while stamps.len() < 3 {
+        assert!(
+            Instant::now() < deadline,
+            "no ticks on sim time: {stamps:?}"
+        );
+        t += 0.05;
+        clock
+            .put(troupe_msgs::encode(&troupe_msgs::sim::Clock { time: t }, t))
+            .wait()
+            .unwrap();
+        while let Ok(Some(sample)) = data.recv_timeout(Duration::from_millis(20)) {
+            let d = troupe_msgs::decode::<troupe_msgs::power::Data>(&sample.payload().to_bytes())
+                .unwrap();
+            stamps.push(d.stamp);
+        }
+    }
+    for w in stamps.windows(2) {
+        assert!(
+            (w[1] - w[0] - 0.1).abs() < 0.051,
+            "stamps not 0.1 s apart in sim time: {stamps:?}"
+        );
+    }
+    assert!(
+        stamps[0] < 1.0,
+        "stamps are wall time, not sim time: {stamps:?}"
+    );
+    node.stop().unwrap();
+}

@@ -140,8 +140,18 @@ pub struct Proc {
 impl Proc {
     /// Starts `troupe ARGS…` with piped stdout and stderr.
     pub fn troupe(name: &str, args: &[String]) -> Proc {
-        let child = Command::new(troupe_bin())
-            .args(args)
+        Self::start(name, Command::new(troupe_bin()).args(args))
+    }
+
+    /// Starts `troupe ARGS…` inside network namespace `ns` (`ip netns exec`).
+    pub fn troupe_in(ns: &str, name: &str, args: &[String]) -> Proc {
+        let mut cmd = Command::new("ip");
+        cmd.args(["netns", "exec", ns]).arg(troupe_bin()).args(args);
+        Self::start(name, &mut cmd)
+    }
+
+    fn start(name: &str, cmd: &mut Command) -> Proc {
+        let child = cmd
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
@@ -151,6 +161,20 @@ impl Proc {
             child,
             name: name.to_owned(),
         }
+    }
+
+    /// The child's stdout, line by line, read on a thread.
+    pub fn lines(&mut self) -> mpsc::Receiver<String> {
+        let out = self.child.stdout.take().expect("stdout piped");
+        let (tx, rx) = mpsc::channel();
+        std::thread::spawn(move || {
+            for line in BufReader::new(out).lines().map_while(Result::ok) {
+                if tx.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+        rx
     }
 
     /// The first line the child prints on stdout, within the deadline.

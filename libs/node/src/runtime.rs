@@ -176,7 +176,7 @@ pub fn spawn<D: Driver>(
     stop.attach(inbox.clone());
 
     let ticks = Arc::new(SimTicks::default());
-    let (clock, _clock_sub) = if cfg.sim_time {
+    let (clock, clock_sub) = if cfg.sim_time {
         let clock = Clock::manual(0.0);
         let sub = sim_clock(&session, clock.clone(), inbox.clone(), ticks.clone())?;
         (clock, Some(sub))
@@ -204,7 +204,11 @@ pub fn spawn<D: Driver>(
     let thread_session = session.clone();
     let thread = std::thread::Builder::new()
         .name(format!("driver {}", D::NAME))
-        .spawn(move || run_loop(driver, &mut ctx, &inbox, &ticks, &thread_session, &provided))
+        .spawn(move || {
+            // The clock subscription lives as long as the loop.
+            let _clock_sub = clock_sub;
+            run_loop(driver, &mut ctx, &inbox, &ticks, &thread_session, &provided)
+        })
         .map_err(|e| NodeError::Driver(format!("starting the driver thread: {e}").into()))?;
     Ok(NodeHandle { thread, stop })
 }
