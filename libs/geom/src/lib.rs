@@ -1,0 +1,18 @@
+//! Geometry for Troupe's simulator and map drivers.
+//!
+//! - [`Pose`]: planar rigid transforms (compose, invert, transform points);
+//! - [`Grid`]: an occupancy grid whose cells hold the id of what occupies
+//!   them, with a coarse level of per-tile counts so rays skip empty space;
+//! - [`Grid::fill_polygon`]: rasterises convex or concave polygons;
+//! - [`Grid::cast`]: the first occupied cell along a ray (a grid walk);
+//! - [`bitmap`]: loads an image and turns dark pixels into obstacle rectangles.
+//!
+//! Depends on troupe-msgs and image only.
+#![warn(missing_docs)]
+
+pub mod bitmap;
+mod grid;
+mod pose;
+
+pub use grid::{Grid, Hit, EMPTY};
+pub use pose::{normalize, Pose};

@@ -1,0 +1,104 @@
+//! Planar poses: a rotation then a translation.
+
+use troupe_msgs::Pose2d;
+
+/// A planar pose (x, y in metres, yaw in radians) used as a rigid transform.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Pose {
+    /// Metres.
+    pub x: f64,
+    /// Metres.
+    pub y: f64,
+    /// Radians.
+    pub yaw: f64,
+}
+
+/// `a` wrapped into (-π, π].
+pub fn normalize(a: f64) -> f64 {
+    let mut a = a % std::f64::consts::TAU;
+    if a > std::f64::consts::PI {
+        a -= std::f64::consts::TAU;
+    } else if a <= -std::f64::consts::PI {
+        a += std::f64::consts::TAU;
+    }
+    a
+}
+
+impl Pose {
+    /// A pose from its parts.
+    pub const fn new(x: f64, y: f64, yaw: f64) -> Self {
+        Pose { x, y, yaw }
+    }
+
+    /// `self ∘ local`: the pose `local`, given in this pose's frame, in the outer frame.
+    ///
+    /// # Example
+    ///
+    /// ```
+    /// use troupe_geom::Pose;
+    /// let robot = Pose::new(1.0, 0.0, std::f64::consts::FRAC_PI_2);
+    /// let sensor = robot.compose(&Pose::new(0.5, 0.0, 0.0));
+    /// assert!((sensor.x - 1.0).abs() < 1e-12 && (sensor.y - 0.5).abs() < 1e-12);
+    /// ```
+    pub fn compose(&self, local: &Pose) -> Pose {
+        let (s, c) = self.yaw.sin_cos();
+        Pose {
+            x: self.x + c * local.x - s * local.y,
+            y: self.y + s * local.x + c * local.y,
+            yaw: normalize(self.yaw + local.yaw),
+        }
+    }
+
+    /// The pose that undoes this one: `p.inverse().compose(&p)` is the identity.
+    pub fn inverse(&self) -> Pose {
+        let (s, c) = self.yaw.sin_cos();
+        Pose {
+            x: -c * self.x - s * self.y,
+            y: s * self.x - c * self.y,
+            yaw: normalize(-self.yaw),
+        }
+    }
+
+    /// A point given in this pose's frame, in the outer frame.
+    pub fn apply(&self, x: f64, y: f64) -> (f64, f64) {
+        let (s, c) = self.yaw.sin_cos();
+        (self.x + c * x - s * y, self.y + s * x + c * y)
+    }
+}
+
+impl From<Pose2d> for Pose {
+    fn from(p: Pose2d) -> Self {
+        Pose::new(p.x, p.y, p.yaw)
+    }
+}
+
+impl From<Pose> for Pose2d {
+    fn from(p: Pose) -> Self {
+        Pose2d::new(p.x, p.y, p.yaw)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::{FRAC_PI_2, PI};
+
+    #[test]
+    fn compose_and_inverse_are_consistent() {
+        let a = Pose::new(1.0, 2.0, 0.7);
+        let b = Pose::new(-0.3, 0.4, -1.2);
+        let ab = a.compose(&b);
+        let back = a.inverse().compose(&ab);
+        assert!((back.x - b.x).abs() < 1e-12 && (back.y - b.y).abs() < 1e-12);
+        assert!((normalize(back.yaw - b.yaw)).abs() < 1e-12);
+        let p = Pose::new(0.0, 0.0, FRAC_PI_2).apply(1.0, 0.0);
+        assert!(p.0.abs() < 1e-12 && (p.1 - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn angles_wrap_into_minus_pi_pi() {
+        assert!((normalize(3.0 * PI) - PI).abs() < 1e-12);
+        assert!((normalize(-PI) - PI).abs() < 1e-12);
+        assert!((normalize(0.5 + 4.0 * PI) - 0.5).abs() < 1e-9);
+    }
+}
