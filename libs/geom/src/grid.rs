@@ -412,7 +412,7 @@ mod tests {
             .filter(|&(i, j)| g.get(i, j) != EMPTY)
             .collect();
         for _ in 0..500 {
-            let (ox, oy, a) = (rnd() * 8.0, rnd() * 8.0, rnd() * 6.28);
+            let (ox, oy, a) = (rnd() * 8.0, rnd() * 8.0, rnd() * std::f64::consts::TAU);
             let fast = g.cast(ox, oy, a, 6.0, |_| true).map(|h| h.range);
             // Exact: the nearest cell box the ray passes through (slab method).
             let (dx, dy) = (a.cos(), a.sin());
