@@ -1,0 +1,10 @@
+//! Troupe's Stage: the 2D multi-robot simulator as one node.
+//!
+//! - [`worldfile`]: Stage's world-file language (includes, macros, entities);
+//! - [`world`]: typed models, bodies stretched to size, sensors;
+//! - [`sim`]: the simulation (kinematics, collisions, ranger ray casting).
+#![warn(missing_docs)]
+
+pub mod colors;
+pub mod world;
+pub mod worldfile;

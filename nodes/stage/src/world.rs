@@ -1,0 +1,903 @@
+//! The world as Stage loads it: typed models from a parsed world file.
+//!
+//! Units in the file are metres and degrees unless the file sets
+//! `unit_length`/`unit_angle`; everything here is metres and radians. Block
+//! and bitmap bodies are stretched so their bounding box is exactly the
+//! model's `size`, centred on the model, as Stage's `CalcSize` does.
+
+use std::collections::HashMap;
+use std::f64::consts::PI;
+use std::path::Path;
+
+use troupe_geom::bitmap::Bitmap;
+use troupe_geom::Pose;
+use troupe_msgs::Color;
+
+use crate::colors;
+use crate::worldfile::{self, Entity, Pos, Prop, Val, WorldError};
+
+/// Model types Stage 4 knows (plus Stage 3's `laser`, read as a ranger).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kind {
+    /// A plain model (walls, floorplans, objects).
+    Model,
+    /// A mobile base.
+    Position,
+    /// Range sensors (`sensor` children; Stage 3 `laser`).
+    Ranger,
+    /// A colour-blob camera.
+    Blobfinder,
+    /// A fiducial detector.
+    Fiducial,
+    /// A gripper.
+    Gripper,
+    /// Contact bumpers.
+    Bumper,
+    /// A camera (not simulated headless).
+    Camera,
+    /// Other Stage 4 types, loaded as plain models.
+    Other,
+}
+
+/// How a position model moves.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Drive {
+    /// Differential: forward speed and turn rate.
+    Diff,
+    /// Holonomic: x, y and turn.
+    Omni,
+    /// Car-like: speed and steering angle.
+    Car,
+}
+
+/// Where a position model's reported pose comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Localization {
+    /// The true pose, relative to `localization_origin`.
+    Gps,
+    /// Integrated odometry with `odom_error`.
+    Odom,
+}
+
+/// A position model's settings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PositionCfg {
+    /// Drive type.
+    pub drive: Drive,
+    /// `[xmin xmax ymin ymax zmin zmax amin amax]`, m/s and rad/s.
+    pub velocity_bounds: [f64; 8],
+    /// Same layout, m/s² and rad/s².
+    pub acceleration_bounds: [f64; 8],
+    /// Reported pose source.
+    pub localization: Localization,
+    /// Frame of the reported pose (default: the model's pose at load).
+    pub localization_origin: Option<Pose>,
+    /// Proportional odometry errors (x, y, yaw).
+    pub odom_error: [f64; 3],
+    /// Metres, for car drive.
+    pub wheelbase: f64,
+}
+
+/// One ranger sensor.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sensor {
+    /// Pose relative to the ranger.
+    pub pose: Pose,
+    /// Height above the ranger's base.
+    pub z: f64,
+    /// `[x y z]` metres.
+    pub size: [f64; 3],
+    /// Metres.
+    pub range: (f64, f64),
+    /// Radians.
+    pub fov: f64,
+    /// Beams.
+    pub samples: usize,
+}
+
+/// A model with everything the simulator needs.
+#[derive(Debug, Clone)]
+pub struct ModelDef {
+    /// Stage's name (`r0`, `r0.ranger:1`…).
+    pub name: String,
+    /// Type.
+    pub kind: Kind,
+    /// Parent model.
+    pub parent: Option<usize>,
+    /// Child models in file order.
+    pub children: Vec<usize>,
+    /// Pose relative to the parent.
+    pub pose: Pose,
+    /// Height of the pose above the parent's base.
+    pub z: f64,
+    /// `[x y z]` metres.
+    pub size: [f64; 3],
+    /// Offset of the body from the pose.
+    pub origin: Pose,
+    /// Colour.
+    pub color: Color,
+    /// Body polygons in the model's frame (origin applied), metres.
+    pub blocks: Vec<Vec<(f64, f64)>>,
+    /// Robots collide with it.
+    pub obstacle_return: bool,
+    /// Seen by rangers (≥ 0), with this intensity.
+    pub ranger_return: f64,
+    /// Seen by blobfinders.
+    pub blob_return: bool,
+    /// Fiducial id (0 = not a fiducial).
+    pub fiducial_return: i32,
+    /// Can be gripped.
+    pub gripper_return: bool,
+    /// Children stack on top of it.
+    pub stack_children: bool,
+    /// Position settings, for position models.
+    pub position: Option<PositionCfg>,
+    /// Sensors, for rangers.
+    pub sensors: Vec<Sensor>,
+    /// Controllers (`ctrl "wander"`).
+    pub ctrl: Vec<String>,
+    /// Where it was written.
+    pub pos: Pos,
+}
+
+/// A loaded world.
+#[derive(Debug, Clone)]
+pub struct World {
+    /// Metres per raster cell.
+    pub resolution: f64,
+    /// Seconds of simulated time per step.
+    pub interval_sim: f64,
+    /// Simulated seconds after which a headless run stops (0 = never).
+    pub quit_time: f64,
+    /// Real-time factor (1 = real time; ≤ 0 = as fast as possible).
+    pub speedup: f64,
+    /// Worker threads the world asks for.
+    pub threads: usize,
+    /// Start paused.
+    pub paused: bool,
+    /// The models, parents before children.
+    pub models: Vec<ModelDef>,
+    /// Every name a model answers to → index.
+    pub names: HashMap<String, usize>,
+}
+
+struct Reader {
+    len: f64,
+    ang: f64,
+}
+
+fn short(p: &Prop, name: &str, want: usize, form: &str) -> WorldError {
+    WorldError {
+        pos: p.pos.clone(),
+        msg: format!(
+            "`{name}` needs {want} values {form}, got {}",
+            p.values.len()
+        ),
+    }
+}
+
+impl Reader {
+    fn prop<'e>(&self, e: &'e Entity, name: &str) -> Option<&'e Prop> {
+        e.props.get(name)
+    }
+    fn float(&self, e: &Entity, name: &str, default: f64) -> f64 {
+        self.prop(e, name)
+            .and_then(|p| p.values.first())
+            .map_or(default, Val::num)
+    }
+    fn length(&self, e: &Entity, name: &str, default: f64) -> f64 {
+        self.prop(e, name)
+            .and_then(|p| p.values.first())
+            .map_or(default, |v| v.num() * self.len)
+    }
+    fn angle(&self, e: &Entity, name: &str, default: f64) -> f64 {
+        self.prop(e, name)
+            .and_then(|p| p.values.first())
+            .map_or(default, |v| v.num() * self.ang)
+    }
+    fn int(&self, e: &Entity, name: &str, default: i64) -> i64 {
+        self.prop(e, name)
+            .and_then(|p| p.values.first())
+            .map_or(default, |v| v.num() as i64)
+    }
+    fn string(&self, e: &Entity, name: &str) -> Option<String> {
+        self.prop(e, name)
+            .and_then(|p| p.values.first())
+            .map(|v| v.text().to_owned())
+    }
+    /// `pose`: Stage 4's `[x y z a]` or Stage 3's `[x y a]`.
+    fn pose(&self, e: &Entity, name: &str) -> Result<Option<(Pose, f64)>, WorldError> {
+        let Some(p) = self.prop(e, name) else {
+            return Ok(None);
+        };
+        let v: Vec<f64> = p.values.iter().map(Val::num).collect();
+        match v.len() {
+            n if n >= 4 => Ok(Some((
+                Pose::new(v[0] * self.len, v[1] * self.len, v[3] * self.ang),
+                v[2] * self.len,
+            ))),
+            3 => Ok(Some((
+                Pose::new(v[0] * self.len, v[1] * self.len, v[2] * self.ang),
+                0.0,
+            ))),
+            _ => Err(short(p, name, 4, "[x y z a] (or Stage 3's [x y a])")),
+        }
+    }
+    /// `size`: `[x y z]`, or `[x y]` keeping the default height.
+    fn size(&self, e: &Entity, default: [f64; 3]) -> Result<[f64; 3], WorldError> {
+        let Some(p) = self.prop(e, "size") else {
+            return Ok(default);
+        };
+        let v: Vec<f64> = p.values.iter().map(|x| x.num() * self.len).collect();
+        match v.len() {
+            n if n >= 3 => Ok([v[0], v[1], v[2]]),
+            2 => Ok([v[0], v[1], default[2]]),
+            _ => Err(short(p, "size", 3, "[x y z]")),
+        }
+    }
+    fn color(&self, e: &Entity, default: Color) -> Color {
+        if let Some(name) = self.string(e, "color") {
+            return colors::lookup(&name).unwrap_or_else(|| {
+                tracing::warn!(
+                    "{}: unknown colour \"{name}\"; using red, as Stage does",
+                    e.props["color"].pos
+                );
+                colors::RED
+            });
+        }
+        match self.prop(e, "color_rgba") {
+            Some(p) if p.values.len() >= 4 => {
+                let c: Vec<f32> = p.values.iter().map(|v| v.num() as f32).collect();
+                Color {
+                    r: c[0],
+                    g: c[1],
+                    b: c[2],
+                    a: c[3],
+                }
+            }
+            _ => default,
+        }
+    }
+    fn bounds(&self, e: &Entity, name: &str, default: [f64; 8]) -> Result<[f64; 8], WorldError> {
+        let Some(p) = self.prop(e, name) else {
+            return Ok(default);
+        };
+        if p.values.len() < 8 {
+            return Err(short(
+                p,
+                name,
+                8,
+                "[xmin xmax ymin ymax zmin zmax amin amax]",
+            ));
+        }
+        let mut out = [0.0; 8];
+        for (i, v) in p.values.iter().take(8).enumerate() {
+            out[i] = v.num() * if i >= 6 { self.ang } else { self.len };
+        }
+        Ok(out)
+    }
+}
+
+fn kind_of(e: &Entity) -> Result<Option<Kind>, WorldError> {
+    Ok(Some(match e.kind.as_str() {
+        "model" => Kind::Model,
+        "position" => Kind::Position,
+        "ranger" | "laser" => Kind::Ranger,
+        "blobfinder" => Kind::Blobfinder,
+        "fiducial" => Kind::Fiducial,
+        "gripper" => Kind::Gripper,
+        "bumper" => Kind::Bumper,
+        "camera" => Kind::Camera,
+        "actuator" | "blinkenlight" | "lightindicator" => Kind::Other,
+        "window" | "block" | "sensor" => return Ok(None),
+        other => {
+            return Err(WorldError {
+                pos: e.pos.clone(),
+                msg: format!(
+                    "unknown model type `{other}`; Stage 4 knows model, position, ranger (with sensor), blobfinder, fiducial, gripper, bumper, camera, actuator, blinkenlight, lightindicator (and Stage 3's laser)"
+                ),
+            })
+        }
+    }))
+}
+
+/// Scales polygons so their bounding box is `size` (x, y), centred on (0, 0).
+fn stretch(blocks: &mut [Vec<(f64, f64)>], sx: f64, sy: f64) {
+    let (mut x0, mut y0, mut x1, mut y1) = (
+        f64::INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NEG_INFINITY,
+    );
+    for p in blocks.iter().flatten() {
+        x0 = x0.min(p.0);
+        x1 = x1.max(p.0);
+        y0 = y0.min(p.1);
+        y1 = y1.max(p.1);
+    }
+    if !x0.is_finite() {
+        return;
+    }
+    let (ex, ey) = ((x1 - x0).max(f64::EPSILON), (y1 - y0).max(f64::EPSILON));
+    let (cx, cy) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
+    for p in blocks.iter_mut().flatten() {
+        p.0 = (p.0 - cx) * sx / ex;
+        p.1 = (p.1 - cy) * sy / ey;
+    }
+}
+
+fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Vec<(f64, f64)> {
+    vec![(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
+}
+
+/// Loads the world file at `path`.
+///
+/// # Errors
+///
+/// A syntax error, an unknown model type, a too-short tuple or a missing
+/// bitmap, each with file:line:column.
+pub fn load(path: &Path) -> Result<World, WorldError> {
+    let wf = worldfile::parse(path)?;
+    let g = &wf.entities[0];
+    let unit = |name: &str, table: &[(&str, f64)], default: f64| -> Result<f64, WorldError> {
+        match g.props.get(name) {
+            None => Ok(default),
+            Some(p) => {
+                let t = p.values.first().map(Val::text).unwrap_or("");
+                table
+                    .iter()
+                    .find(|(n, _)| *n == t)
+                    .map(|(_, f)| *f)
+                    .ok_or_else(|| WorldError {
+                        pos: p.pos.clone(),
+                        msg: format!(
+                            "{name} must be one of {}",
+                            table
+                                .iter()
+                                .map(|(n, _)| format!("\"{n}\""))
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ),
+                    })
+            }
+        }
+    };
+    let r = Reader {
+        len: unit(
+            "unit_length",
+            &[("m", 1.0), ("cm", 0.01), ("mm", 0.001)],
+            1.0,
+        )?,
+        ang: unit(
+            "unit_angle",
+            &[("degrees", PI / 180.0), ("radians", 1.0)],
+            PI / 180.0,
+        )?,
+    };
+    let mut world = World {
+        resolution: r.float(g, "resolution", 0.02).max(1e-4),
+        interval_sim: r.float(g, "interval_sim", 100.0).max(1.0) / 1000.0,
+        quit_time: r.float(g, "quit_time", 0.0).max(0.0),
+        speedup: r.float(g, "speedup", 1.0),
+        threads: r.int(g, "threads", 1).max(1) as usize,
+        paused: r.int(g, "paused", 0) != 0,
+        models: Vec::new(),
+        names: HashMap::new(),
+    };
+    let mut model_of: HashMap<usize, usize> = HashMap::new();
+    let mut raw_blocks: Vec<Vec<Vec<(f64, f64)>>> = Vec::new();
+    let mut has_default_block: Vec<bool> = Vec::new();
+    let mut boundaries: Vec<bool> = Vec::new();
+    let mut counts: HashMap<(Option<usize>, String), usize> = HashMap::new();
+    let dir = path.parent().unwrap_or(Path::new("."));
+    for (ei, e) in wf.entities.iter().enumerate().skip(1) {
+        let parent_model = e.parent.and_then(|p| model_of.get(&p).copied());
+        match e.kind.as_str() {
+            "window" => continue,
+            "block" => {
+                let Some(m) = parent_model else {
+                    return Err(WorldError {
+                        pos: e.pos.clone(),
+                        msg: "a `block` must be inside a model".into(),
+                    });
+                };
+                let n = r.int(e, "points", 0).max(0) as usize;
+                let mut pts = Vec::with_capacity(n);
+                for i in 0..n {
+                    let name = format!("point[{i}]");
+                    let (x, y) = match e.props.get(&name) {
+                        Some(p) if p.values.len() >= 2 => {
+                            (p.values[0].num() * r.len, p.values[1].num() * r.len)
+                        }
+                        Some(p) => return Err(short(p, &name, 2, "[x y]")),
+                        None => (0.0, 0.0),
+                    };
+                    pts.push((x, y));
+                }
+                if pts.len() >= 2 {
+                    if has_default_block[m] {
+                        raw_blocks[m].clear();
+                        has_default_block[m] = false;
+                    }
+                    raw_blocks[m].push(pts);
+                }
+                continue;
+            }
+            "sensor" => {
+                let Some(m) = parent_model.filter(|&m| world.models[m].kind == Kind::Ranger) else {
+                    return Err(WorldError {
+                        pos: e.pos.clone(),
+                        msg: "a `sensor` must be inside a ranger".into(),
+                    });
+                };
+                let (pose, z) = r.pose(e, "pose")?.unwrap_or_default();
+                let range = match e.props.get("range") {
+                    Some(p) if p.values.len() >= 2 => {
+                        (p.values[0].num() * r.len, p.values[1].num() * r.len)
+                    }
+                    Some(p) => return Err(short(p, "range", 2, "[min max]")),
+                    None => (0.0, 5.0),
+                };
+                let sensor = Sensor {
+                    pose,
+                    z,
+                    size: r.size(e, [0.02, 0.02, 0.02])?,
+                    range,
+                    fov: r.angle(e, "fov", 0.1),
+                    samples: r.int(e, "samples", 1).max(1) as usize,
+                };
+                world.models[m].sensors.push(sensor);
+                continue;
+            }
+            _ => {}
+        }
+        let Some(kind) = kind_of(e)? else { continue };
+        let idx = world.models.len();
+        model_of.insert(ei, idx);
+        // Names: `type:n` among siblings, or the given name (children: parent.name).
+        let k = counts.entry((parent_model, e.kind.clone())).or_insert(0);
+        let parent_name = parent_model.map(|p| world.models[p].name.clone());
+        let auto = match &parent_name {
+            Some(pn) => format!("{pn}.{}:{}", e.kind, k),
+            None => format!("{}:{}", e.kind, k),
+        };
+        *k += 1;
+        let name = match r.string(e, "name") {
+            Some(n) if n.starts_with('/') => n[1..].to_owned(),
+            Some(n) => match &parent_name {
+                Some(pn) => format!("{pn}.{n}"),
+                None => n,
+            },
+            None => auto.clone(),
+        };
+        let default_size = match kind {
+            Kind::Ranger => [0.15, 0.15, 0.2],
+            Kind::Gripper => [0.2, 0.3, 0.2],
+            Kind::Fiducial => [0.0, 0.0, 0.0],
+            Kind::Camera => [0.1, 0.07, 0.05],
+            _ => [0.4, 0.4, 1.0],
+        };
+        let size = r.size(e, default_size)?;
+        let (pose, z) = r.pose(e, "pose")?.unwrap_or_default();
+        let origin = r.pose(e, "origin")?.map(|(p, _)| p).unwrap_or_default();
+        let default_color = match kind {
+            Kind::Ranger => Color {
+                r: 0.0,
+                g: 0.0,
+                b: 0.5,
+                a: 1.0,
+            },
+            _ => colors::RED,
+        };
+        let position = if kind == Kind::Position {
+            let drive = match r.string(e, "drive").as_deref() {
+                None | Some("diff") => Drive::Diff,
+                Some("omni") => Drive::Omni,
+                Some("car") => Drive::Car,
+                Some(other) => {
+                    tracing::warn!(
+                        "{}: unknown drive \"{other}\" (diff, omni or car); using diff",
+                        e.props["drive"].pos
+                    );
+                    Drive::Diff
+                }
+            };
+            let localization = match r.string(e, "localization").as_deref() {
+                None | Some("gps") => Localization::Gps,
+                Some("odom") => Localization::Odom,
+                Some(other) => {
+                    tracing::warn!(
+                        "{}: unknown localization \"{other}\" (gps or odom); using gps",
+                        e.props["localization"].pos
+                    );
+                    Localization::Gps
+                }
+            };
+            let odom = match e.props.get("odom_error") {
+                Some(p) if p.values.len() >= 4 => [
+                    p.values[0].num(),
+                    p.values[1].num(),
+                    p.values[3].num() * r.ang,
+                ],
+                Some(p) if p.values.len() == 3 => [
+                    p.values[0].num(),
+                    p.values[1].num(),
+                    p.values[2].num() * r.ang,
+                ],
+                Some(p) => return Err(short(p, "odom_error", 4, "[x y z a]")),
+                None => [0.03, 0.03, 0.05],
+            };
+            let half = PI / 2.0;
+            Some(PositionCfg {
+                drive,
+                velocity_bounds: r.bounds(
+                    e,
+                    "velocity_bounds",
+                    [-1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -half, half],
+                )?,
+                acceleration_bounds: r.bounds(
+                    e,
+                    "acceleration_bounds",
+                    [-1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -half, half],
+                )?,
+                localization,
+                localization_origin: r.pose(e, "localization_origin")?.map(|(p, _)| p),
+                odom_error: odom,
+                wheelbase: r.length(e, "wheelbase", 1.0),
+            })
+        } else {
+            None
+        };
+        let ctrl = match e.props.get("ctrl") {
+            Some(p) => p.values.iter().map(|v| v.text().to_owned()).collect(),
+            None => Vec::new(),
+        };
+        let mut sensors = Vec::new();
+        if e.kind == "laser" {
+            // Stage 3: a laser is one sensor with these properties on the model.
+            let skip = r.int(e, "laser_sample_skip", 1).max(1) as usize;
+            sensors.push(Sensor {
+                pose: Pose::default(),
+                z: 0.0,
+                size: [0.02, 0.02, 0.02],
+                range: (r.length(e, "range_min", 0.0), r.length(e, "range_max", 8.0)),
+                fov: r.angle(e, "fov", PI),
+                samples: (r.int(e, "samples", 361).max(1) as usize).div_ceil(skip),
+            });
+        }
+        // Stage 3 ranger: scount / spose[i] / sview[i] / ssize[i].
+        if kind == Kind::Ranger {
+            let n = r.int(e, "scount", 0).max(0) as usize;
+            for i in 0..n {
+                let sp = e.props.get(&format!("spose[{i}]"));
+                let pose = match sp {
+                    Some(p) if p.values.len() >= 3 => Pose::new(
+                        p.values[0].num() * r.len,
+                        p.values[1].num() * r.len,
+                        p.values[2].num() * r.ang,
+                    ),
+                    Some(p) => return Err(short(p, &format!("spose[{i}]"), 3, "[x y a]")),
+                    None => Pose::default(),
+                };
+                let view = e
+                    .props
+                    .get(&format!("sview[{i}]"))
+                    .or_else(|| e.props.get("sview"));
+                let (range, fov) = match view {
+                    Some(p) if p.values.len() >= 3 => (
+                        (p.values[0].num() * r.len, p.values[1].num() * r.len),
+                        p.values[2].num() * r.ang,
+                    ),
+                    Some(p) => return Err(short(p, "sview", 3, "[min max fov]")),
+                    None => ((0.0, 5.0), 0.1),
+                };
+                sensors.push(Sensor {
+                    pose,
+                    z: 0.0,
+                    size: [0.02, 0.02, 0.02],
+                    range,
+                    fov,
+                    samples: 1,
+                });
+            }
+        }
+        let mut blocks = Vec::new();
+        let mut default_block = matches!(
+            kind,
+            Kind::Model | Kind::Position | Kind::Bumper | Kind::Other
+        );
+        if r.int(e, "noblocks", 0) != 0 {
+            default_block = false;
+        }
+        // Stage 2: polygons N with polygon[i].points and polygon[i].point[j].
+        let np = r.int(e, "polygons", 0).max(0) as usize;
+        for i in 0..np {
+            let pts = r.int(e, &format!("polygon[{i}].points"), 0).max(0) as usize;
+            let mut poly = Vec::new();
+            for j in 0..pts {
+                let key = format!("polygon[{i}].point[{j}]");
+                match e.props.get(&key) {
+                    Some(p) if p.values.len() >= 2 => {
+                        poly.push((p.values[0].num() * r.len, p.values[1].num() * r.len))
+                    }
+                    Some(p) => return Err(short(p, &key, 2, "[x y]")),
+                    None => poly.push((0.0, 0.0)),
+                }
+            }
+            if poly.len() >= 2 {
+                blocks.push(poly);
+                default_block = false;
+            }
+        }
+        if let Some(file) = r.string(e, "bitmap") {
+            let p = if Path::new(&file).is_absolute() {
+                file.clone().into()
+            } else {
+                dir.join(&file)
+            };
+            let bmp = Bitmap::load(&p).map_err(|err| WorldError {
+                pos: e.props["bitmap"].pos.clone(),
+                msg: err.to_string(),
+            })?;
+            for rc in bmp.dark_rects(128) {
+                // Image rows grow downwards; the world's y grows upwards.
+                let (x0, x1) = (f64::from(rc.x), f64::from(rc.x + rc.w));
+                let (y0, y1) = (-f64::from(rc.y + rc.h), -f64::from(rc.y));
+                blocks.push(rect(x0, y0, x1, y1));
+            }
+            default_block = false;
+        }
+        if default_block {
+            blocks.push(rect(-0.5, -0.5, 0.5, 0.5));
+        }
+        let boundary = r.int(e, "boundary", 0) != 0;
+        world.models.push(ModelDef {
+            name: name.clone(),
+            kind,
+            parent: parent_model,
+            children: Vec::new(),
+            pose,
+            z,
+            size,
+            origin,
+            color: r.color(e, default_color),
+            blocks: Vec::new(),
+            obstacle_return: r.int(e, "obstacle_return", 1) != 0,
+            ranger_return: r.float(e, "ranger_return", 1.0),
+            blob_return: r.int(e, "blob_return", 1) != 0,
+            fiducial_return: r.int(e, "fiducial_return", 0) as i32,
+            gripper_return: r.int(e, "gripper_return", 0) != 0,
+            stack_children: r.int(e, "stack_children", 1) != 0,
+            position,
+            sensors,
+            ctrl,
+            pos: e.pos.clone(),
+        });
+        raw_blocks.push(blocks);
+        has_default_block.push(default_block);
+        boundaries.push(boundary);
+        if let Some(p) = parent_model {
+            world.models[p].children.push(idx);
+        }
+        world.names.insert(auto, idx);
+        world.names.insert(name, idx);
+    }
+    // Bodies: stretch to size, add boundary walls, apply the origin.
+    for (m, mut blocks) in raw_blocks.into_iter().enumerate() {
+        let (sx, sy) = (world.models[m].size[0], world.models[m].size[1]);
+        stretch(&mut blocks, sx, sy);
+        if boundaries[m] {
+            let (hx, hy, t) = (sx / 2.0, sy / 2.0, 0.01);
+            blocks.push(rect(-hx, -hy, -hx + t, hy));
+            blocks.push(rect(-hx, -hy, hx, -hy + t));
+            blocks.push(rect(-hx, hy - t, hx, hy));
+            blocks.push(rect(hx - t, -hy, hx, hy));
+        }
+        let o = world.models[m].origin;
+        for b in &mut blocks {
+            for p in b.iter_mut() {
+                *p = o.apply(p.0, p.1);
+            }
+        }
+        world.models[m].blocks = blocks;
+    }
+    Ok(world)
+}
+
+impl World {
+    /// The global pose of model `m` and its height, from the per-model relative `poses`.
+    pub fn global(&self, poses: &[Pose], m: usize) -> (Pose, f64) {
+        let def = &self.models[m];
+        match def.parent {
+            None => (poses[m], def.z),
+            Some(p) => {
+                let (gp, gz) = self.global(poses, p);
+                let stack = if self.models[p].stack_children {
+                    self.models[p].size[2]
+                } else {
+                    0.0
+                };
+                (gp.compose(&poses[m]), gz + def.z + stack)
+            }
+        }
+    }
+
+    /// The top-level ancestor of model `m`.
+    pub fn root(&self, mut m: usize) -> usize {
+        while let Some(p) = self.models[m].parent {
+            m = p;
+        }
+        m
+    }
+
+    /// Model `base` and its descendants, depth-first in file order.
+    pub fn subtree(&self, base: usize) -> Vec<usize> {
+        let mut out = vec![base];
+        let mut i = 0;
+        while i < out.len() {
+            let kids = self.models[out[i]].children.clone();
+            out.splice(i + 1..i + 1, kids);
+            i += 1;
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn load_text(name: &str, text: &str) -> Result<World, WorldError> {
+        let dir = std::env::temp_dir().join(format!("troupe-world-{}-{name}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("t.world");
+        std::fs::write(&p, text).unwrap();
+        let r = load(&p);
+        let _ = std::fs::remove_dir_all(&dir);
+        r
+    }
+
+    #[test]
+    fn models_names_poses_sizes_and_sensors() {
+        let w = load_text(
+            "basic",
+            "interval_sim 50\nquit_time 10\n\
+             define laser_ranger ranger ( sensor( range [0 8] fov 180 samples 181 ) )\n\
+             position ( name \"r0\" pose [1 2 0 90] size [0.5 0.4 0.2] drive \"omni\"\n\
+               ranger( sensor( pose [0.1 0 0 0] ) sensor( pose [0 0.1 0 90] ) )\n\
+               laser_ranger( pose [0.2 0 0 0] ) )\n\
+             model ( name \"box\" pose [3 3 0] size [1 1] )\n",
+        )
+        .unwrap();
+        assert_eq!(w.interval_sim, 0.05);
+        assert_eq!(w.quit_time, 10.0);
+        let r0 = w.names["r0"];
+        let m = &w.models[r0];
+        assert_eq!(m.kind, Kind::Position);
+        assert!((m.pose.yaw - PI / 2.0).abs() < 1e-12);
+        assert_eq!(m.position.as_ref().unwrap().drive, Drive::Omni);
+        assert_eq!(m.children.len(), 2);
+        let sonar = &w.models[w.names["r0.ranger:0"]];
+        assert_eq!(sonar.sensors.len(), 2);
+        let laser = &w.models[w.names["r0.ranger:1"]];
+        assert_eq!(laser.sensors[0].samples, 181);
+        assert!((laser.sensors[0].fov - PI).abs() < 1e-12);
+        // The default body is stretched to the size.
+        let b = &m.blocks[0];
+        assert!(
+            b.iter()
+                .any(|p| (p.0 - 0.25).abs() < 1e-12 && (p.1 - 0.2).abs() < 1e-12),
+            "{b:?}"
+        );
+        // Stage 3 pose [x y a] and size [x y].
+        let bx = &w.models[w.names["box"]];
+        assert_eq!((bx.pose.x, bx.pose.y), (3.0, 3.0));
+        assert_eq!(bx.size, [1.0, 1.0, 1.0]);
+        // Global pose of the laser: r0 at (1,2) facing +y, laser 0.2 ahead.
+        let poses: Vec<Pose> = w.models.iter().map(|m| m.pose).collect();
+        let (g, _) = w.global(&poses, w.names["r0.ranger:1"]);
+        assert!((g.x - 1.0).abs() < 1e-9 && (g.y - 2.2).abs() < 1e-9);
+    }
+
+    #[test]
+    fn bad_worlds_say_where_and_what() {
+        let e = load_text("type", "robot ( )").unwrap_err().to_string();
+        assert!(e.contains(":1:1: unknown model type `robot`"), "{e}");
+        let e = load_text("size", "model ( size [1] )")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("`size` needs 3 values"), "{e}");
+        let e = load_text("bitmap", "model ( bitmap \"nope.png\" )")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(":1:9: cannot load bitmap") && e.contains("nope.png"),
+            "{e}"
+        );
+        let e = load_text("sensor", "model ( sensor ( ) )")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("a `sensor` must be inside a ranger"), "{e}");
+        let e = load_text("units", "unit_length \"feet\"")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("unit_length must be one of"), "{e}");
+    }
+
+    #[test]
+    fn stage3_forms_load() {
+        let w = load_text(
+            "stage3",
+            "laser ( name \"l\" range_max 4 fov 90 samples 91 laser_sample_skip 2 )\n\
+             ranger ( name \"s\" scount 2 spose[0] [0.1 0 0] spose[1] [0 0.1 90] sview [0 5 15] )\n\
+             model ( name \"p\" polygons 1 polygon[0].points 3 polygon[0].point[0] [0 0] polygon[0].point[1] [1 0] polygon[0].point[2] [0 1] )\n",
+        )
+        .unwrap();
+        let l = &w.models[w.names["l"]];
+        assert_eq!(l.kind, Kind::Ranger);
+        assert_eq!(l.sensors[0].samples, 46);
+        assert_eq!(l.sensors[0].range.1, 4.0);
+        assert_eq!(w.models[w.names["s"]].sensors.len(), 2);
+        assert_eq!(w.models[w.names["p"]].blocks[0].len(), 3);
+    }
+}
+
+/// Every world of ../shared/compat/stage loads, or says exactly what is missing.
+#[cfg(test)]
+mod compat {
+    use super::*;
+
+    #[test]
+    fn every_compat_world_loads_or_names_the_missing_file() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/compat/stage");
+        if !dir.is_dir() {
+            eprintln!("skipping: ../shared/compat is absent");
+            return;
+        }
+        let mut worlds: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .flatten()
+            .map(|e| e.path())
+            .filter(|p| p.extension().is_some_and(|e| e == "world"))
+            .collect();
+        worlds.sort();
+        assert!(worlds.len() >= 7);
+        for w in worlds {
+            let name = w.file_name().unwrap().to_string_lossy().into_owned();
+            match (name.as_str(), load(&w)) {
+                // These two name files the compat set does not ship.
+                ("autolab.world", Err(e)) => {
+                    assert!(e.to_string().contains("chatterbox.inc"), "{e}")
+                }
+                ("large.world", Err(e)) => {
+                    assert!(e.to_string().contains("SFU_1200x615.png"), "{e}")
+                }
+                (_, Err(e)) => panic!("{name}: {e}"),
+                (_, Ok(world)) => {
+                    assert!(!world.models.is_empty(), "{name}");
+                    for m in &world.models {
+                        for b in &m.blocks {
+                            assert!(
+                                b.iter().all(|p| p.0.is_finite() && p.1.is_finite()),
+                                "{name}: {}",
+                                m.name
+                            );
+                        }
+                    }
+                }
+            }
+        }
+        // simple.world as the plugin sees it: r0's sonar is ranger:0, the laser ranger:1.
+        let w = load(&dir.join("simple.world")).unwrap();
+        let sonar = &w.models[w.names["r0.ranger:0"]];
+        let laser = &w.models[w.names["r0.ranger:1"]];
+        assert_eq!(sonar.sensors.len(), 16);
+        assert_eq!((laser.sensors.len(), laser.sensors[0].samples), (1, 180));
+        assert!((laser.sensors[0].fov - PI).abs() < 1e-9);
+        assert_eq!(laser.sensors[0].range, (0.0, 8.0));
+        let r0 = &w.models[w.names["r0"]];
+        assert_eq!((r0.size[0], r0.size[1]), (0.44, 0.38));
+        let cave = &w.models[w.names["cave"]];
+        assert!(!cave.obstacle_return && cave.ranger_return == 0.5 && cave.blocks.len() > 100);
+    }
+}
