@@ -6,5 +6,6 @@
 #![warn(missing_docs)]
 
 pub mod colors;
+pub mod sim;
 pub mod world;
 pub mod worldfile;

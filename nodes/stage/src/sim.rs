@@ -1,0 +1,622 @@
+//! The simulation: poses, kinematics, collisions and range sensing.
+//!
+//! Static models (trees without a position model) are rasterised once into
+//! one grid; models that move are kept in a second grid, updated as they
+//! move. A grid cell holds `model index + 1`. Rangers cast their rays in
+//! both grids; robots collide with cells of unrelated models whose
+//! `obstacle_return` is set, and then stop and report a stall, as in Stage.
+
+use troupe_geom::{normalize, Grid, Pose, EMPTY};
+use troupe_msgs::Color;
+
+use crate::world::{Drive, Kind, Localization, World};
+
+/// What a position model was last told to do.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Command {
+    /// Velocity: forward, sideways (m/s), turn (rad/s).
+    Vel(Pose),
+    /// Car-like: speed (m/s) and steering angle (rad).
+    Car(f64, f64),
+    /// Go to a pose of the odometric frame.
+    GoTo(Pose),
+}
+
+/// A mobile base's state.
+#[derive(Debug, Clone)]
+pub struct Base {
+    /// Its model.
+    pub model: usize,
+    /// The last command (`None`: idle, or under its `ctrl`).
+    pub cmd: Option<Command>,
+    /// Velocity in the robot frame, m/s and rad/s.
+    pub vel: Pose,
+    /// Blocked by an obstacle on the last step.
+    pub stall: bool,
+    /// The reported pose (odometry or GPS).
+    pub odom: Pose,
+    /// The frame of the reported pose.
+    pub origin: Pose,
+    /// Motors enabled.
+    pub enabled: bool,
+    /// Under the built-in `wander` controller.
+    pub wander: bool,
+    /// Direction wander is turning away from an obstacle (+1 left, -1 right).
+    pub wander_turn: f64,
+}
+
+/// One sensor's latest readings.
+#[derive(Debug, Clone, Default)]
+pub struct Reading {
+    /// Metres, one per sample.
+    pub ranges: Vec<f64>,
+    /// The hit model's `ranger_return` (0 when nothing was hit).
+    pub intensities: Vec<f64>,
+}
+
+/// The simulated world.
+pub struct Sim {
+    /// The loaded world.
+    pub world: World,
+    /// Simulated seconds.
+    pub time: f64,
+    /// Steps taken.
+    pub steps: u64,
+    /// Pose of each model relative to its parent.
+    pub poses: Vec<Pose>,
+    /// Colour of each model (changeable through the simulation interface).
+    pub colors: Vec<Color>,
+    /// Mobile bases.
+    pub bases: Vec<Base>,
+    /// Latest readings of each ranger model, one per sensor (empty for other models).
+    pub readings: Vec<Vec<Reading>>,
+    roots: Vec<usize>,
+    movable: Vec<bool>,
+    /// The cells each movable model occupies now.
+    cells: Vec<Vec<(usize, usize)>>,
+    statics: Grid,
+    dynamics: Grid,
+}
+
+fn id(m: usize) -> u16 {
+    // INVARIANT: worlds hold fewer than 65535 models (checked in `new`).
+    (m + 1) as u16
+}
+
+impl Sim {
+    /// Builds the simulation of `world`.
+    ///
+    /// # Errors
+    ///
+    /// A world with more models than a grid cell can name.
+    pub fn new(world: World) -> Result<Sim, String> {
+        let n = world.models.len();
+        if n >= usize::from(u16::MAX) {
+            return Err(format!(
+                "the world has {n} models; at most {} are supported",
+                u16::MAX - 1
+            ));
+        }
+        let poses: Vec<Pose> = world.models.iter().map(|m| m.pose).collect();
+        let roots: Vec<usize> = (0..n).map(|m| world.root(m)).collect();
+        let mut movable = vec![false; n];
+        for m in 0..n {
+            if world.models[m].kind == Kind::Position {
+                for k in world.subtree(roots[m]) {
+                    movable[k] = true;
+                }
+            }
+        }
+        // The grids cover every body, with a margin for robots that wander off.
+        let (mut x0, mut y0, mut x1, mut y1) = (
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+        );
+        for m in 0..n {
+            let (g, _) = world.global(&poses, m);
+            for b in &world.models[m].blocks {
+                for &(x, y) in b {
+                    let (wx, wy) = g.apply(x, y);
+                    x0 = x0.min(wx);
+                    x1 = x1.max(wx);
+                    y0 = y0.min(wy);
+                    y1 = y1.max(wy);
+                }
+            }
+        }
+        if !x0.is_finite() {
+            (x0, y0, x1, y1) = (-1.0, -1.0, 1.0, 1.0);
+        }
+        let margin = 2.0;
+        let res = world.resolution;
+        let statics = Grid::new(x0 - margin, y0 - margin, x1 + margin, y1 + margin, res);
+        let dynamics = statics.clone();
+        let bases = (0..n)
+            .filter(|&m| world.models[m].kind == Kind::Position)
+            .map(|m| {
+                let (g, _) = world.global(&poses, m);
+                let cfg = world.models[m].position.as_ref();
+                let origin = cfg.and_then(|c| c.localization_origin).unwrap_or(g);
+                let wander = world.models[m].ctrl.iter().any(|c| c.split_whitespace().next() == Some("wander"));
+                for c in &world.models[m].ctrl {
+                    if c.split_whitespace().next() != Some("wander") {
+                        tracing::warn!("{}: controller \"{c}\" is not built into Troupe; model `{}` stays idle", world.models[m].pos, world.models[m].name);
+                    }
+                }
+                Base {
+                    model: m,
+                    cmd: None,
+                    vel: Pose::default(),
+                    stall: false,
+                    odom: origin.inverse().compose(&g),
+                    origin,
+                    enabled: true,
+                    wander,
+                    wander_turn: 1.0,
+                }
+            })
+            .collect();
+        let readings = world
+            .models
+            .iter()
+            .map(|m| {
+                m.sensors
+                    .iter()
+                    .map(|s| Reading {
+                        ranges: vec![s.range.1; s.samples],
+                        intensities: vec![0.0; s.samples],
+                    })
+                    .collect()
+            })
+            .collect();
+        let colors = world.models.iter().map(|m| m.color).collect();
+        let mut sim = Sim {
+            world,
+            time: 0.0,
+            steps: 0,
+            poses,
+            colors,
+            bases,
+            readings,
+            roots,
+            movable,
+            cells: vec![Vec::new(); n],
+            statics,
+            dynamics,
+        };
+        for m in 0..n {
+            sim.place(m);
+        }
+        sim.sense();
+        Ok(sim)
+    }
+
+    fn in_grid(&self, m: usize) -> bool {
+        let d = &self.world.models[m];
+        !d.blocks.is_empty() && (d.obstacle_return || d.ranger_return >= 0.0)
+    }
+
+    /// The cells model `m`'s body covers at its current pose.
+    fn body_cells(&self, m: usize, at: Option<Pose>) -> Vec<(usize, usize)> {
+        let g = match at {
+            Some(p) => p,
+            None => self.world.global(&self.poses, m).0,
+        };
+        let mut out = Vec::new();
+        for b in &self.world.models[m].blocks {
+            let pts: Vec<(f64, f64)> = b.iter().map(|&(x, y)| g.apply(x, y)).collect();
+            self.statics.polygon_cells(&pts, |i, j| out.push((i, j)));
+        }
+        out
+    }
+
+    /// (Re)writes model `m`'s body into its grid.
+    fn place(&mut self, m: usize) {
+        if !self.in_grid(m) {
+            return;
+        }
+        let cells = self.body_cells(m, None);
+        let grid = if self.movable[m] {
+            &mut self.dynamics
+        } else {
+            &mut self.statics
+        };
+        for &(i, j) in &self.cells[m] {
+            if grid.get(i, j) == id(m) {
+                grid.set(i, j, EMPTY);
+            }
+        }
+        for &(i, j) in &cells {
+            grid.set(i, j, id(m));
+        }
+        self.cells[m] = cells;
+    }
+
+    /// True when the tree of `root`, moved so that `root` is at `at`, overlaps an obstacle.
+    fn collides(&self, root: usize, at: Pose) -> bool {
+        let old = self.world.global(&self.poses, root).0;
+        let shift = at.compose(&old.inverse());
+        for m in self.world.subtree(root) {
+            if self.world.models[m].blocks.is_empty() {
+                continue;
+            }
+            let g = shift.compose(&self.world.global(&self.poses, m).0);
+            for (i, j) in self.body_cells(m, Some(g)) {
+                for grid in [&self.statics, &self.dynamics] {
+                    let c = grid.get(i, j);
+                    if c != EMPTY {
+                        let other = usize::from(c) - 1;
+                        if self.roots[other] != root && self.world.models[other].obstacle_return {
+                            return true;
+                        }
+                    }
+                }
+            }
+        }
+        false
+    }
+
+    /// Moves model `m` (and what it carries) to `pose`, relative to its parent.
+    pub fn set_pose(&mut self, m: usize, pose: Pose) {
+        self.poses[m] = pose;
+        for k in self.world.subtree(m) {
+            self.place(k);
+        }
+        if let Some(b) = self.bases.iter_mut().find(|b| b.model == m) {
+            let g = self.world.global(&self.poses, m).0;
+            if self.world.models[m]
+                .position
+                .as_ref()
+                .is_some_and(|c| c.localization == Localization::Gps)
+            {
+                b.odom = b.origin.inverse().compose(&g);
+            }
+        }
+    }
+
+    /// Advances the world by one `interval_sim`.
+    pub fn step(&mut self) {
+        let dt = self.world.interval_sim;
+        for bi in 0..self.bases.len() {
+            self.drive(bi, dt);
+        }
+        self.sense();
+        self.time += dt;
+        self.steps += 1;
+    }
+
+    fn wander(&mut self, bi: usize) -> Pose {
+        let m = self.bases[bi].model;
+        // The robot's first ranger with many samples, else its first ranger.
+        let rangers: Vec<usize> = self
+            .world
+            .subtree(m)
+            .into_iter()
+            .filter(|&k| !self.readings[k].is_empty())
+            .collect();
+        let laser = rangers
+            .iter()
+            .copied()
+            .find(|&k| self.world.models[k].sensors[0].samples > 1)
+            .or(rangers.first().copied());
+        let Some(r) = laser else {
+            return Pose::new(0.4, 0.0, 0.0);
+        };
+        let sensors = &self.world.models[r].sensors;
+        let (mut left, mut right) = (f64::INFINITY, f64::INFINITY);
+        for (si, s) in sensors.iter().enumerate() {
+            for (k, &range) in self.readings[r][si].ranges.iter().enumerate() {
+                let a = s.pose.yaw
+                    + if s.samples > 1 {
+                        -s.fov / 2.0 + s.fov * k as f64 / (s.samples - 1) as f64
+                    } else {
+                        0.0
+                    };
+                if a.abs() > std::f64::consts::FRAC_PI_2 {
+                    continue;
+                }
+                if a >= 0.0 {
+                    left = left.min(range);
+                } else {
+                    right = right.min(range);
+                }
+            }
+        }
+        let b = &mut self.bases[bi];
+        if left.min(right) < 0.6 {
+            if (left - right).abs() > 0.1 {
+                b.wander_turn = if left < right { -1.0 } else { 1.0 };
+            }
+            Pose::new(0.0, 0.0, b.wander_turn)
+        } else {
+            Pose::new(0.4, 0.0, 0.0)
+        }
+    }
+
+    fn drive(&mut self, bi: usize, dt: f64) {
+        let m = self.bases[bi].model;
+        let Some(cfg) = self.world.models[m].position.clone() else {
+            return;
+        };
+        let want = match self.bases[bi].cmd {
+            _ if !self.bases[bi].enabled => Pose::default(),
+            Some(Command::Vel(v)) => v,
+            Some(Command::Car(speed, steer)) => {
+                Pose::new(speed, 0.0, speed * steer.tan() / cfg.wheelbase.max(1e-6))
+            }
+            Some(Command::GoTo(goal)) => {
+                let o = self.bases[bi].odom;
+                let (dx, dy) = (goal.x - o.x, goal.y - o.y);
+                let dist = dx.hypot(dy);
+                if dist > 0.05 {
+                    let err = normalize(dy.atan2(dx) - o.yaw);
+                    let (s, c) = o.yaw.sin_cos();
+                    match cfg.drive {
+                        Drive::Omni => Pose::new(
+                            (c * dx + s * dy).clamp(-1.0, 1.0),
+                            (-s * dx + c * dy).clamp(-1.0, 1.0),
+                            (2.0 * normalize(goal.yaw - o.yaw)).clamp(-1.0, 1.0),
+                        ),
+                        _ => Pose::new(
+                            dist.min(1.0) * err.cos().max(0.0),
+                            0.0,
+                            (2.0 * err).clamp(-1.5, 1.5),
+                        ),
+                    }
+                } else {
+                    let err = normalize(goal.yaw - o.yaw);
+                    Pose::new(
+                        0.0,
+                        0.0,
+                        if err.abs() > 0.02 {
+                            (2.0 * err).clamp(-1.0, 1.0)
+                        } else {
+                            0.0
+                        },
+                    )
+                }
+            }
+            None if self.bases[bi].wander => self.wander(bi),
+            None => Pose::default(),
+        };
+        let vb = &cfg.velocity_bounds;
+        let ab = &cfg.acceleration_bounds;
+        let cur = self.bases[bi].vel;
+        let limit = |w: f64, c: f64, lo: f64, hi: f64, alo: f64, ahi: f64| {
+            (w.clamp(lo, hi)).clamp(c + alo * dt, c + ahi * dt)
+        };
+        let mut v = Pose::new(
+            limit(want.x, cur.x, vb[0], vb[1], ab[0], ab[1]),
+            limit(want.y, cur.y, vb[2], vb[3], ab[2], ab[3]),
+            limit(want.yaw, cur.yaw, vb[6], vb[7], ab[6], ab[7]),
+        );
+        if cfg.drive != Drive::Omni {
+            v.y = 0.0;
+        }
+        let here = self.poses[m];
+        let next = here.compose(&Pose::new(v.x * dt, v.y * dt, v.yaw * dt));
+        let root_parent = self.world.models[m].parent.is_none();
+        let g_next = if root_parent {
+            next
+        } else {
+            self.world
+                .global(&self.poses, m)
+                .0
+                .compose(&Pose::new(v.x * dt, v.y * dt, v.yaw * dt))
+        };
+        let moving = v.x != 0.0 || v.y != 0.0 || v.yaw != 0.0;
+        if moving && self.collides(self.roots[m], g_next) {
+            let b = &mut self.bases[bi];
+            b.stall = true;
+            b.vel = Pose::default();
+            return;
+        }
+        self.bases[bi].stall = false;
+        self.bases[bi].vel = v;
+        if moving {
+            self.set_pose(m, next);
+        }
+        if cfg.localization == Localization::Odom {
+            let e = cfg.odom_error;
+            let b = &mut self.bases[bi];
+            b.odom = b.odom.compose(&Pose::new(
+                v.x * dt * (1.0 + e[0]),
+                v.y * dt * (1.0 + e[1]),
+                v.yaw * dt * (1.0 + e[2]),
+            ));
+        }
+    }
+
+    /// Updates every ranger's readings.
+    pub fn sense(&mut self) {
+        for r in 0..self.world.models.len() {
+            if self.world.models[r].sensors.is_empty() {
+                continue;
+            }
+            let (g, _) = self.world.global(&self.poses, r);
+            let base = g.compose(&self.world.models[r].origin);
+            let root = self.roots[r];
+            for si in 0..self.world.models[r].sensors.len() {
+                let s = self.world.models[r].sensors[si].clone();
+                let o = base.compose(&s.pose);
+                for k in 0..s.samples {
+                    let a = if s.samples > 1 {
+                        o.yaw - s.fov / 2.0 + s.fov * k as f64 / (s.samples - 1) as f64
+                    } else {
+                        o.yaw
+                    };
+                    let accept = |c: u16| {
+                        let other = usize::from(c) - 1;
+                        self.roots[other] != root && self.world.models[other].ranger_return >= 0.0
+                    };
+                    let h1 = self.statics.cast(o.x, o.y, a, s.range.1, accept);
+                    let h2 = self.dynamics.cast(o.x, o.y, a, s.range.1, accept);
+                    let hit = match (h1, h2) {
+                        (Some(p), Some(q)) => Some(if p.range <= q.range { p } else { q }),
+                        (p, q) => p.or(q),
+                    };
+                    let (range, intensity) = match hit {
+                        Some(h) => (
+                            h.range.max(s.range.0),
+                            self.world.models[usize::from(h.id) - 1].ranger_return,
+                        ),
+                        None => (s.range.1, 0.0),
+                    };
+                    let rd = &mut self.readings[r][si];
+                    rd.ranges[k] = range;
+                    rd.intensities[k] = intensity;
+                }
+            }
+        }
+    }
+
+    /// The global pose of model `m`.
+    pub fn global(&self, m: usize) -> Pose {
+        self.world.global(&self.poses, m).0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::FRAC_PI_2;
+
+    fn sim(name: &str, text: &str) -> Sim {
+        let dir = std::env::temp_dir().join(format!("troupe-sim-{}-{name}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("t.world");
+        std::fs::write(&p, text).unwrap();
+        let w = crate::world::load(&p).unwrap();
+        let _ = std::fs::remove_dir_all(&dir);
+        Sim::new(w).unwrap()
+    }
+
+    const ROOM: &str = "resolution 0.02\ninterval_sim 100\n\
+        model ( name \"wall\" pose [5 0 0 0] size [0.2 10 1] )\n";
+
+    fn steps(s: &mut Sim, n: usize) {
+        for _ in 0..n {
+            s.step();
+        }
+    }
+
+    #[test]
+    fn diff_drive_moves_as_commanded() {
+        let mut s = sim("diff", &format!("{ROOM}position ( name \"r\" pose [0 0 0 0] size [0.4 0.4 0.2] acceleration_bounds [-9 9 -9 9 -9 9 -900 900] )\n"));
+        s.bases[0].cmd = Some(Command::Vel(Pose::new(0.5, 0.3, 0.0)));
+        steps(&mut s, 10);
+        let p = s.global(s.bases[0].model);
+        // 1 s at 0.5 m/s; a diff drive ignores the sideways speed.
+        assert!((p.x - 0.5).abs() < 1e-9 && p.y.abs() < 1e-9, "{p:?}");
+        s.bases[0].cmd = Some(Command::Vel(Pose::new(0.0, 0.0, FRAC_PI_2)));
+        steps(&mut s, 10);
+        assert!((s.global(0 + s.bases[0].model).yaw - FRAC_PI_2).abs() < 1e-9);
+        assert!(
+            (s.bases[0].odom.yaw - FRAC_PI_2).abs() < 1e-9,
+            "gps odometry follows"
+        );
+    }
+
+    #[test]
+    fn omni_drive_moves_sideways_and_car_turns() {
+        let mut s = sim("omni", &format!("{ROOM}position ( name \"r\" drive \"omni\" size [0.4 0.4 0.2] acceleration_bounds [-9 9 -9 9 -9 9 -900 900] )\n"));
+        s.bases[0].cmd = Some(Command::Vel(Pose::new(0.0, 0.5, 0.0)));
+        steps(&mut s, 10);
+        let p = s.global(s.bases[0].model);
+        assert!(p.x.abs() < 1e-9 && (p.y - 0.5).abs() < 1e-9, "{p:?}");
+        let mut c = sim("car", &format!("{ROOM}position ( name \"r\" drive \"car\" wheelbase 1 size [0.4 0.4 0.2] acceleration_bounds [-9 9 -9 9 -9 9 -900 900] velocity_bounds [-1 1 -1 1 -1 1 -900 900] )\n"));
+        c.bases[0].cmd = Some(Command::Car(0.5, std::f64::consts::FRAC_PI_4));
+        steps(&mut c, 10);
+        // yaw rate = v·tan(steer)/wheelbase = 0.5 rad/s.
+        assert!((c.global(c.bases[0].model).yaw - 0.5).abs() < 1e-9);
+    }
+
+    #[test]
+    fn velocity_and_acceleration_bounds_hold() {
+        let mut s = sim("bounds", &format!("{ROOM}position ( name \"r\" size [0.4 0.4 0.2] velocity_bounds [-0.5 0.5 0 0 0 0 -90 90] acceleration_bounds [-1 1 0 0 0 0 -90 90] )\n"));
+        s.bases[0].cmd = Some(Command::Vel(Pose::new(2.0, 0.0, 0.0)));
+        s.step();
+        assert!(
+            (s.bases[0].vel.x - 0.1).abs() < 1e-9,
+            "accel 1 m/s² over 0.1 s"
+        );
+        steps(&mut s, 20);
+        assert!((s.bases[0].vel.x - 0.5).abs() < 1e-9, "capped at 0.5 m/s");
+    }
+
+    #[test]
+    fn a_robot_stops_and_stalls_at_a_wall() {
+        let mut s = sim("stall", &format!("{ROOM}position ( name \"r\" pose [3 0 0 0] size [0.4 0.4 0.2] acceleration_bounds [-9 9 -9 9 -9 9 -900 900] )\n"));
+        s.bases[0].cmd = Some(Command::Vel(Pose::new(1.0, 0.0, 0.0)));
+        steps(&mut s, 40);
+        let p = s.global(s.bases[0].model);
+        assert!(s.bases[0].stall, "stalled");
+        // The wall's face is at x = 4.9; the robot's front at x + 0.2.
+        assert!(p.x + 0.2 < 4.92 && p.x > 4.5, "{p:?}");
+        assert_eq!(s.bases[0].vel, Pose::default());
+    }
+
+    #[test]
+    fn rangers_see_hand_computed_walls() {
+        let mut s = sim(
+            "ranger",
+            &format!("{ROOM}position ( name \"r\" pose [1 0 0 0] size [0.4 0.4 0.2]\n  ranger ( sensor ( range [0 8] fov 180 samples 181 ) sensor ( pose [0 0 0 90] range [0 5] ) ) )\n"),
+        );
+        s.step();
+        let r = s.world.names["r.ranger:0"];
+        let laser = &s.readings[r][0];
+        // Straight ahead: the wall face at x = 4.9, from x = 1.
+        assert!(
+            (laser.ranges[90] - 3.9).abs() < 0.03,
+            "{}",
+            laser.ranges[90]
+        );
+        assert_eq!(laser.intensities[90], 1.0);
+        // 45° left: 3.9 / cos 45° ≈ 5.515 (the wall reaches y = ±5).
+        assert!(
+            (laser.ranges[135] - 3.9 * 2f64.sqrt()).abs() < 0.05,
+            "{}",
+            laser.ranges[135]
+        );
+        // Straight left: nothing within 8 m.
+        assert_eq!(laser.ranges[180], 8.0);
+        assert_eq!(laser.intensities[180], 0.0);
+        // The second sensor looks left: max range 5.
+        assert_eq!(s.readings[r][1].ranges[0], 5.0);
+    }
+
+    #[test]
+    fn robots_see_each_other_but_not_themselves() {
+        let mut s = sim(
+            "robots",
+            "position ( name \"a\" pose [0 0 0 0] size [0.4 0.4 0.2] ranger ( sensor ( range [0 8] ) ) )\n\
+             position ( name \"b\" pose [2 0 0 0] size [0.4 0.4 0.2] )\n",
+        );
+        s.step();
+        let r = s.world.names["a.ranger:0"];
+        assert!(
+            (s.readings[r][0].ranges[0] - 1.8).abs() < 0.03,
+            "{}",
+            s.readings[r][0].ranges[0]
+        );
+        // Move b away through the simulation interface: a sees nothing.
+        let b = s.world.names["b"];
+        s.set_pose(b, Pose::new(2.0, 3.0, 0.0));
+        s.step();
+        assert_eq!(s.readings[r][0].ranges[0], 8.0);
+    }
+
+    #[test]
+    fn goto_reaches_the_goal() {
+        let mut s = sim("goto", "position ( name \"r\" size [0.4 0.4 0.2] )\n");
+        s.bases[0].cmd = Some(Command::GoTo(Pose::new(1.0, 1.0, 0.0)));
+        steps(&mut s, 200);
+        let o = s.bases[0].odom;
+        assert!(
+            (o.x - 1.0).abs() < 0.06 && (o.y - 1.0).abs() < 0.06 && o.yaw.abs() < 0.05,
+            "{o:?}"
+        );
+    }
+}
