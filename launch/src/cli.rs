@@ -56,6 +56,7 @@ another. Ctrl-C stops the nodes in reverse start order.")]
   troupe node dummy --provides ranger:0 -o rate=10
   troupe node rangertolaser --requires ranger:0 --provides laser:0
   troupe node rangertolaser --section '{\"name\":\"rangertolaser\",\"requires\":[\"ranger:0\"],\"provides\":[\"laser:0\"]}'
+  troupe node stage --world worlds/simple.world      # headless; exits at the world's quit_time
 
 The section is what a `driver ( … )` block of a Player .cfg says; flags add to it.
 The node waits for every required device to be live, then announces its own.")]
@@ -124,6 +125,10 @@ pub struct NodeArgs {
     /// Robot field (port) for addresses that give none, as `player -p PORT`.
     #[arg(short = 'p', long = "robot", value_name = "PORT")]
     pub robot: Option<u32>,
+
+    /// The world file of the `stage` driver (sets its `worldfile` option).
+    #[arg(long, value_name = "FILE")]
+    pub world: Option<std::path::PathBuf>,
 
     /// Follow the simulator's clock (sim/clock) instead of wall time.
     #[arg(long)]
@@ -226,6 +231,11 @@ pub fn node(a: NodeArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     section.requires.extend(a.requires);
     if let Some(r) = a.robot {
         section.robot = r;
+    }
+    if let Some(w) = &a.world {
+        section
+            .options
+            .insert("worldfile".into(), w.display().to_string().into());
     }
     for o in &a.options {
         let (k, v) = o

@@ -231,6 +231,60 @@ fn to_json(v: &Value, unit: Option<Unit>, units: &cfg::Units) -> Result<serde_js
     })
 }
 
+/// Folds one `stage` section into the single simulator node, as Player's
+/// plugin shares one world between all its sections: the first `worldfile`
+/// wins (made relative to the cfg's directory), each `model` becomes an
+/// entry of the node's `models` option with the section's devices.
+fn merge_stage(
+    stage: &mut Option<NodeSpec>,
+    options: &mut serde_json::Map<String, serde_json::Value>,
+    provides: Vec<DeviceRef>,
+    source: &Path,
+    at: String,
+    option_pos: BTreeMap<String, String>,
+) {
+    let node = stage.get_or_insert_with(|| NodeSpec {
+        name: "stage".into(),
+        driver: "stage".into(),
+        host: None,
+        start_order: 0,
+        restart: Restart::default(),
+        provides: Vec::new(),
+        requires: Vec::new(),
+        options: serde_json::Map::new(),
+        source: Some(at),
+        option_pos: BTreeMap::new(),
+    });
+    if let Some(serde_json::Value::String(w)) = options.remove("worldfile") {
+        if !node.options.contains_key("worldfile") {
+            let dir = source.parent().unwrap_or(Path::new("."));
+            node.options
+                .insert("worldfile".into(), dir.join(w).display().to_string().into());
+        }
+    }
+    if let Some(model) = options.remove("model") {
+        let devices: Vec<serde_json::Value> = provides
+            .iter()
+            .filter_map(|r| keys::parse_data(&r.device).ok())
+            .map(|d| d.to_string().into())
+            .collect();
+        let entry = serde_json::json!({ "model": model, "provides": devices });
+        match node
+            .options
+            .entry("models")
+            .or_insert_with(|| serde_json::Value::Array(Vec::new()))
+        {
+            serde_json::Value::Array(a) => a.push(entry),
+            other => *other = serde_json::Value::Array(vec![entry]),
+        }
+    }
+    for (k, v) in std::mem::take(options) {
+        node.options.entry(k).or_insert(v);
+    }
+    node.option_pos.extend(option_pos);
+    node.provides.extend(provides);
+}
+
 /// Translates a parsed cfg into a plan; `robot` is the default robot field
 /// (`-p PORT`). Problems are collected in the report, not returned early.
 pub fn from_cfg(file: &CfgFile, source: &Path, robot: u32, report: &mut Report) -> Plan {
@@ -254,6 +308,7 @@ pub fn from_cfg(file: &CfgFile, source: &Path, robot: u32, report: &mut Report) 
     }
     let mut count: HashMap<String, u32> = HashMap::new();
     let mut unknown: BTreeMap<String, Vec<cfg::Pos>> = BTreeMap::new();
+    let mut stage: Option<NodeSpec> = None;
     for s in &file.sections {
         if s.kind != "driver" {
             report.errors.push(format!(
@@ -354,6 +409,17 @@ pub fn from_cfg(file: &CfgFile, source: &Path, robot: u32, report: &mut Report) 
         if bad {
             continue;
         }
+        if driver == "stage" {
+            merge_stage(
+                &mut stage,
+                &mut options,
+                provides,
+                source,
+                s.pos.to_string(),
+                option_pos,
+            );
+            continue;
+        }
         let n = count.entry(driver.clone()).or_insert(0);
         *n += 1;
         plan.nodes.push(NodeSpec {
@@ -372,6 +438,9 @@ pub fn from_cfg(file: &CfgFile, source: &Path, robot: u32, report: &mut Report) 
             source: Some(s.pos.to_string()),
             option_pos,
         });
+    }
+    if let Some(st) = stage {
+        plan.nodes.insert(0, st);
     }
     for (driver, places) in unknown {
         let also = match places.len() {

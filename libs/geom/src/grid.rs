@@ -110,8 +110,9 @@ impl Grid {
     }
 
     /// Calls `f(i, j)` for every cell whose centre lies inside the polygon
-    /// (even-odd rule), plus the cells of its vertices so that a polygon
-    /// smaller than a cell still marks one.
+    /// (even-odd rule) and every cell its outline crosses, so that walls and
+    /// polygons thinner than a cell still mark cells. A cell may be reported
+    /// more than once.
     pub fn polygon_cells(&self, pts: &[(f64, f64)], mut f: impl FnMut(usize, usize)) {
         if pts.len() < 3 {
             for &(x, y) in pts {
@@ -153,9 +154,39 @@ impl Grid {
                 }
             }
         }
-        for &(x, y) in pts {
-            if let Some((i, j)) = self.cell_of(x, y) {
-                f(i, j);
+        // The outline too, so walls thinner than a cell still block rays.
+        for k in 0..pts.len() {
+            self.segment_cells(pts[k], pts[(k + 1) % pts.len()], &mut f);
+        }
+    }
+
+    /// Calls `f(i, j)` for every cell the segment from `a` to `b` passes through.
+    pub fn segment_cells(&self, a: (f64, f64), b: (f64, f64), f: &mut impl FnMut(usize, usize)) {
+        let (ax, ay) = ((a.0 - self.x0) / self.res, (a.1 - self.y0) / self.res);
+        let (bx, by) = ((b.0 - self.x0) / self.res, (b.1 - self.y0) / self.res);
+        let (dx, dy) = (bx - ax, by - ay);
+        let (mut i, mut j) = (ax.floor() as i64, ay.floor() as i64);
+        let (ei, ej) = (bx.floor() as i64, by.floor() as i64);
+        let (si, sj) = (if dx > 0.0 { 1 } else { -1 }, if dy > 0.0 { 1 } else { -1 });
+        let next = |c: i64, s: i64, p: f64, d: f64| {
+            if d.abs() < 1e-12 {
+                f64::INFINITY
+            } else {
+                ((if s > 0 { c + 1 } else { c }) as f64 - p) / d
+            }
+        };
+        let steps = (ei - i).abs() + (ej - j).abs();
+        for _ in 0..=steps {
+            if i >= 0 && j >= 0 && (i as usize) < self.w && (j as usize) < self.h {
+                f(i as usize, j as usize);
+            }
+            if i == ei && j == ej {
+                break;
+            }
+            if next(i, si, ax, dx) < next(j, sj, ay, dy) {
+                i += si;
+            } else {
+                j += sj;
             }
         }
     }
@@ -443,5 +474,22 @@ mod tests {
                 (f, e) => panic!("ray {ox} {oy} {a}: {f:?} vs {e:?}"),
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod thin {
+    use super::*;
+
+    #[test]
+    fn walls_thinner_than_a_cell_still_block_rays() {
+        let mut g = Grid::new(0.0, 0.0, 4.0, 4.0, 0.02);
+        g.fill_polygon(&[(2.0, 0.0), (2.005, 0.0), (2.005, 4.0), (2.0, 4.0)], 5);
+        let hit = g.cast(0.5, 1.0, 0.0, 3.0, |_| true).expect("thin wall hit");
+        assert!((hit.range - 1.5).abs() < 0.021, "{hit:?}");
+        // A diagonal segment marks a connected run of cells.
+        let mut n = 0;
+        g.segment_cells((0.01, 0.01), (0.99, 0.5), &mut |_, _| n += 1);
+        assert!(n >= 49 + 25 - 1, "{n}");
     }
 }

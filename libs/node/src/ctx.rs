@@ -15,6 +15,7 @@ pub const REQUEST_TIMEOUT: Duration = Duration::from_secs(5);
 pub(crate) trait Bus: Send {
     fn publish(&mut self, dev: &Device, payload: Vec<u8>) -> Result<()>;
     fn subscribe(&mut self, dev: &Device) -> Result<()>;
+    fn publish_clock(&mut self, payload: Vec<u8>) -> Result<()>;
     fn command(&mut self, dev: &Device, name: &str, payload: Vec<u8>) -> Result<()>;
     fn request(
         &mut self,
@@ -35,6 +36,7 @@ pub struct Ctx {
     provided: Vec<Device>,
     next_id: u64,
     pub(crate) tick: Option<Duration>,
+    pub(crate) stop: bool,
 }
 
 impl Ctx {
@@ -51,6 +53,7 @@ impl Ctx {
             provided,
             next_id: 0,
             tick: None,
+            stop: false,
         }
     }
 
@@ -118,6 +121,31 @@ impl Ctx {
     /// Delivers [`crate::Event::Tick`] every `period` of the node's clock (`None` stops it).
     pub fn set_tick(&mut self, period: Option<Duration>) {
         self.tick = period.filter(|p| !p.is_zero());
+    }
+
+    /// Sets the node's time (simulation time) and publishes it on `sim/clock`.
+    /// Only for a [`crate::Driver::CLOCK_SOURCE`] driver; others get an error.
+    ///
+    /// # Errors
+    ///
+    /// [`NodeError::Config`] when the driver is not a clock source;
+    /// [`NodeError::Zenoh`] if the clock sample could not be sent.
+    pub fn set_time(&mut self, time: f64) -> Result<()> {
+        if !self.clock.is_manual() {
+            return Err(NodeError::config(
+                self.driver,
+                "only a clock-source driver sets the time",
+            ));
+        }
+        self.clock.set(time);
+        let msg = troupe_msgs::sim::Clock { time };
+        self.bus.publish_clock(codec::encode(&msg, time))
+    }
+
+    /// Asks the runtime to stop this node once the current hook returns
+    /// (`shutdown` runs, the process exits cleanly).
+    pub fn request_stop(&mut self) {
+        self.stop = true;
     }
 
     /// The devices this driver provides.

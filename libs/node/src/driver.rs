@@ -32,6 +32,11 @@ pub trait Driver: Sized + Send + 'static {
     /// and radians.
     const UNITS: &'static [(&'static str, Unit)] = &[];
 
+    /// True for the driver that is the simulation clock (Stage): its node's
+    /// clock is set by the driver through [`Ctx::set_time`] and published on
+    /// `sim/clock`, instead of following wall time.
+    const CLOCK_SOURCE: bool = false;
+
     /// Builds the driver from its section and options.
     ///
     /// Called once, before any network activity. Fail here on anything wrong

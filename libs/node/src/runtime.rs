@@ -176,7 +176,9 @@ pub fn spawn<D: Driver>(
     stop.attach(inbox.clone());
 
     let ticks = Arc::new(SimTicks::default());
-    let (clock, clock_sub) = if cfg.sim_time {
+    let (clock, clock_sub) = if D::CLOCK_SOURCE {
+        (Clock::manual(0.0), None)
+    } else if cfg.sim_time {
         let clock = Clock::manual(0.0);
         let sub = sim_clock(&session, clock.clone(), inbox.clone(), ticks.clone())?;
         (clock, Some(sub))
@@ -196,6 +198,7 @@ pub fn spawn<D: Driver>(
         latest: Arc::new(Mutex::new(HashMap::new())),
         subscribers: Vec::new(),
         queryables: Vec::new(),
+        clock_pub: None,
     };
     for dev in &provided {
         bus.provide(dev, &clock, D::NAME)?;
@@ -278,7 +281,9 @@ fn run_loop<D: Driver>(
     let mut stats = Stats::default();
     let mut next_tick: Option<Instant> = None;
     let result = loop {
-        let sim = ctx.clock().is_manual();
+        // Ticks follow sim/clock only for nodes that follow a simulator,
+        // not for the simulator itself (whose clock is also set by hand).
+        let sim = ctx.clock().is_manual() && !D::CLOCK_SOURCE;
         ticks.set_period(if sim { ctx.tick } else { None });
         next_tick = match (ctx.tick, next_tick) {
             (Some(p), None) if !sim => Some(Instant::now() + p),
@@ -302,6 +307,10 @@ fn run_loop<D: Driver>(
         };
         if let Err(e) = dispatch(&mut driver, ctx, event, &mut stats) {
             break Err(e);
+        }
+        if ctx.stop {
+            tracing::info!(driver = D::NAME, "the driver asked to stop");
+            break Ok(());
         }
     };
     drop(tokens);
@@ -434,6 +443,7 @@ struct ZenohBus {
     latest: Arc<Mutex<HashMap<Device, Vec<ZBytes>>>>,
     subscribers: Vec<Subscriber<()>>,
     queryables: Vec<Queryable<()>>,
+    clock_pub: Option<Publisher<'static>>,
 }
 
 struct ZenohSink(Query);
@@ -549,6 +559,25 @@ impl Bus for ZenohBus {
             .put(bytes)
             .wait()
             .map_err(z(|| format!("publishing on {dev}")))
+    }
+
+    fn publish_clock(&mut self, payload: Vec<u8>) -> Result<()> {
+        if self.clock_pub.is_none() {
+            let p = self
+                .session
+                .declare_publisher(keys::SIM_CLOCK)
+                .express(true)
+                .wait()
+                .map_err(z(|| "declaring the sim/clock publisher".into()))?;
+            self.clock_pub = Some(p);
+        }
+        match &self.clock_pub {
+            Some(p) => p
+                .put(payload)
+                .wait()
+                .map_err(z(|| "publishing sim/clock".into())),
+            None => Ok(()),
+        }
     }
 
     fn subscribe(&mut self, dev: &Device) -> Result<()> {

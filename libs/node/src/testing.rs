@@ -41,6 +41,7 @@ struct Recorder {
     commands: Vec<(Device, String, Vec<u8>)>,
     requests: Vec<SentRequest>,
     answers: HashMap<u64, Answer>,
+    clock: Vec<Vec<u8>>,
 }
 
 /// A request the driver sent.
@@ -82,6 +83,10 @@ impl Bus for Rec {
     }
     fn subscribe(&mut self, dev: &Device) -> Result<()> {
         self.lock().subscribed.push(*dev);
+        Ok(())
+    }
+    fn publish_clock(&mut self, payload: Vec<u8>) -> Result<()> {
+        self.lock().clock.push(payload);
         Ok(())
     }
     fn command(&mut self, dev: &Device, name: &str, payload: Vec<u8>) -> Result<()> {
@@ -314,6 +319,30 @@ impl<D: Driver> Harness<D> {
             .find(|r| r.id == id)
             .ok_or_else(|| NodeError::Driver(format!("no request {id:?} was sent").into()))?;
         Ok((r.device, keys::req(&r.device, &r.name)))
+    }
+
+    /// The `sim/clock` times a clock-source driver published.
+    pub fn clock_published(&self) -> Vec<f64> {
+        self.rec
+            .lock()
+            .clock
+            .iter()
+            .filter_map(|b| {
+                codec::decode::<troupe_msgs::sim::Clock>(b)
+                    .ok()
+                    .map(|s| s.msg.time)
+            })
+            .collect()
+    }
+
+    /// The driver's current time.
+    pub fn now(&self) -> f64 {
+        self.clock.now()
+    }
+
+    /// True once the driver asked to stop.
+    pub fn stop_requested(&self) -> bool {
+        self.ctx.stop
     }
 
     /// Malformed inputs the runtime dropped.

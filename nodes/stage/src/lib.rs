@@ -6,6 +6,9 @@
 #![warn(missing_docs)]
 
 pub mod colors;
+mod node;
 pub mod sim;
 pub mod world;
 pub mod worldfile;
+
+pub use node::{ModelMap, Options, Stage};

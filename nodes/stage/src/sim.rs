@@ -100,9 +100,9 @@ impl Sim {
         let poses: Vec<Pose> = world.models.iter().map(|m| m.pose).collect();
         let roots: Vec<usize> = (0..n).map(|m| world.root(m)).collect();
         let mut movable = vec![false; n];
-        for m in 0..n {
+        for (m, root) in roots.iter().enumerate() {
             if world.models[m].kind == Kind::Position {
-                for k in world.subtree(roots[m]) {
+                for k in world.subtree(*root) {
                     movable[k] = true;
                 }
             }
@@ -512,7 +512,7 @@ mod tests {
         assert!((p.x - 0.5).abs() < 1e-9 && p.y.abs() < 1e-9, "{p:?}");
         s.bases[0].cmd = Some(Command::Vel(Pose::new(0.0, 0.0, FRAC_PI_2)));
         steps(&mut s, 10);
-        assert!((s.global(0 + s.bases[0].model).yaw - FRAC_PI_2).abs() < 1e-9);
+        assert!((s.global(s.bases[0].model).yaw - FRAC_PI_2).abs() < 1e-9);
         assert!(
             (s.bases[0].odom.yaw - FRAC_PI_2).abs() < 1e-9,
             "gps odometry follows"
@@ -618,5 +618,39 @@ mod tests {
             (o.x - 1.0).abs() < 0.06 && (o.y - 1.0).abs() < 0.06 && o.yaw.abs() < 0.05,
             "{o:?}"
         );
+    }
+}
+/// Stage's own simple.world, from ../shared/compat.
+#[cfg(test)]
+mod compat {
+    use super::*;
+
+    #[test]
+    fn ctrl_wander_roams_simple_world_without_leaving_the_cave() {
+        let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../../shared/compat/stage/simple.world");
+        if !p.exists() {
+            eprintln!("skipping: ../shared/compat is absent");
+            return;
+        }
+        let mut s = Sim::new(crate::world::load(&p).unwrap()).unwrap();
+        assert!(
+            s.bases.iter().all(|b| b.wander),
+            "both robots have ctrl \"wander\""
+        );
+        let start = s.global(s.bases[0].model);
+        let mut travelled = 0.0;
+        let mut last = start;
+        for _ in 0..3000 {
+            s.step();
+            let p = s.global(s.bases[0].model);
+            travelled += (p.x - last.x).hypot(p.y - last.y);
+            last = p;
+            for b in &s.bases {
+                let g = s.global(b.model);
+                assert!(g.x.abs() < 8.0 && g.y.abs() < 8.0, "left the cave at {g:?}");
+            }
+        }
+        assert!(travelled > 20.0, "wandered only {travelled} m in 300 s");
     }
 }

@@ -1,0 +1,800 @@
+//! The `stage` driver: one process simulates the world and serves the
+//! devices of every model the cfg maps.
+//!
+//! ```text
+//! driver ( name "stage" provides ["simulation:0"] worldfile "simple.world" )
+//! driver ( name "stage" provides ["position2d:0" "ranger:0" "ranger:1"] model "r0" )
+//! ```
+//!
+//! `troupe plan` merges all stage sections of a cfg into one node whose
+//! `models` option lists each section's model and devices.
+//!
+//! # Device mapping
+//!
+//! As Player's Stage plugin: each device of a section takes the first not yet
+//! used model of its type in a depth-first walk from the named model, in
+//! world-file order (so r0's sonar is `ranger:0` and its laser `ranger:1` in
+//! simple.world). Beyond Player 3's plugin, `laser:N` takes the first unused
+//! one-sensor, many-sample ranger (a scanner) and `sonar:N` the first unused
+//! many-sensor ranger, so Player 2 era cfgs need no converter.
+
+use std::collections::HashSet;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use serde::Deserialize;
+use troupe_geom::Pose;
+use troupe_msgs::{
+    common, laser, position2d, ranger, simulation, sonar, DevAddr, Device, Interface, Pose3d,
+    Size3d,
+};
+use troupe_node::{Ctx, Driver, Event, NodeError, Result, Section};
+
+use crate::sim::{Command, Sim};
+use crate::world::{self, Kind};
+
+/// One cfg section's model and the devices it provides.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelMap {
+    /// The model's name in the world file.
+    pub model: String,
+    /// Its devices, in the section's order.
+    pub provides: Vec<DevAddr>,
+}
+
+/// Options of the stage driver (Player's names).
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(default)]
+pub struct Options {
+    /// The world file (required).
+    pub worldfile: Option<PathBuf>,
+    /// Player's GUI switch; Troupe's Stage is headless (read, then ignored).
+    pub usegui: Option<Switch>,
+    /// The model of a single section's devices.
+    pub model: Option<String>,
+    /// The models of merged sections.
+    pub models: Vec<ModelMap>,
+    /// Overrides the world's `speedup` (1 = real time, ≤ 0 = as fast as possible).
+    pub speedup: Option<f64>,
+    /// Overrides the world's `quit_time` (simulated seconds, 0 = never).
+    pub quit_time: Option<f64>,
+}
+
+/// A cfg on/off value: `1`, `0`, `yes`, `true`…
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(untagged)]
+pub enum Switch {
+    /// `yes`/`no`, `true`/`false`.
+    Bool(bool),
+    /// `1`/`0`.
+    Num(f64),
+}
+
+/// What a provided device is served from.
+#[derive(Debug, Clone, Copy)]
+enum Source {
+    Simulation,
+    Position { base: usize },
+    Ranger { model: usize },
+    Laser { model: usize },
+    Sonar { model: usize },
+}
+
+/// The stage driver.
+pub struct Stage {
+    sim: Sim,
+    devices: Vec<(Device, Source)>,
+    period: Duration,
+    steps_per_tick: u32,
+    quit_time: f64,
+}
+
+/// Models already serving a device of each interface. A laser or sonar may
+/// be the same sensor as a ranger device: each interface has its own set.
+type Used = HashSet<(Interface, usize)>;
+
+fn resolve(
+    sim: &Sim,
+    base: usize,
+    dev: &Device,
+    used: &mut Used,
+) -> std::result::Result<Source, String> {
+    let w = &sim.world;
+    let tree = w.subtree(base);
+    let i = dev.interface;
+    let free = |pred: &dyn Fn(usize) -> bool, used: &Used| {
+        tree.iter()
+            .copied()
+            .find(|&m| !used.contains(&(i, m)) && pred(m))
+    };
+    let is_ranger = |m: usize| w.models[m].kind == Kind::Ranger;
+    let pick = match dev.interface {
+        Interface::Simulation => return Ok(Source::Simulation),
+        Interface::Position2d => free(&|m| w.models[m].kind == Kind::Position, used),
+        Interface::Ranger => free(&is_ranger, used),
+        Interface::Laser => free(&|m| is_ranger(m) && w.models[m].sensors.len() == 1 && w.models[m].sensors[0].samples > 1, used)
+            .or_else(|| free(&is_ranger, used)),
+        Interface::Sonar => free(&|m| is_ranger(m) && w.models[m].sensors.len() > 1, used).or_else(|| free(&is_ranger, used)),
+        other => return Err(format!("{dev}: Troupe's stage does not simulate {other} devices yet (it serves position2d, ranger, laser, sonar and simulation)")),
+    };
+    let Some(m) = pick else {
+        return Err(format!(
+            "{dev}: model `{}` has no unused {} model",
+            w.models[base].name, dev.interface
+        ));
+    };
+    used.insert((i, m));
+    Ok(match dev.interface {
+        Interface::Position2d => Source::Position {
+            base: sim.bases.iter().position(|b| b.model == m).unwrap_or(0),
+        },
+        Interface::Ranger => Source::Ranger { model: m },
+        Interface::Laser => Source::Laser { model: m },
+        _ => Source::Sonar { model: m },
+    })
+}
+
+impl Driver for Stage {
+    const NAME: &'static str = "stage";
+    type Options = Options;
+    const CLOCK_SOURCE: bool = true;
+
+    fn new(section: &Section, o: Options) -> Result<Self> {
+        let cfg_err = |m: String| NodeError::config(Self::NAME, m);
+        let path = o.worldfile.clone().ok_or_else(|| {
+            cfg_err("`worldfile` is required (e.g. worldfile \"simple.world\")".into())
+        })?;
+        let w = world::load(&path).map_err(|e| cfg_err(e.to_string()))?;
+        let sim = Sim::new(w).map_err(cfg_err)?;
+        // Which model serves which device.
+        let mut maps = o.models.clone();
+        let mapped: HashSet<Device> = maps
+            .iter()
+            .flat_map(|m| m.provides.iter().map(|a| a.device(section.robot)))
+            .collect();
+        let rest: Vec<DevAddr> = section
+            .provides
+            .iter()
+            .filter(|a| !mapped.contains(&a.device(section.robot)))
+            .cloned()
+            .collect();
+        if !rest.is_empty() {
+            match &o.model {
+                Some(m) => maps.push(ModelMap {
+                    model: m.clone(),
+                    provides: rest,
+                }),
+                None => {
+                    let sims: Vec<&DevAddr> = rest
+                        .iter()
+                        .filter(|a| a.interface == Interface::Simulation)
+                        .collect();
+                    if sims.len() != rest.len() {
+                        return Err(cfg_err(
+                            "devices other than simulation need a `model` (e.g. model \"r0\")"
+                                .into(),
+                        ));
+                    }
+                    maps.push(ModelMap {
+                        model: String::new(),
+                        provides: rest,
+                    });
+                }
+            }
+        }
+        let mut used = Used::new();
+        let mut devices = Vec::new();
+        for map in &maps {
+            for a in &map.provides {
+                let dev = a.device(section.robot);
+                let src = if a.interface == Interface::Simulation {
+                    Source::Simulation
+                } else {
+                    let base = sim.world.names.get(&map.model).copied().ok_or_else(|| {
+                        let mut names: Vec<&str> = sim
+                            .world
+                            .names
+                            .keys()
+                            .filter(|n| !n.contains(':'))
+                            .map(String::as_str)
+                            .collect();
+                        names.sort_unstable();
+                        cfg_err(format!(
+                            "{}: no model named `{}` (named models: {})",
+                            path.display(),
+                            map.model,
+                            names.join(", ")
+                        ))
+                    })?;
+                    resolve(&sim, base, &dev, &mut used).map_err(cfg_err)?
+                };
+                devices.push((dev, src));
+            }
+        }
+        let speedup = o.speedup.unwrap_or(sim.world.speedup);
+        let interval = sim.world.interval_sim;
+        let (period, steps_per_tick) = if speedup > 0.0 {
+            (Duration::from_secs_f64((interval / speedup).max(1e-4)), 1)
+        } else {
+            // As fast as possible, in small batches so commands and requests interleave.
+            (Duration::from_micros(1), 10)
+        };
+        Ok(Stage {
+            quit_time: o.quit_time.unwrap_or(sim.world.quit_time),
+            sim,
+            devices,
+            period,
+            steps_per_tick,
+        })
+    }
+
+    fn setup(&mut self, ctx: &mut Ctx) -> Result<()> {
+        ctx.set_time(self.sim.time)?;
+        self.publish(ctx)?;
+        ctx.set_tick(Some(self.period));
+        Ok(())
+    }
+
+    fn on_event(&mut self, ctx: &mut Ctx, event: Event) -> Result<()> {
+        match event {
+            Event::Tick => {
+                for _ in 0..self.steps_per_tick {
+                    self.sim.step();
+                    ctx.set_time(self.sim.time)?;
+                    self.publish(ctx)?;
+                    if self.quit_time > 0.0 && self.sim.time >= self.quit_time - 1e-9 {
+                        tracing::info!(
+                            "quit_time {} s reached after {} steps",
+                            self.quit_time,
+                            self.sim.steps
+                        );
+                        ctx.request_stop();
+                        break;
+                    }
+                }
+                Ok(())
+            }
+            Event::Command(c) => {
+                let Some(&(_, src)) = self.devices.iter().find(|(d, _)| *d == c.device) else {
+                    return Ok(());
+                };
+                let Source::Position { base } = src else {
+                    return Err(c.unexpected());
+                };
+                let b = &mut self.sim.bases[base];
+                b.cmd = Some(if c.is::<position2d::CmdVel>() {
+                    let v = c.decode::<position2d::CmdVel>()?.msg;
+                    Command::Vel(v.vel.into())
+                } else if c.is::<position2d::CmdPos>() {
+                    Command::GoTo(c.decode::<position2d::CmdPos>()?.msg.pos.into())
+                } else if c.is::<position2d::CmdCar>() {
+                    let v = c.decode::<position2d::CmdCar>()?.msg;
+                    Command::Car(v.velocity, v.angle)
+                } else {
+                    return Err(c.unexpected());
+                });
+                Ok(())
+            }
+            Event::Request(r) => {
+                let Some(&(_, src)) = self.devices.iter().find(|(d, _)| *d == r.sample.device)
+                else {
+                    r.nack("no such device");
+                    return Ok(());
+                };
+                self.request(src, r)
+            }
+            Event::Data(_) | Event::Reply(_) => Ok(()),
+        }
+    }
+
+    fn shutdown(&mut self, ctx: &mut Ctx) -> Result<()> {
+        // Stop every robot, as a real base's driver would.
+        for b in &mut self.sim.bases {
+            b.cmd = Some(Command::Vel(Pose::default()));
+            b.vel = Pose::default();
+        }
+        self.publish(ctx)
+    }
+}
+
+fn pose3(p: Pose, z: f64) -> Pose3d {
+    Pose3d {
+        x: p.x,
+        y: p.y,
+        z,
+        roll: 0.0,
+        pitch: 0.0,
+        yaw: p.yaw,
+    }
+}
+
+fn size3(s: [f64; 3]) -> Size3d {
+    Size3d {
+        width: s[1],
+        length: s[0],
+        height: s[2],
+    }
+}
+
+impl Stage {
+    /// The simulation, for tests and benchmarks.
+    pub fn sim(&self) -> &Sim {
+        &self.sim
+    }
+
+    fn publish(&self, ctx: &mut Ctx) -> Result<()> {
+        for &(dev, src) in &self.devices {
+            match src {
+                Source::Simulation => {}
+                Source::Position { base } => {
+                    let b = &self.sim.bases[base];
+                    ctx.publish(
+                        &dev,
+                        &position2d::Data {
+                            pose: b.odom.into(),
+                            vel: b.vel.into(),
+                            stall: b.stall,
+                        },
+                    )?;
+                }
+                Source::Ranger { model } => {
+                    let (ranges, intensities) = self.ranger_data(model);
+                    ctx.publish(&dev, &ranger::Ranges { ranges })?;
+                    ctx.publish(&dev, &ranger::Intensities { intensities })?;
+                }
+                Source::Laser { model } => {
+                    let m = &self.sim.world.models[model];
+                    let (Some(s), Some(rd)) = (m.sensors.first(), self.sim.readings[model].first())
+                    else {
+                        continue;
+                    };
+                    let res = if s.samples > 1 {
+                        s.fov / (s.samples - 1) as f64
+                    } else {
+                        0.0
+                    };
+                    ctx.publish(
+                        &dev,
+                        &laser::Scan {
+                            min_angle: (-s.fov / 2.0) as f32,
+                            max_angle: (s.fov / 2.0) as f32,
+                            resolution: res as f32,
+                            max_range: s.range.1 as f32,
+                            ranges: rd.ranges.iter().map(|&r| r as f32).collect(),
+                            intensity: rd
+                                .intensities
+                                .iter()
+                                .map(|&i| i.clamp(0.0, 255.0).round() as u8)
+                                .collect(),
+                            id: self.sim.steps as u32,
+                        },
+                    )?;
+                }
+                Source::Sonar { model } => {
+                    let ranges = self.sim.readings[model]
+                        .iter()
+                        .map(|r| r.ranges.first().copied().unwrap_or(0.0) as f32)
+                        .collect();
+                    ctx.publish(&dev, &sonar::Ranges { ranges })?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// A ranger's data as Player's plugin sends it: every sample of a
+    /// one-sensor ranger, or the first sample of each sensor.
+    fn ranger_data(&self, model: usize) -> (Vec<f64>, Vec<f64>) {
+        let rd = &self.sim.readings[model];
+        if rd.len() == 1 {
+            (rd[0].ranges.clone(), rd[0].intensities.clone())
+        } else {
+            (
+                rd.iter()
+                    .map(|r| r.ranges.first().copied().unwrap_or(0.0))
+                    .collect(),
+                rd.iter()
+                    .map(|r| r.intensities.first().copied().unwrap_or(0.0))
+                    .collect(),
+            )
+        }
+    }
+
+    fn ranger_geom(&self, model: usize) -> ranger::Geom {
+        let m = &self.sim.world.models[model];
+        ranger::Geom {
+            pose: pose3(m.pose, m.z),
+            size: size3(m.size),
+            element_poses: m
+                .sensors
+                .iter()
+                .map(|s| pose3(m.pose.compose(&s.pose), s.z))
+                .collect(),
+            element_sizes: m.sensors.iter().map(|s| size3(s.size)).collect(),
+        }
+    }
+
+    fn ranger_config(&self, model: usize) -> Option<ranger::Config> {
+        let s = self.sim.world.models[model].sensors.first()?;
+        Some(ranger::Config {
+            min_angle: -s.fov / 2.0,
+            max_angle: s.fov / 2.0,
+            angular_res: s.fov / s.samples as f64,
+            min_range: s.range.0,
+            max_range: s.range.1,
+            range_res: self.sim.world.resolution,
+            frequency: 1.0 / self.sim.world.interval_sim,
+        })
+    }
+
+    fn request(&mut self, src: Source, r: troupe_node::Request) -> Result<()> {
+        match src {
+            Source::Position { base } => {
+                let m = self.sim.bases[base].model;
+                if r.is::<position2d::GetGeom>() {
+                    let d = &self.sim.world.models[m];
+                    r.reply(&position2d::Geom {
+                        pose: pose3(d.origin, 0.0),
+                        size: size3(d.size),
+                    });
+                } else if r.is::<position2d::MotorPower>() {
+                    self.sim.bases[base].enabled = r.decode::<position2d::MotorPower>()?.state;
+                    r.reply(&common::Ack);
+                } else if r.is::<position2d::SetOdom>() || r.is::<position2d::ResetOdom>() {
+                    let pose: Pose = if r.is::<position2d::SetOdom>() {
+                        r.decode::<position2d::SetOdom>()?.pose.into()
+                    } else {
+                        Pose::default()
+                    };
+                    let g = self.sim.global(m);
+                    let b = &mut self.sim.bases[base];
+                    b.odom = pose;
+                    b.origin = g.compose(&pose.inverse());
+                    r.reply(&common::Ack);
+                } else if r.is::<position2d::VelocityMode>() || r.is::<position2d::PositionMode>() {
+                    r.reply(&common::Ack);
+                } else {
+                    let n = r.name.clone();
+                    r.nack(format!("stage position2d does not handle `{n}`"));
+                }
+            }
+            Source::Ranger { model } => {
+                if r.is::<ranger::GetGeom>() {
+                    r.reply(&self.ranger_geom(model));
+                } else if r.is::<ranger::GetConfig>() {
+                    match self.ranger_config(model) {
+                        Some(c) => r.reply(&c),
+                        None => r.nack("this ranger has no sensors"),
+                    }
+                } else if r.is::<common::Power>() || r.is::<ranger::IntensityEnable>() {
+                    r.reply(&common::Ack);
+                } else {
+                    let n = r.name.clone();
+                    r.nack(format!("stage ranger does not handle `{n}` (its configuration is the world file's)"));
+                }
+            }
+            Source::Laser { model } => {
+                if r.is::<laser::GetGeom>() {
+                    let g = self.ranger_geom(model);
+                    r.reply(&laser::Geom {
+                        pose: g.pose,
+                        size: g.size,
+                    });
+                } else if r.is::<laser::GetConfig>() {
+                    match self.ranger_config(model) {
+                        Some(c) => {
+                            let s = &self.sim.world.models[model].sensors[0];
+                            r.reply(&laser::Config {
+                                min_angle: c.min_angle as f32,
+                                max_angle: c.max_angle as f32,
+                                resolution: if s.samples > 1 {
+                                    (s.fov / (s.samples - 1) as f64) as f32
+                                } else {
+                                    0.0
+                                },
+                                max_range: c.max_range as f32,
+                                range_res: c.range_res as f32,
+                                intensity: true,
+                                scanning_frequency: c.frequency as f32,
+                            });
+                        }
+                        None => r.nack("this ranger has no sensors"),
+                    }
+                } else if r.is::<common::Power>() {
+                    r.reply(&common::Ack);
+                } else {
+                    let n = r.name.clone();
+                    r.nack(format!(
+                        "stage laser does not handle `{n}` (its configuration is the world file's)"
+                    ));
+                }
+            }
+            Source::Sonar { model } => {
+                if r.is::<sonar::GetGeom>() {
+                    let g = self.ranger_geom(model);
+                    r.reply(&sonar::Geom {
+                        poses: g.element_poses,
+                    });
+                } else if r.is::<common::Power>() {
+                    r.reply(&common::Ack);
+                } else {
+                    let n = r.name.clone();
+                    r.nack(format!("stage sonar does not handle `{n}`"));
+                }
+            }
+            Source::Simulation => self.simulation(r)?,
+        }
+        Ok(())
+    }
+
+    fn simulation(&mut self, r: troupe_node::Request) -> Result<()> {
+        let find = |sim: &Sim, name: &str| sim.world.names.get(name).copied();
+        if r.is::<simulation::GetPose2d>() {
+            let q = r.decode::<simulation::GetPose2d>()?;
+            match find(&self.sim, &q.name) {
+                Some(m) => r.reply(&simulation::Pose2dOf {
+                    name: q.name,
+                    pose: self.sim.poses[m].into(),
+                }),
+                None => r.nack(format!("no model named `{}`", q.name)),
+            }
+        } else if r.is::<simulation::SetPose2d>() {
+            let q = r.decode::<simulation::SetPose2d>()?;
+            match find(&self.sim, &q.name) {
+                Some(m) => {
+                    self.sim.set_pose(m, q.pose.into());
+                    r.reply(&common::Ack);
+                }
+                None => r.nack(format!("no model named `{}`", q.name)),
+            }
+        } else if r.is::<simulation::GetProperty>() {
+            let q = r.decode::<simulation::GetProperty>()?;
+            match (find(&self.sim, &q.name), q.prop.as_str()) {
+                (Some(m), "color") => r.reply(&simulation::Property {
+                    name: q.name,
+                    prop: q.prop,
+                    value: simulation::Value::Color(self.sim.colors[m]),
+                }),
+                (Some(_), "time") => {
+                    let t = self.sim.time;
+                    r.reply(&simulation::Property {
+                        name: q.name,
+                        prop: q.prop,
+                        value: simulation::Value::Number(t),
+                    })
+                }
+                (Some(_), p) => {
+                    let msg = format!("unknown property `{p}` (stage has \"color\" and \"time\")");
+                    r.nack(msg)
+                }
+                (None, _) => r.nack(format!("no model named `{}`", q.name)),
+            }
+        } else if r.is::<simulation::SetProperty>() {
+            let q = r.decode::<simulation::SetProperty>()?;
+            match (find(&self.sim, &q.name), q.prop.as_str(), &q.value) {
+                (Some(m), "color", simulation::Value::Color(c)) => {
+                    self.sim.colors[m] = *c;
+                    r.reply(&common::Ack);
+                }
+                (Some(_), "color", _) => r.nack("property \"color\" takes a colour"),
+                (Some(_), p, _) => {
+                    let msg = format!("cannot set property `{p}` (stage sets \"color\")");
+                    r.nack(msg)
+                }
+                (None, _, _) => r.nack(format!("no model named `{}`", q.name)),
+            }
+        } else {
+            let n = r.name.clone();
+            r.nack(format!("stage simulation does not handle `{n}`"));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use troupe_node::testing::Harness;
+
+    fn world_file(name: &str, text: &str) -> PathBuf {
+        let dir =
+            std::env::temp_dir().join(format!("troupe-stage-node-{}-{name}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("t.world");
+        std::fs::write(&p, text).unwrap();
+        p
+    }
+
+    const WORLD: &str = "interval_sim 100\nquit_time 1\n\
+        define bot position ( size [0.44 0.38 0.22] origin [-0.04 0 0 0] color \"red\"\n\
+          ranger ( sensor ( pose [0.1 0 0 90] range [0 5] ) sensor ( pose [0.1 0 0 -90] range [0 5] ) ) )\n\
+        model ( name \"wall\" pose [4 0 0 0] size [0.2 8 1] )\n\
+        bot ( name \"r0\" pose [0 0 0 0] ranger ( sensor ( range [0 8] fov 180 samples 181 ) ) acceleration_bounds [-9 9 -9 9 -9 9 -900 900] )\n";
+
+    fn harness(name: &str, provides: &str) -> Harness<Stage> {
+        let w = world_file(name, WORLD);
+        Harness::from_json(&format!(
+            r#"{{"name":"stage","provides":{provides},"options":{{"worldfile":"{}","model":"r0"}}}}"#,
+            w.display()
+        ))
+        .unwrap()
+    }
+
+    fn dev(i: Interface, n: u32) -> Device {
+        Device::new(6665, i, n)
+    }
+
+    #[test]
+    fn serves_position_rangers_laser_sonar_and_the_clock() {
+        let mut h = harness(
+            "serve",
+            r#"["simulation:0","position2d:0","ranger:0","ranger:1","laser:0","sonar:0"]"#,
+        );
+        assert_eq!(
+            h.tick_period(),
+            Some(Duration::from_millis(100)),
+            "speedup 1: real time"
+        );
+        h.tick().unwrap();
+        assert!((h.now() - 0.1).abs() < 1e-9);
+        assert_eq!(h.clock_published().last().copied(), Some(h.now()));
+        let r0 = h.published::<ranger::Ranges>(dev(Interface::Ranger, 0));
+        let r1 = h.published::<ranger::Ranges>(dev(Interface::Ranger, 1));
+        assert_eq!(
+            r0.last().unwrap().ranges.len(),
+            2,
+            "ranger:0 is the two-sensor ranger (macro children first)"
+        );
+        assert_eq!(r1.last().unwrap().ranges.len(), 181);
+        // laser:0 is the scanner (also ranger:1); sonar:0 the two-sensor ranger.
+        let scan = h
+            .published::<laser::Scan>(dev(Interface::Laser, 0))
+            .pop()
+            .unwrap();
+        assert_eq!(scan.ranges.len(), 181);
+        assert!(
+            (scan.ranges[90] - (3.9 - 0.0)).abs() < 0.03,
+            "wall ahead: {}",
+            scan.ranges[90]
+        );
+        // Drive towards the wall: the laser sees it approach.
+        h.command(
+            dev(Interface::Position2d, 0),
+            &position2d::CmdVel {
+                vel: troupe_msgs::Pose2d::new(1.0, 0.0, 0.0),
+                state: true,
+            },
+        )
+        .unwrap();
+        h.tick().unwrap();
+        h.tick().unwrap();
+        let later = h
+            .published::<laser::Scan>(dev(Interface::Laser, 0))
+            .pop()
+            .unwrap();
+        assert!(
+            later.ranges[90] < scan.ranges[90] - 0.15,
+            "{} then {}",
+            scan.ranges[90],
+            later.ranges[90]
+        );
+        let pos = h
+            .published::<position2d::Data>(dev(Interface::Position2d, 0))
+            .pop()
+            .unwrap();
+        assert!(pos.pose.x > 0.15 && pos.vel.x == 1.0, "{pos:?}");
+    }
+
+    #[test]
+    fn geometry_config_and_simulation_requests() {
+        let mut h = harness(
+            "requests",
+            r#"["simulation:0","position2d:0","ranger:0","ranger:1"]"#,
+        );
+        let p = h
+            .request(dev(Interface::Position2d, 0), &position2d::GetGeom)
+            .unwrap();
+        let g = h.reply::<position2d::Geom>(p).unwrap().unwrap();
+        assert_eq!((g.size.length, g.size.width), (0.44, 0.38));
+        assert_eq!(g.pose.x, -0.04);
+        let p = h
+            .request(dev(Interface::Ranger, 1), &ranger::GetConfig)
+            .unwrap();
+        let c = h.reply::<ranger::Config>(p).unwrap().unwrap();
+        assert!((c.max_angle - std::f64::consts::FRAC_PI_2).abs() < 1e-9 && c.max_range == 8.0);
+        let p = h
+            .request(dev(Interface::Ranger, 0), &ranger::GetGeom)
+            .unwrap();
+        assert_eq!(
+            h.reply::<ranger::Geom>(p)
+                .unwrap()
+                .unwrap()
+                .element_poses
+                .len(),
+            2
+        );
+        let sim = dev(Interface::Simulation, 0);
+        let p = h
+            .request(
+                sim,
+                &simulation::SetPose2d {
+                    name: "r0".into(),
+                    pose: troupe_msgs::Pose2d::new(1.0, 2.0, 0.5),
+                },
+            )
+            .unwrap();
+        assert!(h.reply::<common::Ack>(p).unwrap().is_ok());
+        let p = h
+            .request(sim, &simulation::GetPose2d { name: "r0".into() })
+            .unwrap();
+        assert_eq!(
+            h.reply::<simulation::Pose2dOf>(p).unwrap().unwrap().pose,
+            troupe_msgs::Pose2d::new(1.0, 2.0, 0.5)
+        );
+        let p = h
+            .request(
+                sim,
+                &simulation::GetProperty {
+                    name: "r0".into(),
+                    prop: "color".into(),
+                },
+            )
+            .unwrap();
+        let col = h.reply::<simulation::Property>(p).unwrap().unwrap();
+        assert_eq!(
+            col.value,
+            simulation::Value::Color(troupe_msgs::Color {
+                r: 1.0,
+                g: 0.0,
+                b: 0.0,
+                a: 1.0
+            })
+        );
+        let p = h
+            .request(
+                sim,
+                &simulation::GetPose2d {
+                    name: "nobody".into(),
+                },
+            )
+            .unwrap();
+        assert!(h
+            .reply::<simulation::Pose2dOf>(p)
+            .unwrap()
+            .unwrap_err()
+            .contains("no model named `nobody`"));
+    }
+
+    #[test]
+    fn quit_time_stops_the_node_and_bad_sections_say_why() {
+        let mut h = harness("quit", r#"["simulation:0"]"#);
+        for _ in 0..9 {
+            h.tick().unwrap();
+            assert!(!h.stop_requested());
+        }
+        h.tick().unwrap();
+        assert!(h.stop_requested(), "quit_time 1 s = 10 steps");
+        let w = world_file("bad", WORLD);
+        let e = |provides: &str, model: &str| {
+            Harness::<Stage>::from_json(&format!(
+                r#"{{"name":"stage","provides":{provides},"options":{{"worldfile":"{}","model":"{model}"}}}}"#,
+                w.display()
+            ))
+            .err()
+            .unwrap()
+            .to_string()
+        };
+        assert!(
+            e(r#"["position2d:0"]"#, "r9").contains("no model named `r9` (named models: r0, wall)")
+        );
+        assert!(e(r#"["position2d:0","position2d:1"]"#, "r0")
+            .contains("has no unused position2d model"));
+        assert!(e(r#"["map:0"]"#, "r0").contains("does not simulate map devices yet"));
+        let e = Harness::<Stage>::from_json(r#"{"name":"stage","provides":["simulation:0"]}"#)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("`worldfile` is required"), "{e}");
+    }
+}
