@@ -9,3 +9,4 @@ mod hosts;
 mod launch;
 mod process;
 mod sessions;
+mod stage;
