@@ -38,6 +38,7 @@ pub fn run(cmd: BenchCmd, z: &ZenohArgs) -> anyhow::Result<()> {
         BenchCmd::Latency(a) => latency(&a),
         BenchCmd::Pong => pong(z),
         BenchCmd::Launch(a) => launch_bench(&a),
+        BenchCmd::Stage(a) => stage_bench(&a),
     }
 }
 
@@ -441,5 +442,189 @@ pub fn launch_bench(a: &LaunchBenchArgs) -> anyhow::Result<()> {
         ms(median(&mut stops.clone())),
         list(&stops)
     )?;
+    Ok(())
+}
+
+/// Flags of `troupe bench stage`.
+#[derive(Debug, Args)]
+pub struct StageBenchArgs {
+    /// Simulated seconds per world.
+    #[arg(long, default_value_t = 60.0)]
+    pub seconds: f64,
+    /// Run only this world (simple, pioneers100, hospital1000) in this process.
+    #[arg(long, hide = true)]
+    pub only: Option<String>,
+    /// Worker threads (the world's `threads`); 1 = one core.
+    #[arg(long, default_value_t = 1)]
+    pub threads: usize,
+    /// Where Stage's sample bitmaps are (cave.png, hospital_section.png).
+    #[arg(long, value_name = "DIR")]
+    pub bitmaps: Option<std::path::PathBuf>,
+}
+
+/// A Pioneer with 16 sonars and a 180-beam SICK, wandering (our own definitions).
+const PIONEER: &str = r#"
+define bench_sonar sensor ( size [0.01 0.05 0.01] range [0 5.0] fov 15 samples 1 )
+define bench_sonars ranger (
+  bench_sonar( pose [ 0.075 0.130 0 90 ] ) bench_sonar( pose [ 0.115 0.115 0 50 ] )
+  bench_sonar( pose [ 0.150 0.080 0 30 ] ) bench_sonar( pose [ 0.170 0.025 0 10 ] )
+  bench_sonar( pose [ 0.170 -0.025 0 -10 ] ) bench_sonar( pose [ 0.150 -0.080 0 -30 ] )
+  bench_sonar( pose [ 0.115 -0.115 0 -50 ] ) bench_sonar( pose [ 0.075 -0.130 0 -90 ] )
+  bench_sonar( pose [ -0.155 -0.130 0 -90 ] ) bench_sonar( pose [ -0.195 -0.115 0 -130 ] )
+  bench_sonar( pose [ -0.230 -0.080 0 -150 ] ) bench_sonar( pose [ -0.250 -0.025 0 -170 ] )
+  bench_sonar( pose [ -0.250 0.025 0 170 ] ) bench_sonar( pose [ -0.230 0.080 0 150 ] )
+  bench_sonar( pose [ -0.195 0.115 0 130 ] ) bench_sonar( pose [ -0.155 0.130 0 90 ] )
+)
+define bench_sick ranger ( sensor( range [0 8.0] fov 180 samples 180 ) size [0.156 0.155 0.19] )
+define bench_pioneer position (
+  size [0.44 0.38 0.22] origin [-0.04 0 0 0] drive "diff" ctrl "wander"
+  bench_sonars( ) bench_sick( pose [0 0 0 0] )
+)
+"#;
+
+/// A small robot with 12 IR rangers around it, wandering.
+const SMALL: &str = r#"
+define bench_ir sensor ( size [0.01 0.01 0.01] range [0 1.0] fov 10 samples 1 )
+define bench_irs ranger (
+  bench_ir( pose [0.1 0 0 0] ) bench_ir( pose [0.087 0.05 0 30] ) bench_ir( pose [0.05 0.087 0 60] )
+  bench_ir( pose [0 0.1 0 90] ) bench_ir( pose [-0.05 0.087 0 120] ) bench_ir( pose [-0.087 0.05 0 150] )
+  bench_ir( pose [-0.1 0 0 180] ) bench_ir( pose [-0.087 -0.05 0 -150] ) bench_ir( pose [-0.05 -0.087 0 -120] )
+  bench_ir( pose [0 -0.1 0 -90] ) bench_ir( pose [0.05 -0.087 0 -60] ) bench_ir( pose [0.087 -0.05 0 -30] )
+)
+define bench_small position ( size [0.2 0.2 0.1] drive "diff" ctrl "wander" bench_irs( ) )
+"#;
+
+fn bench_world(
+    name: &str,
+    bitmaps: &std::path::Path,
+    threads: usize,
+) -> anyhow::Result<(String, String)> {
+    let mut w = String::from("resolution 0.02\ninterval_sim 100\n");
+    w.push_str(&format!("threads {threads}\n"));
+    let map = |file: &str, size: &str| {
+        format!(
+            "model ( name \"map\" bitmap \"{}\" size [{size} 0.8] color \"gray30\" boundary 1 obstacle_return 0 ranger_return 0.5 )\n",
+            bitmaps.join(file).display()
+        )
+    };
+    let what = match name {
+        "simple" => {
+            w.push_str(PIONEER);
+            w.push_str(&map("cave.png", "16 16"));
+            w.push_str("bench_pioneer( name \"r0\" pose [-6.946 -6.947 0 45] )\nbench_pioneer( name \"r1\" pose [-3.946 -6.947 0 45] )\n");
+            "2 Pioneers (16 sonars + 180-beam laser), 16 m cave"
+        }
+        "pioneers100" => {
+            w.push_str(PIONEER);
+            w.push_str(&map("cave.png", "16 16"));
+            for i in 0..100 {
+                let (x, y) = (-6.75 + 1.5 * (i % 10) as f64, -6.75 + 1.5 * (i / 10) as f64);
+                w.push_str(&format!(
+                    "bench_pioneer( name \"p{i}\" pose [{x} {y} 0 {}] )\n",
+                    (i * 37) % 360
+                ));
+            }
+            "100 Pioneers (16 sonars + 180-beam laser), 16 m cave, all moving"
+        }
+        "hospital1000" => {
+            w.push_str(SMALL);
+            w.push_str(&map("hospital_section.png", "140 60"));
+            for i in 0..1000 {
+                let (x, y) = (-68.0 + 3.4 * (i % 40) as f64, -28.0 + 2.3 * (i / 40) as f64);
+                w.push_str(&format!(
+                    "bench_small( name \"s{i}\" pose [{x} {y} 0 {}] )\n",
+                    (i * 53) % 360
+                ));
+            }
+            "1000 small robots (12 IR rangers), 140x60 m hospital, all moving"
+        }
+        other => anyhow::bail!("unknown bench world `{other}` (simple, pioneers100, hospital1000)"),
+    };
+    Ok((w, what.to_owned()))
+}
+
+fn peak_rss_mb() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines().find(|l| l.starts_with("VmHWM:")).and_then(|l| {
+                l.split_whitespace()
+                    .nth(1)
+                    .and_then(|v| v.parse::<f64>().ok())
+            })
+        })
+        .map_or(0.0, |kb| kb / 1024.0)
+}
+
+/// `troupe bench stage`: simulated seconds per wall second and peak memory.
+pub fn stage_bench(a: &StageBenchArgs) -> anyhow::Result<()> {
+    let bitmaps = a
+        .bitmaps
+        .clone()
+        .unwrap_or_else(|| std::path::PathBuf::from("../shared/compat/stage/bitmaps"));
+    let bitmaps = match bitmaps.canonicalize() {
+        Ok(b) if b.join("cave.png").exists() => b,
+        _ => anyhow::bail!(
+            "no Stage bitmaps at {} (cave.png, hospital_section.png); pass --bitmaps DIR",
+            bitmaps.display()
+        ),
+    };
+    if let Some(name) = &a.only {
+        let (text, what) = bench_world(name, &bitmaps, a.threads)?;
+        let dir = std::env::temp_dir().join(format!("troupe-bench-stage-{}", std::process::id()));
+        std::fs::create_dir_all(&dir)?;
+        let path = dir.join(format!("{name}.world"));
+        std::fs::write(&path, text)?;
+        let t_load = Instant::now();
+        let world = troupe_stage::world::load(&path)?;
+        let mut sim = troupe_stage::sim::Sim::new(world).map_err(|e| anyhow::anyhow!(e))?;
+        let load = t_load.elapsed();
+        let _ = std::fs::remove_dir_all(&dir);
+        let steps = (a.seconds / sim.world.interval_sim).round() as u64;
+        let t0 = Instant::now();
+        for _ in 0..steps {
+            sim.step();
+        }
+        let wall = t0.elapsed().as_secs_f64();
+        let moving = sim
+            .bases
+            .iter()
+            .filter(|b| b.vel.x != 0.0 || b.vel.yaw != 0.0)
+            .count();
+        writeln!(
+            std::io::stdout().lock(),
+            "  {name:<13} {:>8.0}x real time  {:>7.1} MB peak  ({what}; {:.0} simulated s in {wall:.2} s, load {:.2} s, {moving}/{} moving at the end)",
+            sim.time / wall,
+            peak_rss_mb(),
+            sim.time,
+            load.as_secs_f64(),
+            sim.bases.len()
+        )?;
+        return Ok(());
+    }
+    writeln!(
+        std::io::stdout().lock(),
+        "troupe bench stage: {} simulated s per world, {} thread(s), every sensor every step, wander controllers",
+        a.seconds, a.threads
+    )?;
+    for name in ["simple", "pioneers100", "hospital1000"] {
+        let status = Command::new(std::env::current_exe()?)
+            .args([
+                "bench",
+                "stage",
+                "--only",
+                name,
+                "--seconds",
+                &a.seconds.to_string(),
+                "--threads",
+                &a.threads.to_string(),
+                "--bitmaps",
+            ])
+            .arg(&bitmaps)
+            .status()?;
+        if !status.success() {
+            anyhow::bail!("bench world `{name}` failed: {status}");
+        }
+    }
     Ok(())
 }

@@ -201,6 +201,10 @@ pub enum BenchCmd {
     #[command(after_help = "Example:
   cargo run --release -- bench launch --runs 5")]
     Launch(crate::bench::LaunchBenchArgs),
+    /// Simulator speed (simulated s per wall s) and peak memory on three worlds.
+    #[command(after_help = "Example:
+  cargo run --release -- bench stage --bitmaps ../shared/compat/stage/bitmaps")]
+    Stage(crate::bench::StageBenchArgs),
     /// The echo side of `bench latency` (started by it).
     #[command(hide = true)]
     Pong,

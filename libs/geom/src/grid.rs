@@ -29,7 +29,6 @@ pub struct Grid {
     h: usize,
     cells: Vec<u16>,
     tw: usize,
-    th: usize,
     tiles: Vec<u32>,
 }
 
@@ -52,7 +51,6 @@ impl Grid {
             h,
             cells: vec![EMPTY; w * h],
             tw,
-            th,
             tiles: vec![0; tw * th],
         }
     }
@@ -216,20 +214,41 @@ impl Grid {
     ///
     /// # Behavior
     ///
-    /// Walks tiles, and cells only inside occupied tiles (Amanatides & Woo at
-    /// both levels). A ray starting outside the grid finds nothing until it
-    /// enters it. The range is to the boundary of the hit cell where the ray
-    /// enters it (0 when the ray starts in it).
+    /// A grid walk (Amanatides & Woo) that jumps over tiles holding nothing:
+    /// in open space a ray costs one step per tile, not per cell. A ray
+    /// starting outside the grid finds nothing until it enters it. The range
+    /// is to the boundary of the hit cell where the ray enters it (0 when the
+    /// ray starts in it).
     pub fn cast(
         &self,
         x: f64,
         y: f64,
         angle: f64,
         max_range: f64,
+        accept: impl FnMut(u16) -> bool,
+    ) -> Option<Hit> {
+        self.cast_layers(None, x, y, angle, max_range, accept)
+    }
+
+    /// [`Grid::cast`] through this grid and `other` at once (same geometry,
+    /// e.g. static and moving obstacles): the nearest accepted cell of either.
+    ///
+    /// # Panics
+    ///
+    /// If `other` does not have this grid's size.
+    pub fn cast_layers(
+        &self,
+        other: Option<&Grid>,
+        x: f64,
+        y: f64,
+        angle: f64,
+        max_range: f64,
         mut accept: impl FnMut(u16) -> bool,
     ) -> Option<Hit> {
+        if let Some(o) = other {
+            assert!(o.w == self.w && o.h == self.h, "layers of different sizes");
+        }
         let (dy, dx) = angle.sin_cos();
-        // Grid units: one unit per cell.
         let gx = (x - self.x0) / self.res;
         let gy = (y - self.y0) / self.res;
         let tmax = max_range / self.res;
@@ -250,106 +269,120 @@ impl Grid {
         if t0 > t1 {
             return None;
         }
-        let step = |d: f64| if d > 0.0 { 1i64 } else { -1 };
-        let inv = |d: f64| {
-            if d.abs() < 1e-12 {
+        let (sx, sy): (i64, i64) = (if dx > 0.0 { 1 } else { -1 }, if dy > 0.0 { 1 } else { -1 });
+        let (ddx, ddy) = (
+            if dx.abs() < 1e-12 {
                 f64::INFINITY
             } else {
-                1.0 / d.abs()
-            }
-        };
-        let (sx, sy, ix, iy) = (step(dx), step(dy), inv(dx), inv(dy));
-        // Tile walk.
-        let ts = TILE as f64;
-        let eps = 1e-9;
-        let px = gx + dx * (t0 + eps);
-        let py = gy + dy * (t0 + eps);
-        let mut tx = ((px / ts).floor() as i64).clamp(0, self.tw as i64 - 1);
-        let mut ty = ((py / ts).floor() as i64).clamp(0, self.th as i64 - 1);
-        let next = |c: i64, s: i64, p: f64, size: f64, d: f64, id: f64| -> f64 {
-            if id.is_infinite() {
-                return f64::INFINITY;
-            }
-            let edge = if s > 0 {
-                (c + 1) as f64 * size
+                1.0 / dx.abs()
+            },
+            if dy.abs() < 1e-12 {
+                f64::INFINITY
             } else {
-                c as f64 * size
-            };
-            (edge - p) / d
-        };
-        let mut t_enter = t0;
-        loop {
-            let tnx = next(tx, sx, gx, ts, dx, ix);
-            let tny = next(ty, sy, gy, ts, dy, iy);
-            let t_exit = tnx.min(tny).min(t1);
-            if self.tiles[ty as usize * self.tw + tx as usize] > 0 {
-                if let Some(hit) = self.walk_cells(gx, gy, dx, dy, t_enter, t_exit, &mut accept) {
-                    return Some(hit);
-                }
-            }
-            if t_exit >= t1 {
-                return None;
-            }
-            t_enter = t_exit;
-            if tnx < tny {
-                tx += sx;
-            } else {
-                ty += sy;
-            }
-            if tx < 0 || ty < 0 || tx >= self.tw as i64 || ty >= self.th as i64 {
-                return None;
-            }
-        }
-    }
-
-    /// Cell-level walk between ray parameters `ta` and `tb` (grid units).
-    #[allow(clippy::too_many_arguments)]
-    fn walk_cells(
-        &self,
-        gx: f64,
-        gy: f64,
-        dx: f64,
-        dy: f64,
-        ta: f64,
-        tb: f64,
-        accept: &mut impl FnMut(u16) -> bool,
-    ) -> Option<Hit> {
-        let eps = 1e-9;
-        let px = gx + dx * (ta + eps);
-        let py = gy + dy * (ta + eps);
-        let mut i = (px.floor() as i64).clamp(0, self.w as i64 - 1);
-        let mut j = (py.floor() as i64).clamp(0, self.h as i64 - 1);
-        let (sx, sy) = (if dx > 0.0 { 1 } else { -1 }, if dy > 0.0 { 1 } else { -1 });
-        let edge = |c: i64, s: i64, p: f64, d: f64| -> f64 {
+                1.0 / dy.abs()
+            },
+        );
+        let (w, h) = (self.w as i64, self.h as i64);
+        // Distance along the ray to the next x (y) cell boundary from cell i at parameter t.
+        let first = |c: i64, s: i64, p: f64, d: f64| -> f64 {
             if d.abs() < 1e-12 {
                 return f64::INFINITY;
             }
-            let e = if s > 0 { (c + 1) as f64 } else { c as f64 };
-            (e - p) / d
+            ((if s > 0 { c + 1 } else { c }) as f64 - p) / d
         };
-        let mut t = ta;
-        loop {
-            let id = self.cells[j as usize * self.w + i as usize];
-            if id != EMPTY && accept(id) {
-                return Some(Hit {
-                    range: t * self.res,
-                    id,
-                });
+        let enter = |t: f64| {
+            let px = gx + dx * (t + 1e-9);
+            let py = gy + dy * (t + 1e-9);
+            (
+                (px.floor() as i64).clamp(0, w - 1),
+                (py.floor() as i64).clamp(0, h - 1),
+            )
+        };
+        let mut t = t0;
+        let (mut i, mut j) = enter(t);
+        let mut tx = first(i, sx, gx, dx);
+        let mut ty = first(j, sy, gy, dy);
+        let shift = TILE.trailing_zeros();
+        let (istep, jstep) = (sx as isize, sy as isize * self.w as isize);
+        'tiles: loop {
+            let (ti, tj) = (i >> shift, j >> shift);
+            let tidx = tj as usize * self.tw + ti as usize;
+            if self.tiles[tidx] == 0 && other.is_none_or(|o| o.tiles[tidx] == 0) {
+                // Jump to where the ray leaves this tile.
+                let ex = first(ti, sx, gx / TILE as f64, dx);
+                let ey = first(tj, sy, gy / TILE as f64, dy);
+                let te = ex.min(ey) * TILE as f64;
+                if te >= t1 {
+                    return None;
+                }
+                t = te;
+                let (ni, nj) = enter(t);
+                // Land in the neighbouring tile even when rounding keeps us on the edge.
+                let (ni, nj) = if ni >> shift == ti && nj >> shift == tj {
+                    if ex < ey {
+                        (ni + sx, nj)
+                    } else {
+                        (ni, nj + sy)
+                    }
+                } else {
+                    (ni, nj)
+                };
+                if ni < 0 || nj < 0 || ni >= w || nj >= h {
+                    return None;
+                }
+                (i, j) = (ni, nj);
+                tx = first(i, sx, gx, dx);
+                ty = first(j, sy, gy, dy);
+                continue;
             }
-            let tnx = edge(i, sx, gx, dx);
-            let tny = edge(j, sy, gy, dy);
-            let tn = tnx.min(tny);
-            if tn >= tb {
-                return None;
-            }
-            t = tn;
-            if tnx < tny {
-                i += sx;
-            } else {
-                j += sy;
-            }
-            if i < 0 || j < 0 || i >= self.w as i64 || j >= self.h as i64 {
-                return None;
+            // Walk the cells of this occupied tile.
+            let mut idx = j as usize * self.w + i as usize;
+            loop {
+                let a = self.cells[idx];
+                if a != EMPTY && accept(a) {
+                    return Some(Hit {
+                        range: t * self.res,
+                        id: a,
+                    });
+                }
+                if let Some(o) = other {
+                    let b = o.cells[idx];
+                    if b != EMPTY && accept(b) {
+                        return Some(Hit {
+                            range: t * self.res,
+                            id: b,
+                        });
+                    }
+                }
+                if tx < ty {
+                    if tx >= t1 {
+                        return None;
+                    }
+                    t = tx;
+                    tx += ddx;
+                    i += sx;
+                    if i < 0 || i >= w {
+                        return None;
+                    }
+                    idx = (idx as isize + istep) as usize;
+                    if i >> shift != ti {
+                        continue 'tiles;
+                    }
+                } else {
+                    if ty >= t1 {
+                        return None;
+                    }
+                    t = ty;
+                    ty += ddy;
+                    j += sy;
+                    if j < 0 || j >= h {
+                        return None;
+                    }
+                    idx = (idx as isize + jstep) as usize;
+                    if j >> shift != tj {
+                        continue 'tiles;
+                    }
+                }
             }
         }
     }

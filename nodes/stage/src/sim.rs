@@ -429,45 +429,68 @@ impl Sim {
         }
     }
 
-    /// Updates every ranger's readings.
+    /// Updates every ranger's readings, on `world.threads` threads.
     pub fn sense(&mut self) {
-        for r in 0..self.world.models.len() {
-            if self.world.models[r].sensors.is_empty() {
-                continue;
+        let rangers: Vec<usize> = (0..self.world.models.len())
+            .filter(|&r| !self.world.models[r].sensors.is_empty())
+            .collect();
+        let threads = self.world.threads.clamp(1, 64).min(rangers.len().max(1));
+        if threads <= 1 {
+            for &r in &rangers {
+                let mut out = std::mem::take(&mut self.readings[r]);
+                self.sense_one(r, &mut out);
+                self.readings[r] = out;
             }
-            let (g, _) = self.world.global(&self.poses, r);
-            let base = g.compose(&self.world.models[r].origin);
-            let root = self.roots[r];
-            for si in 0..self.world.models[r].sensors.len() {
-                let s = self.world.models[r].sensors[si].clone();
-                let o = base.compose(&s.pose);
-                for k in 0..s.samples {
-                    let a = if s.samples > 1 {
-                        o.yaw - s.fov / 2.0 + s.fov * k as f64 / (s.samples - 1) as f64
-                    } else {
-                        o.yaw
-                    };
-                    let accept = |c: u16| {
-                        let other = usize::from(c) - 1;
-                        self.roots[other] != root && self.world.models[other].ranger_return >= 0.0
-                    };
-                    let h1 = self.statics.cast(o.x, o.y, a, s.range.1, accept);
-                    let h2 = self.dynamics.cast(o.x, o.y, a, s.range.1, accept);
-                    let hit = match (h1, h2) {
-                        (Some(p), Some(q)) => Some(if p.range <= q.range { p } else { q }),
-                        (p, q) => p.or(q),
-                    };
-                    let (range, intensity) = match hit {
-                        Some(h) => (
-                            h.range.max(s.range.0),
-                            self.world.models[usize::from(h.id) - 1].ranger_return,
-                        ),
-                        None => (s.range.1, 0.0),
-                    };
-                    let rd = &mut self.readings[r][si];
-                    rd.ranges[k] = range;
-                    rd.intensities[k] = intensity;
-                }
+            return;
+        }
+        let mut work: Vec<(usize, Vec<Reading>)> = rangers
+            .iter()
+            .map(|&r| (r, std::mem::take(&mut self.readings[r])))
+            .collect();
+        let per = work.len().div_ceil(threads);
+        let me = &*self;
+        std::thread::scope(|scope| {
+            for chunk in work.chunks_mut(per) {
+                scope.spawn(move || {
+                    for (r, out) in chunk.iter_mut() {
+                        me.sense_one(*r, out);
+                    }
+                });
+            }
+        });
+        for (r, out) in work {
+            self.readings[r] = out;
+        }
+    }
+
+    fn sense_one(&self, r: usize, out: &mut [Reading]) {
+        let (g, _) = self.world.global(&self.poses, r);
+        let base = g.compose(&self.world.models[r].origin);
+        let root = self.roots[r];
+        for (s, rd) in self.world.models[r].sensors.iter().zip(out.iter_mut()) {
+            let o = base.compose(&s.pose);
+            for k in 0..s.samples {
+                let a = if s.samples > 1 {
+                    o.yaw - s.fov / 2.0 + s.fov * k as f64 / (s.samples - 1) as f64
+                } else {
+                    o.yaw
+                };
+                let accept = |c: u16| {
+                    let other = usize::from(c) - 1;
+                    self.roots[other] != root && self.world.models[other].ranger_return >= 0.0
+                };
+                let hit =
+                    self.statics
+                        .cast_layers(Some(&self.dynamics), o.x, o.y, a, s.range.1, accept);
+                let (range, intensity) = match hit {
+                    Some(h) => (
+                        h.range.max(s.range.0),
+                        self.world.models[usize::from(h.id) - 1].ranger_return,
+                    ),
+                    None => (s.range.1, 0.0),
+                };
+                rd.ranges[k] = range;
+                rd.intensities[k] = intensity;
             }
         }
     }
