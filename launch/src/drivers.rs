@@ -10,6 +10,8 @@ pub struct Entry {
     pub about: &'static str,
     /// Options read as lengths or angles.
     pub units: &'static [(&'static str, Unit)],
+    /// The simulator: other nodes of its plan follow its clock.
+    pub clock_source: bool,
     /// Checks a section without starting anything; returns unused options.
     pub check: fn(&Section) -> Result<Vec<String>>,
     run: fn(Section, &ZenohArgs, &NodeConfig) -> Result<()>,
@@ -20,6 +22,7 @@ fn entry<D: Driver>(about: &'static str) -> Entry {
         name: D::NAME,
         about,
         units: D::UNITS,
+        clock_source: D::CLOCK_SOURCE,
         check: troupe_node::check::<D>,
         run: troupe_node::run::<D>,
     }

@@ -257,7 +257,12 @@ fn merge_stage(
     });
     if let Some(serde_json::Value::String(w)) = options.remove("worldfile") {
         if !node.options.contains_key("worldfile") {
-            let dir = source.parent().unwrap_or(Path::new("."));
+            // Absolute, so the plan runs from any directory.
+            let dir = match source.parent() {
+                Some(d) if !d.as_os_str().is_empty() => d.to_owned(),
+                _ => Path::new(".").to_owned(),
+            };
+            let dir = std::fs::canonicalize(&dir).unwrap_or(dir);
             node.options
                 .insert("worldfile".into(), dir.join(w).display().to_string().into());
         }
@@ -965,5 +970,28 @@ mod golden {
             }
         }
         assert!(failures.is_empty(), "{}", failures.join("\n\n"));
+    }
+}
+
+/// The project's own sample cfgs (worlds/) plan without error or warning.
+#[cfg(test)]
+mod samples {
+    use std::path::Path;
+
+    #[test]
+    fn sample_cfgs_plan_cleanly() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds");
+        let mut n = 0;
+        for e in std::fs::read_dir(&dir).unwrap().flatten() {
+            let p = e.path();
+            if p.extension().is_some_and(|x| x == "cfg") {
+                let (plan, warnings) =
+                    super::load(&p, 6665).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+                assert!(warnings.is_empty(), "{}: {warnings:?}", p.display());
+                assert!(!plan.nodes.is_empty());
+                n += 1;
+            }
+        }
+        assert!(n >= 2, "worlds/ holds the sample cfgs");
     }
 }

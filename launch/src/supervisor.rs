@@ -91,6 +91,11 @@ pub fn launch(a: LaunchArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             .write_all(plan::to_toml(&plan).as_bytes())?;
         return Ok(());
     }
+    // Under a simulator, every other node follows its clock.
+    let sim_time = plan
+        .nodes
+        .iter()
+        .any(|n| crate::drivers::find(&n.driver).is_some_and(|e| e.clock_source));
     let nodes: Vec<NodeSpec> = match &a.host {
         None => plan.nodes.clone(),
         Some(h) => {
@@ -128,7 +133,7 @@ pub fn launch(a: LaunchArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         .worker_threads(2)
         .enable_all()
         .build()?;
-    rt.block_on(supervise(a, z.clone(), nodes))
+    rt.block_on(supervise(a, z.clone(), nodes, sim_time))
 }
 
 /// The shared view of which devices are live.
@@ -144,7 +149,12 @@ struct NodeState {
     failed: AtomicBool,
 }
 
-async fn supervise(a: LaunchArgs, z: ZenohArgs, specs: Vec<NodeSpec>) -> anyhow::Result<()> {
+async fn supervise(
+    a: LaunchArgs,
+    z: ZenohArgs,
+    specs: Vec<NodeSpec>,
+    sim_time: bool,
+) -> anyhow::Result<()> {
     let started = Instant::now();
     // The network: an embedded router unless told to join another.
     let embedded = z.connect.is_empty() && z.zenoh_config.is_none();
@@ -269,6 +279,8 @@ async fn supervise(a: LaunchArgs, z: ZenohArgs, specs: Vec<NodeSpec>) -> anyhow:
             live_rx: live_rx.clone(),
             stop_rx: stop_rx.clone(),
             local: local.clone(),
+            sim_time: sim_time
+                && !crate::drivers::find(&st.spec.driver).is_some_and(|e| e.clock_source),
         };
         tasks.push(tokio::spawn(run_node(st.clone(), ctx)));
     }
@@ -413,6 +425,7 @@ struct NodeCtx {
     live_rx: watch::Receiver<u64>,
     stop_rx: watch::Receiver<bool>,
     local: BTreeSet<Device>,
+    sim_time: bool,
 }
 
 /// Runs one node: waits for its requirements, starts it, forwards its
@@ -474,6 +487,7 @@ async fn run_node(st: Arc<NodeState>, mut ctx: NodeCtx) {
         let mut cmd = Command::new(&ctx.exe);
         cmd.args(&ctx.net)
             .args(["node", &st.spec.driver, "--section", &section_json])
+            .args(if ctx.sim_time { &["--sim-time"][..] } else { &[] })
             .env(SUPERVISOR_ENV, std::process::id().to_string())
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
