@@ -97,7 +97,8 @@ fn gone(pid: u32) -> bool {
 #[test]
 fn launch_runs_the_stack_restarts_a_killed_node_and_stops_cleanly() {
     let cfg = temp_cfg("stack", STACK);
-    let (mut launcher, endpoint, ns) = launch(&cfg, &[]);
+    let logs = cfg.with_file_name("logs");
+    let (mut launcher, endpoint, ns) = launch(&cfg, &["--log-dir", logs.to_str().unwrap()]);
     let s = probe(&endpoint, &ns);
     let tokens = s
         .liveliness()
@@ -155,6 +156,16 @@ fn launch_runs_the_stack_restarts_a_killed_node_and_stops_cleanly() {
     for c in all {
         assert!(gone(c), "child {c} outlived the launcher");
     }
+    // One log file per node, across restarts.
+    let log = std::fs::read_to_string(logs.join("rangertolaser.log")).unwrap();
+    assert_eq!(
+        log.matches("ready: provides 6665:laser:0").count(),
+        2,
+        "{log}"
+    );
+    assert!(std::fs::read_to_string(logs.join("dummy.log"))
+        .unwrap()
+        .contains("ready"));
 }
 
 #[test]
