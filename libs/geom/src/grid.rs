@@ -283,57 +283,72 @@ impl Grid {
             },
         );
         let (w, h) = (self.w as i64, self.h as i64);
-        // Distance along the ray to the next x (y) cell boundary from cell i at parameter t.
+        let shift = TILE.trailing_zeros();
+        let ts = TILE as i64;
+        // Parameter of the next boundary after cell (or tile) `c` on an axis.
         let first = |c: i64, s: i64, p: f64, d: f64| -> f64 {
             if d.abs() < 1e-12 {
                 return f64::INFINITY;
             }
             ((if s > 0 { c + 1 } else { c }) as f64 - p) / d
         };
-        let enter = |t: f64| {
-            let px = gx + dx * (t + 1e-9);
-            let py = gy + dy * (t + 1e-9);
-            (
-                (px.floor() as i64).clamp(0, w - 1),
-                (py.floor() as i64).clamp(0, h - 1),
-            )
-        };
+        // Truncation equals floor here: negative coordinates clamp to 0 anyway.
+        let cell = |p: f64, n: i64| (p as i64).clamp(0, n - 1);
         let mut t = t0;
-        let (mut i, mut j) = enter(t);
+        let (mut i, mut j) = (cell(gx + dx * (t + 1e-9), w), cell(gy + dy * (t + 1e-9), h));
         let mut tx = first(i, sx, gx, dx);
         let mut ty = first(j, sy, gy, dy);
-        let shift = TILE.trailing_zeros();
+        let (mut ti, mut tj) = (i >> shift, j >> shift);
+        let tsf = TILE as f64;
+        let mut ttx = first(ti, sx, gx / tsf, dx) * tsf;
+        let mut tty = first(tj, sy, gy / tsf, dy) * tsf;
+        let (tdx, tdy) = (ddx * tsf, ddy * tsf);
         let (istep, jstep) = (sx as isize, sy as isize * self.w as isize);
+        // Which axis the ray last crossed a tile boundary on, if the cell
+        // position must be recomputed on entering an occupied tile.
+        let mut stale: Option<bool> = None;
         'tiles: loop {
-            let (ti, tj) = (i >> shift, j >> shift);
             let tidx = tj as usize * self.tw + ti as usize;
             if self.tiles[tidx] == 0 && other.is_none_or(|o| o.tiles[tidx] == 0) {
-                // Jump to where the ray leaves this tile.
-                let ex = first(ti, sx, gx / TILE as f64, dx);
-                let ey = first(tj, sy, gy / TILE as f64, dy);
-                let te = ex.min(ey) * TILE as f64;
-                if te >= t1 {
+                // Skip the empty tile: step the tile-level walk only.
+                let cross_x = ttx < tty;
+                t = if cross_x { ttx } else { tty };
+                if t >= t1 {
                     return None;
                 }
-                t = te;
-                let (ni, nj) = enter(t);
-                // Land in the neighbouring tile even when rounding keeps us on the edge.
-                let (ni, nj) = if ni >> shift == ti && nj >> shift == tj {
-                    if ex < ey {
-                        (ni + sx, nj)
-                    } else {
-                        (ni, nj + sy)
-                    }
+                if cross_x {
+                    ttx += tdx;
+                    ti += sx;
                 } else {
-                    (ni, nj)
-                };
-                if ni < 0 || nj < 0 || ni >= w || nj >= h {
+                    tty += tdy;
+                    tj += sy;
+                }
+                if ti < 0
+                    || tj < 0
+                    || ti >= self.tw as i64
+                    || tj as usize * self.tw >= self.tiles.len()
+                {
                     return None;
                 }
-                (i, j) = (ni, nj);
-                tx = first(i, sx, gx, dx);
-                ty = first(j, sy, gy, dy);
+                stale = Some(cross_x);
                 continue;
+            }
+            if let Some(cross_x) = stale.take() {
+                // Enter the tile on the boundary just crossed.
+                if cross_x {
+                    i = if sx > 0 { ti * ts } else { ti * ts + ts - 1 };
+                    j = cell(gy + dy * t, h).clamp(tj * ts, tj * ts + ts - 1);
+                    tx = t + ddx;
+                    ty = first(j, sy, gy, dy);
+                } else {
+                    j = if sy > 0 { tj * ts } else { tj * ts + ts - 1 };
+                    i = cell(gx + dx * t, w).clamp(ti * ts, ti * ts + ts - 1);
+                    ty = t + ddy;
+                    tx = first(i, sx, gx, dx);
+                }
+                if i >= w || j >= h {
+                    return None;
+                }
             }
             // Walk the cells of this occupied tile.
             let mut idx = j as usize * self.w + i as usize;
@@ -366,6 +381,8 @@ impl Grid {
                     }
                     idx = (idx as isize + istep) as usize;
                     if i >> shift != ti {
+                        ti += sx;
+                        ttx += tdx;
                         continue 'tiles;
                     }
                 } else {
@@ -380,6 +397,8 @@ impl Grid {
                     }
                     idx = (idx as isize + jstep) as usize;
                     if j >> shift != tj {
+                        tj += sy;
+                        tty += tdy;
                         continue 'tiles;
                     }
                 }

@@ -71,6 +71,8 @@ pub struct Sim {
     /// Latest readings of each ranger model, one per sensor (empty for other models).
     pub readings: Vec<Vec<Reading>>,
     roots: Vec<usize>,
+    /// Each model's subtree (itself first), depth-first.
+    trees: Vec<Vec<usize>>,
     movable: Vec<bool>,
     /// The cells each movable model occupies now.
     cells: Vec<Vec<(usize, usize)>>,
@@ -172,6 +174,7 @@ impl Sim {
             })
             .collect();
         let colors = world.models.iter().map(|m| m.color).collect();
+        let trees: Vec<Vec<usize>> = (0..n).map(|m| world.subtree(m)).collect();
         let mut sim = Sim {
             world,
             time: 0.0,
@@ -180,6 +183,7 @@ impl Sim {
             colors,
             bases,
             readings,
+            trees,
             roots,
             movable,
             cells: vec![Vec::new(); n],
@@ -234,16 +238,24 @@ impl Sim {
         self.cells[m] = cells;
     }
 
-    /// True when the tree of `root`, moved so that `root` is at `at`, overlaps an obstacle.
-    fn collides(&self, root: usize, at: Pose) -> bool {
+    /// The cells of every body in the tree of `root` if `root` were at `at`.
+    fn tree_cells(&self, root: usize, at: Pose) -> Vec<(usize, Vec<(usize, usize)>)> {
         let old = self.world.global(&self.poses, root).0;
         let shift = at.compose(&old.inverse());
-        for m in self.world.subtree(root) {
-            if self.world.models[m].blocks.is_empty() {
-                continue;
-            }
-            let g = shift.compose(&self.world.global(&self.poses, m).0);
-            for (i, j) in self.body_cells(m, Some(g)) {
+        self.trees[root]
+            .iter()
+            .filter(|&&m| !self.world.models[m].blocks.is_empty())
+            .map(|&m| {
+                let g = shift.compose(&self.world.global(&self.poses, m).0);
+                (m, self.body_cells(m, Some(g)))
+            })
+            .collect()
+    }
+
+    /// True when `cells` (of the tree of `root`) overlap an unrelated obstacle.
+    fn collides(&self, root: usize, cells: &[(usize, Vec<(usize, usize)>)]) -> bool {
+        for (_, cs) in cells {
+            for &(i, j) in cs {
                 for grid in [&self.statics, &self.dynamics] {
                     let c = grid.get(i, j);
                     if c != EMPTY {
@@ -258,10 +270,44 @@ impl Sim {
         false
     }
 
+    /// Moves bodies in the grids to `cells`, computed by `tree_cells`.
+    fn commit(&mut self, cells: Vec<(usize, Vec<(usize, usize)>)>) {
+        for (m, cs) in cells {
+            if !self.in_grid(m) {
+                continue;
+            }
+            let grid = if self.movable[m] {
+                &mut self.dynamics
+            } else {
+                &mut self.statics
+            };
+            for &(i, j) in &self.cells[m] {
+                if grid.get(i, j) == id(m) {
+                    grid.set(i, j, EMPTY);
+                }
+            }
+            for &(i, j) in &cs {
+                grid.set(i, j, id(m));
+            }
+            self.cells[m] = cs;
+        }
+    }
+
+    /// The cells of the tree of `m` (a base carried by another model) if `m` were at `at`.
+    fn tree_cells_moving(&self, m: usize, at: Pose) -> Vec<(usize, Vec<(usize, usize)>)> {
+        let old = self.global(m);
+        let shift = at.compose(&old.inverse());
+        self.trees[m]
+            .iter()
+            .filter(|&&k| !self.world.models[k].blocks.is_empty())
+            .map(|&k| (k, self.body_cells(k, Some(shift.compose(&self.global(k))))))
+            .collect()
+    }
+
     /// Moves model `m` (and what it carries) to `pose`, relative to its parent.
     pub fn set_pose(&mut self, m: usize, pose: Pose) {
         self.poses[m] = pose;
-        for k in self.world.subtree(m) {
+        for k in self.trees[m].clone() {
             self.place(k);
         }
         if let Some(b) = self.bases.iter_mut().find(|b| b.model == m) {
@@ -407,17 +453,29 @@ impl Sim {
                 .compose(&Pose::new(v.x * dt, v.y * dt, v.yaw * dt))
         };
         let moving = v.x != 0.0 || v.y != 0.0 || v.yaw != 0.0;
-        if moving && self.collides(self.roots[m], g_next) {
-            let b = &mut self.bases[bi];
-            b.stall = true;
-            b.vel = Pose::default();
-            return;
+        if moving {
+            let root = self.roots[m];
+            let cells = if root == m {
+                self.tree_cells(root, g_next)
+            } else {
+                self.tree_cells_moving(m, g_next)
+            };
+            if self.collides(root, &cells) {
+                let b = &mut self.bases[bi];
+                b.stall = true;
+                b.vel = Pose::default();
+                return;
+            }
+            self.poses[m] = next;
+            self.commit(cells);
+            if cfg.localization == Localization::Gps {
+                let g = self.global(m);
+                let b = &mut self.bases[bi];
+                b.odom = b.origin.inverse().compose(&g);
+            }
         }
         self.bases[bi].stall = false;
         self.bases[bi].vel = v;
-        if moving {
-            self.set_pose(m, next);
-        }
         if cfg.localization == Localization::Odom {
             let e = cfg.odom_error;
             let b = &mut self.bases[bi];
@@ -434,7 +492,22 @@ impl Sim {
         let rangers: Vec<usize> = (0..self.world.models.len())
             .filter(|&r| !self.world.models[r].sensors.is_empty())
             .collect();
-        let threads = self.world.threads.clamp(1, 64).min(rangers.len().max(1));
+        // Threads pay off only when a step casts thousands of rays.
+        let rays: usize = rangers
+            .iter()
+            .map(|&r| {
+                self.world.models[r]
+                    .sensors
+                    .iter()
+                    .map(|s| s.samples)
+                    .sum::<usize>()
+            })
+            .sum();
+        let threads = if rays < 2000 {
+            1
+        } else {
+            self.world.threads.clamp(1, 64).min(rangers.len().max(1))
+        };
         if threads <= 1 {
             for &r in &rangers {
                 let mut out = std::mem::take(&mut self.readings[r]);
