@@ -238,17 +238,14 @@ impl Sim {
         self.cells[m] = cells;
     }
 
-    /// The cells of every body in the tree of `root` if `root` were at `at`.
-    fn tree_cells(&self, root: usize, at: Pose) -> Vec<(usize, Vec<(usize, usize)>)> {
-        let old = self.world.global(&self.poses, root).0;
-        let shift = at.compose(&old.inverse());
-        self.trees[root]
+    /// The cells of every body in the tree of `m` (itself and what it
+    /// carries) if `m` were at the global pose `at`.
+    fn tree_cells(&self, m: usize, at: Pose) -> Vec<(usize, Vec<(usize, usize)>)> {
+        let shift = at.compose(&self.global(m).inverse());
+        self.trees[m]
             .iter()
-            .filter(|&&m| !self.world.models[m].blocks.is_empty())
-            .map(|&m| {
-                let g = shift.compose(&self.world.global(&self.poses, m).0);
-                (m, self.body_cells(m, Some(g)))
-            })
+            .filter(|&&k| !self.world.models[k].blocks.is_empty())
+            .map(|&k| (k, self.body_cells(k, Some(shift.compose(&self.global(k))))))
             .collect()
     }
 
@@ -291,17 +288,6 @@ impl Sim {
             }
             self.cells[m] = cs;
         }
-    }
-
-    /// The cells of the tree of `m` (a base carried by another model) if `m` were at `at`.
-    fn tree_cells_moving(&self, m: usize, at: Pose) -> Vec<(usize, Vec<(usize, usize)>)> {
-        let old = self.global(m);
-        let shift = at.compose(&old.inverse());
-        self.trees[m]
-            .iter()
-            .filter(|&&k| !self.world.models[k].blocks.is_empty())
-            .map(|&k| (k, self.body_cells(k, Some(shift.compose(&self.global(k))))))
-            .collect()
     }
 
     /// Moves model `m` (and what it carries) to `pose`, relative to its parent.
@@ -455,11 +441,7 @@ impl Sim {
         let moving = v.x != 0.0 || v.y != 0.0 || v.yaw != 0.0;
         if moving {
             let root = self.roots[m];
-            let cells = if root == m {
-                self.tree_cells(root, g_next)
-            } else {
-                self.tree_cells_moving(m, g_next)
-            };
+            let cells = self.tree_cells(m, g_next);
             if self.collides(root, &cells) {
                 let b = &mut self.bases[bi];
                 b.stall = true;
