@@ -25,8 +25,8 @@ use std::time::Duration;
 use serde::Deserialize;
 use troupe_geom::Pose;
 use troupe_msgs::{
-    common, laser, position2d, ranger, simulation, sonar, DevAddr, Device, Interface, Pose3d,
-    Size3d,
+    common, fiducial, laser, position2d, ranger, simulation, sonar, DevAddr, Device, Interface,
+    Pose3d, Size3d,
 };
 use troupe_node::{Ctx, Driver, Event, NodeError, Result, Section};
 
@@ -79,6 +79,8 @@ enum Source {
     Ranger { model: usize },
     Laser { model: usize },
     Sonar { model: usize },
+    Blobfinder { model: usize },
+    Fiducial { model: usize },
 }
 
 /// The stage driver.
@@ -116,7 +118,9 @@ fn resolve(
         Interface::Laser => free(&|m| is_ranger(m) && w.models[m].sensors.len() == 1 && w.models[m].sensors[0].samples > 1, used)
             .or_else(|| free(&is_ranger, used)),
         Interface::Sonar => free(&|m| is_ranger(m) && w.models[m].sensors.len() > 1, used).or_else(|| free(&is_ranger, used)),
-        other => return Err(format!("{dev}: Troupe's stage does not simulate {other} devices yet (it serves position2d, ranger, laser, sonar and simulation)")),
+        Interface::Blobfinder => free(&|m| w.models[m].kind == Kind::Blobfinder, used),
+        Interface::Fiducial => free(&|m| w.models[m].kind == Kind::Fiducial, used),
+        other => return Err(format!("{dev}: Troupe's stage does not simulate {other} devices yet (it serves position2d, ranger, laser, sonar, blobfinder, fiducial and simulation)")),
     };
     let Some(m) = pick else {
         return Err(format!(
@@ -131,6 +135,8 @@ fn resolve(
         },
         Interface::Ranger => Source::Ranger { model: m },
         Interface::Laser => Source::Laser { model: m },
+        Interface::Blobfinder => Source::Blobfinder { model: m },
+        Interface::Fiducial => Source::Fiducial { model: m },
         _ => Source::Sonar { model: m },
     })
 }
@@ -378,6 +384,8 @@ impl Stage {
                         .collect();
                     ctx.publish(&dev, &sonar::Ranges { ranges })?;
                 }
+                Source::Blobfinder { model } => ctx.publish(&dev, &self.sim.blobs(model))?,
+                Source::Fiducial { model } => ctx.publish(&dev, &self.sim.fiducials(model))?,
             }
         }
         Ok(())
@@ -522,6 +530,26 @@ impl Stage {
                     let n = r.name.clone();
                     r.nack(format!("stage sonar does not handle `{n}`"));
                 }
+            }
+            Source::Fiducial { model } => {
+                if r.is::<fiducial::GetGeom>() {
+                    let m = &self.sim.world.models[model];
+                    r.reply(&fiducial::Geom {
+                        pose: pose3(m.pose, m.z),
+                        size: size3(m.size),
+                        fiducial_size: troupe_msgs::Size2d {
+                            width: 0.0,
+                            length: 0.0,
+                        },
+                    });
+                } else {
+                    let n = r.name.clone();
+                    r.nack(format!("stage fiducial does not handle `{n}`"));
+                }
+            }
+            Source::Blobfinder { .. } => {
+                let n = r.name.clone();
+                r.nack(format!("stage blobfinder does not handle `{n}`"));
             }
             Source::Simulation => self.simulation(r)?,
         }
@@ -791,6 +819,7 @@ mod tests {
         assert!(e(r#"["position2d:0","position2d:1"]"#, "r0")
             .contains("has no unused position2d model"));
         assert!(e(r#"["map:0"]"#, "r0").contains("does not simulate map devices yet"));
+        assert!(e(r#"["blobfinder:0"]"#, "r0").contains("has no unused blobfinder model"));
         let e = Harness::<Stage>::from_json(r#"{"name":"stage","provides":["simulation:0"]}"#)
             .err()
             .unwrap()

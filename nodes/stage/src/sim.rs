@@ -550,6 +550,133 @@ impl Sim {
         }
     }
 
+    /// What blobfinder `m` sees now: colour blobs, left to right.
+    pub fn blobs(&self, m: usize) -> troupe_msgs::blobfinder::Data {
+        use troupe_msgs::blobfinder::{Blob, Data};
+        let Some(cfg) = &self.world.models[m].blobfinder else {
+            return Data::default();
+        };
+        let (w, h) = cfg.image;
+        let eye = self.global(m).compose(&self.world.models[m].origin);
+        let root = self.roots[m];
+        // One ray per image column, leftmost column first.
+        let mut cols: Vec<Option<(usize, usize, f64)>> = Vec::with_capacity(w as usize);
+        for c in 0..w {
+            let a =
+                eye.yaw + cfg.pan + cfg.fov / 2.0 - cfg.fov * (f64::from(c) + 0.5) / f64::from(w);
+            let accept = |id: u16| {
+                let o = usize::from(id) - 1;
+                self.roots[o] != root && self.world.models[o].blob_return
+            };
+            let seen = self
+                .statics
+                .cast_layers(Some(&self.dynamics), eye.x, eye.y, a, cfg.range, accept)
+                .and_then(|hit| {
+                    let o = usize::from(hit.id) - 1;
+                    let col = self.colors[o];
+                    cfg.colors
+                        .iter()
+                        .position(|c| {
+                            (c.r - col.r).abs() < 1e-3
+                                && (c.g - col.g).abs() < 1e-3
+                                && (c.b - col.b).abs() < 1e-3
+                        })
+                        .map(|k| (k, o, hit.range))
+                });
+            cols.push(seen);
+        }
+        let vfov = cfg.fov * f64::from(h) / f64::from(w);
+        let mut blobs = Vec::new();
+        let mut c = 0usize;
+        while c < cols.len() {
+            let Some((k, o, r0)) = cols[c] else {
+                c += 1;
+                continue;
+            };
+            let start = c;
+            let mut range = r0;
+            while c + 1 < cols.len()
+                && matches!(cols[c + 1], Some((k2, o2, _)) if k2 == k && o2 == o)
+            {
+                c += 1;
+                range = range.min(cols[c].map_or(range, |x| x.2));
+            }
+            let px = ((self.world.models[o].size[2] / range.max(1e-3))
+                / (2.0 * (vfov / 2.0).tan())
+                * f64::from(h))
+            .min(f64::from(h));
+            let top = ((f64::from(h) - px) / 2.0).max(0.0) as u32;
+            let bottom = (((f64::from(h) + px) / 2.0) as u32).min(h.saturating_sub(1));
+            let col = cfg.colors[k];
+            let rgb = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u32;
+            let (left, right) = (start as u32, c as u32);
+            blobs.push(Blob {
+                id: blobs.len() as u32,
+                color: (rgb(col.r) << 16) | (rgb(col.g) << 8) | rgb(col.b),
+                area: (right - left + 1) * (bottom - top + 1),
+                x: (left + right) / 2,
+                y: (top + bottom) / 2,
+                left,
+                right,
+                top,
+                bottom,
+                range: range as f32,
+            });
+            c += 1;
+        }
+        Data {
+            width: w,
+            height: h,
+            blobs,
+        }
+    }
+
+    /// What fiducial detector `m` sees now.
+    pub fn fiducials(&self, m: usize) -> troupe_msgs::fiducial::Data {
+        use troupe_msgs::fiducial::{Data, Item};
+        let Some(cfg) = &self.world.models[m].fiducial else {
+            return Data::default();
+        };
+        let eye = self.global(m).compose(&self.world.models[m].origin);
+        let root = self.roots[m];
+        let mut items = Vec::new();
+        for (k, target) in self.world.models.iter().enumerate() {
+            if target.fiducial_return == 0 || self.roots[k] == root {
+                continue;
+            }
+            let rel = eye.inverse().compose(&self.global(k));
+            let range = rel.x.hypot(rel.y);
+            let bearing = rel.y.atan2(rel.x);
+            if range < cfg.range_min || range > cfg.range_max || bearing.abs() > cfg.fov / 2.0 {
+                continue;
+            }
+            // Seen only if the first thing along the line of sight is the target.
+            let accept = |id: u16| self.roots[usize::from(id) - 1] != root;
+            let first = self.statics.cast_layers(
+                Some(&self.dynamics),
+                eye.x,
+                eye.y,
+                eye.yaw + bearing,
+                range,
+                accept,
+            );
+            if first.is_some_and(|h| self.roots[usize::from(h.id) - 1] != self.roots[k]) {
+                continue;
+            }
+            let pose = troupe_msgs::Pose3d::planar(rel.x, rel.y, rel.yaw);
+            items.push(Item {
+                id: if range <= cfg.range_max_id {
+                    target.fiducial_return
+                } else {
+                    -1
+                },
+                pose,
+                upose: troupe_msgs::Pose3d::default(),
+            });
+        }
+        Data { fiducials: items }
+    }
+
     /// The global pose of model `m`.
     pub fn global(&self, m: usize) -> Pose {
         self.world.global(&self.poses, m).0
@@ -684,6 +811,44 @@ mod tests {
         s.set_pose(b, Pose::new(2.0, 3.0, 0.0));
         s.step();
         assert_eq!(s.readings[r][0].ranges[0], 8.0);
+    }
+
+    #[test]
+    fn blobs_come_left_to_right_with_their_colours() {
+        let s = sim(
+            "blobs",
+            "position ( name \"r\" size [0.4 0.4 0.2] blobfinder ( colors_count 2 colors [\"red\" \"green\"] image [80 60] range 8 fov 60 ) )\n\
+             model ( name \"a\" pose [3 1 0 0] size [0.3 0.3 0.5] color \"red\" )\n\
+             model ( name \"b\" pose [3 -1 0 0] size [0.3 0.3 0.5] color \"green\" )\n\
+             model ( name \"c\" pose [3 0 0 0] size [0.3 0.3 0.5] color \"blue\" )\n",
+        );
+        let bf = s.world.names["r.blobfinder:0"];
+        let d = s.blobs(bf);
+        assert_eq!((d.width, d.height), (80, 60));
+        let colors: Vec<u32> = d.blobs.iter().map(|b| b.color).collect();
+        // Left of the image is the robot's left (+y): red first, blue untracked.
+        assert_eq!(colors, vec![0xFF0000, 0x00FF00]);
+        assert!(d.blobs[0].right < d.blobs[1].left);
+        assert!((d.blobs[0].range - 2.99).abs() < 0.2, "{:?}", d.blobs[0]);
+    }
+
+    #[test]
+    fn fiducials_in_range_and_sight_are_reported() {
+        let s = sim(
+            "fiducials",
+            "position ( name \"r\" size [0.4 0.4 0.2] fiducial ( range_max 8 range_max_id 3 fov 180 ) )\n\
+             model ( name \"near\" pose [2 0 0 0] size [0.2 0.2 0.5] fiducial_return 7 )\n\
+             model ( name \"far\" pose [0 4 0 0] size [0.2 0.2 0.5] fiducial_return 9 )\n\
+             model ( name \"behind\" pose [-2 0 0 0] size [0.2 0.2 0.5] fiducial_return 5 )\n\
+             model ( name \"hidden\" pose [5 0 0 0] size [0.2 0.2 0.5] fiducial_return 3 )\n",
+        );
+        let f = s.fiducials(s.world.names["r.fiducial:0"]);
+        let mut ids: Vec<i32> = f.fiducials.iter().map(|i| i.id).collect();
+        ids.sort();
+        // near: identified; far: seen but beyond range_max_id; behind: outside the fov; hidden: behind near.
+        assert_eq!(ids, vec![-1, 7]);
+        let near = f.fiducials.iter().find(|i| i.id == 7).unwrap();
+        assert!((near.pose.x - 2.0).abs() < 1e-9 && near.pose.y.abs() < 1e-9);
     }
 
     #[test]

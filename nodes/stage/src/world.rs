@@ -95,6 +95,34 @@ pub struct Sensor {
     pub samples: usize,
 }
 
+/// A blobfinder's settings (Stage's defaults).
+#[derive(Debug, Clone, PartialEq)]
+pub struct BlobfinderCfg {
+    /// Colours it tracks, in order.
+    pub colors: Vec<Color>,
+    /// Image width and height, pixels.
+    pub image: (u32, u32),
+    /// Metres.
+    pub range: f64,
+    /// Horizontal field of view, radians.
+    pub fov: f64,
+    /// Pan, radians.
+    pub pan: f64,
+}
+
+/// A fiducial detector's settings (Stage's defaults).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FiducialCfg {
+    /// Metres.
+    pub range_min: f64,
+    /// Metres: fiducials are seen up to here…
+    pub range_max: f64,
+    /// …and identified up to here.
+    pub range_max_id: f64,
+    /// Radians.
+    pub fov: f64,
+}
+
 /// A model with everything the simulator needs.
 #[derive(Debug, Clone)]
 pub struct ModelDef {
@@ -136,6 +164,10 @@ pub struct ModelDef {
     pub sensors: Vec<Sensor>,
     /// Controllers (`ctrl "wander"`).
     pub ctrl: Vec<String>,
+    /// Blobfinder settings, for blobfinders.
+    pub blobfinder: Option<BlobfinderCfg>,
+    /// Fiducial detector settings, for fiducial models.
+    pub fiducial: Option<FiducialCfg>,
     /// Where it was written.
     pub pos: Pos,
 }
@@ -548,6 +580,42 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
         } else {
             None
         };
+        let blobfinder = if kind == Kind::Blobfinder {
+            let mut colors = Vec::new();
+            if e.props.contains_key("colors") {
+                let n = r.int(e, "colors_count", 0).max(0) as usize;
+                let p = &e.props["colors"];
+                if p.values.len() < n {
+                    return Err(short(p, "colors", n, "(one per colors_count)"));
+                }
+                for v in p.values.iter().take(n) {
+                    colors.push(colors::lookup(v.text()).unwrap_or(colors::RED));
+                }
+            }
+            let image = match e.props.get("image") {
+                Some(p) if p.values.len() >= 2 => (
+                    p.values[0].num().max(1.0) as u32,
+                    p.values[1].num().max(1.0) as u32,
+                ),
+                Some(p) => return Err(short(p, "image", 2, "[width height]")),
+                None => (80, 60),
+            };
+            Some(BlobfinderCfg {
+                colors,
+                image,
+                range: r.float(e, "range", 12.0),
+                fov: r.angle(e, "fov", PI / 3.0),
+                pan: r.angle(e, "pan", 0.0),
+            })
+        } else {
+            None
+        };
+        let fiducial = (kind == Kind::Fiducial).then(|| FiducialCfg {
+            range_min: r.length(e, "range_min", 0.0),
+            range_max: r.length(e, "range_max", 8.0),
+            range_max_id: r.length(e, "range_max_id", 5.0),
+            fov: r.angle(e, "fov", PI),
+        });
         let ctrl = match e.props.get("ctrl") {
             Some(p) => p.values.iter().map(|v| v.text().to_owned()).collect(),
             None => Vec::new(),
@@ -671,6 +739,8 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
             position,
             sensors,
             ctrl,
+            blobfinder,
+            fiducial,
             pos: e.pos.clone(),
         });
         raw_blocks.push(blocks);
