@@ -25,8 +25,8 @@ use std::time::Duration;
 use serde::Deserialize;
 use troupe_geom::Pose;
 use troupe_msgs::{
-    common, fiducial, laser, position2d, ranger, simulation, sonar, DevAddr, Device, Interface,
-    Pose3d, Size3d,
+    common, fiducial, gripper, laser, position2d, ranger, simulation, sonar, DevAddr, Device,
+    Interface, Pose3d, Size3d,
 };
 use troupe_node::{Ctx, Driver, Event, NodeError, Result, Section};
 
@@ -81,6 +81,7 @@ enum Source {
     Sonar { model: usize },
     Blobfinder { model: usize },
     Fiducial { model: usize },
+    Gripper { model: usize },
 }
 
 /// The stage driver.
@@ -120,7 +121,8 @@ fn resolve(
         Interface::Sonar => free(&|m| is_ranger(m) && w.models[m].sensors.len() > 1, used).or_else(|| free(&is_ranger, used)),
         Interface::Blobfinder => free(&|m| w.models[m].kind == Kind::Blobfinder, used),
         Interface::Fiducial => free(&|m| w.models[m].kind == Kind::Fiducial, used),
-        other => return Err(format!("{dev}: Troupe's stage does not simulate {other} devices yet (it serves position2d, ranger, laser, sonar, blobfinder, fiducial and simulation)")),
+        Interface::Gripper => free(&|m| w.models[m].kind == Kind::Gripper, used),
+        other => return Err(format!("{dev}: Troupe's stage does not simulate {other} devices yet (it serves position2d, ranger, laser, sonar, blobfinder, fiducial, gripper and simulation)")),
     };
     let Some(m) = pick else {
         return Err(format!(
@@ -137,6 +139,7 @@ fn resolve(
         Interface::Laser => Source::Laser { model: m },
         Interface::Blobfinder => Source::Blobfinder { model: m },
         Interface::Fiducial => Source::Fiducial { model: m },
+        Interface::Gripper => Source::Gripper { model: m },
         _ => Source::Sonar { model: m },
     })
 }
@@ -265,6 +268,16 @@ impl Driver for Stage {
                 let Some(&(_, src)) = self.devices.iter().find(|(d, _)| *d == c.device) else {
                     return Ok(());
                 };
+                if let Source::Gripper { model } = src {
+                    if c.is::<gripper::Open>() {
+                        self.sim.grip(model, false);
+                    } else if c.is::<gripper::Close>() {
+                        self.sim.grip(model, true);
+                    } else if !c.is::<gripper::Stop>() {
+                        return Err(c.unexpected());
+                    }
+                    return Ok(());
+                }
                 let Source::Position { base } = src else {
                     return Err(c.unexpected());
                 };
@@ -386,6 +399,23 @@ impl Stage {
                 }
                 Source::Blobfinder { model } => ctx.publish(&dev, &self.sim.blobs(model))?,
                 Source::Fiducial { model } => ctx.publish(&dev, &self.sim.fiducials(model))?,
+                Source::Gripper { model } => {
+                    let st = self.sim.grippers[model].clone().unwrap_or_default();
+                    let state = if st.closed {
+                        gripper::State::Closed
+                    } else {
+                        gripper::State::Open
+                    };
+                    let stored = u8::from(st.held.is_some());
+                    ctx.publish(
+                        &dev,
+                        &gripper::Data {
+                            state,
+                            beams: st.beams,
+                            stored,
+                        },
+                    )?;
+                }
             }
         }
         Ok(())
@@ -545,6 +575,21 @@ impl Stage {
                 } else {
                     let n = r.name.clone();
                     r.nack(format!("stage fiducial does not handle `{n}`"));
+                }
+            }
+            Source::Gripper { model } => {
+                if r.is::<gripper::GetGeom>() {
+                    let m = &self.sim.world.models[model];
+                    r.reply(&gripper::Geom {
+                        pose: pose3(m.pose, m.z),
+                        outer_size: size3(m.size),
+                        inner_size: size3([m.size[0] * 0.66, m.size[1] * 0.66, m.size[2]]),
+                        num_beams: 2,
+                        capacity: 1,
+                    });
+                } else {
+                    let n = r.name.clone();
+                    r.nack(format!("stage gripper does not handle `{n}`"));
                 }
             }
             Source::Blobfinder { .. } => {

@@ -45,6 +45,17 @@ pub struct Base {
     pub wander_turn: f64,
 }
 
+/// A gripper's state.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct GripperState {
+    /// Paddles closed.
+    pub closed: bool,
+    /// The model it holds, and that model's pose in the gripper's frame.
+    pub held: Option<(usize, Pose)>,
+    /// Break beams: bit 0 the inner beam, bit 1 the outer beam.
+    pub beams: u32,
+}
+
 /// One sensor's latest readings.
 #[derive(Debug, Clone, Default)]
 pub struct Reading {
@@ -70,6 +81,8 @@ pub struct Sim {
     pub bases: Vec<Base>,
     /// Latest readings of each ranger model, one per sensor (empty for other models).
     pub readings: Vec<Vec<Reading>>,
+    /// Gripper state of each gripper model (`None` for other models).
+    pub grippers: Vec<Option<GripperState>>,
     roots: Vec<usize>,
     /// Each model's subtree (itself first), depth-first.
     trees: Vec<Vec<usize>>,
@@ -174,6 +187,11 @@ impl Sim {
             })
             .collect();
         let colors = world.models.iter().map(|m| m.color).collect();
+        let grippers = world
+            .models
+            .iter()
+            .map(|m| (m.kind == Kind::Gripper).then(GripperState::default))
+            .collect();
         let trees: Vec<Vec<usize>> = (0..n).map(|m| world.subtree(m)).collect();
         let mut sim = Sim {
             world,
@@ -183,6 +201,7 @@ impl Sim {
             colors,
             bases,
             readings,
+            grippers,
             trees,
             roots,
             movable,
@@ -314,6 +333,7 @@ impl Sim {
         for bi in 0..self.bases.len() {
             self.drive(bi, dt);
         }
+        self.carry();
         self.sense();
         self.time += dt;
         self.steps += 1;
@@ -546,6 +566,100 @@ impl Sim {
                 };
                 rd.ranges[k] = range;
                 rd.intensities[k] = intensity;
+            }
+        }
+    }
+
+    /// Objects a gripper could take: their centre between the paddles, in
+    /// front of the gripper's body, within its width. Returns (model, local x).
+    fn graspable(&self, g: usize) -> Vec<(usize, f64)> {
+        let eye = self.global(g);
+        let size = self.world.models[g].size;
+        let root = self.roots[g];
+        (0..self.world.models.len())
+            .filter(|&k| {
+                self.world.models[k].gripper_return
+                    && self.roots[k] != root
+                    && self.world.models[k].parent.is_none()
+            })
+            .filter_map(|k| {
+                let rel = eye.inverse().compose(&self.global(k));
+                (rel.x >= 0.0 && rel.x <= size[0] && rel.y.abs() <= size[1] / 2.0)
+                    .then_some((k, rel.x))
+            })
+            .collect()
+    }
+
+    /// Opens (false) or closes (true) gripper `g`: closing takes the nearest
+    /// graspable object, opening drops what it holds where it is.
+    pub fn grip(&mut self, g: usize, close: bool) {
+        let Some(state) = self.grippers[g].clone() else {
+            return;
+        };
+        let mut state = state;
+        if close && !state.closed {
+            let mut can = self.graspable(g);
+            can.sort_by(|a, b| a.1.total_cmp(&b.1));
+            if let Some(&(k, _)) = can.first() {
+                let rel = self.global(g).inverse().compose(&self.global(k));
+                state.held = Some((k, rel));
+                // Carried: it moves with the robot and is part of it for sensors and collisions.
+                self.roots[k] = self.roots[g];
+                if !self.movable[k] {
+                    for t in self.trees[k].clone() {
+                        self.unplace(t);
+                        self.movable[t] = true;
+                        self.place(t);
+                    }
+                }
+            }
+        }
+        if !close {
+            if let Some((k, _)) = state.held.take() {
+                for t in self.trees[k].clone() {
+                    self.roots[t] = self.world.root(t);
+                }
+            }
+        }
+        state.closed = close;
+        self.grippers[g] = Some(state);
+    }
+
+    /// Empties the cells model `m` holds in its grid.
+    fn unplace(&mut self, m: usize) {
+        let grid = if self.movable[m] {
+            &mut self.dynamics
+        } else {
+            &mut self.statics
+        };
+        for &(i, j) in &self.cells[m] {
+            if grid.get(i, j) == id(m) {
+                grid.set(i, j, EMPTY);
+            }
+        }
+        self.cells[m].clear();
+    }
+
+    /// Moves held objects with their grippers and updates the break beams.
+    fn carry(&mut self) {
+        for g in 0..self.grippers.len() {
+            let Some(state) = self.grippers[g].clone() else {
+                continue;
+            };
+            if let Some((k, rel)) = state.held {
+                let to = self.global(g).compose(&rel);
+                self.set_pose(k, to);
+            }
+            let half = self.world.models[g].size[0] / 2.0;
+            let beams = match state.held {
+                Some(_) => 0b11,
+                None => self
+                    .graspable(g)
+                    .iter()
+                    .fold(0, |b, &(_, x)| b | if x < half { 1 } else { 2 }),
+            };
+            if let Some(st) = &mut self.grippers[g] {
+                st.beams = beams;
             }
         }
     }
@@ -849,6 +963,38 @@ mod tests {
         assert_eq!(ids, vec![-1, 7]);
         let near = f.fiducials.iter().find(|i| i.id == 7).unwrap();
         assert!((near.pose.x - 2.0).abs() < 1e-9 && near.pose.y.abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_gripper_picks_up_carries_and_drops_a_box() {
+        let mut s = sim(
+            "gripper",
+            "position ( name \"r\" size [0.4 0.4 0.2] acceleration_bounds [-9 9 -9 9 -9 9 -900 900] gripper ( pose [0.3 0 0 0] size [0.2 0.3 0.1] ) )\n\
+             model ( name \"box\" pose [0.5 0 0 0] size [0.1 0.1 0.1] gripper_return 1 obstacle_return 1 )\n",
+        );
+        let g = s.world.names["r.gripper:0"];
+        let bx = s.world.names["box"];
+        s.step();
+        assert_eq!(
+            s.grippers[g].as_ref().unwrap().beams,
+            0b10,
+            "the box breaks the outer beam"
+        );
+        s.grip(g, true);
+        s.bases[0].cmd = Some(Command::Vel(Pose::new(0.5, 0.0, 0.0)));
+        for _ in 0..10 {
+            s.step();
+        }
+        assert!(!s.bases[0].stall, "a held box is part of the robot");
+        let p = s.global(bx);
+        assert!((p.x - 1.0).abs() < 0.02, "carried 0.5 m: {p:?}");
+        s.grip(g, false);
+        s.bases[0].cmd = Some(Command::Vel(Pose::new(-0.5, 0.0, 0.0)));
+        for _ in 0..10 {
+            s.step();
+        }
+        assert!((s.global(bx).x - 1.0).abs() < 0.02, "dropped where it was");
+        assert_eq!(s.grippers[g].as_ref().unwrap().held, None);
     }
 
     #[test]
