@@ -1042,4 +1042,25 @@ mod compat {
         }
         assert!(travelled > 20.0, "wandered only {travelled} m in 300 s");
     }
+
+    #[test]
+    fn robot1_of_everything_world_sees_what_player_saw() {
+        let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../../shared/compat/stage/everything_nocamera.world");
+        if !p.exists() {
+            eprintln!("skipping: ../shared/compat is absent");
+            return;
+        }
+        let s = Sim::new(crate::world::load(&p).unwrap()).unwrap();
+        let bf = s.world.names["robot1.blobfinder:0"];
+        let d = s.blobs(bf);
+        // The Player transcript (cpp-blob-fiducial-gripper) shows an 80x60 image with 5 blobs.
+        assert_eq!((d.width, d.height, d.blobs.len()), (80, 60, 5));
+        assert!(
+            d.blobs.windows(2).all(|w| w[0].right < w[1].left),
+            "left to right"
+        );
+        let f = s.fiducials(s.world.names["robot1.fiducial:0"]);
+        assert!(!f.fiducials.is_empty());
+    }
 }
