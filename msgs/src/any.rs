@@ -59,6 +59,7 @@ any! {
     SimulationGetPose2d(simulation::GetPose2d), SimulationPose2d(simulation::Pose2dOf),
     SimulationSetPose2d(simulation::SetPose2d), SimulationGetProperty(simulation::GetProperty),
     SimulationProperty(simulation::Property), SimulationSetProperty(simulation::SetProperty),
+    SimulationStep(simulation::Step),
     BlobfinderData(blobfinder::Data),
     GripperData(gripper::Data), GripperOpen(gripper::Open), GripperClose(gripper::Close),
     GripperStop(gripper::Stop), GripperGeom(gripper::Geom), GripperGetGeom(gripper::GetGeom),

@@ -85,3 +85,12 @@ pub struct SetProperty {
     pub value: Value,
 }
 message!(SetProperty, "simulation/set_property@1", req "set_property" -> Ack);
+
+/// Advances a simulator that steps only when told by `steps` steps
+/// (a Troupe extension, for deterministic tests); the reply comes after them.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Step {
+    /// Steps of `interval_sim` each.
+    pub steps: u32,
+}
+message!(Step, "simulation/step@1", req "step" -> Ack);

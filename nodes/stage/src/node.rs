@@ -59,6 +59,8 @@ pub struct Options {
     pub speedup: Option<f64>,
     /// Overrides the world's `quit_time` (simulated seconds, 0 = never).
     pub quit_time: Option<f64>,
+    /// Step only on `simulation` `step` requests (deterministic tests).
+    pub step_when_told: Option<Switch>,
 }
 
 /// A cfg on/off value: `1`, `0`, `yes`, `true`…
@@ -88,7 +90,7 @@ enum Source {
 pub struct Stage {
     sim: Sim,
     devices: Vec<(Device, Source)>,
-    period: Duration,
+    period: Option<Duration>,
     steps_per_tick: u32,
     quit_time: f64,
 }
@@ -229,11 +231,13 @@ impl Driver for Stage {
             // As fast as possible, in small batches so commands and requests interleave.
             (Duration::from_micros(1), 10)
         };
+        let told = matches!(o.step_when_told, Some(Switch::Bool(true)))
+            || matches!(o.step_when_told, Some(Switch::Num(n)) if n != 0.0);
         Ok(Stage {
             quit_time: o.quit_time.unwrap_or(sim.world.quit_time),
             sim,
             devices,
-            period,
+            period: (!told).then_some(period),
             steps_per_tick,
         })
     }
@@ -241,29 +245,13 @@ impl Driver for Stage {
     fn setup(&mut self, ctx: &mut Ctx) -> Result<()> {
         ctx.set_time(self.sim.time)?;
         self.publish(ctx)?;
-        ctx.set_tick(Some(self.period));
+        ctx.set_tick(self.period);
         Ok(())
     }
 
     fn on_event(&mut self, ctx: &mut Ctx, event: Event) -> Result<()> {
         match event {
-            Event::Tick => {
-                for _ in 0..self.steps_per_tick {
-                    self.sim.step();
-                    ctx.set_time(self.sim.time)?;
-                    self.publish(ctx)?;
-                    if self.quit_time > 0.0 && self.sim.time >= self.quit_time - 1e-9 {
-                        tracing::info!(
-                            "quit_time {} s reached after {} steps",
-                            self.quit_time,
-                            self.sim.steps
-                        );
-                        ctx.request_stop();
-                        break;
-                    }
-                }
-                Ok(())
-            }
+            Event::Tick => self.advance(ctx, self.steps_per_tick),
             Event::Command(c) => {
                 let Some(&(_, src)) = self.devices.iter().find(|(d, _)| *d == c.device) else {
                     return Ok(());
@@ -301,6 +289,12 @@ impl Driver for Stage {
                     r.nack("no such device");
                     return Ok(());
                 };
+                if matches!(src, Source::Simulation) && r.is::<simulation::Step>() {
+                    let n = r.decode::<simulation::Step>()?.steps;
+                    self.advance(ctx, n)?;
+                    r.reply(&common::Ack);
+                    return Ok(());
+                }
                 self.request(src, r)
             }
             Event::Data(_) | Event::Reply(_) => Ok(()),
@@ -601,6 +595,25 @@ impl Stage {
         Ok(())
     }
 
+    /// Takes up to `steps` steps, publishing after each; stops at quit_time.
+    fn advance(&mut self, ctx: &mut Ctx, steps: u32) -> Result<()> {
+        for _ in 0..steps {
+            self.sim.step();
+            ctx.set_time(self.sim.time)?;
+            self.publish(ctx)?;
+            if self.quit_time > 0.0 && self.sim.time >= self.quit_time - 1e-9 {
+                tracing::info!(
+                    "quit_time {} s reached after {} steps",
+                    self.quit_time,
+                    self.sim.steps
+                );
+                ctx.request_stop();
+                break;
+            }
+        }
+        Ok(())
+    }
+
     fn simulation(&mut self, r: troupe_node::Request) -> Result<()> {
         let find = |sim: &Sim, name: &str| sim.world.names.get(name).copied();
         if r.is::<simulation::GetPose2d>() {
@@ -837,6 +850,25 @@ mod tests {
             .unwrap()
             .unwrap_err()
             .contains("no model named `nobody`"));
+    }
+
+    #[test]
+    fn step_when_told_steps_only_on_request() {
+        let w = world_file("told", WORLD);
+        let mut h = Harness::<Stage>::from_json(&format!(
+            r#"{{"name":"stage","provides":["simulation:0"],"options":{{"worldfile":"{}","step_when_told":1}}}}"#,
+            w.display()
+        ))
+        .unwrap();
+        assert_eq!(h.tick_period(), None);
+        let p = h
+            .request(
+                dev(Interface::Simulation, 0),
+                &simulation::Step { steps: 3 },
+            )
+            .unwrap();
+        assert!(h.reply::<common::Ack>(p).unwrap().is_ok());
+        assert!((h.now() - 0.3).abs() < 1e-9, "{}", h.now());
     }
 
     #[test]
