@@ -57,6 +57,7 @@ another. Ctrl-C stops the nodes in reverse start order.")]
   troupe node rangertolaser --requires ranger:0 --provides laser:0
   troupe node rangertolaser --section '{\"name\":\"rangertolaser\",\"requires\":[\"ranger:0\"],\"provides\":[\"laser:0\"]}'
   troupe node stage --world worlds/simple.world      # headless; exits at the world's quit_time
+  troupe node stage --world w.world -o quit_time=60 -o speedup=0 --snapshot w.png
 
 The section is what a `driver ( … )` block of a Player .cfg says; flags add to it.
 The node waits for every required device to be live, then announces its own.")]
@@ -129,6 +130,10 @@ pub struct NodeArgs {
     /// The world file of the `stage` driver (sets its `worldfile` option).
     #[arg(long, value_name = "FILE")]
     pub world: Option<std::path::PathBuf>,
+
+    /// With `stage`: write a PNG of the world when the node stops.
+    #[arg(long, value_name = "FILE.png")]
+    pub snapshot: Option<std::path::PathBuf>,
 
     /// Follow the simulator's clock (sim/clock) instead of wall time.
     #[arg(long)]
@@ -240,6 +245,11 @@ pub fn node(a: NodeArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         section
             .options
             .insert("worldfile".into(), w.display().to_string().into());
+    }
+    if let Some(p) = &a.snapshot {
+        section
+            .options
+            .insert("snapshot".into(), p.display().to_string().into());
     }
     for o in &a.options {
         let (k, v) = o

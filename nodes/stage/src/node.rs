@@ -61,6 +61,8 @@ pub struct Options {
     pub quit_time: Option<f64>,
     /// Step only on `simulation` `step` requests (deterministic tests).
     pub step_when_told: Option<Switch>,
+    /// Write a PNG of the world here when the node stops.
+    pub snapshot: Option<PathBuf>,
 }
 
 /// A cfg on/off value: `1`, `0`, `yes`, `true`…
@@ -93,6 +95,7 @@ pub struct Stage {
     period: Option<Duration>,
     steps_per_tick: u32,
     quit_time: f64,
+    snapshot: Option<PathBuf>,
 }
 
 /// Models already serving a device of each interface. A laser or sonar may
@@ -239,6 +242,7 @@ impl Driver for Stage {
             devices,
             period: (!told).then_some(period),
             steps_per_tick,
+            snapshot: o.snapshot.clone(),
         })
     }
 
@@ -302,6 +306,16 @@ impl Driver for Stage {
     }
 
     fn shutdown(&mut self, ctx: &mut Ctx) -> Result<()> {
+        if let Some(p) = &self.snapshot {
+            match self.sim.snapshot(1000).save(p) {
+                Ok(()) => tracing::info!(
+                    "snapshot of the world at {:.1} s written to {}",
+                    self.sim.time,
+                    p.display()
+                ),
+                Err(e) => tracing::error!("cannot write snapshot {}: {e}", p.display()),
+            }
+        }
         // Stop every robot, as a real base's driver would.
         for b in &mut self.sim.bases {
             b.cmd = Some(Command::Vel(Pose::default()));

@@ -791,6 +791,72 @@ impl Sim {
         Data { fiducials: items }
     }
 
+    /// A picture of the world: obstacles grey, bodies in their colours,
+    /// range readings as light rays, at most `max_px` pixels across.
+    pub fn snapshot(&self, max_px: u32) -> image::RgbImage {
+        let (w, h) = self.statics.size();
+        let scale = (w.max(h) as f64 / f64::from(max_px.max(16))).max(1.0);
+        let (iw, ih) = (
+            ((w as f64) / scale).ceil() as u32,
+            ((h as f64) / scale).ceil() as u32,
+        );
+        let mut img = image::RgbImage::from_pixel(iw, ih, image::Rgb([255, 255, 255]));
+        let px = |i: usize, j: usize| {
+            (
+                (i as f64 / scale) as u32,
+                ih - 1 - ((j as f64 / scale) as u32).min(ih - 1),
+            )
+        };
+        let rgb = |c: Color| {
+            image::Rgb([
+                (c.r * 255.0) as u8,
+                (c.g * 255.0) as u8,
+                (c.b * 255.0) as u8,
+            ])
+        };
+        // Rays first, bodies over them.
+        let (x0, y0) = self.statics.origin();
+        let res = self.statics.resolution();
+        for (r, rd) in self.readings.iter().enumerate() {
+            if rd.is_empty() {
+                continue;
+            }
+            let base = self.global(r).compose(&self.world.models[r].origin);
+            for (s, reading) in self.world.models[r].sensors.iter().zip(rd) {
+                let o = base.compose(&s.pose);
+                for (k, &range) in reading.ranges.iter().enumerate() {
+                    let a = if s.samples > 1 {
+                        o.yaw - s.fov / 2.0 + s.fov * k as f64 / (s.samples - 1) as f64
+                    } else {
+                        o.yaw
+                    };
+                    let end = (o.x + range * a.cos(), o.y + range * a.sin());
+                    self.statics.segment_cells((o.x, o.y), end, &mut |i, j| {
+                        let (x, y) = px(i, j);
+                        if x < iw {
+                            img.put_pixel(x, y, image::Rgb([170, 210, 255]));
+                        }
+                    });
+                }
+            }
+        }
+        let _ = (x0, y0, res);
+        for (grid, _) in [(&self.statics, 0), (&self.dynamics, 1)] {
+            for j in 0..h {
+                for i in 0..w {
+                    let c = grid.get(i, j);
+                    if c != EMPTY {
+                        let (x, y) = px(i, j);
+                        if x < iw {
+                            img.put_pixel(x, y, rgb(self.colors[usize::from(c) - 1]));
+                        }
+                    }
+                }
+            }
+        }
+        img
+    }
+
     /// The global pose of model `m`.
     pub fn global(&self, m: usize) -> Pose {
         self.world.global(&self.poses, m).0
