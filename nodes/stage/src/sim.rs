@@ -1064,6 +1064,18 @@ mod tests {
     }
 
     #[test]
+    fn snapshots_show_walls_robots_and_rays() {
+        let mut s = sim("snap", &format!("{ROOM}position ( name \"r\" color \"red\" size [0.4 0.4 0.2] ranger ( sensor ( range [0 8] fov 90 samples 10 ) ) )\n"));
+        s.step();
+        let img = s.snapshot(200);
+        assert!(img.width() <= 200 && img.height() <= 200 && img.width() > 100);
+        let count = |c: [u8; 3]| img.pixels().filter(|p| p.0 == c).count();
+        assert!(count([255, 0, 0]) > 0, "the red robot");
+        assert!(count([170, 210, 255]) > 0, "its rays");
+        assert!(count([255, 0, 0]) < count([255, 255, 255]));
+    }
+
+    #[test]
     fn goto_reaches_the_goal() {
         let mut s = sim("goto", "position ( name \"r\" size [0.4 0.4 0.2] )\n");
         s.bases[0].cmd = Some(Command::GoTo(Pose::new(1.0, 1.0, 0.0)));
