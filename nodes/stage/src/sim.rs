@@ -235,22 +235,22 @@ impl Sim {
         out
     }
 
-    /// (Re)writes model `m`'s body into its grid.
+    /// (Re)writes model `m`'s body into its grid at its current pose.
     fn place(&mut self, m: usize) {
-        if !self.in_grid(m) {
-            return;
+        if self.in_grid(m) {
+            let cells = self.body_cells(m, None);
+            self.occupy(m, cells);
         }
-        let cells = self.body_cells(m, None);
+    }
+
+    /// Moves model `m`'s body in its grid from its old cells to `cells`.
+    fn occupy(&mut self, m: usize, cells: Vec<(usize, usize)>) {
+        self.unplace(m);
         let grid = if self.movable[m] {
             &mut self.dynamics
         } else {
             &mut self.statics
         };
-        for &(i, j) in &self.cells[m] {
-            if grid.get(i, j) == id(m) {
-                grid.set(i, j, EMPTY);
-            }
-        }
         for &(i, j) in &cells {
             grid.set(i, j, id(m));
         }
@@ -289,23 +289,9 @@ impl Sim {
     /// Moves bodies in the grids to `cells`, computed by `tree_cells`.
     fn commit(&mut self, cells: Vec<(usize, Vec<(usize, usize)>)>) {
         for (m, cs) in cells {
-            if !self.in_grid(m) {
-                continue;
+            if self.in_grid(m) {
+                self.occupy(m, cs);
             }
-            let grid = if self.movable[m] {
-                &mut self.dynamics
-            } else {
-                &mut self.statics
-            };
-            for &(i, j) in &self.cells[m] {
-                if grid.get(i, j) == id(m) {
-                    grid.set(i, j, EMPTY);
-                }
-            }
-            for &(i, j) in &cs {
-                grid.set(i, j, id(m));
-            }
-            self.cells[m] = cs;
         }
     }
 
