@@ -113,47 +113,60 @@ fn a_plan_split_across_two_hosts_runs_and_heals_after_a_cut_link() {
     let plan = dir.join("fleet.toml");
     std::fs::write(&plan, PLAN).unwrap();
     let plan = plan.to_str().unwrap();
-    let at = |h: &str| strings(&["--connect", &format!("tcp/{h}:7447"), "--no-multicast"]);
-    let with = |mut v: Vec<String>, more: &[&str]| {
-        v.extend(strings(more));
-        v
+    // Each router listens on an ephemeral port of its host; its banner says which.
+    let endpoint = |p: &mut Proc| {
+        let line = p.first_line();
+        line.trim()
+            .rsplit(' ')
+            .next()
+            .unwrap_or_default()
+            .to_owned()
     };
-
     let mut ra = Proc::troupe_in(
         &hosts.a,
         "router a",
         &strings(&[
             "router",
             "--listen",
-            &format!("tcp/{A}:7447"),
+            &format!("tcp/{A}:0"),
             "--no-multicast",
         ]),
     );
-    ra.first_line();
+    let ea = endpoint(&mut ra);
     let mut rb = Proc::troupe_in(
         &hosts.b,
         "router b",
         &strings(&[
             "router",
             "--listen",
-            &format!("tcp/{B}:7447"),
+            &format!("tcp/{B}:0"),
             "--connect",
-            &format!("tcp/{A}:7447"),
+            &ea,
             "--no-multicast",
         ]),
     );
-    rb.first_line();
-    let mut watch = Proc::troupe_in(&hosts.a, "watch", &with(at(A), &["list", "--watch"]));
+    let eb = endpoint(&mut rb);
+    assert!(
+        ea.starts_with(&format!("tcp/{A}:")) && eb.starts_with(&format!("tcp/{B}:")),
+        "{ea} {eb}"
+    );
+    let at = |e: &str| strings(&["--connect", e, "--no-multicast"]);
+    let with = |mut v: Vec<String>, more: &[&str]| {
+        v.extend(strings(more));
+        v
+    };
+
+    let mut watch = Proc::troupe_in(&hosts.a, "watch", &with(at(&ea), &["list", "--watch"]));
     let events = watch.lines();
     let mut la = Proc::troupe_in(
         &hosts.a,
         "launch a",
-        &with(at(A), &["launch", plan, "--host", "a"]),
+        &with(at(&ea), &["launch", plan, "--host", "a"]),
     );
     let mut lb = Proc::troupe_in(
         &hosts.b,
         "launch b",
-        &with(at(B), &["launch", plan, "--host", "b"]),
+        &with(at(&eb), &["launch", plan, "--host", "b"]),
     );
 
     // Host B's node needs host A's device: both come up, seen from A.
@@ -161,8 +174,8 @@ fn a_plan_split_across_two_hosts_runs_and_heals_after_a_cut_link() {
     expect_line(&events, &["+", "laser:0", "rangertolaser"], LINK_DEADLINE);
 
     // The whole fleet from either host; data from B reaches a client on A.
-    for (ns, h) in [(&hosts.a, A), (&hosts.b, B)] {
-        let mut l = Proc::troupe_in(ns, "list", &with(at(h), &["list"]));
+    for (ns, e) in [(&hosts.a, &ea), (&hosts.b, &eb)] {
+        let mut l = Proc::troupe_in(ns, "list", &with(at(e), &["list"]));
         let out: Vec<String> = l.lines().iter().collect();
         assert!(l.wait().success());
         assert!(
@@ -173,7 +186,7 @@ fn a_plan_split_across_two_hosts_runs_and_heals_after_a_cut_link() {
     let mut echo = Proc::troupe_in(
         &hosts.a,
         "echo",
-        &with(at(A), &["echo", "laser:0", "--count", "1", "--json"]),
+        &with(at(&ea), &["echo", "laser:0", "--count", "1", "--json"]),
     );
     let sample = expect_line(&echo.lines(), &["LaserScan"], LINK_DEADLINE);
     assert!(echo.wait().success());
