@@ -139,6 +139,13 @@ impl Sample {
             .to_owned()
     }
 
+    /// True when both payloads carry the same schema tag (no allocation:
+    /// the inbox compares every new sample with the queued ones).
+    pub fn same_schema(&self, other: &Sample) -> bool {
+        let (a, b) = (self.payload.to_bytes(), other.payload.to_bytes());
+        matches!((codec::schema_of(&a), codec::schema_of(&b)), (Ok(x), Ok(y)) if x == y)
+    }
+
     /// True when the payload is an `M`.
     pub fn is<M: Message>(&self) -> bool {
         matches!(codec::schema_of(&self.payload.to_bytes()), Ok(s) if s == M::SCHEMA)

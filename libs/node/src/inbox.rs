@@ -39,7 +39,7 @@ impl Inbox {
 
     pub(crate) fn push(&self, event: Event) {
         let mut st = self.lock();
-        let same = |a: &Sample, b: &Sample| a.key == b.key && a.schema() == b.schema();
+        let same = |a: &Sample, b: &Sample| a.key == b.key && a.same_schema(b);
         let slot = match &event {
             Event::Data(new) => st
                 .events

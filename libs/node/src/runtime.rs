@@ -435,12 +435,15 @@ fn sim_clock(
         .map_err(z(|| "subscribing to sim/clock".into()))
 }
 
+/// The latest payload of each schema tag, per provided device.
+type Latest = Arc<Mutex<HashMap<Device, Vec<(String, ZBytes)>>>>;
+
 struct ZenohBus {
     session: Session,
     inbox: Arc<Inbox>,
     publishers: HashMap<Device, Publisher<'static>>,
-    /// Latest payload of each schema published on each provided device.
-    latest: Arc<Mutex<HashMap<Device, Vec<ZBytes>>>>,
+    /// Latest payload of each schema (by tag) published on each provided device.
+    latest: Latest,
     subscribers: Vec<Subscriber<()>>,
     queryables: Vec<Queryable<()>>,
     clock_pub: Option<Publisher<'static>>,
@@ -481,7 +484,7 @@ impl ZenohBus {
                     .lock()
                     .unwrap_or_else(|p| p.into_inner())
                     .get(&d)
-                    .cloned()
+                    .map(|h| h.iter().map(|(_, b)| b.clone()).collect::<Vec<_>>())
                     .unwrap_or_default();
                 for p in held {
                     if let Err(e) = q.reply(q.key_expr().clone(), p).wait() {
@@ -536,21 +539,21 @@ impl ZenohBus {
 
 impl Bus for ZenohBus {
     fn publish(&mut self, dev: &Device, payload: Vec<u8>) -> Result<()> {
-        let bytes = ZBytes::from(payload);
-        {
-            let tag = codec::schema_of(&bytes.to_bytes())
-                .unwrap_or("?")
-                .to_owned();
+        let tag = codec::schema_of(&payload).unwrap_or("?");
+        let bytes = {
             let mut latest = self.latest.lock().unwrap_or_else(|p| p.into_inner());
             let held = latest.entry(*dev).or_default();
-            match held
-                .iter_mut()
-                .find(|b| codec::schema_of(&b.to_bytes()).ok() == Some(tag.as_str()))
-            {
-                Some(slot) => *slot = bytes.clone(),
-                None => held.push(bytes.clone()),
-            }
-        }
+            let slot = match held.iter().position(|(t, _)| t == tag) {
+                Some(i) => i,
+                None => {
+                    held.push((tag.to_owned(), ZBytes::default()));
+                    held.len() - 1
+                }
+            };
+            let bytes = ZBytes::from(payload);
+            held[slot].1 = bytes.clone();
+            bytes
+        };
         let publisher = self
             .publishers
             .get(dev)
