@@ -334,9 +334,14 @@ async fn supervise(
     };
 
     // Wait for a signal, or for every node to be done on its own.
+    // A finished task's handle is dropped (None), never polled again.
+    let mut tasks: Vec<Option<tokio::task::JoinHandle<()>>> = tasks.into_iter().map(Some).collect();
     let all_done = async {
         for t in tasks.iter_mut() {
-            let _ = t.await;
+            if let Some(h) = t.as_mut() {
+                let _ = h.await;
+            }
+            *t = None;
         }
     };
     let signalled = tokio::select! {
@@ -352,31 +357,30 @@ async fn supervise(
         orders.sort_unstable();
         orders.dedup();
         for o in orders.into_iter().rev() {
-            let group: Vec<&Arc<NodeState>> =
-                states.iter().filter(|s| s.spec.start_order == o).collect();
-            for s in &group {
-                s.stopping.store(true, Ordering::SeqCst);
-                signal(s, Signal::SIGTERM);
+            let group: Vec<usize> = (0..states.len())
+                .filter(|&i| states[i].spec.start_order == o)
+                .collect();
+            for &i in &group {
+                states[i].stopping.store(true, Ordering::SeqCst);
+                signal(&states[i], Signal::SIGTERM);
             }
+            // A node's task ends once its process has exited.
             let deadline = tokio::time::Instant::now() + grace;
-            for s in &group {
-                while s.pid.lock().unwrap_or_else(|p| p.into_inner()).is_some() {
-                    if tokio::time::Instant::now() >= deadline {
-                        tracing::warn!(
-                            "node `{}` ignored SIGTERM for {:?}; killing it",
-                            s.spec.name,
-                            grace
-                        );
-                        signal(s, Signal::SIGKILL);
-                        s.failed.store(true, Ordering::SeqCst);
-                        break;
-                    }
-                    tokio::time::sleep(Duration::from_millis(20)).await;
+            for &i in &group {
+                let Some(mut h) = tasks[i].take() else {
+                    continue;
+                };
+                if tokio::time::timeout_at(deadline, &mut h).await.is_err() {
+                    let s = &states[i];
+                    tracing::warn!(
+                        "node `{}` ignored SIGTERM for {grace:?}; killing it",
+                        s.spec.name
+                    );
+                    signal(s, Signal::SIGKILL);
+                    s.failed.store(true, Ordering::SeqCst);
+                    let _ = h.await;
                 }
             }
-        }
-        for t in tasks {
-            let _ = t.await;
         }
     }
     drop(_liveliness);
@@ -452,6 +456,9 @@ async fn run_node(st: Arc<NodeState>, mut ctx: NodeCtx) {
             _ = ctx.live_rx.changed() => {}
             _ = ctx.stop_rx.changed() => {}
         }
+    }
+    if *ctx.stop_rx.borrow() {
+        return;
     }
     let section = match st.spec.section() {
         Ok(s) => s,
