@@ -10,8 +10,33 @@ use troupe_node::zenoh::pubsub::Subscriber;
 
 use crate::client::{Client, ClientError, Result};
 
-/// The latest data of one device, kept up to date in the background.
+/// One device of the client's robot: where commands and requests go.
+#[derive(Clone)]
+struct Link {
+    client: Client,
+    dev: Device,
+}
+
+impl Link {
+    fn new(client: &Client, interface: Interface, index: u32) -> Link {
+        Link {
+            client: client.clone(),
+            dev: client.device(interface, index),
+        }
+    }
+
+    fn request<R: troupe_msgs::Request>(&self, req: &R) -> Result<R::Reply> {
+        self.client.request(self.dev, req)
+    }
+
+    fn command<C: troupe_msgs::Command>(&self, cmd: &C) -> Result<()> {
+        self.client.command(self.dev, cmd)
+    }
+}
+
+/// A device and its latest data, kept up to date in the background.
 struct Feed<S> {
+    link: Link,
     state: Arc<Mutex<S>>,
     _sub: Subscriber<()>,
 }
@@ -19,9 +44,12 @@ struct Feed<S> {
 impl<S: Default + Send + 'static> Feed<S> {
     fn new(
         client: &Client,
-        dev: Device,
+        interface: Interface,
+        index: u32,
         update: fn(&mut S, &[u8]) -> Result<(), DecodeError>,
     ) -> Result<Self> {
+        let link = Link::new(client, interface, index);
+        let dev = link.dev;
         let state = Arc::new(Mutex::new(S::default()));
         let st = state.clone();
         let sub = client.subscribe(dev, move |bytes| {
@@ -30,7 +58,11 @@ impl<S: Default + Send + 'static> Feed<S> {
                 tracing::warn!("dropped a malformed sample from {dev}: {e}");
             }
         })?;
-        Ok(Feed { state, _sub: sub })
+        Ok(Feed {
+            link,
+            state,
+            _sub: sub,
+        })
     }
 
     fn get(&self) -> MutexGuard<'_, S> {
@@ -59,8 +91,6 @@ fn only<M: Message>(slot: &mut Option<M>, bytes: &[u8]) -> Result<(), DecodeErro
 
 /// A planar mobile base (`Position2dProxy`).
 pub struct Position2dProxy {
-    client: Client,
-    dev: Device,
     feed: Feed<Option<position2d::Data>>,
 }
 
@@ -71,17 +101,19 @@ impl Position2dProxy {
     ///
     /// [`ClientError::Node`] if the subscription fails.
     pub fn new(client: &Client, index: u32) -> Result<Self> {
-        let dev = client.device(Interface::Position2d, index);
         Ok(Position2dProxy {
-            client: client.clone(),
-            dev,
-            feed: Feed::new(client, dev, only::<position2d::Data>)?,
+            feed: Feed::new(
+                client,
+                Interface::Position2d,
+                index,
+                only::<position2d::Data>,
+            )?,
         })
     }
 
     /// The device.
     pub fn device(&self) -> Device {
-        self.dev
+        self.feed.link.dev
     }
 
     /// The latest state, if any arrived.
@@ -141,7 +173,7 @@ impl Position2dProxy {
             vel: Pose2d::new(x, y, yaw),
             state: true,
         };
-        self.client.command(self.dev, &cmd)
+        self.feed.link.command(&cmd)
     }
 
     /// Drives like a car: speed m/s, steering angle rad (`SetCarlike`).
@@ -150,8 +182,9 @@ impl Position2dProxy {
     ///
     /// [`ClientError::Node`] if the command cannot be sent.
     pub fn set_car_like(&self, velocity: f64, angle: f64) -> Result<()> {
-        self.client
-            .command(self.dev, &position2d::CmdCar { velocity, angle })
+        self.feed
+            .link
+            .command(&position2d::CmdCar { velocity, angle })
     }
 
     /// Goes to a pose in the odometric frame (`GoTo`).
@@ -165,7 +198,7 @@ impl Position2dProxy {
             vel: Pose2d::default(),
             state: true,
         };
-        self.client.command(self.dev, &cmd)
+        self.feed.link.command(&cmd)
     }
 
     /// Enables or disables the motors (`SetMotorEnable`).
@@ -174,8 +207,9 @@ impl Position2dProxy {
     ///
     /// [`ClientError::Nack`] if the device refuses; [`ClientError::NoAnswer`].
     pub fn set_motor_enable(&self, on: bool) -> Result<()> {
-        self.client
-            .request(self.dev, &position2d::MotorPower { state: on })
+        self.feed
+            .link
+            .request(&position2d::MotorPower { state: on })
             .map(|_| ())
     }
 
@@ -185,7 +219,7 @@ impl Position2dProxy {
     ///
     /// [`ClientError::Nack`] if the device refuses; [`ClientError::NoAnswer`].
     pub fn request_geom(&self) -> Result<position2d::Geom> {
-        self.client.request(self.dev, &position2d::GetGeom)
+        self.feed.link.request(&position2d::GetGeom)
     }
 
     /// Sets the odometric pose (`SetOdometry`).
@@ -197,7 +231,7 @@ impl Position2dProxy {
         let req = position2d::SetOdom {
             pose: Pose2d::new(x, y, yaw),
         };
-        self.client.request(self.dev, &req).map(|_| ())
+        self.feed.link.request(&req).map(|_| ())
     }
 
     /// Resets odometry to the origin (`ResetOdometry`).
@@ -206,16 +240,12 @@ impl Position2dProxy {
     ///
     /// [`ClientError::Nack`] if the device refuses; [`ClientError::NoAnswer`].
     pub fn reset_odometry(&self) -> Result<()> {
-        self.client
-            .request(self.dev, &position2d::ResetOdom)
-            .map(|_| ())
+        self.feed.link.request(&position2d::ResetOdom).map(|_| ())
     }
 }
 
 /// A scanning range finder (`LaserProxy`).
 pub struct LaserProxy {
-    client: Client,
-    dev: Device,
     feed: Feed<Option<laser::Scan>>,
 }
 
@@ -235,11 +265,8 @@ impl LaserProxy {
     ///
     /// [`ClientError::Node`] if the subscription fails.
     pub fn new(client: &Client, index: u32) -> Result<Self> {
-        let dev = client.device(Interface::Laser, index);
         Ok(LaserProxy {
-            client: client.clone(),
-            dev,
-            feed: Feed::new(client, dev, laser_update)?,
+            feed: Feed::new(client, Interface::Laser, index, laser_update)?,
         })
     }
 
@@ -311,7 +338,7 @@ impl LaserProxy {
     ///
     /// [`ClientError::Nack`] if the device refuses; [`ClientError::NoAnswer`].
     pub fn request_geom(&self) -> Result<laser::Geom> {
-        self.client.request(self.dev, &laser::GetGeom)
+        self.feed.link.request(&laser::GetGeom)
     }
 
     /// The laser's configuration.
@@ -320,7 +347,7 @@ impl LaserProxy {
     ///
     /// [`ClientError::Nack`] if the device refuses; [`ClientError::NoAnswer`].
     pub fn request_config(&self) -> Result<laser::Config> {
-        self.client.request(self.dev, &laser::GetConfig)
+        self.feed.link.request(&laser::GetConfig)
     }
 
     /// Sets the configuration; returns the configuration in force.
@@ -329,7 +356,7 @@ impl LaserProxy {
     ///
     /// [`ClientError::Nack`] if the device refuses; [`ClientError::NoAnswer`].
     pub fn configure(&self, config: laser::Config) -> Result<laser::Config> {
-        self.client.request(self.dev, &laser::SetConfig { config })
+        self.feed.link.request(&laser::SetConfig { config })
     }
 }
 
@@ -348,8 +375,6 @@ fn ranger_update(s: &mut RangerState, b: &[u8]) -> Result<(), DecodeError> {
 
 /// A set of range sensors (`RangerProxy`).
 pub struct RangerProxy {
-    client: Client,
-    dev: Device,
     feed: Feed<RangerState>,
 }
 
@@ -360,11 +385,8 @@ impl RangerProxy {
     ///
     /// [`ClientError::Node`] if the subscription fails.
     pub fn new(client: &Client, index: u32) -> Result<Self> {
-        let dev = client.device(Interface::Ranger, index);
         Ok(RangerProxy {
-            client: client.clone(),
-            dev,
-            feed: Feed::new(client, dev, ranger_update)?,
+            feed: Feed::new(client, Interface::Ranger, index, ranger_update)?,
         })
     }
 
@@ -407,7 +429,7 @@ impl RangerProxy {
     ///
     /// [`ClientError::Nack`] if the device refuses; [`ClientError::NoAnswer`].
     pub fn request_geom(&self) -> Result<ranger::Geom> {
-        self.client.request(self.dev, &ranger::GetGeom)
+        self.feed.link.request(&ranger::GetGeom)
     }
 
     /// Configuration.
@@ -416,14 +438,12 @@ impl RangerProxy {
     ///
     /// [`ClientError::Nack`] if the device refuses; [`ClientError::NoAnswer`].
     pub fn request_config(&self) -> Result<ranger::Config> {
-        self.client.request(self.dev, &ranger::GetConfig)
+        self.feed.link.request(&ranger::GetConfig)
     }
 }
 
 /// An array of sonars (`SonarProxy`).
 pub struct SonarProxy {
-    client: Client,
-    dev: Device,
     feed: Feed<Option<sonar::Ranges>>,
 }
 
@@ -434,11 +454,8 @@ impl SonarProxy {
     ///
     /// [`ClientError::Node`] if the subscription fails.
     pub fn new(client: &Client, index: u32) -> Result<Self> {
-        let dev = client.device(Interface::Sonar, index);
         Ok(SonarProxy {
-            client: client.clone(),
-            dev,
-            feed: Feed::new(client, dev, only::<sonar::Ranges>)?,
+            feed: Feed::new(client, Interface::Sonar, index, only::<sonar::Ranges>)?,
         })
     }
 
@@ -463,14 +480,13 @@ impl SonarProxy {
     ///
     /// [`ClientError::Nack`] if the device refuses; [`ClientError::NoAnswer`].
     pub fn request_geom(&self) -> Result<sonar::Geom> {
-        self.client.request(self.dev, &sonar::GetGeom)
+        self.feed.link.request(&sonar::GetGeom)
     }
 }
 
 /// An occupancy grid (`MapProxy`).
 pub struct MapProxy {
-    client: Client,
-    dev: Device,
+    link: Link,
     info: map::Info,
     cells: Vec<i8>,
 }
@@ -482,8 +498,7 @@ impl MapProxy {
     /// A proxy for `map:index` of the client's robot (no data until [`MapProxy::request_map`]).
     pub fn new(client: &Client, index: u32) -> Self {
         MapProxy {
-            client: client.clone(),
-            dev: client.device(Interface::Map, index),
+            link: Link::new(client, Interface::Map, index),
             info: map::Info::default(),
             cells: Vec::new(),
         }
@@ -496,7 +511,7 @@ impl MapProxy {
     /// [`ClientError::Nack`] if the device refuses; [`ClientError::NoAnswer`];
     /// [`ClientError::Decode`] if a tile is not the size asked for.
     pub fn request_map(&mut self) -> Result<()> {
-        let info = self.client.request(self.dev, &map::GetInfo)?;
+        let info = self.link.request(&map::GetInfo)?;
         let (w, h) = (info.width, info.height);
         let mut cells = vec![0i8; w as usize * h as usize];
         let rows = (TILE_CELLS / w.max(1)).max(1);
@@ -509,10 +524,10 @@ impl MapProxy {
                 width: w,
                 height,
             };
-            let tile = self.client.request(self.dev, &req)?;
+            let tile = self.link.request(&req)?;
             if tile.cells.len() != (w * height) as usize {
                 return Err(ClientError::Decode {
-                    device: self.dev,
+                    device: self.link.dev,
                     source: DecodeError::Body {
                         schema: "map/data@1".into(),
                         reason: format!(
@@ -559,8 +574,6 @@ impl MapProxy {
 
 /// A path planner (`PlannerProxy`).
 pub struct PlannerProxy {
-    client: Client,
-    dev: Device,
     feed: Feed<Option<planner::State>>,
 }
 
@@ -571,11 +584,8 @@ impl PlannerProxy {
     ///
     /// [`ClientError::Node`] if the subscription fails.
     pub fn new(client: &Client, index: u32) -> Result<Self> {
-        let dev = client.device(Interface::Planner, index);
         Ok(PlannerProxy {
-            client: client.clone(),
-            dev,
-            feed: Feed::new(client, dev, only::<planner::State>)?,
+            feed: Feed::new(client, Interface::Planner, index, only::<planner::State>)?,
         })
     }
 
@@ -593,7 +603,7 @@ impl PlannerProxy {
         let goal = planner::Goal {
             goal: Pose2d::new(x, y, yaw),
         };
-        self.client.command(self.dev, &goal)
+        self.feed.link.command(&goal)
     }
 
     /// Enables or disables motion (`SetEnable`).
@@ -602,8 +612,9 @@ impl PlannerProxy {
     ///
     /// [`ClientError::Nack`] if the device refuses; [`ClientError::NoAnswer`].
     pub fn set_enable(&self, on: bool) -> Result<()> {
-        self.client
-            .request(self.dev, &planner::Enable { state: on })
+        self.feed
+            .link
+            .request(&planner::Enable { state: on })
             .map(|_| ())
     }
 
@@ -613,8 +624,9 @@ impl PlannerProxy {
     ///
     /// [`ClientError::Nack`] if the device refuses; [`ClientError::NoAnswer`].
     pub fn request_waypoints(&self) -> Result<Vec<Pose2d>> {
-        self.client
-            .request(self.dev, &planner::GetWaypoints)
+        self.feed
+            .link
+            .request(&planner::GetWaypoints)
             .map(|w| w.waypoints)
     }
 
@@ -641,8 +653,6 @@ impl PlannerProxy {
 
 /// A localizer (`LocalizeProxy`).
 pub struct LocalizeProxy {
-    client: Client,
-    dev: Device,
     feed: Feed<Option<localize::Hypoths>>,
 }
 
@@ -653,11 +663,13 @@ impl LocalizeProxy {
     ///
     /// [`ClientError::Node`] if the subscription fails.
     pub fn new(client: &Client, index: u32) -> Result<Self> {
-        let dev = client.device(Interface::Localize, index);
         Ok(LocalizeProxy {
-            client: client.clone(),
-            dev,
-            feed: Feed::new(client, dev, only::<localize::Hypoths>)?,
+            feed: Feed::new(
+                client,
+                Interface::Localize,
+                index,
+                only::<localize::Hypoths>,
+            )?,
         })
     }
 
@@ -676,8 +688,9 @@ impl LocalizeProxy {
     ///
     /// [`ClientError::Nack`] if the device refuses; [`ClientError::NoAnswer`].
     pub fn set_pose(&self, mean: Pose2d, cov: [f64; 3]) -> Result<()> {
-        self.client
-            .request(self.dev, &localize::SetPose { mean, cov })
+        self.feed
+            .link
+            .request(&localize::SetPose { mean, cov })
             .map(|_| ())
     }
 
@@ -687,22 +700,20 @@ impl LocalizeProxy {
     ///
     /// [`ClientError::Nack`] if the device refuses; [`ClientError::NoAnswer`].
     pub fn request_particles(&self) -> Result<localize::Particles> {
-        self.client.request(self.dev, &localize::GetParticles)
+        self.feed.link.request(&localize::GetParticles)
     }
 }
 
 /// The simulator's world, by model name (`SimulationProxy`).
 pub struct SimulationProxy {
-    client: Client,
-    dev: Device,
+    link: Link,
 }
 
 impl SimulationProxy {
     /// A proxy for `simulation:index` of the client's robot.
     pub fn new(client: &Client, index: u32) -> Self {
         SimulationProxy {
-            client: client.clone(),
-            dev: client.device(Interface::Simulation, index),
+            link: Link::new(client, Interface::Simulation, index),
         }
     }
 
@@ -713,7 +724,7 @@ impl SimulationProxy {
     /// [`ClientError::Nack`] for an unknown model; [`ClientError::NoAnswer`].
     pub fn get_pose2d(&self, name: &str) -> Result<Pose2d> {
         let req = simulation::GetPose2d { name: name.into() };
-        self.client.request(self.dev, &req).map(|r| r.pose)
+        self.link.request(&req).map(|r| r.pose)
     }
 
     /// Moves model `name` (`SetPose2d`).
@@ -726,7 +737,7 @@ impl SimulationProxy {
             name: name.into(),
             pose: Pose2d::new(x, y, yaw),
         };
-        self.client.request(self.dev, &req).map(|_| ())
+        self.link.request(&req).map(|_| ())
     }
 
     /// Property `prop` of model `name` (`GetProperty`).
@@ -739,7 +750,7 @@ impl SimulationProxy {
             name: name.into(),
             prop: prop.into(),
         };
-        self.client.request(self.dev, &req).map(|r| r.value)
+        self.link.request(&req).map(|r| r.value)
     }
 
     /// Sets property `prop` of model `name` (`SetProperty`), e.g. `"color"`.
@@ -753,7 +764,7 @@ impl SimulationProxy {
             prop: prop.into(),
             value,
         };
-        self.client.request(self.dev, &req).map(|_| ())
+        self.link.request(&req).map(|_| ())
     }
 }
 
@@ -769,9 +780,13 @@ impl BlobfinderProxy {
     ///
     /// [`ClientError::Node`] if the subscription fails.
     pub fn new(client: &Client, index: u32) -> Result<Self> {
-        let dev = client.device(Interface::Blobfinder, index);
         Ok(BlobfinderProxy {
-            feed: Feed::new(client, dev, only::<blobfinder::Data>)?,
+            feed: Feed::new(
+                client,
+                Interface::Blobfinder,
+                index,
+                only::<blobfinder::Data>,
+            )?,
         })
     }
 
@@ -797,8 +812,6 @@ impl BlobfinderProxy {
 
 /// A gripper (`GripperProxy`).
 pub struct GripperProxy {
-    client: Client,
-    dev: Device,
     feed: Feed<Option<gripper::Data>>,
 }
 
@@ -809,11 +822,8 @@ impl GripperProxy {
     ///
     /// [`ClientError::Node`] if the subscription fails.
     pub fn new(client: &Client, index: u32) -> Result<Self> {
-        let dev = client.device(Interface::Gripper, index);
         Ok(GripperProxy {
-            client: client.clone(),
-            dev,
-            feed: Feed::new(client, dev, only::<gripper::Data>)?,
+            feed: Feed::new(client, Interface::Gripper, index, only::<gripper::Data>)?,
         })
     }
 
@@ -823,7 +833,7 @@ impl GripperProxy {
     ///
     /// [`ClientError::Node`] if the command cannot be sent.
     pub fn open(&self) -> Result<()> {
-        self.client.command(self.dev, &gripper::Open)
+        self.feed.link.command(&gripper::Open)
     }
 
     /// Closes the paddles.
@@ -832,7 +842,7 @@ impl GripperProxy {
     ///
     /// [`ClientError::Node`] if the command cannot be sent.
     pub fn close(&self) -> Result<()> {
-        self.client.command(self.dev, &gripper::Close)
+        self.feed.link.command(&gripper::Close)
     }
 
     /// Stops the paddles.
@@ -841,7 +851,7 @@ impl GripperProxy {
     ///
     /// [`ClientError::Node`] if the command cannot be sent.
     pub fn stop(&self) -> Result<()> {
-        self.client.command(self.dev, &gripper::Stop)
+        self.feed.link.command(&gripper::Stop)
     }
 
     /// Paddle state.
@@ -865,7 +875,7 @@ impl GripperProxy {
     ///
     /// [`ClientError::Nack`] if the device refuses; [`ClientError::NoAnswer`].
     pub fn request_geom(&self) -> Result<gripper::Geom> {
-        self.client.request(self.dev, &gripper::GetGeom)
+        self.feed.link.request(&gripper::GetGeom)
     }
 }
 
