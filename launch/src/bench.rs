@@ -73,12 +73,9 @@ fn latency(a: &LatencyArgs) -> anyhow::Result<()> {
         ..Default::default()
     };
     let session = zr.open(Mode::Router)?;
-    let locator = session
-        .info()
-        .locators()
-        .wait()
-        .first()
-        .map(ToString::to_string)
+    let locator = troupe_node::locators(&session)
+        .into_iter()
+        .next()
         .context("the bench router has no locator")?;
 
     let ready = session

@@ -175,13 +175,7 @@ async fn supervise(
                 listen.join(", ")
             )
         })?;
-        let locators: Vec<String> = session
-            .info()
-            .locators()
-            .wait()
-            .iter()
-            .map(ToString::to_string)
-            .collect();
+        let locators = troupe_node::locators(&session);
         tracing::info!("embedded router listening on {}", locators.join(" "));
         // A line on stdout for scripts and tests that pass --listen …:0.
         let mut out = std::io::stdout().lock();
@@ -209,13 +203,7 @@ async fn supervise(
     let watcher = match (&z.namespace, embedded) {
         (Some(_), true) => {
             let w = ZenohArgs {
-                connect: session
-                    .info()
-                    .locators()
-                    .wait()
-                    .iter()
-                    .map(ToString::to_string)
-                    .collect(),
+                connect: troupe_node::locators(&session),
                 namespace: z.namespace.clone(),
                 no_multicast: true,
                 ..Default::default()

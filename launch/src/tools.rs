@@ -329,8 +329,7 @@ pub fn router(_: RouterArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         z.listen.push("tcp/[::]:7447".into());
     }
     let session = z.open(Mode::Router)?;
-    let locators = session.info().locators().wait();
-    let list: Vec<String> = locators.iter().map(ToString::to_string).collect();
+    let list = troupe_node::locators(&session);
     // The first line on stdout is the contract for scripts and tests.
     let mut out = std::io::stdout().lock();
     writeln!(out, "troupe router listening on {}", list.join(" "))?;

@@ -42,13 +42,10 @@ impl TestNet {
             ..Default::default()
         };
         let router = args.open(Mode::Router).expect("router session");
-        let endpoint = router
-            .info()
-            .locators()
-            .wait()
-            .first()
-            .expect("router locator")
-            .to_string();
+        let endpoint = troupe_node::locators(&router)
+            .into_iter()
+            .next()
+            .expect("router locator");
         TestNet {
             router,
             endpoint,

@@ -144,6 +144,18 @@ impl ZenohArgs {
     }
 }
 
+/// The endpoints a session listens on (e.g. a router opened on port 0 reports
+/// its real port here), as `--connect` takes them.
+pub fn locators(session: &Session) -> Vec<String> {
+    session
+        .info()
+        .locators()
+        .wait()
+        .iter()
+        .map(ToString::to_string)
+        .collect()
+}
+
 fn json_str(s: &str) -> String {
     serde_json::Value::String(s.to_owned()).to_string()
 }

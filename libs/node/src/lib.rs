@@ -22,7 +22,7 @@ mod runtime;
 mod section;
 pub mod testing;
 
-pub use args::{init_logging, Mode, ZenohArgs, DEFAULT_ROUTER};
+pub use args::{init_logging, locators, Mode, ZenohArgs, DEFAULT_ROUTER};
 pub use clock::Clock;
 pub use ctx::{Ctx, REQUEST_TIMEOUT};
 pub use driver::{Driver, Event, Reply, Request, RequestError, RequestId, Responder, Sample, Unit};
