@@ -4,11 +4,8 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use troupe_msgs::keys;
 use troupe_node::zenoh::sample::SampleKind;
-use troupe_node::zenoh::Wait;
-use troupe_node::{Mode, ZenohArgs};
-use troupe_tests::{strings, troupe_output, Proc, DEADLINE};
+use troupe_tests::{client_at, strings, token_events, troupe_output, Proc, DEADLINE};
 
 const STACK: &str = "driver ( name \"dummy\" provides [\"ranger:0\"] rate 20 )\n\
                      driver ( name \"rangertolaser\" requires [\"ranger:0\"] provides [\"laser:0\"] )\n";
@@ -34,27 +31,8 @@ fn launch(cfg: &std::path::Path, extra: &[&str]) -> (Proc, String, String) {
     ]);
     args.extend(strings(extra));
     let mut p = Proc::troupe("launch", &args);
-    let line = p.first_line();
-    let endpoint = line
-        .trim()
-        .strip_prefix("troupe launch: router listening on ")
-        .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
-        .split(' ')
-        .next()
-        .unwrap()
-        .to_owned();
+    let endpoint = p.endpoint("troupe launch: router listening on");
     (p, endpoint, ns)
-}
-
-fn probe(endpoint: &str, ns: &str) -> troupe_node::zenoh::Session {
-    ZenohArgs {
-        connect: vec![endpoint.to_owned()],
-        namespace: Some(ns.to_owned()),
-        no_multicast: true,
-        ..Default::default()
-    }
-    .open(Mode::Client)
-    .unwrap()
 }
 
 /// Children of `parent` whose command line mentions `word`.
@@ -99,13 +77,8 @@ fn launch_runs_the_stack_restarts_a_killed_node_and_stops_cleanly() {
     let cfg = temp_cfg("stack", STACK);
     let logs = cfg.with_file_name("logs");
     let (mut launcher, endpoint, ns) = launch(&cfg, &["--log-dir", logs.to_str().unwrap()]);
-    let s = probe(&endpoint, &ns);
-    let tokens = s
-        .liveliness()
-        .declare_subscriber(keys::tokens(None))
-        .history(true)
-        .wait()
-        .unwrap();
+    let s = client_at(&endpoint, &ns);
+    let tokens = token_events(&s);
     let deadline = Instant::now() + DEADLINE;
     let mut up = std::collections::BTreeSet::new();
     while up.len() < 2 {
@@ -172,13 +145,8 @@ fn launch_runs_the_stack_restarts_a_killed_node_and_stops_cleanly() {
 fn a_killed_launcher_takes_its_nodes_with_it() {
     let cfg = temp_cfg("orphans", STACK);
     let (mut launcher, endpoint, ns) = launch(&cfg, &[]);
-    let s = probe(&endpoint, &ns);
-    let tokens = s
-        .liveliness()
-        .declare_subscriber(keys::tokens(None))
-        .history(true)
-        .wait()
-        .unwrap();
+    let s = client_at(&endpoint, &ns);
+    let tokens = token_events(&s);
     let deadline = Instant::now() + DEADLINE;
     for _ in 0..2 {
         tokens

@@ -8,15 +8,7 @@ fn router() -> (Proc, String) {
         "router",
         &strings(&["router", "--listen", "tcp/127.0.0.1:0", "--no-multicast"]),
     );
-    let line = r.first_line();
-    let endpoint = line
-        .trim()
-        .strip_prefix("troupe router listening on ")
-        .unwrap_or_else(|| panic!("unexpected router banner {line:?}"))
-        .split(' ')
-        .next()
-        .expect("a locator")
-        .to_owned();
+    let endpoint = r.endpoint("troupe router listening on");
     (r, endpoint)
 }
 

@@ -6,7 +6,6 @@ use std::path::Path;
 use std::time::Instant;
 
 use troupe_client::{Client, LaserProxy, Position2dProxy, SimulationProxy};
-use troupe_node::{Mode, ZenohArgs};
 use troupe_tests::{strings, Proc, DEADLINE};
 
 #[test]
@@ -26,15 +25,8 @@ fn simple_cfg_serves_r0_and_the_laser_sees_the_wall_approach() {
         "tcp/127.0.0.1:0",
     ]);
     let mut launcher = Proc::troupe("launch", &args);
-    let line = launcher.first_line();
-    let endpoint = line.trim().rsplit(' ').next().unwrap().to_owned();
-    let net = ZenohArgs {
-        connect: vec![endpoint],
-        namespace: Some(ns),
-        no_multicast: true,
-        ..Default::default()
-    };
-    let client = Client::with_session(net.open(Mode::Client).unwrap(), 6665);
+    let endpoint = launcher.endpoint("troupe launch: router listening on");
+    let client = Client::with_session(troupe_tests::client_at(&endpoint, &ns), 6665);
     // The laser comes from rangertolaser, started once Stage's ranger:1 is live.
     let sim = SimulationProxy::new(&client, 0);
     let pp = Position2dProxy::new(&client, 0).unwrap();

@@ -86,12 +86,7 @@ impl TestNet {
     /// Waits until every device in `devices` has a liveliness token.
     pub fn wait_live(&self, devices: &[&str]) {
         let s = self.client();
-        let sub = s
-            .liveliness()
-            .declare_subscriber(troupe_msgs::keys::tokens(None))
-            .history(true)
-            .wait()
-            .expect("liveliness subscriber");
+        let sub = token_events(&s);
         let deadline = Instant::now() + DEADLINE;
         let mut missing: Vec<String> = devices.iter().map(|d| d.to_string()).collect();
         while !missing.is_empty() {
@@ -187,6 +182,17 @@ impl Proc {
             .unwrap_or_else(|_| panic!("{} printed nothing within {DEADLINE:?}", self.name))
     }
 
+    /// The first locator of the child's banner (`<banner> tcp/… tcp/…`), e.g.
+    /// "troupe router listening on" — how routers on port 0 say where they are.
+    pub fn endpoint(&mut self, banner: &str) -> String {
+        let line = self.first_line();
+        line.trim()
+            .strip_prefix(banner)
+            .and_then(|rest| rest.split_whitespace().next())
+            .unwrap_or_else(|| panic!("{}: expected `{banner} …`, got {line:?}", self.name))
+            .to_owned()
+    }
+
     /// Sends SIGTERM and waits (within the deadline) for the exit status.
     pub fn terminate(&mut self) -> std::process::ExitStatus {
         use nix::sys::signal::{kill, Signal};
@@ -245,6 +251,32 @@ pub fn troupe_output(args: &[String]) -> (std::process::ExitStatus, String, Stri
     let stdout = reader.join().unwrap_or_default();
     let stderr = p.stderr();
     (status, stdout, stderr)
+}
+
+/// A client session of the router at `endpoint`, in namespace `ns`.
+pub fn client_at(endpoint: &str, ns: &str) -> Session {
+    ZenohArgs {
+        connect: vec![endpoint.to_owned()],
+        namespace: Some(ns.to_owned()),
+        no_multicast: true,
+        ..Default::default()
+    }
+    .open(Mode::Client)
+    .expect("client session")
+}
+
+/// Every device token as it comes and goes (those already live first).
+pub fn token_events(
+    session: &Session,
+) -> troupe_node::zenoh::pubsub::Subscriber<
+    troupe_node::zenoh::handlers::FifoChannelHandler<troupe_node::zenoh::sample::Sample>,
+> {
+    session
+        .liveliness()
+        .declare_subscriber(troupe_msgs::keys::tokens(None))
+        .history(true)
+        .wait()
+        .expect("liveliness subscriber")
 }
 
 /// `["a", "b"]` as owned strings.
