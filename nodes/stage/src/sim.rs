@@ -84,6 +84,11 @@ pub struct Sim {
     /// Gripper state of each gripper model (`None` for other models).
     pub grippers: Vec<Option<GripperState>>,
     roots: Vec<usize>,
+    /// The models with range sensors.
+    rangers: Vec<usize>,
+    /// Threads that cast rays: the world's `threads`, but one for small worlds
+    /// (threads pay off only when a step casts thousands of rays).
+    sense_threads: usize,
     /// Each model's subtree (itself first), depth-first.
     trees: Vec<Vec<usize>>,
     movable: Vec<bool>,
@@ -193,6 +198,19 @@ impl Sim {
             .map(|m| (m.kind == Kind::Gripper).then(GripperState::default))
             .collect();
         let trees: Vec<Vec<usize>> = (0..n).map(|m| world.subtree(m)).collect();
+        let rangers: Vec<usize> = (0..n)
+            .filter(|&r| !world.models[r].sensors.is_empty())
+            .collect();
+        let rays: usize = rangers
+            .iter()
+            .flat_map(|&r| &world.models[r].sensors)
+            .map(|s| s.samples)
+            .sum();
+        let sense_threads = if rays < 2000 {
+            1
+        } else {
+            world.threads.clamp(1, 64).min(rangers.len().max(1))
+        };
         let mut sim = Sim {
             world,
             time: 0.0,
@@ -203,6 +221,8 @@ impl Sim {
             readings,
             grippers,
             trees,
+            rangers,
+            sense_threads,
             roots,
             movable,
             cells: vec![Vec::new(); n],
@@ -477,31 +497,14 @@ impl Sim {
 
     /// Updates every ranger's readings, on `world.threads` threads.
     pub fn sense(&mut self) {
-        let rangers: Vec<usize> = (0..self.world.models.len())
-            .filter(|&r| !self.world.models[r].sensors.is_empty())
-            .collect();
-        // Threads pay off only when a step casts thousands of rays.
-        let rays: usize = rangers
-            .iter()
-            .map(|&r| {
-                self.world.models[r]
-                    .sensors
-                    .iter()
-                    .map(|s| s.samples)
-                    .sum::<usize>()
-            })
-            .sum();
-        let threads = if rays < 2000 {
-            1
-        } else {
-            self.world.threads.clamp(1, 64).min(rangers.len().max(1))
-        };
+        let (rangers, threads) = (std::mem::take(&mut self.rangers), self.sense_threads);
         if threads <= 1 {
             for &r in &rangers {
                 let mut out = std::mem::take(&mut self.readings[r]);
                 self.sense_one(r, &mut out);
                 self.readings[r] = out;
             }
+            self.rangers = rangers;
             return;
         }
         let mut work: Vec<(usize, Vec<Reading>)> = rangers
@@ -522,6 +525,7 @@ impl Sim {
         for (r, out) in work {
             self.readings[r] = out;
         }
+        self.rangers = rangers;
     }
 
     fn sense_one(&self, r: usize, out: &mut [Reading]) {
