@@ -326,7 +326,7 @@ pub fn launch_bench(a: &LaunchBenchArgs) -> anyhow::Result<()> {
         let mut child = Command::new(&exe)
             .args(["--namespace", &ns, "launch"])
             .arg(&cfg)
-            .args(["--listen", "tcp/127.0.0.1:0"])
+            .args(["--listen", "tcp/127.0.0.1:0", "--bridge-any-port"])
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
             .stderr(Stdio::null())

@@ -63,6 +63,18 @@ The section is what a `driver ( … )` block of a Player .cfg says; flags add to
 The node waits for every required device to be live, then announces its own.")]
     Node(NodeArgs),
 
+    /// Serve the devices to Player clients (libplayerc, libplayerc++, playerv) over TCP.
+    #[command(after_help = "Examples:
+  troupe bridge                          # robot 6665 on 127.0.0.1:6665, like `player`
+  troupe bridge -p 6665 -p 6666          # two robots, two ports
+  troupe bridge -p 6665=127.0.0.1:0      # any free port; the chosen one is printed
+  troupe bridge --bind 0.0.0.0           # other hosts too (Player has no authentication)
+
+Each port speaks Player 3 TCP/XDR: DEVLIST lists the live devices of that robot,
+subscriptions follow their keys (robot/6665/laser/0), commands and requests go to
+their drivers. `troupe launch` starts one for the robots of its plan.")]
+    Bridge(crate::bridge::BridgeArgs),
+
     /// Print the devices live on the network, like Player's \"Available devices\".
     #[command(after_help = "Example:
   $ troupe list
@@ -270,7 +282,7 @@ pub fn node(a: NodeArgs, z: &ZenohArgs) -> anyhow::Result<()> {
 }
 
 /// Under `troupe launch`: die with the launcher, never outlive it.
-fn supervised() -> anyhow::Result<()> {
+pub fn supervised() -> anyhow::Result<()> {
     let Ok(ppid) = std::env::var(crate::supervisor::SUPERVISOR_ENV) else {
         return Ok(());
     };

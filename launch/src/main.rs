@@ -5,6 +5,7 @@
 //! whole, and the exit code says whether the command succeeded.
 
 mod bench;
+mod bridge;
 mod cfg;
 mod cli;
 mod drivers;
@@ -50,5 +51,6 @@ fn run(cli: cli::Cli) -> anyhow::Result<()> {
         Command::Drivers => tools::print_drivers(),
         Command::Interfaces => tools::print_interfaces(),
         Command::Bench(b) => bench::run(b, z),
+        Command::Bridge(a) => bridge::run(a, z),
     }
 }

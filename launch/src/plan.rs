@@ -251,7 +251,11 @@ fn merge_stage(
         restart: Restart::default(),
         provides: Vec::new(),
         requires: Vec::new(),
-        options: serde_json::Map::new(),
+        // Player stepped its Stage plugin once per server update (100 Hz):
+        // a world with `speedup 0` ran ~10x real time, not flat out.
+        options: [("update_rate".to_owned(), serde_json::Value::from(100))]
+            .into_iter()
+            .collect(),
         source: Some(at),
         option_pos: BTreeMap::new(),
     });
@@ -284,7 +288,11 @@ fn merge_stage(
         }
     }
     for (k, v) in std::mem::take(options) {
-        node.options.entry(k).or_insert(v);
+        if k == "update_rate" {
+            node.options.insert(k, v);
+        } else {
+            node.options.entry(k).or_insert(v);
+        }
     }
     node.option_pos.extend(option_pos);
     node.provides.extend(provides);

@@ -28,7 +28,7 @@ use troupe_msgs::{keys, Device};
 use troupe_node::zenoh::Wait;
 use troupe_node::{Mode, ZenohArgs};
 
-use crate::plan::{self, NodeSpec, Policy};
+use crate::plan::{self, DeviceRef, NodeSpec, Policy};
 
 /// The environment variable that tells `troupe node` who supervises it.
 pub const SUPERVISOR_ENV: &str = "TROUPE_SUPERVISOR_PID";
@@ -56,6 +56,17 @@ pub struct LaunchArgs {
     /// Seconds between SIGTERM and SIGKILL when stopping a node.
     #[arg(long, value_name = "SECS", default_value_t = 5.0)]
     pub grace: f64,
+    /// Serve no Player clients: start no TCP bridge on the robot ports.
+    #[arg(long)]
+    pub no_bridge: bool,
+    /// Address the bridge's robot ports listen on (Player clients have no
+    /// authentication: open other addresses only on a trusted network).
+    #[arg(long, value_name = "ADDR", default_value = "127.0.0.1")]
+    pub bridge_bind: std::net::IpAddr,
+    /// Let the bridge listen on free TCP ports instead of the robot numbers;
+    /// it prints `troupe bridge: robot 6665 on ADDR:PORT` on stdout.
+    #[arg(long)]
+    pub bridge_any_port: bool,
 }
 
 /// Flags of `troupe plan`.
@@ -144,6 +155,8 @@ struct Live {
 
 struct NodeState {
     spec: NodeSpec,
+    /// The `troupe` arguments that run it, when not `node DRIVER --section …`.
+    argv: Option<Vec<String>>,
     pid: Mutex<Option<u32>>,
     stopping: AtomicBool,
     failed: AtomicBool,
@@ -241,6 +254,7 @@ async fn supervise(
         .map(|spec| {
             Arc::new(NodeState {
                 spec,
+                argv: None,
                 pid: Mutex::new(None),
                 stopping: AtomicBool::new(false),
                 failed: AtomicBool::new(false),
@@ -256,6 +270,12 @@ async fn supervise(
                 .filter_map(|r| keys::parse_data(&r.device).ok())
         })
         .collect();
+    let mut states = states;
+    if !a.no_bridge {
+        if let Some(b) = bridge_node(&a, &states) {
+            states.push(Arc::new(b));
+        }
+    }
     let exe = std::env::current_exe().context("finding the troupe binary")?;
     let mut tasks = Vec::new();
     for st in &states {
@@ -480,9 +500,18 @@ async fn run_node(st: Arc<NodeState>, mut ctx: NodeCtx) {
             return;
         }
         let mut cmd = Command::new(&ctx.exe);
-        cmd.args(&ctx.net)
-            .args(["node", &st.spec.driver, "--section", &section_json])
-            .args(if ctx.sim_time { &["--sim-time"][..] } else { &[] })
+        cmd.args(&ctx.net);
+        match &st.argv {
+            Some(argv) => cmd.args(argv),
+            None => cmd
+                .args(["node", &st.spec.driver, "--section", &section_json])
+                .args(if ctx.sim_time {
+                    &["--sim-time"][..]
+                } else {
+                    &[]
+                }),
+        };
+        cmd
             .env(SUPERVISOR_ENV, std::process::id().to_string())
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
@@ -508,11 +537,16 @@ async fn run_node(st: Arc<NodeState>, mut ctx: NodeCtx) {
         );
         let mut forwarders = Vec::new();
         if let Some(out) = child.stdout.take() {
-            forwarders.push(tokio::spawn(forward(
-                BufReader::new(out),
-                name.clone(),
-                log.clone(),
-            )));
+            if st.argv.is_some() {
+                // The bridge's port lines are for scripts: our stdout, as they are.
+                forwarders.push(tokio::spawn(pass_through(BufReader::new(out))));
+            } else {
+                forwarders.push(tokio::spawn(forward(
+                    BufReader::new(out),
+                    name.clone(),
+                    log.clone(),
+                )));
+            }
         }
         if let Some(err) = child.stderr.take() {
             forwarders.push(tokio::spawn(forward(
@@ -578,6 +612,68 @@ async fn run_node(st: Arc<NodeState>, mut ctx: NodeCtx) {
             _ = ctx.stop_rx.changed() => return,
         }
         backoff = (backoff * 2).min(Duration::from_secs(5));
+    }
+}
+
+/// The Player TCP bridge for the robots of `states`, started after them:
+/// Player listened on every robot port of its .cfg, so `troupe launch` does too.
+fn bridge_node(a: &LaunchArgs, states: &[Arc<NodeState>]) -> Option<NodeState> {
+    let provided: Vec<(Device, DeviceRef)> = states
+        .iter()
+        .flat_map(|s| s.spec.provides.iter())
+        .filter_map(|r| keys::parse_data(&r.device).ok().map(|d| (d, r.clone())))
+        .collect();
+    let mut robots: Vec<u32> = provided.iter().map(|(d, _)| d.robot).collect();
+    robots.sort_unstable();
+    robots.dedup();
+    if robots.is_empty() {
+        return None;
+    }
+    let mut argv = vec![
+        "bridge".to_owned(),
+        "--bind".into(),
+        a.bridge_bind.to_string(),
+    ];
+    for r in &robots {
+        argv.push("-p".into());
+        argv.push(if a.bridge_any_port {
+            format!("{r}={}", std::net::SocketAddr::new(a.bridge_bind, 0))
+        } else {
+            r.to_string()
+        });
+    }
+    let order: Vec<String> = provided.iter().map(|(d, _)| d.to_string()).collect();
+    argv.push(format!("--order={}", order.join(",")));
+    let spec = NodeSpec {
+        name: "bridge".into(),
+        driver: "bridge".into(),
+        host: None,
+        start_order: states.iter().map(|s| s.spec.start_order).max().unwrap_or(0) + 1,
+        restart: crate::plan::Restart::default(),
+        provides: Vec::new(),
+        requires: provided
+            .into_iter()
+            .map(|(_, r)| DeviceRef { role: None, ..r })
+            .collect(),
+        options: serde_json::Map::new(),
+        source: None,
+        option_pos: Default::default(),
+    };
+    Some(NodeState {
+        spec,
+        argv: Some(argv),
+        pid: Mutex::new(None),
+        stopping: AtomicBool::new(false),
+        failed: AtomicBool::new(false),
+    })
+}
+
+/// Copies a child's stdout lines to ours, unchanged.
+async fn pass_through<R: tokio::io::AsyncRead + Unpin>(reader: BufReader<R>) {
+    let mut lines = reader.lines();
+    while let Ok(Some(line)) = lines.next_line().await {
+        let mut out = std::io::stdout().lock();
+        let _ = writeln!(out, "{line}").and_then(|()| out.flush());
     }
 }
 

@@ -161,12 +161,18 @@ fn a_plan_split_across_two_hosts_runs_and_heals_after_a_cut_link() {
     let mut la = Proc::troupe_in(
         &hosts.a,
         "launch a",
-        &with(at(&ea), &["launch", plan, "--host", "a"]),
+        &with(
+            at(&ea),
+            &["launch", plan, "--host", "a", "--bridge-any-port"],
+        ),
     );
     let mut lb = Proc::troupe_in(
         &hosts.b,
         "launch b",
-        &with(at(&eb), &["launch", plan, "--host", "b"]),
+        &with(
+            at(&eb),
+            &["launch", plan, "--host", "b", "--bridge-any-port"],
+        ),
     );
 
     // Host B's node needs host A's device: both come up, seen from A.

@@ -28,6 +28,7 @@ fn launch(cfg: &std::path::Path, extra: &[&str]) -> (Proc, String, String) {
         cfg.to_str().unwrap(),
         "--listen",
         "tcp/127.0.0.1:0",
+        "--bridge-any-port",
     ]);
     args.extend(strings(extra));
     let mut p = Proc::troupe("launch", &args);
@@ -144,7 +145,8 @@ fn launch_runs_the_stack_restarts_a_killed_node_and_stops_cleanly() {
 #[test]
 fn a_killed_launcher_takes_its_nodes_with_it() {
     let cfg = temp_cfg("orphans", STACK);
-    let (mut launcher, endpoint, ns) = launch(&cfg, &[]);
+    // The bridge starts once the devices are up: leave it out so the count is exact.
+    let (mut launcher, endpoint, ns) = launch(&cfg, &["--no-bridge"]);
     let s = client_at(&endpoint, &ns);
     let tokens = token_events(&s);
     let deadline = Instant::now() + DEADLINE;

@@ -5,6 +5,7 @@
 //!
 //! Run with `cargo test -p troupe-tests`.
 
+mod bridge;
 mod hosts;
 mod launch;
 mod process;

@@ -23,6 +23,7 @@ fn simple_cfg_serves_r0_and_the_laser_sees_the_wall_approach() {
         cfg.to_str().unwrap(),
         "--listen",
         "tcp/127.0.0.1:0",
+        "--bridge-any-port",
     ]);
     let mut launcher = Proc::troupe("launch", &args);
     let endpoint = launcher.endpoint("troupe launch: router listening on");

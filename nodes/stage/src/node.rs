@@ -57,6 +57,10 @@ pub struct Options {
     pub models: Vec<ModelMap>,
     /// Overrides the world's `speedup` (1 = real time, ≤ 0 = as fast as possible).
     pub speedup: Option<f64>,
+    /// Steps per wall-clock second when the world runs as fast as possible
+    /// (`speedup` ≤ 0). Player stepped its Stage plugin once per server
+    /// update (`player -u`, 100 Hz), so plans made from a .cfg set 100.
+    pub update_rate: Option<f64>,
     /// Overrides the world's `quit_time` (simulated seconds, 0 = never).
     pub quit_time: Option<f64>,
     /// Step only on `simulation` `step` requests (deterministic tests).
@@ -228,8 +232,11 @@ impl Driver for Stage {
         }
         let speedup = o.speedup.unwrap_or(sim.world.speedup);
         let interval = sim.world.interval_sim;
+        let rate = o.update_rate.filter(|r| r.is_finite() && *r > 0.0);
         let (period, steps_per_tick) = if speedup > 0.0 {
             (Duration::from_secs_f64((interval / speedup).max(1e-4)), 1)
+        } else if let Some(rate) = rate {
+            (Duration::from_secs_f64((1.0 / rate).max(1e-4)), 1)
         } else {
             // As fast as possible, in small batches so commands and requests interleave.
             (Duration::from_micros(1), 10)
@@ -447,16 +454,17 @@ impl Stage {
         }
     }
 
+    /// As Stage's plugin answers: the body's planar pose and footprint
+    /// (no height), each element's pose in the body's frame.
     fn ranger_geom(&self, model: usize) -> ranger::Geom {
         let m = &self.sim.world.models[model];
         ranger::Geom {
-            pose: pose3(m.pose, m.z),
-            size: size3(m.size),
-            element_poses: m
-                .sensors
-                .iter()
-                .map(|s| pose3(m.pose.compose(&s.pose), s.z))
-                .collect(),
+            pose: pose3(m.pose, 0.0),
+            size: troupe_msgs::Size3d {
+                height: 0.0,
+                ..size3(m.size)
+            },
+            element_poses: m.sensors.iter().map(|s| pose3(s.pose, s.z)).collect(),
             element_sizes: m.sensors.iter().map(|s| size3(s.size)).collect(),
         }
     }
@@ -513,9 +521,8 @@ impl Stage {
                         Some(c) => r.reply(&c),
                         None => r.nack("this ranger has no sensors"),
                     }
-                } else if r.is::<common::Power>() || r.is::<ranger::IntensityEnable>() {
-                    r.reply(&common::Ack);
                 } else {
+                    // Stage's plugin refuses POWER and INTNS too.
                     let n = r.name.clone();
                     r.nack(format!("stage ranger does not handle `{n}` (its configuration is the world file's)"));
                 }
@@ -558,9 +565,14 @@ impl Stage {
             }
             Source::Sonar { model } => {
                 if r.is::<sonar::GetGeom>() {
-                    let g = self.ranger_geom(model);
+                    // Player's sonar poses are in the robot's frame.
+                    let m = &self.sim.world.models[model];
                     r.reply(&sonar::Geom {
-                        poses: g.element_poses,
+                        poses: m
+                            .sensors
+                            .iter()
+                            .map(|s| pose3(m.pose.compose(&s.pose), s.z))
+                            .collect(),
                     });
                 } else if r.is::<common::Power>() {
                     r.reply(&common::Ack);
@@ -591,9 +603,10 @@ impl Stage {
                     r.reply(&gripper::Geom {
                         pose: pose3(m.pose, m.z),
                         outer_size: size3(m.size),
-                        inner_size: size3([m.size[0] * 0.66, m.size[1] * 0.66, m.size[2]]),
+                        // Stage's plugin leaves these zero.
+                        inner_size: troupe_msgs::Size3d::default(),
                         num_beams: 2,
-                        capacity: 1,
+                        capacity: 0,
                     });
                 } else {
                     let n = r.name.clone();

@@ -1,0 +1,145 @@
+//! `troupe bridge`: serve Troupe's devices to Player clients over TCP.
+
+use std::io::Write;
+use std::net::{IpAddr, SocketAddr};
+
+use anyhow::Context;
+use clap::Args;
+use troupe_bridge::{Bridge, Config, Port};
+use troupe_msgs::DevAddr;
+use troupe_node::{Mode, ZenohArgs};
+
+/// Flags of `troupe bridge`.
+#[derive(Debug, Args)]
+pub struct BridgeArgs {
+    /// Robot ports to serve, like `player -p`: `6665`, or `6665=ADDR:PORT`
+    /// to listen elsewhere (port 0 = any free port). Repeat for more robots.
+    #[arg(
+        short = 'p',
+        long = "port",
+        value_name = "ROBOT[=ADDR:PORT]",
+        default_value = "6665"
+    )]
+    pub ports: Vec<String>,
+
+    /// Address the robot ports listen on. Player clients have no
+    /// authentication: open other addresses only on a trusted network.
+    #[arg(long, value_name = "ADDR", default_value = "127.0.0.1")]
+    pub bind: IpAddr,
+
+    /// Data messages a client's queue holds before dropping (Player's 1024).
+    #[arg(long, value_name = "N", default_value_t = troupe_bridge::queue::DEFAULT_MAXLEN)]
+    pub queue_len: usize,
+
+    /// DEVLIST order, as the .cfg lists devices (set by `troupe launch`).
+    #[arg(long, value_name = "DEVICES", value_delimiter = ',', hide = true)]
+    pub order: Vec<String>,
+}
+
+/// Parses `6665` or `6665=127.0.0.1:0`.
+fn port(spec: &str, bind: IpAddr) -> anyhow::Result<Port> {
+    let (robot, listen) = match spec.split_once('=') {
+        None => (spec, None),
+        Some((r, a)) => (r, Some(a)),
+    };
+    let robot: u32 = robot
+        .trim()
+        .parse()
+        .with_context(|| format!("robot port `{robot}` in `{spec}` is not a number"))?;
+    let listen = match listen {
+        None => SocketAddr::new(
+            bind,
+            u16::try_from(robot).with_context(|| {
+                format!("robot {robot} is not a TCP port; use {robot}=ADDR:PORT")
+            })?,
+        ),
+        Some(a) => a
+            .trim()
+            .parse()
+            .with_context(|| format!("`{a}` in `{spec}` is not ADDR:PORT (e.g. 127.0.0.1:0)"))?,
+    };
+    Ok(Port { robot, listen })
+}
+
+/// `troupe bridge`.
+pub fn run(a: BridgeArgs, z: &ZenohArgs) -> anyhow::Result<()> {
+    let ports = a
+        .ports
+        .iter()
+        .map(|s| port(s, a.bind))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let order = a
+        .order
+        .iter()
+        .map(|s| {
+            let d: DevAddr = s.parse().with_context(|| format!("--order entry `{s}`"))?;
+            Ok(d.device(troupe_msgs::DEFAULT_ROBOT))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    crate::cli::supervised()?;
+    // A client of the router, like the tools: its first requests find routes.
+    let session = z.open(Mode::Client)?;
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("starting the bridge's runtime")?;
+    rt.block_on(async move {
+        let cfg = Config {
+            ports,
+            order,
+            maxlen: a.queue_len.max(1),
+        };
+        let bridge = Bridge::bind(session, cfg).await?;
+        let mut out = std::io::stdout().lock();
+        for (robot, addr) in bridge.local_addrs() {
+            writeln!(out, "troupe bridge: robot {robot} on {addr}")?;
+        }
+        out.flush()?;
+        drop(out);
+        bridge.run(stop_signal()).await;
+        tracing::info!("bridge stopped");
+        anyhow::Ok(())
+    })
+}
+
+/// Ctrl-C or SIGTERM.
+async fn stop_signal() {
+    use tokio::signal::unix::{signal, SignalKind};
+    match signal(SignalKind::terminate()) {
+        Ok(mut term) => {
+            tokio::select! {
+                _ = tokio::signal::ctrl_c() => {}
+                _ = term.recv() => {}
+            }
+        }
+        Err(_) => {
+            let _ = tokio::signal::ctrl_c().await;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn port_specs() {
+        let lo: IpAddr = "127.0.0.1".parse().unwrap();
+        assert_eq!(
+            port("6665", lo).unwrap(),
+            Port {
+                robot: 6665,
+                listen: "127.0.0.1:6665".parse().unwrap()
+            }
+        );
+        assert_eq!(
+            port("6666=0.0.0.0:0", lo).unwrap().listen,
+            "0.0.0.0:0".parse().unwrap()
+        );
+        let e = port("x", lo).unwrap_err().to_string();
+        assert!(e.contains("`x`"), "{e}");
+        let e = format!("{:#}", port("70000", lo).unwrap_err());
+        assert!(e.contains("70000=ADDR:PORT"), "{e}");
+    }
+}

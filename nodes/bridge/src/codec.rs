@@ -1,0 +1,831 @@
+//! Player's XDR bodies ↔ Troupe's messages, interface by interface.
+//!
+//! Layouts follow Player 3's `libplayerinterface/interfaces/*.def` as
+//! `playerxdrgen` encodes them (see [`crate::xdr`]). Three directions:
+//!
+//! - [`to_player`]: a device's data sample → a Player DATA subtype and body;
+//! - [`from_player`]: a client's CMD or REQ → a Troupe command or request,
+//!   with the function that turns the request's reply into Player's ACK body;
+//! - `None` from either: Player defines the message, Troupe does not serve it
+//!   (a REQ gets an empty NACK, as Player's drivers answer what they ignore).
+
+use std::io::Write;
+
+use troupe_msgs::codec::{decode, encode, Command, Message, Request};
+use troupe_msgs::{
+    aio, bumper, common, dio, fiducial, gripper, ir, laser, localize, map, planner, position2d,
+    ptz, ranger, simulation, sonar, AnyMsg, Color, DecodeError, Interface, Pose2d, Pose3d, Size2d,
+    Size3d,
+};
+
+use crate::wire::{CMD, REQ};
+use crate::xdr::{Reader, Writer, XdrError};
+
+/// Why a message could not be translated.
+#[derive(Debug, thiserror::Error)]
+pub enum CodecError {
+    /// A client's body does not match Player's layout for its subtype.
+    #[error("{interface} {kind} subtype {subtype}: {source}")]
+    Body {
+        /// Interface name.
+        interface: &'static str,
+        /// `CMD` or `REQ`.
+        kind: &'static str,
+        /// Subtype.
+        subtype: u8,
+        /// What was wrong.
+        source: XdrError,
+    },
+    /// A device answered with something else than the request's reply type.
+    #[error("reply: {0}")]
+    Reply(#[from] DecodeError),
+}
+
+/// Turns a Troupe reply payload into Player's ACK body.
+pub type ReplyFn = Box<dyn Fn(&[u8]) -> Result<Vec<u8>, DecodeError> + Send + Sync>;
+
+/// What a client's CMD or REQ becomes on Troupe's keys.
+pub enum ToDevice {
+    /// A put on `…/cmd/<name>`.
+    Command {
+        /// Key chunk.
+        name: &'static str,
+        /// Encoded Troupe command.
+        payload: Vec<u8>,
+    },
+    /// A get on `…/req/<name>`; `reply` makes the ACK body.
+    Request {
+        /// Key chunk.
+        name: &'static str,
+        /// Encoded Troupe request.
+        payload: Vec<u8>,
+        /// ACK body from the reply.
+        reply: ReplyFn,
+    },
+}
+
+impl std::fmt::Debug for ToDevice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ToDevice::Command { name, .. } => write!(f, "Command({name})"),
+            ToDevice::Request { name, .. } => write!(f, "Request({name})"),
+        }
+    }
+}
+
+fn command<C: Command>(c: &C, stamp: f64) -> ToDevice {
+    ToDevice::Command {
+        name: C::NAME,
+        payload: encode(c, stamp),
+    }
+}
+
+fn request<Q: Request>(q: &Q, stamp: f64, reply: fn(&Q::Reply, &mut Writer)) -> ToDevice
+where
+    Q::Reply: Message,
+{
+    ToDevice::Request {
+        name: Q::NAME,
+        payload: encode(q, stamp),
+        reply: Box::new(move |p| {
+            let r = decode::<Q::Reply>(p)?;
+            let mut w = Writer::new();
+            reply(&r.msg, &mut w);
+            Ok(w.finish())
+        }),
+    }
+}
+
+/// The ACK body of a request Player answers with no body.
+fn empty(_: &common::Ack, _: &mut Writer) {}
+
+// ---- shared types ---------------------------------------------------------
+
+fn w_pose2d(w: &mut Writer, p: &Pose2d) {
+    w.f64(p.x).f64(p.y).f64(p.yaw);
+}
+
+fn w_pose3d(w: &mut Writer, p: &Pose3d) {
+    w.f64(p.x)
+        .f64(p.y)
+        .f64(p.z)
+        .f64(p.roll)
+        .f64(p.pitch)
+        .f64(p.yaw);
+}
+
+fn w_bbox3d(w: &mut Writer, s: &Size3d) {
+    w.f64(s.width).f64(s.length).f64(s.height);
+}
+
+fn w_bbox2d(w: &mut Writer, s: &Size2d) {
+    w.f64(s.width).f64(s.length);
+}
+
+fn r_pose2d(r: &mut Reader) -> Result<Pose2d, XdrError> {
+    Ok(Pose2d::new(r.f64()?, r.f64()?, r.f64()?))
+}
+
+fn w_f32s(w: &mut Writer, v: &[f32]) {
+    w.array(v, |w, x| {
+        w.f32(*x);
+    });
+}
+
+fn w_f64s(w: &mut Writer, v: &[f64]) {
+    w.array(v, |w, x| {
+        w.f64(*x);
+    });
+}
+
+fn w_pose3ds(w: &mut Writer, v: &[Pose3d]) {
+    w.array(v, w_pose3d);
+}
+
+// ---- device → client ------------------------------------------------------
+
+/// A device's data sample as Player DATA: the interface it belongs to, its
+/// subtype and body. `None` for Troupe messages Player has no DATA for.
+pub fn to_player(msg: &AnyMsg) -> Option<(Interface, u8, Vec<u8>)> {
+    use Interface as I;
+    let mut w = Writer::new();
+    let (iface, subtype) = match msg {
+        AnyMsg::Position2dData(d) => {
+            w_pose2d(&mut w, &d.pose);
+            w_pose2d(&mut w, &d.vel);
+            w.flag(d.stall);
+            (I::Position2d, 1)
+        }
+        AnyMsg::Position2dGeom(g) => {
+            position2d_geom(g, &mut w);
+            (I::Position2d, 2)
+        }
+        AnyMsg::LaserScan(s) => {
+            laser_scan(s, &mut w);
+            (I::Laser, 1)
+        }
+        AnyMsg::LaserScanPose(s) => {
+            laser_scan(&s.scan, &mut w);
+            w_pose2d(&mut w, &s.pose);
+            (I::Laser, 2)
+        }
+        AnyMsg::RangerRanges(r) => {
+            w_f64s(&mut w, &r.ranges);
+            (I::Ranger, 1)
+        }
+        AnyMsg::RangerIntensities(r) => {
+            w_f64s(&mut w, &r.intensities);
+            (I::Ranger, 3)
+        }
+        AnyMsg::RangerGeom(g) => {
+            ranger_geom(g, &mut w);
+            (I::Ranger, 5)
+        }
+        AnyMsg::SonarRanges(s) => {
+            w_f32s(&mut w, &s.ranges);
+            (I::Sonar, 1)
+        }
+        AnyMsg::SonarGeom(g) => {
+            w_pose3ds(&mut w, &g.poses);
+            (I::Sonar, 2)
+        }
+        AnyMsg::MapInfo(i) => {
+            map_info(i, &mut w);
+            (I::Map, 1)
+        }
+        AnyMsg::LocalizeHypoths(h) => {
+            w.u32(h.pending_count).f64(h.pending_time);
+            w.array(&h.hypoths, |w, h| {
+                w_pose2d(w, &h.mean);
+                for c in h.cov {
+                    w.f64(c);
+                }
+                w.f64(0.0).f64(0.0).f64(0.0).f64(h.weight);
+            });
+            (I::Localize, 1)
+        }
+        AnyMsg::PlannerState(s) => {
+            w.flag(s.valid).flag(s.done);
+            w_pose2d(&mut w, &s.pose);
+            w_pose2d(&mut w, &s.goal);
+            w_pose2d(&mut w, &s.waypoint);
+            w.i32(s.waypoint_idx).u32(s.waypoints_count);
+            (I::Planner, 1)
+        }
+        AnyMsg::BlobfinderData(d) => {
+            w.u32(d.width).u32(d.height);
+            w.array(&d.blobs, |w, b| {
+                w.u32(b.id)
+                    .u32(b.color)
+                    .u32(b.area)
+                    .u32(b.x)
+                    .u32(b.y)
+                    .u32(b.left)
+                    .u32(b.right)
+                    .u32(b.top)
+                    .u32(b.bottom)
+                    .f32(b.range);
+            });
+            (I::Blobfinder, 1)
+        }
+        AnyMsg::GripperData(d) => {
+            let state = match d.state {
+                gripper::State::Open => 1,
+                gripper::State::Closed => 2,
+                gripper::State::Moving => 3,
+                gripper::State::Error => 4,
+            };
+            w.u32(state).u32(d.beams).u32(u32::from(d.stored));
+            (I::Gripper, 1)
+        }
+        AnyMsg::FiducialData(d) => {
+            w.array(&d.fiducials, |w, f| {
+                w.i32(f.id);
+                w_pose3d(w, &f.pose);
+                w_pose3d(w, &f.upose);
+            });
+            (I::Fiducial, 1)
+        }
+        AnyMsg::PowerData(p) => {
+            w.u32(p.valid)
+                .f32(p.volts)
+                .f32(p.percent)
+                .f32(p.joules)
+                .f32(p.watts)
+                .i32(i32::from(p.charging));
+            (I::Power, 1)
+        }
+        AnyMsg::BumperData(b) => {
+            let bits: Vec<u8> = b.bumpers.iter().map(|&x| u8::from(x)).collect();
+            w.bytes(&bits);
+            (I::Bumper, 1)
+        }
+        AnyMsg::BumperGeom(g) => {
+            bumper_geom(g, &mut w);
+            (I::Bumper, 2)
+        }
+        AnyMsg::IrData(d) => {
+            w_f32s(&mut w, &d.voltages);
+            w_f32s(&mut w, &d.ranges);
+            (I::Ir, 1)
+        }
+        AnyMsg::AioData(d) => {
+            w_f32s(&mut w, &d.voltages);
+            (I::Aio, 1)
+        }
+        AnyMsg::DioData(d) => {
+            w.u32(d.count).u32(d.bits);
+            (I::Dio, 1)
+        }
+        AnyMsg::PtzData(d) => {
+            w.f32(d.pan)
+                .f32(d.tilt)
+                .f32(d.zoom)
+                .f32(d.panspeed)
+                .f32(d.tiltspeed)
+                .u32(0);
+            (I::Ptz, 1)
+        }
+        _ => return None,
+    };
+    Some((iface, subtype, w.finish()))
+}
+
+fn position2d_geom(g: &position2d::Geom, w: &mut Writer) {
+    w_pose3d(w, &g.pose);
+    w_bbox3d(w, &g.size);
+}
+
+fn laser_scan(s: &laser::Scan, w: &mut Writer) {
+    w.f32(s.min_angle)
+        .f32(s.max_angle)
+        .f32(s.resolution)
+        .f32(s.max_range);
+    w_f32s(w, &s.ranges);
+    w.bytes(&s.intensity);
+    w.u32(s.id);
+}
+
+fn laser_geom(g: &laser::Geom, w: &mut Writer) {
+    w_pose3d(w, &g.pose);
+    w_bbox3d(w, &g.size);
+}
+
+fn laser_config(c: &laser::Config, w: &mut Writer) {
+    w.f32(c.min_angle)
+        .f32(c.max_angle)
+        .f32(c.resolution)
+        .f32(c.max_range)
+        .f32(c.range_res)
+        .flag(c.intensity)
+        .f32(c.scanning_frequency);
+}
+
+fn ranger_geom(g: &ranger::Geom, w: &mut Writer) {
+    w_pose3d(w, &g.pose);
+    w_bbox3d(w, &g.size);
+    w_pose3ds(w, &g.element_poses);
+    w.array(&g.element_sizes, w_bbox3d);
+}
+
+fn ranger_config(c: &ranger::Config, w: &mut Writer) {
+    w.f64(c.min_angle)
+        .f64(c.max_angle)
+        .f64(c.angular_res)
+        .f64(c.min_range)
+        .f64(c.max_range)
+        .f64(c.range_res)
+        .f64(c.frequency);
+}
+
+fn map_info(i: &map::Info, w: &mut Writer) {
+    w.f32(i.resolution).u32(i.width).u32(i.height);
+    w_pose2d(w, &i.origin);
+}
+
+/// A map tile as Player 3 sends it: the cells zlib-compressed.
+fn map_data(d: &map::Data, w: &mut Writer) {
+    // Cells are int8; the wire carries their two's-complement bytes.
+    let raw: Vec<u8> = d.cells.iter().map(|&c| c as u8).collect();
+    let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+    // Writing into a Vec cannot fail.
+    let zipped = z
+        .write_all(&raw)
+        .and_then(|()| z.finish())
+        .unwrap_or_default();
+    w.u32(d.col).u32(d.row).u32(d.width).u32(d.height);
+    // data_count, data_range (the largest cell value), then xdr_bytes.
+    w.u32(u32::try_from(zipped.len()).unwrap_or(u32::MAX))
+        .i32(1)
+        .xdr_bytes(&zipped);
+}
+
+fn bumper_geom(g: &bumper::Geom, w: &mut Writer) {
+    w.array(&g.bumpers, |w, b| {
+        w_pose3d(w, &b.pose);
+        w.f32(b.length).f32(b.radius);
+    });
+}
+
+/// Stage's property values are raw host-order bytes (colour = 4 LE floats).
+fn property_bytes(v: &simulation::Value) -> Vec<u8> {
+    match v {
+        simulation::Value::Color(c) => [c.r, c.g, c.b, c.a]
+            .iter()
+            .flat_map(|x| x.to_le_bytes())
+            .collect(),
+        simulation::Value::Number(x) => x.to_le_bytes().to_vec(),
+        simulation::Value::Int(i) => match i32::try_from(*i) {
+            Ok(i) => i.to_le_bytes().to_vec(),
+            Err(_) => i.to_le_bytes().to_vec(),
+        },
+        simulation::Value::Text(s) => {
+            let mut b = s.as_bytes().to_vec();
+            b.push(0);
+            b
+        }
+    }
+}
+
+fn property_value(prop: &str, b: &[u8]) -> simulation::Value {
+    let f32_at = |i: usize| f32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
+    match b.len() {
+        16 if prop.starts_with("colo") => simulation::Value::Color(Color {
+            r: f32_at(0),
+            g: f32_at(4),
+            b: f32_at(8),
+            a: f32_at(12),
+        }),
+        8 => {
+            let mut x = [0; 8];
+            x.copy_from_slice(b);
+            simulation::Value::Number(f64::from_le_bytes(x))
+        }
+        4 => simulation::Value::Int(i64::from(i32::from_le_bytes([b[0], b[1], b[2], b[3]]))),
+        _ => {
+            let end = b.iter().position(|&c| c == 0).unwrap_or(b.len());
+            simulation::Value::Text(String::from_utf8_lossy(&b[..end]).into_owned())
+        }
+    }
+}
+
+// ---- client → device ------------------------------------------------------
+
+/// A client's CMD or REQ to a device of `iface` as a Troupe command or
+/// request. `Ok(None)`: Player defines it, Troupe does not serve it.
+///
+/// # Errors
+///
+/// [`CodecError::Body`] when the body does not match Player's layout.
+pub fn from_player(
+    iface: Interface,
+    kind: u8,
+    subtype: u8,
+    body: &[u8],
+    stamp: f64,
+) -> Result<Option<ToDevice>, CodecError> {
+    let mut r = Reader::new(body);
+    // A message Troupe does not serve is refused whatever its body holds.
+    let out = translate(iface, kind, subtype, &mut r, stamp).and_then(|out| {
+        if out.is_some() {
+            r.end()?;
+        }
+        Ok(out)
+    });
+    out.map_err(|source| CodecError::Body {
+        interface: iface.name(),
+        kind: if kind == CMD { "CMD" } else { "REQ" },
+        subtype,
+        source,
+    })
+}
+
+fn translate(
+    iface: Interface,
+    kind: u8,
+    subtype: u8,
+    r: &mut Reader,
+    t: f64,
+) -> Result<Option<ToDevice>, XdrError> {
+    use Interface as I;
+    let out = match (iface, kind, subtype) {
+        // position2d
+        (I::Position2d, CMD, 1) => command(
+            &position2d::CmdVel {
+                vel: r_pose2d(r)?,
+                state: r.flag()?,
+            },
+            t,
+        ),
+        (I::Position2d, CMD, 2) => command(
+            &position2d::CmdPos {
+                pos: r_pose2d(r)?,
+                vel: r_pose2d(r)?,
+                state: r.flag()?,
+            },
+            t,
+        ),
+        (I::Position2d, CMD, 3) => command(
+            &position2d::CmdCar {
+                velocity: r.f64()?,
+                angle: r.f64()?,
+            },
+            t,
+        ),
+        (I::Position2d, REQ, 1) => request(&position2d::GetGeom, t, position2d_geom),
+        (I::Position2d, REQ, 2) => request(&position2d::MotorPower { state: r.flag()? }, t, empty),
+        (I::Position2d, REQ, 3) => request(&position2d::VelocityMode { value: r.u32()? }, t, empty),
+        (I::Position2d, REQ, 4) => {
+            request(&position2d::PositionMode { state: r.flag()? }, t, empty)
+        }
+        (I::Position2d, REQ, 5) => request(&position2d::SetOdom { pose: r_pose2d(r)? }, t, empty),
+        (I::Position2d, REQ, 6) => request(&position2d::ResetOdom, t, empty),
+
+        // laser
+        (I::Laser, REQ, 1) => request(&laser::GetGeom, t, laser_geom),
+        (I::Laser, REQ, 2) => {
+            let config = laser::Config {
+                min_angle: r.f32()?,
+                max_angle: r.f32()?,
+                resolution: r.f32()?,
+                max_range: r.f32()?,
+                range_res: r.f32()?,
+                intensity: r.flag()?,
+                scanning_frequency: r.f32()?,
+            };
+            request(&laser::SetConfig { config }, t, laser_config)
+        }
+        (I::Laser, REQ, 3) => request(&laser::GetConfig, t, laser_config),
+        (I::Laser | I::Ranger | I::Sonar, REQ, _) if is_power(iface, subtype) => {
+            request(&common::Power { state: r.flag()? }, t, empty)
+        }
+
+        // ranger
+        (I::Ranger, REQ, 1) => request(&ranger::GetGeom, t, ranger_geom),
+        (I::Ranger, REQ, 3) => request(&ranger::IntensityEnable { state: r.flag()? }, t, empty),
+        (I::Ranger, REQ, 4) => {
+            let config = ranger::Config {
+                min_angle: r.f64()?,
+                max_angle: r.f64()?,
+                angular_res: r.f64()?,
+                min_range: r.f64()?,
+                max_range: r.f64()?,
+                range_res: r.f64()?,
+                frequency: r.f64()?,
+            };
+            request(&ranger::SetConfig { config }, t, ranger_config)
+        }
+        (I::Ranger, REQ, 5) => request(&ranger::GetConfig, t, ranger_config),
+
+        // sonar
+        (I::Sonar, REQ, 1) => request(&sonar::GetGeom, t, |g, w| w_pose3ds(w, &g.poses)),
+
+        // map
+        (I::Map, REQ, 1) => request(&map::GetInfo, t, map_info),
+        (I::Map, REQ, 2) => {
+            let q = map::GetData {
+                col: r.u32()?,
+                row: r.u32()?,
+                width: r.u32()?,
+                height: r.u32()?,
+            };
+            let _data_count = r.u32()?;
+            let _data_range = r.i32()?;
+            let _data = r.xdr_bytes()?;
+            request(&q, t, map_data)
+        }
+        (I::Map, REQ, 3) => request(&map::GetVector, t, |v, w| {
+            w.f32(v.min_x as f32)
+                .f32(v.max_x as f32)
+                .f32(v.min_y as f32)
+                .f32(v.max_y as f32);
+            w.array(&v.segments, |w, s| {
+                w.f64(s.x0).f64(s.y0).f64(s.x1).f64(s.y1);
+            });
+        }),
+
+        // localize
+        (I::Localize, REQ, 1) => {
+            let mean = r_pose2d(r)?;
+            let mut cov = [0.0; 6];
+            for c in &mut cov {
+                *c = r.f64()?;
+            }
+            let q = localize::SetPose {
+                mean,
+                cov: [cov[0], cov[1], cov[2]],
+            };
+            request(&q, t, empty)
+        }
+        (I::Localize, REQ, 2) => request(&localize::GetParticles, t, |p, w| {
+            w_pose2d(w, &p.mean);
+            w.f64(p.variance);
+            w.array(&p.particles, |w, p| {
+                w_pose2d(w, &p.pose);
+                w.f64(p.weight);
+            });
+        }),
+
+        // planner
+        (I::Planner, CMD, 1) => command(&planner::Goal { goal: r_pose2d(r)? }, t),
+        (I::Planner, REQ, 1) => request(&planner::GetWaypoints, t, |p, w| {
+            let dist: f64 = p
+                .waypoints
+                .windows(2)
+                .map(|ab| (ab[1].x - ab[0].x).hypot(ab[1].y - ab[0].y))
+                .sum();
+            w.f64(dist);
+            w.array(&p.waypoints, w_pose2d);
+        }),
+        (I::Planner, REQ, 2) => request(&planner::Enable { state: r.flag()? }, t, empty),
+
+        // simulation
+        (I::Simulation, REQ, 1) => {
+            let name = r.string()?;
+            let _pose = r_pose2d(r)?; // libplayerc sends its buffer's garbage here
+            request(&simulation::GetPose2d { name }, t, |p, w| {
+                w.string(&p.name);
+                w_pose2d(w, &p.pose);
+            })
+        }
+        (I::Simulation, REQ, 2) => {
+            let q = simulation::SetPose2d {
+                name: r.string()?,
+                pose: r_pose2d(r)?,
+            };
+            request(&q, t, empty)
+        }
+        (I::Simulation, REQ, 5) => {
+            let name = r.string()?;
+            let prop = r.string()?;
+            let _index = r.u32()?;
+            let _value = r.bytes()?;
+            request(&simulation::GetProperty { name, prop }, t, |p, w| {
+                w.string(&p.name).string(&p.prop).u32(0);
+                w.bytes(&property_bytes(&p.value));
+            })
+        }
+        (I::Simulation, REQ, 6) => {
+            let name = r.string()?;
+            let prop = r.string()?;
+            let _index = r.u32()?;
+            let value = property_value(&prop, r.bytes()?);
+            request(&simulation::SetProperty { name, prop, value }, t, empty)
+        }
+
+        // gripper
+        (I::Gripper, CMD, 1) => command(&gripper::Open, t),
+        (I::Gripper, CMD, 2) => command(&gripper::Close, t),
+        (I::Gripper, CMD, 3) => command(&gripper::Stop, t),
+        (I::Gripper, REQ, 1) => request(&gripper::GetGeom, t, |g, w| {
+            w_pose3d(w, &g.pose);
+            w_bbox3d(w, &g.outer_size);
+            w_bbox3d(w, &g.inner_size);
+            w.u32(u32::from(g.num_beams)).u32(u32::from(g.capacity));
+        }),
+
+        // fiducial
+        (I::Fiducial, REQ, 1) => request(&fiducial::GetGeom, t, |g, w| {
+            w_pose3d(w, &g.pose);
+            w_bbox3d(w, &g.size);
+            w_bbox2d(w, &g.fiducial_size);
+        }),
+
+        // bumper, ir, aio, dio, ptz
+        (I::Bumper, REQ, 1) => request(&bumper::GetGeom, t, bumper_geom),
+        (I::Ir, REQ, 1) => request(&ir::GetGeom, t, |g, w| w_pose3ds(w, &g.poses)),
+        (I::Ir, REQ, 2) => request(&common::Power { state: r.flag()? }, t, empty),
+        (I::Aio, CMD, 1) => command(
+            &aio::Cmd {
+                id: r.u32()?,
+                voltage: r.f32()?,
+            },
+            t,
+        ),
+        (I::Dio, CMD, 1) => command(
+            &dio::Cmd {
+                count: r.u32()?,
+                bits: r.u32()?,
+            },
+            t,
+        ),
+        (I::Ptz, CMD, 1) => command(
+            &ptz::Cmd {
+                target: ptz::Data {
+                    pan: r.f32()?,
+                    tilt: r.f32()?,
+                    zoom: r.f32()?,
+                    panspeed: r.f32()?,
+                    tiltspeed: r.f32()?,
+                },
+            },
+            t,
+        ),
+        _ => return Ok(None),
+    };
+    Ok(Some(out))
+}
+
+/// Player's POWER request subtypes: laser 4, ranger 2, sonar 2.
+fn is_power(iface: Interface, subtype: u8) -> bool {
+    matches!(
+        (iface, subtype),
+        (Interface::Laser, 4) | (Interface::Ranger, 2) | (Interface::Sonar, 2)
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn hex(s: &str) -> Vec<u8> {
+        (0..s.len())
+            .step_by(2)
+            .map(|i| u8::from_str_radix(&s[i..i + 2], 16).unwrap())
+            .collect()
+    }
+
+    fn req_payload(t: Option<ToDevice>) -> (&'static str, Vec<u8>, ReplyFn) {
+        match t.unwrap() {
+            ToDevice::Request {
+                name,
+                payload,
+                reply,
+            } => (name, payload, reply),
+            c => panic!("{c:?}"),
+        }
+    }
+
+    #[test]
+    fn position2d_state_is_52_bytes_as_in_the_transcript() {
+        let d = position2d::Data {
+            pose: Pose2d::new(-6.946, -6.947, 0.5),
+            vel: Pose2d::default(),
+            stall: false,
+        };
+        let (iface, sub, body) = to_player(&AnyMsg::Position2dData(d)).unwrap();
+        assert_eq!((iface, sub, body.len()), (Interface::Position2d, 1, 52));
+        assert_eq!(&body[48..], &[0, 0, 0, 0]);
+    }
+
+    #[test]
+    fn cmd_vel_from_libplayerc_bytes() {
+        // c-pull-position-laser #92: vel (0.3, 0, 0.2) state 1.
+        let body = hex(concat!(
+            "3fd3333333333333",
+            "0000000000000000",
+            "3fc999999999999a",
+            "00000001"
+        ));
+        let t = from_player(Interface::Position2d, CMD, 1, &body, 1.0).unwrap();
+        let Some(ToDevice::Command { name, payload }) = t else {
+            panic!("{t:?}")
+        };
+        assert_eq!(name, "vel");
+        let c = decode::<position2d::CmdVel>(&payload).unwrap().msg;
+        assert_eq!(c.vel, Pose2d::new(0.3, 0.0, 0.2));
+        assert!(c.state);
+    }
+
+    #[test]
+    fn simulation_get_pose2d_reply_echoes_the_name_with_its_nul() {
+        let mut w = Writer::new();
+        w.string("r0");
+        w_pose2d(&mut w, &Pose2d::default());
+        let (name, payload, reply) =
+            req_payload(from_player(Interface::Simulation, REQ, 1, &w.finish(), 0.0).unwrap());
+        assert_eq!(name, "get_pose2d");
+        let q = decode::<simulation::GetPose2d>(&payload).unwrap().msg;
+        assert_eq!(q.name, "r0");
+        let ack = reply(&encode(
+            &simulation::Pose2dOf {
+                name: "r0".into(),
+                pose: Pose2d::new(-6.946, -6.947, 0.5),
+            },
+            0.0,
+        ))
+        .unwrap();
+        assert_eq!(ack.len(), 36);
+        assert_eq!(&ack[..12], &[0, 0, 0, 3, 0, 0, 0, 3, b'r', b'0', 0, 0]);
+    }
+
+    #[test]
+    fn colour_property_is_four_little_endian_floats() {
+        let v = property_value("color", &hex("00000000000000000000803f0000803f"));
+        assert_eq!(
+            v,
+            simulation::Value::Color(Color {
+                r: 0.0,
+                g: 0.0,
+                b: 1.0,
+                a: 1.0
+            })
+        );
+        assert_eq!(
+            property_bytes(&simulation::Value::Color(Color {
+                r: 1.0,
+                g: 0.0,
+                b: 0.0,
+                a: 1.0
+            })),
+            hex("0000803f00000000000000000000803f")
+        );
+    }
+
+    #[test]
+    fn map_tile_is_zlib_and_decompresses_to_the_cells() {
+        let d = map::Data {
+            col: 0,
+            row: 0,
+            width: 3,
+            height: 2,
+            cells: vec![-1, 0, 1, 1, -1, -1],
+        };
+        let mut w = Writer::new();
+        map_data(&d, &mut w);
+        let b = w.finish();
+        let mut r = Reader::new(&b);
+        for _ in 0..4 {
+            r.u32().unwrap();
+        }
+        let count = r.u32().unwrap() as usize;
+        assert_eq!(r.i32().unwrap(), 1);
+        let z = &b[28..28 + count];
+        assert_eq!(&z[..2], &[0x78, 0x9c]);
+        let mut out = Vec::new();
+        std::io::Read::read_to_end(&mut flate2::read::ZlibDecoder::new(z), &mut out).unwrap();
+        assert_eq!(out, [255, 0, 1, 1, 255, 255]);
+        assert_eq!(b.len() % 4, 0);
+    }
+
+    #[test]
+    fn truncated_and_padded_bodies_name_the_message() {
+        let e = from_player(Interface::Position2d, CMD, 1, &[0; 8], 0.0).unwrap_err();
+        assert!(
+            e.to_string()
+                .starts_with("position2d CMD subtype 1: body ends"),
+            "{e}"
+        );
+        let e = from_player(Interface::Planner, REQ, 2, &[0; 8], 0.0).unwrap_err();
+        assert!(e.to_string().contains("unexpected bytes"), "{e}");
+    }
+
+    #[test]
+    fn unserved_subtypes_are_none() {
+        assert!(from_player(Interface::Position2d, REQ, 7, &[0; 12], 0.0)
+            .unwrap()
+            .is_none());
+        assert!(from_player(Interface::Camera, REQ, 1, &[], 0.0)
+            .unwrap()
+            .is_none());
+    }
+
+    #[test]
+    fn ranger_ranges_are_counted_twice() {
+        let (iface, sub, body) = to_player(&AnyMsg::RangerRanges(ranger::Ranges {
+            ranges: vec![1.0; 16],
+        }))
+        .unwrap();
+        assert_eq!((iface, sub, body.len()), (Interface::Ranger, 1, 136));
+    }
+}

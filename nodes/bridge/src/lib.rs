@@ -1,0 +1,25 @@
+//! Troupe's Player TCP bridge: legacy Player clients (libplayerc,
+//! libplayerc++, playerv, the Python bindings) talk to Troupe's devices
+//! unchanged.
+//!
+//! One TCP listener per robot port speaks Player 3 TCP/XDR byte for byte:
+//! the banner, the `player` meta-device (DEVLIST from liveliness, DRIVERINFO,
+//! DEV open/close, PUSH/PULL data modes, replace rules), and every interface
+//! of troupe-msgs translated both ways ([`codec`]). Each client has its own
+//! bounded queue with Player's semantics ([`queue`]), so a slow client never
+//! stalls the others or the robot.
+//!
+//! - [`xdr`]: XDR as Player's generator writes it;
+//! - [`wire`]: banner, header, framing;
+//! - [`codec`]: Player bodies ↔ Troupe messages;
+//! - [`queue`]: a client's queue (PUSH/PULL, SYNCH, replace rules, overflow);
+//! - [`Bridge`]: listeners, connections, Zenoh subscriptions and requests.
+#![warn(missing_docs)]
+
+pub mod codec;
+pub mod queue;
+mod server;
+pub mod wire;
+pub mod xdr;
+
+pub use server::{Bridge, BridgeError, Config, Port};

@@ -1,0 +1,786 @@
+//! The bridge itself: a TCP listener per robot port, one task pair per
+//! client, one Zenoh subscriber per device that at least one client opened.
+
+use std::collections::HashMap;
+use std::net::SocketAddr;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::{TcpListener, TcpStream};
+use tokio::sync::{mpsc, Notify};
+use troupe_msgs::codec::{self, schema_of, Message};
+use troupe_msgs::{common, decode_any, keys, sim, Device, Interface};
+use troupe_node::zenoh::pubsub::Subscriber;
+use troupe_node::zenoh::sample::SampleKind;
+use troupe_node::zenoh::{Session, Wait};
+use troupe_node::REQUEST_TIMEOUT;
+
+use crate::codec::{from_player, to_player, ReplyFn, ToDevice};
+use crate::queue::{Out, Queue, Replace, Rule, DEFAULT_MAXLEN};
+use crate::wire::{self, player, Header, PLAYER_CODE, REQ, RESP_ACK, RESP_NACK};
+use crate::xdr::{Reader, Writer};
+
+/// Why the bridge could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum BridgeError {
+    /// A robot port could not be bound.
+    #[error("cannot listen for robot {robot} on {addr}: {source}{hint}")]
+    Bind {
+        /// Robot port.
+        robot: u32,
+        /// Address tried.
+        addr: SocketAddr,
+        /// The OS error.
+        source: std::io::Error,
+        /// What to do about it.
+        hint: &'static str,
+    },
+    /// Zenoh refused a declaration.
+    #[error("{what}: {source}")]
+    Zenoh {
+        /// What was being declared.
+        what: String,
+        /// Zenoh's error.
+        source: troupe_node::zenoh::Error,
+    },
+}
+
+/// One robot port to serve.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Port {
+    /// The robot, as in keys and in Player's headers (6665).
+    pub robot: u32,
+    /// Where to listen (`127.0.0.1:6665`; port 0 = any free port).
+    pub listen: SocketAddr,
+}
+
+/// How to run the bridge.
+#[derive(Debug, Clone)]
+pub struct Config {
+    /// The robot ports to serve.
+    pub ports: Vec<Port>,
+    /// Device order for DEVLIST (Player lists devices in .cfg order); devices
+    /// not named here follow, by interface code and index.
+    pub order: Vec<Device>,
+    /// Data messages a client's queue holds before it drops (Player: 1024).
+    pub maxlen: usize,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Config {
+            ports: Vec::new(),
+            order: Vec::new(),
+            maxlen: DEFAULT_MAXLEN,
+        }
+    }
+}
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// A client's queue and the bell its writer waits on.
+struct ClientQueue {
+    queue: Mutex<Queue>,
+    bell: Notify,
+}
+
+impl ClientQueue {
+    fn push(&self, m: Out) {
+        lock(&self.queue).push(m);
+        self.bell.notify_one();
+    }
+}
+
+/// Client ids and their queues.
+type Clients = Arc<Mutex<Vec<(u64, Arc<ClientQueue>)>>>;
+
+/// The clients subscribed to one device, and the Zenoh subscriber feeding them.
+struct DeviceFeed {
+    clients: Clients,
+    _sub: Subscriber<()>,
+}
+
+struct Shared {
+    session: Session,
+    /// Live devices and their drivers, from liveliness.
+    devices: Mutex<HashMap<Device, String>>,
+    order: Vec<Device>,
+    feeds: Mutex<HashMap<Device, DeviceFeed>>,
+    /// Latest simulation time, as f64 bits; NaN until a clock is seen.
+    sim_time: AtomicU64,
+    maxlen: usize,
+    next_client: AtomicU64,
+    /// Malformed samples dropped, for the logs.
+    bad_samples: AtomicU64,
+}
+
+impl Shared {
+    /// Player stamps its own replies with the server's time: simulation
+    /// time under Stage, the wall clock otherwise.
+    fn now(&self) -> f64 {
+        let t = f64::from_bits(self.sim_time.load(Ordering::Relaxed));
+        if t.is_nan() {
+            SystemTime::now()
+                .duration_since(UNIX_EPOCH)
+                .map_or(0.0, |d| d.as_secs_f64())
+        } else {
+            t
+        }
+    }
+
+    /// The devices of `robot`, in DEVLIST order.
+    fn devlist(&self, robot: u32) -> Vec<Device> {
+        let devices = lock(&self.devices);
+        let mut list: Vec<Device> = devices
+            .keys()
+            .filter(|d| d.robot == robot)
+            .copied()
+            .collect();
+        let rank = |d: &Device| {
+            let pos = self.order.iter().position(|o| o == d).unwrap_or(usize::MAX);
+            (pos, d.interface.code(), d.index)
+        };
+        list.sort_by_key(rank);
+        list
+    }
+
+    fn driver(&self, d: &Device) -> Option<String> {
+        lock(&self.devices).get(d).cloned()
+    }
+}
+
+/// A bound bridge, ready to [`run`](Bridge::run).
+pub struct Bridge {
+    shared: Arc<Shared>,
+    listeners: Vec<(u32, u32, TcpListener)>,
+    _watch: Subscriber<()>,
+    _clock: Subscriber<()>,
+}
+
+impl Bridge {
+    /// Binds every port and starts following the devices on `session`.
+    ///
+    /// # Errors
+    ///
+    /// [`BridgeError::Bind`] when a port is taken or not allowed.
+    pub async fn bind(session: Session, cfg: Config) -> Result<Bridge, BridgeError> {
+        let mut listeners = Vec::new();
+        for p in &cfg.ports {
+            let l = TcpListener::bind(p.listen)
+                .await
+                .map_err(|source| BridgeError::Bind {
+                    robot: p.robot,
+                    addr: p.listen,
+                    hint: match source.kind() {
+                        std::io::ErrorKind::AddrInUse => {
+                            " (another Player server or troupe bridge? pick another port or stop it)"
+                        }
+                        std::io::ErrorKind::PermissionDenied => " (ports below 1024 need root)",
+                        _ => "",
+                    },
+                    source,
+                })?;
+            let ip = p.listen.ip();
+            let host = if ip.is_unspecified() {
+                wire::host_of(std::net::Ipv4Addr::LOCALHOST.into())
+            } else {
+                wire::host_of(ip)
+            };
+            listeners.push((p.robot, host, l));
+        }
+        let shared = Arc::new(Shared {
+            session: session.clone(),
+            devices: Mutex::new(HashMap::new()),
+            order: cfg.order,
+            feeds: Mutex::new(HashMap::new()),
+            sim_time: AtomicU64::new(f64::NAN.to_bits()),
+            maxlen: cfg.maxlen,
+            next_client: AtomicU64::new(0),
+            bad_samples: AtomicU64::new(0),
+        });
+        // Changes first, then the current list: no token is missed, and the
+        // port opens only once DEVLIST would be complete.
+        let s = Arc::downgrade(&shared);
+        let touched = Arc::new(Mutex::new(std::collections::HashSet::new()));
+        let t = touched.clone();
+        let watch = session
+            .liveliness()
+            .declare_subscriber(keys::tokens(None))
+            .callback(move |sample| {
+                let Some(shared) = s.upgrade() else { return };
+                let Ok((dev, driver)) = keys::parse_token(sample.key_expr().as_str()) else {
+                    return;
+                };
+                lock(&t).insert(dev);
+                let mut devices = lock(&shared.devices);
+                match sample.kind() {
+                    SampleKind::Put => {
+                        tracing::debug!("device {dev} ({driver}) is live");
+                        devices.insert(dev, driver);
+                    }
+                    SampleKind::Delete => {
+                        tracing::debug!("device {dev} ({driver}) is gone");
+                        devices.remove(&dev);
+                    }
+                }
+            })
+            .await
+            .map_err(|source| BridgeError::Zenoh {
+                what: "watching device tokens".into(),
+                source,
+            })?;
+        let current = session
+            .liveliness()
+            .get(keys::tokens(None))
+            .timeout(REQUEST_TIMEOUT)
+            .await
+            .map_err(|source| BridgeError::Zenoh {
+                what: "listing live devices".into(),
+                source,
+            })?;
+        while let Ok(reply) = current.recv_async().await {
+            let Ok(sample) = reply.into_result() else {
+                continue;
+            };
+            if let Ok((dev, driver)) = keys::parse_token(sample.key_expr().as_str()) {
+                if !lock(&touched).contains(&dev) {
+                    lock(&shared.devices).insert(dev, driver);
+                }
+            }
+        }
+        let s = Arc::downgrade(&shared);
+        let clock = session
+            .declare_subscriber(keys::SIM_CLOCK)
+            .callback(move |sample| {
+                let Some(shared) = s.upgrade() else { return };
+                if let Ok(c) = codec::decode::<sim::Clock>(&sample.payload().to_bytes()) {
+                    shared
+                        .sim_time
+                        .store(c.msg.time.to_bits(), Ordering::Relaxed);
+                }
+            })
+            .await
+            .map_err(|source| BridgeError::Zenoh {
+                what: "following the simulation clock".into(),
+                source,
+            })?;
+        Ok(Bridge {
+            shared,
+            listeners,
+            _watch: watch,
+            _clock: clock,
+        })
+    }
+
+    /// Where each robot port listens: `(robot, address)`.
+    pub fn local_addrs(&self) -> Vec<(u32, SocketAddr)> {
+        self.listeners
+            .iter()
+            .filter_map(|(robot, _, l)| l.local_addr().ok().map(|a| (*robot, a)))
+            .collect()
+    }
+
+    /// Serves clients until `shutdown` completes.
+    pub async fn run(self, shutdown: impl std::future::Future<Output = ()>) {
+        let mut tasks = tokio::task::JoinSet::new();
+        for (robot, host, listener) in self.listeners {
+            let shared = self.shared.clone();
+            tasks.spawn(accept_loop(shared, robot, host, listener));
+        }
+        shutdown.await;
+        tasks.shutdown().await;
+        let bad = self.shared.bad_samples.load(Ordering::Relaxed);
+        if bad > 0 {
+            tracing::warn!("{bad} malformed device samples were dropped");
+        }
+    }
+}
+
+async fn accept_loop(shared: Arc<Shared>, robot: u32, host: u32, listener: TcpListener) {
+    let mut clients = tokio::task::JoinSet::new();
+    loop {
+        tokio::select! {
+            accepted = listener.accept() => match accepted {
+                Ok((stream, peer)) => {
+                    let id = shared.next_client.fetch_add(1, Ordering::Relaxed);
+                    tracing::info!("robot {robot}: client {id} connected from {peer}");
+                    let conn = Conn { shared: shared.clone(), robot, host, id, queue: Arc::new(ClientQueue {
+                        queue: Mutex::new(Queue::new(shared.maxlen)),
+                        bell: Notify::new(),
+                    }), subscribed: Vec::new() };
+                    clients.spawn(conn.serve(stream));
+                }
+                Err(e) => {
+                    tracing::warn!("robot {robot}: accept failed: {e}");
+                    tokio::time::sleep(Duration::from_millis(50)).await;
+                }
+            },
+            Some(_) = clients.join_next(), if !clients.is_empty() => {}
+        }
+    }
+}
+
+/// One client connection.
+struct Conn {
+    shared: Arc<Shared>,
+    robot: u32,
+    host: u32,
+    id: u64,
+    queue: Arc<ClientQueue>,
+    subscribed: Vec<Device>,
+}
+
+/// A device request waiting for its turn: Player drivers answer in order.
+struct Pending {
+    header: Header,
+    dev: Device,
+    name: &'static str,
+    payload: Vec<u8>,
+    reply: ReplyFn,
+}
+
+impl Conn {
+    async fn serve(mut self, stream: TcpStream) {
+        let _ = stream.set_nodelay(true);
+        let (mut rd, wr) = stream.into_split();
+        let writer = tokio::spawn(write_loop(self.queue.clone(), wr));
+        let (req_tx, req_rx) = mpsc::unbounded_channel();
+        let requests = tokio::spawn(request_loop(
+            self.shared.clone(),
+            self.queue.clone(),
+            req_rx,
+        ));
+        let mut buf = Vec::with_capacity(64 * 1024);
+        let mut chunk = vec![0u8; 64 * 1024];
+        let why = 'conn: loop {
+            let n = match rd.read(&mut chunk).await {
+                Ok(0) => break 'conn "closed by the client".to_owned(),
+                Ok(n) => n,
+                Err(e) => break 'conn format!("read failed: {e}"),
+            };
+            buf.extend_from_slice(&chunk[..n]);
+            let mut start = 0;
+            loop {
+                match wire::frame(&buf[start..]) {
+                    Ok(Some((h, len))) => {
+                        let body = &buf[start + wire::HEADER_LEN..start + len];
+                        if let Err(reason) = self.handle(h, body, &req_tx).await {
+                            break 'conn reason;
+                        }
+                        start += len;
+                    }
+                    Ok(None) => break,
+                    Err(e) => break 'conn e.to_string(),
+                }
+            }
+            buf.drain(..start);
+        };
+        tracing::info!(
+            "robot {}: client {} disconnected: {why}",
+            self.robot,
+            self.id
+        );
+        writer.abort();
+        requests.abort();
+        for dev in std::mem::take(&mut self.subscribed) {
+            self.unsubscribe(dev);
+        }
+        let dropped = lock(&self.queue.queue).dropped_total();
+        if dropped > 0 {
+            tracing::warn!(
+                "robot {}: client {} was too slow: {dropped} data messages dropped",
+                self.robot,
+                self.id
+            );
+        }
+    }
+
+    fn header(&self, interf: u32, index: u32, kind: u8, subtype: u32) -> Header {
+        Header {
+            host: self.host,
+            robot: self.robot,
+            interf,
+            index,
+            kind: u32::from(kind),
+            subtype,
+            timestamp: self.shared.now(),
+            seq: 0,
+            size: 0,
+        }
+    }
+
+    fn reply(&self, req: &Header, kind: u8, body: &[u8]) {
+        let h = self.header(req.interf, req.index, kind, req.subtype);
+        self.queue.push(Out::new(h, body));
+    }
+
+    /// Handles one message; `Err` closes the connection with that reason.
+    async fn handle(
+        &mut self,
+        h: Header,
+        body: &[u8],
+        req_tx: &mpsc::UnboundedSender<Pending>,
+    ) -> Result<(), String> {
+        if h.interf == u32::from(PLAYER_CODE) {
+            return self.handle_player(h, body);
+        }
+        let dev = u16::try_from(h.interf)
+            .ok()
+            .and_then(Interface::from_code)
+            .map(|i| Device::new(self.robot, i, h.index));
+        let Some(dev) = dev.filter(|d| self.shared.driver(d).is_some()) else {
+            tracing::warn!(
+                "robot {}: client {}: skipping message of type {}:{} to unknown device {}:{}",
+                self.robot,
+                self.id,
+                h.kind,
+                h.subtype,
+                h.interf,
+                h.index
+            );
+            return Ok(());
+        };
+        let kind = u8::try_from(h.kind).unwrap_or(0);
+        if kind != REQ && kind != wire::CMD {
+            tracing::debug!(
+                "client {}: ignoring message type {} to {dev}",
+                self.id,
+                h.kind
+            );
+            return Ok(());
+        }
+        let subtype = u8::try_from(h.subtype).unwrap_or(0);
+        match from_player(dev.interface, kind, subtype, body, h.timestamp) {
+            Err(e) => Err(e.to_string()),
+            Ok(None) if kind == REQ => {
+                tracing::debug!("{dev}: request subtype {subtype} is not served; NACK");
+                self.reply(&h, RESP_NACK, &[]);
+                Ok(())
+            }
+            Ok(None) => {
+                tracing::debug!("{dev}: command subtype {subtype} is not served; dropped");
+                Ok(())
+            }
+            Ok(Some(ToDevice::Command { name, payload })) => {
+                let key = keys::cmd(&dev, name);
+                if let Err(e) = self.shared.session.put(&key, payload).await {
+                    tracing::warn!("sending {key}: {e}");
+                }
+                Ok(())
+            }
+            Ok(Some(ToDevice::Request {
+                name,
+                payload,
+                reply,
+            })) => {
+                let _ = req_tx.send(Pending {
+                    header: Header {
+                        host: self.host,
+                        robot: self.robot,
+                        ..h
+                    },
+                    dev,
+                    name,
+                    payload,
+                    reply,
+                });
+                Ok(())
+            }
+        }
+    }
+
+    /// The `player` meta-device, as Player's `HandlePlayerMessage`.
+    fn handle_player(&mut self, h: Header, body: &[u8]) -> Result<(), String> {
+        let bad = |e: crate::xdr::XdrError| format!("player REQ subtype {}: {e}", h.subtype);
+        if h.kind != u32::from(REQ) {
+            self.reply(&h, RESP_NACK, &[]);
+            return Ok(());
+        }
+        let mut r = Reader::new(body);
+        match u8::try_from(h.subtype).unwrap_or(0) {
+            player::DEVLIST => {
+                let list = self.shared.devlist(self.robot);
+                let mut w = Writer::new();
+                w.array(&list, |w, d| {
+                    w.u32(self.host)
+                        .u32(self.robot)
+                        .u32(u32::from(d.interface.code()))
+                        .u32(d.index);
+                });
+                self.reply(&h, RESP_ACK, &w.finish());
+            }
+            player::DRIVERINFO => {
+                let (interf, index) = read_addr(&mut r).map_err(bad)?;
+                r.bytes().and_then(|_| r.end()).map_err(bad)?;
+                match self.device(interf, index) {
+                    Some((_, driver)) => {
+                        let mut w = Writer::new();
+                        w.u32(self.host).u32(self.robot).u32(interf).u32(index);
+                        w.string(&driver);
+                        self.reply(&h, RESP_ACK, &w.finish());
+                    }
+                    None => self.reply(&h, RESP_NACK, &[]),
+                }
+            }
+            player::DEV => {
+                let (interf, index) = read_addr(&mut r).map_err(bad)?;
+                let access = r.u32().map_err(bad)?;
+                r.bytes().and_then(|_| r.end()).map_err(bad)?;
+                let mut w = Writer::new();
+                w.u32(self.host).u32(self.robot).u32(interf).u32(index);
+                match self.device(interf, index) {
+                    None => {
+                        tracing::warn!(
+                            "robot {}: client {}: subscription to unknown device {interf}:{index}",
+                            self.robot,
+                            self.id
+                        );
+                        w.u32(player::ERROR).bytes(&[]);
+                        self.reply(&h, RESP_NACK, &w.finish());
+                    }
+                    Some((dev, driver)) => {
+                        let granted = match access {
+                            player::OPEN => {
+                                self.subscribe(dev);
+                                player::OPEN
+                            }
+                            player::CLOSE if self.subscribed.contains(&dev) => {
+                                self.subscribed.retain(|d| *d != dev);
+                                self.unsubscribe(dev);
+                                player::CLOSE
+                            }
+                            _ => player::ERROR,
+                        };
+                        w.u32(granted).string(&driver);
+                        self.reply(&h, RESP_ACK, &w.finish());
+                    }
+                }
+            }
+            player::DATA => {
+                let ack = Out::new(self.header(h.interf, h.index, RESP_ACK, h.subtype), &[]);
+                lock(&self.queue.queue).request_data(ack);
+                self.queue.bell.notify_one();
+            }
+            player::DATAMODE => {
+                let mode = r.u32().and_then(|m| r.end().map(|()| m)).map_err(bad)?;
+                match mode {
+                    player::PUSH => lock(&self.queue.queue).set_pull(false),
+                    player::PULL => lock(&self.queue.queue).set_pull(true),
+                    m => tracing::warn!("client {}: unknown data mode {m} requested", self.id),
+                }
+                self.reply(&h, RESP_ACK, &[]);
+            }
+            player::ADD_REPLACE_RULE => {
+                let mut f = [0i32; 5];
+                for v in &mut f {
+                    *v = r.i32().map_err(bad)?;
+                }
+                r.end().map_err(bad)?;
+                lock(&self.queue.queue).add_rule(Rule {
+                    interf: f[0],
+                    index: f[1],
+                    kind: f[2],
+                    subtype: f[3],
+                    replace: Replace::from_player(f[4]),
+                });
+                self.reply(&h, RESP_ACK, &[]);
+            }
+            other => {
+                tracing::debug!("client {}: player request {other} refused", self.id);
+                self.reply(&h, RESP_NACK, &[]);
+            }
+        }
+        Ok(())
+    }
+
+    fn device(&self, interf: u32, index: u32) -> Option<(Device, String)> {
+        let iface = u16::try_from(interf).ok().and_then(Interface::from_code)?;
+        let dev = Device::new(self.robot, iface, index);
+        self.shared.driver(&dev).map(|d| (dev, d))
+    }
+
+    fn subscribe(&mut self, dev: Device) {
+        if self.subscribed.contains(&dev) {
+            // Player counts subscriptions per device, not per client: one feed.
+            return;
+        }
+        self.subscribed.push(dev);
+        let mut feeds = lock(&self.shared.feeds);
+        if let Some(feed) = feeds.get(&dev) {
+            lock(&feed.clients).push((self.id, self.queue.clone()));
+            return;
+        }
+        let clients: Clients = Arc::new(Mutex::new(vec![(self.id, self.queue.clone())]));
+        let (c, shared) = (clients.clone(), Arc::downgrade(&self.shared));
+        let host = self.host;
+        let sub = self
+            .shared
+            .session
+            .declare_subscriber(keys::data(&dev))
+            .callback(move |s| {
+                let bytes = s.payload().to_bytes();
+                match data_message(dev, host, &bytes) {
+                    Some(out) => {
+                        for (_, q) in lock(&c).iter() {
+                            q.push(out.clone());
+                        }
+                    }
+                    None => {
+                        if let Some(sh) = shared.upgrade() {
+                            sh.bad_samples.fetch_add(1, Ordering::Relaxed);
+                        }
+                    }
+                }
+            })
+            .wait();
+        match sub {
+            Ok(sub) => {
+                feeds.insert(dev, DeviceFeed { clients, _sub: sub });
+            }
+            Err(e) => tracing::warn!("subscribing to {dev}: {e}"),
+        }
+    }
+
+    fn unsubscribe(&self, dev: Device) {
+        let mut feeds = lock(&self.shared.feeds);
+        let empty = feeds.get(&dev).is_some_and(|f| {
+            let mut c = lock(&f.clients);
+            c.retain(|(id, _)| *id != self.id);
+            c.is_empty()
+        });
+        if empty {
+            feeds.remove(&dev);
+        }
+    }
+}
+
+fn read_addr(r: &mut Reader) -> Result<(u32, u32), crate::xdr::XdrError> {
+    let _host = r.u32()?;
+    let _robot = r.u32()?;
+    Ok((r.u32()?, r.u32()?))
+}
+
+/// A device's sample as a Player DATA message, or `None` if it is malformed
+/// or of another interface.
+fn data_message(dev: Device, host: u32, payload: &[u8]) -> Option<Out> {
+    let m = match decode_any(payload) {
+        Ok(m) => m,
+        Err(e) => {
+            tracing::debug!("{dev}: dropping a sample: {e}");
+            return None;
+        }
+    };
+    let (iface, subtype, body) = to_player(&m.msg)?;
+    if iface != dev.interface {
+        tracing::debug!("{dev}: dropping a {iface} sample published on it");
+        return None;
+    }
+    let h = Header {
+        host,
+        robot: dev.robot,
+        interf: u32::from(iface.code()),
+        index: dev.index,
+        kind: u32::from(wire::DATA),
+        subtype: u32::from(subtype),
+        timestamp: m.stamp,
+        seq: 0,
+        size: 0,
+    };
+    Some(Out::new(h, &body))
+}
+
+/// Writes the banner, then whatever the queue lets go, in batches.
+async fn write_loop(q: Arc<ClientQueue>, mut wr: tokio::net::tcp::OwnedWriteHalf) {
+    if wr.write_all(&wire::banner()).await.is_err() {
+        return;
+    }
+    let mut batch = Vec::with_capacity(64 * 1024);
+    loop {
+        batch.clear();
+        {
+            let mut queue = lock(&q.queue);
+            while batch.len() < 1 << 20 {
+                match queue.pop() {
+                    Some(m) => batch.extend_from_slice(&m.bytes),
+                    None => break,
+                }
+            }
+        }
+        if batch.is_empty() {
+            q.bell.notified().await;
+            continue;
+        }
+        if let Err(e) = wr.write_all(&batch).await {
+            tracing::debug!("write failed: {e}");
+            return;
+        }
+    }
+}
+
+/// Sends a client's device requests one at a time and queues the answers.
+async fn request_loop(
+    shared: Arc<Shared>,
+    q: Arc<ClientQueue>,
+    mut rx: mpsc::UnboundedReceiver<Pending>,
+) {
+    while let Some(p) = rx.recv().await {
+        let (kind, body, stamp) = ask(&shared, &p).await;
+        let h = Header {
+            kind: u32::from(kind),
+            timestamp: stamp.unwrap_or_else(|| shared.now()),
+            size: 0,
+            ..p.header
+        };
+        q.push(Out::new(h, &body));
+    }
+}
+
+/// One request's answer: ACK with its body, or NACK with none.
+async fn ask(shared: &Shared, p: &Pending) -> (u8, Vec<u8>, Option<f64>) {
+    let key = keys::req(&p.dev, p.name);
+    let nack = (RESP_NACK, Vec::new(), None);
+    let replies = match shared
+        .session
+        .get(&key)
+        .payload(p.payload.clone())
+        .timeout(REQUEST_TIMEOUT)
+        .await
+    {
+        Ok(r) => r,
+        Err(e) => {
+            tracing::warn!("{key}: {e}");
+            return nack;
+        }
+    };
+    let Ok(reply) = replies.recv_async().await else {
+        tracing::info!("{key}: no answer within {REQUEST_TIMEOUT:?}; NACK");
+        return nack;
+    };
+    match reply.into_result() {
+        Ok(s) => {
+            let bytes = s.payload().to_bytes();
+            if schema_of(&bytes) == Ok(common::Nack::SCHEMA) {
+                return nack;
+            }
+            let stamp = codec::split(&bytes).ok().map(|(_, t, _)| t);
+            match (p.reply)(&bytes) {
+                Ok(body) => (RESP_ACK, body, stamp),
+                Err(e) => {
+                    tracing::warn!("{key}: {e}; NACK");
+                    nack
+                }
+            }
+        }
+        Err(e) => {
+            let reason = codec::decode::<common::Nack>(&e.payload().to_bytes())
+                .map(|n| n.msg.reason)
+                .unwrap_or_default();
+            tracing::debug!("{key}: refused: {reason}");
+            nack
+        }
+    }
+}
