@@ -6,6 +6,7 @@
 //! Run with `cargo test -p troupe-tests`.
 
 mod bridge;
+mod bridge_devices;
 mod hosts;
 mod launch;
 mod process;

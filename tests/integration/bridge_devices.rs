@@ -1,0 +1,664 @@
+//! The bridge's own suite: fake devices of every interface on Zenoh, the
+//! bridge in this process, and a Player client written here in raw XDR (not
+//! Troupe's client API). Data, commands and requests of each interface, many
+//! clients with one stuck, and malformed input closing only its connection.
+
+use std::io::{Read, Write};
+use std::net::{SocketAddr, TcpStream};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{mpsc, Arc};
+use std::time::{Duration, Instant};
+
+use troupe_bridge::{Bridge, Config, Port};
+use troupe_msgs::codec::{decode, encode, split};
+use troupe_msgs::*;
+use troupe_node::zenoh::{Session, Wait};
+use troupe_tests::{TestNet, DEADLINE};
+
+const ROBOT: u32 = 6665;
+
+/// Every fake device and the sample it publishes.
+fn samples() -> Vec<(Device, Vec<u8>)> {
+    let d = |i, n| Device::new(ROBOT, i, n);
+    let p = Pose2d::new(1.0, 2.0, 0.5);
+    vec![
+        (
+            d(Interface::Position2d, 0),
+            encode(
+                &position2d::Data {
+                    pose: p,
+                    vel: p,
+                    stall: true,
+                },
+                1.0,
+            ),
+        ),
+        (
+            d(Interface::Laser, 0),
+            encode(
+                &laser::Scan {
+                    min_angle: -1.0,
+                    max_angle: 1.0,
+                    resolution: 0.5,
+                    max_range: 8.0,
+                    ranges: vec![1.0; 5],
+                    intensity: vec![1; 5],
+                    id: 7,
+                },
+                1.0,
+            ),
+        ),
+        (
+            d(Interface::Ranger, 0),
+            encode(
+                &ranger::Ranges {
+                    ranges: vec![2.0; 3],
+                },
+                1.0,
+            ),
+        ),
+        (
+            d(Interface::Sonar, 0),
+            encode(
+                &sonar::Ranges {
+                    ranges: vec![2.0; 16],
+                },
+                1.0,
+            ),
+        ),
+        (
+            d(Interface::Power, 0),
+            encode(
+                &power::Data {
+                    valid: 1,
+                    volts: 12.5,
+                    ..Default::default()
+                },
+                1.0,
+            ),
+        ),
+        (
+            d(Interface::Bumper, 0),
+            encode(
+                &bumper::Data {
+                    bumpers: vec![true, false, true],
+                },
+                1.0,
+            ),
+        ),
+        (
+            d(Interface::Ir, 0),
+            encode(
+                &ir::Data {
+                    voltages: vec![1.0; 2],
+                    ranges: vec![0.5; 2],
+                },
+                1.0,
+            ),
+        ),
+        (
+            d(Interface::Aio, 0),
+            encode(
+                &aio::Data {
+                    voltages: vec![3.3; 4],
+                },
+                1.0,
+            ),
+        ),
+        (
+            d(Interface::Dio, 0),
+            encode(
+                &dio::Data {
+                    count: 8,
+                    bits: 0xa5,
+                },
+                1.0,
+            ),
+        ),
+        (
+            d(Interface::Ptz, 0),
+            encode(
+                &ptz::Data {
+                    pan: 0.5,
+                    ..Default::default()
+                },
+                1.0,
+            ),
+        ),
+        (
+            d(Interface::Planner, 0),
+            encode(
+                &planner::State {
+                    valid: true,
+                    waypoints_count: 2,
+                    ..Default::default()
+                },
+                1.0,
+            ),
+        ),
+        (
+            d(Interface::Localize, 0),
+            encode(
+                &localize::Hypoths {
+                    hypoths: vec![localize::Hypoth {
+                        mean: p,
+                        cov: [0.1; 3],
+                        weight: 1.0,
+                    }],
+                    ..Default::default()
+                },
+                1.0,
+            ),
+        ),
+        (
+            d(Interface::Gripper, 0),
+            encode(
+                &gripper::Data {
+                    state: gripper::State::Closed,
+                    beams: 3,
+                    stored: 0,
+                },
+                1.0,
+            ),
+        ),
+        (
+            d(Interface::Blobfinder, 0),
+            encode(
+                &blobfinder::Data {
+                    width: 80,
+                    height: 60,
+                    blobs: vec![Default::default(); 2],
+                },
+                1.0,
+            ),
+        ),
+        (
+            d(Interface::Fiducial, 0),
+            encode(
+                &fiducial::Data {
+                    fiducials: vec![Default::default(); 3],
+                },
+                1.0,
+            ),
+        ),
+        (
+            d(Interface::Map, 0),
+            encode(
+                &map::Info {
+                    width: 3,
+                    height: 2,
+                    resolution: 0.5,
+                    origin: p,
+                },
+                1.0,
+            ),
+        ),
+    ]
+}
+
+/// Player's DATA subtype and body length for each sample above.
+fn expected_data(i: Interface) -> (u32, usize) {
+    match i {
+        Interface::Position2d => (1, 52),
+        Interface::Laser => (1, 16 + 8 + 20 + 4 + 4 + 8 + 4),
+        Interface::Ranger => (1, 8 + 24),
+        Interface::Sonar => (1, 8 + 64),
+        Interface::Power => (1, 24),
+        Interface::Bumper => (1, 8 + 4),
+        Interface::Ir => (1, 8 + 8 + 8 + 8),
+        Interface::Aio => (1, 8 + 16),
+        Interface::Dio => (1, 8),
+        Interface::Ptz => (1, 24),
+        Interface::Planner => (1, 88),
+        Interface::Localize => (1, 4 + 8 + 8 + 80),
+        Interface::Gripper => (1, 12),
+        Interface::Blobfinder => (1, 16 + 80),
+        Interface::Fiducial => (1, 8 + 300),
+        Interface::Map => (1, 36),
+        other => panic!("no expectation for {other}"),
+    }
+}
+
+/// Answers every request like a driver would.
+fn answer(name: &str, payload: &[u8]) -> Result<Vec<u8>, Vec<u8>> {
+    let nack = |r: &str| Err(encode(&common::Nack { reason: r.into() }, 0.0));
+    let p = Pose2d::new(1.0, 2.0, 0.5);
+    Ok(match name {
+        "info" => encode(
+            &map::Info {
+                width: 3,
+                height: 2,
+                resolution: 0.5,
+                origin: p,
+            },
+            2.0,
+        ),
+        "data" => {
+            let q = decode::<map::GetData>(payload).map_err(|_| vec![])?.msg;
+            let n = (q.width * q.height) as usize;
+            let cells = (0..n).map(|i| [-1i8, 0, 1][i % 3]).collect();
+            encode(
+                &map::Data {
+                    col: q.col,
+                    row: q.row,
+                    width: q.width,
+                    height: q.height,
+                    cells,
+                },
+                2.0,
+            )
+        }
+        "set_pose" => {
+            let q = decode::<localize::SetPose>(payload)
+                .map_err(|_| vec![])?
+                .msg;
+            if q.mean.x == 1.0 {
+                encode(&common::Ack, 2.0)
+            } else {
+                return nack("bad pose");
+            }
+        }
+        "waypoints" => encode(
+            &planner::Waypoints {
+                waypoints: vec![Pose2d::new(0.0, 0.0, 0.0), Pose2d::new(3.0, 4.0, 0.0)],
+            },
+            2.0,
+        ),
+        "geom" if split(payload).map(|(t, _, _)| t) == Ok("sonar/get_geom@1") => encode(
+            &sonar::Geom {
+                poses: vec![Pose3d::planar(0.1, 0.0, 0.0); 16],
+            },
+            2.0,
+        ),
+        "geom" => encode(
+            &bumper::Geom {
+                bumpers: vec![Default::default(); 2],
+            },
+            2.0,
+        ),
+        "pose" => encode(
+            &ir::Geom {
+                poses: vec![Default::default(); 2],
+            },
+            2.0,
+        ),
+        _ => return nack("not served"),
+    })
+}
+
+/// The fake devices: tokens, a publisher thread, a queryable, a command tap.
+struct Devices {
+    _session: Session,
+    stop: Arc<AtomicBool>,
+    commands: mpsc::Receiver<(String, Vec<u8>)>,
+    big: Arc<std::sync::Mutex<Option<Vec<u8>>>>,
+}
+
+fn devices(net: &TestNet) -> Devices {
+    let s = net.peer();
+    let (tx, commands) = mpsc::channel();
+    let tap = s
+        .declare_subscriber(format!("robot/{ROBOT}/*/*/cmd/*"))
+        .callback(move |x| {
+            let _ = tx.send((x.key_expr().to_string(), x.payload().to_bytes().to_vec()));
+        })
+        .wait()
+        .unwrap();
+    let q = s
+        .declare_queryable(format!("robot/{ROBOT}/*/*/req/*"))
+        .callback(|q| {
+            let key = q.key_expr().as_str().to_owned();
+            let name = key.rsplit('/').next().unwrap_or("").to_owned();
+            let payload = q
+                .payload()
+                .map(|p| p.to_bytes().to_vec())
+                .unwrap_or_default();
+            match answer(&name, &payload) {
+                Ok(r) => q.reply(q.key_expr().clone(), r).wait().unwrap(),
+                Err(e) => q.reply_err(e).wait().unwrap(),
+            }
+        })
+        .wait()
+        .unwrap();
+    let samples = samples();
+    let mut tokens = Vec::new();
+    for (d, _) in &samples {
+        tokens.push(
+            s.liveliness()
+                .declare_token(keys::token(d, "fake"))
+                .wait()
+                .unwrap(),
+        );
+    }
+    let names: Vec<String> = samples.iter().map(|(d, _)| d.to_string()).collect();
+    net.wait_live(&names.iter().map(String::as_str).collect::<Vec<_>>());
+    let stop = Arc::new(AtomicBool::new(false));
+    let big: Arc<std::sync::Mutex<Option<Vec<u8>>>> = Arc::default();
+    let (st, b, pubs) = (stop.clone(), big.clone(), s.clone());
+    // Like drivers, the devices publish all the time (every 5 ms here).
+    std::thread::spawn(move || {
+        let _keep = (tap, q, tokens);
+        while !st.load(Ordering::Relaxed) {
+            for (d, payload) in &samples {
+                let big = b.lock().unwrap().clone();
+                let payload = match (d.interface, big) {
+                    (Interface::Laser, Some(big)) => big,
+                    _ => payload.clone(),
+                };
+                pubs.put(keys::data(d), payload).wait().unwrap();
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    });
+    Devices {
+        _session: s,
+        stop,
+        commands,
+        big,
+    }
+}
+
+impl Drop for Devices {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+    }
+}
+
+/// The bridge in this process, on a free port.
+fn bridge(
+    net: &TestNet,
+) -> (
+    SocketAddr,
+    std::thread::JoinHandle<()>,
+    tokio::sync::oneshot::Sender<()>,
+) {
+    let session = net.client();
+    let (addr_tx, addr_rx) = mpsc::channel();
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let t = std::thread::spawn(move || {
+        let rt = tokio::runtime::Builder::new_multi_thread()
+            .enable_all()
+            .build()
+            .unwrap();
+        rt.block_on(async move {
+            let cfg = Config {
+                ports: vec![Port {
+                    robot: ROBOT,
+                    listen: "127.0.0.1:0".parse().unwrap(),
+                }],
+                ..Config::default()
+            };
+            let b = Bridge::bind(session, cfg).await.unwrap();
+            addr_tx.send(b.local_addrs()[0].1).unwrap();
+            b.run(async {
+                let _ = stop_rx.await;
+            })
+            .await;
+        });
+    });
+    (addr_rx.recv_timeout(DEADLINE).unwrap(), t, stop_tx)
+}
+
+/// A Player client in raw XDR.
+struct Player {
+    s: TcpStream,
+}
+
+#[derive(Debug)]
+struct Reply {
+    h: [u32; 6],
+    body: Vec<u8>,
+}
+
+impl Player {
+    fn connect(addr: SocketAddr) -> Player {
+        let mut s = TcpStream::connect(addr).unwrap();
+        s.set_read_timeout(Some(DEADLINE)).unwrap();
+        let mut banner = [0u8; 32];
+        s.read_exact(&mut banner).unwrap();
+        assert!(banner.starts_with(b"Player v.3"));
+        Player { s }
+    }
+
+    fn send(&mut self, interf: u32, index: u32, kind: u32, subtype: u32, body: &[u8]) {
+        let mut m = Vec::new();
+        for v in [0, ROBOT, interf, index, kind, subtype] {
+            m.extend_from_slice(&v.to_be_bytes());
+        }
+        m.extend_from_slice(&0f64.to_be_bytes());
+        m.extend_from_slice(&0u32.to_be_bytes());
+        m.extend_from_slice(&(body.len() as u32).to_be_bytes());
+        m.extend_from_slice(body);
+        self.s.write_all(&m).unwrap();
+    }
+
+    fn recv(&mut self) -> Reply {
+        let mut h = [0u8; 40];
+        self.s.read_exact(&mut h).unwrap();
+        let w = |i: usize| u32::from_be_bytes(h[i * 4..i * 4 + 4].try_into().unwrap());
+        let mut body = vec![0; w(9) as usize];
+        self.s.read_exact(&mut body).unwrap();
+        Reply {
+            h: [w(0), w(1), w(2), w(3), w(4), w(5)],
+            body,
+        }
+    }
+
+    /// The next message that is not DATA.
+    fn reply(&mut self) -> Reply {
+        loop {
+            let r = self.recv();
+            if r.h[4] != 1 {
+                return r;
+            }
+        }
+    }
+
+    fn open(&mut self, d: Device) {
+        let mut b = Vec::new();
+        for v in [0u32, 0, u32::from(d.interface.code()), d.index, 1, 0, 0] {
+            b.extend_from_slice(&v.to_be_bytes());
+        }
+        self.send(1, 0, 3, 3, &b);
+        let r = self.reply();
+        assert_eq!((r.h[4], r.h[5]), (4, 3), "subscribing {d}: {r:?}");
+    }
+
+    fn request(&mut self, d: Device, subtype: u32, body: &[u8]) -> Reply {
+        self.send(u32::from(d.interface.code()), d.index, 3, subtype, body);
+        let r = self.reply();
+        assert_eq!(
+            (r.h[2], r.h[3], r.h[5]),
+            (u32::from(d.interface.code()), d.index, subtype)
+        );
+        r
+    }
+}
+
+fn be(words: &[u32]) -> Vec<u8> {
+    words.iter().flat_map(|w| w.to_be_bytes()).collect()
+}
+
+fn f64s(v: &[f64]) -> Vec<u8> {
+    v.iter().flat_map(|w| w.to_be_bytes()).collect()
+}
+
+#[test]
+fn every_interface_s_data_commands_and_requests_cross_the_bridge() {
+    let net = TestNet::new("bridge-ifaces");
+    let devs = devices(&net);
+    let (addr, thread, stop) = bridge(&net);
+    let mut c = Player::connect(addr);
+
+    // DEVLIST: every device, by interface code and index.
+    c.send(1, 0, 3, 1, &[]);
+    let r = c.reply();
+    assert_eq!(r.body.len(), 8 + 16 * samples().len());
+
+    // Data: subscribe to everything in PUSH mode; each interface arrives as Player's DATA.
+    let mut missing: Vec<Interface> = samples().iter().map(|(d, _)| d.interface).collect();
+    for (d, _) in samples() {
+        c.open(d);
+    }
+    let deadline = Instant::now() + DEADLINE;
+    while !missing.is_empty() {
+        assert!(Instant::now() < deadline, "no DATA from {missing:?}");
+        let r = c.recv();
+        if r.h[4] != 1 {
+            continue;
+        }
+        let iface = Interface::from_code(r.h[2] as u16).unwrap();
+        assert_eq!((r.h[5], r.body.len()), expected_data(iface), "{iface}");
+        missing.retain(|i| *i != iface);
+    }
+
+    // Commands: each becomes the Troupe command its driver expects.
+    let d = |i| Device::new(ROBOT, i, 0);
+    let mut vel = f64s(&[0.3, 0.0, 0.2]);
+    vel.extend(be(&[1]));
+    c.send(4, 0, 2, 1, &vel);
+    c.send(44, 0, 2, 1, &f64s(&[-4.5, -5.5, 0.0]));
+    c.send(3, 0, 2, 2, &[]);
+    c.send(21, 0, 2, 1, &be(&[2, 3.3f32.to_bits()]));
+    c.send(20, 0, 2, 1, &be(&[8, 0x0f]));
+    c.send(8, 0, 2, 1, &be(&[0.5f32.to_bits(), 0, 0, 0, 0]));
+    let mut got = std::collections::HashMap::new();
+    while got.len() < 6 {
+        let (key, payload) = devs.commands.recv_timeout(DEADLINE).expect("a command");
+        got.insert(key, payload);
+    }
+    let cmd = |i, n| &got[&keys::cmd(&d(i), n)];
+    let v = decode::<position2d::CmdVel>(cmd(Interface::Position2d, "vel"))
+        .unwrap()
+        .msg;
+    assert_eq!((v.vel, v.state), (Pose2d::new(0.3, 0.0, 0.2), true));
+    let g = decode::<planner::Goal>(cmd(Interface::Planner, "goal"))
+        .unwrap()
+        .msg;
+    assert_eq!(g.goal, Pose2d::new(-4.5, -5.5, 0.0));
+    decode::<gripper::Close>(cmd(Interface::Gripper, "close")).unwrap();
+    let a = decode::<aio::Cmd>(cmd(Interface::Aio, "state"))
+        .unwrap()
+        .msg;
+    assert_eq!((a.id, a.voltage), (2, 3.3));
+    let io = decode::<dio::Cmd>(cmd(Interface::Dio, "values"))
+        .unwrap()
+        .msg;
+    assert_eq!((io.count, io.bits), (8, 0x0f));
+    let z = decode::<ptz::Cmd>(cmd(Interface::Ptz, "state"))
+        .unwrap()
+        .msg;
+    assert_eq!(z.target.pan, 0.5);
+
+    // Requests: ACK bodies in Player's layouts, NACK when the driver refuses.
+    let r = c.request(d(Interface::Map), 1, &[]);
+    assert_eq!(r.h[4], 4);
+    assert_eq!(&r.body[..12], &be(&[0.5f32.to_bits(), 3, 2])[..]);
+    let r = c.request(d(Interface::Map), 2, &be(&[0, 0, 3, 2, 0, 0, 0]));
+    assert_eq!(r.h[4], 4);
+    let zlen = u32::from_be_bytes(r.body[16..20].try_into().unwrap()) as usize;
+    let mut cells = Vec::new();
+    flate2::read::ZlibDecoder::new(&r.body[28..28 + zlen])
+        .read_to_end(&mut cells)
+        .unwrap();
+    assert_eq!(cells, [255, 0, 1, 255, 0, 1]);
+    let mut pose = f64s(&[1.0, 2.0, 0.5]);
+    pose.extend(f64s(&[0.1; 6]));
+    assert_eq!(c.request(d(Interface::Localize), 1, &pose).h[4], 4);
+    let mut far = f64s(&[9.0, 2.0, 0.5]);
+    far.extend(f64s(&[0.1; 6]));
+    let r = c.request(d(Interface::Localize), 1, &far);
+    assert_eq!(
+        (r.h[4], r.body.len()),
+        (6, 0),
+        "a refused request is an empty NACK"
+    );
+    let r = c.request(d(Interface::Planner), 1, &[]);
+    assert_eq!(
+        f64::from_be_bytes(r.body[..8].try_into().unwrap()),
+        5.0,
+        "path length"
+    );
+    assert_eq!(r.body.len(), 8 + 8 + 2 * 24);
+    assert_eq!(
+        c.request(d(Interface::Sonar), 1, &[]).body.len(),
+        8 + 16 * 48
+    );
+    assert_eq!(
+        c.request(d(Interface::Bumper), 1, &[]).body.len(),
+        8 + 2 * 56
+    );
+    assert_eq!(c.request(d(Interface::Ir), 1, &[]).body.len(), 8 + 2 * 48);
+    // A subtype Troupe does not serve, and a universal one: empty NACKs.
+    assert_eq!(
+        c.request(d(Interface::Position2d), 7, &be(&[0, 0, 0])).h[4],
+        6
+    );
+    assert_eq!(
+        c.request(d(Interface::Position2d), 255, &be(&[3, 1])).h[4],
+        6
+    );
+
+    drop(c);
+    let _ = stop.send(());
+    thread.join().unwrap();
+}
+
+#[test]
+fn dozens_of_clients_flow_while_one_is_stuck_and_bad_input_closes_only_its_connection() {
+    let net = TestNet::new("bridge-clients");
+    let devs = devices(&net);
+    // A 40 KB scan every 5 ms: a client that never reads fills its socket and queue.
+    let big = encode(
+        &laser::Scan {
+            ranges: vec![1.0; 10_000],
+            ..Default::default()
+        },
+        1.0,
+    );
+    *devs.big.lock().unwrap() = Some(big);
+    let (addr, thread, stop) = bridge(&net);
+    let laser = Device::new(ROBOT, Interface::Laser, 0);
+
+    let mut stuck = Player::connect(addr);
+    stuck.open(laser);
+    let mut clients: Vec<Player> = (0..30).map(|_| Player::connect(addr)).collect();
+    for c in &mut clients {
+        c.open(laser);
+    }
+    // Every reading client gets 100 scans while the stuck one reads nothing.
+    for c in &mut clients {
+        let mut n = 0;
+        while n < 100 {
+            let r = c.recv();
+            if r.h[2] == 6 && r.h[4] == 1 {
+                assert_eq!(r.body.len(), 16 + 8 + 40_000 + 8 + 4);
+                n += 1;
+            }
+        }
+    }
+
+    // A truncated command closes that connection, and only that one.
+    let mut bad = Player::connect(addr);
+    bad.send(4, 0, 2, 1, &[0, 0, 0]);
+    let mut rest = Vec::new();
+    bad.s
+        .read_to_end(&mut rest)
+        .expect("the bridge closes the connection");
+    // An absurd size closes the connection too.
+    let mut huge = Player::connect(addr);
+    let mut h = be(&[0, ROBOT, 1, 0, 3, 1]);
+    h.extend(0f64.to_be_bytes());
+    h.extend(be(&[0, 64 << 20]));
+    huge.s.write_all(&h).unwrap();
+    huge.s.read_to_end(&mut rest).expect("closed");
+    // The others are served as before.
+    let c = &mut clients[0];
+    c.send(1, 0, 3, 1, &[]);
+    assert_eq!(c.reply().h[5], 1, "DEVLIST answered");
+
+    drop(stuck);
+    drop(clients);
+    let _ = stop.send(());
+    thread.join().unwrap();
+}
