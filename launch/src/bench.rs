@@ -39,6 +39,7 @@ pub fn run(cmd: BenchCmd, z: &ZenohArgs) -> anyhow::Result<()> {
         BenchCmd::Pong => pong(z),
         BenchCmd::Launch(a) => launch_bench(&a),
         BenchCmd::Stage(a) => stage_bench(&a),
+        BenchCmd::Bridge(a) => bridge_bench(&a),
     }
 }
 
@@ -623,5 +624,333 @@ pub fn stage_bench(a: &StageBenchArgs) -> anyhow::Result<()> {
             anyhow::bail!("bench world `{name}` failed: {status}");
         }
     }
+    Ok(())
+}
+
+/// Flags of `troupe bench bridge`.
+#[derive(Debug, Args)]
+pub struct BridgeBenchArgs {
+    /// Timed requests of each kind.
+    #[arg(long, default_value_t = 2000)]
+    pub samples: usize,
+    /// Full map fetches.
+    #[arg(long, default_value_t = 50)]
+    pub fetches: usize,
+    /// The map image (500x500 cave.png in the reference); a synthetic cave without it.
+    #[arg(long, value_name = "PNG")]
+    pub map: Option<std::path::PathBuf>,
+}
+
+/// A Player client's side of a request, in raw XDR over a socket without
+/// TCP_NODELAY, as libplayerc: send, then read until the answer (DATA ahead
+/// of it is read and dropped, as the client queues it).
+fn player_request(
+    s: &mut std::net::TcpStream,
+    h: [u32; 6],
+    body: &[u8],
+) -> anyhow::Result<Vec<u8>> {
+    use std::io::{Read, Write};
+    let mut m = Vec::with_capacity(40 + body.len());
+    for v in h {
+        m.extend_from_slice(&v.to_be_bytes());
+    }
+    m.extend_from_slice(&0f64.to_be_bytes());
+    m.extend_from_slice(&0u32.to_be_bytes());
+    m.extend_from_slice(&u32::try_from(body.len())?.to_be_bytes());
+    m.extend_from_slice(body);
+    s.write_all(&m)?;
+    loop {
+        let mut hdr = [0u8; 40];
+        s.read_exact(&mut hdr)?;
+        let word = |i: usize| {
+            u32::from_be_bytes([hdr[i * 4], hdr[i * 4 + 1], hdr[i * 4 + 2], hdr[i * 4 + 3]])
+        };
+        let mut b = vec![0; word(9) as usize];
+        s.read_exact(&mut b)?;
+        match word(4) {
+            4 if word(5) == h[5] && word(2) == h[2] => return Ok(b),
+            6 => anyhow::bail!("request {:?} refused", h),
+            _ => {}
+        }
+    }
+}
+
+/// `troupe bench bridge`: Player clients' request round trips and a full map
+/// fetch through the bridge, against the reference Player server's figures.
+pub fn bridge_bench(a: &BridgeBenchArgs) -> anyhow::Result<()> {
+    use std::io::Read;
+    use troupe_msgs::{common, keys, map, position2d, Device, Interface, Pose2d, Pose3d, Size3d};
+    let ns = format!("bench-bridge-{}", std::process::id());
+    let router = ZenohArgs {
+        listen: vec!["tcp/127.0.0.1:0".into()],
+        no_multicast: true,
+        ..Default::default()
+    }
+    .open(Mode::Router)?;
+    let at = ZenohArgs {
+        connect: troupe_node::locators(&router),
+        namespace: Some(ns),
+        no_multicast: true,
+        ..Default::default()
+    };
+    // The map: the image's dark pixels occupied, light free, as mapfile reads it.
+    let (w, h, cells) = match &a.map {
+        Some(p) => {
+            let b = troupe_geom::bitmap::Bitmap::load(p)?;
+            let mut cells = vec![0i8; b.luma.len()];
+            for row in 0..b.height as usize {
+                for col in 0..b.width as usize {
+                    // Player's rows run bottom-up.
+                    let l = b.luma[(b.height as usize - 1 - row) * b.width as usize + col];
+                    cells[row * b.width as usize + col] = if l < 25 { 1 } else { -1 };
+                }
+            }
+            (b.width, b.height, cells)
+        }
+        None => {
+            let cells = (0..500 * 500)
+                .map(|i: usize| {
+                    let (x, y) = ((i % 500) as f64, (i / 500) as f64);
+                    if (x / 37.0).sin() * (y / 23.0).cos() > 0.6 {
+                        1
+                    } else {
+                        -1
+                    }
+                })
+                .collect();
+            (500, 500, cells)
+        }
+    };
+    let devices = at.open(Mode::Peer)?;
+    let robot = troupe_msgs::DEFAULT_ROBOT;
+    let map_dev = Device::new(robot, Interface::Map, 0);
+    let pos_dev = Device::new(robot, Interface::Position2d, 0);
+    let info = map::Info {
+        width: w,
+        height: h,
+        resolution: 0.032,
+        origin: Pose2d::new(-8.0, -8.0, 0.0),
+    };
+    let cells = std::sync::Arc::new(cells);
+    let q = devices
+        .declare_queryable(format!("robot/{robot}/*/0/req/*"))
+        .callback(move |q| {
+            let name = q
+                .key_expr()
+                .as_str()
+                .rsplit('/')
+                .next()
+                .unwrap_or("")
+                .to_owned();
+            let payload = q
+                .payload()
+                .map(|p| p.to_bytes().to_vec())
+                .unwrap_or_default();
+            let reply = match name.as_str() {
+                "info" => codec::encode(&info, 0.0),
+                "data" => match codec::decode::<map::GetData>(&payload) {
+                    Ok(g) => {
+                        let g = g.msg;
+                        let mut out = Vec::with_capacity((g.width * g.height) as usize);
+                        for r in g.row..(g.row + g.height).min(info.height) {
+                            let s = (r * info.width + g.col) as usize;
+                            let e = s + (g.width.min(info.width - g.col.min(info.width))) as usize;
+                            out.extend_from_slice(&cells[s..e]);
+                        }
+                        codec::encode(
+                            &map::Data {
+                                col: g.col,
+                                row: g.row,
+                                width: g.width,
+                                height: g.height,
+                                cells: out,
+                            },
+                            0.0,
+                        )
+                    }
+                    Err(_) => codec::encode(
+                        &common::Nack {
+                            reason: "bad".into(),
+                        },
+                        0.0,
+                    ),
+                },
+                "geom" => codec::encode(
+                    &position2d::Geom {
+                        pose: Pose3d::planar(-0.04, 0.0, 0.0),
+                        size: Size3d {
+                            width: 0.38,
+                            length: 0.44,
+                            height: 0.22,
+                        },
+                    },
+                    0.0,
+                ),
+                _ => codec::encode(
+                    &common::Nack {
+                        reason: "no".into(),
+                    },
+                    0.0,
+                ),
+            };
+            let _ = q.reply(q.key_expr().clone(), reply).wait();
+        })
+        .wait()
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let _tokens = [map_dev, pos_dev]
+        .iter()
+        .map(|d| {
+            devices
+                .liveliness()
+                .declare_token(keys::token(d, "bench"))
+                .wait()
+        })
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    // The router has both tokens before the bridge lists the devices.
+    let watcher = at.open(Mode::Client)?;
+    let seen = watcher
+        .liveliness()
+        .declare_subscriber(keys::tokens(Some(robot)))
+        .history(true)
+        .wait()
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    for _ in 0..2 {
+        seen.recv_timeout(Duration::from_secs(10))
+            .map_err(|e| anyhow::anyhow!("{e}"))?
+            .ok_or_else(|| anyhow::anyhow!("the bench's devices never came up"))?;
+    }
+    // position2d data at Stage-under-Player's rate (~110 Hz) while we measure.
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let (st, pubs) = (stop.clone(), devices.clone());
+    let publisher = std::thread::spawn(move || {
+        while !st.load(std::sync::atomic::Ordering::Relaxed) {
+            let _ = pubs
+                .put(
+                    keys::data(&pos_dev),
+                    codec::encode(&position2d::Data::default(), 0.0),
+                )
+                .wait();
+            std::thread::sleep(Duration::from_millis(9));
+        }
+    });
+    // The bridge, as `troupe bridge` runs it.
+    let session = at.open(Mode::Client)?;
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()?;
+    let bridge = rt.block_on(troupe_bridge::Bridge::bind(
+        session,
+        troupe_bridge::Config {
+            ports: vec![troupe_bridge::Port {
+                robot,
+                listen: "127.0.0.1:0".parse()?,
+            }],
+            ..Default::default()
+        },
+    ))?;
+    let addr = bridge.local_addrs()[0].1;
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let server = rt.spawn(bridge.run(async {
+        let _ = stop_rx.await;
+    }));
+
+    let mut s = std::net::TcpStream::connect(addr)?;
+    let mut banner = [0u8; 32];
+    s.read_exact(&mut banner)?;
+    let player = |sub: u32| [0, 0, 1, 0, 3, sub];
+    player_request(&mut s, player(5), &2u32.to_be_bytes())?; // PULL, as libplayerc
+    let (mi, pi) = (
+        u32::from(Interface::Map.code()),
+        u32::from(Interface::Position2d.code()),
+    );
+    let timed = |s: &mut std::net::TcpStream,
+                 h: [u32; 6],
+                 body: &[u8],
+                 n: usize|
+     -> anyhow::Result<Vec<Duration>> {
+        let mut v = Vec::with_capacity(n);
+        for i in 0..n + n / 10 {
+            let t0 = Instant::now();
+            player_request(s, h, body)?;
+            if i >= n / 10 {
+                v.push(t0.elapsed());
+            }
+        }
+        v.sort();
+        Ok(v)
+    };
+    let idle = timed(&mut s, [0, robot, mi, 0, 3, 1], &[], a.samples)?;
+    let mut sub = Vec::new();
+    for v in [0, 0, pi, 0, 1, 0, 0] {
+        sub.extend_from_slice(&v.to_be_bytes());
+    }
+    player_request(&mut s, player(3), &sub)?;
+    let busy = timed(&mut s, [0, robot, pi, 0, 3, 1], &[], a.samples)?;
+    let mut fetches = Vec::new();
+    for _ in 0..a.fetches {
+        let t0 = Instant::now();
+        let info = player_request(&mut s, [0, robot, mi, 0, 3, 1], &[])?;
+        let w = u32::from_be_bytes([info[4], info[5], info[6], info[7]]);
+        let h = u32::from_be_bytes([info[8], info[9], info[10], info[11]]);
+        let mut got = 0usize;
+        // libplayerc's tiles: at most 640x640.
+        for row in (0..h).step_by(640) {
+            for col in (0..w).step_by(640) {
+                let (tw, th) = ((w - col).min(640), (h - row).min(640));
+                let mut q = Vec::new();
+                for v in [col, row, tw, th, 0, 0, 0] {
+                    q.extend_from_slice(&v.to_be_bytes());
+                }
+                let b = player_request(&mut s, [0, robot, mi, 0, 3, 2], &q)?;
+                let n = u32::from_be_bytes([b[24], b[25], b[26], b[27]]) as usize;
+                let mut cells = Vec::with_capacity((tw * th) as usize);
+                flate2::read::ZlibDecoder::new(&b[28..28 + n]).read_to_end(&mut cells)?;
+                got += cells.len();
+            }
+        }
+        anyhow::ensure!(
+            got == (w * h) as usize,
+            "map fetch got {got} cells of {}",
+            w * h
+        );
+        fetches.push(t0.elapsed());
+    }
+    fetches.sort();
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    let _ = publisher.join();
+    let _ = stop_tx.send(());
+    let _ = rt.block_on(server);
+    drop(q);
+
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "troupe bench bridge: a Player client in raw XDR (no TCP_NODELAY, PULL mode) → bridge → Zenoh → devices, loopback")?;
+    let row = |out: &mut std::io::StdoutLock, name: &str, v: &[Duration], target: &str| {
+        writeln!(
+            out,
+            "  {name:<44} p50 {:>8}  p99 {:>8}   {target}",
+            us(percentile(v, 0.5)),
+            us(percentile(v, 0.99)),
+        )
+    };
+    row(
+        &mut out,
+        "map GET_INFO round trip, idle",
+        &idle,
+        "Player 66 µs; target <= 250 µs",
+    )?;
+    row(
+        &mut out,
+        "position2d GET_GEOM round trip, data at 110 Hz",
+        &busy,
+        "Player 44 ms; target <= 250 µs",
+    )?;
+    row(
+        &mut out,
+        &format!("full {w}x{h} map fetch (zlib tiles)"),
+        &fetches,
+        "Player 2.1-2.4 ms; target <= 4 ms",
+    )?;
     Ok(())
 }

@@ -77,7 +77,8 @@ pub fn run(a: BridgeArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
     crate::cli::supervised()?;
-    // A client of the router, like the tools: its first requests find routes.
+    // A client of the router, like the tools: its device listing at start is
+    // complete (a peer's first query can run before its routes exist).
     let session = z.open(Mode::Client)?;
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)

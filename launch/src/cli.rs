@@ -222,6 +222,10 @@ pub enum BenchCmd {
     #[command(after_help = "Example:
   cargo run --release -- bench stage --bitmaps ../shared/compat/stage/bitmaps")]
     Stage(crate::bench::StageBenchArgs),
+    /// Player clients through the bridge: request round trips and a full map fetch.
+    #[command(after_help = "Example:
+  cargo run --release -- bench bridge --map ../shared/compat/stage/bitmaps/cave.png")]
+    Bridge(crate::bench::BridgeBenchArgs),
     /// The echo side of `bench latency` (started by it).
     #[command(hide = true)]
     Pong,
