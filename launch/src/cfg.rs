@@ -27,35 +27,13 @@
 //! setting everywhere; the two agree whenever a file sets them once, at the
 //! top, as every known cfg does).
 
-use std::fmt;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-/// A place in a cfg file.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Pos {
-    /// The file.
-    pub file: PathBuf,
-    /// 1-based line.
-    pub line: u32,
-    /// 1-based column.
-    pub col: u32,
-}
-
-impl fmt::Display for Pos {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}:{}:{}", self.file.display(), self.line, self.col)
-    }
-}
+pub use troupe_node::syntax::Pos;
+use troupe_node::syntax::{lex, SyntaxError, Tok, Token};
 
 /// A syntax error, with where it is and what was expected.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("{pos}: {msg}")]
-pub struct CfgError {
-    /// Where.
-    pub pos: Pos,
-    /// What is wrong and what was expected.
-    pub msg: String,
-}
+pub type CfgError = SyntaxError;
 
 /// A field value.
 #[derive(Debug, Clone, PartialEq)]
@@ -135,183 +113,21 @@ pub struct CfgFile {
     pub plugins: Vec<(String, Pos)>,
 }
 
-#[derive(Debug, Clone, PartialEq)]
-enum Tok {
-    Word(String),
-    Num(String),
-    Str(String),
-    Bool(bool),
-    Open,
-    Close,
-    TupleOpen,
-    TupleClose,
-    Eol,
-}
-
-#[derive(Debug, Clone)]
-struct Token {
-    tok: Tok,
-    line: u32,
-    col: u32,
-}
-
-fn lex(text: &str, file: &Path) -> Result<Vec<Token>, CfgError> {
-    let mut out = Vec::new();
-    let chars: Vec<char> = text.chars().collect();
-    let (mut i, mut line, mut col) = (0usize, 1u32, 1u32);
-    let err = |line, col, msg: String| CfgError {
-        pos: Pos {
-            file: file.to_owned(),
-            line,
-            col,
-        },
-        msg,
-    };
-    while i < chars.len() {
-        let c = chars[i];
-        let (l0, c0) = (line, col);
-        let take = |pred: &dyn Fn(char) -> bool, i: &mut usize, col: &mut u32| {
-            let start = *i;
-            while *i < chars.len() && pred(chars[*i]) {
-                *i += 1;
-                *col += 1;
-            }
-            chars[start..*i].iter().collect::<String>()
-        };
-        match c {
-            '#' => {
-                while i < chars.len() && chars[i] != '\n' && chars[i] != '\r' {
-                    i += 1;
-                }
-            }
-            '\r' | '\n' => {
-                i += 1;
-                // \r\n and \n\r count once, as in Player.
-                if i < chars.len() && (chars[i] == '\r' || chars[i] == '\n') && chars[i] != c {
-                    i += 1;
-                }
-                out.push(Token {
-                    tok: Tok::Eol,
-                    line,
-                    col,
-                });
-                line += 1;
-                col = 1;
-            }
-            ' ' | '\t' => {
-                i += 1;
-                col += 1;
-            }
-            '(' | ')' | '[' | ']' => {
-                let tok = match c {
-                    '(' => Tok::Open,
-                    ')' => Tok::Close,
-                    '[' => Tok::TupleOpen,
-                    _ => Tok::TupleClose,
-                };
-                out.push(Token { tok, line, col });
-                i += 1;
-                col += 1;
-            }
-            '"' => {
-                i += 1;
-                col += 1;
-                let start = i;
-                while i < chars.len() && chars[i] != '"' {
-                    if chars[i] == '\n' || chars[i] == '\r' {
-                        return Err(err(
-                            l0,
-                            c0,
-                            "unterminated string: a string ends with `\"` on its own line".into(),
-                        ));
-                    }
-                    i += 1;
-                    col += 1;
-                }
-                if i >= chars.len() {
-                    return Err(err(
-                        l0,
-                        c0,
-                        "unterminated string: a string ends with `\"` on its own line".into(),
-                    ));
-                }
-                let s: String = chars[start..i].iter().collect();
-                i += 1;
-                col += 1;
-                out.push(Token {
-                    tok: Tok::Str(s),
-                    line: l0,
-                    col: c0,
-                });
-            }
-            c if c.is_ascii_alphabetic() => {
-                let w = take(
-                    &|c: char| c.is_ascii_alphanumeric() || ".-_[]:".contains(c),
-                    &mut i,
-                    &mut col,
-                );
-                let tok = match w.as_str() {
-                    "true" | "yes" => Tok::Bool(true),
-                    "false" | "no" => Tok::Bool(false),
-                    _ => Tok::Word(w),
-                };
-                out.push(Token {
-                    tok,
-                    line: l0,
-                    col: c0,
-                });
-            }
-            c if "+-.0123456789".contains(c) => {
-                let n = take(&|c: char| "+-.0123456789".contains(c), &mut i, &mut col);
-                out.push(Token {
-                    tok: Tok::Num(n),
-                    line: l0,
-                    col: c0,
-                });
-            }
-            other => {
-                return Err(err(
-                    l0,
-                    c0,
-                    format!(
-                        "syntax error: unexpected character `{}`",
-                        other.escape_default()
-                    ),
-                ));
-            }
-        }
-    }
-    out.push(Token {
-        tok: Tok::Eol,
-        line,
-        col,
-    });
-    Ok(out)
-}
-
 /// How deep includes may nest before we call it a cycle.
 const MAX_INCLUDE_DEPTH: usize = 16;
 
 struct Parser<'a> {
     toks: &'a [Token],
     i: usize,
-    file: &'a Path,
 }
 
 impl Parser<'_> {
     fn pos(&self, t: &Token) -> Pos {
-        Pos {
-            file: self.file.to_owned(),
-            line: t.line,
-            col: t.col,
-        }
+        t.pos.clone()
     }
 
     fn err(&self, t: &Token, msg: impl Into<String>) -> CfgError {
-        CfgError {
-            pos: self.pos(t),
-            msg: msg.into(),
-        }
+        SyntaxError::at(&t.pos, msg)
     }
 
     fn peek(&self) -> Option<&Token> {
@@ -346,8 +162,11 @@ impl Parser<'_> {
                 Ok(Value::Num(n))
             }
             Tok::Str(s) => Ok(Value::Str(s)),
-            Tok::Bool(b) => Ok(Value::Bool(b)),
-            Tok::Word(w) => Ok(Value::Word(w)),
+            Tok::Word(w) => Ok(match w.as_str() {
+                "true" | "yes" => Value::Bool(true),
+                "false" | "no" => Value::Bool(false),
+                _ => Value::Word(w),
+            }),
             Tok::TupleOpen => {
                 let mut items = Vec::new();
                 loop {
@@ -369,7 +188,7 @@ impl Parser<'_> {
                                 &t,
                                 format!(
                                     "expected `]` to close the tuple opened at line {}",
-                                    field.line
+                                    field.pos.line
                                 ),
                             ));
                         }
@@ -450,11 +269,7 @@ fn parse_into(
     from: Option<&Pos>,
 ) -> Result<(), CfgError> {
     let text = std::fs::read_to_string(path).map_err(|e| CfgError {
-        pos: from.cloned().unwrap_or(Pos {
-            file: path.to_owned(),
-            line: 1,
-            col: 1,
-        }),
+        pos: from.cloned().unwrap_or_else(|| Pos::start(path)),
         msg: format!("cannot read {}: {e}", path.display()),
     })?;
     parse_text(&text, path, out, units, depth)
@@ -467,12 +282,8 @@ fn parse_text(
     units: &mut Units,
     depth: usize,
 ) -> Result<(), CfgError> {
-    let toks = lex(text, path)?;
-    let mut p = Parser {
-        toks: &toks,
-        i: 0,
-        file: path,
-    };
+    let toks = lex(text, path, ":")?;
+    let mut p = Parser { toks: &toks, i: 0 };
     loop {
         p.skip_eols();
         let Some(t) = p.peek().cloned() else {
@@ -609,7 +420,6 @@ fn section(
                 let what = match other {
                     Tok::Num(n) => format!("number `{n}`"),
                     Tok::Str(v) => format!("string \"{v}\""),
-                    Tok::Bool(b) => format!("`{b}`"),
                     Tok::Open => "`(`".into(),
                     Tok::TupleOpen => "`[`".into(),
                     _ => "`]`".into(),

@@ -7,6 +7,7 @@
 //!   command, request, read the [`Clock`]);
 //! - [`run`]/[`spawn`]: the Zenoh-backed runtime (liveliness per provided
 //!   device, latest-value queryables, request queryables, sim clock, signals);
+//! - [`syntax`]: the lexical grammar of Player's .cfg and Stage's world files;
 //! - [`testing::Harness`]: the same driver, driven by hand without the network.
 //!
 //! Depends on troupe-msgs and Zenoh; never on a node crate.
@@ -20,6 +21,7 @@ mod error;
 mod inbox;
 mod runtime;
 mod section;
+pub mod syntax;
 pub mod testing;
 
 pub use args::{init_logging, locators, Mode, ZenohArgs, DEFAULT_ROUTER};

@@ -21,35 +21,13 @@
 //! true file, line and column.
 
 use std::collections::HashMap;
-use std::fmt;
 use std::path::{Path, PathBuf};
 
-/// A place in a world file.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Pos {
-    /// The file.
-    pub file: PathBuf,
-    /// 1-based line.
-    pub line: u32,
-    /// 1-based column.
-    pub col: u32,
-}
-
-impl fmt::Display for Pos {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}:{}:{}", self.file.display(), self.line, self.col)
-    }
-}
+pub use troupe_node::syntax::Pos;
+use troupe_node::syntax::{lex, SyntaxError, Tok, Token};
 
 /// A malformed world file: where, and what was expected.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("{pos}: {msg}")]
-pub struct WorldError {
-    /// Where.
-    pub pos: Pos,
-    /// What is wrong and what was expected.
-    pub msg: String,
-}
+pub type WorldError = SyntaxError;
 
 /// One value of a property.
 #[derive(Debug, Clone, PartialEq)]
@@ -120,34 +98,17 @@ pub struct WorldFile {
     pub path: PathBuf,
 }
 
-#[derive(Debug, Clone, PartialEq)]
-enum Tok {
-    Word(String),
-    Num(String),
-    Str(String),
-    Open,
-    Close,
-    TupleOpen,
-    TupleClose,
-    Eol,
-}
-
-#[derive(Debug, Clone)]
-struct Token {
-    tok: Tok,
-    pos: Pos,
-}
-
 const MAX_INCLUDE_DEPTH: usize = 16;
 const MAX_MACRO_DEPTH: usize = 64;
 
 fn err(pos: &Pos, msg: impl Into<String>) -> WorldError {
-    WorldError {
-        pos: pos.clone(),
-        msg: msg.into(),
-    }
+    SyntaxError::at(pos, msg)
 }
 
+const INCLUDE_FORM: &str = "`include` takes a quoted file name: include \"pioneer.inc\"";
+
+/// Tokens of `path` with every `include "file"` replaced by that file's
+/// tokens (looked up next to the including file, then in the world's directory).
 fn lex_file(
     path: &Path,
     world_dir: &Path,
@@ -156,161 +117,38 @@ fn lex_file(
     from: Option<&Pos>,
 ) -> Result<(), WorldError> {
     let text = std::fs::read(path).map_err(|e| {
-        let at = from.cloned().unwrap_or(Pos {
-            file: path.to_owned(),
-            line: 1,
-            col: 1,
-        });
+        let at = from.cloned().unwrap_or_else(|| Pos::start(path));
         err(&at, format!("cannot read {}: {e}", path.display()))
     })?;
-    let text = String::from_utf8_lossy(&text);
-    let chars: Vec<char> = text.chars().collect();
-    let (mut i, mut line, mut col) = (0usize, 1u32, 1u32);
-    let mut pending_include: Option<Pos> = None;
-    while i < chars.len() {
-        let c = chars[i];
-        let pos = Pos {
-            file: path.to_owned(),
-            line,
-            col,
-        };
-        let push = |tok: Tok, out: &mut Vec<Token>| {
-            out.push(Token {
-                tok,
-                pos: pos.clone(),
-            })
-        };
-        match c {
-            '#' => {
-                while i < chars.len() && chars[i] != '\n' && chars[i] != '\r' {
-                    i += 1;
-                }
-            }
-            '\r' | '\n' => {
-                i += 1;
-                if i < chars.len() && (chars[i] == '\r' || chars[i] == '\n') && chars[i] != c {
-                    i += 1;
-                }
-                push(Tok::Eol, out);
-                line += 1;
-                col = 1;
-            }
-            ' ' | '\t' => {
-                i += 1;
-                col += 1;
-            }
-            '(' | ')' | '[' | ']' => {
-                push(
-                    match c {
-                        '(' => Tok::Open,
-                        ')' => Tok::Close,
-                        '[' => Tok::TupleOpen,
-                        _ => Tok::TupleClose,
-                    },
-                    out,
-                );
-                i += 1;
-                col += 1;
-            }
-            '"' => {
-                let start = i + 1;
-                let mut j = start;
-                while j < chars.len() && chars[j] != '"' {
-                    if chars[j] == '\n' || chars[j] == '\r' {
-                        return Err(err(
-                            &pos,
-                            "unterminated string: a string ends with `\"` on its own line",
-                        ));
-                    }
-                    j += 1;
-                }
-                if j >= chars.len() {
-                    return Err(err(
-                        &pos,
-                        "unterminated string: a string ends with `\"` on its own line",
-                    ));
-                }
-                let s: String = chars[start..j].iter().collect();
-                col += (j + 1 - i) as u32;
-                i = j + 1;
-                if let Some(at) = pending_include.take() {
-                    if depth >= MAX_INCLUDE_DEPTH {
-                        return Err(err(&at, format!("includes nest deeper than {MAX_INCLUDE_DEPTH}: is `{s}` including itself?")));
-                    }
-                    let here = path.parent().unwrap_or(Path::new(".")).join(&s);
-                    let target = if here.exists() {
-                        here
-                    } else {
-                        world_dir.join(&s)
-                    };
-                    lex_file(&target, world_dir, out, depth + 1, Some(&at))?;
-                    continue;
-                }
-                push(Tok::Str(s), out);
-            }
-            c if c.is_ascii_alphabetic() => {
-                let start = i;
-                while i < chars.len()
-                    && (chars[i].is_ascii_alphanumeric() || ".-_[]".contains(chars[i]))
-                {
-                    i += 1;
-                }
-                let w: String = chars[start..i].iter().collect();
-                col += (i - start) as u32;
-                if w == "include" && pending_include.is_none() {
-                    pending_include = Some(pos.clone());
-                    continue;
-                }
-                if let Some(at) = &pending_include {
-                    return Err(err(
-                        at,
-                        "`include` takes a quoted file name: include \"pioneer.inc\"",
-                    ));
-                }
-                push(Tok::Word(w), out);
-            }
-            c if "+-.0123456789".contains(c) => {
-                let start = i;
-                while i < chars.len() && "+-.0123456789".contains(chars[i]) {
-                    i += 1;
-                }
-                col += (i - start) as u32;
-                push(Tok::Num(chars[start..i].iter().collect()), out);
-            }
-            other => {
-                return Err(err(
-                    &pos,
-                    format!(
-                        "syntax error: unexpected character `{}`",
-                        other.escape_default()
-                    ),
-                ));
-            }
+    let mut toks = lex(&String::from_utf8_lossy(&text), path, "")?.into_iter();
+    while let Some(t) = toks.next() {
+        if t.tok != Tok::Word("include".into()) {
+            out.push(t);
+            continue;
         }
-        if pending_include.is_some() && !matches!(c, ' ' | '\t') {
-            // Only blanks may separate `include` from its file name.
-            if let Some(at) = pending_include.take() {
-                return Err(err(
-                    &at,
-                    "`include` takes a quoted file name: include \"pioneer.inc\"",
-                ));
-            }
+        // Only blanks may separate `include` from its file name.
+        let Some(Token {
+            tok: Tok::Str(s), ..
+        }) = toks.next()
+        else {
+            return Err(err(&t.pos, INCLUDE_FORM));
+        };
+        if depth >= MAX_INCLUDE_DEPTH {
+            return Err(err(
+                &t.pos,
+                format!(
+                    "includes nest deeper than {MAX_INCLUDE_DEPTH}: is `{s}` including itself?"
+                ),
+            ));
         }
+        let here = path.parent().unwrap_or(Path::new(".")).join(&s);
+        let target = if here.exists() {
+            here
+        } else {
+            world_dir.join(&s)
+        };
+        lex_file(&target, world_dir, out, depth + 1, Some(&t.pos))?;
     }
-    if let Some(at) = pending_include {
-        return Err(err(
-            &at,
-            "`include` takes a quoted file name: include \"pioneer.inc\"",
-        ));
-    }
-    out.push(Token {
-        tok: Tok::Eol,
-        pos: Pos {
-            file: path.to_owned(),
-            line,
-            col,
-        },
-    });
     Ok(())
 }
 
