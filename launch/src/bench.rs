@@ -650,26 +650,27 @@ fn player_request(
     body: &[u8],
 ) -> anyhow::Result<Vec<u8>> {
     use std::io::{Read, Write};
-    let mut m = Vec::with_capacity(40 + body.len());
-    for v in h {
-        m.extend_from_slice(&v.to_be_bytes());
-    }
-    m.extend_from_slice(&0f64.to_be_bytes());
-    m.extend_from_slice(&0u32.to_be_bytes());
-    m.extend_from_slice(&u32::try_from(body.len())?.to_be_bytes());
-    m.extend_from_slice(body);
-    s.write_all(&m)?;
+    use troupe_bridge::wire::{self, Header, HEADER_LEN};
+    let [host, robot, interf, index, kind, subtype] = h;
+    let req = Header {
+        host,
+        robot,
+        interf,
+        index,
+        kind,
+        subtype,
+        ..Header::default()
+    };
+    s.write_all(&wire::message(req, body))?;
     loop {
-        let mut hdr = [0u8; 40];
+        let mut hdr = [0u8; HEADER_LEN];
         s.read_exact(&mut hdr)?;
-        let word = |i: usize| {
-            u32::from_be_bytes([hdr[i * 4], hdr[i * 4 + 1], hdr[i * 4 + 2], hdr[i * 4 + 3]])
-        };
-        let mut b = vec![0; word(9) as usize];
+        let got = Header::read(&hdr)?;
+        let mut b = vec![0; got.size as usize];
         s.read_exact(&mut b)?;
-        match word(4) {
-            4 if word(5) == h[5] && word(2) == h[2] => return Ok(b),
-            6 => anyhow::bail!("request {:?} refused", h),
+        match u8::try_from(got.kind) {
+            Ok(wire::RESP_ACK) if (got.interf, got.subtype) == (interf, subtype) => return Ok(b),
+            Ok(wire::RESP_NACK) => anyhow::bail!("request {h:?} refused"),
             _ => {}
         }
     }

@@ -634,7 +634,7 @@ pub fn check(plan: &mut Plan, report: &mut Report) {
 pub fn load(path: &Path, robot: u32) -> Result<(Plan, Vec<String>), PlanError> {
     let mut report = Report::default();
     let is_toml = path.extension().is_some_and(|e| e == "toml");
-    let mut plan = if is_toml {
+    let plan = if is_toml {
         let text = std::fs::read_to_string(path)
             .map_err(|e| PlanError(vec![format!("{}: {e}", path.display())]))?;
         toml::from_str::<Plan>(&text)
@@ -643,6 +643,12 @@ pub fn load(path: &Path, robot: u32) -> Result<(Plan, Vec<String>), PlanError> {
         let file = cfg::parse_file(path).map_err(|e| PlanError(vec![e.to_string()]))?;
         from_cfg(&file, path, robot, &mut report)
     };
+    checked(plan, report)
+}
+
+/// Checks `plan` unless building it already failed: the plan and its
+/// warnings, or every error.
+fn checked(mut plan: Plan, mut report: Report) -> Result<(Plan, Vec<String>), PlanError> {
     if report.errors.is_empty() {
         check(&mut plan, &mut report);
     }
@@ -747,15 +753,8 @@ mod tests {
         let file =
             cfg::parse_str(text, Path::new("t.cfg")).map_err(|e| PlanError(vec![e.to_string()]))?;
         let mut report = Report::default();
-        let mut plan = from_cfg(&file, Path::new("t.cfg"), 6665, &mut report);
-        if report.errors.is_empty() {
-            check(&mut plan, &mut report);
-        }
-        if report.errors.is_empty() {
-            Ok((plan, report.warnings))
-        } else {
-            Err(PlanError(report.errors))
-        }
+        let plan = from_cfg(&file, Path::new("t.cfg"), 6665, &mut report);
+        checked(plan, report)
     }
 
     const STACK: &str = "driver( name \"dummy\" provides [\"ranger:0\"] rate 20 colour \"red\" )\n\

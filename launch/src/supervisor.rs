@@ -162,6 +162,18 @@ struct NodeState {
     failed: AtomicBool,
 }
 
+impl NodeState {
+    fn new(spec: NodeSpec, argv: Option<Vec<String>>) -> NodeState {
+        NodeState {
+            spec,
+            argv,
+            pid: Mutex::new(None),
+            stopping: AtomicBool::new(false),
+            failed: AtomicBool::new(false),
+        }
+    }
+}
+
 async fn supervise(
     a: LaunchArgs,
     z: ZenohArgs,
@@ -251,15 +263,7 @@ async fn supervise(
     let (stop_tx, stop_rx) = watch::channel(false);
     let states: Vec<Arc<NodeState>> = specs
         .into_iter()
-        .map(|spec| {
-            Arc::new(NodeState {
-                spec,
-                argv: None,
-                pid: Mutex::new(None),
-                stopping: AtomicBool::new(false),
-                failed: AtomicBool::new(false),
-            })
-        })
+        .map(|spec| Arc::new(NodeState::new(spec, None)))
         .collect();
     let local: BTreeSet<Device> = states
         .iter()
@@ -659,13 +663,7 @@ fn bridge_node(a: &LaunchArgs, states: &[Arc<NodeState>]) -> Option<NodeState> {
         source: None,
         option_pos: Default::default(),
     };
-    Some(NodeState {
-        spec,
-        argv: Some(argv),
-        pid: Mutex::new(None),
-        stopping: AtomicBool::new(false),
-        failed: AtomicBool::new(false),
-    })
+    Some(NodeState::new(spec, Some(argv)))
 }
 
 /// Copies a child's stdout lines to ours, unchanged.

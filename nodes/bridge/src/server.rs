@@ -151,6 +151,10 @@ impl Shared {
     fn driver(&self, d: &Device) -> Option<String> {
         lock(&self.devices).get(d).cloned()
     }
+
+    fn is_live(&self, d: &Device) -> bool {
+        lock(&self.devices).contains_key(d)
+    }
 }
 
 /// A bound bridge, ready to [`run`](Bridge::run).
@@ -428,11 +432,10 @@ impl Conn {
         if h.interf == u32::from(PLAYER_CODE) {
             return self.handle_player(h, body);
         }
-        let dev = u16::try_from(h.interf)
-            .ok()
-            .and_then(Interface::from_code)
-            .map(|i| Device::new(self.robot, i, h.index));
-        let Some(dev) = dev.filter(|d| self.shared.driver(d).is_some()) else {
+        let Some(dev) = self
+            .addr(h.interf, h.index)
+            .filter(|d| self.shared.is_live(d))
+        else {
             tracing::warn!(
                 "robot {}: client {}: skipping message of type {}:{} to unknown device {}:{}",
                 self.robot,
@@ -597,9 +600,15 @@ impl Conn {
         Ok(())
     }
 
-    fn device(&self, interf: u32, index: u32) -> Option<(Device, String)> {
+    /// The device of this robot a header or body names, if its interface exists.
+    fn addr(&self, interf: u32, index: u32) -> Option<Device> {
         let iface = u16::try_from(interf).ok().and_then(Interface::from_code)?;
-        let dev = Device::new(self.robot, iface, index);
+        Some(Device::new(self.robot, iface, index))
+    }
+
+    /// A live device of this robot and its driver.
+    fn device(&self, interf: u32, index: u32) -> Option<(Device, String)> {
+        let dev = self.addr(interf, index)?;
         self.shared.driver(&dev).map(|d| (dev, d))
     }
 
