@@ -11,30 +11,24 @@ use std::net::TcpStream;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use troupe_tests::{strings, Proc, DEADLINE};
+use troupe_tests::{Proc, DEADLINE};
 
-const DATA: u32 = 1;
-const RESP_ACK: u32 = 4;
-const SYNCH: u32 = 5;
+use crate::player::{Frame, DATA, RESP_ACK, SYNCH};
 
-/// One recorded message.
+/// One recorded message: its place in the transcript, its direction, what
+/// it says, and the transcript's note for messages.
 #[derive(Debug, Clone)]
 struct Msg {
     n: usize,
     s2c: bool,
-    /// host robot interf index type subtype (seq and size are checked apart).
-    h: [u32; 6],
-    seq: u32,
-    body: Vec<u8>,
+    frame: Frame,
     note: String,
 }
 
-impl Msg {
-    fn kind(&self) -> u32 {
-        self.h[4]
-    }
-    fn sig(&self) -> (u32, u32, u32, u32) {
-        (self.h[2], self.h[3], self.h[4], self.h[5])
+impl std::ops::Deref for Msg {
+    type Target = Frame;
+    fn deref(&self) -> &Frame {
+        &self.frame
     }
 }
 
@@ -68,60 +62,24 @@ fn load(dir: &Path) -> (Vec<u8>, Vec<Msg>) {
         out.push(Msg {
             n,
             s2c: v["dir"] == "s2c",
-            h: [
-                f("host"),
-                f("robot"),
-                f("interf"),
-                f("index"),
-                f("type"),
-                f("subtype"),
-            ],
-            seq: f("seq"),
-            body,
+            frame: Frame {
+                h: [
+                    f("host"),
+                    f("robot"),
+                    f("interf"),
+                    f("index"),
+                    f("type"),
+                    f("subtype"),
+                ],
+                // The client's timestamp, resent as recorded.
+                timestamp: v["timestamp"].as_f64().unwrap(),
+                seq: f("seq"),
+                body,
+            },
             note: v["note"].as_str().unwrap_or("").to_owned(),
         });
-        let ts = v["timestamp"].as_f64().unwrap();
-        let last = out.last_mut().unwrap();
-        // Keep the client's timestamp to resend it as recorded.
-        last.note = format!("{} @{ts}", last.note);
     }
     (banner, out)
-}
-
-fn encode(m: &Msg) -> Vec<u8> {
-    let ts: f64 = m
-        .note
-        .rsplit_once(" @")
-        .and_then(|(_, t)| t.parse().ok())
-        .unwrap_or(0.0);
-    let mut b = Vec::new();
-    for v in m.h {
-        b.extend_from_slice(&v.to_be_bytes());
-    }
-    b.extend_from_slice(&ts.to_be_bytes());
-    b.extend_from_slice(&m.seq.to_be_bytes());
-    b.extend_from_slice(&(m.body.len() as u32).to_be_bytes());
-    b.extend_from_slice(&m.body);
-    b
-}
-
-fn read_msg(s: &mut TcpStream) -> Msg {
-    let mut h = [0u8; 40];
-    s.read_exact(&mut h)
-        .expect("reading a header from the bridge");
-    let word = |i: usize| u32::from_be_bytes(h[i * 4..i * 4 + 4].try_into().unwrap());
-    let size = word(9) as usize;
-    let mut body = vec![0; size];
-    s.read_exact(&mut body)
-        .expect("reading a body from the bridge");
-    Msg {
-        n: 0,
-        s2c: true,
-        h: [word(0), word(1), word(2), word(3), word(4), word(5)],
-        seq: word(8),
-        body,
-        note: String::new(),
-    }
 }
 
 /// Byte ranges of a reply body that hold uninitialised memory in the
@@ -136,7 +94,7 @@ fn masked(sig: (u32, u32, u32, u32)) -> &'static [(usize, usize)] {
     }
 }
 
-fn same_reply(got: &Msg, want: &Msg) -> Result<(), String> {
+fn same_reply(got: &Frame, want: &Msg) -> Result<(), String> {
     let header_ok = if want.kind() == SYNCH {
         (got.h[2], got.h[4], got.h[5]) == (want.h[2], want.h[4], want.h[5])
     } else {
@@ -179,16 +137,7 @@ struct Stack {
 
 fn launch(cfg: &Path, robots: &[u32]) -> Stack {
     let ns = troupe_tests::unique_namespace("bridge");
-    let args = strings(&[
-        "--namespace",
-        &ns,
-        "launch",
-        cfg.to_str().unwrap(),
-        "--listen",
-        "tcp/127.0.0.1:0",
-        "--bridge-any-port",
-    ]);
-    let mut launcher = Proc::troupe("launch", &args);
+    let mut launcher = troupe_tests::launch(&ns, cfg, &[]);
     let lines = launcher.lines();
     let mut ports = HashMap::new();
     let deadline = Instant::now() + DEADLINE;
@@ -227,7 +176,7 @@ fn replay(addr: &str, banner: &[u8], msgs: &[Msg]) {
         if m.s2c {
             continue;
         }
-        s.write_all(&encode(m)).unwrap();
+        s.write_all(&m.encode()).unwrap();
         let expected: Vec<&Msg> = msgs[i..]
             .iter()
             .take_while(|x| x.s2c)
@@ -235,7 +184,7 @@ fn replay(addr: &str, banner: &[u8], msgs: &[Msg]) {
             .collect();
         for want in expected {
             let got = loop {
-                let got = read_msg(&mut s);
+                let got = Frame::read(&mut s);
                 if got.kind() != DATA {
                     break got;
                 }

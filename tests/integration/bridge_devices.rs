@@ -15,6 +15,8 @@ use troupe_msgs::*;
 use troupe_node::zenoh::{Session, Wait};
 use troupe_tests::{TestNet, DEADLINE};
 
+use crate::player::{Frame, DATA};
+
 const ROBOT: u32 = 6665;
 
 /// Every fake device and the sample it publishes.
@@ -404,12 +406,6 @@ struct Player {
     s: TcpStream,
 }
 
-#[derive(Debug)]
-struct Reply {
-    h: [u32; 6],
-    body: Vec<u8>,
-}
-
 impl Player {
     fn connect(addr: SocketAddr) -> Player {
         let mut s = TcpStream::connect(addr).unwrap();
@@ -421,34 +417,19 @@ impl Player {
     }
 
     fn send(&mut self, interf: u32, index: u32, kind: u32, subtype: u32, body: &[u8]) {
-        let mut m = Vec::new();
-        for v in [0, ROBOT, interf, index, kind, subtype] {
-            m.extend_from_slice(&v.to_be_bytes());
-        }
-        m.extend_from_slice(&0f64.to_be_bytes());
-        m.extend_from_slice(&0u32.to_be_bytes());
-        m.extend_from_slice(&(body.len() as u32).to_be_bytes());
-        m.extend_from_slice(body);
-        self.s.write_all(&m).unwrap();
+        let m = Frame::new([0, ROBOT, interf, index, kind, subtype], body);
+        self.s.write_all(&m.encode()).unwrap();
     }
 
-    fn recv(&mut self) -> Reply {
-        let mut h = [0u8; 40];
-        self.s.read_exact(&mut h).unwrap();
-        let w = |i: usize| u32::from_be_bytes(h[i * 4..i * 4 + 4].try_into().unwrap());
-        let mut body = vec![0; w(9) as usize];
-        self.s.read_exact(&mut body).unwrap();
-        Reply {
-            h: [w(0), w(1), w(2), w(3), w(4), w(5)],
-            body,
-        }
+    fn recv(&mut self) -> Frame {
+        Frame::read(&mut self.s)
     }
 
     /// The next message that is not DATA.
-    fn reply(&mut self) -> Reply {
+    fn reply(&mut self) -> Frame {
         loop {
             let r = self.recv();
-            if r.h[4] != 1 {
+            if r.kind() != DATA {
                 return r;
             }
         }
@@ -464,7 +445,7 @@ impl Player {
         assert_eq!((r.h[4], r.h[5]), (4, 3), "subscribing {d}: {r:?}");
     }
 
-    fn request(&mut self, d: Device, subtype: u32, body: &[u8]) -> Reply {
+    fn request(&mut self, d: Device, subtype: u32, body: &[u8]) -> Frame {
         self.send(u32::from(d.interface.code()), d.index, 3, subtype, body);
         let r = self.reply();
         assert_eq!(
@@ -647,9 +628,9 @@ fn dozens_of_clients_flow_while_one_is_stuck_and_bad_input_closes_only_its_conne
         .expect("the bridge closes the connection");
     // An absurd size closes the connection too.
     let mut huge = Player::connect(addr);
-    let mut h = be(&[0, ROBOT, 1, 0, 3, 1]);
-    h.extend(0f64.to_be_bytes());
-    h.extend(be(&[0, 64 << 20]));
+    // A header announcing a 64 MiB body, and no body.
+    let mut h = Frame::new([0, ROBOT, 1, 0, 3, 1], &[]).encode();
+    h[36..40].copy_from_slice(&(64u32 << 20).to_be_bytes());
     huge.s.write_all(&h).unwrap();
     huge.s.read_to_end(&mut rest).expect("closed");
     // The others are served as before.

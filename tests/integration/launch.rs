@@ -21,17 +21,7 @@ fn temp_cfg(name: &str, text: &str) -> PathBuf {
 /// Starts `troupe launch` on an ephemeral port; returns it, its endpoint and namespace.
 fn launch(cfg: &std::path::Path, extra: &[&str]) -> (Proc, String, String) {
     let ns = troupe_tests::unique_namespace("launch");
-    let mut args = strings(&[
-        "--namespace",
-        &ns,
-        "launch",
-        cfg.to_str().unwrap(),
-        "--listen",
-        "tcp/127.0.0.1:0",
-        "--bridge-any-port",
-    ]);
-    args.extend(strings(extra));
-    let mut p = Proc::troupe("launch", &args);
+    let mut p = troupe_tests::launch(&ns, cfg, extra);
     let endpoint = p.endpoint("troupe launch: router listening on");
     (p, endpoint, ns)
 }

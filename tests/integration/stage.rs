@@ -6,7 +6,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use troupe_client::{Client, LaserProxy, Position2dProxy, SimulationProxy};
-use troupe_tests::{strings, Proc, DEADLINE};
+use troupe_tests::DEADLINE;
 
 #[test]
 fn simple_cfg_serves_r0_and_the_laser_sees_the_wall_approach() {
@@ -16,16 +16,7 @@ fn simple_cfg_serves_r0_and_the_laser_sees_the_wall_approach() {
         return;
     }
     let ns = troupe_tests::unique_namespace("stage");
-    let args = strings(&[
-        "--namespace",
-        &ns,
-        "launch",
-        cfg.to_str().unwrap(),
-        "--listen",
-        "tcp/127.0.0.1:0",
-        "--bridge-any-port",
-    ]);
-    let mut launcher = Proc::troupe("launch", &args);
+    let mut launcher = troupe_tests::launch(&ns, &cfg, &[]);
     let endpoint = launcher.endpoint("troupe launch: router listening on");
     let client = Client::with_session(troupe_tests::client_at(&endpoint, &ns), 6665);
     // The laser comes from rangertolaser, started once Stage's ranger:1 is live.

@@ -121,6 +121,22 @@ pub fn troupe_bin() -> PathBuf {
     dir.join("troupe")
 }
 
+/// `troupe launch CFG EXTRA…` in namespace `ns`, with its router and its
+/// Player bridge on free ports (it prints where on stdout).
+pub fn launch(ns: &str, cfg: &std::path::Path, extra: &[&str]) -> Proc {
+    let mut args = strings(&[
+        "--namespace",
+        ns,
+        "launch",
+        cfg.to_str().expect("a UTF-8 path"),
+        "--listen",
+        "tcp/127.0.0.1:0",
+        "--bridge-any-port",
+    ]);
+    args.extend(strings(extra));
+    Proc::troupe("launch", &args)
+}
+
 /// A child process that is killed when dropped, so a failing test leaves no orphan.
 pub struct Proc {
     /// The child.

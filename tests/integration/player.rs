@@ -1,0 +1,75 @@
+//! Player 3 messages on the wire, written for the tests independently of the
+//! bridge's own codec: the 40-byte XDR header and the body.
+
+use std::io::Read;
+
+/// `PLAYER_MSGTYPE_DATA`.
+pub const DATA: u32 = 1;
+/// `PLAYER_MSGTYPE_RESP_ACK`.
+pub const RESP_ACK: u32 = 4;
+/// `PLAYER_MSGTYPE_SYNCH`.
+pub const SYNCH: u32 = 5;
+
+/// One message.
+#[derive(Debug, Clone, Default)]
+pub struct Frame {
+    /// host, robot, interf, index, type, subtype.
+    pub h: [u32; 6],
+    /// Header timestamp.
+    pub timestamp: f64,
+    /// Header sequence number.
+    pub seq: u32,
+    /// The XDR body (its length is the header's size).
+    pub body: Vec<u8>,
+}
+
+impl Frame {
+    /// A message with a zero timestamp and sequence number.
+    pub fn new(h: [u32; 6], body: &[u8]) -> Frame {
+        Frame {
+            h,
+            body: body.to_vec(),
+            ..Frame::default()
+        }
+    }
+
+    /// The message type.
+    pub fn kind(&self) -> u32 {
+        self.h[4]
+    }
+
+    /// interf, index, type, subtype.
+    pub fn sig(&self) -> (u32, u32, u32, u32) {
+        (self.h[2], self.h[3], self.h[4], self.h[5])
+    }
+
+    /// Header and body as sent.
+    pub fn encode(&self) -> Vec<u8> {
+        let mut b = Vec::with_capacity(40 + self.body.len());
+        for v in self.h {
+            b.extend_from_slice(&v.to_be_bytes());
+        }
+        b.extend_from_slice(&self.timestamp.to_be_bytes());
+        b.extend_from_slice(&self.seq.to_be_bytes());
+        b.extend_from_slice(&(self.body.len() as u32).to_be_bytes());
+        b.extend_from_slice(&self.body);
+        b
+    }
+
+    /// Reads one message (the test's deadline is the socket's read timeout).
+    pub fn read(s: &mut impl Read) -> Frame {
+        let mut h = [0u8; 40];
+        s.read_exact(&mut h)
+            .expect("reading a header from the bridge");
+        let word = |i: usize| u32::from_be_bytes(h[i * 4..i * 4 + 4].try_into().unwrap());
+        let mut body = vec![0; word(9) as usize];
+        s.read_exact(&mut body)
+            .expect("reading a body from the bridge");
+        Frame {
+            h: [word(0), word(1), word(2), word(3), word(4), word(5)],
+            timestamp: f64::from_be_bytes(h[24..32].try_into().unwrap()),
+            seq: word(8),
+            body,
+        }
+    }
+}
