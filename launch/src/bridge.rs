@@ -98,26 +98,16 @@ pub fn run(a: BridgeArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         }
         out.flush()?;
         drop(out);
-        bridge.run(stop_signal()).await;
+        bridge
+            .run(async {
+                if let Err(e) = crate::supervisor::wait_signal().await {
+                    tracing::error!("cannot wait for signals: {e}");
+                }
+            })
+            .await;
         tracing::info!("bridge stopped");
         anyhow::Ok(())
     })
-}
-
-/// Ctrl-C or SIGTERM.
-async fn stop_signal() {
-    use tokio::signal::unix::{signal, SignalKind};
-    match signal(SignalKind::terminate()) {
-        Ok(mut term) => {
-            tokio::select! {
-                _ = tokio::signal::ctrl_c() => {}
-                _ = term.recv() => {}
-            }
-        }
-        Err(_) => {
-            let _ = tokio::signal::ctrl_c().await;
-        }
-    }
 }
 
 #[cfg(test)]

@@ -251,11 +251,7 @@ fn merge_stage(
         restart: Restart::default(),
         provides: Vec::new(),
         requires: Vec::new(),
-        // Player stepped its Stage plugin once per server update (100 Hz):
-        // a world with `speedup 0` ran ~10x real time, not flat out.
-        options: [("update_rate".to_owned(), serde_json::Value::from(100))]
-            .into_iter()
-            .collect(),
+        options: serde_json::Map::new(),
         source: Some(at),
         option_pos: BTreeMap::new(),
     });
@@ -288,11 +284,7 @@ fn merge_stage(
         }
     }
     for (k, v) in std::mem::take(options) {
-        if k == "update_rate" {
-            node.options.insert(k, v);
-        } else {
-            node.options.entry(k).or_insert(v);
-        }
+        node.options.entry(k).or_insert(v);
     }
     node.option_pos.extend(option_pos);
     node.provides.extend(provides);
@@ -452,7 +444,12 @@ pub fn from_cfg(file: &CfgFile, source: &Path, robot: u32, report: &mut Report) 
             option_pos,
         });
     }
-    if let Some(st) = stage {
+    if let Some(mut st) = stage {
+        // Player stepped its Stage plugin once per server update (100 Hz):
+        // a world with `speedup 0` ran ~10x real time, not flat out.
+        st.options
+            .entry("update_rate")
+            .or_insert(serde_json::Value::from(100));
         plan.nodes.insert(0, st);
     }
     for (driver, places) in unknown {

@@ -422,7 +422,8 @@ fn signal(s: &NodeState, sig: Signal) {
     }
 }
 
-async fn wait_signal() -> anyhow::Result<()> {
+/// SIGTERM or SIGINT (Ctrl-C), logged.
+pub(crate) async fn wait_signal() -> anyhow::Result<()> {
     use tokio::signal::unix::{signal, SignalKind};
     let mut term = signal(SignalKind::terminate())?;
     let mut int = signal(SignalKind::interrupt())?;
