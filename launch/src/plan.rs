@@ -12,7 +12,7 @@
 
 use std::collections::{BTreeMap, HashMap};
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 use troupe_msgs::{keys, DevAddr, Device};
@@ -197,8 +197,24 @@ fn num(text: &str) -> serde_json::Value {
         .map_or(serde_json::Value::Null, serde_json::Value::Number)
 }
 
-/// A cfg value as JSON, scaled to SI where the driver reads a length or angle.
-fn to_json(v: &Value, unit: Option<Unit>, units: &cfg::Units) -> Result<serde_json::Value, String> {
+/// The directory that relative file names in `file` are read against,
+/// absolute so that the plan runs from any directory.
+fn cfg_dir(file: &Path) -> PathBuf {
+    let dir = match file.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_owned(),
+        _ => Path::new(".").to_owned(),
+    };
+    std::fs::canonicalize(&dir).unwrap_or(dir)
+}
+
+/// A cfg value as JSON, scaled to SI where the driver reads a length or
+/// angle; file names are made absolute against `dir`.
+fn to_json(
+    v: &Value,
+    unit: Option<Unit>,
+    units: &cfg::Units,
+    dir: &Path,
+) -> Result<serde_json::Value, String> {
     let scale = |text: &str, factor: f64| -> Result<serde_json::Value, String> {
         let x: f64 = text
             .parse()
@@ -211,6 +227,9 @@ fn to_json(v: &Value, unit: Option<Unit>, units: &cfg::Units) -> Result<serde_js
         (Value::Num(n), Some(Unit::Length)) => scale(n, units.length)?,
         (Value::Num(n), Some(Unit::Angle)) => scale(n, units.angle)?,
         (Value::Num(n), _) => num(n),
+        (Value::Str(s) | Value::Word(s), Some(Unit::Path)) => {
+            dir.join(s).display().to_string().into()
+        }
         (Value::Str(s) | Value::Word(s), _) => s.clone().into(),
         (Value::Bool(b), _) => (*b).into(),
         (Value::Tuple(items), u) => {
@@ -224,7 +243,7 @@ fn to_json(v: &Value, unit: Option<Unit>, units: &cfg::Units) -> Result<serde_js
                 items
                     .iter()
                     .enumerate()
-                    .map(|(i, x)| to_json(x, each(i), units))
+                    .map(|(i, x)| to_json(x, each(i), units, dir))
                     .collect::<Result<_, _>>()?,
             )
         }
@@ -257,14 +276,10 @@ fn merge_stage(
     });
     if let Some(serde_json::Value::String(w)) = options.remove("worldfile") {
         if !node.options.contains_key("worldfile") {
-            // Absolute, so the plan runs from any directory.
-            let dir = match source.parent() {
-                Some(d) if !d.as_os_str().is_empty() => d.to_owned(),
-                _ => Path::new(".").to_owned(),
-            };
-            let dir = std::fs::canonicalize(&dir).unwrap_or(dir);
-            node.options
-                .insert("worldfile".into(), dir.join(w).display().to_string().into());
+            node.options.insert(
+                "worldfile".into(),
+                cfg_dir(source).join(w).display().to_string().into(),
+            );
         }
     }
     if let Some(model) = options.remove("model") {
@@ -398,7 +413,7 @@ pub fn from_cfg(file: &CfgFile, source: &Path, robot: u32, report: &mut Report) 
                 .iter()
                 .find(|(n, _)| *n == f.name)
                 .map(|(_, u)| *u);
-            match to_json(&f.value, unit, &f.units) {
+            match to_json(&f.value, unit, &f.units, &cfg_dir(&f.pos.file)) {
                 Ok(v) => {
                     options.insert(f.name.clone(), v);
                     option_pos.insert(f.name.clone(), f.pos.to_string());
@@ -882,11 +897,22 @@ mod tests {
             &pose,
             Some(Unit::Tuple(&[Unit::Length, Unit::Length, Unit::Angle])),
             &u,
+            Path::new("/cfg"),
         )
         .unwrap();
         assert_eq!(j[0], 0.1);
         assert!((j[2].as_f64().unwrap() - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
-        assert_eq!(to_json(&Value::Num("3".into()), None, &u).unwrap(), 3);
+        let here = Path::new("/cfg");
+        assert_eq!(to_json(&Value::Num("3".into()), None, &u, here).unwrap(), 3);
+        let file = Value::Str("maps/cave.png".into());
+        assert_eq!(
+            to_json(&file, Some(Unit::Path), &u, here).unwrap(),
+            "/cfg/maps/cave.png"
+        );
+        assert_eq!(
+            to_json(&Value::Str("/abs.png".into()), Some(Unit::Path), &u, here).unwrap(),
+            "/abs.png"
+        );
     }
 }
 

@@ -5,14 +5,18 @@
 //!   them, with a coarse level of per-tile counts so rays skip empty space;
 //! - [`Grid::fill_polygon`]: rasterises convex or concave polygons;
 //! - [`Grid::cast`]: the first occupied cell along a ray (a grid walk);
-//! - [`bitmap`]: loads an image and turns dark pixels into obstacle rectangles.
+//! - [`bitmap`]: loads an image and turns dark pixels into obstacle rectangles;
+//! - [`OccMap`]: a Player map (-1 free, 0 unknown, +1 occupied) with world↔cell
+//!   conversions and tiles.
 //!
 //! Depends on troupe-msgs and image only.
 #![warn(missing_docs)]
 
 pub mod bitmap;
 mod grid;
+pub mod occmap;
 mod pose;
 
 pub use grid::{Grid, Hit, EMPTY};
+pub use occmap::OccMap;
 pub use pose::{normalize, Pose};

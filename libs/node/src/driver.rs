@@ -85,6 +85,9 @@ pub enum Unit {
     Lengths,
     /// A tuple of any length, every element an angle.
     Angles,
+    /// A file name (Player's `ReadFilename`): a relative path is made
+    /// absolute against the directory of the `.cfg` that names it.
+    Path,
 }
 
 /// Something for a driver to react to.
