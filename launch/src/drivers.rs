@@ -33,6 +33,7 @@ pub fn all() -> Vec<Entry> {
     vec![
         entry::<troupe_dummy::Dummy>("fixed data at a fixed rate on many interfaces (testing)"),
         entry::<troupe_rangertolaser::RangerToLaser>("republishes a ranger as a laser"),
+        entry::<troupe_amcl::Amcl>("adaptive Monte Carlo localization on a map (odometry + laser)"),
         entry::<troupe_mapfile::MapFile>("serves an occupancy map read from an image"),
         entry::<troupe_stage::Stage>(
             "the 2D multi-robot simulator: a Stage world's robots and sensors",

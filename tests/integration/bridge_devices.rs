@@ -144,7 +144,7 @@ fn samples() -> Vec<(Device, Vec<u8>)> {
                 &localize::Hypoths {
                     hypoths: vec![localize::Hypoth {
                         mean: p,
-                        cov: [0.1; 3],
+                        cov: [0.1; 6],
                         weight: 1.0,
                     }],
                     ..Default::default()

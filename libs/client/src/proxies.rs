@@ -682,12 +682,13 @@ impl LocalizeProxy {
             .unwrap_or_default()
     }
 
-    /// Resets the filter around `mean` with covariance diagonal `cov` (`SetPose`).
+    /// Resets the filter around `mean` with covariance `cov` (`SetPose`): Player's
+    /// order, xx, yy, yaw-yaw, xy, y-yaw, x-yaw.
     ///
     /// # Errors
     ///
     /// [`ClientError::Nack`] if the device refuses; [`ClientError::NoAnswer`].
-    pub fn set_pose(&self, mean: Pose2d, cov: [f64; 3]) -> Result<()> {
+    pub fn set_pose(&self, mean: Pose2d, cov: [f64; 6]) -> Result<()> {
         self.feed
             .link
             .request(&localize::SetPose { mean, cov })

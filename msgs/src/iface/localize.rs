@@ -10,8 +10,9 @@ use crate::{message, Pose2d};
 pub struct Hypoth {
     /// Mean pose, world frame.
     pub mean: Pose2d,
-    /// Covariance diagonal: x (m²), y (m²), yaw (rad²), as Player's `cov[3]`.
-    pub cov: [f64; 3],
+    /// Covariance in Player's order: xx, yy, yaw-yaw, xy, y-yaw, x-yaw
+    /// (m², rad², m·rad), as Player's `cov[6]`.
+    pub cov: [f64; 6],
     /// Weight of the hypothesis (Player's `alpha`), 0..=1.
     pub weight: f64,
 }
@@ -26,17 +27,17 @@ pub struct Hypoths {
     /// Hypotheses, best first.
     pub hypoths: Vec<Hypoth>,
 }
-message!(Hypoths, "localize/hypoths@1");
+message!(Hypoths, "localize/hypoths@2");
 
 /// Resets the filter around a pose.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct SetPose {
     /// Mean pose.
     pub mean: Pose2d,
-    /// Covariance diagonal (m², m², rad²).
-    pub cov: [f64; 3],
+    /// Covariance in Player's order: xx, yy, yaw-yaw, xy, y-yaw, x-yaw.
+    pub cov: [f64; 6],
 }
-message!(SetPose, "localize/set_pose@1", req "set_pose" -> Ack);
+message!(SetPose, "localize/set_pose@2", req "set_pose" -> Ack);
 
 /// One particle.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]

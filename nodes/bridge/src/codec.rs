@@ -200,7 +200,7 @@ pub fn to_player(msg: &AnyMsg) -> Option<(Interface, u8, Vec<u8>)> {
                 for c in h.cov {
                     w.f64(c);
                 }
-                w.f64(0.0).f64(0.0).f64(0.0).f64(h.weight);
+                w.f64(h.weight);
             });
             (I::Localize, 1)
         }
@@ -551,10 +551,7 @@ fn translate(
             for c in &mut cov {
                 *c = r.f64()?;
             }
-            let q = localize::SetPose {
-                mean,
-                cov: [cov[0], cov[1], cov[2]],
-            };
+            let q = localize::SetPose { mean, cov };
             request(&q, t, empty)
         }
         (I::Localize, REQ, 2) => request(&localize::GetParticles, t, |p, w| {

@@ -1,0 +1,366 @@
+//! The laser sensor model: how likely a scan is from a pose on the map.
+//!
+//! The map becomes a distance field (metres from each cell's centre to the
+//! nearest obstacle cell's; unknown and off-map count as obstacles, as
+//! Player's amcl treats them). Two models use it:
+//!
+//! - **beam** (Player's, the default): each used beam's range is compared
+//!   with the range ray-cast on the map,
+//!   `pz = bad + (1 - bad)·exp(-(obs - map)² / (2σ²))`, `p = Π pz`; a beam
+//!   at maximum range that the map also sees at maximum range has `pz = 1`.
+//!   Rays march through the distance field (sphere tracing), a few steps
+//!   per ray instead of one per cell.
+//! - **likelihood_field** (from ROS's amcl, which grew out of Player's):
+//!   each beam's end point is scored by its distance `d` to the nearest
+//!   obstacle, `pz = z_hit·exp(-d²/(2σ_hit²)) + z_rand / max_range`,
+//!   `p = 1 + Σ pz³`, `d` capped at a maximum that is also the distance of
+//!   a point off the map; no ray casting at all.
+
+use troupe_geom::occmap::OccMap;
+use troupe_geom::Pose;
+
+/// Distance from every cell to the nearest obstacle cell.
+pub struct DistanceMap {
+    width: usize,
+    height: usize,
+    res: f64,
+    ox: f64,
+    oy: f64,
+    /// Metres, row-major; 0 on obstacles.
+    dist: Vec<f32>,
+}
+
+/// Exact 1-D squared distance transform (Felzenszwalb & Huttenlocher) of `f`
+/// into `d`, with scratch space `v`, `z`.
+fn edt_1d(f: &[f64], d: &mut [f64], v: &mut [usize], z: &mut [f64]) {
+    let n = f.len();
+    let parabola = |q: usize, p: usize| {
+        ((f[q] + (q * q) as f64) - (f[p] + (p * p) as f64)) / (2.0 * (q - p) as f64)
+    };
+    let mut k = 0;
+    v[0] = 0;
+    z[0] = f64::NEG_INFINITY;
+    z[1] = f64::INFINITY;
+    for q in 1..n {
+        let mut s = parabola(q, v[k]);
+        // z[0] is -inf, so this stops at k = 0.
+        while s <= z[k] {
+            k -= 1;
+            s = parabola(q, v[k]);
+        }
+        k += 1;
+        v[k] = q;
+        z[k] = s;
+        z[k + 1] = f64::INFINITY;
+    }
+    k = 0;
+    for (q, out) in d.iter_mut().enumerate() {
+        while z[k + 1] < q as f64 {
+            k += 1;
+        }
+        let p = v[k];
+        let dq = q as f64 - p as f64;
+        *out = dq * dq + f[p];
+    }
+}
+
+impl DistanceMap {
+    /// The distance field of `map`: cells with a state ≥ 0 (occupied or
+    /// unknown) are obstacles.
+    pub fn new(map: &OccMap) -> Self {
+        let (w, h) = map.size();
+        const FAR: f64 = 1e12;
+        let mut g: Vec<f64> = map
+            .cells
+            .iter()
+            .map(|&c| if c >= 0 { 0.0 } else { FAR })
+            .collect();
+        let n = w.max(h);
+        let (mut f, mut d) = (vec![0.0; n], vec![0.0; n]);
+        let (mut v, mut z) = (vec![0usize; n], vec![0.0; n + 1]);
+        if w > 0 && h > 0 {
+            for i in 0..w {
+                for j in 0..h {
+                    f[j] = g[j * w + i];
+                }
+                edt_1d(&f[..h], &mut d[..h], &mut v, &mut z);
+                for j in 0..h {
+                    g[j * w + i] = d[j];
+                }
+            }
+            for j in 0..h {
+                f[..w].copy_from_slice(&g[j * w..(j + 1) * w]);
+                edt_1d(&f[..w], &mut d[..w], &mut v, &mut z);
+                g[j * w..(j + 1) * w].copy_from_slice(&d[..w]);
+            }
+        }
+        let res = map.resolution();
+        DistanceMap {
+            width: w,
+            height: h,
+            res,
+            ox: map.info.origin.x,
+            oy: map.info.origin.y,
+            dist: g.iter().map(|&s| (s.sqrt() * res) as f32).collect(),
+        }
+    }
+
+    /// Distance at world point (x, y); 0 off the map (an obstacle).
+    #[inline]
+    pub fn at(&self, x: f64, y: f64) -> f64 {
+        self.at_or(x, y, 0.0)
+    }
+
+    /// Distance at world point (x, y); `off` off the map.
+    #[inline]
+    pub fn at_or(&self, x: f64, y: f64, off: f64) -> f64 {
+        let i = ((x - self.ox) / self.res).floor();
+        let j = ((y - self.oy) / self.res).floor();
+        if i < 0.0 || j < 0.0 || i >= self.width as f64 || j >= self.height as f64 {
+            return off;
+        }
+        f64::from(self.dist[j as usize * self.width + i as usize])
+    }
+
+    /// Range from (x, y) along `angle` to the first obstacle cell, at most
+    /// `max`. Marches by the clearance the field guarantees (the distance
+    /// minus a cell diagonal), at least half a cell at a time.
+    pub fn range(&self, x: f64, y: f64, angle: f64, max: f64) -> f64 {
+        let (s, c) = angle.sin_cos();
+        let safe = self.res * std::f64::consts::SQRT_2;
+        let min_step = self.res * 0.5;
+        let mut t = 0.0;
+        while t < max {
+            let d = self.at(x + t * c, y + t * s);
+            if d <= 0.0 {
+                return t;
+            }
+            t += (d - safe).max(min_step);
+        }
+        max
+    }
+}
+
+/// Which model scores a scan.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Model {
+    /// Player's beam model.
+    Beam {
+        /// Standard deviation of a range, m (`laser_range_var`).
+        sigma: f64,
+        /// Floor probability of a bad range (`laser_range_bad`).
+        bad: f64,
+    },
+    /// ROS amcl's likelihood field.
+    LikelihoodField {
+        /// Weight of the hit Gaussian (`laser_z_hit`).
+        z_hit: f64,
+        /// Weight of random ranges (`laser_z_rand`).
+        z_rand: f64,
+        /// Standard deviation of the hit, m (`laser_sigma_hit`).
+        sigma_hit: f64,
+        /// Distances are capped here; an end point off the map is this far
+        /// (`laser_likelihood_max_dist`).
+        max_dist: f64,
+    },
+}
+
+/// A scan reduced to the beams the model uses.
+#[derive(Debug, Clone, Default)]
+pub struct Beams {
+    /// (range, bearing in the laser frame) of each used beam.
+    pub beams: Vec<(f64, f64)>,
+    /// The laser's maximum range.
+    pub max_range: f64,
+}
+
+impl Beams {
+    /// Picks `max_beams` beams evenly from a scan, first and last included
+    /// (Player's step `(n − 1) / (max_beams − 1)`, at least 1).
+    pub fn pick(
+        ranges: &[f32],
+        min_angle: f64,
+        resolution: f64,
+        max_range: f64,
+        max_beams: usize,
+    ) -> Self {
+        let n = ranges.len();
+        let mut beams = Vec::new();
+        if n > 0 && max_beams >= 2 {
+            let step = ((n - 1) / (max_beams - 1)).max(1);
+            let mut i = 0;
+            while i < n {
+                beams.push((f64::from(ranges[i]), min_angle + i as f64 * resolution));
+                i += step;
+            }
+        }
+        Beams { beams, max_range }
+    }
+}
+
+impl Model {
+    /// The likelihood of `beams` seen by a laser at world pose `laser`.
+    pub fn likelihood(&self, map: &DistanceMap, laser: &Pose, beams: &Beams) -> f64 {
+        let max = beams.max_range;
+        match *self {
+            Model::Beam { sigma, bad } => {
+                let k = 1.0 / (2.0 * sigma * sigma);
+                let mut p = 1.0;
+                for &(obs, bearing) in &beams.beams {
+                    let sim = map.range(laser.x, laser.y, laser.yaw + bearing, max + 1.0);
+                    let pz = if obs >= max && sim >= max {
+                        1.0
+                    } else {
+                        let z = obs - sim;
+                        bad + (1.0 - bad) * (-z * z * k).exp()
+                    };
+                    p *= pz;
+                }
+                p
+            }
+            Model::LikelihoodField {
+                z_hit,
+                z_rand,
+                sigma_hit,
+                max_dist,
+            } => {
+                let k = 1.0 / (2.0 * sigma_hit * sigma_hit);
+                let rand = if max > 0.0 { z_rand / max } else { 0.0 };
+                let mut p = 1.0;
+                for &(obs, bearing) in &beams.beams {
+                    if obs >= max {
+                        continue;
+                    }
+                    let a = laser.yaw + bearing;
+                    let d = map
+                        .at_or(laser.x + obs * a.cos(), laser.y + obs * a.sin(), max_dist)
+                        .min(max_dist);
+                    let pz = z_hit * (-d * d * k).exp() + rand;
+                    p += pz * pz * pz;
+                }
+                p
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use troupe_geom::occmap::{FREE, OCCUPIED};
+    use troupe_msgs::{map, Pose2d};
+
+    /// A 10 m × 10 m room at 0.1 m, walls on the border, origin at (0, 0).
+    fn room() -> OccMap {
+        let info = map::Info {
+            width: 100,
+            height: 100,
+            resolution: 0.1,
+            origin: Pose2d::new(0.0, 0.0, 0.0),
+        };
+        let mut m = OccMap::filled(info, FREE);
+        for k in 0..100 {
+            m.cells[k] = OCCUPIED;
+            m.cells[99 * 100 + k] = OCCUPIED;
+            m.cells[k * 100] = OCCUPIED;
+            m.cells[k * 100 + 99] = OCCUPIED;
+        }
+        m
+    }
+
+    #[test]
+    fn distance_field_is_euclidean() {
+        let d = DistanceMap::new(&room());
+        assert_eq!(d.at(0.05, 0.05), 0.0);
+        // Cell (10, 50): 10 cells from the left wall.
+        assert!((d.at(1.05, 5.05) - 1.0).abs() < 1e-6);
+        // Cell (3, 4) from corner cell... nearest wall cell is (0, 4): 3 cells.
+        assert!((d.at(0.35, 0.45) - 0.3).abs() < 1e-6);
+        assert_eq!(d.at(-1.0, 5.0), 0.0, "off the map is an obstacle");
+        // Against brute force on a map with scattered obstacles.
+        let mut m = room();
+        for &(i, j) in &[(30, 40), (70, 20), (55, 55)] {
+            m.cells[j * 100 + i] = OCCUPIED;
+        }
+        let d = DistanceMap::new(&m);
+        let obstacles: Vec<(f64, f64)> = (0..10_000)
+            .filter(|&k| m.cells[k] >= 0)
+            .map(|k| ((k % 100) as f64, (k / 100) as f64))
+            .collect();
+        for &(i, j) in &[(31, 42), (60, 61), (12, 88), (50, 50)] {
+            let want = obstacles
+                .iter()
+                .map(|&(a, b)| ((a - i as f64).powi(2) + (b - j as f64).powi(2)).sqrt())
+                .fold(f64::INFINITY, f64::min)
+                * 0.1;
+            let got = d.at(i as f64 * 0.1 + 0.05, j as f64 * 0.1 + 0.05);
+            assert!((got - want).abs() < 1e-5, "({i}, {j}) {got} vs {want}");
+        }
+    }
+
+    #[test]
+    fn rays_stop_at_walls() {
+        let d = DistanceMap::new(&room());
+        // From the centre to the right wall (its cell starts at x = 9.9).
+        let r = d.range(5.0, 5.0, 0.0, 20.0);
+        assert!((r - 4.9).abs() < 0.06, "{r}");
+        let r = d.range(5.0, 5.0, std::f64::consts::FRAC_PI_4, 20.0);
+        assert!((r - 4.9 * std::f64::consts::SQRT_2).abs() < 0.1, "{r}");
+        assert_eq!(d.range(5.0, 5.0, 0.0, 2.0), 2.0);
+        assert_eq!(d.range(0.05, 0.05, 0.0, 2.0), 0.0);
+    }
+
+    #[test]
+    fn models_prefer_the_true_pose() {
+        let m = room();
+        let d = DistanceMap::new(&m);
+        let truth = Pose::new(3.0, 4.0, 0.3);
+        // A 181-beam scan simulated from the truth.
+        let ranges: Vec<f32> = (0..181)
+            .map(|i| {
+                let b = -std::f64::consts::FRAC_PI_2 + i as f64 * std::f64::consts::PI / 180.0;
+                d.range(truth.x, truth.y, truth.yaw + b, 8.0) as f32
+            })
+            .collect();
+        let beams = Beams::pick(
+            &ranges,
+            -std::f64::consts::FRAC_PI_2,
+            std::f64::consts::PI / 180.0,
+            8.0,
+            6,
+        );
+        assert_eq!(beams.beams.len(), 6);
+        assert!((beams.beams[5].1 - std::f64::consts::FRAC_PI_2).abs() < 1e-9);
+        for model in [
+            Model::Beam {
+                sigma: 0.1,
+                bad: 0.1,
+            },
+            Model::LikelihoodField {
+                z_hit: 0.95,
+                z_rand: 0.05,
+                sigma_hit: 0.2,
+                max_dist: 2.0,
+            },
+        ] {
+            let at = |p: Pose| model.likelihood(&d, &p, &beams);
+            let good = at(truth);
+            for wrong in [
+                Pose::new(3.5, 4.0, 0.3),
+                Pose::new(3.0, 3.5, 0.3),
+                Pose::new(3.0, 4.0, 0.6),
+                Pose::new(7.0, 6.0, -2.0),
+            ] {
+                assert!(
+                    good > at(wrong),
+                    "{model:?}: {good} vs {} at {wrong:?}",
+                    at(wrong)
+                );
+            }
+        }
+        // Too few beams in the scan: every beam used, never a zero step.
+        let b = Beams::pick(&ranges[..3], 0.0, 0.1, 8.0, 6);
+        assert_eq!(b.beams.len(), 3);
+        assert!(Beams::pick(&ranges, 0.0, 0.1, 8.0, 1).beams.is_empty());
+    }
+}

@@ -1,0 +1,756 @@
+//! Player's `amcl`: adaptive Monte Carlo localization on a map with odometry
+//! and a laser.
+//!
+//! ```text
+//! driver ( name "amcl" provides ["localize:0" "position2d:2"]
+//!          requires ["odometry:::position2d:0" "laser:0" "laser:::map:0"]
+//!          init_pose [-6.9 -6.9 45] init_pose_var [0.2 0.2 10] )
+//! ```
+//!
+//! | | |
+//! |---|---|
+//! | requires | `odometry:::position2d` (odometry), a `laser`, `laser:::map` (the map the laser sees) |
+//! | provides | `localize` (hypotheses, particles, set pose), `position2d` (the best hypothesis) — at least one |
+//!
+//! Options, Player's names and defaults: `pf_min_samples` 100,
+//! `pf_max_samples` 10000, `pf_err` 0.01, `pf_z` 3, `init_pose` [0 0 0],
+//! `init_pose_var` [1 1 360] (standard deviations, m m deg), `update_thresh`
+//! [0.2 30] (m deg), `laser_max_beams` 6, `laser_range_var` 0.1 (σ, m),
+//! `laser_range_bad` 0.1. Troupe adds `laser_model_type` (`beam`, Player's
+//! and the default, or `likelihood_field` with `laser_z_hit` 0.95,
+//! `laser_z_rand` 0.05, `laser_sigma_hit` 0.2, `laser_likelihood_max_dist` 2
+//! as ROS's amcl) and `seed`
+//! (42) for repeatable runs. Player's odometry drift `odom_drift[k]` is fixed
+//! at its defaults (0.2 on x, y and θ, 0.2 of forward motion onto θ).
+//!
+//! # Behavior
+//!
+//! - At setup the map comes from the map device (info, then the whole grid)
+//!   and the laser's pose on the robot from its geometry (zero, with a
+//!   warning, if the laser refuses). The filter starts with `pf_max_samples`
+//!   particles drawn around `init_pose`.
+//! - The first odometry sample is the reference. Once odometry has moved
+//!   more than `update_thresh` (x, y or θ) from the last update, the next
+//!   laser scan updates the filter: every particle moves by the odometric
+//!   step with noise, is weighted by the scan, and the set is resampled to
+//!   the KLD bound. Odometry is always the latest sample and a scan is the
+//!   latest one (the runtime replaces queued samples), so a filter slower
+//!   than its inputs works on fresh data and never falls behind a backlog.
+//! - After each update `localize` publishes every hypothesis (cluster of
+//!   particles, heaviest first, at most 100) with its weight, mean and
+//!   covariance (Player's six terms); `position2d` publishes the best
+//!   hypothesis, and between updates the best hypothesis moved by the
+//!   odometry since (one sample per odometry sample). Nothing is published
+//!   before the first update.
+//! - `set_pose` restarts the filter around the given mean and covariance
+//!   (variances, Player's order); `particles` returns every particle with
+//!   the set's mean and spread; `position2d` `geom` answers a 1 cm robot.
+
+pub mod laser;
+pub mod pf;
+
+use serde::Deserialize;
+use troupe_geom::occmap::OccMap;
+use troupe_geom::{normalize, Pose};
+use troupe_msgs::{
+    common, laser as laser_msg, localize, map, position2d, Device, Interface, Pose2d, Pose3d,
+    Size3d,
+};
+use troupe_node::{Ctx, Driver, Event, NodeError, RequestId, Result, Section, Unit};
+
+use crate::laser::{Beams, DistanceMap, Model};
+use crate::pf::Filter;
+
+/// Options, by Player's names (see the crate docs for defaults).
+#[derive(Debug, Deserialize)]
+#[serde(default)]
+pub struct Options {
+    /// Fewest particles.
+    pub pf_min_samples: usize,
+    /// Most particles.
+    pub pf_max_samples: usize,
+    /// KLD ε.
+    pub pf_err: f64,
+    /// KLD z.
+    pub pf_z: f64,
+    /// Initial mean: x, y (m), yaw (rad).
+    pub init_pose: Vec<f64>,
+    /// Initial standard deviations: x, y (m), yaw (rad).
+    pub init_pose_var: Vec<f64>,
+    /// Update after this much odometric motion: distance (m), angle (rad).
+    pub update_thresh: Vec<f64>,
+    /// Beams of a scan used per update.
+    pub laser_max_beams: usize,
+    /// σ of a range (m), the beam model.
+    pub laser_range_var: f64,
+    /// Floor for an unexplained range, the beam model.
+    pub laser_range_bad: f64,
+    /// `beam` or `likelihood_field`.
+    pub laser_model_type: String,
+    /// Likelihood field: weight of hits.
+    pub laser_z_hit: f64,
+    /// Likelihood field: weight of random ranges.
+    pub laser_z_rand: f64,
+    /// Likelihood field: σ of a hit (m).
+    pub laser_sigma_hit: f64,
+    /// Likelihood field: distances are capped here (m).
+    pub laser_likelihood_max_dist: f64,
+    /// Random seed.
+    pub seed: u64,
+    /// Player's, unused.
+    pub odom_init: Option<f64>,
+    /// Player's GUI switch, unused.
+    pub enable_gui: Option<f64>,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            pf_min_samples: 100,
+            pf_max_samples: 10_000,
+            pf_err: 0.01,
+            pf_z: 3.0,
+            init_pose: vec![0.0, 0.0, 0.0],
+            init_pose_var: vec![1.0, 1.0, std::f64::consts::TAU],
+            update_thresh: vec![0.2, std::f64::consts::PI / 6.0],
+            laser_max_beams: 6,
+            laser_range_var: 0.1,
+            laser_range_bad: 0.1,
+            laser_model_type: "beam".into(),
+            laser_z_hit: 0.95,
+            laser_z_rand: 0.05,
+            laser_sigma_hit: 0.2,
+            laser_likelihood_max_dist: 2.0,
+            seed: 42,
+            odom_init: None,
+            enable_gui: None,
+        }
+    }
+}
+
+/// Player's default odometry drift.
+const DRIFT: [[f64; 3]; 3] = [[0.2, 0.0, 0.0], [0.0, 0.2, 0.0], [0.2, 0.0, 0.2]];
+
+/// Hypotheses published at most (Player's cluster limit).
+const MAX_HYPOTHS: usize = 100;
+
+/// `a` in the frame of `b` (Player's `coord_sub`).
+fn relative(a: &Pose, b: &Pose) -> Pose {
+    let mut d = b.inverse().compose(a);
+    d.yaw = normalize(d.yaw);
+    d
+}
+
+fn pose(p: &Pose2d) -> Pose {
+    Pose::new(p.x, p.y, p.yaw)
+}
+
+fn pose2d(p: &Pose) -> Pose2d {
+    Pose2d::new(p.x, p.y, p.yaw)
+}
+
+/// The localizer without the network: odometry and scans in, estimates out.
+pub struct Localizer {
+    filter: Filter,
+    model: Model,
+    max_beams: usize,
+    thresh: (f64, f64),
+    map: Option<DistanceMap>,
+    laser_pose: Pose,
+    /// Odometry at the last filter update; `None` until the first sample.
+    odom_ref: Option<Pose>,
+    odom: Option<Pose>,
+    /// The next scan updates the filter.
+    due: bool,
+    /// The first update weighs the initial cloud without moving it.
+    moved: bool,
+    best: Option<Pose>,
+    hypoths: Vec<pf::Cluster>,
+    updates: u64,
+}
+
+impl Localizer {
+    /// A localizer from the driver's options.
+    ///
+    /// # Errors
+    ///
+    /// An option has a value Player would not accept.
+    pub fn new(o: &Options) -> std::result::Result<Self, String> {
+        let model = match o.laser_model_type.as_str() {
+            "beam" => Model::Beam {
+                sigma: o.laser_range_var,
+                bad: o.laser_range_bad,
+            },
+            "likelihood_field" => Model::LikelihoodField {
+                z_hit: o.laser_z_hit,
+                z_rand: o.laser_z_rand,
+                sigma_hit: o.laser_sigma_hit,
+                max_dist: o.laser_likelihood_max_dist,
+            },
+            other => {
+                return Err(format!(
+                "laser_model_type `{other}` is not known: `beam` (Player's) or `likelihood_field`"
+            ))
+            }
+        };
+        let three = |name: &str, v: &[f64]| -> std::result::Result<[f64; 3], String> {
+            match v {
+                [a, b, c] => Ok([*a, *b, *c]),
+                _ => Err(format!("{name} needs three values (x y yaw), not {v:?}")),
+            }
+        };
+        let mean = three("init_pose", &o.init_pose)?;
+        let sd = three("init_pose_var", &o.init_pose_var)?;
+        let thresh = match o.update_thresh.as_slice() {
+            [d, a] => (*d, *a),
+            v => {
+                return Err(format!(
+                    "update_thresh needs a distance and an angle, not {v:?}"
+                ))
+            }
+        };
+        if o.pf_max_samples == 0 || o.pf_min_samples > o.pf_max_samples {
+            return Err(format!(
+                "pf_min_samples ({}) must not exceed pf_max_samples ({}), which must be positive",
+                o.pf_min_samples, o.pf_max_samples
+            ));
+        }
+        if !(o.pf_err > 0.0) || !(o.pf_z > 0.0) {
+            return Err("pf_err and pf_z must be positive".into());
+        }
+        let config = pf::Config {
+            min_samples: o.pf_min_samples,
+            max_samples: o.pf_max_samples,
+            err: o.pf_err,
+            z: o.pf_z,
+        };
+        let mut filter = Filter::new(config, o.seed);
+        filter.init(
+            Pose::new(mean[0], mean[1], mean[2]),
+            &[
+                [sd[0] * sd[0], 0.0, 0.0],
+                [0.0, sd[1] * sd[1], 0.0],
+                [0.0, 0.0, sd[2] * sd[2]],
+            ],
+        );
+        Ok(Localizer {
+            filter,
+            model,
+            max_beams: o.laser_max_beams,
+            thresh,
+            map: None,
+            laser_pose: Pose::default(),
+            odom_ref: None,
+            odom: None,
+            due: false,
+            moved: false,
+            best: None,
+            hypoths: Vec::new(),
+            updates: 0,
+        })
+    }
+
+    /// Sets the map the laser sees.
+    pub fn set_map(&mut self, map: &OccMap) {
+        self.map = Some(DistanceMap::new(map));
+    }
+
+    /// Sets the laser's pose on the robot.
+    pub fn set_laser_pose(&mut self, p: Pose) {
+        self.laser_pose = p;
+    }
+
+    /// Restarts the filter around `mean` with covariance `cov` (Player's six terms).
+    pub fn set_pose(&mut self, mean: Pose, cov: &[f64; 6]) {
+        let c = [
+            [cov[0], cov[3], cov[5]],
+            [cov[3], cov[1], cov[4]],
+            [cov[5], cov[4], cov[2]],
+        ];
+        self.filter.init(mean, &c);
+        self.odom_ref = None;
+        self.due = false;
+    }
+
+    /// Takes an odometry pose; returns the pose estimate to publish now, if any.
+    pub fn odometry(&mut self, odom: Pose) -> Option<Pose> {
+        self.odom = Some(odom);
+        let Some(r) = self.odom_ref else {
+            self.odom_ref = Some(odom);
+            self.due = true;
+            self.moved = false;
+            return None;
+        };
+        let d = relative(&odom, &r);
+        if d.x.abs() > self.thresh.0 || d.y.abs() > self.thresh.0 || d.yaw.abs() > self.thresh.1 {
+            self.due = true;
+            self.moved = true;
+        }
+        self.best.map(|b| b.compose(&d))
+    }
+
+    /// Takes a scan; returns true when it updated the filter.
+    pub fn scan(&mut self, scan: &laser_msg::Scan) -> bool {
+        if !self.due {
+            return false;
+        }
+        let (Some(map), Some(odom), Some(r)) = (&self.map, self.odom, self.odom_ref) else {
+            return false;
+        };
+        if self.moved {
+            self.filter.action(relative(&odom, &r), &DRIFT);
+        }
+        let beams = Beams::pick(
+            &scan.ranges,
+            f64::from(scan.min_angle),
+            f64::from(scan.resolution),
+            f64::from(scan.max_range),
+            self.max_beams,
+        );
+        if !beams.beams.is_empty() {
+            let (model, laser) = (self.model, self.laser_pose);
+            self.filter
+                .sensor(|p| model.likelihood(map, &p.compose(&laser), &beams));
+        }
+        self.filter.resample();
+        self.hypoths = self.filter.clusters();
+        self.hypoths.truncate(MAX_HYPOTHS);
+        if let Some(h) = self.hypoths.first() {
+            self.best = Some(h.mean);
+        }
+        self.odom_ref = Some(odom);
+        self.due = false;
+        self.moved = false;
+        self.updates += 1;
+        true
+    }
+
+    /// The best hypothesis so far.
+    pub fn best(&self) -> Option<Pose> {
+        self.best
+    }
+
+    /// The hypotheses of the last update, heaviest first.
+    pub fn hypotheses(&self) -> &[pf::Cluster] {
+        &self.hypoths
+    }
+
+    /// The particle filter.
+    pub fn filter(&self) -> &Filter {
+        &self.filter
+    }
+
+    /// Filter updates so far.
+    pub fn updates(&self) -> u64 {
+        self.updates
+    }
+}
+
+enum Setup {
+    MapInfo(RequestId),
+    MapData(RequestId, map::Info),
+    Ready,
+}
+
+/// The amcl driver.
+pub struct Amcl {
+    localize: Option<Device>,
+    position: Option<Device>,
+    odom: Device,
+    laser: Device,
+    map: Device,
+    loc: Localizer,
+    setup: Setup,
+    geom: Option<RequestId>,
+}
+
+impl Driver for Amcl {
+    const NAME: &'static str = "amcl";
+    type Options = Options;
+    const UNITS: &'static [(&'static str, Unit)] = &[
+        (
+            "init_pose",
+            Unit::Tuple(&[Unit::Length, Unit::Length, Unit::Angle]),
+        ),
+        (
+            "init_pose_var",
+            Unit::Tuple(&[Unit::Length, Unit::Length, Unit::Angle]),
+        ),
+        ("update_thresh", Unit::Tuple(&[Unit::Length, Unit::Angle])),
+        ("laser_range_var", Unit::Length),
+        ("laser_sigma_hit", Unit::Length),
+        ("laser_likelihood_max_dist", Unit::Length),
+    ];
+
+    fn new(section: &Section, o: Options) -> Result<Self> {
+        let provided = |i: Interface| {
+            section
+                .provided()
+                .into_iter()
+                .find(|s| s.device.interface == i)
+                .map(|s| s.device)
+        };
+        let (localize, position) = (
+            provided(Interface::Localize),
+            provided(Interface::Position2d),
+        );
+        if localize.is_none() && position.is_none() {
+            return Err(NodeError::config(
+                Self::NAME,
+                "`provides` needs a localize or a position2d device (e.g. [\"localize:0\" \"position2d:2\"])",
+            ));
+        }
+        let loc = Localizer::new(&o).map_err(|e| NodeError::config(Self::NAME, e))?;
+        Ok(Amcl {
+            localize,
+            position,
+            odom: section.required_one(Interface::Position2d, Some("odometry"))?,
+            laser: section.required_one(Interface::Laser, None)?,
+            map: section.required_one(Interface::Map, Some("laser"))?,
+            loc,
+            setup: Setup::Ready,
+            geom: None,
+        })
+    }
+
+    fn setup(&mut self, ctx: &mut Ctx) -> Result<()> {
+        self.setup = Setup::MapInfo(ctx.request(&self.map, &map::GetInfo)?);
+        self.geom = Some(ctx.request(&self.laser, &laser_msg::GetGeom)?);
+        ctx.subscribe(&self.odom)?;
+        ctx.subscribe(&self.laser)?;
+        Ok(())
+    }
+
+    fn on_event(&mut self, ctx: &mut Ctx, event: Event) -> Result<()> {
+        match event {
+            Event::Data(s) if s.device == self.odom && s.is::<position2d::Data>() => {
+                let d = s.decode::<position2d::Data>()?.msg;
+                if let (Some(p), Some(dev)) = (self.loc.odometry(pose(&d.pose)), self.position) {
+                    ctx.publish(
+                        &dev,
+                        &position2d::Data {
+                            pose: pose2d(&p),
+                            ..Default::default()
+                        },
+                    )?;
+                }
+                Ok(())
+            }
+            Event::Data(s) if s.device == self.laser && s.is::<laser_msg::Scan>() => {
+                let scan = s.decode::<laser_msg::Scan>()?.msg;
+                if self.loc.scan(&scan) {
+                    self.publish(ctx)?;
+                }
+                Ok(())
+            }
+            Event::Data(s) => Err(s.unexpected()),
+            Event::Reply(r) => self.on_reply(ctx, r),
+            Event::Request(r) if r.is::<localize::SetPose>() => {
+                let q = r.decode::<localize::SetPose>()?;
+                self.loc.set_pose(pose(&q.mean), &q.cov);
+                tracing::info!(
+                    "filter reset around ({:.3}, {:.3}, {:.3})",
+                    q.mean.x,
+                    q.mean.y,
+                    q.mean.yaw
+                );
+                r.reply(&common::Ack);
+                Ok(())
+            }
+            Event::Request(r) if r.is::<localize::GetParticles>() => {
+                let f = self.loc.filter();
+                let (mx, my, variance) = f.cep_stats();
+                r.reply(&localize::Particles {
+                    mean: Pose2d::new(mx, my, 0.0),
+                    variance,
+                    particles: f
+                        .particles()
+                        .iter()
+                        .map(|p| localize::Particle {
+                            pose: pose2d(&p.pose),
+                            weight: p.weight,
+                        })
+                        .collect(),
+                });
+                Ok(())
+            }
+            Event::Request(r) if r.is::<position2d::GetGeom>() => {
+                r.reply(&position2d::Geom {
+                    pose: Pose3d::default(),
+                    size: Size3d {
+                        width: 0.01,
+                        length: 0.01,
+                        height: 0.0,
+                    },
+                });
+                Ok(())
+            }
+            Event::Request(r) => {
+                let why = format!("amcl does not handle request `{}`", r.name);
+                r.nack(why);
+                Ok(())
+            }
+            Event::Command(c) => {
+                tracing::debug!("amcl takes no commands; ignored `{}`", c.key);
+                Ok(())
+            }
+            Event::Tick => Ok(()),
+        }
+    }
+}
+
+impl Amcl {
+    /// The localizer (tests).
+    pub fn localizer(&self) -> &Localizer {
+        &self.loc
+    }
+
+    fn on_reply(&mut self, ctx: &mut Ctx, r: troupe_node::Reply) -> Result<()> {
+        if Some(r.id) == self.geom {
+            self.geom = None;
+            match r.decode::<laser_msg::Geom>() {
+                Ok(g) => self
+                    .loc
+                    .set_laser_pose(Pose::new(g.pose.x, g.pose.y, g.pose.yaw)),
+                Err(e) => tracing::warn!(
+                    "laser {} gave no geometry ({e}); assuming it sits at the robot's centre",
+                    self.laser
+                ),
+            }
+            return Ok(());
+        }
+        match self.setup {
+            Setup::MapInfo(id) if id == r.id => {
+                let info = r.decode::<map::Info>().map_err(|e| {
+                    NodeError::config(Self::NAME, format!("map {} gave no info: {e}", self.map))
+                })?;
+                let q = map::GetData {
+                    col: 0,
+                    row: 0,
+                    width: info.width,
+                    height: info.height,
+                };
+                self.setup = Setup::MapData(ctx.request(&self.map, &q)?, info);
+            }
+            Setup::MapData(id, info) if id == r.id => {
+                let data = r.decode::<map::Data>().map_err(|e| {
+                    NodeError::config(Self::NAME, format!("map {} gave no data: {e}", self.map))
+                })?;
+                let mut m = OccMap::filled(info, 0);
+                m.put_tile(&data)
+                    .map_err(|e| NodeError::config(Self::NAME, format!("map {}: {e}", self.map)))?;
+                self.loc.set_map(&m);
+                tracing::info!(
+                    "map {}: {} x {} cells at {} m",
+                    self.map,
+                    info.width,
+                    info.height,
+                    info.resolution
+                );
+                self.setup = Setup::Ready;
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+
+    fn publish(&mut self, ctx: &mut Ctx) -> Result<()> {
+        if let Some(dev) = self.localize {
+            let hypoths = self
+                .loc
+                .hypotheses()
+                .iter()
+                .map(|h| localize::Hypoth {
+                    mean: pose2d(&h.mean),
+                    cov: h.cov,
+                    weight: h.weight,
+                })
+                .collect();
+            ctx.publish(
+                &dev,
+                &localize::Hypoths {
+                    pending_count: 0,
+                    pending_time: 0.0,
+                    hypoths,
+                },
+            )?;
+        }
+        if let (Some(dev), Some(b)) = (self.position, self.loc.best()) {
+            ctx.publish(
+                &dev,
+                &position2d::Data {
+                    pose: pose2d(&b),
+                    ..Default::default()
+                },
+            )?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use troupe_geom::occmap::{FREE, OCCUPIED};
+
+    /// A 10 m × 10 m room at 0.05 m with walls and two pillars (so that
+    /// the room is not symmetric).
+    fn room() -> OccMap {
+        let info = map::Info {
+            width: 200,
+            height: 200,
+            resolution: 0.05,
+            origin: Pose2d::new(-5.0, -5.0, 0.0),
+        };
+        let mut m = OccMap::filled(info, FREE);
+        for j in 0..200usize {
+            for i in 0..200usize {
+                let wall = i < 2 || j < 2 || i >= 198 || j >= 198;
+                let pillar = (60..80).contains(&i) && (120..150).contains(&j);
+                let block = (140..150).contains(&i) && (40..90).contains(&j);
+                if wall || pillar || block {
+                    m.cells[j * 200 + i] = OCCUPIED;
+                }
+            }
+        }
+        m
+    }
+
+    fn scan_from(d: &DistanceMap, p: &Pose) -> laser_msg::Scan {
+        let res = std::f64::consts::PI / 180.0;
+        let ranges = (0..181)
+            .map(|i| {
+                d.range(
+                    p.x,
+                    p.y,
+                    p.yaw - std::f64::consts::FRAC_PI_2 + i as f64 * res,
+                    8.0,
+                ) as f32
+            })
+            .collect();
+        laser_msg::Scan {
+            min_angle: -std::f32::consts::FRAC_PI_2,
+            max_angle: std::f32::consts::FRAC_PI_2,
+            resolution: res as f32,
+            max_range: 8.0,
+            ranges,
+            ..Default::default()
+        }
+    }
+
+    fn converges(model: &str) {
+        let m = room();
+        let truth_map = DistanceMap::new(&m);
+        let o = Options {
+            // Wrong by ~0.7 m and 20°, with a wide spread.
+            init_pose: vec![-2.5, -1.5, 0.35],
+            init_pose_var: vec![1.0, 1.0, 0.6],
+            laser_model_type: model.into(),
+            pf_max_samples: 5000,
+            ..Options::default()
+        };
+        let mut loc = Localizer::new(&o).unwrap();
+        loc.set_map(&m);
+        // The robot drives a loop; odometry starts at its own origin.
+        let start = Pose::new(-3.0, -2.0, 0.0);
+        let mut truth = start;
+        let mut worst_late = 0.0f64;
+        for step in 0..240 {
+            let turn = if (step / 40) % 2 == 1 { 0.05 } else { 0.0 };
+            truth = truth.compose(&Pose::new(0.04, 0.0, turn));
+            if truth_map.at(truth.x, truth.y) < 0.4 {
+                truth = truth.compose(&Pose::new(-0.04, 0.0, 0.3));
+            }
+            let odom = relative(&truth, &start);
+            let est = loc.odometry(odom);
+            loc.scan(&scan_from(&truth_map, &truth));
+            if step > 120 {
+                let e = est.or(loc.best()).unwrap();
+                worst_late =
+                    worst_late.max(((e.x - truth.x).powi(2) + (e.y - truth.y).powi(2)).sqrt());
+            }
+        }
+        let b = loc.best().unwrap();
+        let err = ((b.x - truth.x).powi(2) + (b.y - truth.y).powi(2)).sqrt();
+        let aerr = normalize(b.yaw - truth.yaw).abs();
+        assert!(
+            err < 0.25 && aerr < 10f64.to_radians(),
+            "{model}: {b:?} vs {truth:?}"
+        );
+        assert!(
+            worst_late < 0.25,
+            "{model}: estimate strayed {worst_late} m along the route"
+        );
+        assert!(loc.updates() > 20, "{}", loc.updates());
+        assert!(loc.filter().particles().len() < 5000, "KLD shrank the set");
+        let h = loc.hypotheses();
+        assert!(h[0].weight > 0.5 && h.windows(2).all(|w| w[0].weight >= w[1].weight));
+    }
+
+    #[test]
+    fn beam_model_converges_from_a_wrong_wide_guess() {
+        converges("beam");
+    }
+
+    #[test]
+    fn likelihood_field_converges_from_a_wrong_wide_guess() {
+        converges("likelihood_field");
+    }
+
+    #[test]
+    fn nothing_before_odometry_and_a_scan_and_set_pose_restarts() {
+        let m = room();
+        let d = DistanceMap::new(&m);
+        let mut loc = Localizer::new(&Options::default()).unwrap();
+        loc.set_map(&m);
+        let p = Pose::new(1.0, 1.0, 0.0);
+        assert!(!loc.scan(&scan_from(&d, &p)), "no odometry yet");
+        assert_eq!(loc.odometry(Pose::default()), None);
+        assert!(loc.scan(&scan_from(&d, &p)));
+        assert!(!loc.scan(&scan_from(&d, &p)), "no motion, no update");
+        // Small motion: no update, but the estimate follows odometry.
+        let before = loc.best().unwrap();
+        let e = loc.odometry(Pose::new(0.1, 0.0, 0.0)).unwrap();
+        assert!((e.x - before.compose(&Pose::new(0.1, 0.0, 0.0)).x).abs() < 1e-12);
+        assert!(!loc.scan(&scan_from(&d, &p)));
+        loc.set_pose(
+            Pose::new(1.0, 1.0, 0.0),
+            &[0.01, 0.01, 0.005, 0.0, 0.0, 0.0],
+        );
+        assert_eq!(loc.filter().particles().len(), 10_000);
+        assert_eq!(
+            loc.odometry(Pose::new(0.1, 0.0, 0.0)),
+            None,
+            "new reference"
+        );
+        assert!(loc.scan(&scan_from(&d, &p)));
+        let b = loc.best().unwrap();
+        assert!((b.x - 1.0).abs() < 0.1 && (b.y - 1.0).abs() < 0.1, "{b:?}");
+    }
+
+    #[test]
+    fn bad_options_are_named() {
+        let e = |o: Options| Localizer::new(&o).err().unwrap();
+        assert!(e(Options {
+            laser_model_type: "x".into(),
+            ..Options::default()
+        })
+        .contains("laser_model_type"));
+        assert!(e(Options {
+            init_pose: vec![1.0],
+            ..Options::default()
+        })
+        .contains("init_pose"));
+        assert!(e(Options {
+            pf_min_samples: 10,
+            pf_max_samples: 5,
+            ..Options::default()
+        })
+        .contains("pf_min_samples"));
+        assert!(e(Options {
+            update_thresh: vec![],
+            ..Options::default()
+        })
+        .contains("update_thresh"));
+    }
+}
