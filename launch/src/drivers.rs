@@ -35,6 +35,12 @@ pub fn all() -> Vec<Entry> {
         entry::<troupe_rangertolaser::RangerToLaser>("republishes a ranger as a laser"),
         entry::<troupe_amcl::Amcl>("adaptive Monte Carlo localization on a map (odometry + laser)"),
         entry::<troupe_mapfile::MapFile>("serves an occupancy map read from an image"),
+        entry::<troupe_vfh::Vfh>(
+            "VFH+ obstacle avoidance: velocity and goto commands past obstacles",
+        ),
+        entry::<troupe_wavefront::Wavefront>(
+            "global path planner feeding waypoints to a position2d",
+        ),
         entry::<troupe_stage::Stage>(
             "the 2D multi-robot simulator: a Stage world's robots and sensors",
         ),

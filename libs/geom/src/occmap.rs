@@ -128,9 +128,77 @@ impl OccMap {
         Ok(())
     }
 
+    /// Metres from each cell's centre to the nearest obstacle cell's
+    /// (state ≥ 0: occupied or unknown), 0 on obstacles; row-major. Exact
+    /// Euclidean distance transform, linear in the cells.
+    pub fn distance_field(&self) -> Vec<f32> {
+        let (w, h) = self.size();
+        const FAR: f64 = 1e12;
+        let mut g: Vec<f64> = self
+            .cells
+            .iter()
+            .map(|&c| if c >= 0 { 0.0 } else { FAR })
+            .collect();
+        let n = w.max(h);
+        let (mut f, mut d) = (vec![0.0; n], vec![0.0; n]);
+        let (mut v, mut z) = (vec![0usize; n], vec![0.0; n + 1]);
+        if w > 0 && h > 0 {
+            for i in 0..w {
+                for j in 0..h {
+                    f[j] = g[j * w + i];
+                }
+                edt_1d(&f[..h], &mut d[..h], &mut v, &mut z);
+                for j in 0..h {
+                    g[j * w + i] = d[j];
+                }
+            }
+            for j in 0..h {
+                f[..w].copy_from_slice(&g[j * w..(j + 1) * w]);
+                edt_1d(&f[..w], &mut d[..w], &mut v, &mut z);
+                g[j * w..(j + 1) * w].copy_from_slice(&d[..w]);
+            }
+        }
+        let res = self.resolution();
+        g.iter().map(|&s| (s.sqrt() * res) as f32).collect()
+    }
+
     /// The world pose of the map's origin corner.
     pub fn origin(&self) -> Pose2d {
         self.info.origin
+    }
+}
+
+/// Exact 1-D squared distance transform (Felzenszwalb & Huttenlocher) of `f`
+/// into `d`, with scratch space `v`, `z`.
+fn edt_1d(f: &[f64], d: &mut [f64], v: &mut [usize], z: &mut [f64]) {
+    let n = f.len();
+    let parabola = |q: usize, p: usize| {
+        ((f[q] + (q * q) as f64) - (f[p] + (p * p) as f64)) / (2.0 * (q - p) as f64)
+    };
+    let mut k = 0;
+    v[0] = 0;
+    z[0] = f64::NEG_INFINITY;
+    z[1] = f64::INFINITY;
+    for q in 1..n {
+        let mut s = parabola(q, v[k]);
+        // z[0] is -inf, so this stops at k = 0.
+        while s <= z[k] {
+            k -= 1;
+            s = parabola(q, v[k]);
+        }
+        k += 1;
+        v[k] = q;
+        z[k] = s;
+        z[k + 1] = f64::INFINITY;
+    }
+    k = 0;
+    for (q, out) in d.iter_mut().enumerate() {
+        while z[k + 1] < q as f64 {
+            k += 1;
+        }
+        let p = v[k];
+        let dq = q as f64 - p as f64;
+        *out = dq * dq + f[p];
     }
 }
 

@@ -118,6 +118,25 @@ impl Ctx {
         Ok(id)
     }
 
+    /// Sends an already encoded request `name` to `dev`, as a driver that
+    /// passes its clients' requests through does; the answer arrives as
+    /// [`crate::Event::Reply`] (see [`crate::Responder::forward`]).
+    ///
+    /// # Errors
+    ///
+    /// [`NodeError::Zenoh`] if it could not be sent.
+    pub fn forward_request(
+        &mut self,
+        dev: &Device,
+        name: &str,
+        payload: Vec<u8>,
+    ) -> Result<RequestId> {
+        self.next_id += 1;
+        let id = RequestId(self.next_id);
+        self.bus.request(id, dev, name, payload, REQUEST_TIMEOUT)?;
+        Ok(id)
+    }
+
     /// Delivers [`crate::Event::Tick`] every `period` of the node's clock (`None` stops it).
     pub fn set_tick(&mut self, period: Option<Duration>) {
         self.tick = period.filter(|p| !p.is_zero());

@@ -261,6 +261,20 @@ impl Responder {
         }
     }
 
+    /// Answers with another device's answer to a forwarded request: its
+    /// ACK as it came, or a NACK with its reason.
+    pub fn forward(mut self, answer: std::result::Result<Sample, RequestError>) {
+        match answer {
+            Ok(s) => {
+                if let Some(sink) = self.sink.take() {
+                    sink.send(Ok(s.payload.to_bytes().into_owned()));
+                }
+            }
+            Err(RequestError::Nack(reason)) => self.nack(reason),
+            Err(e) => self.nack(e.to_string()),
+        }
+    }
+
     /// Refuses with `reason`.
     pub fn nack(mut self, reason: impl Into<String>) {
         self.send_nack(reason.into());

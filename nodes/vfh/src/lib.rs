@@ -1,0 +1,453 @@
+//! Player's `vfh`: VFH+ local obstacle avoidance between a client (or a
+//! planner) and a mobile base.
+//!
+//! ```text
+//! driver ( name "vfh" provides ["position2d:1"] requires ["position2d:0" "laser:0"]
+//!          distance_epsilon 0.3 angle_epsilon 5 )
+//! ```
+//!
+//! | | |
+//! |---|---|
+//! | requires | one `position2d` (the base), one `laser` |
+//! | provides | one `position2d` |
+//!
+//! Options, Player's names and defaults: `cell_size` 0.1 m,
+//! `window_diameter` 61, `sector_angle` 5°, `safety_dist_0ms` 0.1 m,
+//! `safety_dist_1ms` (= 0ms), `max_speed` 0.2 m/s,
+//! `max_speed_narrow_opening`/`max_speed_wide_opening` (= max_speed),
+//! `max_acceleration` 0.2 m/s², `min_turnrate` 10°/s, `max_turnrate_0ms`
+//! 40°/s, `max_turnrate_1ms` (= 0ms), `min_turn_radius_safety_factor` 1,
+//! `free_space_cutoff_0ms` 2e6, `obs_cutoff_0ms` (= free), the `_1ms`
+//! cutoffs (= 0ms), `weight_desired_dir` 5, `weight_current_dir` 3,
+//! `distance_epsilon` 0.5 m, `angle_epsilon` 10°, `escape_speed` 0,
+//! `escape_time` 0, `escape_max_turnrate` 0. `synchronous` is accepted and
+//! has no effect (every scan is handled as it comes).
+//!
+//! # Behavior
+//!
+//! - The base's data is republished unchanged on the provided device;
+//!   requests to it go to the base and the base's answer comes back.
+//! - A velocity command goes straight to the base and cancels the goal.
+//! - A position command is a goal in the base's odometric frame (a goal
+//!   equal to the last one, to the millimetre and degree, is ignored, as
+//!   Player's). For each laser scan while a goal is active: within
+//!   `distance_epsilon` and `angle_epsilon` the robot stops and the goal is
+//!   done; within `distance_epsilon` only, it turns on the spot toward the
+//!   goal's heading; otherwise VFH+ picks speed and turn rate (half speed
+//!   within twice `distance_epsilon`).
+//! - The robot's radius is half the larger side of the base's geometry,
+//!   asked at setup; no motion is commanded before it is known.
+//! - With `escape_speed` and `escape_time` set, a stalled robot backs off
+//!   (then drives forward if still stalled) for `escape_time` seconds.
+//! - The laser scan may start anywhere: each direction of the half plane
+//!   ahead reads the beam nearest to it; directions no beam covers read the
+//!   nearest covered one.
+
+pub mod algorithm;
+
+use std::collections::HashMap;
+
+use serde::Deserialize;
+use troupe_geom::normalize;
+use troupe_msgs::{laser, position2d, Device, Interface, Pose2d};
+use troupe_node::{Ctx, Driver, Event, NodeError, RequestId, Responder, Result, Section, Unit};
+
+use crate::algorithm::{Params, Vfh as Algorithm};
+
+/// Options, by Player's names (`None` = Player's derived default).
+#[derive(Debug, Deserialize)]
+#[serde(default)]
+#[allow(missing_docs)]
+pub struct Options {
+    pub cell_size: f64,
+    pub window_diameter: usize,
+    pub sector_angle: u32,
+    pub safety_dist_0ms: f64,
+    pub safety_dist_1ms: Option<f64>,
+    pub max_speed: f64,
+    pub max_speed_narrow_opening: Option<f64>,
+    pub max_speed_wide_opening: Option<f64>,
+    pub max_acceleration: f64,
+    pub min_turnrate: f64,
+    pub max_turnrate_0ms: f64,
+    pub max_turnrate_1ms: Option<f64>,
+    pub min_turn_radius_safety_factor: f64,
+    pub free_space_cutoff_0ms: f64,
+    pub obs_cutoff_0ms: Option<f64>,
+    pub free_space_cutoff_1ms: Option<f64>,
+    pub obs_cutoff_1ms: Option<f64>,
+    pub weight_desired_dir: f64,
+    pub weight_current_dir: f64,
+    pub distance_epsilon: f64,
+    pub angle_epsilon: f64,
+    pub escape_speed: f64,
+    pub escape_time: f64,
+    pub escape_max_turnrate: f64,
+    pub synchronous: Option<f64>,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        let p = Params::default();
+        Options {
+            cell_size: p.cell_size,
+            window_diameter: p.window_diameter,
+            sector_angle: p.sector_angle,
+            safety_dist_0ms: p.safety_dist_0ms,
+            safety_dist_1ms: None,
+            max_speed: p.max_speed,
+            max_speed_narrow_opening: None,
+            max_speed_wide_opening: None,
+            max_acceleration: p.max_acceleration,
+            min_turnrate: p.min_turnrate,
+            max_turnrate_0ms: p.max_turnrate_0ms,
+            max_turnrate_1ms: None,
+            min_turn_radius_safety_factor: p.min_turn_radius_safety_factor,
+            free_space_cutoff_0ms: p.free_space_cutoff_0ms,
+            obs_cutoff_0ms: None,
+            free_space_cutoff_1ms: None,
+            obs_cutoff_1ms: None,
+            weight_desired_dir: p.weight_desired_dir,
+            weight_current_dir: p.weight_current_dir,
+            distance_epsilon: 0.5,
+            angle_epsilon: 10f64.to_radians(),
+            escape_speed: 0.0,
+            escape_time: 0.0,
+            escape_max_turnrate: 0.0,
+            synchronous: None,
+        }
+    }
+}
+
+impl Options {
+    fn params(&self) -> Params {
+        let free1 = self
+            .free_space_cutoff_1ms
+            .unwrap_or(self.free_space_cutoff_0ms);
+        Params {
+            cell_size: self.cell_size,
+            window_diameter: self.window_diameter,
+            sector_angle: self.sector_angle,
+            safety_dist_0ms: self.safety_dist_0ms,
+            safety_dist_1ms: self.safety_dist_1ms.unwrap_or(self.safety_dist_0ms),
+            max_speed: self.max_speed,
+            max_speed_narrow_opening: self.max_speed_narrow_opening.unwrap_or(self.max_speed),
+            max_speed_wide_opening: self.max_speed_wide_opening.unwrap_or(self.max_speed),
+            max_acceleration: self.max_acceleration,
+            min_turnrate: self.min_turnrate,
+            max_turnrate_0ms: self.max_turnrate_0ms,
+            max_turnrate_1ms: self.max_turnrate_1ms.unwrap_or(self.max_turnrate_0ms),
+            min_turn_radius_safety_factor: self.min_turn_radius_safety_factor,
+            free_space_cutoff_0ms: self.free_space_cutoff_0ms,
+            obs_cutoff_0ms: self.obs_cutoff_0ms.unwrap_or(self.free_space_cutoff_0ms),
+            free_space_cutoff_1ms: free1,
+            obs_cutoff_1ms: self.obs_cutoff_1ms.unwrap_or(free1),
+            weight_desired_dir: self.weight_desired_dir,
+            weight_current_dir: self.weight_current_dir,
+            robot_radius: 0.0,
+        }
+    }
+}
+
+/// Ranges (mm) by half degree of the polar frame, 0°..180°, from a scan.
+fn polar(scan: &laser::Scan) -> Vec<f64> {
+    let mut out = vec![f64::NAN; 361];
+    let res = f64::from(scan.resolution);
+    let min = f64::from(scan.min_angle);
+    let n = scan.ranges.len();
+    if n > 0 {
+        for (k, slot) in out.iter_mut().enumerate() {
+            // Polar 0° is the robot's right: −90° in the scan's frame.
+            let a = (k as f64 / 2.0 - 90.0).to_radians();
+            let i = if res.abs() > 0.0 {
+                ((a - min) / res).round()
+            } else {
+                0.0
+            };
+            if i >= 0.0 && (i as usize) < n {
+                *slot = f64::from(scan.ranges[i as usize]) * 1000.0;
+            }
+        }
+    }
+    // Directions no beam covers read the nearest covered one.
+    let first = out.iter().position(|v| !v.is_nan());
+    let mut last = first.map_or(1e6, |i| out[i]);
+    for v in &mut out {
+        if v.is_nan() {
+            *v = last;
+        } else {
+            last = *v;
+        }
+    }
+    out
+}
+
+/// The vfh driver.
+pub struct Vfh {
+    o: Options,
+    vfh: Algorithm,
+    base: Device,
+    laser: Device,
+    out: Device,
+    geom: Option<RequestId>,
+    radius_known: bool,
+    odom: position2d::Data,
+    goal: Option<Pose2d>,
+    last_goal: (i64, i64, i64),
+    motors_on: bool,
+    turning: Option<f64>,
+    last_update: Option<f64>,
+    escape: Option<(f64, f64)>,
+    escape_dir: f64,
+    /// Requests forwarded to the base, by the base's request id.
+    pending: HashMap<RequestId, Responder>,
+}
+
+impl Driver for Vfh {
+    const NAME: &'static str = "vfh";
+    type Options = Options;
+    const UNITS: &'static [(&'static str, Unit)] = &[
+        ("cell_size", Unit::Length),
+        ("safety_dist_0ms", Unit::Length),
+        ("safety_dist_1ms", Unit::Length),
+        ("max_speed", Unit::Length),
+        ("max_speed_narrow_opening", Unit::Length),
+        ("max_speed_wide_opening", Unit::Length),
+        ("max_acceleration", Unit::Length),
+        ("min_turnrate", Unit::Angle),
+        ("max_turnrate_0ms", Unit::Angle),
+        ("max_turnrate_1ms", Unit::Angle),
+        ("distance_epsilon", Unit::Length),
+        ("angle_epsilon", Unit::Angle),
+        ("escape_speed", Unit::Length),
+        ("escape_max_turnrate", Unit::Angle),
+    ];
+
+    fn new(section: &Section, o: Options) -> Result<Self> {
+        let bad = |why: String| NodeError::config(Self::NAME, why);
+        if o.window_diameter < 3
+            || o.cell_size <= 0.0
+            || o.sector_angle == 0
+            || 360 % o.sector_angle != 0
+        {
+            return Err(bad(format!(
+                "window_diameter ({}) must be ≥ 3, cell_size ({}) positive and sector_angle ({}) divide 360",
+                o.window_diameter, o.cell_size, o.sector_angle
+            )));
+        }
+        if o.max_speed <= 0.0 {
+            return Err(bad(format!(
+                "max_speed must be positive, not {}",
+                o.max_speed
+            )));
+        }
+        for i in [Interface::Sonar, Interface::Ranger] {
+            if section.required().iter().any(|s| s.device.interface == i) {
+                return Err(bad(format!(
+                    "vfh reads a laser; put rangertolaser in front of the {i}"
+                )));
+            }
+        }
+        Ok(Vfh {
+            vfh: Algorithm::new(o.params()),
+            base: section.required_one(Interface::Position2d, None)?,
+            laser: section.required_one(Interface::Laser, None)?,
+            out: section.provided_one(Interface::Position2d, None)?,
+            o,
+            geom: None,
+            radius_known: false,
+            odom: position2d::Data::default(),
+            goal: None,
+            last_goal: (0, 0, 0),
+            motors_on: true,
+            turning: None,
+            last_update: None,
+            escape: None,
+            escape_dir: 1.0,
+            pending: HashMap::new(),
+        })
+    }
+
+    fn setup(&mut self, ctx: &mut Ctx) -> Result<()> {
+        self.geom = Some(ctx.request(&self.base, &position2d::GetGeom)?);
+        ctx.subscribe(&self.base)?;
+        ctx.subscribe(&self.laser)?;
+        Ok(())
+    }
+
+    fn on_event(&mut self, ctx: &mut Ctx, event: Event) -> Result<()> {
+        match event {
+            Event::Data(s) if s.device == self.base && s.is::<position2d::Data>() => {
+                self.odom = s.decode::<position2d::Data>()?.msg;
+                ctx.publish(&self.out, &self.odom)
+            }
+            Event::Data(s) if s.device == self.base && s.is::<position2d::Geom>() => {
+                let g = s.decode::<position2d::Geom>()?.msg;
+                ctx.publish(&self.out, &g)
+            }
+            Event::Data(s) if s.device == self.laser && s.is::<laser::Scan>() => {
+                let scan = s.decode::<laser::Scan>()?.msg;
+                self.step(ctx, &scan)
+            }
+            Event::Data(s) => Err(s.unexpected()),
+            Event::Command(c) if c.is::<position2d::CmdVel>() => {
+                let cmd = c.decode::<position2d::CmdVel>()?.msg;
+                self.goal = None;
+                ctx.command(&self.base, &cmd)
+            }
+            Event::Command(c) if c.is::<position2d::CmdPos>() => {
+                let cmd = c.decode::<position2d::CmdPos>()?.msg;
+                self.motors_on = cmd.state;
+                let key = (
+                    (cmd.pos.x * 1000.0).round() as i64,
+                    (cmd.pos.y * 1000.0).round() as i64,
+                    cmd.pos.yaw.to_degrees().round() as i64,
+                );
+                if key != self.last_goal {
+                    self.last_goal = key;
+                    self.goal = Some(cmd.pos);
+                    self.turning = None;
+                    tracing::debug!(
+                        "goal ({:.3}, {:.3}, {:.1}°)",
+                        cmd.pos.x,
+                        cmd.pos.y,
+                        cmd.pos.yaw.to_degrees()
+                    );
+                }
+                Ok(())
+            }
+            Event::Command(c) => {
+                tracing::debug!("vfh: ignored command `{}`", c.key);
+                Ok(())
+            }
+            Event::Request(r) => {
+                // The base answers; its reply (or refusal) goes back.
+                let payload = r.sample.payload().to_bytes().into_owned();
+                let id = ctx.forward_request(&self.base, &r.name, payload)?;
+                self.pending.insert(id, r.responder);
+                Ok(())
+            }
+            Event::Reply(reply) => {
+                if Some(reply.id) == self.geom {
+                    self.geom = None;
+                    let g = reply.decode::<position2d::Geom>().map_err(|e| {
+                        NodeError::config(
+                            Self::NAME,
+                            format!(
+                                "{} gave no geometry (the robot's size is needed): {e}",
+                                self.base
+                            ),
+                        )
+                    })?;
+                    let r = g.size.width.max(g.size.length) / 2.0;
+                    self.vfh.set_robot_radius(r);
+                    self.radius_known = true;
+                    tracing::info!("robot radius {r:.3} m");
+                    return Ok(());
+                }
+                if let Some(resp) = self.pending.remove(&reply.id) {
+                    resp.forward(reply.result);
+                }
+                Ok(())
+            }
+            Event::Tick => Ok(()),
+        }
+    }
+
+    fn shutdown(&mut self, ctx: &mut Ctx) -> Result<()> {
+        self.drive(ctx, 0.0, 0.0)
+    }
+}
+
+impl Vfh {
+    fn drive(&mut self, ctx: &mut Ctx, speed: f64, turnrate: f64) -> Result<()> {
+        let (speed, mut turnrate) = if self.motors_on {
+            (speed, turnrate)
+        } else {
+            (0.0, 0.0)
+        };
+        if turnrate.abs().to_degrees() > self.vfh.max_turnrate(speed * 1000.0) + 1e-9 {
+            tracing::debug!("fast turn at {speed:.2} m/s: turn rate zeroed, as Player's");
+            turnrate = 0.0;
+        }
+        let vel = Pose2d::new(speed, 0.0, turnrate);
+        ctx.command(&self.base, &position2d::CmdVel { vel, state: true })
+    }
+
+    fn step(&mut self, ctx: &mut Ctx, scan: &laser::Scan) -> Result<()> {
+        let now = ctx.now();
+        let dt = self.last_update.map_or(0.1, |t| now - t);
+        self.last_update = Some(now);
+        let Some(goal) = self.goal else {
+            return Ok(());
+        };
+        if !self.radius_known {
+            return Ok(());
+        }
+        let o = &self.o;
+        let p = self.odom.pose;
+        // Escape from a stall.
+        if let Some((start, _)) = self.escape {
+            if now - start > o.escape_time {
+                if self.odom.stall {
+                    self.escape_dir = -self.escape_dir;
+                }
+                self.escape = None;
+            }
+        }
+        if self.escape.is_some()
+            || (o.escape_speed != 0.0 && o.escape_time != 0.0 && self.odom.stall)
+        {
+            let start = self.escape.map_or(now, |e| e.0);
+            let speed = -o.escape_speed * self.escape_dir;
+            let turn = self.escape.map_or(0.0, |e| e.1);
+            self.escape = Some((start, turn));
+            self.turning = None;
+            return self.drive(ctx, speed, turn);
+        }
+        let dist = (goal.x - p.x).hypot(goal.y - p.y);
+        let angdiff = normalize(goal.yaw - p.yaw);
+        if dist < o.distance_epsilon && angdiff.abs() < o.angle_epsilon {
+            self.goal = None;
+            self.turning = None;
+            tracing::debug!("goal reached");
+            return self.drive(ctx, 0.0, 0.0);
+        }
+        if dist > o.distance_epsilon {
+            self.turning = None;
+            let desired = (90.0 + (goal.y - p.y).atan2(goal.x - p.x).to_degrees()
+                - p.yaw.to_degrees())
+            .rem_euclid(360.0);
+            let ranges = polar(scan);
+            let range = |deg: f64| {
+                let k = (deg * 2.0).round();
+                if (0.0..=360.0).contains(&k) {
+                    ranges[k as usize]
+                } else {
+                    f64::INFINITY // behind: the mask blocks it anyway
+                }
+            };
+            let tol = o.distance_epsilon * 1000.0;
+            let m = self.vfh.update(
+                range,
+                self.odom.vel.x * 1000.0,
+                desired,
+                dist * 1000.0,
+                tol,
+                dt,
+            );
+            let mut speed = m.speed;
+            if dist < 2.0 * o.distance_epsilon && speed > o.max_speed / 2.0 {
+                speed = o.max_speed / 2.0;
+            }
+            return self.drive(ctx, speed, m.turnrate);
+        }
+        // At the spot, wrong heading: turn toward the goal's heading.
+        let dir = *self
+            .turning
+            .get_or_insert(if angdiff < 0.0 { -1.0 } else { 1.0 });
+        let max0 = self.vfh.max_turnrate(0.0).to_radians();
+        let rate = (angdiff.abs() / std::f64::consts::PI * max0).max(o.min_turnrate) * dir;
+        self.drive(ctx, 0.0, rate)
+    }
+}

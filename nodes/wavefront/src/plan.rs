@@ -1,0 +1,425 @@
+//! Global path planning on an occupancy map, pure.
+//!
+//! The configuration space: every cell's distance to the nearest obstacle
+//! (occupied or unknown), capped at `max_radius`. Cells closer than the
+//! robot's radius plus `safety_dist` are blocked. A step costs its length
+//! plus `dist_penalty · (max_radius − distance)` near obstacles, so paths
+//! keep clear of walls — Player's wavefront cost. Player floods the whole
+//! map from the goal; this searches from the start with A* (the Euclidean
+//! distance is a lower bound on that cost), which finds a path of the same
+//! cost and touches a fraction of the cells.
+//!
+//! [`Planner::waypoints`] turns a path into waypoints as Player's does:
+//! the start cell, then each farthest path cell still in line of sight
+//! (through unblocked cells), the first 0.5 m taken without looking, and
+//! the goal cell last.
+
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+
+use troupe_geom::occmap::OccMap;
+
+/// Planning parameters (metres).
+#[derive(Debug, Clone, Copy)]
+pub struct Params {
+    /// Robot radius plus safety distance: cells closer to an obstacle are blocked.
+    pub min_radius: f64,
+    /// Obstacle distances are capped here; the penalty vanishes beyond.
+    pub max_radius: f64,
+    /// Weight of the obstacle-proximity cost.
+    pub dist_penalty: f64,
+}
+
+/// Why there is no path.
+#[derive(Debug, Clone, PartialEq)]
+pub enum NoPath {
+    /// The start is off the map.
+    StartOff,
+    /// The goal is off the map.
+    GoalOff,
+    /// The goal lies in an obstacle or too close to one.
+    GoalBlocked,
+    /// Nothing connects start and goal.
+    Unreachable,
+}
+
+impl std::fmt::Display for NoPath {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            NoPath::StartOff => "the start is off the map",
+            NoPath::GoalOff => "the goal is off the map",
+            NoPath::GoalBlocked => "the goal is in or too close to an obstacle",
+            NoPath::Unreachable => "no path connects the start to the goal",
+        })
+    }
+}
+
+impl std::error::Error for NoPath {}
+
+#[derive(Clone, Copy, PartialEq)]
+struct Open {
+    f: f32,
+    cell: u32,
+}
+
+impl Eq for Open {}
+
+impl Ord for Open {
+    fn cmp(&self, other: &Self) -> Ordering {
+        // Min-heap on f; ties by cell for determinism.
+        other
+            .f
+            .total_cmp(&self.f)
+            .then_with(|| other.cell.cmp(&self.cell))
+    }
+}
+
+impl PartialOrd for Open {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+/// A planner over one map.
+pub struct Planner {
+    width: usize,
+    height: usize,
+    res: f64,
+    ox: f64,
+    oy: f64,
+    params: Params,
+    /// Distance to the nearest obstacle, capped at `max_radius`.
+    dist: Vec<f32>,
+    /// Per-cell step penalty, precomputed.
+    penalty: Vec<f32>,
+    g: Vec<f32>,
+    parent: Vec<u32>,
+    /// Search generation of `g`/`parent` (no clearing between plans).
+    stamp: Vec<u32>,
+    generation: u32,
+    heap: BinaryHeap<Open>,
+}
+
+const NONE: u32 = u32::MAX;
+
+impl Planner {
+    /// Builds the configuration space of `map`.
+    pub fn new(map: &OccMap, params: Params) -> Self {
+        let (width, height) = map.size();
+        let maxr = params.max_radius as f32;
+        let dist: Vec<f32> = map
+            .distance_field()
+            .into_iter()
+            .map(|d| d.min(maxr))
+            .collect();
+        let penalty = dist
+            .iter()
+            .map(|&d| {
+                if d < maxr {
+                    (params.dist_penalty * f64::from(maxr - d)) as f32
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let n = width * height;
+        Planner {
+            width,
+            height,
+            res: map.resolution(),
+            ox: map.info.origin.x,
+            oy: map.info.origin.y,
+            params,
+            dist,
+            penalty,
+            g: vec![0.0; n],
+            parent: vec![NONE; n],
+            stamp: vec![0; n],
+            generation: 0,
+            heap: BinaryHeap::new(),
+        }
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &Params {
+        &self.params
+    }
+
+    fn cell(&self, x: f64, y: f64) -> Option<usize> {
+        let i = ((x - self.ox) / self.res).floor();
+        let j = ((y - self.oy) / self.res).floor();
+        if i < 0.0 || j < 0.0 || i >= self.width as f64 || j >= self.height as f64 {
+            return None;
+        }
+        Some(j as usize * self.width + i as usize)
+    }
+
+    /// The centre of cell `k`, world frame.
+    pub fn centre(&self, k: usize) -> (f64, f64) {
+        let (i, j) = (k % self.width, k / self.width);
+        (
+            self.ox + (i as f64 + 0.5) * self.res,
+            self.oy + (j as f64 + 0.5) * self.res,
+        )
+    }
+
+    fn free(&self, k: usize) -> bool {
+        f64::from(self.dist[k]) >= self.params.min_radius
+    }
+
+    /// The cheapest path of cells from `start` to `goal` (world points).
+    /// The start cell may be inside the safety margin (the robot is where
+    /// it is); the goal may not.
+    ///
+    /// # Errors
+    ///
+    /// [`NoPath`] says why there is none.
+    pub fn plan(&mut self, start: (f64, f64), goal: (f64, f64)) -> Result<Vec<usize>, NoPath> {
+        let s = self.cell(start.0, start.1).ok_or(NoPath::StartOff)?;
+        let t = self.cell(goal.0, goal.1).ok_or(NoPath::GoalOff)?;
+        if !self.free(t) && s != t {
+            return Err(NoPath::GoalBlocked);
+        }
+        self.generation = self.generation.wrapping_add(1);
+        if self.generation == 0 {
+            self.stamp.fill(0);
+            self.generation = 1;
+        }
+        let gen = self.generation;
+        let w = self.width as i64;
+        let (tx, ty) = ((t % self.width) as i64, (t / self.width) as i64);
+        let res = self.res as f32;
+        let h = |k: usize| -> f32 {
+            let dx = ((k % self.width) as i64 - tx).abs() as f32;
+            let dy = ((k / self.width) as i64 - ty).abs() as f32;
+            // Octile distance: a lower bound on the step lengths.
+            (dx.max(dy) + (std::f32::consts::SQRT_2 - 1.0) * dx.min(dy)) * res
+        };
+        self.heap.clear();
+        self.stamp[s] = gen;
+        self.g[s] = 0.0;
+        self.parent[s] = NONE;
+        self.heap.push(Open {
+            f: h(s),
+            cell: s as u32,
+        });
+        const STEPS: [(i64, i64, f32); 8] = [
+            (-1, -1, std::f32::consts::SQRT_2),
+            (0, -1, 1.0),
+            (1, -1, std::f32::consts::SQRT_2),
+            (-1, 0, 1.0),
+            (1, 0, 1.0),
+            (-1, 1, std::f32::consts::SQRT_2),
+            (0, 1, 1.0),
+            (1, 1, std::f32::consts::SQRT_2),
+        ];
+        while let Some(Open { f, cell }) = self.heap.pop() {
+            let c = cell as usize;
+            let gc = self.g[c];
+            if f > gc + h(c) + 1e-4 {
+                continue; // a stale entry
+            }
+            if c == t {
+                let mut path = vec![t];
+                let mut k = t;
+                while self.parent[k] != NONE {
+                    k = self.parent[k] as usize;
+                    path.push(k);
+                }
+                path.reverse();
+                return Ok(path);
+            }
+            let (ci, cj) = ((c % self.width) as i64, (c / self.width) as i64);
+            for &(di, dj, len) in &STEPS {
+                let (ni, nj) = (ci + di, cj + dj);
+                if ni < 0 || nj < 0 || ni >= w || nj >= self.height as i64 {
+                    continue;
+                }
+                let n = (nj * w + ni) as usize;
+                if !self.free(n) {
+                    continue;
+                }
+                let cost = gc + len * res + self.penalty[n];
+                if self.stamp[n] != gen || cost < self.g[n] {
+                    self.stamp[n] = gen;
+                    self.g[n] = cost;
+                    self.parent[n] = c as u32;
+                    self.heap.push(Open {
+                        f: cost + h(n),
+                        cell: n as u32,
+                    });
+                }
+            }
+        }
+        Err(NoPath::Unreachable)
+    }
+
+    /// True when the straight line between cells `a` and `b` crosses only
+    /// unblocked cells.
+    pub fn visible(&self, a: usize, b: usize) -> bool {
+        let (ax, ay) = ((a % self.width) as f64, (a / self.width) as f64);
+        let (bx, by) = ((b % self.width) as f64, (b / self.width) as f64);
+        let n = (bx - ax).abs().max((by - ay).abs()).ceil() as usize * 2;
+        (0..=n).all(|s| {
+            let t = if n == 0 { 0.0 } else { s as f64 / n as f64 };
+            let i = (ax + (bx - ax) * t + 0.5).floor() as usize;
+            let j = (ay + (by - ay) * t + 0.5).floor() as usize;
+            self.free(j * self.width + i)
+        })
+    }
+
+    /// Waypoints (world points) along `path`, Player's way.
+    pub fn waypoints(&self, path: &[usize]) -> Vec<(f64, f64)> {
+        let Some(&first) = path.first() else {
+            return Vec::new();
+        };
+        let mut out = vec![self.centre(first)];
+        let mut at = 0;
+        while at + 1 < path.len() {
+            let mut dist = 0.0;
+            let mut k = at;
+            while k + 1 < path.len() {
+                if dist > 0.5 && !self.visible(path[at], path[k + 1]) {
+                    break;
+                }
+                dist += self.res;
+                k += 1;
+            }
+            at = k;
+            out.push(self.centre(path[at]));
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use troupe_geom::occmap::{FREE, OCCUPIED};
+    use troupe_msgs::{map, Pose2d};
+
+    /// 10 m × 10 m at 0.1 m, a wall across the middle with a gap at the right.
+    fn walled() -> OccMap {
+        let info = map::Info {
+            width: 100,
+            height: 100,
+            resolution: 0.1,
+            origin: Pose2d::new(0.0, 0.0, 0.0),
+        };
+        let mut m = OccMap::filled(info, FREE);
+        for i in 0..80 {
+            m.cells[50 * 100 + i] = OCCUPIED;
+            m.cells[51 * 100 + i] = OCCUPIED;
+        }
+        m
+    }
+
+    fn params() -> Params {
+        Params {
+            min_radius: 0.4,
+            max_radius: 1.0,
+            dist_penalty: 1.0,
+        }
+    }
+
+    #[test]
+    fn goes_round_the_wall_and_keeps_clear() {
+        let m = walled();
+        let mut p = Planner::new(&m, params());
+        let path = p.plan((1.0, 2.0), (1.0, 8.0)).unwrap();
+        let dist = m.distance_field();
+        for &k in &path[1..] {
+            assert!(dist[k] >= 0.4, "path cell {k} too close: {}", dist[k]);
+        }
+        // Through the gap (x > 8 m).
+        assert!(path.iter().any(|&k| p.centre(k).0 > 8.0));
+        let wps = p.waypoints(&path);
+        assert!(wps.len() >= 3 && wps.len() < 10, "{wps:?}");
+        assert_eq!(wps[0], p.centre(path[0]));
+        assert_eq!(*wps.last().unwrap(), p.centre(*path.last().unwrap()));
+        // Each leg is in line of sight after the first half metre.
+        for w in wps.windows(2).skip(1) {
+            let a = p.cell(w[0].0, w[0].1).unwrap();
+            let b = p.cell(w[1].0, w[1].1).unwrap();
+            assert!(p.visible(a, b), "{w:?}");
+        }
+    }
+
+    #[test]
+    fn same_cost_as_a_full_flood() {
+        // Dijkstra from the goal over the whole map (Player's flood) gives
+        // the same cost to the start as A*.
+        let m = walled();
+        let mut p = Planner::new(&m, params());
+        let path = p.plan((2.0, 1.5), (3.0, 9.0)).unwrap();
+        let cost = |path: &[usize]| -> f32 {
+            path.windows(2)
+                .map(|w| {
+                    let d = if (w[0] as i64 - w[1] as i64).abs() == 1
+                        || (w[0] as i64 - w[1] as i64).abs() == 100
+                    {
+                        1.0
+                    } else {
+                        std::f32::consts::SQRT_2
+                    };
+                    d * 0.1 + p.penalty[w[1]]
+                })
+                .sum()
+        };
+        // flood[n]: cheapest cost from n to the goal, a step into k costing
+        // its length plus k's penalty, as A* counts it.
+        let mut flood = vec![f32::INFINITY; 10_000];
+        let goal = p.cell(3.0, 9.0).unwrap();
+        let start = path[0];
+        flood[goal] = 0.0;
+        let mut changed = true;
+        while changed {
+            changed = false;
+            for k in 0..10_000usize {
+                if !flood[k].is_finite() {
+                    continue;
+                }
+                let (i, j) = ((k % 100) as i64, (k / 100) as i64);
+                for (di, dj) in (-1..=1i64).flat_map(|a| (-1..=1i64).map(move |b| (a, b))) {
+                    let (ni, nj) = (i + di, j + dj);
+                    if (di, dj) == (0, 0) || !(0..100).contains(&ni) || !(0..100).contains(&nj) {
+                        continue;
+                    }
+                    let n = (nj * 100 + ni) as usize;
+                    if !p.free(n) && n != start {
+                        continue;
+                    }
+                    let len = if di != 0 && dj != 0 {
+                        std::f32::consts::SQRT_2
+                    } else {
+                        1.0
+                    };
+                    let c = flood[k] + len * 0.1 + p.penalty[k];
+                    if c + 1e-5 < flood[n] {
+                        flood[n] = c;
+                        changed = true;
+                    }
+                }
+            }
+        }
+        let (a, f) = (cost(&path), flood[start]);
+        assert!((a - f).abs() < 1e-3 * a, "A* {a} vs flood {f}");
+    }
+
+    #[test]
+    fn unreachable_blocked_and_off_map_goals_say_why() {
+        let mut m = walled();
+        for i in 80..100 {
+            m.cells[50 * 100 + i] = OCCUPIED;
+        }
+        let mut p = Planner::new(&m, params());
+        assert_eq!(p.plan((1.0, 2.0), (1.0, 8.0)), Err(NoPath::Unreachable));
+        assert_eq!(p.plan((1.0, 2.0), (5.0, 5.05)), Err(NoPath::GoalBlocked));
+        assert_eq!(p.plan((1.0, 2.0), (11.0, 8.0)), Err(NoPath::GoalOff));
+        assert_eq!(p.plan((-1.0, 2.0), (1.0, 3.0)), Err(NoPath::StartOff));
+        // A start inside the margin still plans out of it.
+        let path = p.plan((0.05, 2.0), (2.0, 2.0)).unwrap();
+        assert!(path.len() > 10);
+        assert_eq!(p.plan((2.0, 2.0), (2.0, 2.0)).unwrap().len(), 1);
+    }
+}
