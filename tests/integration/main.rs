@@ -9,6 +9,7 @@ mod bridge;
 mod bridge_devices;
 mod hosts;
 mod launch;
+mod nav;
 mod player;
 mod process;
 mod sessions;

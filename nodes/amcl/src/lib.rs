@@ -131,6 +131,9 @@ impl Default for Options {
 /// Player's default odometry drift.
 const DRIFT: [[f64; 3]; 3] = [[0.2, 0.0, 0.0], [0.0, 0.2, 0.0], [0.2, 0.0, 0.2]];
 
+/// Odometry samples kept to pair scans with the pose of their time.
+const ODOM_HISTORY: usize = 64;
+
 /// Hypotheses published at most (Player's cluster limit).
 const MAX_HYPOTHS: usize = 100;
 
@@ -159,7 +162,10 @@ pub struct Localizer {
     laser_pose: Pose,
     /// Odometry at the last filter update; `None` until the first sample.
     odom_ref: Option<Pose>,
-    odom: Option<Pose>,
+    /// Recent odometry, (stamp, pose), oldest first.
+    odom: std::collections::VecDeque<(f64, Pose)>,
+    /// A scan waiting for the odometry of its time.
+    pending: Option<(f64, Beams)>,
     /// The next scan updates the filter.
     due: bool,
     /// The first update weighs the initial cloud without moving it.
@@ -241,7 +247,8 @@ impl Localizer {
             map: None,
             laser_pose: Pose::default(),
             odom_ref: None,
-            odom: None,
+            odom: std::collections::VecDeque::new(),
+            pending: None,
             due: false,
             moved: false,
             best: None,
@@ -272,9 +279,16 @@ impl Localizer {
         self.due = false;
     }
 
-    /// Takes an odometry pose; returns the pose estimate to publish now, if any.
-    pub fn odometry(&mut self, odom: Pose) -> Option<Pose> {
-        self.odom = Some(odom);
+    /// Takes an odometry pose stamped `stamp`; returns the pose estimate
+    /// to publish now, if any.
+    pub fn odometry(&mut self, odom: Pose, stamp: f64) -> Option<Pose> {
+        if self.odom.back().is_some_and(|&(t, _)| t > stamp) {
+            self.odom.clear(); // the clock went back: a new run
+        }
+        if self.odom.len() == ODOM_HISTORY {
+            self.odom.pop_front();
+        }
+        self.odom.push_back((stamp, odom));
         let Some(r) = self.odom_ref else {
             self.odom_ref = Some(odom);
             self.due = true;
@@ -289,16 +303,12 @@ impl Localizer {
         self.best.map(|b| b.compose(&d))
     }
 
-    /// Takes a scan; returns true when it updated the filter.
-    pub fn scan(&mut self, scan: &laser_msg::Scan) -> bool {
+    /// Takes a scan stamped `stamp`; returns true when it updated the
+    /// filter. A scan newer than the latest odometry waits for odometry of
+    /// its time (see [`Localizer::poll`]).
+    pub fn scan(&mut self, scan: &laser_msg::Scan, stamp: f64) -> bool {
         if !self.due {
             return false;
-        }
-        let (Some(map), Some(odom), Some(r)) = (&self.map, self.odom, self.odom_ref) else {
-            return false;
-        };
-        if self.moved {
-            self.filter.action(relative(&odom, &r), &DRIFT);
         }
         let beams = Beams::pick(
             &scan.ranges,
@@ -307,6 +317,45 @@ impl Localizer {
             f64::from(scan.max_range),
             self.max_beams,
         );
+        self.pending = Some((stamp, beams));
+        self.poll()
+    }
+
+    /// The odometric pose at time `t`, interpolated; `None` while odometry
+    /// has not reached `t`.
+    fn odom_at(&self, t: f64) -> Option<Pose> {
+        let &(last_t, _) = self.odom.back()?;
+        if last_t < t - 1e-9 {
+            return None;
+        }
+        // The first sample at or after t; one before it to interpolate from.
+        let k = self.odom.iter().position(|&(s, _)| s >= t - 1e-9)?;
+        let (t1, p1) = self.odom[k];
+        if k == 0 || t1 - t <= 1e-9 {
+            return Some(p1);
+        }
+        let (t0, p0) = self.odom[k - 1];
+        let f = ((t - t0) / (t1 - t0)).clamp(0.0, 1.0);
+        let d = relative(&p1, &p0);
+        Some(p0.compose(&Pose::new(d.x * f, d.y * f, d.yaw * f)))
+    }
+
+    /// Updates the filter with a waiting scan once odometry has caught up
+    /// with it; returns true when it did.
+    pub fn poll(&mut self) -> bool {
+        let Some(stamp) = self.pending.as_ref().map(|p| p.0) else {
+            return false;
+        };
+        let (Some(map), Some(odom), Some(r)) = (&self.map, self.odom_at(stamp), self.odom_ref)
+        else {
+            return false;
+        };
+        let Some((_, beams)) = self.pending.take() else {
+            return false;
+        };
+        if self.moved {
+            self.filter.action(relative(&odom, &r), &DRIFT);
+        }
         if !beams.beams.is_empty() {
             let (model, laser) = (self.model, self.laser_pose);
             self.filter
@@ -424,8 +473,9 @@ impl Driver for Amcl {
     fn on_event(&mut self, ctx: &mut Ctx, event: Event) -> Result<()> {
         match event {
             Event::Data(s) if s.device == self.odom && s.is::<position2d::Data>() => {
-                let d = s.decode::<position2d::Data>()?.msg;
-                if let (Some(p), Some(dev)) = (self.loc.odometry(pose(&d.pose)), self.position) {
+                let d = s.decode::<position2d::Data>()?;
+                let estimate = self.loc.odometry(pose(&d.msg.pose), d.stamp);
+                if let (Some(p), Some(dev)) = (estimate, self.position) {
                     ctx.publish(
                         &dev,
                         &position2d::Data {
@@ -434,11 +484,14 @@ impl Driver for Amcl {
                         },
                     )?;
                 }
+                if self.loc.poll() {
+                    self.publish(ctx)?;
+                }
                 Ok(())
             }
             Event::Data(s) if s.device == self.laser && s.is::<laser_msg::Scan>() => {
-                let scan = s.decode::<laser_msg::Scan>()?.msg;
-                if self.loc.scan(&scan) {
+                let scan = s.decode::<laser_msg::Scan>()?;
+                if self.loc.scan(&scan.msg, scan.stamp) {
                     self.publish(ctx)?;
                 }
                 Ok(())
@@ -662,8 +715,8 @@ mod tests {
                 truth = truth.compose(&Pose::new(-0.04, 0.0, 0.3));
             }
             let odom = relative(&truth, &start);
-            let est = loc.odometry(odom);
-            loc.scan(&scan_from(&truth_map, &truth));
+            let est = loc.odometry(odom, step as f64);
+            loc.scan(&scan_from(&truth_map, &truth), step as f64);
             if step > 120 {
                 let e = est.or(loc.best()).unwrap();
                 worst_late =
@@ -704,26 +757,29 @@ mod tests {
         let mut loc = Localizer::new(&Options::default()).unwrap();
         loc.set_map(&m);
         let p = Pose::new(1.0, 1.0, 0.0);
-        assert!(!loc.scan(&scan_from(&d, &p)), "no odometry yet");
-        assert_eq!(loc.odometry(Pose::default()), None);
-        assert!(loc.scan(&scan_from(&d, &p)));
-        assert!(!loc.scan(&scan_from(&d, &p)), "no motion, no update");
+        assert!(!loc.scan(&scan_from(&d, &p), 0.0), "no odometry yet");
+        assert_eq!(loc.odometry(Pose::default(), 0.0), None);
+        assert!(loc.scan(&scan_from(&d, &p), 0.0));
+        assert!(!loc.scan(&scan_from(&d, &p), 0.0), "no motion, no update");
         // Small motion: no update, but the estimate follows odometry.
         let before = loc.best().unwrap();
-        let e = loc.odometry(Pose::new(0.1, 0.0, 0.0)).unwrap();
+        let e = loc.odometry(Pose::new(0.1, 0.0, 0.0), 1.0).unwrap();
         assert!((e.x - before.compose(&Pose::new(0.1, 0.0, 0.0)).x).abs() < 1e-12);
-        assert!(!loc.scan(&scan_from(&d, &p)));
+        assert!(!loc.scan(&scan_from(&d, &p), 1.0));
         loc.set_pose(
             Pose::new(1.0, 1.0, 0.0),
             &[0.01, 0.01, 0.005, 0.0, 0.0, 0.0],
         );
         assert_eq!(loc.filter().particles().len(), 10_000);
         assert_eq!(
-            loc.odometry(Pose::new(0.1, 0.0, 0.0)),
+            loc.odometry(Pose::new(0.1, 0.0, 0.0), 2.0),
             None,
             "new reference"
         );
-        assert!(loc.scan(&scan_from(&d, &p)));
+        // A scan ahead of odometry waits for it.
+        assert!(!loc.scan(&scan_from(&d, &p), 3.0));
+        loc.odometry(Pose::new(0.2, 0.0, 0.0), 4.0);
+        assert!(loc.poll());
         let b = loc.best().unwrap();
         assert!((b.x - 1.0).abs() < 0.1 && (b.y - 1.0).abs() < 0.1, "{b:?}");
     }

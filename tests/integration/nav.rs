@@ -1,0 +1,131 @@
+//! The navigation stack as processes: Stage + rangertolaser + mapfile + amcl +
+//! vfh + wavefront from the cpp-planner-localize scenario's own
+//! nav_headless.cfg (read in place from ../shared/compat). A client sets a
+//! goal across the cave with the planner and watches the robot get there,
+//! by the simulator's true pose, without a collision, in simulated time.
+
+use std::path::Path;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::Instant;
+
+use troupe_client::{Client, LocalizeProxy, PlannerProxy, Position2dProxy, SimulationProxy};
+use troupe_msgs::{keys, sim};
+use troupe_node::zenoh::Wait;
+
+/// The goal of the reference run, and what Player 3.1 achieved there.
+const GOAL: (f64, f64) = (-4.5, -5.5);
+const PLAYER_ARRIVAL_SIM_S: f64 = 32.0;
+
+#[test]
+fn planner_drives_r0_across_the_cave_to_the_goal() {
+    let cfg = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared/compat/player-tcp/cpp-planner-localize/nav_headless.cfg");
+    if !cfg.exists() {
+        eprintln!("skipping: ../shared/compat is absent");
+        return;
+    }
+    let ns = troupe_tests::unique_namespace("nav");
+    let mut launcher = troupe_tests::launch(&ns, &cfg, &["--no-bridge"]);
+    let endpoint = launcher.endpoint("troupe launch: router listening on");
+    let session = troupe_tests::client_at(&endpoint, &ns);
+    // Simulated time, from the simulator's clock.
+    let sim_time = Arc::new(AtomicU64::new(0));
+    let t = sim_time.clone();
+    let _clock = session
+        .declare_subscriber(keys::SIM_CLOCK)
+        .callback(move |s| {
+            if let Ok(c) = troupe_msgs::decode::<sim::Clock>(&s.payload().to_bytes()) {
+                t.store(c.msg.time.to_bits(), Ordering::Relaxed);
+            }
+        })
+        .wait()
+        .unwrap();
+    let now = || f64::from_bits(sim_time.load(Ordering::Relaxed));
+    let client = Client::with_session(session.clone(), 6665);
+    let planner = PlannerProxy::new(&client, 0).unwrap();
+    let localize = LocalizeProxy::new(&client, 0).unwrap();
+    let odom = Position2dProxy::new(&client, 0).unwrap();
+    let amcl = Position2dProxy::new(&client, 2).unwrap();
+    let sim = SimulationProxy::new(&client, 0);
+
+    // amcl publishes once it has odometry, a scan and the map; wavefront
+    // once it has the map.
+    let deadline = Instant::now() + troupe_tests::DEADLINE;
+    while localize.hypoths().is_empty() || planner.state().is_none() {
+        assert!(
+            Instant::now() < deadline,
+            "amcl never published: {}",
+            launcher.stderr()
+        );
+        let _ = client.read_timeout(troupe_tests::DEADLINE);
+    }
+    let start = sim.get_pose2d("r0").unwrap();
+    let h = localize.hypoths()[0];
+    assert!(
+        (h.mean.x - start.x).hypot(h.mean.y - start.y) < 0.25,
+        "amcl's first estimate {:?} is far from the true start {start:?}",
+        h.mean
+    );
+
+    let t0 = now();
+    planner.set_goal_pose(GOAL.0, GOAL.1, 0.0).unwrap();
+    if let Err(e) = planner.set_enable(true) {
+        panic!("enable: {e}\n{}", launcher.stderr());
+    }
+    let mut valid_at = None;
+    let (mut worst_amcl, mut sum_amcl, mut n_amcl) = (0.0f64, 0.0, 0u32);
+    let deadline = Instant::now() + troupe_tests::DEADLINE * 3;
+    loop {
+        assert!(
+            Instant::now() < deadline,
+            "r0 did not arrive: planner {:?}, at {:?} after {:.1} simulated s\n{}",
+            planner.state(),
+            sim.get_pose2d("r0"),
+            now() - t0,
+            launcher.stderr()
+        );
+        let _ = client.read_timeout(troupe_tests::DEADLINE);
+        assert!(!odom.stall(), "r0 collided at {:?}", sim.get_pose2d("r0"));
+        let Some(state) = planner.state() else {
+            continue;
+        };
+        if state.valid && valid_at.is_none() && state.goal.x == GOAL.0 {
+            valid_at = Some(now() - t0);
+        }
+        // amcl follows the robot along the route.
+        if let (Some(est), Ok(truth)) = (amcl.data(), sim.get_pose2d("r0")) {
+            let e = (est.pose.x - truth.x).hypot(est.pose.y - truth.y);
+            worst_amcl = worst_amcl.max(e);
+            sum_amcl += e;
+            n_amcl += 1;
+        }
+        if state.done && state.goal.x == GOAL.0 {
+            break;
+        }
+    }
+    let took = now() - t0;
+    let mean_amcl = sum_amcl / f64::from(n_amcl.max(1));
+    let end = sim.get_pose2d("r0").unwrap();
+    let off = (end.x - GOAL.0).hypot(end.y - GOAL.1);
+    eprintln!(
+        "nav: valid path after {:.2} simulated s, arrived after {took:.1} simulated s, \
+         {off:.2} m from the goal; amcl's error on the way {mean_amcl:.3} m mean, \
+         {worst_amcl:.2} m worst",
+        valid_at.unwrap_or(f64::NAN)
+    );
+    assert!(off < 0.5, "stopped {off:.2} m from the goal at {end:?}");
+    assert!(
+        took <= PLAYER_ARRIVAL_SIM_S,
+        "took {took:.1} simulated s; Player's stack took {PLAYER_ARRIVAL_SIM_S}"
+    );
+    assert!(
+        worst_amcl < 0.35 && mean_amcl < 0.15,
+        "amcl strayed from the true pose: {mean_amcl:.3} m mean, {worst_amcl:.2} m worst"
+    );
+    let wps = planner.request_waypoints().unwrap();
+    assert!(wps.len() >= 2, "{wps:?}");
+    let last = wps.last().unwrap();
+    assert!((last.x - GOAL.0).hypot(last.y - GOAL.1) < 0.1, "{wps:?}");
+    assert!(launcher.terminate().success(), "{}", launcher.stderr());
+}
