@@ -40,6 +40,7 @@ pub fn run(cmd: BenchCmd, z: &ZenohArgs) -> anyhow::Result<()> {
         BenchCmd::Launch(a) => launch_bench(&a),
         BenchCmd::Stage(a) => stage_bench(&a),
         BenchCmd::Bridge(a) => bridge_bench(&a),
+        BenchCmd::Nav(a) => crate::navbench::nav_bench(&a),
     }
 }
 

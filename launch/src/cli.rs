@@ -226,6 +226,10 @@ pub enum BenchCmd {
     #[command(after_help = "Example:
   cargo run --release -- bench bridge --map ../shared/compat/stage/bitmaps/cave.png")]
     Bridge(crate::bench::BridgeBenchArgs),
+    /// Navigation cores: amcl updates/s by particle count, wavefront plan time, vfh decision time.
+    #[command(after_help = "Example:
+  cargo run --release -- bench nav --map ../shared/compat/stage/bitmaps/cave.png")]
+    Nav(crate::navbench::NavBenchArgs),
     /// The echo side of `bench latency` (started by it).
     #[command(hide = true)]
     Pong,

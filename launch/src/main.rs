@@ -9,6 +9,7 @@ mod bridge;
 mod cfg;
 mod cli;
 mod drivers;
+mod navbench;
 mod plan;
 mod supervisor;
 mod tools;

@@ -221,7 +221,7 @@ impl Localizer {
                 o.pf_min_samples, o.pf_max_samples
             ));
         }
-        if !(o.pf_err > 0.0) || !(o.pf_z > 0.0) {
+        if o.pf_err.is_nan() || o.pf_err <= 0.0 || o.pf_z.is_nan() || o.pf_z <= 0.0 {
             return Err("pf_err and pf_z must be positive".into());
         }
         let config = pf::Config {

@@ -390,7 +390,7 @@ impl Filter {
                     cov: [
                         (a.xx / a.w - mx * mx).max(0.0),
                         (a.yy / a.w - my * my).max(0.0),
-                        -2.0 * r.min(1.0).max(f64::MIN_POSITIVE).ln(),
+                        -2.0 * r.clamp(f64::MIN_POSITIVE, 1.0).ln(),
                         a.xy / a.w - mx * my,
                         0.0,
                         0.0,

@@ -163,7 +163,7 @@ impl Driver for Wavefront {
     ];
 
     fn new(section: &Section, o: Options) -> Result<Self> {
-        if !(o.update_rate > 0.0) {
+        if o.update_rate.is_nan() || o.update_rate <= 0.0 {
             return Err(NodeError::config(
                 Self::NAME,
                 format!("update_rate must be positive, not {}", o.update_rate),
