@@ -274,6 +274,7 @@ mod tests {
         // Negated: 230 is only 0.90 occupied, 12 and 13 are free.
         assert_eq!(n.cells, vec![FREE, UNKNOWN, FREE, FREE, OCCUPIED, UNKNOWN]);
         assert_eq!(n.info.origin, Pose2d::new(1.0, 2.0, 0.0));
+        let _ = std::fs::remove_dir_all(&d);
     }
 
     #[test]
@@ -325,6 +326,7 @@ mod tests {
             .to_string();
         assert!(e.contains("origin"), "{e}");
         assert!(h(&format!(r#"{file},"resolution":1,"origin":[1,2,45]"#)).is_ok());
+        let _ = std::fs::remove_dir_all(&d);
     }
 
     #[test]
