@@ -8,7 +8,7 @@
 //!
 //! | | |
 //! |---|---|
-//! | requires | one `position2d` (the base), one `laser` |
+//! | requires | one `position2d` (the base), and one `laser`, `sonar` or `ranger` |
 //! | provides | one `position2d` |
 //!
 //! Options, Player's names and defaults: `cell_size` 0.1 m,
@@ -41,15 +41,17 @@
 //!   (then drives forward if still stalled) for `escape_time` seconds.
 //! - The laser scan may start anywhere: each direction of the half plane
 //!   ahead reads the beam nearest to it; directions no beam covers read the
-//!   nearest covered one.
+//!   nearest covered one. Sonar and ranger elements (poses from their
+//!   geometry) each cover a cone of 30° (sonar) or 50° (ranger) at their
+//!   range plus their distance from the robot's centre, as Player's.
 
 pub mod algorithm;
 
 use std::collections::HashMap;
 
 use serde::Deserialize;
-use troupe_geom::normalize;
-use troupe_msgs::{laser, position2d, Device, Interface, Pose2d};
+use troupe_geom::{normalize, Pose};
+use troupe_msgs::{laser, position2d, ranger, sonar, Device, Interface, Pose2d, Pose3d};
 use troupe_node::{Ctx, Driver, Event, NodeError, RequestId, Responder, Result, Section, Unit};
 
 use crate::algorithm::{Params, Vfh as Algorithm};
@@ -169,17 +171,64 @@ fn polar(scan: &laser::Scan) -> Vec<f64> {
             }
         }
     }
-    // Directions no beam covers read the nearest covered one.
+    fill_gaps(&mut out);
+    out
+}
+
+/// Ranges (mm) by half degree of the polar frame from sonar or ranger
+/// elements at `poses` on the robot, each seeing a `cone`° wide cone (Player:
+/// 30° for sonar, 50° for a ranger); later elements overwrite earlier ones.
+fn cones_polar(poses: &[Pose], ranges: &[f64], cone: f64) -> Vec<f64> {
+    let mut out = vec![f64::NAN; 361];
+    for (p, &r) in poses.iter().zip(ranges) {
+        let d = (p.x.hypot(p.y) + r) * 1000.0;
+        let centre = p.yaw.to_degrees() + 90.0;
+        let mut b = centre - cone / 2.0;
+        while b < centre + cone / 2.0 {
+            let k = (2.0 * b).round();
+            if b >= 0.0 && k < 361.0 {
+                out[k as usize] = d;
+            }
+            b += 0.5;
+        }
+    }
+    fill_gaps(&mut out);
+    out
+}
+
+/// Directions nothing covers read the nearest covered one before them (the
+/// first covered one at the start); nothing covered at all reads 1000 m.
+fn fill_gaps(out: &mut [f64]) {
     let first = out.iter().position(|v| !v.is_nan());
     let mut last = first.map_or(1e6, |i| out[i]);
-    for v in &mut out {
+    for v in out.iter_mut() {
         if v.is_nan() {
             *v = last;
         } else {
             last = *v;
         }
     }
-    out
+}
+
+/// What the obstacles are read from.
+enum Sensor {
+    Laser(Device),
+    /// Sonar or ranger elements: poses on the robot (from the geometry,
+    /// asked at setup) and the cone each sees, degrees.
+    Cones {
+        dev: Device,
+        poses: Vec<Pose>,
+        cone: f64,
+        geom: Option<RequestId>,
+    },
+}
+
+impl Sensor {
+    fn device(&self) -> Device {
+        match self {
+            Sensor::Laser(d) | Sensor::Cones { dev: d, .. } => *d,
+        }
+    }
 }
 
 /// The vfh driver.
@@ -187,7 +236,7 @@ pub struct Vfh {
     o: Options,
     vfh: Algorithm,
     base: Device,
-    laser: Device,
+    sensor: Sensor,
     out: Device,
     geom: Option<RequestId>,
     radius_known: bool,
@@ -241,17 +290,40 @@ impl Driver for Vfh {
                 o.max_speed
             )));
         }
-        for i in [Interface::Sonar, Interface::Ranger] {
-            if section.required().iter().any(|s| s.device.interface == i) {
+        let sensors: Vec<Device> = section
+            .required()
+            .iter()
+            .map(|s| s.device)
+            .filter(|d| {
+                matches!(
+                    d.interface,
+                    Interface::Laser | Interface::Sonar | Interface::Ranger
+                )
+            })
+            .collect();
+        let sensor = match sensors.as_slice() {
+            [d] if d.interface == Interface::Laser => Sensor::Laser(*d),
+            [d] => Sensor::Cones {
+                dev: *d,
+                poses: Vec::new(),
+                cone: if d.interface == Interface::Sonar {
+                    30.0
+                } else {
+                    50.0
+                },
+                geom: None,
+            },
+            _ => {
                 return Err(bad(format!(
-                    "vfh reads a laser; put rangertolaser in front of the {i}"
-                )));
+                    "vfh needs exactly one laser, sonar or ranger in `requires`; it has {}",
+                    sensors.len()
+                )))
             }
-        }
+        };
         Ok(Vfh {
             vfh: Algorithm::new(o.params()),
             base: section.required_one(Interface::Position2d, None)?,
-            laser: section.required_one(Interface::Laser, None)?,
+            sensor,
             out: section.provided_one(Interface::Position2d, None)?,
             o,
             geom: None,
@@ -271,7 +343,14 @@ impl Driver for Vfh {
     fn setup(&mut self, ctx: &mut Ctx) -> Result<()> {
         self.geom = Some(ctx.request(&self.base, &position2d::GetGeom)?);
         ctx.subscribe(&self.base)?;
-        ctx.subscribe(&self.laser)?;
+        if let Sensor::Cones { dev, geom, .. } = &mut self.sensor {
+            *geom = Some(if dev.interface == Interface::Sonar {
+                ctx.request(dev, &sonar::GetGeom)?
+            } else {
+                ctx.request(dev, &ranger::GetGeom)?
+            });
+        }
+        ctx.subscribe(&self.sensor.device())?;
         Ok(())
     }
 
@@ -285,10 +364,25 @@ impl Driver for Vfh {
                 let g = s.decode::<position2d::Geom>()?.msg;
                 ctx.publish(&self.out, &g)
             }
-            Event::Data(s) if s.device == self.laser && s.is::<laser::Scan>() => {
+            Event::Data(s) if s.device == self.sensor.device() && s.is::<laser::Scan>() => {
                 let scan = s.decode::<laser::Scan>()?.msg;
-                self.step(ctx, &scan)
+                self.step(ctx, &polar(&scan))
             }
+            Event::Data(s) if s.device == self.sensor.device() && s.is::<sonar::Ranges>() => {
+                let r: Vec<f64> = s
+                    .decode::<sonar::Ranges>()?
+                    .msg
+                    .ranges
+                    .iter()
+                    .map(|&x| f64::from(x))
+                    .collect();
+                self.cones(ctx, &r)
+            }
+            Event::Data(s) if s.device == self.sensor.device() && s.is::<ranger::Ranges>() => {
+                let r = s.decode::<ranger::Ranges>()?.msg.ranges;
+                self.cones(ctx, &r)
+            }
+            Event::Data(s) if s.device == self.sensor.device() => Ok(()),
             Event::Data(s) => Err(s.unexpected()),
             Event::Command(c) if c.is::<position2d::CmdVel>() => {
                 let cmd = c.decode::<position2d::CmdVel>()?.msg;
@@ -328,6 +422,44 @@ impl Driver for Vfh {
                 Ok(())
             }
             Event::Reply(reply) => {
+                if let Sensor::Cones {
+                    dev, poses, geom, ..
+                } = &mut self.sensor
+                {
+                    if *geom == Some(reply.id) {
+                        *geom = None;
+                        let why = |e: NodeError| {
+                            NodeError::config(
+                                "vfh",
+                                format!(
+                                    "{dev} gave no geometry (the element poses are needed): {e}"
+                                ),
+                            )
+                        };
+                        let pose = |p: &Pose3d| Pose::new(p.x, p.y, p.yaw);
+                        *poses = if dev.interface == Interface::Sonar {
+                            reply
+                                .decode::<sonar::Geom>()
+                                .map_err(why)?
+                                .poses
+                                .iter()
+                                .map(pose)
+                                .collect()
+                        } else {
+                            let g = reply.decode::<ranger::Geom>().map_err(why)?;
+                            let base = pose(&g.pose);
+                            if g.element_poses.is_empty() {
+                                vec![base]
+                            } else {
+                                g.element_poses
+                                    .iter()
+                                    .map(|p| base.compose(&pose(p)))
+                                    .collect()
+                            }
+                        };
+                        return Ok(());
+                    }
+                }
                 if Some(reply.id) == self.geom {
                     self.geom = None;
                     let g = reply.decode::<position2d::Geom>().map_err(|e| {
@@ -374,7 +506,18 @@ impl Vfh {
         ctx.command(&self.base, &position2d::CmdVel { vel, state: true })
     }
 
-    fn step(&mut self, ctx: &mut Ctx, scan: &laser::Scan) -> Result<()> {
+    fn cones(&mut self, ctx: &mut Ctx, ranges: &[f64]) -> Result<()> {
+        match &self.sensor {
+            Sensor::Cones { poses, cone, .. } if !poses.is_empty() => {
+                let polar = cones_polar(poses, ranges, *cone);
+                self.step(ctx, &polar)
+            }
+            _ => Ok(()), // the element poses are not known yet
+        }
+    }
+
+    /// One decision from ranges (mm) by half degree of the polar frame.
+    fn step(&mut self, ctx: &mut Ctx, ranges: &[f64]) -> Result<()> {
         let now = ctx.now();
         let dt = self.last_update.map_or(0.1, |t| now - t);
         self.last_update = Some(now);
@@ -418,7 +561,6 @@ impl Vfh {
             let desired = (90.0 + (goal.y - p.y).atan2(goal.x - p.x).to_degrees()
                 - p.yaw.to_degrees())
             .rem_euclid(360.0);
-            let ranges = polar(scan);
             let range = |deg: f64| {
                 let k = (deg * 2.0).round();
                 if (0.0..=360.0).contains(&k) {
@@ -449,5 +591,46 @@ impl Vfh {
         let max0 = self.vfh.max_turnrate(0.0).to_radians();
         let rate = (angdiff.abs() / std::f64::consts::PI * max0).max(o.min_turnrate) * dir;
         self.drive(ctx, 0.0, rate)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn scans_map_to_the_polar_frame_wherever_they_start() {
+        // A 90° scan centred ahead, 10 beams: 1 m on the right half, 2 m on the left.
+        let scan = laser::Scan {
+            min_angle: -std::f32::consts::FRAC_PI_4,
+            max_angle: std::f32::consts::FRAC_PI_4,
+            resolution: std::f32::consts::FRAC_PI_2 / 9.0,
+            ranges: vec![1.0, 1.0, 1.0, 1.0, 1.0, 2.0, 2.0, 2.0, 2.0, 2.0],
+            ..Default::default()
+        };
+        let p = polar(&scan);
+        assert_eq!(p.len(), 361);
+        assert_eq!(p[2 * 50], 1000.0, "50° polar = 40° right");
+        assert_eq!(p[2 * 130], 2000.0, "130° polar = 40° left");
+        // Uncovered directions read the nearest covered one before them.
+        assert_eq!(p[0], 1000.0);
+        assert_eq!(p[360], 2000.0);
+    }
+
+    #[test]
+    fn sonar_cones_cover_their_sectors() {
+        // One sonar ahead at 0.2 m from the centre, one to the left.
+        let poses = [
+            Pose::new(0.2, 0.0, 0.0),
+            Pose::new(0.0, 0.1, std::f64::consts::FRAC_PI_2),
+        ];
+        let p = cones_polar(&poses, &[1.0, 3.0], 30.0);
+        assert_eq!(p[2 * 90], 1200.0);
+        assert_eq!(p[2 * 76], 1200.0);
+        assert_eq!(p[2 * 170], 3100.0);
+        // Right of the first cone: nothing covers it before, so the first covered value.
+        assert_eq!(p[0], 1200.0);
+        // Between the cones: the last covered one before.
+        assert_eq!(p[2 * 130], 1200.0);
     }
 }
