@@ -8,7 +8,7 @@ use troupe_amcl::laser::DistanceMap;
 use troupe_amcl::{Localizer, Options as AmclOptions};
 use troupe_geom::occmap::{OccMap, FREE, OCCUPIED};
 use troupe_geom::Pose;
-use troupe_msgs::{laser, map, Pose2d};
+use troupe_msgs::{map, Pose2d};
 use troupe_wavefront::plan::{Params, Planner};
 
 /// Flags of `troupe bench nav`.
@@ -35,23 +35,22 @@ fn synthetic() -> OccMap {
         resolution: 0.032,
         origin: Pose2d::new(-8.0, -8.0, 0.0),
     };
-    let mut m = OccMap::filled(info, FREE);
-    for j in 0..500usize {
-        for i in 0..500usize {
-            let wall = i < 5 || j < 5 || i >= 495 || j >= 495;
-            let block = (i / 60 + j / 45) % 4 == 0 && (i % 60) < 20 && (j % 45) < 15;
-            if wall || block {
-                m.cells[j * 500 + i] = OCCUPIED;
-            }
+    OccMap::from_fn(info, |i, j| {
+        let wall = i < 5 || j < 5 || i >= 495 || j >= 495;
+        let block = (i / 60 + j / 45) % 4 == 0 && (i % 60) < 20 && (j % 45) < 15;
+        if wall || block {
+            OCCUPIED
+        } else {
+            FREE
         }
-    }
-    m
+    })
 }
 
 /// The free cell centre nearest to (x, y) with at least `clear` metres of room.
 fn nearest_clear(m: &OccMap, dist: &[f32], x: f64, y: f64, clear: f32) -> (f64, f64) {
     let (w, _) = m.size();
-    let (ci, cj) = m.cell_of(x, y);
+    let target = m.index_of(x, y).unwrap_or(0);
+    let (ci, cj) = ((target % w) as i64, (target / w) as i64);
     let best = dist
         .iter()
         .enumerate()
@@ -61,28 +60,7 @@ fn nearest_clear(m: &OccMap, dist: &[f32], x: f64, y: f64, clear: f32) -> (f64, 
             (i - ci).pow(2) + (j - cj).pow(2)
         })
         .map_or(0, |(k, _)| k);
-    m.centre_of((best % w) as i64, (best / w) as i64)
-}
-
-fn scan_from(d: &DistanceMap, p: &Pose) -> laser::Scan {
-    let res = std::f64::consts::PI / 180.0;
-    laser::Scan {
-        min_angle: -std::f32::consts::FRAC_PI_2,
-        max_angle: std::f32::consts::FRAC_PI_2,
-        resolution: res as f32,
-        max_range: 8.0,
-        ranges: (0..181)
-            .map(|i| {
-                d.range(
-                    p.x,
-                    p.y,
-                    p.yaw - std::f64::consts::FRAC_PI_2 + i as f64 * res,
-                    8.0,
-                ) as f32
-            })
-            .collect(),
-        ..Default::default()
-    }
+    m.centre(best)
 }
 
 fn per(total: Duration, n: usize) -> f64 {
@@ -109,12 +87,12 @@ fn amcl(m: &OccMap, start: Pose, counts: &[usize]) -> anyhow::Result<()> {
             let mut took = Duration::ZERO;
             let mut t = 0.0;
             loc.odometry(Pose::default(), t);
-            loc.scan(&scan_from(&field, &start), t);
+            loc.scan(&field.scan(&start, 8.0), t);
             for k in 0..updates {
                 t += 1.0;
                 let along = if k % 2 == 0 { 0.25 } else { 0.0 };
                 let truth = start.compose(&Pose::new(along, 0.0, 0.0));
-                let scan = scan_from(&field, &truth);
+                let scan = field.scan(&truth, 8.0);
                 loc.odometry(Pose::new(along, 0.0, 0.0), t);
                 let t0 = Instant::now();
                 let updated = loc.scan(&scan, t);
@@ -224,19 +202,14 @@ pub fn nav_bench(a: &NavBenchArgs) -> anyhow::Result<()> {
     wavefront("500x500 across", &m, (-6.946, -6.947), (6.5, 6.5))?;
     // 2000 x 2000: the map tiled 4 x 4.
     let (w, h) = m.size();
-    let mut big = OccMap::filled(
+    let big = OccMap::from_fn(
         map::Info {
             width: (w * 4) as u32,
             height: (h * 4) as u32,
             ..m.info
         },
-        FREE,
+        |i, j| m.cells[(j % h) * w + (i % w)],
     );
-    for j in 0..h * 4 {
-        for i in 0..w * 4 {
-            big.cells[j * w * 4 + i] = m.cells[(j % h) * w + (i % w)];
-        }
-    }
     let span = f64::from(m.info.resolution) * (w * 4) as f64;
     let o = m.info.origin;
     wavefront(

@@ -10,6 +10,28 @@ pub const UNKNOWN: i8 = 0;
 /// Cell value: occupied.
 pub const OCCUPIED: i8 = 1;
 
+/// The index (row-major from the origin) of the cell of `info`'s grid that
+/// holds world point (x, y); `None` off the grid. One conversion for the
+/// map, amcl's distance field and wavefront's planner.
+#[inline]
+pub fn index_of(info: &map::Info, x: f64, y: f64) -> Option<usize> {
+    let r = f64::from(info.resolution);
+    let i = ((x - info.origin.x) / r).floor();
+    let j = ((y - info.origin.y) / r).floor();
+    if i < 0.0 || j < 0.0 || i >= f64::from(info.width) || j >= f64::from(info.height) {
+        return None;
+    }
+    Some(j as usize * info.width as usize + i as usize)
+}
+
+/// The world point at the centre of the cell at `index` of `info`'s grid.
+pub fn centre(info: &map::Info, index: usize) -> (f64, f64) {
+    let r = f64::from(info.resolution);
+    let w = info.width.max(1) as usize;
+    let (i, j) = ((index % w) as f64, (index / w) as f64);
+    (info.origin.x + (i + 0.5) * r, info.origin.y + (j + 0.5) * r)
+}
+
 /// A grid of cells (-1 free, 0 unknown, +1 occupied), row 0 at the bottom
 /// (the map's origin), as Player's map interface lays them out.
 #[derive(Debug, Clone, PartialEq)]
@@ -28,6 +50,13 @@ impl OccMap {
             info,
             cells: vec![value; n],
         }
+    }
+
+    /// A map of `info`'s size whose cell at column `i`, row `j` is `cell(i, j)`.
+    pub fn from_fn(info: map::Info, mut cell: impl FnMut(usize, usize) -> i8) -> Self {
+        let (w, h) = (info.width as usize, info.height as usize);
+        let cells = (0..w * h).map(|k| cell(k % w, k / w)).collect();
+        OccMap { info, cells }
     }
 
     /// Cells along x and y.
@@ -49,21 +78,14 @@ impl OccMap {
         Some(self.cells[j as usize * w + i as usize])
     }
 
-    /// The (column, row) holding world point (x, y); may be off the map.
-    pub fn cell_of(&self, x: f64, y: f64) -> (i64, i64) {
-        let r = self.resolution();
-        let o = self.info.origin;
-        (
-            ((x - o.x) / r).floor() as i64,
-            ((y - o.y) / r).floor() as i64,
-        )
+    /// The index of the cell holding world point (x, y); `None` off the map.
+    pub fn index_of(&self, x: f64, y: f64) -> Option<usize> {
+        index_of(&self.info, x, y)
     }
 
-    /// The world point at the centre of cell (i, j).
-    pub fn centre_of(&self, i: i64, j: i64) -> (f64, f64) {
-        let r = self.resolution();
-        let o = self.info.origin;
-        (o.x + (i as f64 + 0.5) * r, o.y + (j as f64 + 0.5) * r)
+    /// The world point at the centre of the cell at `index`.
+    pub fn centre(&self, index: usize) -> (f64, f64) {
+        centre(&self.info, index)
     }
 
     /// The tile at (`col`, `row`) of `width` × `height` cells, as a map
@@ -218,10 +240,12 @@ mod tests {
     #[test]
     fn world_and_cells_agree() {
         let m = OccMap::filled(info(4, 8), FREE);
-        assert_eq!(m.cell_of(-1.0, -2.0), (0, 0));
-        assert_eq!(m.cell_of(-0.01, -1.49), (1, 1));
-        assert_eq!(m.cell_of(-1.01, 0.0), (-1, 4));
-        assert_eq!(m.centre_of(1, 1), (-0.25, -1.25));
+        assert_eq!(m.index_of(-1.0, -2.0), Some(0));
+        // Cell (1, 1).
+        assert_eq!(m.index_of(-0.01, -1.49), Some(4 + 1));
+        // Cell (-1, 4).
+        assert_eq!(m.index_of(-1.01, 0.0), None);
+        assert_eq!(m.centre(4 + 1), (-0.25, -1.25));
         assert_eq!(m.get(-1, 0), None);
         assert_eq!(m.get(3, 7), Some(FREE));
         assert_eq!(m.get(4, 7), None);
@@ -229,8 +253,11 @@ mod tests {
 
     #[test]
     fn tiles_round_trip_and_clip() {
-        let mut m = OccMap::filled(info(3, 2), FREE);
-        m.cells[4] = OCCUPIED; // (1, 1)
+        let m = OccMap::from_fn(
+            info(3, 2),
+            |i, j| if (i, j) == (1, 1) { OCCUPIED } else { FREE },
+        );
+        assert_eq!(m.cells[4], OCCUPIED);
         let (t, off) = m.tile(1, 1, 3, 2);
         assert_eq!(off, 4);
         assert_eq!(t.cells, vec![OCCUPIED, FREE, 0, 0, 0, 0]);

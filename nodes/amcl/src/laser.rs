@@ -16,16 +16,13 @@
 //!   `p = 1 + Σ pz³`, `d` capped at a maximum that is also the distance of
 //!   a point off the map; no ray casting at all.
 
-use troupe_geom::occmap::OccMap;
+use troupe_geom::occmap::{self, OccMap};
 use troupe_geom::Pose;
+use troupe_msgs::{laser, map};
 
 /// Distance from every cell to the nearest obstacle cell.
 pub struct DistanceMap {
-    width: usize,
-    height: usize,
-    res: f64,
-    ox: f64,
-    oy: f64,
+    info: map::Info,
     /// Metres, row-major; 0 on obstacles.
     dist: Vec<f32>,
 }
@@ -34,13 +31,8 @@ impl DistanceMap {
     /// The distance field of `map`: cells with a state ≥ 0 (occupied or
     /// unknown) are obstacles.
     pub fn new(map: &OccMap) -> Self {
-        let (width, height) = map.size();
         DistanceMap {
-            width,
-            height,
-            res: map.resolution(),
-            ox: map.info.origin.x,
-            oy: map.info.origin.y,
+            info: map.info,
             dist: map.distance_field(),
         }
     }
@@ -54,12 +46,7 @@ impl DistanceMap {
     /// Distance at world point (x, y); `off` off the map.
     #[inline]
     pub fn at_or(&self, x: f64, y: f64, off: f64) -> f64 {
-        let i = ((x - self.ox) / self.res).floor();
-        let j = ((y - self.oy) / self.res).floor();
-        if i < 0.0 || j < 0.0 || i >= self.width as f64 || j >= self.height as f64 {
-            return off;
-        }
-        f64::from(self.dist[j as usize * self.width + i as usize])
+        occmap::index_of(&self.info, x, y).map_or(off, |k| f64::from(self.dist[k]))
     }
 
     /// Range from (x, y) along `angle` to the first obstacle cell, at most
@@ -67,8 +54,9 @@ impl DistanceMap {
     /// minus a cell diagonal), at least half a cell at a time.
     pub fn range(&self, x: f64, y: f64, angle: f64, max: f64) -> f64 {
         let (s, c) = angle.sin_cos();
-        let safe = self.res * std::f64::consts::SQRT_2;
-        let min_step = self.res * 0.5;
+        let res = f64::from(self.info.resolution);
+        let safe = res * std::f64::consts::SQRT_2;
+        let min_step = res * 0.5;
         let mut t = 0.0;
         while t < max {
             let d = self.at(x + t * c, y + t * s);
@@ -78,6 +66,25 @@ impl DistanceMap {
             t += (d - safe).max(min_step);
         }
         max
+    }
+
+    /// The scan of 181 beams over 180° that a laser at `p` sees, ranges
+    /// capped at `max_range` (for tests and benchmarks).
+    pub fn scan(&self, p: &Pose, max_range: f64) -> laser::Scan {
+        use std::f64::consts::{FRAC_PI_2, PI};
+        let res = PI / 180.0;
+        laser::Scan {
+            min_angle: -FRAC_PI_2 as f32,
+            max_angle: FRAC_PI_2 as f32,
+            resolution: res as f32,
+            max_range: max_range as f32,
+            ranges: (0..181)
+                .map(|i| {
+                    self.range(p.x, p.y, p.yaw - FRAC_PI_2 + f64::from(i) * res, max_range) as f32
+                })
+                .collect(),
+            ..Default::default()
+        }
     }
 }
 
@@ -188,7 +195,7 @@ impl Model {
 mod tests {
     use super::*;
     use troupe_geom::occmap::{FREE, OCCUPIED};
-    use troupe_msgs::{map, Pose2d};
+    use troupe_msgs::Pose2d;
 
     /// A 10 m × 10 m room at 0.1 m, walls on the border, origin at (0, 0).
     fn room() -> OccMap {
@@ -198,14 +205,13 @@ mod tests {
             resolution: 0.1,
             origin: Pose2d::new(0.0, 0.0, 0.0),
         };
-        let mut m = OccMap::filled(info, FREE);
-        for k in 0..100 {
-            m.cells[k] = OCCUPIED;
-            m.cells[99 * 100 + k] = OCCUPIED;
-            m.cells[k * 100] = OCCUPIED;
-            m.cells[k * 100 + 99] = OCCUPIED;
-        }
-        m
+        OccMap::from_fn(info, |i, j| {
+            if i == 0 || j == 0 || i == 99 || j == 99 {
+                OCCUPIED
+            } else {
+                FREE
+            }
+        })
     }
 
     #[test]
@@ -256,12 +262,7 @@ mod tests {
         let d = DistanceMap::new(&m);
         let truth = Pose::new(3.0, 4.0, 0.3);
         // A 181-beam scan simulated from the truth.
-        let ranges: Vec<f32> = (0..181)
-            .map(|i| {
-                let b = -std::f64::consts::FRAC_PI_2 + i as f64 * std::f64::consts::PI / 180.0;
-                d.range(truth.x, truth.y, truth.yaw + b, 8.0) as f32
-            })
-            .collect();
+        let ranges = d.scan(&truth, 8.0).ranges;
         let beams = Beams::pick(
             &ranges,
             -std::f64::consts::FRAC_PI_2,

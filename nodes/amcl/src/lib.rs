@@ -51,7 +51,7 @@ pub mod pf;
 
 use serde::Deserialize;
 use troupe_geom::occmap::OccMap;
-use troupe_geom::{normalize, Pose};
+use troupe_geom::Pose;
 use troupe_msgs::{
     common, laser as laser_msg, localize, map, position2d, Device, Interface, Pose2d, Pose3d,
     Size3d,
@@ -139,17 +139,7 @@ const MAX_HYPOTHS: usize = 100;
 
 /// `a` in the frame of `b` (Player's `coord_sub`).
 fn relative(a: &Pose, b: &Pose) -> Pose {
-    let mut d = b.inverse().compose(a);
-    d.yaw = normalize(d.yaw);
-    d
-}
-
-fn pose(p: &Pose2d) -> Pose {
-    Pose::new(p.x, p.y, p.yaw)
-}
-
-fn pose2d(p: &Pose) -> Pose2d {
-    Pose2d::new(p.x, p.y, p.yaw)
+    b.inverse().compose(a)
 }
 
 /// The localizer without the network: odometry and scans in, estimates out.
@@ -474,12 +464,12 @@ impl Driver for Amcl {
         match event {
             Event::Data(s) if s.device == self.odom && s.is::<position2d::Data>() => {
                 let d = s.decode::<position2d::Data>()?;
-                let estimate = self.loc.odometry(pose(&d.msg.pose), d.stamp);
+                let estimate = self.loc.odometry(d.msg.pose.into(), d.stamp);
                 if let (Some(p), Some(dev)) = (estimate, self.position) {
                     ctx.publish(
                         &dev,
                         &position2d::Data {
-                            pose: pose2d(&p),
+                            pose: p.into(),
                             ..Default::default()
                         },
                     )?;
@@ -500,7 +490,7 @@ impl Driver for Amcl {
             Event::Reply(r) => self.on_reply(ctx, r),
             Event::Request(r) if r.is::<localize::SetPose>() => {
                 let q = r.decode::<localize::SetPose>()?;
-                self.loc.set_pose(pose(&q.mean), &q.cov);
+                self.loc.set_pose(q.mean.into(), &q.cov);
                 tracing::info!(
                     "filter reset around ({:.3}, {:.3}, {:.3})",
                     q.mean.x,
@@ -520,7 +510,7 @@ impl Driver for Amcl {
                         .particles()
                         .iter()
                         .map(|p| localize::Particle {
-                            pose: pose2d(&p.pose),
+                            pose: p.pose.into(),
                             weight: p.weight,
                         })
                         .collect(),
@@ -614,7 +604,7 @@ impl Amcl {
                 .hypotheses()
                 .iter()
                 .map(|h| localize::Hypoth {
-                    mean: pose2d(&h.mean),
+                    mean: h.mean.into(),
                     cov: h.cov,
                     weight: h.weight,
                 })
@@ -632,7 +622,7 @@ impl Amcl {
             ctx.publish(
                 &dev,
                 &position2d::Data {
-                    pose: pose2d(&b),
+                    pose: b.into(),
                     ..Default::default()
                 },
             )?;
@@ -644,6 +634,7 @@ impl Amcl {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use troupe_geom::normalize;
     use troupe_geom::occmap::{FREE, OCCUPIED};
 
     /// A 10 m × 10 m room at 0.05 m with walls and two pillars (so that
@@ -655,40 +646,16 @@ mod tests {
             resolution: 0.05,
             origin: Pose2d::new(-5.0, -5.0, 0.0),
         };
-        let mut m = OccMap::filled(info, FREE);
-        for j in 0..200usize {
-            for i in 0..200usize {
-                let wall = i < 2 || j < 2 || i >= 198 || j >= 198;
-                let pillar = (60..80).contains(&i) && (120..150).contains(&j);
-                let block = (140..150).contains(&i) && (40..90).contains(&j);
-                if wall || pillar || block {
-                    m.cells[j * 200 + i] = OCCUPIED;
-                }
+        OccMap::from_fn(info, |i, j| {
+            let wall = i < 2 || j < 2 || i >= 198 || j >= 198;
+            let pillar = (60..80).contains(&i) && (120..150).contains(&j);
+            let block = (140..150).contains(&i) && (40..90).contains(&j);
+            if wall || pillar || block {
+                OCCUPIED
+            } else {
+                FREE
             }
-        }
-        m
-    }
-
-    fn scan_from(d: &DistanceMap, p: &Pose) -> laser_msg::Scan {
-        let res = std::f64::consts::PI / 180.0;
-        let ranges = (0..181)
-            .map(|i| {
-                d.range(
-                    p.x,
-                    p.y,
-                    p.yaw - std::f64::consts::FRAC_PI_2 + i as f64 * res,
-                    8.0,
-                ) as f32
-            })
-            .collect();
-        laser_msg::Scan {
-            min_angle: -std::f32::consts::FRAC_PI_2,
-            max_angle: std::f32::consts::FRAC_PI_2,
-            resolution: res as f32,
-            max_range: 8.0,
-            ranges,
-            ..Default::default()
-        }
+        })
     }
 
     fn converges(model: &str) {
@@ -716,7 +683,7 @@ mod tests {
             }
             let odom = relative(&truth, &start);
             let est = loc.odometry(odom, step as f64);
-            loc.scan(&scan_from(&truth_map, &truth), step as f64);
+            loc.scan(&truth_map.scan(&truth, 8.0), step as f64);
             if step > 120 {
                 let e = est.or(loc.best()).unwrap();
                 worst_late =
@@ -757,15 +724,15 @@ mod tests {
         let mut loc = Localizer::new(&Options::default()).unwrap();
         loc.set_map(&m);
         let p = Pose::new(1.0, 1.0, 0.0);
-        assert!(!loc.scan(&scan_from(&d, &p), 0.0), "no odometry yet");
+        assert!(!loc.scan(&d.scan(&p, 8.0), 0.0), "no odometry yet");
         assert_eq!(loc.odometry(Pose::default(), 0.0), None);
-        assert!(loc.scan(&scan_from(&d, &p), 0.0));
-        assert!(!loc.scan(&scan_from(&d, &p), 0.0), "no motion, no update");
+        assert!(loc.scan(&d.scan(&p, 8.0), 0.0));
+        assert!(!loc.scan(&d.scan(&p, 8.0), 0.0), "no motion, no update");
         // Small motion: no update, but the estimate follows odometry.
         let before = loc.best().unwrap();
         let e = loc.odometry(Pose::new(0.1, 0.0, 0.0), 1.0).unwrap();
         assert!((e.x - before.compose(&Pose::new(0.1, 0.0, 0.0)).x).abs() < 1e-12);
-        assert!(!loc.scan(&scan_from(&d, &p), 1.0));
+        assert!(!loc.scan(&d.scan(&p, 8.0), 1.0));
         loc.set_pose(
             Pose::new(1.0, 1.0, 0.0),
             &[0.01, 0.01, 0.005, 0.0, 0.0, 0.0],
@@ -777,7 +744,7 @@ mod tests {
             "new reference"
         );
         // A scan ahead of odometry waits for it.
-        assert!(!loc.scan(&scan_from(&d, &p), 3.0));
+        assert!(!loc.scan(&d.scan(&p, 8.0), 3.0));
         loc.odometry(Pose::new(0.2, 0.0, 0.0), 4.0);
         assert!(loc.poll());
         let b = loc.best().unwrap();

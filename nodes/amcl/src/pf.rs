@@ -198,9 +198,7 @@ impl Filter {
                 gaussian(&mut self.rng, 1.0),
                 gaussian(&mut self.rng, 1.0),
             ];
-            let d: Vec<f64> = (0..3)
-                .map(|i| (0..3).map(|k| l[i][k] * r[k]).sum())
-                .collect();
+            let d: [f64; 3] = std::array::from_fn(|i| (0..3).map(|k| l[i][k] * r[k]).sum());
             self.particles.push(Particle {
                 pose: Pose::new(mean.x + d[0], mean.y + d[1], normalize(mean.yaw + d[2])),
                 weight: w,

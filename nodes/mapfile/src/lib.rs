@@ -107,25 +107,23 @@ pub fn load(
         resolution: resolution as f32,
         origin: Pose2d::new(ox, oy, 0.0),
     };
-    let mut m = OccMap::filled(info, UNKNOWN);
+    // Map row j is image row height - 1 - j: the image's top is the map's far edge.
     let w = width as usize;
-    for (k, a) in avg.iter().enumerate() {
-        let (i, j) = (k % w, k / w);
+    Ok(OccMap::from_fn(info, |i, j| {
+        let a = avg[(height as usize - 1 - j) * w + i];
         let occ = if negate {
             a / 255.0
         } else {
             (255.0 - a) / 255.0
         };
-        let cell = if occ > 0.95 {
+        if occ > 0.95 {
             OCCUPIED
         } else if occ < 0.1 {
             FREE
         } else {
             UNKNOWN
-        };
-        m.cells[(height as usize - j - 1) * w + i] = cell;
-    }
-    Ok(m)
+        }
+    }))
 }
 
 /// The mapfile driver.

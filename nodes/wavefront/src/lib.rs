@@ -220,7 +220,7 @@ impl Driver for Wavefront {
         match event {
             Event::Data(s) if s.is::<position2d::Data>() => {
                 let d = s.decode::<position2d::Data>()?.msg;
-                let p = Pose::new(d.pose.x, d.pose.y, d.pose.yaw);
+                let p: Pose = d.pose.into();
                 if s.device == self.output {
                     self.odom = p;
                 }
@@ -232,7 +232,7 @@ impl Driver for Wavefront {
             Event::Data(s) => Err(s.unexpected()),
             Event::Command(c) if c.is::<planner::Goal>() => {
                 let g = c.decode::<planner::Goal>()?.msg.goal;
-                self.target = Pose::new(g.x, g.y, g.yaw);
+                self.target = g.into();
                 self.new_goal = true;
                 self.atgoal = false;
                 self.failed_once = false;
@@ -507,12 +507,12 @@ impl Wavefront {
         let mut s = planner::State {
             valid,
             done,
-            pose: Pose2d::new(p.x, p.y, p.yaw),
-            goal: Pose2d::new(self.target.x, self.target.y, self.target.yaw),
+            pose: p.into(),
+            goal: self.target.into(),
             ..Default::default()
         };
         if valid && !done {
-            s.waypoint = Pose2d::new(self.waypoint.x, self.waypoint.y, self.waypoint.yaw);
+            s.waypoint = self.waypoint.into();
             s.waypoint_idx = self.curr as i32;
             s.waypoints_count = self.waypoints.len() as u32;
         }

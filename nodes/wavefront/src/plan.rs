@@ -17,7 +17,8 @@
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
-use troupe_geom::occmap::OccMap;
+use troupe_geom::occmap::{self, OccMap};
+use troupe_msgs::map;
 
 /// Planning parameters (metres).
 #[derive(Debug, Clone, Copy)]
@@ -82,11 +83,11 @@ impl PartialOrd for Open {
 
 /// A planner over one map.
 pub struct Planner {
+    /// The map's size, resolution and origin.
+    info: map::Info,
+    /// Cells across and up, from `info`, for the inner loops.
     width: usize,
     height: usize,
-    res: f64,
-    ox: f64,
-    oy: f64,
     params: Params,
     /// Distance to the nearest obstacle, capped at `max_radius`.
     dist: Vec<f32>,
@@ -124,11 +125,9 @@ impl Planner {
             .collect();
         let n = width * height;
         Planner {
+            info: map.info,
             width,
             height,
-            res: map.resolution(),
-            ox: map.info.origin.x,
-            oy: map.info.origin.y,
             params,
             dist,
             penalty,
@@ -146,21 +145,16 @@ impl Planner {
     }
 
     fn cell(&self, x: f64, y: f64) -> Option<usize> {
-        let i = ((x - self.ox) / self.res).floor();
-        let j = ((y - self.oy) / self.res).floor();
-        if i < 0.0 || j < 0.0 || i >= self.width as f64 || j >= self.height as f64 {
-            return None;
-        }
-        Some(j as usize * self.width + i as usize)
+        occmap::index_of(&self.info, x, y)
     }
 
     /// The centre of cell `k`, world frame.
     pub fn centre(&self, k: usize) -> (f64, f64) {
-        let (i, j) = (k % self.width, k / self.width);
-        (
-            self.ox + (i as f64 + 0.5) * self.res,
-            self.oy + (j as f64 + 0.5) * self.res,
-        )
+        occmap::centre(&self.info, k)
+    }
+
+    fn res(&self) -> f64 {
+        f64::from(self.info.resolution)
     }
 
     fn free(&self, k: usize) -> bool {
@@ -188,7 +182,7 @@ impl Planner {
         let gen = self.generation;
         let w = self.width as i64;
         let (tx, ty) = ((t % self.width) as i64, (t / self.width) as i64);
-        let res = self.res as f32;
+        let res = self.res() as f32;
         let h = |k: usize| -> f32 {
             let dx = ((k % self.width) as i64 - tx).abs() as f32;
             let dy = ((k / self.width) as i64 - ty).abs() as f32;
@@ -282,7 +276,7 @@ impl Planner {
                 if dist > 0.5 && !self.visible(path[at], path[k + 1]) {
                     break;
                 }
-                dist += self.res;
+                dist += self.res();
                 k += 1;
             }
             at = k;
@@ -296,7 +290,7 @@ impl Planner {
 mod tests {
     use super::*;
     use troupe_geom::occmap::{FREE, OCCUPIED};
-    use troupe_msgs::{map, Pose2d};
+    use troupe_msgs::Pose2d;
 
     /// 10 m × 10 m at 0.1 m, a wall across the middle with a gap at the right.
     fn walled() -> OccMap {
@@ -306,12 +300,13 @@ mod tests {
             resolution: 0.1,
             origin: Pose2d::new(0.0, 0.0, 0.0),
         };
-        let mut m = OccMap::filled(info, FREE);
-        for i in 0..80 {
-            m.cells[50 * 100 + i] = OCCUPIED;
-            m.cells[51 * 100 + i] = OCCUPIED;
-        }
-        m
+        OccMap::from_fn(info, |i, j| {
+            if i < 80 && (j == 50 || j == 51) {
+                OCCUPIED
+            } else {
+                FREE
+            }
+        })
     }
 
     fn params() -> Params {
