@@ -13,12 +13,6 @@ use troupe_client::{Client, LocalizeProxy, PlannerProxy, Position2dProxy, Simula
 use troupe_msgs::{keys, sim};
 use troupe_node::zenoh::Wait;
 
-/// The launcher's log, after stopping it (its stderr ends only then).
-fn logs(launcher: &mut troupe_tests::Proc) -> String {
-    launcher.terminate();
-    launcher.stderr()
-}
-
 /// The goal of the reference run, and what Player 3.1 achieved there.
 const GOAL: (f64, f64) = (-4.5, -5.5);
 const PLAYER_ARRIVAL_SIM_S: f64 = 32.0;
@@ -62,7 +56,7 @@ fn planner_drives_r0_across_the_cave_to_the_goal() {
         assert!(
             Instant::now() < deadline,
             "amcl never published: {}",
-            logs(&mut launcher)
+            launcher.stderr()
         );
         let _ = client.read_timeout(troupe_tests::DEADLINE);
     }
@@ -77,7 +71,7 @@ fn planner_drives_r0_across_the_cave_to_the_goal() {
     let t0 = now();
     planner.set_goal_pose(GOAL.0, GOAL.1, 0.0).unwrap();
     if let Err(e) = planner.set_enable(true) {
-        panic!("enable: {e}\n{}", logs(&mut launcher));
+        panic!("enable: {e}\n{}", launcher.stderr());
     }
     let mut valid_at = None;
     let (mut worst_amcl, mut sum_amcl, mut n_amcl) = (0.0f64, 0.0, 0u32);
@@ -89,7 +83,7 @@ fn planner_drives_r0_across_the_cave_to_the_goal() {
             planner.state(),
             sim.get_pose2d("r0"),
             now() - t0,
-            logs(&mut launcher)
+            launcher.stderr()
         );
         let _ = client.read_timeout(troupe_tests::DEADLINE);
         assert!(!odom.stall(), "r0 collided at {:?}", sim.get_pose2d("r0"));

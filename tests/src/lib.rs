@@ -235,8 +235,13 @@ impl Proc {
         status
     }
 
-    /// Everything the child wrote on stderr (after it exited).
+    /// Everything the child wrote on stderr. A child still running is
+    /// stopped first: its stderr ends only when it exits, so reading it
+    /// earlier (in a failing assertion's message) would wait forever.
     pub fn stderr(&mut self) -> String {
+        if let Ok(None) = self.child.try_wait() {
+            self.terminate();
+        }
         let mut s = String::new();
         if let Some(mut e) = self.child.stderr.take() {
             let _ = std::io::Read::read_to_string(&mut e, &mut s);

@@ -110,12 +110,8 @@ impl Ctx {
     ///
     /// [`NodeError::Zenoh`] if it could not be sent.
     pub fn request<R: Request>(&mut self, dev: &Device, req: &R) -> Result<RequestId> {
-        self.next_id += 1;
-        let id = RequestId(self.next_id);
         let payload = codec::encode(req, self.clock.now());
-        self.bus
-            .request(id, dev, R::NAME, payload, REQUEST_TIMEOUT)?;
-        Ok(id)
+        self.forward_request(dev, R::NAME, payload)
     }
 
     /// Sends an already encoded request `name` to `dev`, as a driver that
