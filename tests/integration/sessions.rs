@@ -247,7 +247,7 @@ impl Driver for TestBase {
                 p.yaw += self.state.vel.yaw * dt;
                 ctx.publish(&self.dev, &self.state)?;
             }
-            Event::Data(_) | Event::Reply(_) => {}
+            Event::Data(_) | Event::Reply(_) | Event::Wake => {}
         }
         Ok(())
     }

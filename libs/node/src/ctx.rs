@@ -1,5 +1,6 @@
 //! [`Ctx`]: a driver's handle on the world during a hook.
 
+use std::sync::Arc;
 use std::time::Duration;
 
 use troupe_msgs::{codec, Command, Device, Message, Request};
@@ -7,6 +8,7 @@ use troupe_msgs::{codec, Command, Device, Message, Request};
 use crate::clock::Clock;
 use crate::driver::RequestId;
 use crate::error::{NodeError, Result};
+use crate::inbox::Inbox;
 
 /// How long a request waits for its answer: libplayerc's default.
 pub const REQUEST_TIMEOUT: Duration = Duration::from_secs(5);
@@ -37,6 +39,34 @@ pub struct Ctx {
     next_id: u64,
     pub(crate) tick: Option<Duration>,
     pub(crate) stop: bool,
+    pub(crate) ready: bool,
+    inbox: Option<Arc<Inbox>>,
+}
+
+/// Delivers [`crate::Event::Wake`] to a driver from any thread: how a
+/// driver's own I/O thread tells it that input is waiting.
+#[derive(Clone, Default)]
+pub struct Waker(Option<Arc<Inbox>>);
+
+impl Waker {
+    /// A waker that wakes nobody: for code that runs a driver's I/O
+    /// without a driver (tests, benchmarks).
+    pub fn none() -> Self {
+        Waker(None)
+    }
+
+    /// Queues one [`crate::Event::Wake`] (none if one is already queued).
+    pub fn wake(&self) {
+        if let Some(inbox) = &self.0 {
+            inbox.push(crate::Event::Wake);
+        }
+    }
+}
+
+impl std::fmt::Debug for Waker {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Waker")
+    }
 }
 
 impl Ctx {
@@ -45,6 +75,7 @@ impl Ctx {
         clock: Clock,
         bus: Box<dyn Bus>,
         provided: Vec<Device>,
+        inbox: Option<Arc<Inbox>>,
     ) -> Self {
         Ctx {
             driver,
@@ -54,6 +85,8 @@ impl Ctx {
             next_id: 0,
             tick: None,
             stop: false,
+            ready: true,
+            inbox,
         }
     }
 
@@ -161,6 +194,27 @@ impl Ctx {
     /// (`shutdown` runs, the process exits cleanly).
     pub fn request_stop(&mut self) {
         self.stop = true;
+    }
+
+    /// A handle that wakes this driver from another thread (see
+    /// [`crate::Event::Wake`]). Under the test harness it does nothing:
+    /// deliver `Event::Wake` by hand.
+    pub fn waker(&self) -> Waker {
+        Waker(self.inbox.clone())
+    }
+
+    /// Says whether the driver's devices can serve: a hardware driver that
+    /// lost its device (or has not reached it yet) sets `false`, and its
+    /// devices' liveliness tokens are withdrawn, so `troupe list` and every
+    /// waiting `requires` see them as not ready, until it sets `true` again.
+    /// A driver is ready by default.
+    pub fn set_ready(&mut self, ready: bool) {
+        self.ready = ready;
+    }
+
+    /// Whether the driver last said it is ready ([`Ctx::set_ready`]).
+    pub fn is_ready(&self) -> bool {
+        self.ready
     }
 
     /// The devices this driver provides.

@@ -104,6 +104,10 @@ pub enum Event {
     Reply(Reply),
     /// The period set with [`Ctx::set_tick`] has elapsed (on the node's clock).
     Tick,
+    /// The driver's own I/O (a serial reader thread, say) called
+    /// [`crate::Waker::wake`]: something it produced is waiting. Wakes are
+    /// coalesced; drain everything that is ready.
+    Wake,
 }
 
 /// An encoded message received on a device's key.

@@ -49,6 +49,7 @@ impl Inbox {
                 .events
                 .iter()
                 .position(|e| matches!(e, Event::Command(old) if same(old, new))),
+            Event::Wake if st.events.iter().any(|e| matches!(e, Event::Wake)) => return,
             _ => None,
         };
         match slot {

@@ -26,7 +26,7 @@ pub mod testing;
 
 pub use args::{init_logging, locators, Mode, ZenohArgs, DEFAULT_ROUTER};
 pub use clock::Clock;
-pub use ctx::{Ctx, REQUEST_TIMEOUT};
+pub use ctx::{Ctx, Waker, REQUEST_TIMEOUT};
 pub use driver::{Driver, Event, Reply, Request, RequestError, RequestId, Responder, Sample, Unit};
 pub use error::{BoxError, NodeError, Result};
 pub use runtime::{check, run, spawn, NodeConfig, NodeHandle, Stop};

@@ -203,7 +203,13 @@ pub fn spawn<D: Driver>(
     for dev in &provided {
         bus.provide(dev, &clock, D::NAME)?;
     }
-    let mut ctx = Ctx::new(D::NAME, clock, Box::new(bus), provided.clone());
+    let mut ctx = Ctx::new(
+        D::NAME,
+        clock,
+        Box::new(bus),
+        provided.clone(),
+        Some(inbox.clone()),
+    );
     let thread_session = session.clone();
     let thread = std::thread::Builder::new()
         .name(format!("driver {}", D::NAME))
@@ -259,25 +265,8 @@ fn run_loop<D: Driver>(
 ) -> Result<()> {
     driver.setup(ctx)?;
     let mut tokens: Vec<LivelinessToken> = Vec::new();
-    for dev in provided {
-        let key = keys::token(dev, D::NAME);
-        let token = session
-            .liveliness()
-            .declare_token(&key)
-            .wait()
-            .map_err(z(|| format!("declaring liveliness {key}")))?;
-        tokens.push(token);
-    }
-    tracing::info!(
-        driver = D::NAME,
-        "ready: provides {}",
-        provided
-            .iter()
-            .map(ToString::to_string)
-            .collect::<Vec<_>>()
-            .join(", ")
-    );
-
+    announce::<D>(ctx.ready, &mut tokens, session, provided)?;
+    let mut announced = ctx.ready;
     let mut stats = Stats::default();
     let mut next_tick: Option<Instant> = None;
     let result = loop {
@@ -308,6 +297,12 @@ fn run_loop<D: Driver>(
         if let Err(e) = dispatch(&mut driver, ctx, event, &mut stats) {
             break Err(e);
         }
+        if ctx.ready != announced {
+            announced = ctx.ready;
+            if let Err(e) = announce::<D>(ctx.ready, &mut tokens, session, provided) {
+                break Err(e);
+            }
+        }
         if ctx.stop {
             tracing::info!(driver = D::NAME, "the driver asked to stop");
             break Ok(());
@@ -332,6 +327,43 @@ fn run_loop<D: Driver>(
 pub(crate) struct Stats {
     pub(crate) events: u64,
     pub(crate) malformed: u64,
+}
+
+/// Declares the provided devices' liveliness tokens when the driver is
+/// ready, withdraws them when it is not.
+fn announce<D: Driver>(
+    ready: bool,
+    tokens: &mut Vec<LivelinessToken>,
+    session: &Session,
+    provided: &[Device],
+) -> Result<()> {
+    let list = || {
+        provided
+            .iter()
+            .map(ToString::to_string)
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    if !ready {
+        if !tokens.is_empty() || provided.is_empty() {
+            tokens.clear();
+            tracing::warn!(driver = D::NAME, "not ready: withdrew {}", list());
+        } else {
+            tracing::info!(driver = D::NAME, "not ready yet: {}", list());
+        }
+        return Ok(());
+    }
+    for dev in provided {
+        let key = keys::token(dev, D::NAME);
+        let token = session
+            .liveliness()
+            .declare_token(&key)
+            .wait()
+            .map_err(z(|| format!("declaring liveliness {key}")))?;
+        tokens.push(token);
+    }
+    tracing::info!(driver = D::NAME, "ready: provides {}", list());
+    Ok(())
 }
 
 /// Calls the driver's hook for one event with the runtime's error policy.

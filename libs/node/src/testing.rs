@@ -140,7 +140,13 @@ impl<D: Driver> Harness<D> {
         let rec = Rec(Arc::default());
         let clock = Clock::manual(0.0);
         let provided = section.provided().into_iter().map(|s| s.device).collect();
-        let mut ctx = Ctx::new(D::NAME, clock.clone(), Box::new(rec.clone()), provided);
+        let mut ctx = Ctx::new(
+            D::NAME,
+            clock.clone(),
+            Box::new(rec.clone()),
+            provided,
+            None,
+        );
         driver.setup(&mut ctx)?;
         Ok(Harness {
             driver,

@@ -537,7 +537,7 @@ impl Driver for Amcl {
                 tracing::debug!("amcl takes no commands; ignored `{}`", c.key);
                 Ok(())
             }
-            Event::Tick => Ok(()),
+            Event::Tick | Event::Wake => Ok(()),
         }
     }
 }

@@ -103,7 +103,7 @@ impl Driver for Dummy {
                 r.nack("the dummy driver refuses every request");
                 Ok(())
             }
-            Event::Command(_) | Event::Data(_) | Event::Reply(_) => Ok(()),
+            Event::Command(_) | Event::Data(_) | Event::Reply(_) | Event::Wake => Ok(()),
         }
     }
 }

@@ -218,7 +218,7 @@ impl Driver for MapFile {
                 tracing::debug!("map takes no commands; ignored `{}`", c.key);
                 Ok(())
             }
-            Event::Data(_) | Event::Reply(_) | Event::Tick => Ok(()),
+            Event::Data(_) | Event::Reply(_) | Event::Tick | Event::Wake => Ok(()),
         }
     }
 }

@@ -187,7 +187,7 @@ impl Driver for RangerToLaser {
                 tracing::debug!("laser takes no commands; ignored `{}`", c.key);
                 Ok(())
             }
-            Event::Tick => Ok(()),
+            Event::Tick | Event::Wake => Ok(()),
         }
     }
 }

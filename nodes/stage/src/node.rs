@@ -308,7 +308,7 @@ impl Driver for Stage {
                 }
                 self.request(src, r)
             }
-            Event::Data(_) | Event::Reply(_) => Ok(()),
+            Event::Data(_) | Event::Reply(_) | Event::Wake => Ok(()),
         }
     }
 

@@ -482,7 +482,7 @@ impl Driver for Vfh {
                 }
                 Ok(())
             }
-            Event::Tick => Ok(()),
+            Event::Tick | Event::Wake => Ok(()),
         }
     }
 

@@ -270,6 +270,7 @@ impl Driver for Wavefront {
             }
             Event::Reply(r) => self.on_reply(ctx, r),
             Event::Tick => self.cycle(ctx),
+            Event::Wake => Ok(()),
         }
     }
 

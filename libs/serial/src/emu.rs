@@ -1,0 +1,173 @@
+//! The device end of an emulated serial line.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use rand::rngs::StdRng;
+use rand::SeedableRng;
+
+use crate::faults::{Faults, Injected};
+use crate::pty::{Pacer, Pty};
+
+/// What [`EmuLine::recv`] saw.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LineEvent {
+    /// This many bytes arrived at the device's baud rate.
+    Received(usize),
+    /// Nothing (or only bytes at the wrong rate) arrived in time.
+    Idle,
+    /// The device was unplugged (by the fault plan); nothing goes through.
+    Unplugged,
+    /// The device was plugged back in: it powers up afresh.
+    Replugged,
+}
+
+/// A pseudo-terminal linked at a path, seen from the device: bytes sent at
+/// another baud rate than the device's are garbage to it, what it sends
+/// takes real line time, and [`Faults`] are applied on the way out.
+#[derive(Debug)]
+pub struct EmuLine {
+    link: PathBuf,
+    pty: Option<Pty>,
+    pacer: Pacer,
+    faults: Faults,
+    rng: StdRng,
+    plugged_at: Instant,
+    unplugged_at: Option<Instant>,
+    /// Faults injected so far.
+    pub injected: Injected,
+    /// Bytes received at a baud rate other than the device's.
+    pub wrong_baud: u64,
+}
+
+impl EmuLine {
+    /// Opens a pseudo-terminal and links it at `link`.
+    ///
+    /// # Errors
+    ///
+    /// When no pseudo-terminal can be had or the link cannot be made.
+    pub fn open(link: &Path, faults: Faults, seed: u64) -> std::io::Result<EmuLine> {
+        let mut pty = Pty::open()?;
+        pty.link(link)?;
+        tracing::info!(
+            "emulated device at {} -> {}",
+            link.display(),
+            pty.slave_path().display()
+        );
+        Ok(EmuLine {
+            link: link.to_owned(),
+            pty: Some(pty),
+            pacer: Pacer::new(),
+            faults,
+            rng: StdRng::seed_from_u64(seed),
+            plugged_at: Instant::now(),
+            unplugged_at: None,
+            injected: Injected::default(),
+            wrong_baud: 0,
+        })
+    }
+
+    /// The link path.
+    pub fn link(&self) -> &Path {
+        &self.link
+    }
+
+    /// The faults in force.
+    pub fn faults(&self) -> &Faults {
+        &self.faults
+    }
+
+    /// Waits up to `timeout` for bytes from the driver that a device at
+    /// `baud` can read, and runs the unplug plan.
+    ///
+    /// # Errors
+    ///
+    /// A failed read, or a failure to plug back in.
+    pub fn recv(
+        &mut self,
+        buf: &mut [u8],
+        baud: u32,
+        timeout: Duration,
+    ) -> std::io::Result<LineEvent> {
+        if let Some(at) = self.unplugged_at {
+            let back = self.faults.replug_after.map(|d| at + d);
+            match back {
+                Some(t) if Instant::now() >= t => {
+                    let mut pty = Pty::open()?;
+                    pty.link(&self.link)?;
+                    tracing::warn!("fault: device plugged back in at {}", self.link.display());
+                    self.pty = Some(pty);
+                    self.unplugged_at = None;
+                    self.plugged_at = Instant::now();
+                    self.pacer = Pacer::new();
+                    return Ok(LineEvent::Replugged);
+                }
+                _ => {
+                    let wait = back.map_or(timeout, |t| {
+                        t.saturating_duration_since(Instant::now()).min(timeout)
+                    });
+                    std::thread::sleep(wait);
+                    return Ok(LineEvent::Unplugged);
+                }
+            }
+        }
+        if let Some(after) = self.faults.unplug_after {
+            if self.plugged_at.elapsed() >= after {
+                tracing::warn!("fault: device unplugged from {}", self.link.display());
+                self.pty = None;
+                self.unplugged_at = Some(Instant::now());
+                // Unplug once per plan: the next plug stays in.
+                self.faults.unplug_after = None;
+                return Ok(LineEvent::Unplugged);
+            }
+        }
+        let Some(pty) = self.pty.as_mut() else {
+            return Ok(LineEvent::Unplugged);
+        };
+        let timeout = match self.faults.unplug_after {
+            Some(after) => timeout.min(after.saturating_sub(self.plugged_at.elapsed())),
+            None => timeout,
+        };
+        let n = pty.recv(buf, timeout)?;
+        if n == 0 {
+            return Ok(LineEvent::Idle);
+        }
+        if self.faults.mute {
+            return Ok(LineEvent::Idle);
+        }
+        let line = pty.line_baud();
+        if line != baud {
+            self.wrong_baud += n as u64;
+            tracing::debug!("{n} bytes at {line} baud: garbage to a device at {baud}");
+            return Ok(LineEvent::Idle);
+        }
+        Ok(LineEvent::Received(n))
+    }
+
+    /// Sends `frame` at `baud`, through the faults, taking the time the line
+    /// takes. Nothing goes out while unplugged or muted.
+    ///
+    /// # Errors
+    ///
+    /// A failed write.
+    pub fn send(&mut self, frame: &[u8], baud: u32) -> std::io::Result<()> {
+        if self.faults.mute {
+            return Ok(());
+        }
+        let Some(pty) = self.pty.as_mut() else {
+            return Ok(());
+        };
+        let bytes = self.faults.apply(frame, &mut self.rng, &mut self.injected);
+        self.pacer.send(pty, &bytes, baud)
+    }
+
+    /// When what was sent has left the line.
+    pub fn idle_at(&self) -> Instant {
+        self.pacer.idle_at()
+    }
+
+    /// True while plugged in.
+    pub fn plugged(&self) -> bool {
+        self.pty.is_some()
+    }
+}

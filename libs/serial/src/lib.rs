@@ -1,0 +1,25 @@
+//! Serial lines for Troupe's hardware drivers and their device emulators.
+//!
+//! - [`Port`]: a serial device (`/dev/ttyUSB0`, or a pseudo-terminal's
+//!   slave) in raw 8N1 mode at a chosen baud rate, with reads that time out
+//!   and a clear [`LineError::Lost`] when the device goes away.
+//! - [`Framer`] and [`Codec`]: check-then-parse framing over a byte stream
+//!   that resynchronises on noise and counts what it skipped.
+//! - [`Pty`]: a pseudo-terminal whose slave is linked at a path, so that a
+//!   `.cfg` names an emulated device as `port "/tmp/laser"`.
+//! - [`Pacer`]: writes at the speed a real line would carry the bytes.
+//!
+//! Every call blocks for at most the time it is given: a driver runs its
+//! device on a thread of its own and hands results to its event loop.
+
+mod emu;
+mod faults;
+mod framer;
+mod port;
+mod pty;
+
+pub use emu::{EmuLine, LineEvent};
+pub use faults::{Faults, Injected};
+pub use framer::{Codec, Decoded, FrameStats, Framer, Skipped};
+pub use port::{baud_supported, LineError, Port, BAUD_RATES};
+pub use pty::{Pacer, Pty};

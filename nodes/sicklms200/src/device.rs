@@ -1,0 +1,565 @@
+//! The driver's side of the line: connects to the scanner, configures it
+//! and streams scans, on a thread of its own.
+//!
+//! The sequence is Player's `MainSetup`/`Main`: open the port; at each
+//! `connect_rate` in turn ask the scanner to stop streaming until one
+//! answers; switch it and the port to `transfer_rate`; read its type; enter
+//! configuration mode with the password `SICK_` + the type's first three
+//! letters; set the variant (width, resolution) and the configuration
+//! (units, intensity, availability) only when they differ; ask for
+//! continuous scans. Any failure — no answer, a refusal, a lost line, scans
+//! that stop — ends the session: the driver is told, waits, and starts over.
+
+use std::path::PathBuf;
+use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, TryRecvError};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use troupe_node::Waker;
+use troupe_serial::{Framer, LineError, Port};
+
+use crate::telegram::{self, cmd, mode, RawScan, Telegram, TelegramCodec};
+
+/// Player's retries for each request.
+const TRIES: u32 = 3;
+/// How long to wait between two connection attempts.
+pub const RECONNECT_DELAY: Duration = Duration::from_secs(2);
+
+/// How the scanner is to scan, in the scanner's own units.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ScanConfig {
+    /// Angular resolution in 1/100 degree: 25, 50 or 100.
+    pub res: u16,
+    /// Range resolution in mm: 1, 10 or 100.
+    pub range_res: u32,
+    /// Report the intensity bits.
+    pub intensity: bool,
+    /// First and last angle in 1/100 degree (−9000..=9000).
+    pub min_angle: i32,
+    /// Last angle in 1/100 degree.
+    pub max_angle: i32,
+}
+
+impl ScanConfig {
+    /// The scan width in degrees: 100 at 0.25°, else 180.
+    pub fn width(&self) -> u16 {
+        if self.res == 25 {
+            100
+        } else {
+            180
+        }
+    }
+
+    /// First and last scan segment (0-based), Player's `CheckScanConfig`.
+    pub fn segments(&self) -> (u16, u16) {
+        let half = i32::from(self.width()) * 50;
+        let top = i32::from(self.width()) * 100 / i32::from(self.res);
+        let seg = |a: i32| ((a + half) / i32::from(self.res)).clamp(0, top) as u16;
+        (seg(self.min_angle), seg(self.max_angle))
+    }
+
+    /// Number of values per scan.
+    pub fn count(&self) -> usize {
+        let (a, b) = self.segments();
+        usize::from(b.saturating_sub(a)) + 1
+    }
+
+    /// Maximum range in metres, as Player reports it.
+    pub fn max_range(&self) -> f32 {
+        match self.range_res {
+            10 => 80.0,
+            100 => 150.0,
+            _ => 8.0,
+        }
+    }
+
+    /// Checks the values the LMS200 can take.
+    ///
+    /// # Errors
+    ///
+    /// What is wrong, in words.
+    pub fn check(&self) -> Result<(), String> {
+        if ![25, 50, 100].contains(&self.res) {
+            return Err(format!(
+                "resolution {} is not one of 25, 50, 100 (1/100 degree)",
+                self.res
+            ));
+        }
+        if ![1, 10, 100].contains(&self.range_res) {
+            return Err(format!(
+                "range_res {} is not one of 1, 10, 100 (mm)",
+                self.range_res
+            ));
+        }
+        if self.min_angle > self.max_angle {
+            return Err("min_angle is greater than max_angle".into());
+        }
+        Ok(())
+    }
+}
+
+/// How to reach the scanner.
+#[derive(Debug, Clone)]
+pub struct Settings {
+    /// The serial device.
+    pub port: PathBuf,
+    /// Rates tried in order when connecting.
+    pub connect_rates: Vec<u32>,
+    /// The rate for data.
+    pub transfer_rate: u32,
+    /// Extra passes over `connect_rates` per connection attempt.
+    pub retry: u32,
+    /// Wait before the first connection (a scanner powered by the port).
+    pub delay: Duration,
+    /// High-availability mode.
+    pub high_avail: bool,
+    /// The scan.
+    pub config: ScanConfig,
+}
+
+/// What the device thread tells the driver.
+#[derive(Debug)]
+pub enum Update {
+    /// Connected, configured and streaming.
+    Ready {
+        /// The scanner's type string.
+        kind: String,
+        /// The line's rate.
+        baud: u32,
+    },
+    /// A scan, with the configuration it was taken under.
+    Scan(RawScan, ScanConfig),
+    /// The session ended; the thread retries after [`RECONNECT_DELAY`].
+    Lost(String),
+    /// The answer to [`Order::Configure`].
+    Configured(Result<ScanConfig, String>),
+}
+
+/// What the driver asks of the device thread.
+#[derive(Debug)]
+pub enum Order {
+    /// Rescan with another configuration.
+    Configure(ScanConfig),
+    /// Stop streaming, put the scanner back to its connect rate, and end.
+    Stop,
+}
+
+/// Counts kept across sessions.
+#[derive(Debug, Default, Clone, Copy)]
+struct Counts {
+    sessions: u64,
+    scans: u64,
+    bad_scans: u64,
+}
+
+#[derive(Debug)]
+enum Fail {
+    Line(LineError),
+    NoReply(String),
+    Refused(String),
+    Silent(Duration),
+    Stopped,
+}
+
+impl std::fmt::Display for Fail {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Fail::Line(e) => write!(f, "{e}"),
+            Fail::NoReply(what) => write!(f, "no reply to {what}"),
+            Fail::Refused(what) => write!(f, "the scanner refused {what}"),
+            Fail::Silent(d) => write!(f, "no scan for {:.1} s", d.as_secs_f64()),
+            Fail::Stopped => f.write_str("stopped"),
+        }
+    }
+}
+
+impl From<LineError> for Fail {
+    fn from(e: LineError) -> Self {
+        Fail::Line(e)
+    }
+}
+
+/// Starts the device thread.
+///
+/// # Errors
+///
+/// When the thread cannot be started.
+pub fn spawn(
+    settings: Settings,
+    updates: Sender<Update>,
+    orders: Receiver<Order>,
+    waker: Waker,
+) -> std::io::Result<JoinHandle<()>> {
+    std::thread::Builder::new()
+        .name("sicklms200 line".into())
+        .spawn(move || run(settings, &updates, &orders, &waker))
+}
+
+fn run(mut settings: Settings, updates: &Sender<Update>, orders: &Receiver<Order>, waker: &Waker) {
+    let send = |u: Update| {
+        let _ = updates.send(u);
+        waker.wake();
+    };
+    let mut counts = Counts::default();
+    let mut first = true;
+    loop {
+        counts.sessions += 1;
+        let mut s = Session {
+            settings: &mut settings,
+            port: None,
+            framer: Framer::new(TelegramCodec {
+                addr: telegram::FROM_DEVICE,
+            }),
+            orders,
+            send: &send,
+            counts: &mut counts,
+        };
+        let result = s.run(first);
+        let stats = s.framer.stats;
+        first = false;
+        match result {
+            Ok(()) | Err(Fail::Stopped) => return,
+            Err(e) => {
+                tracing::warn!(
+                    port = %settings.port.display(),
+                    session = counts.sessions,
+                    scans = counts.scans,
+                    bad_scans = counts.bad_scans,
+                    noise_bytes = stats.noise,
+                    checksum_errors = stats.checksum,
+                    "laser not ready: {e}; retrying in {} s",
+                    RECONNECT_DELAY.as_secs()
+                );
+                send(Update::Lost(e.to_string()));
+            }
+        }
+        // Wait before retrying, but answer orders meanwhile.
+        let until = Instant::now() + RECONNECT_DELAY;
+        loop {
+            match orders.recv_timeout(until.saturating_duration_since(Instant::now())) {
+                Ok(Order::Stop) | Err(RecvTimeoutError::Disconnected) => return,
+                Ok(Order::Configure(c)) => {
+                    // Taken up at the next connection.
+                    settings.config = c;
+                    send(Update::Configured(Ok(c)));
+                }
+                Err(RecvTimeoutError::Timeout) => break,
+            }
+        }
+    }
+}
+
+struct Session<'a, F: Fn(Update)> {
+    settings: &'a mut Settings,
+    port: Option<Port>,
+    framer: Framer<TelegramCodec>,
+    orders: &'a Receiver<Order>,
+    send: &'a F,
+    counts: &'a mut Counts,
+}
+
+impl<F: Fn(Update)> Session<'_, F> {
+    fn port(&mut self) -> &mut Port {
+        self.port
+            .as_mut()
+            .expect("the port is open during a session")
+    }
+
+    fn run(&mut self, first: bool) -> Result<(), Fail> {
+        let rates = self.settings.connect_rates.clone();
+        self.port = Some(Port::open(&self.settings.port, rates[0])?);
+        if first && !self.settings.delay.is_zero() {
+            tracing::info!(
+                "waiting {} s for the laser to power up",
+                self.settings.delay.as_secs()
+            );
+            std::thread::sleep(self.settings.delay);
+        }
+        let mut current = None;
+        'connect: for _ in 0..=self.settings.retry {
+            for &rate in &rates {
+                self.port().set_baud(rate)?;
+                tracing::debug!("trying {rate} baud");
+                match self.mode(
+                    mode::STOP,
+                    &[],
+                    "stop streaming",
+                    Duration::from_millis(1000),
+                ) {
+                    Ok(()) => {
+                        current = Some(rate);
+                        break 'connect;
+                    }
+                    Err(Fail::NoReply(_)) => continue,
+                    Err(e) => return Err(e),
+                }
+            }
+        }
+        let Some(mut baud) = current else {
+            let list: Vec<String> = rates.iter().map(u32::to_string).collect();
+            return Err(Fail::NoReply(format!(
+                "stop streaming at {} baud (is the laser on and on this port?)",
+                list.join(", ")
+            )));
+        };
+        tracing::info!("laser answered at {baud} baud");
+        let transfer = self.settings.transfer_rate;
+        if baud != transfer {
+            let m = telegram::baud_mode(transfer).ok_or_else(|| {
+                Fail::Refused(format!("transfer rate {transfer} (not one the LMS200 has)"))
+            })?;
+            self.mode(m, &[], "a baud rate change", Duration::from_secs(20))?;
+            self.port().set_baud(transfer)?;
+            baud = transfer;
+            tracing::info!("laser switched to {baud} baud");
+        }
+        let kind = self.kind()?;
+        let config = self.settings.config;
+        self.configure(&kind, config)?;
+        self.stream_start(config)?;
+        tracing::info!("SICK laser type [{kind}] at {baud} baud: streaming");
+        (self.send)(Update::Ready {
+            kind: kind.clone(),
+            baud,
+        });
+        self.stream(&kind)
+    }
+
+    /// Sends a request and waits for the reply `expect` (skipping scans
+    /// still in flight), with Player's three tries.
+    fn transact(
+        &mut self,
+        body: &[u8],
+        expect: u8,
+        what: &str,
+        timeout: Duration,
+    ) -> Result<Telegram, Fail> {
+        let bytes = telegram::request(body);
+        for _ in 0..TRIES {
+            self.port().discard_input();
+            self.framer.clear();
+            self.port().send(&bytes)?;
+            let deadline = Instant::now() + timeout;
+            loop {
+                let left = deadline.saturating_duration_since(Instant::now());
+                let port = self.port.as_mut().expect("open");
+                match self.framer.read(port, left)? {
+                    Some(t) if t.cmd() == expect => return Ok(t),
+                    Some(t) if t.cmd() == cmd::NACK => return Err(Fail::Refused(what.into())),
+                    Some(_) => continue,
+                    None => break,
+                }
+            }
+        }
+        Err(Fail::NoReply(what.into()))
+    }
+
+    /// A mode change (0x20) and its 0xA0 reply, whose first data byte is 0 on success.
+    fn mode(&mut self, m: u8, extra: &[u8], what: &str, timeout: Duration) -> Result<(), Fail> {
+        let mut body = vec![cmd::MODE, m];
+        body.extend_from_slice(extra);
+        let t = self.transact(&body, cmd::MODE | cmd::REPLY, what, timeout)?;
+        match t.reply_data().first() {
+            Some(0) => Ok(()),
+            Some(1) => Err(Fail::Refused(format!("{what}: wrong password"))),
+            _ => Err(Fail::Refused(what.into())),
+        }
+    }
+
+    fn kind(&mut self) -> Result<String, Fail> {
+        let t = self.transact(
+            &[cmd::TYPE],
+            cmd::TYPE | cmd::REPLY,
+            "the type request",
+            Duration::from_secs(2),
+        )?;
+        let text: String = t
+            .reply_data()
+            .iter()
+            .take_while(|&&b| b != 0)
+            .map(|&b| char::from(b))
+            .collect();
+        Ok(text.trim().to_owned())
+    }
+
+    /// Configuration mode, variant and configuration, each written only
+    /// when it differs from what the scanner has (it is flash memory).
+    fn configure(&mut self, kind: &str, c: ScanConfig) -> Result<(), Fail> {
+        let mut password = b"SICK_".to_vec();
+        password.extend(kind.bytes().chain(std::iter::repeat(b' ')).take(3));
+        self.mode(
+            mode::CONFIG,
+            &password,
+            "configuration mode",
+            Duration::from_millis(2500),
+        )?;
+
+        let status = self.transact(
+            &[cmd::STATUS],
+            cmd::STATUS | cmd::REPLY,
+            "the status request",
+            Duration::from_secs(25),
+        )?;
+        let d = status.reply_data();
+        let word = |i: usize| d.get(i..i + 2).map(|w| u16::from_le_bytes([w[0], w[1]]));
+        if word(106) != Some(c.width()) || word(108) != Some(c.res) {
+            tracing::info!("setting the scan to {}° at {}/100°", c.width(), c.res);
+            let mut body = vec![cmd::VARIANT];
+            body.extend_from_slice(&c.width().to_le_bytes());
+            body.extend_from_slice(&c.res.to_le_bytes());
+            let t = self.transact(
+                &body,
+                cmd::VARIANT | cmd::REPLY,
+                "the variant",
+                Duration::from_secs(2),
+            )?;
+            if t.reply_data().first() != Some(&1) {
+                return Err(Fail::Refused(format!(
+                    "the variant {}°/{}",
+                    c.width(),
+                    c.res
+                )));
+            }
+        }
+
+        let conf = self.transact(
+            &[cmd::GET_CONFIG],
+            cmd::GET_CONFIG | cmd::REPLY,
+            "the configuration request",
+            Duration::from_secs(25),
+        )?;
+        let mut data = conf.reply_data().to_vec();
+        if data.len() < 7 {
+            return Err(Fail::Refused(
+                "the configuration request (short reply)".into(),
+            ));
+        }
+        let want = [
+            u8::from(self.settings.high_avail),
+            u8::from(c.intensity),
+            telegram::units_code(c.range_res),
+        ];
+        if data[4..7] != want {
+            tracing::info!(
+                "writing the configuration (units {} mm, intensity {})",
+                c.range_res,
+                c.intensity
+            );
+            data[4..7].copy_from_slice(&want);
+            let mut body = vec![cmd::SET_CONFIG];
+            body.extend_from_slice(&data);
+            let t = self.transact(
+                &body,
+                cmd::SET_CONFIG | cmd::REPLY,
+                "the configuration",
+                Duration::from_secs(25),
+            )?;
+            if t.reply_data().first() != Some(&1) {
+                return Err(Fail::Refused("the configuration".into()));
+            }
+        }
+        Ok(())
+    }
+
+    fn stream_start(&mut self, c: ScanConfig) -> Result<(), Fail> {
+        let (a, b) = c.segments();
+        let full = if c.res == 25 { 400 } else { 360 };
+        if a == 0 && b == full {
+            self.mode(
+                mode::CONTINUOUS,
+                &[],
+                "continuous scans",
+                Duration::from_secs(2),
+            )
+        } else {
+            let mut extra = Vec::with_capacity(4);
+            extra.extend_from_slice(&(a + 1).to_le_bytes());
+            extra.extend_from_slice(&(b + 1).to_le_bytes());
+            self.mode(
+                mode::CONTINUOUS_PART,
+                &extra,
+                "continuous scans",
+                Duration::from_secs(2),
+            )
+        }
+    }
+
+    fn stream(&mut self, kind: &str) -> Result<(), Fail> {
+        // Scans must keep coming: allow three telegrams' line time, and at least a second.
+        let config = self.settings.config;
+        let bytes = 2 * config.count() + 16;
+        let line = Duration::from_secs_f64(bytes as f64 * 10.0 / f64::from(self.port().baud()));
+        let patience = (3 * line).max(Duration::from_secs(1));
+        let mut last = Instant::now();
+        loop {
+            match self.orders.try_recv() {
+                Ok(Order::Stop) | Err(TryRecvError::Disconnected) => {
+                    self.shut_down();
+                    return Err(Fail::Stopped);
+                }
+                Ok(Order::Configure(c)) => {
+                    let result = self
+                        .configure(kind, c)
+                        .and_then(|()| self.stream_start(c))
+                        .map(|()| c);
+                    let reply = result.as_ref().map(|c| *c).map_err(|e| e.to_string());
+                    (self.send)(Update::Configured(reply));
+                    result?;
+                    self.settings.config = c;
+                    return self.stream(kind);
+                }
+                Err(TryRecvError::Empty) => {}
+            }
+            let port = self.port.as_mut().expect("open");
+            match self.framer.read(port, Duration::from_millis(100))? {
+                Some(t) if t.cmd() == cmd::SCAN || t.cmd() == cmd::SCAN_PART => {
+                    last = Instant::now();
+                    match telegram::decode_scan(&t) {
+                        Ok(raw) if raw.values.len() == config.count() => {
+                            self.counts.scans += 1;
+                            (self.send)(Update::Scan(raw, config));
+                        }
+                        Ok(raw) => {
+                            self.counts.bad_scans += 1;
+                            tracing::warn!(
+                                bad_scans = self.counts.bad_scans,
+                                "scan of {} values dropped: {} expected",
+                                raw.values.len(),
+                                config.count()
+                            );
+                        }
+                        Err(e) => {
+                            self.counts.bad_scans += 1;
+                            tracing::warn!(bad_scans = self.counts.bad_scans, "scan dropped: {e}");
+                        }
+                    }
+                }
+                Some(t) => tracing::debug!("ignored telegram 0x{:02X}", t.cmd()),
+                None if last.elapsed() > patience => return Err(Fail::Silent(last.elapsed())),
+                None => {}
+            }
+        }
+    }
+
+    /// Player's `MainQuit`: stop streaming and go back to the connect rate.
+    fn shut_down(&mut self) {
+        let rate = self.settings.connect_rates[0];
+        let _ = self.mode(
+            mode::STOP,
+            &[],
+            "stop streaming",
+            Duration::from_millis(500),
+        );
+        if self.port().baud() != rate {
+            if let Some(m) = telegram::baud_mode(rate) {
+                if self
+                    .mode(m, &[], "a baud rate change", Duration::from_millis(500))
+                    .is_err()
+                {
+                    tracing::warn!("cannot throttle the laser back to {rate} baud");
+                }
+            }
+        }
+        tracing::info!("laser stopped");
+    }
+}

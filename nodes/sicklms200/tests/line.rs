@@ -1,0 +1,260 @@
+//! The driver's line thread against the emulated scanner, over a real
+//! pseudo-terminal: Player's whole connection sequence, then scans.
+#![allow(clippy::unwrap_used)] // test helpers outside #[test] fns
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{self, Receiver};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use troupe_node::Waker;
+use troupe_serial::Faults;
+use troupe_sicklms200::device::{self, Order, ScanConfig, Settings, Update};
+use troupe_sicklms200::emulator::{self, EmulatorOptions, EmulatorStats, Room, Scene};
+
+struct Emu {
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<std::io::Result<EmulatorStats>>>,
+    link: PathBuf,
+    _dir: TempDir,
+}
+
+struct TempDir(PathBuf);
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn emulate(name: &str, faults: Faults) -> Emu {
+    let dir = std::env::temp_dir().join(format!("troupe-lms-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let link = dir.join("laser");
+    let stop = Arc::new(AtomicBool::new(false));
+    let opts = EmulatorOptions {
+        link: link.clone(),
+        faults,
+        seed: 1,
+    };
+    let (ready_tx, ready) = mpsc::channel();
+    let s = stop.clone();
+    let thread = std::thread::spawn(move || {
+        let mut room = Room;
+        emulator::run_with(&opts, &mut room, &s, || {
+            let _ = ready_tx.send(());
+        })
+    });
+    ready
+        .recv_timeout(Duration::from_secs(10))
+        .expect("the emulator links its line");
+    Emu {
+        stop,
+        thread: Some(thread),
+        link,
+        _dir: TempDir(dir),
+    }
+}
+
+impl Emu {
+    fn stop(&mut self) -> EmulatorStats {
+        self.stop.store(true, Ordering::Relaxed);
+        self.thread.take().unwrap().join().unwrap().unwrap()
+    }
+}
+
+impl Drop for Emu {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+    }
+}
+
+fn settings(link: &std::path::Path, res: u16, transfer: u32) -> Settings {
+    Settings {
+        port: link.to_owned(),
+        connect_rates: vec![9600, 38400, 500000],
+        transfer_rate: transfer,
+        retry: 0,
+        delay: Duration::ZERO,
+        high_avail: false,
+        config: ScanConfig {
+            res,
+            range_res: 1,
+            intensity: true,
+            min_angle: -9000,
+            max_angle: 9000,
+        },
+    }
+}
+
+/// Waits for an update matching `want`, for at most `secs`.
+fn wait_for(rx: &Receiver<Update>, secs: u64, mut want: impl FnMut(&Update) -> bool) -> Update {
+    let deadline = Instant::now() + Duration::from_secs(secs);
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        match rx.recv_timeout(left) {
+            Ok(u) if want(&u) => return u,
+            Ok(_) => {}
+            Err(e) => panic!("no matching update within {secs} s: {e}"),
+        }
+    }
+}
+
+#[test]
+fn connects_at_9600_switches_to_500000_and_streams_room_scans() {
+    let mut emu = emulate("fast", Faults::default());
+    let (tx, rx) = mpsc::channel();
+    let (orders, orders_rx) = mpsc::channel();
+    let t = device::spawn(
+        settings(&emu.link, 50, 500000),
+        tx,
+        orders_rx,
+        Waker::none(),
+    )
+    .unwrap();
+    let ready = wait_for(&rx, 20, |u| matches!(u, Update::Ready { .. }));
+    let Update::Ready { kind, baud } = ready else {
+        unreachable!()
+    };
+    assert_eq!((kind.as_str(), baud), (emulator::KIND, 500000));
+
+    let Update::Scan(raw, config) = wait_for(&rx, 10, |u| matches!(u, Update::Scan(..))) else {
+        unreachable!()
+    };
+    assert_eq!(raw.values.len(), 361);
+    assert_eq!(config.res, 50);
+    let scan = troupe_sicklms200::to_scan(&raw, &config, false, 0);
+    // Straight ahead: the pillar (2 m ahead, radius 0.3, drifting sideways) or
+    // the far wall 6 m away; straight left/right: the side walls 3 m away.
+    let angles: Vec<f64> = (0..361)
+        .map(|i| (-90.0 + 0.5 * f64::from(i)).to_radians())
+        .collect();
+    let truth = Room.ranges(0.0, &angles);
+    assert!(
+        (scan.ranges[0] - 3.0).abs() < 0.002,
+        "right wall {}",
+        scan.ranges[0]
+    );
+    assert!(
+        (scan.ranges[360] - 3.0).abs() < 0.002,
+        "left wall {}",
+        scan.ranges[360]
+    );
+    assert!((scan.ranges[180] - 1.7).abs() < 0.31 || (scan.ranges[180] - 6.0).abs() < 0.01);
+    assert_eq!(truth.len(), scan.ranges.len());
+    assert!(
+        scan.intensity.iter().all(|&i| i == 0),
+        "nothing within 1 m reflects"
+    );
+
+    // A new configuration is taken up: 1° gives 181 values.
+    let mut c = config;
+    c.res = 100;
+    orders.send(Order::Configure(c)).unwrap();
+    let Update::Configured(done) = wait_for(&rx, 20, |u| matches!(u, Update::Configured(..)))
+    else {
+        unreachable!()
+    };
+    assert_eq!(done, Ok(c));
+    wait_for(
+        &rx,
+        10,
+        |u| matches!(u, Update::Scan(r, _) if r.values.len() == 181),
+    );
+
+    orders.send(Order::Stop).unwrap();
+    t.join().unwrap();
+    let stats = emu.stop();
+    assert!(stats.scans >= 2 && stats.requests >= 8, "{stats:?}");
+    assert_eq!(stats.refused, 0);
+}
+
+#[test]
+fn survives_noise_bad_checksums_truncation_and_dropped_bytes() {
+    let faults = Faults {
+        noise: 0.2,
+        corrupt: 0.1,
+        truncate: 0.1,
+        drop: 0.0005,
+        ..Faults::default()
+    };
+    let mut emu = emulate("noisy", faults);
+    let (tx, rx) = mpsc::channel();
+    let (orders, orders_rx) = mpsc::channel();
+    let t = device::spawn(
+        settings(&emu.link, 100, 500000),
+        tx,
+        orders_rx,
+        Waker::none(),
+    )
+    .unwrap();
+    // Whatever the faults did to the handshake, the driver gets through it
+    // (reconnecting if it must) and good scans come out: every one whole.
+    let mut good = 0;
+    wait_for(&rx, 60, |u| {
+        if let Update::Scan(raw, _) = u {
+            assert_eq!(raw.values.len(), 181);
+            good += 1;
+        }
+        good >= 30
+    });
+    orders.send(Order::Stop).unwrap();
+    t.join().unwrap();
+    emu.stop();
+}
+
+#[test]
+fn a_mute_device_is_reported_and_an_unplugged_one_reconnects() {
+    let mut mute = emulate(
+        "mute",
+        Faults {
+            mute: true,
+            ..Faults::default()
+        },
+    );
+    let (tx, rx) = mpsc::channel();
+    let (orders, orders_rx) = mpsc::channel();
+    let mut s = settings(&mute.link, 100, 38400);
+    s.connect_rates = vec![9600];
+    let t = device::spawn(s, tx, orders_rx, Waker::none()).unwrap();
+    let Update::Lost(why) = wait_for(&rx, 20, |u| matches!(u, Update::Lost(_))) else {
+        unreachable!()
+    };
+    assert!(
+        why.contains("no reply to stop streaming at 9600 baud"),
+        "{why}"
+    );
+    orders.send(Order::Stop).unwrap();
+    t.join().unwrap();
+    mute.stop();
+
+    let mut unplug = emulate(
+        "unplug",
+        Faults {
+            unplug_after: Some(Duration::from_secs(3)),
+            replug_after: Some(Duration::from_secs(1)),
+            ..Faults::default()
+        },
+    );
+    let (tx, rx) = mpsc::channel();
+    let (orders, orders_rx) = mpsc::channel();
+    let t = device::spawn(
+        settings(&unplug.link, 100, 38400),
+        tx,
+        orders_rx,
+        Waker::none(),
+    )
+    .unwrap();
+    wait_for(&rx, 20, |u| matches!(u, Update::Ready { .. }));
+    let Update::Lost(why) = wait_for(&rx, 20, |u| matches!(u, Update::Lost(_))) else {
+        unreachable!()
+    };
+    assert!(why.contains("lost") || why.contains("no scan"), "{why}");
+    // Plugged back in, powered up afresh at 9600: the whole sequence again.
+    wait_for(&rx, 30, |u| matches!(u, Update::Ready { .. }));
+    wait_for(&rx, 10, |u| matches!(u, Update::Scan(..)));
+    orders.send(Order::Stop).unwrap();
+    t.join().unwrap();
+    unplug.stop();
+}
