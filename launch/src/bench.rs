@@ -41,6 +41,7 @@ pub fn run(cmd: BenchCmd, z: &ZenohArgs) -> anyhow::Result<()> {
         BenchCmd::Stage(a) => stage_bench(&a),
         BenchCmd::Bridge(a) => bridge_bench(&a),
         BenchCmd::Nav(a) => crate::navbench::nav_bench(&a),
+        BenchCmd::Serial(a) => crate::serialbench::run(&a),
     }
 }
 

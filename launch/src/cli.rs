@@ -103,6 +103,18 @@ their drivers. `troupe launch` starts one for the robots of its plan.")]
   troupe router --zenoh-config secure.json5      # TLS, auth, ACLs")]
     Router(RouterArgs),
 
+    /// Play a serial device (SICK LMS200…) on a pseudo-terminal, for its driver to talk to.
+    #[command(after_help = "Examples:
+  troupe emulate sicklms200 --link /tmp/laser     # then: port \"/tmp/laser\" in the .cfg
+  troupe emulate sicklms200 --link /tmp/laser --corrupt 0.1 --noise 0.1
+  troupe emulate sicklms200 --link /tmp/laser --unplug-after 10 --replug-after 2
+
+The emulator speaks the device's side of the protocol at the device's own
+speed: it powers up at its default baud rate, ignores bytes sent at another,
+and carries each byte in the time the line would. Faults are injected on
+what it sends.")]
+    Emulate(crate::emulate::EmulateArgs),
+
     /// List the drivers this build can run.
     Drivers,
 
@@ -230,6 +242,10 @@ pub enum BenchCmd {
     #[command(after_help = "Example:
   cargo run --release -- bench nav --map ../shared/compat/stage/bitmaps/cave.png")]
     Nav(crate::navbench::NavBenchArgs),
+    /// Scan rate of the sicklms200 driver against its emulator at 38400 and 500000 baud.
+    #[command(after_help = "Example:
+  cargo run --release -- bench serial --seconds 5")]
+    Serial(crate::serialbench::SerialBenchArgs),
     /// The echo side of `bench latency` (started by it).
     #[command(hide = true)]
     Pong,

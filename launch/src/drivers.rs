@@ -41,6 +41,7 @@ pub fn all() -> Vec<Entry> {
         entry::<troupe_wavefront::Wavefront>(
             "global path planner feeding waypoints to a position2d",
         ),
+        entry::<troupe_sicklms200::SickLms200>("the SICK LMS200 laser over a serial line"),
         entry::<troupe_stage::Stage>(
             "the 2D multi-robot simulator: a Stage world's robots and sensors",
         ),

@@ -9,8 +9,10 @@ mod bridge;
 mod cfg;
 mod cli;
 mod drivers;
+mod emulate;
 mod navbench;
 mod plan;
+mod serialbench;
 mod supervisor;
 mod tools;
 
@@ -49,6 +51,7 @@ fn run(cli: cli::Cli) -> anyhow::Result<()> {
         Command::Echo(a) => tools::echo(a, z),
         Command::Hz(a) => tools::hz(a, z),
         Command::Router(a) => tools::router(a, z),
+        Command::Emulate(a) => emulate::run(a),
         Command::Drivers => tools::print_drivers(),
         Command::Interfaces => tools::print_interfaces(),
         Command::Bench(b) => bench::run(b, z),

@@ -12,5 +12,6 @@ mod launch;
 mod nav;
 mod player;
 mod process;
+mod serial;
 mod sessions;
 mod stage;

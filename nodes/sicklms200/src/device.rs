@@ -11,7 +11,9 @@
 //! that stop — ends the session: the driver is told, waits, and starts over.
 
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, TryRecvError};
+use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -21,6 +23,12 @@ use troupe_serial::{Framer, LineError, Port};
 use crate::telegram::{self, cmd, mode, RawScan, Telegram, TelegramCodec};
 
 /// Player's retries for each request.
+///
+/// Each request waits for its reply as long as Player waits for the reply's
+/// header (1 s to stop streaming, 2.5 s for configuration mode, 10 s for a
+/// configuration written to flash, 2 s for the rest) — not Player's 25 s for
+/// a whole status or configuration telegram, which only made a corrupted
+/// reply cost 25 s.
 const TRIES: u32 = 3;
 /// How long to wait between two connection attempts.
 pub const RECONNECT_DELAY: Duration = Duration::from_secs(2);
@@ -179,6 +187,27 @@ impl From<LineError> for Fail {
     }
 }
 
+/// A running device thread.
+#[derive(Debug)]
+pub struct LineThread {
+    /// Orders for the thread.
+    pub orders: Sender<Order>,
+    abort: Arc<AtomicBool>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl LineThread {
+    /// Stops the thread: a streaming scanner is stopped and put back at its
+    /// connect rate; a wait for a reply is cut short.
+    pub fn stop(mut self) {
+        self.abort.store(true, Ordering::Relaxed);
+        let _ = self.orders.send(Order::Stop);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
 /// Starts the device thread.
 ///
 /// # Errors
@@ -187,15 +216,28 @@ impl From<LineError> for Fail {
 pub fn spawn(
     settings: Settings,
     updates: Sender<Update>,
-    orders: Receiver<Order>,
     waker: Waker,
-) -> std::io::Result<JoinHandle<()>> {
-    std::thread::Builder::new()
+) -> std::io::Result<LineThread> {
+    let (orders, orders_rx) = std::sync::mpsc::channel();
+    let abort = Arc::new(AtomicBool::new(false));
+    let flag = abort.clone();
+    let thread = std::thread::Builder::new()
         .name("sicklms200 line".into())
-        .spawn(move || run(settings, &updates, &orders, &waker))
+        .spawn(move || run(settings, &updates, &orders_rx, &waker, &flag))?;
+    Ok(LineThread {
+        orders,
+        abort,
+        thread: Some(thread),
+    })
 }
 
-fn run(mut settings: Settings, updates: &Sender<Update>, orders: &Receiver<Order>, waker: &Waker) {
+fn run(
+    mut settings: Settings,
+    updates: &Sender<Update>,
+    orders: &Receiver<Order>,
+    waker: &Waker,
+    abort: &AtomicBool,
+) {
     let send = |u: Update| {
         let _ = updates.send(u);
         waker.wake();
@@ -213,6 +255,8 @@ fn run(mut settings: Settings, updates: &Sender<Update>, orders: &Receiver<Order
             orders,
             send: &send,
             counts: &mut counts,
+            abort,
+            closing: false,
         };
         let result = s.run(first);
         let stats = s.framer.stats;
@@ -256,6 +300,10 @@ struct Session<'a, F: Fn(Update)> {
     orders: &'a Receiver<Order>,
     send: &'a F,
     counts: &'a mut Counts,
+    /// Set when the driver stops: waits end at once…
+    abort: &'a AtomicBool,
+    /// …except those of the goodbye to the scanner.
+    closing: bool,
 }
 
 impl<F: Fn(Update)> Session<'_, F> {
@@ -308,7 +356,7 @@ impl<F: Fn(Update)> Session<'_, F> {
             let m = telegram::baud_mode(transfer).ok_or_else(|| {
                 Fail::Refused(format!("transfer rate {transfer} (not one the LMS200 has)"))
             })?;
-            self.mode(m, &[], "a baud rate change", Duration::from_secs(20))?;
+            self.mode(m, &[], "a baud rate change", Duration::from_secs(2))?;
             self.port().set_baud(transfer)?;
             baud = transfer;
             tracing::info!("laser switched to {baud} baud");
@@ -341,13 +389,21 @@ impl<F: Fn(Update)> Session<'_, F> {
             self.port().send(&bytes)?;
             let deadline = Instant::now() + timeout;
             loop {
+                if self.abort.load(Ordering::Relaxed) && !self.closing {
+                    return Err(Fail::Stopped);
+                }
                 let left = deadline.saturating_duration_since(Instant::now());
+                if left.is_zero() {
+                    break;
+                }
                 let port = self.port.as_mut().expect("open");
-                match self.framer.read(port, left)? {
+                match self
+                    .framer
+                    .read(port, left.min(Duration::from_millis(100)))?
+                {
                     Some(t) if t.cmd() == expect => return Ok(t),
                     Some(t) if t.cmd() == cmd::NACK => return Err(Fail::Refused(what.into())),
-                    Some(_) => continue,
-                    None => break,
+                    Some(_) | None => continue,
                 }
             }
         }
@@ -398,7 +454,7 @@ impl<F: Fn(Update)> Session<'_, F> {
             &[cmd::STATUS],
             cmd::STATUS | cmd::REPLY,
             "the status request",
-            Duration::from_secs(25),
+            Duration::from_secs(2),
         )?;
         let d = status.reply_data();
         let word = |i: usize| d.get(i..i + 2).map(|w| u16::from_le_bytes([w[0], w[1]]));
@@ -426,7 +482,7 @@ impl<F: Fn(Update)> Session<'_, F> {
             &[cmd::GET_CONFIG],
             cmd::GET_CONFIG | cmd::REPLY,
             "the configuration request",
-            Duration::from_secs(25),
+            Duration::from_secs(2),
         )?;
         let mut data = conf.reply_data().to_vec();
         if data.len() < 7 {
@@ -452,7 +508,7 @@ impl<F: Fn(Update)> Session<'_, F> {
                 &body,
                 cmd::SET_CONFIG | cmd::REPLY,
                 "the configuration",
-                Duration::from_secs(25),
+                Duration::from_secs(10),
             )?;
             if t.reply_data().first() != Some(&1) {
                 return Err(Fail::Refused("the configuration".into()));
@@ -543,20 +599,16 @@ impl<F: Fn(Update)> Session<'_, F> {
 
     /// Player's `MainQuit`: stop streaming and go back to the connect rate.
     fn shut_down(&mut self) {
+        self.closing = true;
         let rate = self.settings.connect_rates[0];
-        let _ = self.mode(
-            mode::STOP,
-            &[],
-            "stop streaming",
-            Duration::from_millis(500),
-        );
+        let quick = Duration::from_millis(300);
+        if let Err(e) = self.mode(mode::STOP, &[], "stop streaming", quick) {
+            tracing::warn!("cannot stop the laser's stream: {e}");
+        }
         if self.port().baud() != rate {
             if let Some(m) = telegram::baud_mode(rate) {
-                if self
-                    .mode(m, &[], "a baud rate change", Duration::from_millis(500))
-                    .is_err()
-                {
-                    tracing::warn!("cannot throttle the laser back to {rate} baud");
+                if let Err(e) = self.mode(m, &[], "a baud rate change", quick) {
+                    tracing::warn!("cannot throttle the laser back to {rate} baud: {e}");
                 }
             }
         }

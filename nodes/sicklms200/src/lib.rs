@@ -37,15 +37,14 @@ pub mod telegram;
 
 use std::collections::VecDeque;
 use std::path::PathBuf;
-use std::sync::mpsc::{self, Receiver, Sender};
-use std::thread::JoinHandle;
+use std::sync::mpsc::{self, Receiver};
 use std::time::Duration;
 
 use serde::Deserialize;
 use troupe_msgs::{laser, Device, Interface, Pose3d, Size3d};
 use troupe_node::{Ctx, Driver, Event, NodeError, Responder, Result, Section, Unit};
 
-use crate::device::{Order, ScanConfig, Settings, Update};
+use crate::device::{LineThread, Order, ScanConfig, Settings, Update};
 use crate::telegram::RawScan;
 
 /// Options, by Player's names.
@@ -109,8 +108,7 @@ pub struct SickLms200 {
 
 struct Link {
     updates: Receiver<Update>,
-    orders: Sender<Order>,
-    thread: Option<JoinHandle<()>>,
+    line: LineThread,
 }
 
 impl Driver for SickLms200 {
@@ -171,15 +169,10 @@ impl Driver for SickLms200 {
     fn setup(&mut self, ctx: &mut Ctx) -> Result<()> {
         ctx.set_ready(false);
         let (updates_tx, updates) = mpsc::channel();
-        let (orders, orders_rx) = mpsc::channel();
-        let thread = device::spawn(self.settings.clone(), updates_tx, orders_rx, ctx.waker())
+        let line = device::spawn(self.settings.clone(), updates_tx, ctx.waker())
             .map_err(|e| NodeError::Driver(format!("starting the line thread: {e}").into()))?;
         tracing::info!("laser initialising ({})", self.settings.port.display());
-        self.link = Some(Link {
-            updates,
-            orders,
-            thread: Some(thread),
-        });
+        self.link = Some(Link { updates, line });
         Ok(())
     }
 
@@ -200,7 +193,7 @@ impl Driver for SickLms200 {
                 match (c.check(), &self.link) {
                     (Err(why), _) => r.nack(format!("invalid laser configuration: {why}")),
                     (Ok(()), Some(link)) => {
-                        if link.orders.send(Order::Configure(c)).is_ok() {
+                        if link.line.orders.send(Order::Configure(c)).is_ok() {
                             self.pending.push_back(r.responder);
                         } else {
                             r.nack("the laser's line thread has stopped");
@@ -221,11 +214,8 @@ impl Driver for SickLms200 {
     }
 
     fn shutdown(&mut self, _: &mut Ctx) -> Result<()> {
-        if let Some(mut link) = self.link.take() {
-            let _ = link.orders.send(Order::Stop);
-            if let Some(t) = link.thread.take() {
-                let _ = t.join();
-            }
+        if let Some(link) = self.link.take() {
+            link.line.stop();
         }
         tracing::info!(scans = self.scan_id, "laser shutdown");
         Ok(())

@@ -105,14 +105,7 @@ fn wait_for(rx: &Receiver<Update>, secs: u64, mut want: impl FnMut(&Update) -> b
 fn connects_at_9600_switches_to_500000_and_streams_room_scans() {
     let mut emu = emulate("fast", Faults::default());
     let (tx, rx) = mpsc::channel();
-    let (orders, orders_rx) = mpsc::channel();
-    let t = device::spawn(
-        settings(&emu.link, 50, 500000),
-        tx,
-        orders_rx,
-        Waker::none(),
-    )
-    .unwrap();
+    let t = device::spawn(settings(&emu.link, 50, 500000), tx, Waker::none()).unwrap();
     let ready = wait_for(&rx, 20, |u| matches!(u, Update::Ready { .. }));
     let Update::Ready { kind, baud } = ready else {
         unreachable!()
@@ -151,7 +144,7 @@ fn connects_at_9600_switches_to_500000_and_streams_room_scans() {
     // A new configuration is taken up: 1° gives 181 values.
     let mut c = config;
     c.res = 100;
-    orders.send(Order::Configure(c)).unwrap();
+    t.orders.send(Order::Configure(c)).unwrap();
     let Update::Configured(done) = wait_for(&rx, 20, |u| matches!(u, Update::Configured(..)))
     else {
         unreachable!()
@@ -163,8 +156,7 @@ fn connects_at_9600_switches_to_500000_and_streams_room_scans() {
         |u| matches!(u, Update::Scan(r, _) if r.values.len() == 181),
     );
 
-    orders.send(Order::Stop).unwrap();
-    t.join().unwrap();
+    t.stop();
     let stats = emu.stop();
     assert!(stats.scans >= 2 && stats.requests >= 8, "{stats:?}");
     assert_eq!(stats.refused, 0);
@@ -181,14 +173,7 @@ fn survives_noise_bad_checksums_truncation_and_dropped_bytes() {
     };
     let mut emu = emulate("noisy", faults);
     let (tx, rx) = mpsc::channel();
-    let (orders, orders_rx) = mpsc::channel();
-    let t = device::spawn(
-        settings(&emu.link, 100, 500000),
-        tx,
-        orders_rx,
-        Waker::none(),
-    )
-    .unwrap();
+    let t = device::spawn(settings(&emu.link, 100, 500000), tx, Waker::none()).unwrap();
     // Whatever the faults did to the handshake, the driver gets through it
     // (reconnecting if it must) and good scans come out: every one whole.
     let mut good = 0;
@@ -199,8 +184,7 @@ fn survives_noise_bad_checksums_truncation_and_dropped_bytes() {
         }
         good >= 30
     });
-    orders.send(Order::Stop).unwrap();
-    t.join().unwrap();
+    t.stop();
     emu.stop();
 }
 
@@ -214,10 +198,9 @@ fn a_mute_device_is_reported_and_an_unplugged_one_reconnects() {
         },
     );
     let (tx, rx) = mpsc::channel();
-    let (orders, orders_rx) = mpsc::channel();
     let mut s = settings(&mute.link, 100, 38400);
     s.connect_rates = vec![9600];
-    let t = device::spawn(s, tx, orders_rx, Waker::none()).unwrap();
+    let t = device::spawn(s, tx, Waker::none()).unwrap();
     let Update::Lost(why) = wait_for(&rx, 20, |u| matches!(u, Update::Lost(_))) else {
         unreachable!()
     };
@@ -225,8 +208,7 @@ fn a_mute_device_is_reported_and_an_unplugged_one_reconnects() {
         why.contains("no reply to stop streaming at 9600 baud"),
         "{why}"
     );
-    orders.send(Order::Stop).unwrap();
-    t.join().unwrap();
+    t.stop();
     mute.stop();
 
     let mut unplug = emulate(
@@ -238,14 +220,7 @@ fn a_mute_device_is_reported_and_an_unplugged_one_reconnects() {
         },
     );
     let (tx, rx) = mpsc::channel();
-    let (orders, orders_rx) = mpsc::channel();
-    let t = device::spawn(
-        settings(&unplug.link, 100, 38400),
-        tx,
-        orders_rx,
-        Waker::none(),
-    )
-    .unwrap();
+    let t = device::spawn(settings(&unplug.link, 100, 38400), tx, Waker::none()).unwrap();
     wait_for(&rx, 20, |u| matches!(u, Update::Ready { .. }));
     let Update::Lost(why) = wait_for(&rx, 20, |u| matches!(u, Update::Lost(_))) else {
         unreachable!()
@@ -254,7 +229,6 @@ fn a_mute_device_is_reported_and_an_unplugged_one_reconnects() {
     // Plugged back in, powered up afresh at 9600: the whole sequence again.
     wait_for(&rx, 30, |u| matches!(u, Update::Ready { .. }));
     wait_for(&rx, 10, |u| matches!(u, Update::Scan(..)));
-    orders.send(Order::Stop).unwrap();
-    t.join().unwrap();
+    t.stop();
     unplug.stop();
 }

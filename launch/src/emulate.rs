@@ -1,0 +1,120 @@
+//! `troupe emulate`: a device emulator on a pseudo-terminal.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+use anyhow::Context;
+use clap::{Args, ValueEnum};
+use troupe_serial::Faults;
+
+/// The devices Troupe can emulate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Emulated {
+    /// A SICK LMS200 laser scanner in a room with a drifting pillar.
+    Sicklms200,
+}
+
+#[derive(Debug, Args)]
+pub struct EmulateArgs {
+    /// The device to play.
+    pub device: Emulated,
+
+    /// Where to put the device: a symlink to the pseudo-terminal, for a
+    /// `.cfg` to name as its `port`. An old symlink there is replaced; any
+    /// other file is left alone (and the emulator refuses to start).
+    #[arg(long, value_name = "PATH")]
+    pub link: PathBuf,
+
+    /// Fault: probability of random bytes before each frame sent (line noise).
+    #[arg(long, value_name = "P", default_value_t = 0.0)]
+    pub noise: f64,
+    /// Fault: probability of losing each byte sent.
+    #[arg(long, value_name = "P", default_value_t = 0.0)]
+    pub drop: f64,
+    /// Fault: probability of one flipped bit in each frame sent (bad checksum).
+    #[arg(long, value_name = "P", default_value_t = 0.0)]
+    pub corrupt: f64,
+    /// Fault: probability of cutting each frame sent short.
+    #[arg(long, value_name = "P", default_value_t = 0.0)]
+    pub truncate: f64,
+    /// Fault: a device that never answers.
+    #[arg(long)]
+    pub mute: bool,
+    /// Fault: unplug the device (close the line, remove the link) after SECS.
+    #[arg(long, value_name = "SECS")]
+    pub unplug_after: Option<f64>,
+    /// Plug it back in (a fresh power-up) SECS after unplugging.
+    #[arg(long, value_name = "SECS", requires = "unplug_after")]
+    pub replug_after: Option<f64>,
+    /// Seed of the fault generator (runs with the same seed fail alike).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+}
+
+fn probability(name: &str, p: f64) -> anyhow::Result<f64> {
+    anyhow::ensure!(
+        (0.0..=1.0).contains(&p),
+        "--{name} {p}: a probability is between 0 and 1"
+    );
+    Ok(p)
+}
+
+fn seconds(name: &str, s: Option<f64>) -> anyhow::Result<Option<Duration>> {
+    s.map(|s| {
+        Duration::try_from_secs_f64(s)
+            .with_context(|| format!("--{name} {s}: give a number of seconds ≥ 0"))
+    })
+    .transpose()
+}
+
+/// `troupe emulate: DEVICE at PATH` on stdout, once the device can be
+/// opened: what a script or test waits for.
+fn banner(device: &str, link: &std::path::Path) {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    let _ = writeln!(out, "troupe emulate: {device} at {}", link.display());
+    let _ = out.flush();
+}
+
+/// Runs the emulator until SIGINT or SIGTERM.
+pub fn run(a: EmulateArgs) -> anyhow::Result<()> {
+    let faults = Faults {
+        noise: probability("noise", a.noise)?,
+        drop: probability("drop", a.drop)?,
+        corrupt: probability("corrupt", a.corrupt)?,
+        truncate: probability("truncate", a.truncate)?,
+        mute: a.mute,
+        unplug_after: seconds("unplug-after", a.unplug_after)?,
+        replug_after: seconds("replug-after", a.replug_after)?,
+    };
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()?;
+    std::thread::Builder::new()
+        .name("signals".into())
+        .spawn(move || {
+            let _ = rt.block_on(crate::supervisor::wait_signal());
+            flag.store(true, Ordering::Relaxed);
+        })?;
+    match a.device {
+        Emulated::Sicklms200 => {
+            use troupe_sicklms200::emulator;
+            let opts = emulator::EmulatorOptions {
+                link: a.link.clone(),
+                faults,
+                seed: a.seed,
+            };
+            let mut scene = emulator::Room;
+            emulator::run_with(&opts, &mut scene, &stop, || {
+                banner("sicklms200", &a.link);
+                tracing::info!("{} emulated; Ctrl-C stops it", emulator::KIND);
+            })
+            .with_context(|| format!("emulating a sicklms200 at {}", a.link.display()))?;
+        }
+    }
+    Ok(())
+}

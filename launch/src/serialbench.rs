@@ -1,0 +1,115 @@
+//! `troupe bench serial`: scan rates of the sicklms200 driver against the
+//! emulated scanner, over a pseudo-terminal paced at the line's baud rate.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{mpsc, Arc};
+use std::time::{Duration, Instant};
+
+use clap::Args;
+use troupe_node::Waker;
+use troupe_serial::Faults;
+use troupe_sicklms200::device::{self, ScanConfig, Settings, Update};
+use troupe_sicklms200::emulator::{self, EmulatorOptions, Room};
+
+#[derive(Debug, Args)]
+pub struct SerialBenchArgs {
+    /// Seconds of scans measured per case (after the connection).
+    #[arg(long, default_value_t = 5.0)]
+    pub seconds: f64,
+}
+
+/// Runs every case and prints one line each.
+pub fn run(a: &SerialBenchArgs) -> anyhow::Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    writeln!(
+        out,
+        "sicklms200 against its emulator (line time paced at the baud rate; LMS200 mirror 75 Hz)"
+    )?;
+    writeln!(
+        out,
+        "{:>8} {:>6} {:>7} {:>10} {:>12}",
+        "baud", "res", "values", "scans/s", "connect s"
+    )?;
+    for baud in [38400u32, 500000] {
+        for res in [100u16, 50] {
+            let (rate, connect, values) = case(baud, res, a.seconds)?;
+            writeln!(
+                out,
+                "{baud:>8} {:>5}° {values:>7} {rate:>10.1} {connect:>12.2}",
+                f64::from(res) / 100.0
+            )?;
+        }
+    }
+    Ok(())
+}
+
+fn case(baud: u32, res: u16, seconds: f64) -> anyhow::Result<(f64, f64, usize)> {
+    let dir = std::env::temp_dir().join(format!("troupe-bench-serial-{}", std::process::id()));
+    std::fs::create_dir_all(&dir)?;
+    let link = dir.join("laser");
+    let stop = Arc::new(AtomicBool::new(false));
+    let (linked_tx, linked) = mpsc::channel();
+    let opts = EmulatorOptions {
+        link: link.clone(),
+        faults: Faults::default(),
+        seed: 1,
+    };
+    let flag = stop.clone();
+    let emu = std::thread::spawn(move || {
+        emulator::run_with(&opts, &mut Room, &flag, || {
+            let _ = linked_tx.send(());
+        })
+    });
+    linked.recv_timeout(Duration::from_secs(10))?;
+    let settings = Settings {
+        port: link,
+        connect_rates: vec![9600, 38400, 500000],
+        transfer_rate: baud,
+        retry: 0,
+        delay: Duration::ZERO,
+        high_avail: false,
+        config: ScanConfig {
+            res,
+            range_res: 1,
+            intensity: true,
+            min_angle: -9000,
+            max_angle: 9000,
+        },
+    };
+    let (tx, rx) = mpsc::channel();
+    let t0 = Instant::now();
+    let line = device::spawn(settings, tx, Waker::none())?;
+    let mut connect = None;
+    let mut first = None;
+    let mut scans = 0u64;
+    let mut values;
+    let deadline = Instant::now() + Duration::from_secs(30) + Duration::from_secs_f64(seconds);
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        match rx.recv_timeout(left) {
+            Ok(Update::Ready { .. }) => connect = Some(t0.elapsed().as_secs_f64()),
+            Ok(Update::Scan(raw, _)) => {
+                values = raw.values.len();
+                match first {
+                    None => first = Some(Instant::now()),
+                    Some(f) => {
+                        scans += 1;
+                        if f.elapsed().as_secs_f64() >= seconds {
+                            break;
+                        }
+                    }
+                }
+            }
+            Ok(Update::Lost(why)) => anyhow::bail!("{baud} baud: {why}"),
+            Ok(_) => {}
+            Err(_) => anyhow::bail!("{baud} baud: no scans within the deadline"),
+        }
+    }
+    let elapsed = first.map_or(1.0, |f| f.elapsed().as_secs_f64());
+    line.stop();
+    stop.store(true, Ordering::Relaxed);
+    let _ = emu.join();
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok((scans as f64 / elapsed, connect.unwrap_or(0.0), values))
+}

@@ -1,0 +1,189 @@
+//! Hardware drivers against their emulators, as processes: `troupe emulate`
+//! plays the device on a pseudo-terminal, `troupe launch` runs the driver
+//! from a .cfg naming the emulator's link as its `port`, and a client reads
+//! the devices over Zenoh.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use troupe_client::{Client, LaserProxy};
+use troupe_tests::{client_at, strings, token_events, Proc, DEADLINE};
+
+struct Rig {
+    dir: PathBuf,
+}
+
+impl Rig {
+    fn new(name: &str) -> Rig {
+        let dir = std::env::temp_dir().join(troupe_tests::unique_namespace(name));
+        std::fs::create_dir_all(&dir).unwrap();
+        Rig { dir }
+    }
+
+    /// `troupe emulate DEVICE --link DIR/dev FLAGS…`, once its line is linked.
+    fn emulate(&self, device: &str, flags: &[&str]) -> (Proc, PathBuf) {
+        let link = self.dir.join(device);
+        let mut args = strings(&["emulate", device, "--link", link.to_str().unwrap()]);
+        args.extend(strings(flags));
+        let mut p = Proc::troupe("emulate", &args);
+        let line = p.first_line();
+        assert!(line.starts_with("troupe emulate: "), "{line:?}");
+        (p, link)
+    }
+
+    fn cfg(&self, text: &str) -> PathBuf {
+        let p = self.dir.join("robot.cfg");
+        std::fs::write(&p, text).unwrap();
+        p
+    }
+}
+
+impl Drop for Rig {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+fn launch(cfg: &Path) -> (Proc, troupe_node::zenoh::Session) {
+    let ns = troupe_tests::unique_namespace("serial");
+    let mut launcher = troupe_tests::launch(&ns, cfg, &["--no-bridge"]);
+    let endpoint = launcher.endpoint("troupe launch: router listening on");
+    let session = client_at(&endpoint, &ns);
+    (launcher, session)
+}
+
+fn sick_cfg(link: &Path, extra: &str) -> String {
+    format!(
+        "driver ( name \"sicklms200\" provides [\"laser:0\"] port \"{}\" {extra} )\n",
+        link.display()
+    )
+}
+
+#[test]
+fn sicklms200_reads_scans_from_the_emulated_scanner() {
+    let rig = Rig::new("sick");
+    let (_emu, link) = rig.emulate("sicklms200", &[]);
+    let cfg = rig.cfg(&sick_cfg(
+        &link,
+        "transfer_rate 500000 resolution 100 pose [0.1 0 0]",
+    ));
+    let (mut launcher, session) = launch(&cfg);
+    let client = Client::with_session(session, 6665);
+    let laser = LaserProxy::new(&client, 0).unwrap();
+    let deadline = Instant::now() + DEADLINE;
+    let mut ids = Vec::new();
+    while ids.len() < 5 {
+        assert!(Instant::now() < deadline, "no scans: {}", launcher.stderr());
+        let _ = client.read_timeout(DEADLINE);
+        if let Some(s) = laser.scan() {
+            if ids.last() != Some(&s.id) {
+                ids.push(s.id);
+            }
+        }
+    }
+    assert!(ids.windows(2).all(|w| w[1] > w[0]), "ids count up: {ids:?}");
+    let s = laser.scan().unwrap();
+    assert_eq!(s.ranges.len(), 181);
+    assert!((s.min_angle + 90f32.to_radians()).abs() < 1e-4);
+    assert!((s.max_angle - 90f32.to_radians()).abs() < 1e-4);
+    assert!((s.resolution - 1f32.to_radians()).abs() < 1e-6);
+    // The emulated room: side walls 3 m to the right and left.
+    assert!((s.ranges[0] - 3.0).abs() < 0.002, "{}", s.ranges[0]);
+    assert!((s.ranges[180] - 3.0).abs() < 0.002, "{}", s.ranges[180]);
+    let geom = laser.request_geom().unwrap();
+    assert!((geom.pose.x - 0.1).abs() < 1e-9);
+    let mut config = laser.request_config().unwrap();
+    assert_eq!(config.max_range, 8.0);
+    assert!((config.scanning_frequency - 75.0).abs() < 1e-3);
+
+    // A client asks for 0.5°: the scanner is reconfigured, scans get 361 values.
+    config.resolution = 0.5f32.to_radians();
+    let now = laser.configure(config).unwrap();
+    assert!((now.resolution - 0.5f32.to_radians()).abs() < 1e-6);
+    let deadline = Instant::now() + DEADLINE;
+    while laser.count() != 361 {
+        assert!(
+            Instant::now() < deadline,
+            "no 0.5° scans: {}",
+            launcher.stderr()
+        );
+        let _ = client.read_timeout(DEADLINE);
+    }
+    launcher.terminate();
+    let log = launcher.stderr();
+    assert!(log.contains("switched to 500000 baud"), "{log}");
+}
+
+#[test]
+fn sicklms200_keeps_reading_through_line_faults() {
+    let rig = Rig::new("sick-faults");
+    let (mut emu, link) = rig.emulate(
+        "sicklms200",
+        &[
+            "--corrupt",
+            "0.2",
+            "--noise",
+            "0.2",
+            "--truncate",
+            "0.05",
+            "--seed",
+            "3",
+        ],
+    );
+    let cfg = rig.cfg(&sick_cfg(&link, "transfer_rate 500000 resolution 100"));
+    let (mut launcher, session) = launch(&cfg);
+    let client = Client::with_session(session, 6665);
+    let laser = LaserProxy::new(&client, 0).unwrap();
+    let deadline = Instant::now() + DEADLINE;
+    let mut seen = std::collections::BTreeSet::new();
+    while seen.len() < 40 {
+        assert!(
+            Instant::now() < deadline,
+            "scans stopped: {}",
+            launcher.stderr()
+        );
+        let _ = client.read_timeout(DEADLINE);
+        if let Some(s) = laser.scan() {
+            assert_eq!(s.ranges.len(), 181, "every published scan is whole");
+            seen.insert(s.id);
+        }
+    }
+    launcher.terminate();
+    let log = launcher.stderr();
+    assert!(
+        log.contains("bad checksum"),
+        "checksum errors are logged: {log}"
+    );
+    emu.terminate();
+    let emu_log = emu.stderr();
+    assert!(emu_log.contains("corrupted="), "{emu_log}");
+}
+
+#[test]
+fn an_unplugged_sicklms200_is_not_ready_until_it_is_back() {
+    let rig = Rig::new("sick-unplug");
+    let (_emu, link) = rig.emulate(
+        "sicklms200",
+        &["--unplug-after", "3", "--replug-after", "1"],
+    );
+    let cfg = rig.cfg(&sick_cfg(&link, "transfer_rate 38400 resolution 100"));
+    let (mut launcher, session) = launch(&cfg);
+    let tokens = token_events(&session);
+    let deadline = Instant::now() + DEADLINE * 2;
+    // The laser's token: up once streaming, withdrawn when unplugged, up again.
+    let mut events = Vec::new();
+    while events.len() < 3 {
+        let Ok(Some(t)) = tokens.recv_deadline(deadline) else {
+            panic!("token events so far {events:?}: {}", launcher.stderr());
+        };
+        if t.key_expr().as_str().contains("laser") {
+            events.push(t.kind());
+        }
+    }
+    use troupe_node::zenoh::sample::SampleKind::{Delete, Put};
+    assert_eq!(events, vec![Put, Delete, Put]);
+    launcher.terminate();
+    let log = launcher.stderr();
+    assert!(log.contains("laser lost"), "{log}");
+    assert!(log.contains("not ready: withdrew 6665:laser:0"), "{log}");
+}
