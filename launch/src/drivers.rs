@@ -42,6 +42,7 @@ pub fn all() -> Vec<Entry> {
             "global path planner feeding waypoints to a position2d",
         ),
         entry::<troupe_sicklms200::SickLms200>("the SICK LMS200 laser over a serial line"),
+        entry::<troupe_p2os::P2os>("Pioneer robots (P2OS/ARCOS) over a serial line"),
         entry::<troupe_stage::Stage>(
             "the 2D multi-robot simulator: a Stage world's robots and sensors",
         ),

@@ -14,6 +14,8 @@ use troupe_serial::Faults;
 pub enum Emulated {
     /// A SICK LMS200 laser scanner in a room with a drifting pillar.
     Sicklms200,
+    /// A Pioneer (ARCOS) robot with a sonar ring, in an 8 m × 6 m room.
+    P2os,
 }
 
 #[derive(Debug, Args)]
@@ -48,6 +50,9 @@ pub struct EmulateArgs {
     /// Plug it back in (a fresh power-up) SECS after unplugging.
     #[arg(long, value_name = "SECS", requires = "unplug_after")]
     pub replug_after: Option<f64>,
+    /// p2os: the robot's subclass (p3dx-sh, p3dx, p3at-sh, p3at, p2dx, p2de, p2at, amigo-sh, amigo).
+    #[arg(long, default_value = "p3dx-sh")]
+    pub subclass: String,
     /// Seed of the fault generator (runs with the same seed fail alike).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -114,6 +119,21 @@ pub fn run(a: EmulateArgs) -> anyhow::Result<()> {
                 tracing::info!("{} emulated; Ctrl-C stops it", emulator::KIND);
             })
             .with_context(|| format!("emulating a sicklms200 at {}", a.link.display()))?;
+        }
+        Emulated::P2os => {
+            use troupe_p2os::emulator;
+            let opts = emulator::EmulatorOptions {
+                link: a.link.clone(),
+                faults,
+                seed: a.seed,
+                subclass: a.subclass.clone(),
+                name: "Troupe".into(),
+            };
+            emulator::run_with(&opts, &stop, || {
+                banner("p2os", &a.link);
+                tracing::info!("a Pioneer {} emulated; Ctrl-C stops it", a.subclass);
+            })
+            .with_context(|| format!("emulating a p2os robot at {}", a.link.display()))?;
         }
     }
     Ok(())

@@ -187,3 +187,61 @@ fn an_unplugged_sicklms200_is_not_ready_until_it_is_back() {
     assert!(log.contains("laser lost"), "{log}");
     assert!(log.contains("not ready: withdrew 6665:laser:0"), "{log}");
 }
+
+/// A Pioneer with a SICK laser, as Player's pioneer.cfg lays it out, both
+/// emulated: the client reads a scan, enables the motors, drives, and sees
+/// odometry and sonar; when it stops commanding, the watchdog stops the robot.
+#[test]
+fn p2os_drives_the_emulated_pioneer_and_its_watchdog_stops_it() {
+    use troupe_client::{Position2dProxy, SonarProxy};
+    let rig = Rig::new("pioneer");
+    let (_robot, robot_link) = rig.emulate("p2os", &[]);
+    let (_laser, laser_link) = rig.emulate("sicklms200", &[]);
+    let cfg = rig.cfg(&format!(
+        "driver ( name \"p2os\" port \"{}\" watchdog 1.0\n  provides [\"odometry:::position2d:0\" \"compass:::position2d:1\" \"gyro:::position2d:2\" \"sonar:0\" \"power:0\" \"bumper:0\" \"aio:0\" \"dio:0\" \"gripper:::gripper:0\"] )\n{}",
+        robot_link.display(),
+        sick_cfg(&laser_link, "")
+    ));
+    let (mut launcher, session) = launch(&cfg);
+    let client = Client::with_session(session, 6665);
+    let base = Position2dProxy::new(&client, 0).unwrap();
+    let sonar = SonarProxy::new(&client, 0).unwrap();
+    let laser = LaserProxy::new(&client, 0).unwrap();
+    let deadline = Instant::now() + DEADLINE;
+    while base.data().is_none() || sonar.count() == 0 || laser.count() == 0 {
+        assert!(Instant::now() < deadline, "no data: {}", launcher.stderr());
+        let _ = client.read_timeout(DEADLINE);
+    }
+    assert_eq!(sonar.count(), 16, "a p3dx-sh's ring");
+    assert_eq!(laser.count(), 361, "0.5° by default");
+    assert_eq!(base.x(), 0.0);
+
+    base.set_motor_enable(true).unwrap();
+    let deadline = Instant::now() + DEADLINE;
+    while base.x() < 0.5 {
+        assert!(
+            Instant::now() < deadline,
+            "odometry stuck at {}: {}",
+            base.x(),
+            launcher.stderr()
+        );
+        base.set_speed(0.4, 0.0).unwrap();
+        let _ = client.read_timeout(DEADLINE);
+    }
+    assert!((base.x_speed() - 0.4).abs() < 0.03, "{}", base.x_speed());
+    assert!(base.y().abs() < 0.01 && base.yaw().abs() < 0.01);
+    // Silence from the client: within the watchdog period (1 s) the robot stops.
+    let deadline = Instant::now() + DEADLINE;
+    while base.x_speed() != 0.0 {
+        assert!(
+            Instant::now() < deadline,
+            "never stopped: {}",
+            launcher.stderr()
+        );
+        let _ = client.read_timeout(DEADLINE);
+    }
+    launcher.terminate();
+    let log = launcher.stderr();
+    assert!(log.contains("watchdog"), "{log}");
+    assert!(log.contains("robot stopped and closed"), "{log}");
+}

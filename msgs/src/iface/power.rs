@@ -4,6 +4,17 @@ use serde::{Deserialize, Serialize};
 
 use crate::message;
 
+/// [`Data::valid`]: `volts` is set.
+pub const VALID_VOLTS: u32 = 1;
+/// [`Data::valid`]: `watts` is set.
+pub const VALID_WATTS: u32 = 2;
+/// [`Data::valid`]: `joules` is set.
+pub const VALID_JOULES: u32 = 4;
+/// [`Data::valid`]: `percent` is set.
+pub const VALID_PERCENT: u32 = 8;
+/// [`Data::valid`]: `charging` is set.
+pub const VALID_CHARGING: u32 = 16;
+
 /// Battery state (`PLAYER_POWER_DATA_STATE`); `valid` says which fields are set.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct Data {

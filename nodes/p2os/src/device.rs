@@ -1,0 +1,503 @@
+//! The driver's side of the line: synchronises with the robot, opens it,
+//! and streams SIPs, on a thread of its own.
+//!
+//! Player's `MainSetup`: at each baud rate in turn (9600, 38400, 19200,
+//! 115200, 57600) send SYNC0 up to five times until the robot echoes it;
+//! then SYNC1, then SYNC2, whose reply names the robot (name, class,
+//! subclass). The first data byte of each reply drives the state, as in
+//! Player; a robot still open from an earlier client (it answers with
+//! SIPs) is sent CLOSE once and synchronised afresh. Then OPEN, PULSE, the
+//! first SIP, and SONAR on when sonars are provided. Unlike Player, every
+//! read has a deadline: a robot silent for a second ends the session, and
+//! the driver reconnects.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, TryRecvError};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use troupe_node::Waker;
+use troupe_serial::{Framer, LineError, Port};
+
+use crate::packet::{self, cmd, PacketCodec, Sip};
+use crate::params::{self, Params};
+
+/// Player's baud rates, in the order it tries them.
+pub const BAUD_RATES: [u32; 5] = [9600, 38400, 19200, 115200, 57600];
+/// How long to wait between two connection attempts.
+pub const RECONNECT_DELAY: Duration = Duration::from_secs(2);
+/// A robot that sends no SIP for this long is lost (it sends ten a second).
+pub const SILENCE: Duration = Duration::from_secs(1);
+
+/// How to drive the robot.
+#[derive(Debug, Clone)]
+pub struct Settings {
+    /// The serial device.
+    pub port: PathBuf,
+    /// Turn the sonars on.
+    pub sonar: bool,
+    /// VEL2 wheel commands (Player's `direct_wheel_vel_control`) or VEL + RVEL.
+    pub direct_wheel: bool,
+    /// Speed limit, mm/s.
+    pub max_speed: i32,
+    /// Turn-rate limit, deg/s.
+    pub max_turn: i32,
+    /// Never drive the wheels in opposite directions (Player's `use_vel_band`).
+    pub vel_band: bool,
+    /// Send PULSE this often (Player's `pulse`).
+    pub pulse: Option<Duration>,
+    /// BUMP_STALL setting 0–3 (Player's `bumpstall`), if any.
+    pub bumpstall: Option<u8>,
+}
+
+/// What the line thread tells the driver.
+#[derive(Debug)]
+pub enum Update {
+    /// Synchronised and open.
+    Ready {
+        /// Name, class and subclass from the SYNC2 reply.
+        name: (String, String, String),
+        /// The parameters chosen for the subclass.
+        params: &'static Params,
+        /// The line's rate.
+        baud: u32,
+    },
+    /// A standard SIP.
+    Sip(Sip),
+    /// The session ended; the thread retries after [`RECONNECT_DELAY`].
+    Lost(String),
+}
+
+/// What the driver asks of the line thread.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Order {
+    /// Velocity: mm/s and deg/s.
+    Vel {
+        /// Forward speed, mm/s.
+        speed: i32,
+        /// Turn rate, deg/s.
+        turn: i32,
+    },
+    /// Motors on or off.
+    Enable(bool),
+    /// Odometry to zero (SETO).
+    ResetOdom,
+    /// VEL2 (true) or VEL + RVEL (false).
+    DirectWheel(bool),
+    /// STOP, CLOSE and end.
+    Stop,
+}
+
+/// A running line thread.
+#[derive(Debug)]
+pub struct LineThread {
+    /// Orders for the thread.
+    pub orders: Sender<Order>,
+    abort: Arc<AtomicBool>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl LineThread {
+    /// Stops the robot (STOP, CLOSE) and the thread.
+    pub fn stop(mut self) {
+        self.abort.store(true, Ordering::Relaxed);
+        let _ = self.orders.send(Order::Stop);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+/// Starts the line thread.
+///
+/// # Errors
+///
+/// When the thread cannot be started.
+pub fn spawn(
+    settings: Settings,
+    updates: Sender<Update>,
+    waker: Waker,
+) -> std::io::Result<LineThread> {
+    let (orders, orders_rx) = std::sync::mpsc::channel();
+    let abort = Arc::new(AtomicBool::new(false));
+    let flag = abort.clone();
+    let thread = std::thread::Builder::new()
+        .name("p2os line".into())
+        .spawn(move || run(settings, &updates, &orders_rx, &waker, &flag))?;
+    Ok(LineThread {
+        orders,
+        abort,
+        thread: Some(thread),
+    })
+}
+
+#[derive(Debug)]
+enum Fail {
+    Line(LineError),
+    NoSync,
+    NoReply(&'static str),
+    Silent,
+    Stopped,
+}
+
+impl std::fmt::Display for Fail {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Fail::Line(e) => write!(f, "{e}"),
+            Fail::NoSync => write!(
+                f,
+                "no answer to SYNC0 at 9600, 38400, 19200, 115200 or 57600 baud (is the robot on and on this port?)"
+            ),
+            Fail::NoReply(what) => write!(f, "no reply to {what}"),
+            Fail::Silent => write!(f, "no SIP for {} s", SILENCE.as_secs_f64()),
+            Fail::Stopped => f.write_str("stopped"),
+        }
+    }
+}
+
+impl From<LineError> for Fail {
+    fn from(e: LineError) -> Self {
+        Fail::Line(e)
+    }
+}
+
+fn run(
+    mut settings: Settings,
+    updates: &Sender<Update>,
+    orders: &Receiver<Order>,
+    waker: &Waker,
+    abort: &AtomicBool,
+) {
+    let send = |u: Update| {
+        let _ = updates.send(u);
+        waker.wake();
+    };
+    let mut sessions = 0u64;
+    loop {
+        sessions += 1;
+        let mut s = Session {
+            settings: &mut settings,
+            port: None,
+            framer: Framer::new(PacketCodec),
+            orders,
+            abort,
+            params: &params::ROBOTS[0],
+        };
+        let result = s.run(&send);
+        let stats = s.framer.stats;
+        match result {
+            Ok(()) | Err(Fail::Stopped) => return,
+            Err(e) => {
+                tracing::warn!(
+                    port = %settings.port.display(),
+                    session = sessions,
+                    noise_bytes = stats.noise,
+                    checksum_errors = stats.checksum,
+                    malformed = stats.malformed,
+                    "robot not ready: {e}; retrying in {} s",
+                    RECONNECT_DELAY.as_secs()
+                );
+                send(Update::Lost(e.to_string()));
+            }
+        }
+        let until = Instant::now() + RECONNECT_DELAY;
+        loop {
+            match orders.recv_timeout(until.saturating_duration_since(Instant::now())) {
+                Ok(Order::Stop) | Err(RecvTimeoutError::Disconnected) => return,
+                Ok(Order::DirectWheel(d)) => settings.direct_wheel = d,
+                Ok(_) => {}
+                Err(RecvTimeoutError::Timeout) => break,
+            }
+        }
+    }
+}
+
+struct Session<'a> {
+    settings: &'a mut Settings,
+    port: Option<Port>,
+    framer: Framer<PacketCodec>,
+    orders: &'a Receiver<Order>,
+    abort: &'a AtomicBool,
+    params: &'static Params,
+}
+
+impl Session<'_> {
+    fn port(&mut self) -> &mut Port {
+        self.port
+            .as_mut()
+            .expect("the port is open during a session")
+    }
+
+    fn send(&mut self, bytes: &[u8]) -> Result<(), Fail> {
+        self.port().send(bytes)?;
+        Ok(())
+    }
+
+    /// The next packet within `timeout`, `None` if none came.
+    fn read(&mut self, timeout: Duration) -> Result<Option<Vec<u8>>, Fail> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if self.abort.load(Ordering::Relaxed) {
+                return Err(Fail::Stopped);
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Ok(None);
+            }
+            let port = self.port.as_mut().expect("open");
+            if let Some(p) = self
+                .framer
+                .read(port, left.min(Duration::from_millis(100)))?
+            {
+                return Ok(Some(p));
+            }
+        }
+    }
+
+    fn sync(&mut self) -> Result<(String, String, String), Fail> {
+        let mut closed_once = false;
+        for &baud in &BAUD_RATES {
+            self.port().set_baud(baud)?;
+            self.port().discard_input();
+            self.framer.clear();
+            let mut step = cmd::SYNC0;
+            let mut tries = 0;
+            while tries < 5 {
+                self.send(&packet::command(step))?;
+                let reply = self.read(Duration::from_millis(400))?;
+                let Some(data) = reply else {
+                    if step == cmd::SYNC0 {
+                        tries += 1;
+                        continue;
+                    }
+                    return Err(Fail::NoReply(if step == cmd::SYNC1 {
+                        "SYNC1"
+                    } else {
+                        "SYNC2"
+                    }));
+                };
+                match data.first() {
+                    Some(0) => step = cmd::SYNC1,
+                    Some(1) => step = cmd::SYNC2,
+                    Some(2) => {
+                        tracing::info!("synchronised at {baud} baud");
+                        return Ok(packet::parse_sync2(&data));
+                    }
+                    _ if !closed_once => {
+                        // A robot still open from an earlier client.
+                        tracing::info!("robot already open: closing it first");
+                        closed_once = true;
+                        self.send(&packet::command(cmd::CLOSE))?;
+                        std::thread::sleep(Duration::from_millis(400));
+                        self.port().discard_input();
+                        self.framer.clear();
+                        step = cmd::SYNC0;
+                    }
+                    _ => tries += 1,
+                }
+            }
+        }
+        Err(Fail::NoSync)
+    }
+
+    fn run(&mut self, send: &impl Fn(Update)) -> Result<(), Fail> {
+        self.port = Some(Port::open(&self.settings.port, BAUD_RATES[0])?);
+        let (name, class, subclass) = self.sync()?;
+        self.params = match params::find(&subclass) {
+            Some(p) => p,
+            None => {
+                tracing::warn!(
+                    "unknown robot subclass `{subclass}`: using {}'s parameters, as Player does",
+                    params::ROBOTS[0].subclass
+                );
+                &params::ROBOTS[0]
+            }
+        };
+        tracing::info!("connected to {name}, a {class} {subclass}");
+        self.send(&packet::command(cmd::OPEN))?;
+        self.send(&packet::command(cmd::PULSE))?;
+        let first = loop {
+            match self.read(SILENCE)? {
+                Some(d) if Sip::is_standard(&d) => break d,
+                Some(_) => continue,
+                None => return Err(Fail::NoReply("OPEN (no SIP)")),
+            }
+        };
+        self.send(&packet::command_int(
+            cmd::SONAR,
+            i32::from(self.settings.sonar),
+        ))?;
+        if let Some(b) = self.settings.bumpstall {
+            self.send(&packet::command_int(44, i32::from(b)))?;
+        }
+        let baud = self.port().baud();
+        send(Update::Ready {
+            name: (name, class, subclass),
+            params: self.params,
+            baud,
+        });
+        self.forward(&first, send);
+        self.stream(send)
+    }
+
+    fn forward(&mut self, data: &[u8], send: &impl Fn(Update)) {
+        match Sip::decode(data) {
+            Ok(sip) => send(Update::Sip(sip)),
+            Err(e) => tracing::warn!("SIP dropped: {e}"),
+        }
+    }
+
+    fn stream(&mut self, send: &impl Fn(Update)) -> Result<(), Fail> {
+        let mut last_sip = Instant::now();
+        let mut last_pulse = Instant::now();
+        loop {
+            loop {
+                match self.orders.try_recv() {
+                    Ok(Order::Stop) | Err(TryRecvError::Disconnected) => {
+                        self.goodbye();
+                        return Err(Fail::Stopped);
+                    }
+                    Ok(o) => {
+                        self.obey(o)?;
+                        last_pulse = Instant::now();
+                    }
+                    Err(TryRecvError::Empty) => break,
+                }
+            }
+            if let Some(p) = self.settings.pulse {
+                if last_pulse.elapsed() >= p {
+                    self.send(&packet::command(cmd::PULSE))?;
+                    last_pulse = Instant::now();
+                }
+            }
+            let packet = match self.read(Duration::from_millis(50)) {
+                Err(Fail::Stopped) => {
+                    self.goodbye();
+                    return Err(Fail::Stopped);
+                }
+                other => other?,
+            };
+            match packet {
+                Some(d) if Sip::is_standard(&d) => {
+                    last_sip = Instant::now();
+                    self.forward(&d, send);
+                }
+                Some(d) => tracing::debug!(
+                    "ignored packet type 0x{:02X}",
+                    d.first().copied().unwrap_or(0)
+                ),
+                None if last_sip.elapsed() > SILENCE => return Err(Fail::Silent),
+                None => {}
+            }
+        }
+    }
+
+    /// Player's `MainQuit`: STOP, then CLOSE.
+    fn goodbye(&mut self) {
+        let stop = self.send(&packet::command(cmd::STOP));
+        let close = self.send(&packet::command(cmd::CLOSE));
+        match stop.and(close) {
+            Ok(()) => tracing::info!("robot stopped and closed"),
+            Err(e) => tracing::warn!("could not stop the robot: {e}"),
+        }
+    }
+
+    fn obey(&mut self, o: Order) -> Result<(), Fail> {
+        match o {
+            Order::Enable(on) => self.send(&packet::command_int(cmd::ENABLE, i32::from(on))),
+            Order::ResetOdom => self.send(&packet::frame(&[cmd::SETO, packet::ARGINT])),
+            Order::DirectWheel(d) => {
+                self.settings.direct_wheel = d;
+                Ok(())
+            }
+            Order::Vel { speed, turn } => {
+                let bytes = velocity(self.settings, self.params, speed, turn);
+                for b in bytes {
+                    self.send(&b)?;
+                }
+                Ok(())
+            }
+            Order::Stop => Ok(()),
+        }
+    }
+}
+
+/// The packets for a velocity command (Player's `HandlePositionCommand`).
+pub fn velocity(s: &Settings, p: &Params, speed: i32, turn: i32) -> Vec<Vec<u8>> {
+    if !s.direct_wheel {
+        let v = speed.clamp(-s.max_speed, s.max_speed);
+        let w = turn.clamp(-s.max_turn, s.max_turn);
+        return vec![
+            packet::command_int(cmd::VEL, v),
+            packet::command_int(cmd::RVEL, w),
+        ];
+    }
+    let max = f64::from(s.max_speed);
+    let rot = f64::from(turn).to_radians() / p.diff_conv;
+    let (mut left, mut right) = (f64::from(speed) - rot, f64::from(speed) + rot);
+    if left.abs() > max {
+        right *= max / left.abs();
+        left = max.copysign(left);
+    }
+    if right.abs() > max {
+        left *= max / right.abs();
+        right = max.copysign(right);
+    }
+    if s.vel_band && left * right < 0.0 {
+        if left + right >= 0.0 {
+            if left < 0.0 {
+                left = 0.0;
+            } else {
+                right = 0.0;
+            }
+        } else if left > 0.0 {
+            left = 0.0;
+        } else {
+            right = 0.0;
+        }
+    }
+    let unit = |v: f64| (v / p.vel2_div).trunc() as i32;
+    vec![packet::vel2(unit(right), unit(left))]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn settings() -> Settings {
+        Settings {
+            port: PathBuf::new(),
+            sonar: true,
+            direct_wheel: true,
+            max_speed: 500,
+            max_turn: 100,
+            vel_band: false,
+            pulse: None,
+            bumpstall: None,
+        }
+    }
+
+    /// Player's worked example: p3dx-sh, 0.3 m/s and 0.5 rad/s (29°/s).
+    #[test]
+    fn velocity_becomes_vel2_or_vel_and_rvel() {
+        let p = params::find("p3dx-sh").unwrap();
+        let s = settings();
+        assert_eq!(velocity(&s, p, 300, 29), vec![packet::vel2(19, 10)]);
+        // Clamped to the speed limit, keeping the ratio.
+        let fast = velocity(&s, p, 2000, 0);
+        assert_eq!(fast, vec![packet::vel2(25, 25)]);
+        let s = Settings {
+            direct_wheel: false,
+            ..settings()
+        };
+        assert_eq!(
+            velocity(&s, p, -200, -300),
+            vec![
+                packet::command_int(cmd::VEL, -200),
+                packet::command_int(cmd::RVEL, -100)
+            ]
+        );
+    }
+}

@@ -1,0 +1,379 @@
+//! An emulated Pioneer (ARCOS firmware) on a pseudo-terminal.
+//!
+//! It answers SYNC0/1/2 with echoes and a SYNC2 reply naming the robot,
+//! opens on OPEN, then sends a standard SIP every 100 ms: odometry from
+//! differential-drive kinematics in an 8 m × 6 m room (the robot starts in
+//! the middle facing +x and stalls against the walls), wheel velocities,
+//! battery, stall bits and, when on, its sonar ring's ranges to the walls.
+//! It obeys ENABLE, SETO, VEL2, VEL/RVEL, SONAR, STOP and CLOSE, and
+//! stops the wheels when nothing arrives for 2 s, as ARCOS's watchdog does.
+
+use std::f64::consts::TAU;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use troupe_serial::{EmuLine, Faults, Framer, LineEvent};
+
+use crate::packet::{self, cmd, PacketCodec, Sip};
+use crate::params::{self, Params};
+
+/// ARCOS's SIP cycle.
+pub const CYCLE: Duration = Duration::from_millis(100);
+/// ARCOS's default watchdog.
+pub const WATCHDOG: Duration = Duration::from_secs(2);
+/// The room's walls: x from −4 to 4 m, y from −3 to 3 m.
+const ROOM: (f64, f64, f64, f64) = (-4.0, 4.0, -3.0, 3.0);
+/// The robot's radius for collisions, m.
+const RADIUS: f64 = 0.25;
+/// The sonars' reach, m.
+const SONAR_MAX: f64 = 5.0;
+
+/// What the emulator is told.
+#[derive(Debug, Clone)]
+pub struct EmulatorOptions {
+    /// The path to link the pseudo-terminal at.
+    pub link: PathBuf,
+    /// Faults to inject.
+    pub faults: Faults,
+    /// Seed of the fault generator.
+    pub seed: u64,
+    /// The subclass to report (a key of Player's robot table).
+    pub subclass: String,
+    /// The robot's name.
+    pub name: String,
+}
+
+/// Counts for the log.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct EmulatorStats {
+    /// Packets from the driver.
+    pub packets: u64,
+    /// SIPs sent.
+    pub sips: u64,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum State {
+    Unsynced,
+    /// SYNC2 answered: the next `[1]` is OPEN.
+    Synced,
+    Open,
+}
+
+#[derive(Debug)]
+struct Robot {
+    params: &'static Params,
+    state: State,
+    enabled: bool,
+    sonar: bool,
+    /// True pose in the room: m, m, rad.
+    pose: (f64, f64, f64),
+    /// Odometry since the last SETO: mm, mm, rad.
+    odo: (f64, f64, f64),
+    /// Wheel speeds commanded, mm/s.
+    left: f64,
+    right: f64,
+    stalled: bool,
+    last_heard: Instant,
+}
+
+impl Robot {
+    fn power_up(params: &'static Params) -> Robot {
+        Robot {
+            params,
+            state: State::Unsynced,
+            enabled: false,
+            sonar: false,
+            pose: (0.0, 0.0, 0.0),
+            odo: (0.0, 0.0, 0.0),
+            left: 0.0,
+            right: 0.0,
+            stalled: false,
+            last_heard: Instant::now(),
+        }
+    }
+
+    fn wheels_from(&mut self, speed: f64, turn_deg: f64) {
+        let rot = turn_deg.to_radians() / self.params.diff_conv;
+        self.left = speed - rot;
+        self.right = speed + rot;
+    }
+
+    /// Moves for `dt`, stalling at the walls.
+    fn step(&mut self, dt: f64) {
+        let (l, r) = if self.enabled {
+            (self.left, self.right)
+        } else {
+            (0.0, 0.0)
+        };
+        let v = (l + r) / 2.0 / 1000.0;
+        let w = (r - l) * self.params.diff_conv / 2.0;
+        let (x, y, a) = self.pose;
+        let (nx, ny) = (x + v * dt * a.cos(), y + v * dt * a.sin());
+        let (x0, x1, y0, y1) = ROOM;
+        let inside = |x: f64, y: f64| {
+            x - RADIUS > x0 && x + RADIUS < x1 && y - RADIUS > y0 && y + RADIUS < y1
+        };
+        self.stalled = v != 0.0 && !inside(nx, ny);
+        let (dx, dy) = if self.stalled {
+            (0.0, 0.0)
+        } else {
+            (nx - x, ny - y)
+        };
+        let na = (a + w * dt).rem_euclid(TAU);
+        self.pose = (x + dx, y + dy, na);
+        // Odometry sees the same motion in its own frame.
+        let (ox, oy, oa) = self.odo;
+        let dist = (dx * a.cos() + dy * a.sin()) * 1000.0;
+        self.odo = (ox + dist * oa.cos(), oy + dist * oa.sin(), oa + w * dt);
+    }
+
+    fn sip(&self) -> Sip {
+        let p = self.params;
+        let counter = |mm: f64| ((mm / p.dist_conv).round() as i64).rem_euclid(32768) as u16;
+        let th = ((self.odo.2 / p.angle_conv).round() as i64 + 2048).rem_euclid(4096) - 2048;
+        let (l, r) = if self.enabled {
+            (self.left, self.right)
+        } else {
+            (0.0, 0.0)
+        };
+        let (l, r) = if self.stalled { (0.0, 0.0) } else { (l, r) };
+        let sonars = if self.sonar {
+            let (x, y, a) = self.pose;
+            p.sonars
+                .iter()
+                .enumerate()
+                .map(|(i, &(sx, sy, sa))| {
+                    let (sx, sy) = (f64::from(sx) / 1000.0, f64::from(sy) / 1000.0);
+                    let wx = x + sx * a.cos() - sy * a.sin();
+                    let wy = y + sx * a.sin() + sy * a.cos();
+                    let d = room_range(wx, wy, a + f64::from(sa).to_radians()).min(SONAR_MAX);
+                    (i as u8, (d * 1000.0 / p.range_conv).round() as u16)
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        Sip {
+            kind: if l != 0.0 || r != 0.0 { 0x33 } else { 0x32 },
+            xpos: counter(self.odo.0),
+            ypos: counter(self.odo.1),
+            th: th as i16,
+            lvel: (l / p.vel_conv).round() as i16,
+            rvel: (r / p.vel_conv).round() as i16,
+            battery: 123,
+            lstall: u8::from(self.stalled),
+            rstall: u8::from(self.stalled),
+            control: 0,
+            flags: u16::from(self.enabled),
+            compass: 0,
+            sonars,
+            ..Sip::default()
+        }
+    }
+}
+
+/// Distance from (x, y) along heading `a` to the room's walls.
+fn room_range(x: f64, y: f64, a: f64) -> f64 {
+    let (dx, dy) = (a.cos(), a.sin());
+    let (x0, x1, y0, y1) = ROOM;
+    let mut d = f64::INFINITY;
+    for (den, lim) in [(dx, x0 - x), (dx, x1 - x), (dy, y0 - y), (dy, y1 - y)] {
+        if den.abs() > 1e-12 && lim / den > 0.0 {
+            d = d.min(lim / den);
+        }
+    }
+    d
+}
+
+/// Runs the emulated robot until `stop` is set, calling `linked` once its
+/// line is linked.
+///
+/// # Errors
+///
+/// An unknown subclass, or a pseudo-terminal that cannot be opened or linked.
+pub fn run_with(
+    opts: &EmulatorOptions,
+    stop: &AtomicBool,
+    linked: impl FnOnce(),
+) -> std::io::Result<EmulatorStats> {
+    let params = params::find(&opts.subclass).ok_or_else(|| {
+        let known: Vec<&str> = params::ROBOTS.iter().map(|p| p.subclass).collect();
+        std::io::Error::other(format!(
+            "unknown subclass `{}`; known: {}",
+            opts.subclass,
+            known.join(", ")
+        ))
+    })?;
+    let mut line = EmuLine::open(&opts.link, opts.faults.clone(), opts.seed)?;
+    linked();
+    // A Pioneer's serial port speaks 9600 baud unless its FLASH says otherwise.
+    let baud = 9600;
+    let mut robot = Robot::power_up(params);
+    let mut framer = Framer::new(PacketCodec);
+    let mut stats = EmulatorStats::default();
+    let mut next_sip = Instant::now();
+    let mut buf = [0u8; 512];
+    let mut barked = false;
+    while !stop.load(Ordering::Relaxed) {
+        let wait = next_sip
+            .saturating_duration_since(Instant::now())
+            .min(CYCLE);
+        match line.recv(&mut buf, baud, wait)? {
+            LineEvent::Received(n) => {
+                framer.push(&buf[..n]);
+                while let Some(p) = framer.next_frame() {
+                    stats.packets += 1;
+                    robot.last_heard = Instant::now();
+                    barked = false;
+                    obey(&mut robot, &p, &mut line, baud, opts)?;
+                }
+            }
+            LineEvent::Replugged => {
+                robot = Robot::power_up(params);
+                framer.clear();
+            }
+            LineEvent::Idle | LineEvent::Unplugged => {}
+        }
+        let now = Instant::now();
+        if robot.state == State::Open && now >= next_sip {
+            if robot.last_heard.elapsed() > WATCHDOG && (robot.left != 0.0 || robot.right != 0.0) {
+                if !barked {
+                    tracing::warn!(
+                        "watchdog: nothing from the client for {} s; wheels stopped",
+                        WATCHDOG.as_secs()
+                    );
+                    barked = true;
+                }
+                robot.left = 0.0;
+                robot.right = 0.0;
+            }
+            robot.step(CYCLE.as_secs_f64());
+            line.send(&robot.sip().encode(), baud)?;
+            stats.sips += 1;
+            next_sip += CYCLE;
+            if next_sip < now {
+                next_sip = now + CYCLE;
+            }
+        } else if robot.state != State::Open {
+            next_sip = now + CYCLE;
+        }
+    }
+    tracing::info!(
+        packets = stats.packets,
+        sips = stats.sips,
+        wrong_baud_bytes = line.wrong_baud,
+        noise = line.injected.noise,
+        dropped = line.injected.dropped,
+        corrupted = line.injected.corrupted,
+        truncated = line.injected.truncated,
+        pose = ?robot.pose,
+        "emulated p2os robot stopped"
+    );
+    Ok(stats)
+}
+
+fn obey(
+    robot: &mut Robot,
+    p: &[u8],
+    line: &mut EmuLine,
+    baud: u32,
+    opts: &EmulatorOptions,
+) -> std::io::Result<()> {
+    let Some(&c) = p.first() else {
+        return Ok(());
+    };
+    match (robot.state, c) {
+        (State::Unsynced | State::Synced, cmd::SYNC0) => {
+            robot.state = State::Unsynced;
+            line.send(&packet::command(cmd::SYNC0), baud)
+        }
+        (State::Unsynced, cmd::SYNC1) => line.send(&packet::command(cmd::SYNC1), baud),
+        (State::Unsynced, cmd::SYNC2) => {
+            robot.state = State::Synced;
+            line.send(
+                &packet::sync2_reply(&opts.name, "Pioneer", robot.params.subclass),
+                baud,
+            )
+        }
+        (State::Synced, cmd::OPEN) => {
+            robot.state = State::Open;
+            tracing::info!("opened by the client");
+            Ok(())
+        }
+        (State::Open, cmd::CLOSE) => {
+            tracing::info!("closed by the client");
+            robot.state = State::Unsynced;
+            robot.enabled = false;
+            robot.left = 0.0;
+            robot.right = 0.0;
+            Ok(())
+        }
+        (State::Open, cmd::ENABLE) => {
+            robot.enabled = packet::argument(p) != 0;
+            Ok(())
+        }
+        (State::Open, cmd::SETO) => {
+            robot.odo = (0.0, 0.0, 0.0);
+            Ok(())
+        }
+        (State::Open, cmd::SONAR) => {
+            robot.sonar = packet::argument(p) != 0;
+            Ok(())
+        }
+        (State::Open, cmd::STOP) => {
+            robot.left = 0.0;
+            robot.right = 0.0;
+            Ok(())
+        }
+        (State::Open, cmd::VEL) => {
+            let turn = (robot.right - robot.left) * robot.params.diff_conv / 2.0;
+            robot.wheels_from(f64::from(packet::argument(p)), turn.to_degrees());
+            Ok(())
+        }
+        (State::Open, cmd::RVEL) => {
+            let speed = (robot.left + robot.right) / 2.0;
+            robot.wheels_from(speed, f64::from(packet::argument(p)));
+            Ok(())
+        }
+        (State::Open, cmd::VEL2) if p.len() >= 4 => {
+            robot.right = f64::from(p[2] as i8) * robot.params.vel2_div;
+            robot.left = f64::from(p[3] as i8) * robot.params.vel2_div;
+            Ok(())
+        }
+        _ => Ok(()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_robot_drives_turns_and_stalls_at_a_wall() {
+        let mut r = Robot::power_up(params::find("p3dx-sh").unwrap());
+        r.enabled = true;
+        r.wheels_from(500.0, 0.0);
+        for _ in 0..10 {
+            r.step(0.1);
+        }
+        assert!((r.pose.0 - 0.5).abs() < 1e-9 && r.odo.0 > 499.0);
+        assert_eq!(r.sip().kind, 0x33);
+        for _ in 0..200 {
+            r.step(0.1);
+        }
+        assert!(r.stalled && r.pose.0 < 4.0 - RADIUS);
+        assert_eq!(r.sip().lstall & 1, 1);
+        r.wheels_from(0.0, 90.0);
+        for _ in 0..10 {
+            r.step(0.1);
+        }
+        assert!(
+            (r.pose.2 - std::f64::consts::FRAC_PI_2).abs() < 0.01,
+            "{:?}",
+            r.pose
+        );
+        assert!((room_range(0.0, 0.0, 0.0) - 4.0).abs() < 1e-9);
+    }
+}

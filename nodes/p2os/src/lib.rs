@@ -1,0 +1,518 @@
+//! Player's `p2os`: Pioneer robots (P2OS and ARCOS firmware) over a serial line.
+//!
+//! ```text
+//! driver ( name "p2os" port "/dev/ttyUSB0"
+//!          provides ["odometry:::position2d:0" "compass:::position2d:1"
+//!                    "sonar:0" "power:0" "bumper:0" "aio:0" "dio:0"] )
+//! ```
+//!
+//! | | |
+//! |---|---|
+//! | provides | `position2d` (the first one, or keyed `odometry`: odometry and velocity commands), `compass:::position2d`, `sonar`, `power`, `bumper`, `aio`, `dio`; accessories Player offered (`gyro:::position2d`, `gripper`, `blobfinder`, `sound`…) are declared and stay silent, with a warning |
+//! | requires | none |
+//! | options | Player's: `port` ("/dev/ttyS0"), `max_xspeed` (0.5 m/s), `max_yawspeed` (100°/s), `direct_wheel_vel_control` (1), `use_vel_band` (0), `pulse` (−1: off), `bumpstall` (−1: leave); Troupe's `watchdog` (2 s) |
+//!
+//! # Behavior
+//!
+//! - The line runs on a thread of its own ([`device`]): Player's baud-rate
+//!   search and SYNC0/1/2 handshake, OPEN, then the robot's SIPs, ten a
+//!   second. Each SIP publishes odometry (x, y, yaw from the wheel encoders'
+//!   15-bit counters, velocities, stall), sonar ranges (sticky: each SIP
+//!   brings some), battery, bumpers, the analog and digital inputs.
+//! - The motors start disabled, as Player leaves them: a client enables
+//!   them with the `motor_power` request. Velocity commands become VEL2
+//!   wheel commands (or VEL + RVEL), limited by `max_xspeed`/`max_yawspeed`.
+//! - `watchdog`: when no velocity command has come for that long while the
+//!   robot was told to move, the driver stops it (0 turns this off; the
+//!   robot's own firmware watchdog still stops it when the line goes quiet).
+//!   On shutdown it sends STOP and CLOSE, as Player's `MainQuit`.
+//! - The devices are not ready (liveliness withdrawn) until the robot is
+//!   open, and again whenever the line is lost or the robot falls silent
+//!   for a second; the driver resynchronises every 2 s, logging why.
+//! - Requests: position2d `geom` (Player's pose (−0.1, 0) and the robot's
+//!   size), `motor_power`, `set_odom`, `reset_odom` (SETO), `velocity_mode`;
+//!   sonar `geom` (the subclass's sonar ring); bumper `geom`.
+//! - Differences from Player, on purpose: positions use all 15 bits of the
+//!   counters (Player masked 12 and dropped steps over 100 mm, so above
+//!   1 m/s its odometry lost distance); yaw keeps the counter's resolution
+//!   instead of whole degrees; every read has a deadline.
+
+pub mod device;
+pub mod emulator;
+pub mod packet;
+pub mod params;
+
+use std::path::PathBuf;
+use std::sync::mpsc::{self, Receiver};
+use std::time::Duration;
+
+use serde::Deserialize;
+use troupe_geom::Pose;
+use troupe_msgs::{
+    aio, bumper, common, dio, position2d, power, sonar, Device, Interface, Pose2d, Pose3d, Size3d,
+};
+use troupe_node::{Ctx, Driver, Event, NodeError, Result, Section, Unit};
+
+use crate::device::{LineThread, Order, Settings, Update};
+use crate::packet::Sip;
+use crate::params::Params;
+
+/// Options, by Player's names (and Troupe's `watchdog`).
+#[derive(Debug, Deserialize)]
+#[serde(default)]
+#[allow(missing_docs)]
+pub struct Options {
+    pub port: PathBuf,
+    pub max_xspeed: f64,
+    pub max_yawspeed: f64,
+    pub direct_wheel_vel_control: i64,
+    pub use_vel_band: i64,
+    pub pulse: f64,
+    pub bumpstall: i64,
+    pub watchdog: f64,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            port: "/dev/ttyS0".into(),
+            max_xspeed: 0.5,
+            max_yawspeed: 100f64.to_radians(),
+            direct_wheel_vel_control: 1,
+            use_vel_band: 0,
+            pulse: -1.0,
+            bumpstall: -1,
+            watchdog: 2.0,
+        }
+    }
+}
+
+/// The devices the driver serves.
+#[derive(Debug, Default)]
+struct Devices {
+    odometry: Option<Device>,
+    compass: Option<Device>,
+    sonar: Option<Device>,
+    power: Option<Device>,
+    bumper: Option<Device>,
+    aio: Option<Device>,
+    dio: Option<Device>,
+    /// Accessories declared but not served (gyro, gripper, blobfinder…).
+    silent: Vec<Device>,
+}
+
+/// Odometry integrated from the robot's position counters.
+#[derive(Debug, Default)]
+struct Odometry {
+    raw: Option<(u16, u16)>,
+    x: f64,
+    y: f64,
+    /// The reported pose = frame ⊕ (x, y, heading).
+    frame: Pose,
+}
+
+/// The signed change between two 15-bit counter values.
+fn counter_change(from: u16, to: u16) -> i32 {
+    let d = (i32::from(to) - i32::from(from)).rem_euclid(32768);
+    if d >= 16384 {
+        d - 32768
+    } else {
+        d
+    }
+}
+
+impl Odometry {
+    fn update(&mut self, sip: &Sip, p: &Params) -> Pose {
+        let raw = (sip.xpos & 0x7FFF, sip.ypos & 0x7FFF);
+        if let Some((x0, y0)) = self.raw {
+            self.x += f64::from(counter_change(x0, raw.0)) * p.dist_conv;
+            self.y += f64::from(counter_change(y0, raw.1)) * p.dist_conv;
+        }
+        self.raw = Some(raw);
+        let yaw = f64::from(sip.th) * p.angle_conv;
+        self.frame
+            .compose(&Pose::new(self.x / 1000.0, self.y / 1000.0, yaw))
+    }
+
+    /// Makes the current pose read `want` from now on.
+    fn set(&mut self, now: Pose, want: Pose) {
+        // frame' ⊕ local = want where local = frame⁻¹ ⊕ now.
+        let local = self.frame.inverse().compose(&now);
+        self.frame = want.compose(&local.inverse());
+    }
+}
+
+/// The p2os driver.
+pub struct P2os {
+    dev: Devices,
+    settings: Settings,
+    watchdog: Option<Duration>,
+    link: Option<(Receiver<Update>, LineThread)>,
+    params: Option<&'static Params>,
+    odom: Odometry,
+    pose: Pose,
+    sonar: Vec<f32>,
+    /// When the last velocity command came, and whether it was a move.
+    last_cmd: Option<(f64, bool)>,
+}
+
+impl Driver for P2os {
+    const NAME: &'static str = "p2os";
+    type Options = Options;
+    const UNITS: &'static [(&'static str, Unit)] =
+        &[("max_xspeed", Unit::Length), ("max_yawspeed", Unit::Angle)];
+
+    fn new(section: &Section, o: Options) -> Result<Self> {
+        let bad = |why: String| NodeError::config(Self::NAME, why);
+        if o.max_xspeed <= 0.0 || o.max_yawspeed <= 0.0 {
+            return Err(bad("max_xspeed and max_yawspeed must be positive".into()));
+        }
+        if o.bumpstall > 3 {
+            return Err(bad(format!(
+                "bumpstall {} is not one of -1, 0, 1, 2, 3",
+                o.bumpstall
+            )));
+        }
+        let mut dev = Devices::default();
+        for slot in section.provided() {
+            let d = slot.device;
+            let key = slot.key.as_deref();
+            let place = match (d.interface, key) {
+                (Interface::Position2d, Some("compass")) => &mut dev.compass,
+                (Interface::Position2d, Some("odometry") | None) => &mut dev.odometry,
+                (Interface::Sonar, _) => &mut dev.sonar,
+                (Interface::Power, _) => &mut dev.power,
+                (Interface::Bumper, _) => &mut dev.bumper,
+                (Interface::Aio, _) => &mut dev.aio,
+                (Interface::Dio, _) => &mut dev.dio,
+                _ => {
+                    // Player's p2os offered these for optional hardware (a
+                    // gyro, a gripper, a CMUcam, sound) and served nothing
+                    // without it; its sample pioneer.cfg lists them all.
+                    tracing::warn!(
+                        "{d}{}: no support for this p2os accessory yet; the device is declared and stays silent",
+                        key.map(|k| format!(" ({k})")).unwrap_or_default()
+                    );
+                    dev.silent.push(d);
+                    continue;
+                }
+            };
+            if place.is_some() {
+                return Err(bad(format!(
+                    "{d}: p2os provides one {} of this kind",
+                    d.interface
+                )));
+            }
+            *place = Some(d);
+        }
+        Ok(P2os {
+            settings: Settings {
+                port: o.port,
+                sonar: dev.sonar.is_some(),
+                direct_wheel: o.direct_wheel_vel_control != 0,
+                max_speed: (o.max_xspeed * 1000.0).round() as i32,
+                max_turn: o.max_yawspeed.to_degrees().round() as i32,
+                vel_band: o.use_vel_band != 0,
+                pulse: (o.pulse > 0.0).then(|| Duration::from_secs_f64(o.pulse)),
+                bumpstall: u8::try_from(o.bumpstall).ok(),
+            },
+            dev,
+            watchdog: (o.watchdog > 0.0).then(|| Duration::from_secs_f64(o.watchdog)),
+            link: None,
+            params: None,
+            odom: Odometry::default(),
+            pose: Pose::default(),
+            sonar: Vec::new(),
+            last_cmd: None,
+        })
+    }
+
+    fn setup(&mut self, ctx: &mut Ctx) -> Result<()> {
+        ctx.set_ready(false);
+        let (tx, rx) = mpsc::channel();
+        let line = device::spawn(self.settings.clone(), tx, ctx.waker())
+            .map_err(|e| NodeError::Driver(format!("starting the line thread: {e}").into()))?;
+        tracing::info!("robot initialising ({})", self.settings.port.display());
+        self.link = Some((rx, line));
+        if self.watchdog.is_some() {
+            ctx.set_tick(Some(Duration::from_millis(100)));
+        }
+        Ok(())
+    }
+
+    fn on_event(&mut self, ctx: &mut Ctx, event: Event) -> Result<()> {
+        match event {
+            Event::Wake => self.drain(ctx),
+            Event::Tick => {
+                self.check_watchdog(ctx);
+                Ok(())
+            }
+            Event::Command(c) if c.is::<position2d::CmdVel>() => {
+                let v = c.decode::<position2d::CmdVel>()?.msg.vel;
+                let speed = (v.x * 1000.0).round() as i32;
+                let turn = v.yaw.to_degrees().round() as i32;
+                self.last_cmd = Some((ctx.now(), speed != 0 || turn != 0));
+                self.order(Order::Vel { speed, turn });
+                Ok(())
+            }
+            Event::Command(c) => Err(c.unexpected()),
+            Event::Request(r) if r.is::<position2d::GetGeom>() => {
+                let p = self.params.unwrap_or(&params::ROBOTS[0]);
+                r.reply(&position2d::Geom {
+                    pose: Pose3d::planar(-0.1, 0.0, 0.0),
+                    size: Size3d {
+                        length: p.length / 1000.0,
+                        width: p.width / 1000.0,
+                        height: 0.0,
+                    },
+                });
+                Ok(())
+            }
+            Event::Request(r) if r.is::<position2d::MotorPower>() => {
+                let on = r.decode::<position2d::MotorPower>()?.state;
+                self.order(Order::Enable(on));
+                r.reply(&common::Ack);
+                Ok(())
+            }
+            Event::Request(r) if r.is::<position2d::ResetOdom>() => {
+                self.order(Order::ResetOdom);
+                self.odom = Odometry::default();
+                r.reply(&common::Ack);
+                Ok(())
+            }
+            Event::Request(r) if r.is::<position2d::SetOdom>() => {
+                let want: Pose = r.decode::<position2d::SetOdom>()?.pose.into();
+                self.odom.set(self.pose, want);
+                self.pose = want;
+                r.reply(&common::Ack);
+                Ok(())
+            }
+            Event::Request(r) if r.is::<position2d::VelocityMode>() => {
+                let separate = r.decode::<position2d::VelocityMode>()?.value != 0;
+                self.order(Order::DirectWheel(!separate));
+                r.reply(&common::Ack);
+                Ok(())
+            }
+            Event::Request(r) if r.is::<sonar::GetGeom>() => {
+                let p = self.params.unwrap_or(&params::ROBOTS[0]);
+                r.reply(&sonar::Geom {
+                    poses: p
+                        .sonars
+                        .iter()
+                        .map(|&(x, y, a)| {
+                            Pose3d::planar(
+                                f64::from(x) / 1000.0,
+                                f64::from(y) / 1000.0,
+                                f64::from(a).to_radians(),
+                            )
+                        })
+                        .collect(),
+                });
+                Ok(())
+            }
+            Event::Request(r) if r.is::<bumper::GetGeom>() => {
+                let p = self.params.unwrap_or(&params::ROBOTS[0]);
+                let n = usize::from(p.front_bumpers + p.rear_bumpers);
+                // Player's tables give every bumper a zero geometry.
+                r.reply(&bumper::Geom {
+                    bumpers: vec![bumper::Define::default(); n],
+                });
+                Ok(())
+            }
+            Event::Request(r) => {
+                let why = format!(
+                    "p2os does not handle request `{}` on {}",
+                    r.name, r.sample.device
+                );
+                r.nack(why);
+                Ok(())
+            }
+            Event::Data(_) | Event::Reply(_) => Ok(()),
+        }
+    }
+
+    fn shutdown(&mut self, _: &mut Ctx) -> Result<()> {
+        if let Some((_, line)) = self.link.take() {
+            line.stop();
+        }
+        Ok(())
+    }
+}
+
+impl P2os {
+    fn order(&self, o: Order) {
+        if let Some((_, line)) = &self.link {
+            let _ = line.orders.send(o);
+        }
+    }
+
+    fn check_watchdog(&mut self, ctx: &Ctx) {
+        let (Some(limit), Some((at, true))) = (self.watchdog, self.last_cmd) else {
+            return;
+        };
+        if ctx.now() - at > limit.as_secs_f64() {
+            tracing::warn!(
+                "no velocity command for {:.1} s: stopping the robot (watchdog)",
+                limit.as_secs_f64()
+            );
+            self.last_cmd = Some((ctx.now(), false));
+            self.order(Order::Vel { speed: 0, turn: 0 });
+        }
+    }
+
+    fn drain(&mut self, ctx: &mut Ctx) -> Result<()> {
+        let Some((rx, _)) = &self.link else {
+            return Ok(());
+        };
+        let updates: Vec<Update> = rx.try_iter().collect();
+        for u in updates {
+            match u {
+                Update::Ready { name, params, baud } => {
+                    tracing::info!(
+                        "robot ready: {} ({} {}) at {baud} baud; motors off until a client enables them",
+                        name.0,
+                        name.1,
+                        name.2
+                    );
+                    self.params = Some(params);
+                    self.odom = Odometry::default();
+                    self.sonar = vec![0.0; params.sonars.len()];
+                    ctx.set_ready(true);
+                }
+                Update::Lost(why) => {
+                    if ctx.is_ready() {
+                        tracing::warn!("robot lost: {why}");
+                    }
+                    ctx.set_ready(false);
+                }
+                Update::Sip(sip) => self.publish(ctx, &sip)?,
+            }
+        }
+        Ok(())
+    }
+
+    /// Player's `FillStandard`, from one SIP.
+    fn publish(&mut self, ctx: &mut Ctx, sip: &Sip) -> Result<()> {
+        let Some(p) = self.params else {
+            return Ok(());
+        };
+        self.pose = self.odom.update(sip, p);
+        if let Some(d) = self.dev.odometry {
+            let (l, r) = (
+                f64::from(sip.lvel) * p.vel_conv,
+                f64::from(sip.rvel) * p.vel_conv,
+            );
+            ctx.publish(
+                &d,
+                &position2d::Data {
+                    pose: self.pose.into(),
+                    vel: Pose2d {
+                        x: (l + r) / 2.0 / 1000.0,
+                        y: 0.0,
+                        yaw: (r - l) * p.diff_conv / 2.0,
+                    },
+                    stall: (sip.lstall | sip.rstall) & 1 != 0,
+                },
+            )?;
+        }
+        if let Some(d) = self.dev.compass {
+            if !matches!(sip.compass, 0 | 181 | 255) {
+                let deg = (f64::from(sip.compass) - 1.0) * 2.0;
+                ctx.publish(
+                    &d,
+                    &position2d::Data {
+                        pose: Pose2d {
+                            x: 0.0,
+                            y: 0.0,
+                            yaw: deg.to_radians(),
+                        },
+                        ..Default::default()
+                    },
+                )?;
+            }
+        }
+        if let Some(d) = self.dev.sonar {
+            for &(i, range) in &sip.sonars {
+                if let Some(slot) = self.sonar.get_mut(usize::from(i)) {
+                    *slot = (f64::from(range) * p.range_conv / 1000.0) as f32;
+                }
+            }
+            ctx.publish(
+                &d,
+                &sonar::Ranges {
+                    ranges: self.sonar.clone(),
+                },
+            )?;
+        }
+        if let Some(d) = self.dev.power {
+            let volts = f32::from(sip.battery) / 10.0;
+            ctx.publish(
+                &d,
+                &power::Data {
+                    valid: power::VALID_VOLTS | power::VALID_PERCENT,
+                    volts,
+                    percent: 100.0 * volts / 12.0,
+                    ..Default::default()
+                },
+            )?;
+        }
+        if let Some(d) = self.dev.bumper {
+            let bits = |byte: u8, n: u8| (0..n).rev().map(move |b| (byte >> 1) & (1 << b) != 0);
+            let bumpers = bits(sip.rstall, p.front_bumpers)
+                .chain(bits(sip.lstall, p.rear_bumpers))
+                .collect();
+            ctx.publish(&d, &bumper::Data { bumpers })?;
+        }
+        if let Some(d) = self.dev.dio {
+            ctx.publish(
+                &d,
+                &dio::Data {
+                    count: 8,
+                    bits: u32::from(sip.digin),
+                },
+            )?;
+        }
+        if let Some(d) = self.dev.aio {
+            ctx.publish(
+                &d,
+                &aio::Data {
+                    voltages: vec![f32::from(sip.analog) / 255.0 * 5.0],
+                },
+            )?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn counters_wrap_at_15_bits() {
+        assert_eq!(counter_change(100, 150), 50);
+        assert_eq!(counter_change(32760, 10), 18);
+        assert_eq!(counter_change(10, 32760), -18);
+    }
+
+    #[test]
+    fn odometry_integrates_counters_and_honours_set_odom() {
+        let p = params::find("p3dx").unwrap();
+        let mut o = Odometry::default();
+        let sip = |x: u16, th: i16| Sip {
+            xpos: x,
+            th,
+            ..Sip::default()
+        };
+        // The first SIP is the origin, whatever its counters say.
+        assert_eq!(o.update(&sip(5000, 0), p), Pose::new(0.0, 0.0, 0.0));
+        let pose = o.update(&sip(5000 + 2062, 0), p); // 2062 × 0.485 mm ≈ 1 m
+        assert!((pose.x - 1.000_07).abs() < 1e-4, "{pose:?}");
+        o.set(pose, Pose::new(10.0, 5.0, 0.0));
+        let moved = o.update(&sip(5000 + 2062 * 2, 0), p);
+        assert!(
+            (moved.x - 11.0).abs() < 1e-3 && (moved.y - 5.0).abs() < 1e-9,
+            "{moved:?}"
+        );
+    }
+}

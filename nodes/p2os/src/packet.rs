@@ -1,0 +1,388 @@
+//! P2OS/ARCOS packets: framing, checksum, commands and the standard SIP.
+//!
+//! ```text
+//! 0xFA 0xFB N DATA… CK_HI CK_LO        N = data bytes + 2
+//! ```
+//! The checksum adds the data as big-endian 16-bit words (an odd last
+//! byte is xored in) and is sent high byte first; integers inside the data
+//! are little-endian. A command's data is `[cmd]` or `[cmd, argtype, lo,
+//! hi]`, the argument type carrying the sign (0x3B positive, 0x1B negative).
+
+use troupe_serial::{Codec, Decoded, Skipped};
+
+/// First header byte.
+pub const HEADER: [u8; 2] = [0xFA, 0xFB];
+/// Largest count byte Player's driver can take.
+pub const MAX_COUNT: u8 = 252;
+
+/// Command numbers.
+pub mod cmd {
+    /// SYNC0, and PULSE once open (keeps the watchdog quiet).
+    pub const SYNC0: u8 = 0;
+    /// SYNC1, and OPEN once synchronised.
+    pub const SYNC1: u8 = 1;
+    /// SYNC2, and CLOSE once open.
+    pub const SYNC2: u8 = 2;
+    /// PULSE: a keep-alive.
+    pub const PULSE: u8 = 0;
+    /// OPEN: start the SIP stream.
+    pub const OPEN: u8 = 1;
+    /// CLOSE: stop the SIP stream and forget the client.
+    pub const CLOSE: u8 = 2;
+    /// ENABLE the motors (1) or not (0).
+    pub const ENABLE: u8 = 4;
+    /// SETO: odometry back to zero.
+    pub const SETO: u8 = 7;
+    /// VEL: translational velocity, mm/s.
+    pub const VEL: u8 = 11;
+    /// RVEL: rotational velocity, deg/s.
+    pub const RVEL: u8 = 21;
+    /// SONAR on (1) or off (0).
+    pub const SONAR: u8 = 28;
+    /// STOP: both wheels to zero.
+    pub const STOP: u8 = 29;
+    /// VEL2: wheel velocities, low byte right, high byte left, in Vel2Divisor mm/s.
+    pub const VEL2: u8 = 32;
+}
+
+/// Argument type of a positive (or zero) integer.
+pub const ARGINT: u8 = 0x3B;
+/// Argument type of a negative integer (the magnitude follows).
+pub const ARGNINT: u8 = 0x1B;
+
+/// The P2OS checksum of `data`.
+pub fn checksum(data: &[u8]) -> u16 {
+    let mut pairs = data.chunks_exact(2);
+    let mut c: u16 = 0;
+    for p in &mut pairs {
+        c = c.wrapping_add(u16::from(p[0]) << 8 | u16::from(p[1]));
+    }
+    if let [last] = pairs.remainder() {
+        c ^= u16::from(*last);
+    }
+    c
+}
+
+/// Frames `data` as a packet.
+pub fn frame(data: &[u8]) -> Vec<u8> {
+    let mut p = Vec::with_capacity(data.len() + 5);
+    p.extend_from_slice(&HEADER);
+    p.push((data.len() + 2) as u8);
+    p.extend_from_slice(data);
+    p.extend_from_slice(&checksum(data).to_be_bytes());
+    p
+}
+
+/// A command without argument.
+pub fn command(c: u8) -> Vec<u8> {
+    frame(&[c])
+}
+
+/// A command with a signed integer argument.
+pub fn command_int(c: u8, v: i32) -> Vec<u8> {
+    let m = v.unsigned_abs().min(0xFFFF) as u16;
+    let t = if v < 0 { ARGNINT } else { ARGINT };
+    let [lo, hi] = m.to_le_bytes();
+    frame(&[c, t, lo, hi])
+}
+
+/// VEL2 with wheel speeds in Vel2Divisor units (clamped to ±126).
+pub fn vel2(right: i32, left: i32) -> Vec<u8> {
+    let r = right.clamp(-126, 126) as i8 as u8;
+    let l = left.clamp(-126, 126) as i8 as u8;
+    frame(&[cmd::VEL2, ARGINT, r, l])
+}
+
+/// A command's argument as a signed value (0 when it has none).
+pub fn argument(data: &[u8]) -> i32 {
+    match data {
+        [_, t, lo, hi, ..] => {
+            let m = i32::from(u16::from_le_bytes([*lo, *hi]));
+            if *t == ARGNINT {
+                -m
+            } else {
+                m
+            }
+        }
+        _ => 0,
+    }
+}
+
+/// Finds packets in a byte stream.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct PacketCodec;
+
+impl Codec for PacketCodec {
+    /// The packet's data (type or command first), without header, count and checksum.
+    type Frame = Vec<u8>;
+
+    fn decode(&mut self, buf: &[u8]) -> Decoded<Vec<u8>> {
+        let Some(start) = buf.windows(2).position(|w| w == HEADER) else {
+            // Keep a trailing 0xFA: it may start the next header.
+            let keep = usize::from(buf.last() == Some(&HEADER[0]));
+            return match buf.len() - keep {
+                0 => Decoded::Incomplete,
+                n => Decoded::Skip(n, Skipped::Noise),
+            };
+        };
+        if start > 0 {
+            return Decoded::Skip(start, Skipped::Noise);
+        }
+        let Some(&n) = buf.get(2) else {
+            return Decoded::Incomplete;
+        };
+        if !(3..=MAX_COUNT).contains(&n) {
+            return Decoded::Skip(2, Skipped::Malformed);
+        }
+        let total = 3 + usize::from(n);
+        if buf.len() < total {
+            return Decoded::Incomplete;
+        }
+        let data = &buf[3..total - 2];
+        let ck = u16::from_be_bytes([buf[total - 2], buf[total - 1]]);
+        if checksum(data) != ck {
+            return Decoded::Skip(2, Skipped::Checksum);
+        }
+        Decoded::Frame(data.to_vec(), total)
+    }
+}
+
+/// The robot's answer to SYNC2: name, class, subclass.
+pub fn sync2_reply(name: &str, class: &str, subclass: &str) -> Vec<u8> {
+    let mut d = vec![cmd::SYNC2];
+    for s in [name, class, subclass] {
+        d.extend_from_slice(s.as_bytes());
+        d.push(0);
+    }
+    frame(&d)
+}
+
+/// Reads the three strings of a SYNC2 reply's data.
+pub fn parse_sync2(data: &[u8]) -> (String, String, String) {
+    let mut parts = data
+        .get(1..)
+        .unwrap_or(&[])
+        .split(|&b| b == 0)
+        .map(|s| String::from_utf8_lossy(s).into_owned());
+    let mut next = || parts.next().unwrap_or_default();
+    (next(), next(), next())
+}
+
+/// A standard SIP (types 0x30–0x34), raw as the robot sends it.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Sip {
+    /// 0x32 stopped, 0x33 moving.
+    pub kind: u8,
+    /// Raw x position (15 bits).
+    pub xpos: u16,
+    /// Raw y position.
+    pub ypos: u16,
+    /// Heading in AngleConv units.
+    pub th: i16,
+    /// Left wheel, VelConv units.
+    pub lvel: i16,
+    /// Right wheel.
+    pub rvel: i16,
+    /// Battery, volts × 10.
+    pub battery: u8,
+    /// Bit 0 left wheel stalled, bits 1–7 rear bumpers.
+    pub lstall: u8,
+    /// Bit 0 right wheel stalled, bits 1–7 front bumpers.
+    pub rstall: u8,
+    /// Control heading.
+    pub control: i16,
+    /// ARCOS flags: bit 0 motors enabled.
+    pub flags: u16,
+    /// Compass: 0 none, else degrees / 2 + 1.
+    pub compass: u8,
+    /// New sonar readings: (index, range in RangeConv units).
+    pub sonars: Vec<(u8, u16)>,
+    /// Gripper state (ARCOS GRIP_STATE).
+    pub grip: u8,
+    /// ARCOS ANPORT: the byte Player reads as gripper state.
+    pub anport: u8,
+    /// Analog input.
+    pub analog: u8,
+    /// Digital inputs.
+    pub digin: u8,
+    /// Digital outputs.
+    pub digout: u8,
+}
+
+/// Why a SIP was refused.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SipError(pub String);
+
+impl std::fmt::Display for SipError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl Sip {
+    /// True for the standard SIP types.
+    pub fn is_standard(data: &[u8]) -> bool {
+        matches!(data.first(), Some(0x30..=0x34))
+    }
+
+    /// Decodes a standard SIP's data.
+    ///
+    /// # Errors
+    ///
+    /// [`SipError`] when the packet is shorter than its sonar count says.
+    pub fn decode(d: &[u8]) -> Result<Sip, SipError> {
+        if d.len() < 20 {
+            return Err(SipError(format!(
+                "SIP of {} bytes: at least 25 expected",
+                d.len()
+            )));
+        }
+        let u16at = |i: usize| u16::from_le_bytes([d[i], d[i + 1]]);
+        let k = usize::from(d[19]);
+        let need = 25 + 3 * k;
+        if d.len() < need {
+            return Err(SipError(format!(
+                "SIP of {} bytes with {k} sonar readings: {need} expected",
+                d.len()
+            )));
+        }
+        let sonars = (0..k)
+            .map(|i| {
+                let o = 20 + 3 * i;
+                (d[o], u16at(o + 1))
+            })
+            .collect();
+        let o = 20 + 3 * k;
+        Ok(Sip {
+            kind: d[0],
+            xpos: u16at(1),
+            ypos: u16at(3),
+            th: u16at(5) as i16,
+            lvel: u16at(7) as i16,
+            rvel: u16at(9) as i16,
+            battery: d[11],
+            lstall: d[12],
+            rstall: d[13],
+            control: u16at(14) as i16,
+            flags: u16at(16),
+            compass: d[18],
+            sonars,
+            grip: d[o],
+            anport: d[o + 1],
+            analog: d[o + 2],
+            digin: d[o + 3],
+            digout: d[o + 4],
+        })
+    }
+
+    /// Encodes the SIP as a packet.
+    pub fn encode(&self) -> Vec<u8> {
+        let mut d = Vec::with_capacity(25 + 3 * self.sonars.len());
+        d.push(self.kind);
+        d.extend_from_slice(&self.xpos.to_le_bytes());
+        d.extend_from_slice(&self.ypos.to_le_bytes());
+        d.extend_from_slice(&self.th.to_le_bytes());
+        d.extend_from_slice(&self.lvel.to_le_bytes());
+        d.extend_from_slice(&self.rvel.to_le_bytes());
+        d.push(self.battery);
+        d.push(self.lstall);
+        d.push(self.rstall);
+        d.extend_from_slice(&self.control.to_le_bytes());
+        d.extend_from_slice(&self.flags.to_le_bytes());
+        d.push(self.compass);
+        d.push(self.sonars.len() as u8);
+        for (i, r) in &self.sonars {
+            d.push(*i);
+            d.extend_from_slice(&r.to_le_bytes());
+        }
+        d.extend_from_slice(&[self.grip, self.anport, self.analog, self.digin, self.digout]);
+        frame(&d)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use troupe_serial::Framer;
+
+    fn hex(s: &str) -> Vec<u8> {
+        s.split_whitespace()
+            .map(|b| u8::from_str_radix(b, 16).unwrap())
+            .collect()
+    }
+
+    /// Packets as Player's driver and an ARCOS robot put them on the wire.
+    #[test]
+    fn commands_match_the_wire_bytes() {
+        assert_eq!(command(cmd::SYNC0), hex("FA FB 03 00 00 00"));
+        assert_eq!(command(cmd::SYNC1), hex("FA FB 03 01 00 01"));
+        assert_eq!(command(cmd::STOP), hex("FA FB 03 1D 00 1D"));
+        assert_eq!(
+            command_int(cmd::ENABLE, 1),
+            hex("FA FB 06 04 3B 01 00 05 3B")
+        );
+        assert_eq!(
+            command_int(cmd::SONAR, 0),
+            hex("FA FB 06 1C 3B 00 00 1C 3B")
+        );
+        assert_eq!(
+            command_int(cmd::VEL, 200),
+            hex("FA FB 06 0B 3B C8 00 D3 3B")
+        );
+        assert_eq!(
+            command_int(cmd::VEL, -200),
+            hex("FA FB 06 0B 1B C8 00 D3 1B")
+        );
+        assert_eq!(
+            command_int(cmd::RVEL, -30),
+            hex("FA FB 06 15 1B 1E 00 33 1B")
+        );
+        assert_eq!(vel2(19, 10), hex("FA FB 06 20 3B 13 0A 33 45"));
+        assert_eq!(
+            sync2_reply("MyRobot", "Pioneer", "p3dx-sh"),
+            hex("FA FB 1B 02 4D 79 52 6F 62 6F 74 00 50 69 6F 6E 65 65 72 00 70 33 64 78 2D 73 68 00 B7 74")
+        );
+        assert_eq!(argument(&[cmd::VEL, ARGNINT, 0xC8, 0]), -200);
+    }
+
+    #[test]
+    fn a_sip_round_trips_and_matches_an_arcos_capture() {
+        let wire = hex(
+            "FA FB 21 33 64 00 00 00 00 00 C8 00 C8 00 78 00 00 00 00 01 00 00 02 00 E8 03 01 F4 01 00 00 00 00 00 2E 58",
+        );
+        let mut f = Framer::new(PacketCodec);
+        f.push(&[0x00, 0xFA, 0x13]);
+        f.push(&wire);
+        let sip = Sip::decode(&f.next_frame().unwrap()).unwrap();
+        assert_eq!(
+            (sip.kind, sip.xpos, sip.lvel, sip.rvel, sip.battery),
+            (0x33, 100, 200, 200, 120)
+        );
+        assert_eq!(sip.flags, 1);
+        assert_eq!(sip.sonars, vec![(0, 1000), (1, 500)]);
+        assert_eq!(sip.encode(), wire);
+        assert_eq!(f.stats.noise, 3);
+    }
+
+    #[test]
+    fn bad_checksums_and_short_sips_are_refused() {
+        let mut p = command_int(cmd::ENABLE, 1);
+        p[5] ^= 1;
+        let mut f = Framer::new(PacketCodec);
+        f.push(&p);
+        f.push(&command(cmd::PULSE));
+        assert_eq!(f.next_frame(), Some(vec![0]));
+        assert_eq!(f.stats.checksum, 1);
+        let mut sip = Sip::default().encode();
+        sip.truncate(sip.len() - 4);
+        let data = &sip[3..];
+        assert!(Sip::decode(data).is_err());
+        let many = Sip {
+            sonars: vec![(0, 1); 3],
+            ..Sip::default()
+        };
+        let mut d = many.encode()[3..].to_vec();
+        d.truncate(d.len() - 5);
+        assert!(Sip::decode(&d).unwrap_err().0.contains("3 sonar readings"));
+    }
+}

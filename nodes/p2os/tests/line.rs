@@ -1,0 +1,182 @@
+//! The driver's line thread against the emulated Pioneer over a real
+//! pseudo-terminal: the handshake, SIPs, driving, faults.
+#![allow(clippy::unwrap_used)] // test helpers outside #[test] fns
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{self, Receiver};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use troupe_node::Waker;
+use troupe_p2os::device::{self, Order, Settings, Update};
+use troupe_p2os::emulator::{self, EmulatorOptions, EmulatorStats};
+use troupe_serial::Faults;
+
+struct Emu {
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<std::io::Result<EmulatorStats>>>,
+    link: PathBuf,
+    dir: PathBuf,
+}
+
+fn emulate(name: &str, faults: Faults) -> Emu {
+    let dir = std::env::temp_dir().join(format!("troupe-p2os-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let link = dir.join("robot");
+    let stop = Arc::new(AtomicBool::new(false));
+    let opts = EmulatorOptions {
+        link: link.clone(),
+        faults,
+        seed: 2,
+        subclass: "p3dx-sh".into(),
+        name: "Troupe".into(),
+    };
+    let (ready_tx, ready) = mpsc::channel();
+    let s = stop.clone();
+    let thread = std::thread::spawn(move || {
+        emulator::run_with(&opts, &s, || {
+            let _ = ready_tx.send(());
+        })
+    });
+    ready.recv_timeout(Duration::from_secs(10)).unwrap();
+    Emu {
+        stop,
+        thread: Some(thread),
+        link,
+        dir,
+    }
+}
+
+impl Emu {
+    fn stop(&mut self) -> EmulatorStats {
+        self.stop.store(true, Ordering::Relaxed);
+        self.thread.take().unwrap().join().unwrap().unwrap()
+    }
+}
+
+impl Drop for Emu {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+fn settings(link: &std::path::Path) -> Settings {
+    Settings {
+        port: link.to_owned(),
+        sonar: true,
+        direct_wheel: true,
+        max_speed: 500,
+        max_turn: 100,
+        vel_band: false,
+        pulse: None,
+        bumpstall: None,
+    }
+}
+
+fn wait_for(rx: &Receiver<Update>, secs: u64, mut want: impl FnMut(&Update) -> bool) -> Update {
+    let deadline = Instant::now() + Duration::from_secs(secs);
+    loop {
+        match rx.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
+            Ok(u) if want(&u) => return u,
+            Ok(_) => {}
+            Err(e) => panic!("no matching update within {secs} s: {e}"),
+        }
+    }
+}
+
+fn sip(u: &Update) -> Option<&troupe_p2os::packet::Sip> {
+    match u {
+        Update::Sip(s) => Some(s),
+        _ => None,
+    }
+}
+
+#[test]
+fn handshake_sips_sonar_and_driving() {
+    let mut emu = emulate("drive", Faults::default());
+    let (tx, rx) = mpsc::channel();
+    let line = device::spawn(settings(&emu.link), tx, Waker::none()).unwrap();
+    let Update::Ready { name, params, baud } =
+        wait_for(&rx, 20, |u| matches!(u, Update::Ready { .. }))
+    else {
+        unreachable!()
+    };
+    assert_eq!(
+        (name.0.as_str(), name.1.as_str(), name.2.as_str()),
+        ("Troupe", "Pioneer", "p3dx-sh")
+    );
+    assert_eq!((params.subclass, baud), ("p3dx-sh", 9600));
+    // Sonars on: all 16 ranges; the front right one, 166 mm ahead and aimed
+    // 10° left, sees the wall 4 m ahead at 3.834 m / cos 10°.
+    let u = wait_for(&rx, 5, |u| sip(u).is_some_and(|s| s.sonars.len() == 16));
+    let s = sip(&u).unwrap();
+    let want = (4000.0 - 166.0) / 10f64.to_radians().cos();
+    assert!(
+        (f64::from(s.sonars[3].1) - want).abs() <= 2.0,
+        "{:?}",
+        s.sonars
+    );
+    assert_eq!(s.flags & 1, 0, "motors start off");
+
+    line.orders.send(Order::Enable(true)).unwrap();
+    line.orders
+        .send(Order::Vel {
+            speed: 300,
+            turn: 0,
+        })
+        .unwrap();
+    let u = wait_for(&rx, 5, |u| sip(u).is_some_and(|s| s.xpos >= 600));
+    let s = sip(&u).unwrap();
+    assert_eq!((s.kind, s.flags & 1), (0x33, 1));
+    assert!(
+        (i32::from(s.lvel) - 300).abs() <= 20 && (i32::from(s.rvel) - 300).abs() <= 20,
+        "{s:?}"
+    );
+    line.orders.send(Order::Vel { speed: 0, turn: 0 }).unwrap();
+    wait_for(&rx, 5, |u| sip(u).is_some_and(|s| s.kind == 0x32));
+    line.stop();
+    let stats = emu.stop();
+    assert!(stats.sips >= 10, "{stats:?}");
+}
+
+#[test]
+fn faults_are_survived_and_a_mute_robot_is_reported() {
+    let faults = Faults {
+        noise: 0.2,
+        corrupt: 0.1,
+        truncate: 0.05,
+        drop: 0.001,
+        ..Faults::default()
+    };
+    let mut emu = emulate("noisy", faults);
+    let (tx, rx) = mpsc::channel();
+    let line = device::spawn(settings(&emu.link), tx, Waker::none()).unwrap();
+    let mut sips = 0;
+    wait_for(&rx, 60, |u| {
+        if sip(u).is_some() {
+            sips += 1;
+        }
+        sips >= 30
+    });
+    line.stop();
+    emu.stop();
+
+    let mut mute = emulate(
+        "mute",
+        Faults {
+            mute: true,
+            ..Faults::default()
+        },
+    );
+    let (tx, rx) = mpsc::channel();
+    let line = device::spawn(settings(&mute.link), tx, Waker::none()).unwrap();
+    let Update::Lost(why) = wait_for(&rx, 30, |u| matches!(u, Update::Lost(_))) else {
+        unreachable!()
+    };
+    assert!(why.contains("no answer to SYNC0"), "{why}");
+    line.stop();
+    mute.stop();
+}
