@@ -107,7 +107,7 @@ fn case(baud: u32, res: u16, seconds: f64) -> anyhow::Result<(f64, f64, usize)> 
         }
     }
     let elapsed = first.map_or(1.0, |f| f.elapsed().as_secs_f64());
-    line.stop();
+    line.stop(device::Order::Stop);
     stop.store(true, Ordering::Relaxed);
     let _ = emu.join();
     let _ = std::fs::remove_dir_all(&dir);

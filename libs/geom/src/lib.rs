@@ -19,4 +19,4 @@ mod pose;
 
 pub use grid::{Grid, Hit, EMPTY};
 pub use occmap::OccMap;
-pub use pose::{normalize, Pose};
+pub use pose::{normalize, ray_to_box, Pose};

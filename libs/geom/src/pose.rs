@@ -102,3 +102,32 @@ mod tests {
         assert!((normalize(0.5 + 4.0 * PI) - 0.5).abs() < 1e-9);
     }
 }
+
+/// Distance from (`x`, `y`) along heading `a` to the inside walls of the
+/// axis-aligned box `x0..x1` × `y0..y1` (infinite if the ray never meets
+/// one): the room of the device emulators.
+pub fn ray_to_box(x: f64, y: f64, a: f64, (x0, x1, y0, y1): (f64, f64, f64, f64)) -> f64 {
+    let (dx, dy) = (a.cos(), a.sin());
+    let mut d = f64::INFINITY;
+    for (den, lim) in [(dx, x0 - x), (dx, x1 - x), (dy, y0 - y), (dy, y1 - y)] {
+        if den.abs() > 1e-12 && lim / den > 0.0 {
+            d = d.min(lim / den);
+        }
+    }
+    d
+}
+
+#[cfg(test)]
+mod box_tests {
+    use super::*;
+
+    #[test]
+    fn rays_meet_the_nearest_wall_ahead() {
+        let room = (-4.0, 4.0, -3.0, 3.0);
+        assert!((ray_to_box(0.0, 0.0, 0.0, room) - 4.0).abs() < 1e-12);
+        assert!((ray_to_box(1.0, 0.0, std::f64::consts::PI, room) - 5.0).abs() < 1e-12);
+        assert!((ray_to_box(0.0, 0.0, std::f64::consts::FRAC_PI_2, room) - 3.0).abs() < 1e-12);
+        let corner = ray_to_box(0.0, 0.0, 3f64.atan2(4.0), room);
+        assert!((corner - 5.0).abs() < 1e-9);
+    }
+}

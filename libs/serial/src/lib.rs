@@ -8,18 +8,22 @@
 //! - [`Pty`]: a pseudo-terminal whose slave is linked at a path, so that a
 //!   `.cfg` names an emulated device as `port "/tmp/laser"`.
 //! - [`Pacer`]: writes at the speed a real line would carry the bytes.
+//! - [`arcos`]: the packet framing of Pioneer and Erratic controllers.
 //!
 //! Every call blocks for at most the time it is given: a driver runs its
 //! device on a thread of its own and hands results to its event loop.
 
+pub mod arcos;
 mod emu;
 mod faults;
 mod framer;
 mod port;
 mod pty;
+mod thread;
 
 pub use emu::{EmuLine, LineEvent};
 pub use faults::{Faults, Injected};
 pub use framer::{Codec, Decoded, FrameStats, Framer, Skipped};
 pub use port::{baud_supported, LineError, Port, BAUD_RATES};
 pub use pty::{Pacer, Pty};
+pub use thread::LineThread;

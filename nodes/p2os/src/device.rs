@@ -14,12 +14,10 @@
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, TryRecvError};
-use std::sync::Arc;
-use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use troupe_node::Waker;
-use troupe_serial::{Framer, LineError, Port};
+use troupe_serial::{arcos, Framer, LineError, LineThread, Port};
 
 use crate::packet::{self, cmd, PacketCodec, Sip};
 use crate::params::{self, Params};
@@ -90,46 +88,17 @@ pub enum Order {
     Stop,
 }
 
-/// A running line thread.
-#[derive(Debug)]
-pub struct LineThread {
-    /// Orders for the thread.
-    pub orders: Sender<Order>,
-    abort: Arc<AtomicBool>,
-    thread: Option<JoinHandle<()>>,
-}
-
-impl LineThread {
-    /// Stops the robot (STOP, CLOSE) and the thread.
-    pub fn stop(mut self) {
-        self.abort.store(true, Ordering::Relaxed);
-        let _ = self.orders.send(Order::Stop);
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
-    }
-}
+/// The line thread, as the driver holds it.
+pub type Line = LineThread<Order>;
 
 /// Starts the line thread.
 ///
 /// # Errors
 ///
 /// When the thread cannot be started.
-pub fn spawn(
-    settings: Settings,
-    updates: Sender<Update>,
-    waker: Waker,
-) -> std::io::Result<LineThread> {
-    let (orders, orders_rx) = std::sync::mpsc::channel();
-    let abort = Arc::new(AtomicBool::new(false));
-    let flag = abort.clone();
-    let thread = std::thread::Builder::new()
-        .name("p2os line".into())
-        .spawn(move || run(settings, &updates, &orders_rx, &waker, &flag))?;
-    Ok(LineThread {
-        orders,
-        abort,
-        thread: Some(thread),
+pub fn spawn(settings: Settings, updates: Sender<Update>, waker: Waker) -> std::io::Result<Line> {
+    LineThread::spawn("p2os line", move |orders, abort| {
+        run(settings, &updates, &orders, &waker, &abort);
     })
 }
 
@@ -434,30 +403,13 @@ pub fn velocity(s: &Settings, p: &Params, speed: i32, turn: i32) -> Vec<Vec<u8>>
             packet::command_int(cmd::RVEL, w),
         ];
     }
-    let max = f64::from(s.max_speed);
-    let rot = f64::from(turn).to_radians() / p.diff_conv;
-    let (mut left, mut right) = (f64::from(speed) - rot, f64::from(speed) + rot);
-    if left.abs() > max {
-        right *= max / left.abs();
-        left = max.copysign(left);
-    }
-    if right.abs() > max {
-        left *= max / right.abs();
-        right = max.copysign(right);
-    }
-    if s.vel_band && left * right < 0.0 {
-        if left + right >= 0.0 {
-            if left < 0.0 {
-                left = 0.0;
-            } else {
-                right = 0.0;
-            }
-        } else if left > 0.0 {
-            left = 0.0;
-        } else {
-            right = 0.0;
-        }
-    }
+    let (left, right) = arcos::wheels(
+        f64::from(speed),
+        f64::from(turn),
+        p.diff_conv,
+        f64::from(s.max_speed),
+        s.vel_band,
+    );
     let unit = |v: f64| (v / p.vel2_div).trunc() as i32;
     vec![packet::vel2(unit(right), unit(left))]
 }

@@ -148,7 +148,8 @@ impl Robot {
                     let (sx, sy) = (f64::from(sx) / 1000.0, f64::from(sy) / 1000.0);
                     let wx = x + sx * a.cos() - sy * a.sin();
                     let wy = y + sx * a.sin() + sy * a.cos();
-                    let d = room_range(wx, wy, a + f64::from(sa).to_radians()).min(SONAR_MAX);
+                    let d = troupe_geom::ray_to_box(wx, wy, a + f64::from(sa).to_radians(), ROOM)
+                        .min(SONAR_MAX);
                     (i as u8, (d * 1000.0 / p.range_conv).round() as u16)
                 })
                 .collect()
@@ -172,19 +173,6 @@ impl Robot {
             ..Sip::default()
         }
     }
-}
-
-/// Distance from (x, y) along heading `a` to the room's walls.
-fn room_range(x: f64, y: f64, a: f64) -> f64 {
-    let (dx, dy) = (a.cos(), a.sin());
-    let (x0, x1, y0, y1) = ROOM;
-    let mut d = f64::INFINITY;
-    for (den, lim) in [(dx, x0 - x), (dx, x1 - x), (dy, y0 - y), (dy, y1 - y)] {
-        if den.abs() > 1e-12 && lim / den > 0.0 {
-            d = d.min(lim / den);
-        }
-    }
-    d
 }
 
 /// Runs the emulated robot until `stop` is set, calling `linked` once its
@@ -374,6 +362,5 @@ mod tests {
             "{:?}",
             r.pose
         );
-        assert!((room_range(0.0, 0.0, 0.0) - 4.0).abs() < 1e-9);
     }
 }

@@ -53,7 +53,7 @@ use troupe_msgs::{
 };
 use troupe_node::{Ctx, Driver, Event, NodeError, Result, Section, Unit};
 
-use crate::device::{LineThread, Order, Settings, Update};
+use crate::device::{Line, Order, Settings, Update};
 use crate::packet::Sip;
 use crate::params::Params;
 
@@ -147,7 +147,7 @@ pub struct P2os {
     dev: Devices,
     settings: Settings,
     watchdog: Option<Duration>,
-    link: Option<(Receiver<Update>, LineThread)>,
+    link: Option<(Receiver<Update>, Line)>,
     params: Option<&'static Params>,
     odom: Odometry,
     pose: Pose,
@@ -333,7 +333,7 @@ impl Driver for P2os {
 
     fn shutdown(&mut self, _: &mut Ctx) -> Result<()> {
         if let Some((_, line)) = self.link.take() {
-            line.stop();
+            line.stop(Order::Stop);
         }
         Ok(())
     }
@@ -342,7 +342,7 @@ impl Driver for P2os {
 impl P2os {
     fn order(&self, o: Order) {
         if let Some((_, line)) = &self.link {
-            let _ = line.orders.send(o);
+            let _ = line.send(o);
         }
     }
 

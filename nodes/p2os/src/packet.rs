@@ -1,19 +1,9 @@
-//! P2OS/ARCOS packets: framing, checksum, commands and the standard SIP.
-//!
-//! ```text
-//! 0xFA 0xFB N DATA… CK_HI CK_LO        N = data bytes + 2
-//! ```
-//! The checksum adds the data as big-endian 16-bit words (an odd last
-//! byte is xored in) and is sent high byte first; integers inside the data
-//! are little-endian. A command's data is `[cmd]` or `[cmd, argtype, lo,
-//! hi]`, the argument type carrying the sign (0x3B positive, 0x1B negative).
+//! P2OS/ARCOS packets: the commands Player's driver sends and the standard
+//! SIP, on the framing of [`troupe_serial::arcos`].
 
-use troupe_serial::{Codec, Decoded, Skipped};
-
-/// First header byte.
-pub const HEADER: [u8; 2] = [0xFA, 0xFB];
-/// Largest count byte Player's driver can take.
-pub const MAX_COUNT: u8 = 252;
+pub use troupe_serial::arcos::{
+    argument, checksum, command, command_int, frame, vel2, PacketCodec, ARGINT, ARGNINT,
+};
 
 /// Command numbers.
 pub mod cmd {
@@ -43,108 +33,6 @@ pub mod cmd {
     pub const STOP: u8 = 29;
     /// VEL2: wheel velocities, low byte right, high byte left, in Vel2Divisor mm/s.
     pub const VEL2: u8 = 32;
-}
-
-/// Argument type of a positive (or zero) integer.
-pub const ARGINT: u8 = 0x3B;
-/// Argument type of a negative integer (the magnitude follows).
-pub const ARGNINT: u8 = 0x1B;
-
-/// The P2OS checksum of `data`.
-pub fn checksum(data: &[u8]) -> u16 {
-    let mut pairs = data.chunks_exact(2);
-    let mut c: u16 = 0;
-    for p in &mut pairs {
-        c = c.wrapping_add(u16::from(p[0]) << 8 | u16::from(p[1]));
-    }
-    if let [last] = pairs.remainder() {
-        c ^= u16::from(*last);
-    }
-    c
-}
-
-/// Frames `data` as a packet.
-pub fn frame(data: &[u8]) -> Vec<u8> {
-    let mut p = Vec::with_capacity(data.len() + 5);
-    p.extend_from_slice(&HEADER);
-    p.push((data.len() + 2) as u8);
-    p.extend_from_slice(data);
-    p.extend_from_slice(&checksum(data).to_be_bytes());
-    p
-}
-
-/// A command without argument.
-pub fn command(c: u8) -> Vec<u8> {
-    frame(&[c])
-}
-
-/// A command with a signed integer argument.
-pub fn command_int(c: u8, v: i32) -> Vec<u8> {
-    let m = v.unsigned_abs().min(0xFFFF) as u16;
-    let t = if v < 0 { ARGNINT } else { ARGINT };
-    let [lo, hi] = m.to_le_bytes();
-    frame(&[c, t, lo, hi])
-}
-
-/// VEL2 with wheel speeds in Vel2Divisor units (clamped to ±126).
-pub fn vel2(right: i32, left: i32) -> Vec<u8> {
-    let r = right.clamp(-126, 126) as i8 as u8;
-    let l = left.clamp(-126, 126) as i8 as u8;
-    frame(&[cmd::VEL2, ARGINT, r, l])
-}
-
-/// A command's argument as a signed value (0 when it has none).
-pub fn argument(data: &[u8]) -> i32 {
-    match data {
-        [_, t, lo, hi, ..] => {
-            let m = i32::from(u16::from_le_bytes([*lo, *hi]));
-            if *t == ARGNINT {
-                -m
-            } else {
-                m
-            }
-        }
-        _ => 0,
-    }
-}
-
-/// Finds packets in a byte stream.
-#[derive(Debug, Default, Clone, Copy)]
-pub struct PacketCodec;
-
-impl Codec for PacketCodec {
-    /// The packet's data (type or command first), without header, count and checksum.
-    type Frame = Vec<u8>;
-
-    fn decode(&mut self, buf: &[u8]) -> Decoded<Vec<u8>> {
-        let Some(start) = buf.windows(2).position(|w| w == HEADER) else {
-            // Keep a trailing 0xFA: it may start the next header.
-            let keep = usize::from(buf.last() == Some(&HEADER[0]));
-            return match buf.len() - keep {
-                0 => Decoded::Incomplete,
-                n => Decoded::Skip(n, Skipped::Noise),
-            };
-        };
-        if start > 0 {
-            return Decoded::Skip(start, Skipped::Noise);
-        }
-        let Some(&n) = buf.get(2) else {
-            return Decoded::Incomplete;
-        };
-        if !(3..=MAX_COUNT).contains(&n) {
-            return Decoded::Skip(2, Skipped::Malformed);
-        }
-        let total = 3 + usize::from(n);
-        if buf.len() < total {
-            return Decoded::Incomplete;
-        }
-        let data = &buf[3..total - 2];
-        let ck = u16::from_be_bytes([buf[total - 2], buf[total - 1]]);
-        if checksum(data) != ck {
-            return Decoded::Skip(2, Skipped::Checksum);
-        }
-        Decoded::Frame(data.to_vec(), total)
-    }
 }
 
 /// The robot's answer to SYNC2: name, class, subclass.

@@ -121,13 +121,11 @@ fn handshake_sips_sonar_and_driving() {
     );
     assert_eq!(s.flags & 1, 0, "motors start off");
 
-    line.orders.send(Order::Enable(true)).unwrap();
-    line.orders
-        .send(Order::Vel {
-            speed: 300,
-            turn: 0,
-        })
-        .unwrap();
+    assert!(line.send(Order::Enable(true)));
+    assert!(line.send(Order::Vel {
+        speed: 300,
+        turn: 0,
+    }));
     let u = wait_for(&rx, 5, |u| sip(u).is_some_and(|s| s.xpos >= 600));
     let s = sip(&u).unwrap();
     assert_eq!((s.kind, s.flags & 1), (0x33, 1));
@@ -135,9 +133,9 @@ fn handshake_sips_sonar_and_driving() {
         (i32::from(s.lvel) - 300).abs() <= 20 && (i32::from(s.rvel) - 300).abs() <= 20,
         "{s:?}"
     );
-    line.orders.send(Order::Vel { speed: 0, turn: 0 }).unwrap();
+    assert!(line.send(Order::Vel { speed: 0, turn: 0 }));
     wait_for(&rx, 5, |u| sip(u).is_some_and(|s| s.kind == 0x32));
-    line.stop();
+    line.stop(Order::Stop);
     let stats = emu.stop();
     assert!(stats.sips >= 10, "{stats:?}");
 }
@@ -161,7 +159,7 @@ fn faults_are_survived_and_a_mute_robot_is_reported() {
         }
         sips >= 30
     });
-    line.stop();
+    line.stop(Order::Stop);
     emu.stop();
 
     let mut mute = emulate(
@@ -177,6 +175,6 @@ fn faults_are_survived_and_a_mute_robot_is_reported() {
         unreachable!()
     };
     assert!(why.contains("no answer to SYNC0"), "{why}");
-    line.stop();
+    line.stop(Order::Stop);
     mute.stop();
 }

@@ -13,12 +13,10 @@
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, TryRecvError};
-use std::sync::Arc;
-use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use troupe_node::Waker;
-use troupe_serial::{Framer, LineError, Port};
+use troupe_serial::{Framer, LineError, LineThread, Port};
 
 use crate::telegram::{self, cmd, mode, RawScan, Telegram, TelegramCodec};
 
@@ -187,47 +185,17 @@ impl From<LineError> for Fail {
     }
 }
 
-/// A running device thread.
-#[derive(Debug)]
-pub struct LineThread {
-    /// Orders for the thread.
-    pub orders: Sender<Order>,
-    abort: Arc<AtomicBool>,
-    thread: Option<JoinHandle<()>>,
-}
+/// The line thread, as the driver holds it.
+pub type Line = LineThread<Order>;
 
-impl LineThread {
-    /// Stops the thread: a streaming scanner is stopped and put back at its
-    /// connect rate; a wait for a reply is cut short.
-    pub fn stop(mut self) {
-        self.abort.store(true, Ordering::Relaxed);
-        let _ = self.orders.send(Order::Stop);
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
-    }
-}
-
-/// Starts the device thread.
+/// Starts the line thread.
 ///
 /// # Errors
 ///
 /// When the thread cannot be started.
-pub fn spawn(
-    settings: Settings,
-    updates: Sender<Update>,
-    waker: Waker,
-) -> std::io::Result<LineThread> {
-    let (orders, orders_rx) = std::sync::mpsc::channel();
-    let abort = Arc::new(AtomicBool::new(false));
-    let flag = abort.clone();
-    let thread = std::thread::Builder::new()
-        .name("sicklms200 line".into())
-        .spawn(move || run(settings, &updates, &orders_rx, &waker, &flag))?;
-    Ok(LineThread {
-        orders,
-        abort,
-        thread: Some(thread),
+pub fn spawn(settings: Settings, updates: Sender<Update>, waker: Waker) -> std::io::Result<Line> {
+    LineThread::spawn("sicklms200 line", move |orders, abort| {
+        run(settings, &updates, &orders, &waker, &abort);
     })
 }
 

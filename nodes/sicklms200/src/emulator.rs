@@ -41,17 +41,7 @@ impl Scene for Room {
             .iter()
             .map(|&a| {
                 let (dx, dy) = (a.cos(), a.sin());
-                let mut d = f64::INFINITY;
-                for (den, lim) in [(dx, x0), (dx, x1)] {
-                    if den.abs() > 1e-12 && lim / den > 0.0 {
-                        d = d.min(lim / den);
-                    }
-                }
-                for (den, lim) in [(dy, y0), (dy, y1)] {
-                    if den.abs() > 1e-12 && lim / den > 0.0 {
-                        d = d.min(lim / den);
-                    }
-                }
+                let mut d = troupe_geom::ray_to_box(0.0, 0.0, a, (x0, x1, y0, y1));
                 // Ray–circle: |s·u − p|² = r².
                 let b = dx * px + dy * py;
                 let c = px * px + py * py - r * r;

@@ -44,7 +44,7 @@ use serde::Deserialize;
 use troupe_msgs::{laser, Device, Interface, Pose3d, Size3d};
 use troupe_node::{Ctx, Driver, Event, NodeError, Responder, Result, Section, Unit};
 
-use crate::device::{LineThread, Order, ScanConfig, Settings, Update};
+use crate::device::{Line, Order, ScanConfig, Settings, Update};
 use crate::telegram::RawScan;
 
 /// Options, by Player's names.
@@ -108,7 +108,7 @@ pub struct SickLms200 {
 
 struct Link {
     updates: Receiver<Update>,
-    line: LineThread,
+    line: Line,
 }
 
 impl Driver for SickLms200 {
@@ -193,7 +193,7 @@ impl Driver for SickLms200 {
                 match (c.check(), &self.link) {
                     (Err(why), _) => r.nack(format!("invalid laser configuration: {why}")),
                     (Ok(()), Some(link)) => {
-                        if link.line.orders.send(Order::Configure(c)).is_ok() {
+                        if link.line.send(Order::Configure(c)) {
                             self.pending.push_back(r.responder);
                         } else {
                             r.nack("the laser's line thread has stopped");
@@ -215,7 +215,7 @@ impl Driver for SickLms200 {
 
     fn shutdown(&mut self, _: &mut Ctx) -> Result<()> {
         if let Some(link) = self.link.take() {
-            link.line.stop();
+            link.line.stop(Order::Stop);
         }
         tracing::info!(scans = self.scan_id, "laser shutdown");
         Ok(())

@@ -144,7 +144,7 @@ fn connects_at_9600_switches_to_500000_and_streams_room_scans() {
     // A new configuration is taken up: 1° gives 181 values.
     let mut c = config;
     c.res = 100;
-    t.orders.send(Order::Configure(c)).unwrap();
+    assert!(t.send(Order::Configure(c)));
     let Update::Configured(done) = wait_for(&rx, 20, |u| matches!(u, Update::Configured(..)))
     else {
         unreachable!()
@@ -156,7 +156,7 @@ fn connects_at_9600_switches_to_500000_and_streams_room_scans() {
         |u| matches!(u, Update::Scan(r, _) if r.values.len() == 181),
     );
 
-    t.stop();
+    t.stop(Order::Stop);
     let stats = emu.stop();
     assert!(stats.scans >= 2 && stats.requests >= 8, "{stats:?}");
     assert_eq!(stats.refused, 0);
@@ -184,7 +184,7 @@ fn survives_noise_bad_checksums_truncation_and_dropped_bytes() {
         }
         good >= 30
     });
-    t.stop();
+    t.stop(Order::Stop);
     emu.stop();
 }
 
@@ -208,7 +208,7 @@ fn a_mute_device_is_reported_and_an_unplugged_one_reconnects() {
         why.contains("no reply to stop streaming at 9600 baud"),
         "{why}"
     );
-    t.stop();
+    t.stop(Order::Stop);
     mute.stop();
 
     let mut unplug = emulate(
@@ -229,6 +229,6 @@ fn a_mute_device_is_reported_and_an_unplugged_one_reconnects() {
     // Plugged back in, powered up afresh at 9600: the whole sequence again.
     wait_for(&rx, 30, |u| matches!(u, Update::Ready { .. }));
     wait_for(&rx, 10, |u| matches!(u, Update::Scan(..)));
-    t.stop();
+    t.stop(Order::Stop);
     unplug.stop();
 }
