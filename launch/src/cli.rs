@@ -103,10 +103,11 @@ their drivers. `troupe launch` starts one for the robots of its plan.")]
   troupe router --zenoh-config secure.json5      # TLS, auth, ACLs")]
     Router(RouterArgs),
 
-    /// Play a serial device (SICK LMS200, Pioneer) on a pseudo-terminal, for its driver to talk to.
+    /// Play a serial device (SICK LMS200, Pioneer, Erratic) on a pseudo-terminal, for its driver to talk to.
     #[command(after_help = "Examples:
   troupe emulate sicklms200 --link /tmp/laser     # then: port \"/tmp/laser\" in the .cfg
   troupe emulate p2os --link /tmp/pioneer --subclass p3at
+  troupe emulate erratic --link /tmp/erratic --revision \"Rev G\"
   troupe emulate sicklms200 --link /tmp/laser --corrupt 0.1 --noise 0.1
   troupe emulate sicklms200 --link /tmp/laser --unplug-after 10 --replug-after 2
 

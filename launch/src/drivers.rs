@@ -43,6 +43,7 @@ pub fn all() -> Vec<Entry> {
         ),
         entry::<troupe_sicklms200::SickLms200>("the SICK LMS200 laser over a serial line"),
         entry::<troupe_p2os::P2os>("Pioneer robots (P2OS/ARCOS) over a serial line"),
+        entry::<troupe_erratic::Erratic>("the Videre Erratic robot over a serial line"),
         entry::<troupe_stage::Stage>(
             "the 2D multi-robot simulator: a Stage world's robots and sensors",
         ),

@@ -16,6 +16,8 @@ pub enum Emulated {
     Sicklms200,
     /// A Pioneer (ARCOS) robot with a sonar ring, in an 8 m × 6 m room.
     P2os,
+    /// A Videre Erratic with sonars, floor IR and servos, in an 8 m × 6 m room.
+    Erratic,
 }
 
 #[derive(Debug, Args)]
@@ -53,6 +55,9 @@ pub struct EmulateArgs {
     /// p2os: the robot's subclass (p3dx-sh, p3dx, p3at-sh, p3at, p2dx, p2de, p2at, amigo-sh, amigo).
     #[arg(long, default_value = "p3dx-sh")]
     pub subclass: String,
+    /// erratic: the robot's revision ("Rev E", "Rev G" or "Rev H").
+    #[arg(long, default_value = "Rev H")]
+    pub revision: String,
     /// Seed of the fault generator (runs with the same seed fail alike).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -134,6 +139,20 @@ pub fn run(a: EmulateArgs) -> anyhow::Result<()> {
                 tracing::info!("a Pioneer {} emulated; Ctrl-C stops it", a.subclass);
             })
             .with_context(|| format!("emulating a p2os robot at {}", a.link.display()))?;
+        }
+        Emulated::Erratic => {
+            use troupe_erratic::emulator;
+            let opts = emulator::EmulatorOptions {
+                link: a.link.clone(),
+                faults,
+                seed: a.seed,
+                revision: a.revision.clone(),
+            };
+            emulator::run_with(&opts, &stop, || {
+                banner("erratic", &a.link);
+                tracing::info!("an Erratic {} emulated; Ctrl-C stops it", a.revision);
+            })
+            .with_context(|| format!("emulating an erratic at {}", a.link.display()))?;
         }
     }
     Ok(())

@@ -245,3 +245,71 @@ fn p2os_drives_the_emulated_pioneer_and_its_watchdog_stops_it() {
     assert!(log.contains("watchdog"), "{log}");
     assert!(log.contains("robot stopped and closed"), "{log}");
 }
+
+/// The Erratic with the sample erratic.cfg's devices and settings, emulated:
+/// the client drives it, reads odometry, sonar, IR, and points the pan-tilt.
+#[test]
+fn erratic_drives_the_emulated_robot_and_moves_its_servos() {
+    use troupe_client::{Position2dProxy, SonarProxy};
+    let rig = Rig::new("erratic");
+    let (mut robot, link) = rig.emulate("erratic", &[]);
+    let cfg = rig.cfg(&format!(
+        "driver ( name \"erratic\" port \"{}\"\n  provides [\"position2d:0\" \"power:0\" \"aio:0\" \"ir:0\" \"sonar:0\" \"ptz:0\" \"tilt:::ptz:1\"]\n  max_trans_vel 0.5 max_rot_vel 200 trans_acc 0.5 rot_acc 100\n  pid_trans_p 40 pid_trans_v 100 pid_rot_p 40 pid_rot_v 100\n  motor_pwm_frequency 16000 motor_pwm_max_on 0.7 direct_wheel_vel_control 0 )\n",
+        link.display()
+    ));
+    let (mut launcher, session) = launch(&cfg);
+    let client = Client::with_session(session.clone(), 6665);
+    let base = Position2dProxy::new(&client, 0).unwrap();
+    let sonar = SonarProxy::new(&client, 0).unwrap();
+    let deadline = Instant::now() + DEADLINE;
+    while base.data().is_none() || sonar.count() == 0 {
+        assert!(Instant::now() < deadline, "no data: {}", launcher.stderr());
+        let _ = client.read_timeout(DEADLINE);
+    }
+    assert_eq!(sonar.count(), 8);
+    // Rev H's sonar 3 looks straight ahead from 0.21 m: the wall is 4 m away.
+    assert!(
+        (sonar.range(3).unwrap() - 3.79).abs() < 0.01,
+        "{:?}",
+        sonar.range(3)
+    );
+
+    base.set_motor_enable(true).unwrap();
+    let deadline = Instant::now() + DEADLINE;
+    while base.x() < 0.3 || base.yaw() < 0.2 {
+        assert!(
+            Instant::now() < deadline,
+            "pose {:?}: {}",
+            base.data(),
+            launcher.stderr()
+        );
+        base.set_speed(0.3, 0.3).unwrap();
+        let _ = client.read_timeout(DEADLINE);
+    }
+    base.set_speed(0.0, 0.0).unwrap();
+
+    // Pan-tilt: a command moves the servos and the commanded angles come back.
+    let ptz = troupe_client::PtzProxy::new(&client, 0).unwrap();
+    ptz.set_pan_tilt(0.3, -0.2).unwrap();
+    let deadline = Instant::now() + DEADLINE;
+    while ptz.data().is_none() {
+        assert!(
+            Instant::now() < deadline,
+            "no ptz data: {}",
+            launcher.stderr()
+        );
+        let _ = client.read_timeout(DEADLINE);
+    }
+    let d = ptz.data().unwrap();
+    assert!(
+        (f64::from(d.pan) - 17f64.to_radians()).abs() < 1e-3,
+        "{d:?}"
+    );
+    launcher.terminate();
+    robot.terminate();
+    let log = robot.stderr();
+    assert!(
+        log.contains("servo=2"),
+        "two servo commands reached the robot: {log}"
+    );
+}

@@ -3,7 +3,7 @@
 use std::sync::{Arc, Mutex, MutexGuard};
 
 use troupe_msgs::{
-    blobfinder, codec, common, gripper, laser, localize, map, planner, position2d, ranger,
+    blobfinder, codec, common, gripper, laser, localize, map, planner, position2d, ptz, ranger,
     simulation, sonar, DecodeError, Device, Interface, Message, Pose2d,
 };
 use troupe_node::zenoh::pubsub::Subscriber;
@@ -481,6 +481,44 @@ impl SonarProxy {
     /// [`ClientError::Nack`] if the device refuses; [`ClientError::NoAnswer`].
     pub fn request_geom(&self) -> Result<sonar::Geom> {
         self.feed.link.request(&sonar::GetGeom)
+    }
+}
+
+/// A pan-tilt-zoom unit (`PtzProxy`).
+pub struct PtzProxy {
+    feed: Feed<Option<ptz::Data>>,
+}
+
+impl PtzProxy {
+    /// Subscribes to `ptz:index` of the client's robot.
+    ///
+    /// # Errors
+    ///
+    /// [`ClientError::Node`] if the subscription fails.
+    pub fn new(client: &Client, index: u32) -> Result<Self> {
+        Ok(PtzProxy {
+            feed: Feed::new(client, Interface::Ptz, index, only::<ptz::Data>)?,
+        })
+    }
+
+    /// The latest state the device reported.
+    pub fn data(&self) -> Option<ptz::Data> {
+        *self.feed.get()
+    }
+
+    /// Points the unit: pan and tilt in radians, zoom as it is (Player's `SetCam`).
+    ///
+    /// # Errors
+    ///
+    /// [`ClientError::Node`] if the command could not be sent.
+    pub fn set_pan_tilt(&self, pan: f64, tilt: f64) -> Result<()> {
+        self.feed.link.command(&ptz::Cmd {
+            target: ptz::Data {
+                pan: pan as f32,
+                tilt: tilt as f32,
+                ..Default::default()
+            },
+        })
     }
 }
 

@@ -13,10 +13,14 @@
 #![warn(missing_docs)]
 
 pub mod bitmap;
+mod drive;
 mod grid;
 pub mod occmap;
+mod odometry;
 mod pose;
 
+pub use drive::DiffDrive;
 pub use grid::{Grid, Hit, EMPTY};
 pub use occmap::OccMap;
+pub use odometry::Odometry;
 pub use pose::{normalize, ray_to_box, Pose};

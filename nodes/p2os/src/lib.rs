@@ -47,7 +47,7 @@ use std::sync::mpsc::{self, Receiver};
 use std::time::Duration;
 
 use serde::Deserialize;
-use troupe_geom::Pose;
+use troupe_geom::{Odometry, Pose};
 use troupe_msgs::{
     aio, bumper, common, dio, position2d, power, sonar, Device, Interface, Pose2d, Pose3d, Size3d,
 };
@@ -99,47 +99,6 @@ struct Devices {
     dio: Option<Device>,
     /// Accessories declared but not served (gyro, gripper, blobfinder…).
     silent: Vec<Device>,
-}
-
-/// Odometry integrated from the robot's position counters.
-#[derive(Debug, Default)]
-struct Odometry {
-    raw: Option<(u16, u16)>,
-    x: f64,
-    y: f64,
-    /// The reported pose = frame ⊕ (x, y, heading).
-    frame: Pose,
-}
-
-/// The signed change between two 15-bit counter values.
-fn counter_change(from: u16, to: u16) -> i32 {
-    let d = (i32::from(to) - i32::from(from)).rem_euclid(32768);
-    if d >= 16384 {
-        d - 32768
-    } else {
-        d
-    }
-}
-
-impl Odometry {
-    fn update(&mut self, sip: &Sip, p: &Params) -> Pose {
-        let raw = (sip.xpos & 0x7FFF, sip.ypos & 0x7FFF);
-        if let Some((x0, y0)) = self.raw {
-            self.x += f64::from(counter_change(x0, raw.0)) * p.dist_conv;
-            self.y += f64::from(counter_change(y0, raw.1)) * p.dist_conv;
-        }
-        self.raw = Some(raw);
-        let yaw = f64::from(sip.th) * p.angle_conv;
-        self.frame
-            .compose(&Pose::new(self.x / 1000.0, self.y / 1000.0, yaw))
-    }
-
-    /// Makes the current pose read `want` from now on.
-    fn set(&mut self, now: Pose, want: Pose) {
-        // frame' ⊕ local = want where local = frame⁻¹ ⊕ now.
-        let local = self.frame.inverse().compose(&now);
-        self.frame = want.compose(&local.inverse());
-    }
 }
 
 /// The p2os driver.
@@ -220,7 +179,7 @@ impl Driver for P2os {
             watchdog: (o.watchdog > 0.0).then(|| Duration::from_secs_f64(o.watchdog)),
             link: None,
             params: None,
-            odom: Odometry::default(),
+            odom: Odometry::new(15),
             pose: Pose::default(),
             sonar: Vec::new(),
             last_cmd: None,
@@ -276,7 +235,7 @@ impl Driver for P2os {
             }
             Event::Request(r) if r.is::<position2d::ResetOdom>() => {
                 self.order(Order::ResetOdom);
-                self.odom = Odometry::default();
+                self.odom = Odometry::new(15);
                 r.reply(&common::Ack);
                 Ok(())
             }
@@ -375,7 +334,7 @@ impl P2os {
                         name.2
                     );
                     self.params = Some(params);
-                    self.odom = Odometry::default();
+                    self.odom = Odometry::new(15);
                     self.sonar = vec![0.0; params.sonars.len()];
                     ctx.set_ready(true);
                 }
@@ -396,7 +355,12 @@ impl P2os {
         let Some(p) = self.params else {
             return Ok(());
         };
-        self.pose = self.odom.update(sip, p);
+        self.pose = self.odom.update(
+            sip.xpos,
+            sip.ypos,
+            f64::from(sip.th) * p.angle_conv,
+            p.dist_conv,
+        );
         if let Some(d) = self.dev.odometry {
             let (l, r) = (
                 f64::from(sip.lvel) * p.vel_conv,
@@ -481,38 +445,5 @@ impl P2os {
             )?;
         }
         Ok(())
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn counters_wrap_at_15_bits() {
-        assert_eq!(counter_change(100, 150), 50);
-        assert_eq!(counter_change(32760, 10), 18);
-        assert_eq!(counter_change(10, 32760), -18);
-    }
-
-    #[test]
-    fn odometry_integrates_counters_and_honours_set_odom() {
-        let p = params::find("p3dx").unwrap();
-        let mut o = Odometry::default();
-        let sip = |x: u16, th: i16| Sip {
-            xpos: x,
-            th,
-            ..Sip::default()
-        };
-        // The first SIP is the origin, whatever its counters say.
-        assert_eq!(o.update(&sip(5000, 0), p), Pose::new(0.0, 0.0, 0.0));
-        let pose = o.update(&sip(5000 + 2062, 0), p); // 2062 × 0.485 mm ≈ 1 m
-        assert!((pose.x - 1.000_07).abs() < 1e-4, "{pose:?}");
-        o.set(pose, Pose::new(10.0, 5.0, 0.0));
-        let moved = o.update(&sip(5000 + 2062 * 2, 0), p);
-        assert!(
-            (moved.x - 11.0).abs() < 1e-3 && (moved.y - 5.0).abs() < 1e-9,
-            "{moved:?}"
-        );
     }
 }
