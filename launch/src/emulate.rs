@@ -58,6 +58,12 @@ pub struct EmulateArgs {
     /// erratic: the robot's revision ("Rev E", "Rev G" or "Rev H").
     #[arg(long, default_value = "Rev H")]
     pub revision: String,
+    /// sicklms200: take the ranges from this laser of a running stack (a
+    /// Stage robot's, say: `6665:laser:1`) instead of the built-in room,
+    /// so the hardware path runs in a simulated world. Reached through the
+    /// global --connect/--namespace flags.
+    #[arg(long, value_name = "ADDR")]
+    pub stage_laser: Option<troupe_msgs::DevAddr>,
     /// Seed of the fault generator (runs with the same seed fail alike).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -88,8 +94,40 @@ fn banner(device: &str, link: &std::path::Path) {
     let _ = out.flush();
 }
 
+/// Ranges from a live laser device: each angle reads the nearest beam of
+/// the latest scan (out of reach until the first scan arrives).
+struct LiveLaser {
+    _client: troupe_client::Client,
+    laser: troupe_client::LaserProxy,
+}
+
+impl troupe_sicklms200::emulator::Scene for LiveLaser {
+    fn ranges(&mut self, _t: f64, angles: &[f64]) -> Vec<f64> {
+        let Some(scan) = self.laser.scan() else {
+            return vec![f64::INFINITY; angles.len()];
+        };
+        let (min, res) = (f64::from(scan.min_angle), f64::from(scan.resolution));
+        angles
+            .iter()
+            .map(|&a| {
+                let i = if res > 0.0 {
+                    ((a - min) / res).round()
+                } else {
+                    -1.0
+                };
+                match scan.ranges.get(i as usize) {
+                    Some(&r) if i >= 0.0 && f64::from(r) < f64::from(scan.max_range) => {
+                        f64::from(r)
+                    }
+                    _ => f64::INFINITY,
+                }
+            })
+            .collect()
+    }
+}
+
 /// Runs the emulator until SIGINT or SIGTERM.
-pub fn run(a: EmulateArgs) -> anyhow::Result<()> {
+pub fn run(a: EmulateArgs, z: &troupe_node::ZenohArgs) -> anyhow::Result<()> {
     let faults = Faults {
         noise: probability("noise", a.noise)?,
         drop: probability("drop", a.drop)?,
@@ -118,8 +156,25 @@ pub fn run(a: EmulateArgs) -> anyhow::Result<()> {
                 faults,
                 seed: a.seed,
             };
-            let mut scene = emulator::Room;
-            emulator::run_with(&opts, &mut scene, &stop, || {
+            let mut room = emulator::Room;
+            let mut live;
+            let scene: &mut dyn emulator::Scene = match &a.stage_laser {
+                None => &mut room,
+                Some(addr) => {
+                    let dev = addr.device(troupe_msgs::DEFAULT_ROBOT);
+                    let client = troupe_client::Client::connect(z, dev.robot)
+                        .context("connecting to the stack for --stage-laser")?;
+                    let laser = troupe_client::LaserProxy::new(&client, dev.index)
+                        .with_context(|| format!("subscribing to {dev}"))?;
+                    tracing::info!("ranges from {dev}");
+                    live = LiveLaser {
+                        _client: client,
+                        laser,
+                    };
+                    &mut live
+                }
+            };
+            emulator::run_with(&opts, scene, &stop, || {
                 banner("sicklms200", &a.link);
                 tracing::info!("{} emulated; Ctrl-C stops it", emulator::KIND);
             })

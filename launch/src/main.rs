@@ -51,7 +51,7 @@ fn run(cli: cli::Cli) -> anyhow::Result<()> {
         Command::Echo(a) => tools::echo(a, z),
         Command::Hz(a) => tools::hz(a, z),
         Command::Router(a) => tools::router(a, z),
-        Command::Emulate(a) => emulate::run(a),
+        Command::Emulate(a) => emulate::run(a, z),
         Command::Drivers => tools::print_drivers(),
         Command::Interfaces => tools::print_interfaces(),
         Command::Bench(b) => bench::run(b, z),
