@@ -1,13 +1,12 @@
 //! `troupe bench serial`: scan rates of the sicklms200 driver against the
 //! emulated scanner, over a pseudo-terminal paced at the line's baud rate.
 
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{mpsc, Arc};
+use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use clap::Args;
 use troupe_node::Waker;
-use troupe_serial::Faults;
+use troupe_serial::{Emulator, Faults};
 use troupe_sicklms200::device::{self, ScanConfig, Settings, Update};
 use troupe_sicklms200::emulator::{self, EmulatorOptions, Room};
 
@@ -48,20 +47,13 @@ fn case(baud: u32, res: u16, seconds: f64) -> anyhow::Result<(f64, f64, usize)> 
     let dir = std::env::temp_dir().join(format!("troupe-bench-serial-{}", std::process::id()));
     std::fs::create_dir_all(&dir)?;
     let link = dir.join("laser");
-    let stop = Arc::new(AtomicBool::new(false));
-    let (linked_tx, linked) = mpsc::channel();
     let opts = EmulatorOptions {
         link: link.clone(),
         faults: Faults::default(),
         seed: 1,
     };
-    let flag = stop.clone();
-    let emu = std::thread::spawn(move || {
-        emulator::run_with(&opts, &mut Room, &flag, || {
-            let _ = linked_tx.send(());
-        })
-    });
-    linked.recv_timeout(Duration::from_secs(10))?;
+    let emu =
+        Emulator::spawn(move |stop, linked| emulator::run_with(&opts, &mut Room, stop, linked))?;
     let settings = Settings {
         port: link,
         connect_rates: vec![9600, 38400, 500000],
@@ -108,8 +100,7 @@ fn case(baud: u32, res: u16, seconds: f64) -> anyhow::Result<(f64, f64, usize)> 
     }
     let elapsed = first.map_or(1.0, |f| f.elapsed().as_secs_f64());
     line.stop(device::Order::Stop);
-    stop.store(true, Ordering::Relaxed);
-    let _ = emu.join();
+    emu.stop()?;
     let _ = std::fs::remove_dir_all(&dir);
     Ok((scans as f64 / elapsed, connect.unwrap_or(0.0), values))
 }

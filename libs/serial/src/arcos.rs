@@ -58,6 +58,22 @@ pub fn command_int(c: u8, v: i32) -> Vec<u8> {
     frame(&[c, t, lo, hi])
 }
 
+/// Both controllers' CLOSE: stop the data stream and forget the client.
+pub const CLOSE: u8 = 2;
+/// Both controllers' STOP: wheels to zero.
+pub const STOP: u8 = 29;
+
+/// Player's goodbye to either controller (its `MainQuit`): STOP, then
+/// CLOSE, logged either way.
+pub fn stop_and_close(port: &mut crate::Port) {
+    let stop = port.send(&command(STOP));
+    let close = port.send(&command(CLOSE));
+    match stop.and(close) {
+        Ok(()) => tracing::info!("robot stopped and closed"),
+        Err(e) => tracing::warn!("could not stop the robot: {e}"),
+    }
+}
+
 /// The wheel-velocity command (VEL2) of both controllers.
 pub const VEL2: u8 = 32;
 

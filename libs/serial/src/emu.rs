@@ -34,6 +34,9 @@ pub struct EmuLine {
     rng: StdRng,
     plugged_at: Instant,
     unplugged_at: Option<Instant>,
+    /// When the device last understood something from the driver.
+    last_heard: Instant,
+    barked: bool,
     /// Faults injected so far.
     pub injected: Injected,
     /// Bytes received at a baud rate other than the device's.
@@ -62,6 +65,8 @@ impl EmuLine {
             rng: StdRng::seed_from_u64(seed),
             plugged_at: Instant::now(),
             unplugged_at: None,
+            last_heard: Instant::now(),
+            barked: false,
             injected: Injected::default(),
             wrong_baud: 0,
         })
@@ -141,6 +146,8 @@ impl EmuLine {
             tracing::debug!("{n} bytes at {line} baud: garbage to a device at {baud}");
             return Ok(LineEvent::Idle);
         }
+        self.last_heard = Instant::now();
+        self.barked = false;
         Ok(LineEvent::Received(n))
     }
 
@@ -159,6 +166,20 @@ impl EmuLine {
         };
         let bytes = self.faults.apply(frame, &mut self.rng, &mut self.injected);
         self.pacer.send(pty, &bytes, baud)
+    }
+
+    /// A firmware watchdog's trigger: true once each time nothing has come
+    /// from the driver for `limit` (logged as the robot stopping).
+    pub fn watchdog(&mut self, limit: Duration) -> bool {
+        if self.barked || self.last_heard.elapsed() <= limit {
+            return false;
+        }
+        self.barked = true;
+        tracing::warn!(
+            "watchdog: nothing from the client for {} s; wheels stopped",
+            limit.as_secs_f64()
+        );
+        true
     }
 
     /// When what was sent has left the line.

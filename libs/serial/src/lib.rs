@@ -9,6 +9,11 @@
 //!   `.cfg` names an emulated device as `port "/tmp/laser"`.
 //! - [`Pacer`]: writes at the speed a real line would carry the bytes.
 //! - [`arcos`]: the packet framing of Pioneer and Erratic controllers.
+//! - [`LineThread`], [`run_sessions`] and [`Link`]: a hardware driver's
+//!   line thread — sessions with the device, reconnection, a prompt stop;
+//!   [`CommandWatchdog`]: the robot drivers' `watchdog` option.
+//! - [`EmuLine`] and [`Emulator`]: the device end of an emulated line, and
+//!   an emulator on a thread for tests and benchmarks.
 //!
 //! Every call blocks for at most the time it is given: a driver runs its
 //! device on a thread of its own and hands results to its event loop.
@@ -17,13 +22,17 @@ pub mod arcos;
 mod emu;
 mod faults;
 mod framer;
+mod link;
 mod port;
 mod pty;
 mod thread;
+mod watchdog;
 
 pub use emu::{EmuLine, LineEvent};
 pub use faults::{Faults, Injected};
 pub use framer::{Codec, Decoded, FrameStats, Framer, Skipped};
+pub use link::{Link, LinkError};
 pub use port::{baud_supported, LineError, Port, BAUD_RATES};
 pub use pty::{Pacer, Pty};
-pub use thread::LineThread;
+pub use thread::{run_sessions, Emulator, Ended, LineThread, Linked};
+pub use watchdog::CommandWatchdog;

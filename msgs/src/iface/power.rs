@@ -31,4 +31,17 @@ pub struct Data {
     /// Charging.
     pub charging: bool,
 }
+
+impl Data {
+    /// A battery at `volts`, its charge given as a share of `nominal` volts
+    /// (how Player's robot drivers fill it in).
+    pub fn battery(volts: f32, nominal: f32) -> Data {
+        Data {
+            valid: VALID_VOLTS | VALID_PERCENT,
+            volts,
+            percent: 100.0 * volts / nominal,
+            ..Default::default()
+        }
+    }
+}
 message!(Data, "power/data@1");

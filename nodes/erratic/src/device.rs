@@ -11,12 +11,13 @@
 //! for a second, so the robot's watchdog keeps quiet.
 
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, TryRecvError};
+use std::sync::atomic::AtomicBool;
+use std::sync::mpsc::{Receiver, Sender, TryRecvError};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use troupe_node::Waker;
-use troupe_serial::{arcos, Framer, LineError, LineThread, Port};
+use troupe_serial::{arcos, run_sessions, Ended, LineError, LineThread, Link, LinkError};
 
 use crate::packet::{self, cmd, kind, PacketCodec};
 use crate::params::{self, Params};
@@ -97,7 +98,7 @@ pub type Line = LineThread<Order>;
 /// When the thread cannot be started.
 pub fn spawn(settings: Settings, updates: Sender<Update>, waker: Waker) -> std::io::Result<Line> {
     LineThread::spawn("erratic line", move |orders, abort| {
-        run(settings, &updates, &orders, &waker, &abort);
+        run(settings, &updates, &orders, &waker, abort);
     })
 }
 
@@ -128,32 +129,44 @@ impl From<LineError> for Fail {
     }
 }
 
+impl From<LinkError> for Fail {
+    fn from(e: LinkError) -> Self {
+        match e {
+            LinkError::Line(e) => Fail::Line(e),
+            LinkError::Aborted => Fail::Stopped,
+        }
+    }
+}
+
 fn run(
     mut settings: Settings,
     updates: &Sender<Update>,
     orders: &Receiver<Order>,
     waker: &Waker,
-    abort: &AtomicBool,
+    abort: Arc<AtomicBool>,
 ) {
     let send = |u: Update| {
         let _ = updates.send(u);
         waker.wake();
     };
     let mut sessions = 0u64;
-    loop {
+    let session = |settings: &mut Settings| {
         sessions += 1;
-        let mut s = Session {
-            settings: &mut settings,
-            port: None,
-            framer: Framer::new(PacketCodec),
-            orders,
-            abort,
-            last_sent: Instant::now(),
-        };
-        let result = s.run(&send);
-        let stats = s.framer.stats;
+        let (result, stats) =
+            match Link::open(&settings.port, BAUD_RATES[0], PacketCodec, abort.clone()) {
+                Ok(link) => {
+                    let mut s = Session {
+                        settings,
+                        link,
+                        orders,
+                        last_sent: Instant::now(),
+                    };
+                    (s.run(&send), s.link.framer.stats)
+                }
+                Err(e) => (Err(e.into()), Default::default()),
+            };
         match result {
-            Ok(()) | Err(Fail::Stopped) => return,
+            Ok(()) | Err(Fail::Stopped) => Ended::Stopped,
             Err(e) => {
                 tracing::warn!(
                     session = sessions,
@@ -164,67 +177,43 @@ fn run(
                     RECONNECT_DELAY.as_secs()
                 );
                 send(Update::Lost(e.to_string()));
+                Ended::Failed
             }
         }
-        let until = Instant::now() + RECONNECT_DELAY;
-        loop {
-            match orders.recv_timeout(until.saturating_duration_since(Instant::now())) {
-                Ok(Order::Stop) | Err(RecvTimeoutError::Disconnected) => return,
-                Ok(Order::DirectWheel(d)) => settings.direct_wheel = d,
-                Ok(_) => {}
-                Err(RecvTimeoutError::Timeout) => break,
-            }
+    };
+    let between = |settings: &mut Settings, order| match order {
+        Order::Stop => false,
+        Order::DirectWheel(d) => {
+            settings.direct_wheel = d;
+            true
         }
-    }
+        _ => true,
+    };
+    run_sessions(&mut settings, orders, RECONNECT_DELAY, session, between);
 }
 
 struct Session<'a> {
     settings: &'a mut Settings,
-    port: Option<Port>,
-    framer: Framer<PacketCodec>,
+    link: Link<PacketCodec>,
     orders: &'a Receiver<Order>,
-    abort: &'a AtomicBool,
     last_sent: Instant,
 }
 
 impl Session<'_> {
-    fn port(&mut self) -> &mut Port {
-        self.port
-            .as_mut()
-            .expect("the port is open during a session")
-    }
-
     fn send(&mut self, bytes: &[u8]) -> Result<(), Fail> {
-        self.port().send(bytes)?;
+        self.link.send(bytes)?;
         self.last_sent = Instant::now();
         Ok(())
     }
 
     fn read(&mut self, timeout: Duration) -> Result<Option<Vec<u8>>, Fail> {
-        let deadline = Instant::now() + timeout;
-        loop {
-            if self.abort.load(Ordering::Relaxed) {
-                return Err(Fail::Stopped);
-            }
-            let left = deadline.saturating_duration_since(Instant::now());
-            if left.is_zero() {
-                return Ok(None);
-            }
-            let port = self.port.as_mut().expect("open");
-            if let Some(p) = self
-                .framer
-                .read(port, left.min(Duration::from_millis(100)))?
-            {
-                return Ok(Some(p));
-            }
-        }
+        Ok(self.link.read(timeout)?)
     }
 
     fn connect(&mut self) -> Result<(String, String, String), Fail> {
         for &baud in &BAUD_RATES {
-            self.port().set_baud(baud)?;
-            self.port().discard_input();
-            self.framer.clear();
+            self.link.port.set_baud(baud)?;
+            self.link.flush();
             for _ in 0..12 {
                 self.send(&packet::command(cmd::CONFIG))?;
                 let deadline = Instant::now() + Duration::from_millis(250);
@@ -240,7 +229,6 @@ impl Session<'_> {
     }
 
     fn run(&mut self, send: &impl Fn(Update)) -> Result<(), Fail> {
-        self.port = Some(Port::open(&self.settings.port, BAUD_RATES[0])?);
         let name = self.connect()?;
         let params = params::find(&name.2).unwrap_or_else(|| {
             tracing::warn!(
@@ -263,7 +251,7 @@ impl Session<'_> {
             cmd::ANALOG,
             i32::from(self.settings.analog),
         ))?;
-        let baud = self.port().baud();
+        let baud = self.link.port.baud();
         send(Update::Ready { name, params, baud });
         self.stream(send)
     }
@@ -331,12 +319,7 @@ impl Session<'_> {
     }
 
     fn goodbye(&mut self) {
-        let stop = self.send(&packet::command(cmd::STOP));
-        let close = self.send(&packet::command(cmd::CLOSE));
-        match stop.and(close) {
-            Ok(()) => tracing::info!("robot stopped and closed"),
-            Err(e) => tracing::warn!("could not stop the robot: {e}"),
-        }
+        arcos::stop_and_close(&mut self.link.port);
     }
 }
 

@@ -61,7 +61,6 @@ struct Robot {
     left: f64,
     right: f64,
     servos: [u16; 3],
-    last_heard: Instant,
 }
 
 impl Robot {
@@ -76,7 +75,6 @@ impl Robot {
             left: 0.0,
             right: 0.0,
             servos: [1650; 3],
-            last_heard: Instant::now(),
         }
     }
 
@@ -163,7 +161,6 @@ pub fn run_with(
     let mut stats = EmulatorStats::default();
     let mut next = Instant::now();
     let mut buf = [0u8; 512];
-    let mut barked = false;
     while !stop.load(Ordering::Relaxed) {
         let wait = next.saturating_duration_since(Instant::now()).min(CYCLE);
         match line.recv(&mut buf, baud, wait)? {
@@ -171,8 +168,6 @@ pub fn run_with(
                 framer.push(&buf[..n]);
                 while let Some(p) = framer.next_frame() {
                     stats.packets += 1;
-                    robot.last_heard = Instant::now();
-                    barked = false;
                     obey(&mut robot, &p, &mut line, baud, &mut stats)?;
                 }
             }
@@ -190,14 +185,8 @@ pub fn run_with(
         if now < next {
             continue;
         }
-        if robot.last_heard.elapsed() > WATCHDOG && (robot.left != 0.0 || robot.right != 0.0) {
-            if !barked {
-                tracing::warn!(
-                    "watchdog: nothing from the client for {} s; wheels stopped",
-                    WATCHDOG.as_secs()
-                );
-                barked = true;
-            }
+        let moving = robot.left != 0.0 || robot.right != 0.0;
+        if moving && line.watchdog(WATCHDOG) {
             robot.left = 0.0;
             robot.right = 0.0;
         }

@@ -43,7 +43,6 @@ pub mod params;
 
 use std::path::PathBuf;
 use std::sync::mpsc::{self, Receiver};
-use std::time::Duration;
 
 use serde::Deserialize;
 use troupe_geom::{Odometry, Pose};
@@ -51,6 +50,7 @@ use troupe_msgs::{
     aio, common, ir, position2d, power, ptz, sonar, Device, Interface, Pose2d, Pose3d, Size3d,
 };
 use troupe_node::{Ctx, Driver, Event, NodeError, Result, Section, Unit};
+use troupe_serial::CommandWatchdog;
 
 use crate::device::{Line, Order, Settings, Update};
 use crate::packet::{cmd, command_int, frame, kind, Motor};
@@ -184,13 +184,12 @@ struct Devices {
 pub struct Erratic {
     dev: Devices,
     settings: Settings,
-    watchdog: Option<Duration>,
+    watchdog: CommandWatchdog,
     link: Option<(Receiver<Update>, Line)>,
     params: Option<&'static Params>,
     odom: Odometry,
     pose: Pose,
     sonar: Vec<f32>,
-    last_cmd: Option<(f64, bool)>,
 }
 
 impl Driver for Erratic {
@@ -243,13 +242,12 @@ impl Driver for Erratic {
                 startup: startup(&o)?,
             },
             dev,
-            watchdog: (o.watchdog > 0.0).then(|| Duration::from_secs_f64(o.watchdog)),
+            watchdog: CommandWatchdog::new(o.watchdog),
             link: None,
             params: None,
             odom: Odometry::new(12),
             pose: Pose::default(),
             sonar: vec![0.0; 8],
-            last_cmd: None,
         })
     }
 
@@ -260,9 +258,7 @@ impl Driver for Erratic {
             .map_err(|e| NodeError::Driver(format!("starting the line thread: {e}").into()))?;
         tracing::info!("robot initialising ({})", self.settings.port.display());
         self.link = Some((rx, line));
-        if self.watchdog.is_some() {
-            ctx.set_tick(Some(Duration::from_millis(100)));
-        }
+        ctx.set_tick(self.watchdog.tick());
         Ok(())
     }
 
@@ -270,14 +266,16 @@ impl Driver for Erratic {
         match event {
             Event::Wake => self.drain(ctx),
             Event::Tick => {
-                self.check_watchdog(ctx);
+                if self.watchdog.expired(ctx.now()) {
+                    self.order(Order::Vel { speed: 0, turn: 0 });
+                }
                 Ok(())
             }
             Event::Command(c) if c.is::<position2d::CmdVel>() => {
                 let v = c.decode::<position2d::CmdVel>()?.msg.vel;
                 let speed = (v.x * 1000.0).round() as i32;
                 let turn = v.yaw.to_degrees().round() as i32;
-                self.last_cmd = Some((ctx.now(), speed != 0 || turn != 0));
+                self.watchdog.commanded(ctx.now(), speed != 0 || turn != 0);
                 self.order(Order::Vel { speed, turn });
                 Ok(())
             }
@@ -396,20 +394,6 @@ impl Erratic {
         }
     }
 
-    fn check_watchdog(&mut self, ctx: &Ctx) {
-        let (Some(limit), Some((at, true))) = (self.watchdog, self.last_cmd) else {
-            return;
-        };
-        if ctx.now() - at > limit.as_secs_f64() {
-            tracing::warn!(
-                "no velocity command for {:.1} s: stopping the robot (watchdog)",
-                limit.as_secs_f64()
-            );
-            self.last_cmd = Some((ctx.now(), false));
-            self.order(Order::Vel { speed: 0, turn: 0 });
-        }
-    }
-
     fn drain(&mut self, ctx: &mut Ctx) -> Result<()> {
         let Some((rx, _)) = &self.link else {
             return Ok(());
@@ -475,15 +459,7 @@ impl Erratic {
                 }
                 if let Some(d) = self.dev.power {
                     let volts = f32::from(m.battery) / 10.0;
-                    ctx.publish(
-                        &d,
-                        &power::Data {
-                            valid: power::VALID_VOLTS | power::VALID_PERCENT,
-                            volts,
-                            percent: 100.0 * volts / 12.0,
-                            ..Default::default()
-                        },
-                    )?;
+                    ctx.publish(&d, &power::Data::battery(volts, 12.0))?;
                 }
             }
             Some(&kind::SONAR) => match packet::decode_sonar(p) {

@@ -72,7 +72,6 @@ struct Robot {
     /// Wheel speeds commanded, mm/s.
     left: f64,
     right: f64,
-    last_heard: Instant,
 }
 
 impl Robot {
@@ -85,7 +84,6 @@ impl Robot {
             body: DiffDrive::new(ROOM, RADIUS),
             left: 0.0,
             right: 0.0,
-            last_heard: Instant::now(),
         }
     }
 
@@ -186,7 +184,6 @@ pub fn run_with(
     let mut stats = EmulatorStats::default();
     let mut next_sip = Instant::now();
     let mut buf = [0u8; 512];
-    let mut barked = false;
     while !stop.load(Ordering::Relaxed) {
         let wait = next_sip
             .saturating_duration_since(Instant::now())
@@ -196,8 +193,6 @@ pub fn run_with(
                 framer.push(&buf[..n]);
                 while let Some(p) = framer.next_frame() {
                     stats.packets += 1;
-                    robot.last_heard = Instant::now();
-                    barked = false;
                     obey(&mut robot, &p, &mut line, baud, opts)?;
                 }
             }
@@ -209,14 +204,8 @@ pub fn run_with(
         }
         let now = Instant::now();
         if robot.state == State::Open && now >= next_sip {
-            if robot.last_heard.elapsed() > WATCHDOG && (robot.left != 0.0 || robot.right != 0.0) {
-                if !barked {
-                    tracing::warn!(
-                        "watchdog: nothing from the client for {} s; wheels stopped",
-                        WATCHDOG.as_secs()
-                    );
-                    barked = true;
-                }
+            let moving = robot.left != 0.0 || robot.right != 0.0;
+            if moving && line.watchdog(WATCHDOG) {
                 robot.left = 0.0;
                 robot.right = 0.0;
             }

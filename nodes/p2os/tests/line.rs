@@ -3,20 +3,17 @@
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] fns
 
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, Receiver};
-use std::sync::Arc;
-use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use troupe_node::Waker;
 use troupe_p2os::device::{self, Order, Settings, Update};
 use troupe_p2os::emulator::{self, EmulatorOptions, EmulatorStats};
-use troupe_serial::Faults;
+use troupe_serial::{Emulator, Faults};
 
+/// An emulated Pioneer on a thread, its line linked in a directory of its own.
 struct Emu {
-    stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<std::io::Result<EmulatorStats>>>,
+    emulator: Option<Emulator<EmulatorStats>>,
     link: PathBuf,
     dir: PathBuf,
 }
@@ -25,7 +22,6 @@ fn emulate(name: &str, faults: Faults) -> Emu {
     let dir = std::env::temp_dir().join(format!("troupe-p2os-{name}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let link = dir.join("robot");
-    let stop = Arc::new(AtomicBool::new(false));
     let opts = EmulatorOptions {
         link: link.clone(),
         faults,
@@ -33,17 +29,10 @@ fn emulate(name: &str, faults: Faults) -> Emu {
         subclass: "p3dx-sh".into(),
         name: "Troupe".into(),
     };
-    let (ready_tx, ready) = mpsc::channel();
-    let s = stop.clone();
-    let thread = std::thread::spawn(move || {
-        emulator::run_with(&opts, &s, || {
-            let _ = ready_tx.send(());
-        })
-    });
-    ready.recv_timeout(Duration::from_secs(10)).unwrap();
+    let emulator =
+        Emulator::spawn(move |stop, linked| emulator::run_with(&opts, stop, linked)).unwrap();
     Emu {
-        stop,
-        thread: Some(thread),
+        emulator: Some(emulator),
         link,
         dir,
     }
@@ -51,14 +40,12 @@ fn emulate(name: &str, faults: Faults) -> Emu {
 
 impl Emu {
     fn stop(&mut self) -> EmulatorStats {
-        self.stop.store(true, Ordering::Relaxed);
-        self.thread.take().unwrap().join().unwrap().unwrap()
+        self.emulator.take().unwrap().stop().unwrap()
     }
 }
 
 impl Drop for Emu {
     fn drop(&mut self) {
-        self.stop.store(true, Ordering::Relaxed);
         let _ = std::fs::remove_dir_all(&self.dir);
     }
 }

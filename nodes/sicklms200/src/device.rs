@@ -11,12 +11,13 @@
 //! that stop — ends the session: the driver is told, waits, and starts over.
 
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, TryRecvError};
+use std::sync::atomic::AtomicBool;
+use std::sync::mpsc::{Receiver, Sender, TryRecvError};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use troupe_node::Waker;
-use troupe_serial::{Framer, LineError, LineThread, Port};
+use troupe_serial::{run_sessions, Ended, LineError, LineThread, Link, LinkError};
 
 use crate::telegram::{self, cmd, mode, RawScan, Telegram, TelegramCodec};
 
@@ -185,6 +186,15 @@ impl From<LineError> for Fail {
     }
 }
 
+impl From<LinkError> for Fail {
+    fn from(e: LinkError) -> Self {
+        match e {
+            LinkError::Line(e) => Fail::Line(e),
+            LinkError::Aborted => Fail::Stopped,
+        }
+    }
+}
+
 /// The line thread, as the driver holds it.
 pub type Line = LineThread<Order>;
 
@@ -195,7 +205,7 @@ pub type Line = LineThread<Order>;
 /// When the thread cannot be started.
 pub fn spawn(settings: Settings, updates: Sender<Update>, waker: Waker) -> std::io::Result<Line> {
     LineThread::spawn("sicklms200 line", move |orders, abort| {
-        run(settings, &updates, &orders, &waker, &abort);
+        run(settings, &updates, &orders, &waker, abort);
     })
 }
 
@@ -204,33 +214,35 @@ fn run(
     updates: &Sender<Update>,
     orders: &Receiver<Order>,
     waker: &Waker,
-    abort: &AtomicBool,
+    abort: Arc<AtomicBool>,
 ) {
     let send = |u: Update| {
         let _ = updates.send(u);
         waker.wake();
     };
     let mut counts = Counts::default();
-    let mut first = true;
-    loop {
+    let session = |settings: &mut Settings| {
         counts.sessions += 1;
-        let mut s = Session {
-            settings: &mut settings,
-            port: None,
-            framer: Framer::new(TelegramCodec {
-                addr: telegram::FROM_DEVICE,
-            }),
-            orders,
-            send: &send,
-            counts: &mut counts,
-            abort,
-            closing: false,
+        let first = counts.sessions == 1;
+        let codec = TelegramCodec {
+            addr: telegram::FROM_DEVICE,
         };
-        let result = s.run(first);
-        let stats = s.framer.stats;
-        first = false;
+        let rate = settings.connect_rates[0];
+        let (result, stats) = match Link::open(&settings.port, rate, codec, abort.clone()) {
+            Ok(link) => {
+                let mut s = Session {
+                    settings,
+                    link,
+                    orders,
+                    send: &send,
+                    counts: &mut counts,
+                };
+                (s.run(first), s.link.framer.stats)
+            }
+            Err(e) => (Err(e.into()), Default::default()),
+        };
         match result {
-            Ok(()) | Err(Fail::Stopped) => return,
+            Ok(()) | Err(Fail::Stopped) => Ended::Stopped,
             Err(e) => {
                 tracing::warn!(
                     port = %settings.port.display(),
@@ -243,47 +255,33 @@ fn run(
                     RECONNECT_DELAY.as_secs()
                 );
                 send(Update::Lost(e.to_string()));
+                Ended::Failed
             }
         }
-        // Wait before retrying, but answer orders meanwhile.
-        let until = Instant::now() + RECONNECT_DELAY;
-        loop {
-            match orders.recv_timeout(until.saturating_duration_since(Instant::now())) {
-                Ok(Order::Stop) | Err(RecvTimeoutError::Disconnected) => return,
-                Ok(Order::Configure(c)) => {
-                    // Taken up at the next connection.
-                    settings.config = c;
-                    send(Update::Configured(Ok(c)));
-                }
-                Err(RecvTimeoutError::Timeout) => break,
-            }
+    };
+    // A configuration that comes between sessions is taken up at the next.
+    let between = |settings: &mut Settings, order| match order {
+        Order::Stop => false,
+        Order::Configure(c) => {
+            settings.config = c;
+            send(Update::Configured(Ok(c)));
+            true
         }
-    }
+    };
+    run_sessions(&mut settings, orders, RECONNECT_DELAY, session, between);
 }
 
 struct Session<'a, F: Fn(Update)> {
     settings: &'a mut Settings,
-    port: Option<Port>,
-    framer: Framer<TelegramCodec>,
+    link: Link<TelegramCodec>,
     orders: &'a Receiver<Order>,
     send: &'a F,
     counts: &'a mut Counts,
-    /// Set when the driver stops: waits end at once…
-    abort: &'a AtomicBool,
-    /// …except those of the goodbye to the scanner.
-    closing: bool,
 }
 
 impl<F: Fn(Update)> Session<'_, F> {
-    fn port(&mut self) -> &mut Port {
-        self.port
-            .as_mut()
-            .expect("the port is open during a session")
-    }
-
     fn run(&mut self, first: bool) -> Result<(), Fail> {
         let rates = self.settings.connect_rates.clone();
-        self.port = Some(Port::open(&self.settings.port, rates[0])?);
         if first && !self.settings.delay.is_zero() {
             tracing::info!(
                 "waiting {} s for the laser to power up",
@@ -294,7 +292,7 @@ impl<F: Fn(Update)> Session<'_, F> {
         let mut current = None;
         'connect: for _ in 0..=self.settings.retry {
             for &rate in &rates {
-                self.port().set_baud(rate)?;
+                self.link.port.set_baud(rate)?;
                 tracing::debug!("trying {rate} baud");
                 match self.mode(
                     mode::STOP,
@@ -325,7 +323,7 @@ impl<F: Fn(Update)> Session<'_, F> {
                 Fail::Refused(format!("transfer rate {transfer} (not one the LMS200 has)"))
             })?;
             self.mode(m, &[], "a baud rate change", Duration::from_secs(2))?;
-            self.port().set_baud(transfer)?;
+            self.link.port.set_baud(transfer)?;
             baud = transfer;
             tracing::info!("laser switched to {baud} baud");
         }
@@ -352,26 +350,16 @@ impl<F: Fn(Update)> Session<'_, F> {
     ) -> Result<Telegram, Fail> {
         let bytes = telegram::request(body);
         for _ in 0..TRIES {
-            self.port().discard_input();
-            self.framer.clear();
-            self.port().send(&bytes)?;
+            self.link.flush();
+            self.link.send(&bytes)?;
             let deadline = Instant::now() + timeout;
             loop {
-                if self.abort.load(Ordering::Relaxed) && !self.closing {
-                    return Err(Fail::Stopped);
-                }
                 let left = deadline.saturating_duration_since(Instant::now());
-                if left.is_zero() {
-                    break;
-                }
-                let port = self.port.as_mut().expect("open");
-                match self
-                    .framer
-                    .read(port, left.min(Duration::from_millis(100)))?
-                {
+                match self.link.read(left)? {
                     Some(t) if t.cmd() == expect => return Ok(t),
                     Some(t) if t.cmd() == cmd::NACK => return Err(Fail::Refused(what.into())),
-                    Some(_) | None => continue,
+                    Some(_) => continue,
+                    None => break,
                 }
             }
         }
@@ -509,11 +497,8 @@ impl<F: Fn(Update)> Session<'_, F> {
     }
 
     fn stream(&mut self, kind: &str) -> Result<(), Fail> {
-        // Scans must keep coming: allow three telegrams' line time, and at least a second.
-        let config = self.settings.config;
-        let bytes = 2 * config.count() + 16;
-        let line = Duration::from_secs_f64(bytes as f64 * 10.0 / f64::from(self.port().baud()));
-        let patience = (3 * line).max(Duration::from_secs(1));
+        let mut config = self.settings.config;
+        let mut patience = self.patience(config);
         let mut last = Instant::now();
         loop {
             match self.orders.try_recv() {
@@ -522,20 +507,25 @@ impl<F: Fn(Update)> Session<'_, F> {
                     return Err(Fail::Stopped);
                 }
                 Ok(Order::Configure(c)) => {
-                    let result = self
-                        .configure(kind, c)
-                        .and_then(|()| self.stream_start(c))
-                        .map(|()| c);
-                    let reply = result.as_ref().map(|c| *c).map_err(|e| e.to_string());
+                    let result = self.configure(kind, c).and_then(|()| self.stream_start(c));
+                    let reply = result.as_ref().map(|()| c).map_err(|e| e.to_string());
                     (self.send)(Update::Configured(reply));
                     result?;
                     self.settings.config = c;
-                    return self.stream(kind);
+                    config = c;
+                    patience = self.patience(c);
+                    last = Instant::now();
                 }
                 Err(TryRecvError::Empty) => {}
             }
-            let port = self.port.as_mut().expect("open");
-            match self.framer.read(port, Duration::from_millis(100))? {
+            let read = match self.link.read(Duration::from_millis(100)) {
+                Err(LinkError::Aborted) => {
+                    self.shut_down();
+                    return Err(Fail::Stopped);
+                }
+                other => other?,
+            };
+            match read {
                 Some(t) if t.cmd() == cmd::SCAN || t.cmd() == cmd::SCAN_PART => {
                     last = Instant::now();
                     match telegram::decode_scan(&t) {
@@ -565,15 +555,23 @@ impl<F: Fn(Update)> Session<'_, F> {
         }
     }
 
+    /// How long scans may pause before the scanner counts as lost: three
+    /// telegrams' line time, and at least a second.
+    fn patience(&self, c: ScanConfig) -> Duration {
+        let bytes = 2 * c.count() + 16;
+        let line = Duration::from_secs_f64(bytes as f64 * 10.0 / f64::from(self.link.port.baud()));
+        (3 * line).max(Duration::from_secs(1))
+    }
+
     /// Player's `MainQuit`: stop streaming and go back to the connect rate.
     fn shut_down(&mut self) {
-        self.closing = true;
+        self.link.closing();
         let rate = self.settings.connect_rates[0];
         let quick = Duration::from_millis(300);
         if let Err(e) = self.mode(mode::STOP, &[], "stop streaming", quick) {
             tracing::warn!("cannot stop the laser's stream: {e}");
         }
-        if self.port().baud() != rate {
+        if self.link.port.baud() != rate {
             if let Some(m) = telegram::baud_mode(rate) {
                 if let Err(e) = self.mode(m, &[], "a baud rate change", quick) {
                     tracing::warn!("cannot throttle the laser back to {rate} baud: {e}");

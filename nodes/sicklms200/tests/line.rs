@@ -3,70 +3,49 @@
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] fns
 
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, Receiver};
-use std::sync::Arc;
-use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use troupe_node::Waker;
-use troupe_serial::Faults;
+use troupe_serial::{Emulator, Faults};
 use troupe_sicklms200::device::{self, Order, ScanConfig, Settings, Update};
 use troupe_sicklms200::emulator::{self, EmulatorOptions, EmulatorStats, Room, Scene};
 
+/// An emulated scanner on a thread, its line linked in a directory of its own.
 struct Emu {
-    stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<std::io::Result<EmulatorStats>>>,
+    emulator: Option<Emulator<EmulatorStats>>,
     link: PathBuf,
-    _dir: TempDir,
-}
-
-struct TempDir(PathBuf);
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
+    dir: PathBuf,
 }
 
 fn emulate(name: &str, faults: Faults) -> Emu {
     let dir = std::env::temp_dir().join(format!("troupe-lms-{name}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let link = dir.join("laser");
-    let stop = Arc::new(AtomicBool::new(false));
     let opts = EmulatorOptions {
         link: link.clone(),
         faults,
         seed: 1,
     };
-    let (ready_tx, ready) = mpsc::channel();
-    let s = stop.clone();
-    let thread = std::thread::spawn(move || {
-        let mut room = Room;
-        emulator::run_with(&opts, &mut room, &s, || {
-            let _ = ready_tx.send(());
-        })
-    });
-    ready
-        .recv_timeout(Duration::from_secs(10))
-        .expect("the emulator links its line");
+    let emulator =
+        Emulator::spawn(move |stop, linked| emulator::run_with(&opts, &mut Room, stop, linked))
+            .expect("the emulator links its line");
     Emu {
-        stop,
-        thread: Some(thread),
+        emulator: Some(emulator),
         link,
-        _dir: TempDir(dir),
+        dir,
     }
 }
 
 impl Emu {
     fn stop(&mut self) -> EmulatorStats {
-        self.stop.store(true, Ordering::Relaxed);
-        self.thread.take().unwrap().join().unwrap().unwrap()
+        self.emulator.take().unwrap().stop().unwrap()
     }
 }
 
 impl Drop for Emu {
     fn drop(&mut self) {
-        self.stop.store(true, Ordering::Relaxed);
+        let _ = std::fs::remove_dir_all(&self.dir);
     }
 }
 
