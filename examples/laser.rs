@@ -10,7 +10,7 @@ use clap::Parser;
 use troupe_client::{Client, LaserProxy};
 
 fn main() -> anyhow::Result<()> {
-    let args = troupe_examples::Args::parse();
+    let args = troupe_examples::Common::parse();
     let robot = Client::connect(&args.zenoh, args.robot)?;
     let lp = LaserProxy::new(&robot, 0)?;
     for _ in 0..5 {

@@ -67,6 +67,10 @@ pub struct LaunchArgs {
     /// it prints `troupe bridge: robot 6665 on ADDR:PORT` on stdout.
     #[arg(long)]
     pub bridge_any_port: bool,
+    /// Run the simulator at this multiple of real time, whatever the world
+    /// file says (1 = real time, 0 = as fast as the machine can)
+    #[arg(long, value_name = "X")]
+    pub speedup: Option<f64>,
 }
 
 /// Flags of `troupe plan`.
@@ -92,9 +96,12 @@ pub fn print_plan(a: PlanArgs) -> anyhow::Result<()> {
 
 /// `troupe launch`.
 pub fn launch(a: LaunchArgs, z: &ZenohArgs) -> anyhow::Result<()> {
-    let (plan, warnings) = plan::load(&a.file, a.robot)?;
+    let (mut plan, warnings) = plan::load(&a.file, a.robot)?;
     for w in &warnings {
         tracing::warn!("{w}");
+    }
+    if let Some(x) = a.speedup {
+        set_speedup(&mut plan, x)?;
     }
     if a.dry_run {
         std::io::stdout()
@@ -145,6 +152,24 @@ pub fn launch(a: LaunchArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         .enable_all()
         .build()?;
     rt.block_on(supervise(a, z.clone(), nodes, sim_time))
+}
+
+/// Overrides the `speedup` of every simulator in the plan (`--speedup`).
+fn set_speedup(plan: &mut plan::Plan, x: f64) -> anyhow::Result<()> {
+    if !x.is_finite() {
+        anyhow::bail!("--speedup {x}: expected a number (1 = real time, 0 = as fast as possible)");
+    }
+    let mut any = false;
+    for n in plan.nodes.iter_mut().filter(|n| n.driver == "stage") {
+        if n.options.contains_key("worldfile") {
+            n.options.insert("speedup".into(), x.into());
+            any = true;
+        }
+    }
+    if !any {
+        anyhow::bail!("--speedup: the plan has no simulator (no `stage` driver with a worldfile)");
+    }
+    Ok(())
 }
 
 /// The shared view of which devices are live.
@@ -692,5 +717,37 @@ async fn forward<R: tokio::io::AsyncRead + Unpin>(
                 tracing::warn!("log file of `{name}`: {e}");
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    fn sample(name: &str) -> crate::plan::Plan {
+        let p = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../worlds")
+            .join(name);
+        crate::plan::load(&p, 6665).expect("sample plan").0
+    }
+
+    #[test]
+    fn speedup_overrides_the_simulator_and_only_it() {
+        let mut plan = sample("simple.cfg");
+        super::set_speedup(&mut plan, 5.0).expect("a simulator");
+        for n in &plan.nodes {
+            let want = (n.driver == "stage").then(|| serde_json::json!(5.0));
+            assert_eq!(n.options.get("speedup").cloned(), want, "{}", n.name);
+        }
+    }
+
+    #[test]
+    fn speedup_without_a_simulator_or_a_number_is_refused() {
+        let mut plan = sample("laser.cfg");
+        let e = super::set_speedup(&mut plan, 5.0).expect_err("no simulator");
+        assert!(e.to_string().contains("no simulator"), "{e}");
+        let mut plan = sample("simple.cfg");
+        let e = super::set_speedup(&mut plan, f64::NAN).expect_err("NaN");
+        assert!(e.to_string().contains("expected a number"), "{e}");
     }
 }

@@ -85,18 +85,23 @@ impl TestNet {
 
     /// Waits until every device in `devices` has a liveliness token.
     pub fn wait_live(&self, devices: &[&str]) {
-        let s = self.client();
-        let sub = token_events(&s);
-        let deadline = Instant::now() + DEADLINE;
-        let mut missing: Vec<String> = devices.iter().map(|d| d.to_string()).collect();
-        while !missing.is_empty() {
-            let sample = sub
-                .recv_deadline(deadline)
-                .expect("liveliness channel")
-                .unwrap_or_else(|| panic!("devices never came up: {missing:?}"));
-            if let Ok((d, _)) = troupe_msgs::keys::parse_token(sample.key_expr().as_str()) {
-                missing.retain(|m| *m != d.to_string());
-            }
+        wait_live(&self.client(), devices);
+    }
+}
+
+/// Waits (within the deadline) until every device in `devices` (as
+/// `6665:laser:0`) has a liveliness token, as `session` sees them.
+pub fn wait_live(session: &Session, devices: &[&str]) {
+    let sub = token_events(session);
+    let deadline = Instant::now() + DEADLINE;
+    let mut missing: Vec<String> = devices.iter().map(|d| d.to_string()).collect();
+    while !missing.is_empty() {
+        let sample = sub
+            .recv_deadline(deadline)
+            .expect("liveliness channel")
+            .unwrap_or_else(|| panic!("devices never came up: {missing:?}"));
+        if let Ok((d, _)) = troupe_msgs::keys::parse_token(sample.key_expr().as_str()) {
+            missing.retain(|m| *m != d.to_string());
         }
     }
 }
@@ -158,7 +163,8 @@ impl Proc {
         Self::start(name, &mut cmd)
     }
 
-    fn start(name: &str, cmd: &mut Command) -> Proc {
+    /// Starts `cmd` with piped stdout and stderr.
+    pub fn start(name: &str, cmd: &mut Command) -> Proc {
         let child = cmd
             .stdin(Stdio::null())
             .stdout(Stdio::piped())

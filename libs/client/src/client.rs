@@ -1,5 +1,6 @@
 //! The connection: a Zenoh session, a robot, and the "fresh data" signal.
 
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 
@@ -65,6 +66,8 @@ struct Inner {
     robot: u32,
     fresh: Fresh,
     seen: Mutex<u64>,
+    /// The newest data stamp, as f64 bits.
+    data_time: AtomicU64,
 }
 
 /// A connection to the robots on a Zenoh network, like libplayerc++'s `PlayerClient`.
@@ -92,7 +95,15 @@ impl Client {
             robot,
             fresh: Fresh::default(),
             seen: Mutex::new(0),
+            data_time: AtomicU64::new(0),
         }))
+    }
+
+    /// The stamp of the newest sample any proxy received, in seconds: the
+    /// simulator's clock under Stage, like libplayerc's `datatime`. 0 before
+    /// the first sample.
+    pub fn data_time(&self) -> f64 {
+        f64::from_bits(self.0.data_time.load(Ordering::Relaxed))
     }
 
     /// The robot (port) this client talks to.
@@ -176,8 +187,17 @@ impl Client {
             .session
             .declare_subscriber(&key)
             .callback(move |s| {
-                f(&s.payload().to_bytes());
+                let bytes = s.payload().to_bytes();
+                f(&bytes);
                 if let Some(inner) = me.upgrade() {
+                    // Non-negative floats order as their bit patterns do.
+                    if let Ok((_, stamp, _)) = codec::split(&bytes) {
+                        if stamp.is_finite() && stamp >= 0.0 {
+                            inner
+                                .data_time
+                                .fetch_max(stamp.to_bits(), Ordering::Relaxed);
+                        }
+                    }
                     Client(inner).bump();
                 }
             })
