@@ -16,24 +16,40 @@
 //!   `p = 1 + Σ pz³`, `d` capped at a maximum that is also the distance of
 //!   a point off the map; no ray casting at all.
 
-use troupe_geom::occmap::{self, OccMap};
+use troupe_geom::occmap::OccMap;
 use troupe_geom::Pose;
-use troupe_msgs::{laser, map};
+use troupe_msgs::laser;
 
 /// Distance from every cell to the nearest obstacle cell.
 pub struct DistanceMap {
-    info: map::Info,
     /// Metres, row-major; 0 on obstacles.
     dist: Vec<f32>,
+    /// The same in cells, for marching rays in grid units.
+    cells: Vec<f32>,
+    /// Metres per cell and its inverse; the origin; the size in cells.
+    res: f64,
+    inv_res: f64,
+    origin: (f64, f64),
+    size: (usize, usize),
 }
 
 impl DistanceMap {
     /// The distance field of `map`: cells with a state ≥ 0 (occupied or
     /// unknown) are obstacles.
     pub fn new(map: &OccMap) -> Self {
+        let dist = map.distance_field();
+        let res = f64::from(map.info.resolution);
+        let inv_res = if res > 0.0 { 1.0 / res } else { 0.0 };
         DistanceMap {
-            info: map.info,
-            dist: map.distance_field(),
+            cells: dist
+                .iter()
+                .map(|&d| (f64::from(d) * inv_res) as f32)
+                .collect(),
+            dist,
+            res,
+            inv_res,
+            origin: (map.info.origin.x, map.info.origin.y),
+            size: (map.info.width as usize, map.info.height as usize),
         }
     }
 
@@ -46,7 +62,14 @@ impl DistanceMap {
     /// Distance at world point (x, y); `off` off the map.
     #[inline]
     pub fn at_or(&self, x: f64, y: f64, off: f64) -> f64 {
-        occmap::index_of(&self.info, x, y).map_or(off, |k| f64::from(self.dist[k]))
+        let gx = (x - self.origin.0) * self.inv_res;
+        let gy = (y - self.origin.1) * self.inv_res;
+        // Truncation is the floor for the non-negative coordinates on the map.
+        if gx >= 0.0 && gy >= 0.0 && gx < self.size.0 as f64 && gy < self.size.1 as f64 {
+            f64::from(self.dist[gy as usize * self.size.0 + gx as usize])
+        } else {
+            off
+        }
     }
 
     /// Range from (x, y) along `angle` to the first obstacle cell, at most
@@ -54,18 +77,75 @@ impl DistanceMap {
     /// minus a cell diagonal), at least half a cell at a time.
     pub fn range(&self, x: f64, y: f64, angle: f64, max: f64) -> f64 {
         let (s, c) = angle.sin_cos();
-        let res = f64::from(self.info.resolution);
-        let safe = res * std::f64::consts::SQRT_2;
-        let min_step = res * 0.5;
+        self.range_along(x, y, (c, s), max)
+    }
+
+    /// [`DistanceMap::range`] along the unit vector `(cos, sin)`.
+    ///
+    /// The hot loop of the beam model: it works in cells (no division, and
+    /// truncation is the floor on the map, where coordinates are positive).
+    #[inline]
+    pub fn range_along(&self, x: f64, y: f64, (c, s): (f64, f64), max: f64) -> f64 {
+        let (w, h) = self.size;
+        let (wf, hf) = (w as f64, h as f64);
+        let gx = (x - self.origin.0) * self.inv_res;
+        let gy = (y - self.origin.1) * self.inv_res;
+        let tmax = max * self.inv_res;
         let mut t = 0.0;
-        while t < max {
-            let d = self.at(x + t * c, y + t * s);
-            if d <= 0.0 {
-                return t;
+        while t < tmax {
+            let (px, py) = (gx + t * c, gy + t * s);
+            if !(px >= 0.0 && py >= 0.0 && px < wf && py < hf) {
+                return t * self.res;
             }
-            t += (d - safe).max(min_step);
+            let d = f64::from(self.cells[py as usize * w + px as usize]);
+            if d <= 0.0 {
+                return t * self.res;
+            }
+            t += (d - std::f64::consts::SQRT_2).max(0.5);
         }
         max
+    }
+
+    /// [`DistanceMap::range_along`] for up to [`LANES`] rays from one point
+    /// at once: `out[k]` is the range along `dirs[k]`.
+    ///
+    /// One ray's march is a chain of dependent loads; marching several in
+    /// lockstep lets the processor overlap their latencies.
+    pub fn ranges_along(&self, x: f64, y: f64, dirs: &[(f64, f64)], max: f64, out: &mut [f64]) {
+        let n = dirs.len().min(LANES).min(out.len());
+        let (w, h) = self.size;
+        let (wf, hf) = (w as f64, h as f64);
+        let gx = (x - self.origin.0) * self.inv_res;
+        let gy = (y - self.origin.1) * self.inv_res;
+        let tmax = max * self.inv_res;
+        let mut t = [0.0f64; LANES];
+        let mut live: u32 = if tmax > 0.0 { (1 << n) - 1 } else { 0 };
+        for o in &mut out[..n] {
+            *o = max;
+        }
+        while live != 0 {
+            for k in 0..n {
+                if live & (1 << k) == 0 {
+                    continue;
+                }
+                let (c, s) = dirs[k];
+                let (px, py) = (gx + t[k] * c, gy + t[k] * s);
+                let d = if px >= 0.0 && py >= 0.0 && px < wf && py < hf {
+                    f64::from(self.cells[py as usize * w + px as usize])
+                } else {
+                    0.0
+                };
+                if d <= 0.0 {
+                    out[k] = t[k] * self.res;
+                    live &= !(1 << k);
+                    continue;
+                }
+                t[k] += (d - std::f64::consts::SQRT_2).max(0.5);
+                if t[k] >= tmax {
+                    live &= !(1 << k); // out[k] stays `max`
+                }
+            }
+        }
     }
 
     /// The scan of 181 beams over 180° that a laser at `p` sees, ranges
@@ -87,6 +167,9 @@ impl DistanceMap {
         }
     }
 }
+
+/// Rays [`DistanceMap::ranges_along`] marches together.
+pub const LANES: usize = 8;
 
 /// Which model scores a scan.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -117,6 +200,9 @@ pub enum Model {
 pub struct Beams {
     /// (range, bearing in the laser frame) of each used beam.
     pub beams: Vec<(f64, f64)>,
+    /// (cos, sin) of each bearing: a particle turns them with one rotation
+    /// instead of a sine and cosine per beam.
+    dirs: Vec<(f64, f64)>,
     /// The laser's maximum range.
     pub max_range: f64,
 }
@@ -141,27 +227,65 @@ impl Beams {
                 i += step;
             }
         }
-        Beams { beams, max_range }
+        let dirs = beams.iter().map(|&(_, b)| (b.cos(), b.sin())).collect();
+        Beams {
+            beams,
+            dirs,
+            max_range,
+        }
     }
 }
 
 impl Model {
     /// The likelihood of `beams` seen by a laser at world pose `laser`.
     pub fn likelihood(&self, map: &DistanceMap, laser: &Pose, beams: &Beams) -> f64 {
+        self.likelihood_on(map, laser, &Pose::default(), beams)
+    }
+
+    /// The likelihood of `beams` seen by a laser mounted at `mount` on a
+    /// robot at world pose `robot`: the particle filter's inner loop, with
+    /// one sine and cosine per particle.
+    pub fn likelihood_on(
+        &self,
+        map: &DistanceMap,
+        robot: &Pose,
+        mount: &Pose,
+        beams: &Beams,
+    ) -> f64 {
+        let (rs, rc) = robot.yaw.sin_cos();
+        let laser = Pose {
+            x: robot.x + rc * mount.x - rs * mount.y,
+            y: robot.y + rs * mount.x + rc * mount.y,
+            yaw: 0.0, // unused: (lc, ls) below carry the heading
+        };
+        let (ls, lc) = if mount.yaw == 0.0 {
+            (rs, rc)
+        } else {
+            let (ms, mc) = mount.yaw.sin_cos();
+            (rs * mc + rc * ms, rc * mc - rs * ms)
+        };
         let max = beams.max_range;
         match *self {
             Model::Beam { sigma, bad } => {
                 let k = 1.0 / (2.0 * sigma * sigma);
                 let mut p = 1.0;
-                for &(obs, bearing) in &beams.beams {
-                    let sim = map.range(laser.x, laser.y, laser.yaw + bearing, max + 1.0);
-                    let pz = if obs >= max && sim >= max {
-                        1.0
-                    } else {
-                        let z = obs - sim;
-                        bad + (1.0 - bad) * (-z * z * k).exp()
-                    };
-                    p *= pz;
+                let mut dirs = [(0.0, 0.0); LANES];
+                let mut sims = [0.0; LANES];
+                for (obs, rel) in beams.beams.chunks(LANES).zip(beams.dirs.chunks(LANES)) {
+                    for (d, &(bc, bs)) in dirs.iter_mut().zip(rel) {
+                        *d = (lc * bc - ls * bs, ls * bc + lc * bs);
+                    }
+                    let n = rel.len();
+                    map.ranges_along(laser.x, laser.y, &dirs[..n], max + 1.0, &mut sims[..n]);
+                    for (&(obs, _), &sim) in obs.iter().zip(&sims[..n]) {
+                        let pz = if obs >= max && sim >= max {
+                            1.0
+                        } else {
+                            let z = obs - sim;
+                            bad + (1.0 - bad) * (-z * z * k).exp()
+                        };
+                        p *= pz;
+                    }
                 }
                 p
             }
@@ -174,13 +298,13 @@ impl Model {
                 let k = 1.0 / (2.0 * sigma_hit * sigma_hit);
                 let rand = if max > 0.0 { z_rand / max } else { 0.0 };
                 let mut p = 1.0;
-                for &(obs, bearing) in &beams.beams {
+                for (&(obs, _), &(bc, bs)) in beams.beams.iter().zip(&beams.dirs) {
                     if obs >= max {
                         continue;
                     }
-                    let a = laser.yaw + bearing;
+                    let (c, s) = (lc * bc - ls * bs, ls * bc + lc * bs);
                     let d = map
-                        .at_or(laser.x + obs * a.cos(), laser.y + obs * a.sin(), max_dist)
+                        .at_or(laser.x + obs * c, laser.y + obs * s, max_dist)
                         .min(max_dist);
                     let pz = z_hit * (-d * d * k).exp() + rand;
                     p += pz * pz * pz;
@@ -194,8 +318,9 @@ impl Model {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::f64::consts::{FRAC_PI_2, PI};
     use troupe_geom::occmap::{FREE, OCCUPIED};
-    use troupe_msgs::Pose2d;
+    use troupe_msgs::{map, Pose2d};
 
     /// A 10 m × 10 m room at 0.1 m, walls on the border, origin at (0, 0).
     fn room() -> OccMap {
@@ -254,6 +379,46 @@ mod tests {
         assert!((r - 4.9 * std::f64::consts::SQRT_2).abs() < 0.1, "{r}");
         assert_eq!(d.range(5.0, 5.0, 0.0, 2.0), 2.0);
         assert_eq!(d.range(0.05, 0.05, 0.0, 2.0), 0.0);
+    }
+
+    #[test]
+    fn lockstep_rays_agree_with_single_rays() {
+        let d = DistanceMap::new(&room());
+        for (x, y) in [(5.0, 5.0), (0.5, 9.3), (9.8, 0.2), (3.3, 7.1), (-1.0, 5.0)] {
+            for max in [0.0, 1.0, 20.0] {
+                let dirs: Vec<(f64, f64)> = (0..LANES)
+                    .map(|k| {
+                        let a = 0.1 + k as f64 * 0.77;
+                        (a.cos(), a.sin())
+                    })
+                    .collect();
+                let mut out = [f64::NAN; LANES];
+                d.ranges_along(x, y, &dirs, max, &mut out);
+                for (k, &(c, s)) in dirs.iter().enumerate() {
+                    let one = d.range_along(x, y, (c, s), max);
+                    assert_eq!(out[k], one, "ray {k} from ({x}, {y}), max {max}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_mounted_laser_sees_what_the_same_laser_placed_in_the_world_sees() {
+        let m = room();
+        let d = DistanceMap::new(&m);
+        let scan = d.scan(&Pose::new(4.2, 5.5, 0.6), 8.0);
+        let beams = Beams::pick(&scan.ranges, -FRAC_PI_2, PI / 180.0, 8.0, 6);
+        let model = Model::Beam {
+            sigma: 0.15,
+            bad: 0.01,
+        };
+        let (robot, mount) = (Pose::new(4.0, 5.4, 0.5), Pose::new(0.2, 0.05, 0.1));
+        let placed = model.likelihood(&d, &robot.compose(&mount), &beams);
+        let mounted = model.likelihood_on(&d, &robot, &mount, &beams);
+        assert!(
+            (placed - mounted).abs() <= 1e-9 * placed.abs().max(1e-300),
+            "{placed} vs {mounted}"
+        );
     }
 
     #[test]

@@ -349,7 +349,7 @@ impl Localizer {
         if !beams.beams.is_empty() {
             let (model, laser) = (self.model, self.laser_pose);
             self.filter
-                .sensor(|p| model.likelihood(map, &p.compose(&laser), &beams));
+                .sensor(|p| model.likelihood_on(map, p, &laser, &beams));
         }
         self.filter.resample();
         self.hypoths = self.filter.clusters();
