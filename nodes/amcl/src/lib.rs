@@ -20,8 +20,9 @@
 //! and the default, or `likelihood_field` with `laser_z_hit` 0.95,
 //! `laser_z_rand` 0.05, `laser_sigma_hit` 0.2, `laser_likelihood_max_dist` 2
 //! as ROS's amcl) and `seed`
-//! (42) for repeatable runs. Player's odometry drift `odom_drift[k]` is fixed
-//! at its defaults (0.2 on x, y and θ, 0.2 of forward motion onto θ).
+//! (42) for repeatable runs. Odometry drift, Player's `odom_drift[0]`,
+//! `odom_drift[1]`, `odom_drift[2]` (rows x, y, θ of how much of each
+//! motion becomes noise): [0.2 0 0], [0 0.2 0], [0.2 0 0.2].
 //!
 //! # Behavior
 //!
@@ -97,6 +98,16 @@ pub struct Options {
     pub laser_likelihood_max_dist: f64,
     /// Random seed.
     pub seed: u64,
+    /// Odometry drift, row x: how much of the x, y and θ motion becomes
+    /// noise on x (Player's `odom_drift[0]`).
+    #[serde(rename = "odom_drift[0]")]
+    pub odom_drift_0: Vec<f64>,
+    /// Row y (`odom_drift[1]`).
+    #[serde(rename = "odom_drift[1]")]
+    pub odom_drift_1: Vec<f64>,
+    /// Row θ (`odom_drift[2]`).
+    #[serde(rename = "odom_drift[2]")]
+    pub odom_drift_2: Vec<f64>,
     /// Player's, unused.
     pub odom_init: Option<f64>,
     /// Player's GUI switch, unused.
@@ -122,6 +133,9 @@ impl Default for Options {
             laser_sigma_hit: 0.2,
             laser_likelihood_max_dist: 2.0,
             seed: 42,
+            odom_drift_0: DRIFT[0].to_vec(),
+            odom_drift_1: DRIFT[1].to_vec(),
+            odom_drift_2: DRIFT[2].to_vec(),
             odom_init: None,
             enable_gui: None,
         }
@@ -148,6 +162,7 @@ pub struct Localizer {
     model: Model,
     max_beams: usize,
     thresh: (f64, f64),
+    drift: [[f64; 3]; 3],
     map: Option<DistanceMap>,
     laser_pose: Pose,
     /// Odometry at the last filter update; `None` until the first sample.
@@ -195,6 +210,20 @@ impl Localizer {
                 _ => Err(format!("{name} needs three values (x y yaw), not {v:?}")),
             }
         };
+        // Player reads each drift row element by element, a missing one at
+        // its default.
+        let mut drift = DRIFT;
+        for (k, row) in [&o.odom_drift_0, &o.odom_drift_1, &o.odom_drift_2]
+            .into_iter()
+            .enumerate()
+        {
+            if row.len() > 3 || row.iter().any(|v| !v.is_finite() || *v < 0.0) {
+                return Err(format!(
+                    "odom_drift[{k}] needs up to three non-negative fractions (of x, y and θ motion), not {row:?}"
+                ));
+            }
+            drift[k][..row.len()].copy_from_slice(row);
+        }
         let mean = three("init_pose", &o.init_pose)?;
         let sd = three("init_pose_var", &o.init_pose_var)?;
         let thresh = match o.update_thresh.as_slice() {
@@ -234,6 +263,7 @@ impl Localizer {
             model,
             max_beams: o.laser_max_beams,
             thresh,
+            drift,
             map: None,
             laser_pose: Pose::default(),
             odom_ref: None,
@@ -344,7 +374,7 @@ impl Localizer {
             return false;
         };
         if self.moved {
-            self.filter.action(relative(&odom, &r), &DRIFT);
+            self.filter.action(relative(&odom, &r), &self.drift);
         }
         if !beams.beams.is_empty() {
             let (model, laser) = (self.model, self.laser_pose);
@@ -775,5 +805,25 @@ mod tests {
             ..Options::default()
         })
         .contains("update_thresh"));
+        assert!(e(Options {
+            odom_drift_1: vec![0.1, -0.2],
+            ..Options::default()
+        })
+        .contains("odom_drift[1]"));
+    }
+
+    #[test]
+    fn odom_drift_rows_come_by_players_names_with_missing_values_at_defaults() {
+        let o: Options = serde_json::from_value(serde_json::json!({
+            "odom_drift[0]": [0.05],
+            "odom_drift[2]": [0.0, 0.0, 0.1],
+        }))
+        .unwrap();
+        let loc = Localizer::new(&o).unwrap();
+        assert_eq!(
+            loc.drift,
+            [[0.05, 0.0, 0.0], [0.0, 0.2, 0.0], [0.0, 0.0, 0.1]],
+            "row 0 keeps its defaults after the first value"
+        );
     }
 }
