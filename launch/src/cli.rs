@@ -41,7 +41,7 @@ pub enum Command {
   troupe launch robot.cfg -p 7000                 # default robot port 7000
   troupe launch plan.toml --host hostb --connect tcp/10.0.0.1:7447
   troupe launch robot.cfg --dry-run               # print the plan, start nothing
-  troupe launch worlds/wander.cfg --speedup 5     # the simulator at 5x real time
+  troupe launch worlds/simple.cfg --speedup 5     # the simulator at 5x real time
 
 An embedded Zenoh router listens on tcp/127.0.0.1:7447 unless --connect names
 another. Ctrl-C stops the nodes in reverse start order.")]

@@ -68,7 +68,7 @@ pub struct LaunchArgs {
     #[arg(long)]
     pub bridge_any_port: bool,
     /// Run the simulator at this multiple of real time, whatever the world
-    /// file says (1 = real time, 0 = as fast as the machine can)
+    /// file says (1 = real time; 0 = Player's pace, 100 steps a second)
     #[arg(long, value_name = "X")]
     pub speedup: Option<f64>,
 }
