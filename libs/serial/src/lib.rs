@@ -31,7 +31,7 @@ mod watchdog;
 pub use emu::{EmuLine, LineEvent};
 pub use faults::{Faults, Injected};
 pub use framer::{Codec, Decoded, FrameStats, Framer, Skipped};
-pub use link::{Link, LinkError};
+pub use link::{Link, LinkError, SessionError};
 pub use port::{baud_supported, LineError, Port, BAUD_RATES};
 pub use pty::{Pacer, Pty};
 pub use thread::{run_sessions, Emulator, Ended, LineThread, Linked};

@@ -6,7 +6,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use crate::framer::{Codec, Framer};
+use crate::framer::{Codec, FrameStats, Framer};
 use crate::port::{LineError, Port};
 
 /// Why a [`Link`] read or write ended early.
@@ -18,6 +18,31 @@ pub enum LinkError {
     /// The driver is stopping.
     #[error("stopped")]
     Aborted,
+}
+
+/// Why a session with a device ended: the line failed, the driver is
+/// stopping, or the device misbehaved in a way only its driver can name
+/// (`E`, the driver's own reasons).
+#[derive(Debug, thiserror::Error)]
+pub enum SessionError<E> {
+    /// The device went away, or the line failed.
+    #[error(transparent)]
+    Line(#[from] LineError),
+    /// The driver is stopping.
+    #[error("stopped")]
+    Stopped,
+    /// What the driver has to say about its device.
+    #[error("{0}")]
+    Device(E),
+}
+
+impl<E> From<LinkError> for SessionError<E> {
+    fn from(e: LinkError) -> Self {
+        match e {
+            LinkError::Line(e) => SessionError::Line(e),
+            LinkError::Aborted => SessionError::Stopped,
+        }
+    }
 }
 
 /// An open port and the frames of codec `C` on it. Reads wait in slices of
@@ -52,6 +77,24 @@ impl<C: Codec> Link<C> {
             abort,
             closing: false,
         })
+    }
+
+    /// Opens `path` at `baud` and runs one session with the device on it:
+    /// the session's outcome and the line's frame statistics.
+    pub fn session<E>(
+        path: &Path,
+        baud: u32,
+        codec: C,
+        abort: Arc<AtomicBool>,
+        body: impl FnOnce(&mut Link<C>) -> Result<(), SessionError<E>>,
+    ) -> (Result<(), SessionError<E>>, FrameStats) {
+        match Link::open(path, baud, codec, abort) {
+            Ok(mut link) => {
+                let result = body(&mut link);
+                (result, link.framer.stats)
+            }
+            Err(e) => (Err(e.into()), FrameStats::default()),
+        }
     }
 
     /// Sends `bytes`.

@@ -17,7 +17,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use troupe_node::Waker;
-use troupe_serial::{arcos, run_sessions, Ended, LineError, LineThread, Link, LinkError};
+use troupe_serial::{arcos, run_sessions, Ended, LineThread, Link, SessionError};
 
 use crate::packet::{self, cmd, kind, PacketCodec};
 use crate::params::{self, Params};
@@ -102,40 +102,31 @@ pub fn spawn(settings: Settings, updates: Sender<Update>, waker: Waker) -> std::
     })
 }
 
+/// What can go wrong with the device itself; the line's failures and
+/// stops are [`SessionError`]'s.
 #[derive(Debug)]
 enum Fail {
-    Line(LineError),
     NoConfig,
     Silent,
-    Stopped,
 }
 
 impl std::fmt::Display for Fail {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            Fail::Line(e) => write!(f, "{e}"),
             Fail::NoConfig => f.write_str(
                 "no configuration reply at 38400 or 115200 baud (is the robot on and on this port?)",
             ),
             Fail::Silent => write!(f, "no motor packet for {} s", SILENCE.as_secs_f64()),
-            Fail::Stopped => f.write_str("stopped"),
         }
     }
 }
 
-impl From<LineError> for Fail {
-    fn from(e: LineError) -> Self {
-        Fail::Line(e)
-    }
-}
+/// A session's end: the line's, or the device's [`Fail`].
+type Error = SessionError<Fail>;
 
-impl From<LinkError> for Fail {
-    fn from(e: LinkError) -> Self {
-        match e {
-            LinkError::Line(e) => Fail::Line(e),
-            LinkError::Aborted => Fail::Stopped,
-        }
-    }
+/// `Err` of the device's failure `f`.
+fn fail<T>(f: Fail) -> Result<T, Error> {
+    Err(SessionError::Device(f))
 }
 
 fn run(
@@ -152,21 +143,19 @@ fn run(
     let mut sessions = 0u64;
     let session = |settings: &mut Settings| {
         sessions += 1;
+        let port = settings.port.clone();
         let (result, stats) =
-            match Link::open(&settings.port, BAUD_RATES[0], PacketCodec, abort.clone()) {
-                Ok(link) => {
-                    let mut s = Session {
-                        settings,
-                        link,
-                        orders,
-                        last_sent: Instant::now(),
-                    };
-                    (s.run(&send), s.link.framer.stats)
+            Link::session(&port, BAUD_RATES[0], PacketCodec, abort.clone(), |link| {
+                Session {
+                    settings,
+                    link,
+                    orders,
+                    last_sent: Instant::now(),
                 }
-                Err(e) => (Err(e.into()), Default::default()),
-            };
+                .run(&send)
+            });
         match result {
-            Ok(()) | Err(Fail::Stopped) => Ended::Stopped,
+            Ok(()) | Err(Error::Stopped) => Ended::Stopped,
             Err(e) => {
                 tracing::warn!(
                     session = sessions,
@@ -194,23 +183,23 @@ fn run(
 
 struct Session<'a> {
     settings: &'a mut Settings,
-    link: Link<PacketCodec>,
+    link: &'a mut Link<PacketCodec>,
     orders: &'a Receiver<Order>,
     last_sent: Instant,
 }
 
 impl Session<'_> {
-    fn send(&mut self, bytes: &[u8]) -> Result<(), Fail> {
+    fn send(&mut self, bytes: &[u8]) -> Result<(), Error> {
         self.link.send(bytes)?;
         self.last_sent = Instant::now();
         Ok(())
     }
 
-    fn read(&mut self, timeout: Duration) -> Result<Option<Vec<u8>>, Fail> {
+    fn read(&mut self, timeout: Duration) -> Result<Option<Vec<u8>>, Error> {
         Ok(self.link.read(timeout)?)
     }
 
-    fn connect(&mut self) -> Result<(String, String, String), Fail> {
+    fn connect(&mut self) -> Result<(String, String, String), Error> {
         for &baud in &BAUD_RATES {
             self.link.port.set_baud(baud)?;
             self.link.flush();
@@ -225,10 +214,10 @@ impl Session<'_> {
                 }
             }
         }
-        Err(Fail::NoConfig)
+        fail(Fail::NoConfig)
     }
 
-    fn run(&mut self, send: &impl Fn(Update)) -> Result<(), Fail> {
+    fn run(&mut self, send: &impl Fn(Update)) -> Result<(), Error> {
         let name = self.connect()?;
         let params = params::find(&name.2).unwrap_or_else(|| {
             tracing::warn!(
@@ -256,7 +245,7 @@ impl Session<'_> {
         self.stream(send)
     }
 
-    fn stream(&mut self, send: &impl Fn(Update)) -> Result<(), Fail> {
+    fn stream(&mut self, send: &impl Fn(Update)) -> Result<(), Error> {
         let mut last_motor = Instant::now();
         loop {
             // The latest velocity wins: Player's 50 ms throttle dropped
@@ -266,7 +255,7 @@ impl Session<'_> {
                 match self.orders.try_recv() {
                     Ok(Order::Stop) | Err(TryRecvError::Disconnected) => {
                         self.goodbye();
-                        return Err(Fail::Stopped);
+                        return Err(Error::Stopped);
                     }
                     Ok(Order::Vel { speed, turn }) => vel = Some((speed, turn)),
                     Ok(o) => self.obey(o)?,
@@ -282,9 +271,9 @@ impl Session<'_> {
                 self.send(&packet::command(cmd::PULSE))?;
             }
             let packet = match self.read(Duration::from_millis(50)) {
-                Err(Fail::Stopped) => {
+                Err(Error::Stopped) => {
                     self.goodbye();
-                    return Err(Fail::Stopped);
+                    return Err(Error::Stopped);
                 }
                 other => other?,
             };
@@ -300,13 +289,13 @@ impl Session<'_> {
                     "ignored packet type 0x{:02X}",
                     p.first().copied().unwrap_or(0)
                 ),
-                None if last_motor.elapsed() > SILENCE => return Err(Fail::Silent),
+                None if last_motor.elapsed() > SILENCE => return fail(Fail::Silent),
                 None => {}
             }
         }
     }
 
-    fn obey(&mut self, o: Order) -> Result<(), Fail> {
+    fn obey(&mut self, o: Order) -> Result<(), Error> {
         match o {
             Order::Enable(on) => self.send(&packet::command_int(cmd::ENABLE, i32::from(on))),
             Order::DirectWheel(d) => {

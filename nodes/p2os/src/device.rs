@@ -18,7 +18,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use troupe_node::Waker;
-use troupe_serial::{arcos, run_sessions, Ended, LineError, LineThread, Link, LinkError};
+use troupe_serial::{arcos, run_sessions, Ended, LineThread, Link, SessionError};
 
 use crate::packet::{self, cmd, PacketCodec, Sip};
 use crate::params::{self, Params};
@@ -103,43 +103,34 @@ pub fn spawn(settings: Settings, updates: Sender<Update>, waker: Waker) -> std::
     })
 }
 
+/// What can go wrong with the device itself; the line's failures and
+/// stops are [`SessionError`]'s.
 #[derive(Debug)]
 enum Fail {
-    Line(LineError),
     NoSync,
     NoReply(&'static str),
     Silent,
-    Stopped,
 }
 
 impl std::fmt::Display for Fail {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            Fail::Line(e) => write!(f, "{e}"),
             Fail::NoSync => write!(
                 f,
                 "no answer to SYNC0 at 9600, 38400, 19200, 115200 or 57600 baud (is the robot on and on this port?)"
             ),
             Fail::NoReply(what) => write!(f, "no reply to {what}"),
             Fail::Silent => write!(f, "no SIP for {} s", SILENCE.as_secs_f64()),
-            Fail::Stopped => f.write_str("stopped"),
         }
     }
 }
 
-impl From<LineError> for Fail {
-    fn from(e: LineError) -> Self {
-        Fail::Line(e)
-    }
-}
+/// A session's end: the line's, or the device's [`Fail`].
+type Error = SessionError<Fail>;
 
-impl From<LinkError> for Fail {
-    fn from(e: LinkError) -> Self {
-        match e {
-            LinkError::Line(e) => Fail::Line(e),
-            LinkError::Aborted => Fail::Stopped,
-        }
-    }
+/// `Err` of the device's failure `f`.
+fn fail<T>(f: Fail) -> Result<T, Error> {
+    Err(SessionError::Device(f))
 }
 
 fn run(
@@ -156,21 +147,19 @@ fn run(
     let mut sessions = 0u64;
     let session = |settings: &mut Settings| {
         sessions += 1;
+        let port = settings.port.clone();
         let (result, stats) =
-            match Link::open(&settings.port, BAUD_RATES[0], PacketCodec, abort.clone()) {
-                Ok(link) => {
-                    let mut s = Session {
-                        settings,
-                        link,
-                        orders,
-                        params: &params::ROBOTS[0],
-                    };
-                    (s.run(&send), s.link.framer.stats)
+            Link::session(&port, BAUD_RATES[0], PacketCodec, abort.clone(), |link| {
+                Session {
+                    settings,
+                    link,
+                    orders,
+                    params: &params::ROBOTS[0],
                 }
-                Err(e) => (Err(e.into()), Default::default()),
-            };
+                .run(&send)
+            });
         match result {
-            Ok(()) | Err(Fail::Stopped) => Ended::Stopped,
+            Ok(()) | Err(Error::Stopped) => Ended::Stopped,
             Err(e) => {
                 tracing::warn!(
                     port = %settings.port.display(),
@@ -199,23 +188,23 @@ fn run(
 
 struct Session<'a> {
     settings: &'a mut Settings,
-    link: Link<PacketCodec>,
+    link: &'a mut Link<PacketCodec>,
     orders: &'a Receiver<Order>,
     params: &'static Params,
 }
 
 impl Session<'_> {
-    fn send(&mut self, bytes: &[u8]) -> Result<(), Fail> {
+    fn send(&mut self, bytes: &[u8]) -> Result<(), Error> {
         self.link.send(bytes)?;
         Ok(())
     }
 
     /// The next packet within `timeout`, `None` if none came.
-    fn read(&mut self, timeout: Duration) -> Result<Option<Vec<u8>>, Fail> {
+    fn read(&mut self, timeout: Duration) -> Result<Option<Vec<u8>>, Error> {
         Ok(self.link.read(timeout)?)
     }
 
-    fn sync(&mut self) -> Result<(String, String, String), Fail> {
+    fn sync(&mut self) -> Result<(String, String, String), Error> {
         let mut closed_once = false;
         for &baud in &BAUD_RATES {
             self.link.port.set_baud(baud)?;
@@ -230,7 +219,7 @@ impl Session<'_> {
                         tries += 1;
                         continue;
                     }
-                    return Err(Fail::NoReply(if step == cmd::SYNC1 {
+                    return fail(Fail::NoReply(if step == cmd::SYNC1 {
                         "SYNC1"
                     } else {
                         "SYNC2"
@@ -256,10 +245,10 @@ impl Session<'_> {
                 }
             }
         }
-        Err(Fail::NoSync)
+        fail(Fail::NoSync)
     }
 
-    fn run(&mut self, send: &impl Fn(Update)) -> Result<(), Fail> {
+    fn run(&mut self, send: &impl Fn(Update)) -> Result<(), Error> {
         let (name, class, subclass) = self.sync()?;
         self.params = match params::find(&subclass) {
             Some(p) => p,
@@ -278,7 +267,7 @@ impl Session<'_> {
             match self.read(SILENCE)? {
                 Some(d) if Sip::is_standard(&d) => break d,
                 Some(_) => continue,
-                None => return Err(Fail::NoReply("OPEN (no SIP)")),
+                None => return fail(Fail::NoReply("OPEN (no SIP)")),
             }
         };
         self.send(&packet::command_int(
@@ -305,7 +294,7 @@ impl Session<'_> {
         }
     }
 
-    fn stream(&mut self, send: &impl Fn(Update)) -> Result<(), Fail> {
+    fn stream(&mut self, send: &impl Fn(Update)) -> Result<(), Error> {
         let mut last_sip = Instant::now();
         let mut last_pulse = Instant::now();
         loop {
@@ -313,7 +302,7 @@ impl Session<'_> {
                 match self.orders.try_recv() {
                     Ok(Order::Stop) | Err(TryRecvError::Disconnected) => {
                         self.goodbye();
-                        return Err(Fail::Stopped);
+                        return Err(Error::Stopped);
                     }
                     Ok(o) => {
                         self.obey(o)?;
@@ -329,9 +318,9 @@ impl Session<'_> {
                 }
             }
             let packet = match self.read(Duration::from_millis(50)) {
-                Err(Fail::Stopped) => {
+                Err(Error::Stopped) => {
                     self.goodbye();
-                    return Err(Fail::Stopped);
+                    return Err(Error::Stopped);
                 }
                 other => other?,
             };
@@ -344,7 +333,7 @@ impl Session<'_> {
                     "ignored packet type 0x{:02X}",
                     d.first().copied().unwrap_or(0)
                 ),
-                None if last_sip.elapsed() > SILENCE => return Err(Fail::Silent),
+                None if last_sip.elapsed() > SILENCE => return fail(Fail::Silent),
                 None => {}
             }
         }
@@ -355,7 +344,7 @@ impl Session<'_> {
         arcos::stop_and_close(&mut self.link.port);
     }
 
-    fn obey(&mut self, o: Order) -> Result<(), Fail> {
+    fn obey(&mut self, o: Order) -> Result<(), Error> {
         match o {
             Order::Enable(on) => self.send(&packet::command_int(cmd::ENABLE, i32::from(on))),
             Order::ResetOdom => self.send(&packet::frame(&[cmd::SETO, packet::ARGINT])),

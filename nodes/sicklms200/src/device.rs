@@ -17,7 +17,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use troupe_node::Waker;
-use troupe_serial::{run_sessions, Ended, LineError, LineThread, Link, LinkError};
+use troupe_serial::{run_sessions, Ended, LineThread, Link, LinkError, SessionError};
 
 use crate::telegram::{self, cmd, mode, RawScan, Telegram, TelegramCodec};
 
@@ -159,40 +159,31 @@ struct Counts {
     bad_scans: u64,
 }
 
+/// What can go wrong with the device itself; the line's failures and
+/// stops are [`SessionError`]'s.
 #[derive(Debug)]
 enum Fail {
-    Line(LineError),
     NoReply(String),
     Refused(String),
     Silent(Duration),
-    Stopped,
 }
 
 impl std::fmt::Display for Fail {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            Fail::Line(e) => write!(f, "{e}"),
             Fail::NoReply(what) => write!(f, "no reply to {what}"),
             Fail::Refused(what) => write!(f, "the scanner refused {what}"),
             Fail::Silent(d) => write!(f, "no scan for {:.1} s", d.as_secs_f64()),
-            Fail::Stopped => f.write_str("stopped"),
         }
     }
 }
 
-impl From<LineError> for Fail {
-    fn from(e: LineError) -> Self {
-        Fail::Line(e)
-    }
-}
+/// A session's end: the line's, or the device's [`Fail`].
+type Error = SessionError<Fail>;
 
-impl From<LinkError> for Fail {
-    fn from(e: LinkError) -> Self {
-        match e {
-            LinkError::Line(e) => Fail::Line(e),
-            LinkError::Aborted => Fail::Stopped,
-        }
-    }
+/// `Err` of the device's failure `f`.
+fn fail<T>(f: Fail) -> Result<T, Error> {
+    Err(SessionError::Device(f))
 }
 
 /// The line thread, as the driver holds it.
@@ -228,21 +219,19 @@ fn run(
             addr: telegram::FROM_DEVICE,
         };
         let rate = settings.connect_rates[0];
-        let (result, stats) = match Link::open(&settings.port, rate, codec, abort.clone()) {
-            Ok(link) => {
-                let mut s = Session {
-                    settings,
-                    link,
-                    orders,
-                    send: &send,
-                    counts: &mut counts,
-                };
-                (s.run(first), s.link.framer.stats)
+        let port = settings.port.clone();
+        let (result, stats) = Link::session(&port, rate, codec, abort.clone(), |link| {
+            Session {
+                settings,
+                link,
+                orders,
+                send: &send,
+                counts: &mut counts,
             }
-            Err(e) => (Err(e.into()), Default::default()),
-        };
+            .run(first)
+        });
         match result {
-            Ok(()) | Err(Fail::Stopped) => Ended::Stopped,
+            Ok(()) | Err(Error::Stopped) => Ended::Stopped,
             Err(e) => {
                 tracing::warn!(
                     port = %settings.port.display(),
@@ -273,14 +262,14 @@ fn run(
 
 struct Session<'a, F: Fn(Update)> {
     settings: &'a mut Settings,
-    link: Link<TelegramCodec>,
+    link: &'a mut Link<TelegramCodec>,
     orders: &'a Receiver<Order>,
     send: &'a F,
     counts: &'a mut Counts,
 }
 
 impl<F: Fn(Update)> Session<'_, F> {
-    fn run(&mut self, first: bool) -> Result<(), Fail> {
+    fn run(&mut self, first: bool) -> Result<(), Error> {
         let rates = self.settings.connect_rates.clone();
         if first && !self.settings.delay.is_zero() {
             tracing::info!(
@@ -304,14 +293,14 @@ impl<F: Fn(Update)> Session<'_, F> {
                         current = Some(rate);
                         break 'connect;
                     }
-                    Err(Fail::NoReply(_)) => continue,
+                    Err(SessionError::Device(Fail::NoReply(_))) => continue,
                     Err(e) => return Err(e),
                 }
             }
         }
         let Some(mut baud) = current else {
             let list: Vec<String> = rates.iter().map(u32::to_string).collect();
-            return Err(Fail::NoReply(format!(
+            return fail(Fail::NoReply(format!(
                 "stop streaming at {} baud (is the laser on and on this port?)",
                 list.join(", ")
             )));
@@ -320,7 +309,9 @@ impl<F: Fn(Update)> Session<'_, F> {
         let transfer = self.settings.transfer_rate;
         if baud != transfer {
             let m = telegram::baud_mode(transfer).ok_or_else(|| {
-                Fail::Refused(format!("transfer rate {transfer} (not one the LMS200 has)"))
+                SessionError::Device(Fail::Refused(format!(
+                    "transfer rate {transfer} (not one the LMS200 has)"
+                )))
             })?;
             self.mode(m, &[], "a baud rate change", Duration::from_secs(2))?;
             self.link.port.set_baud(transfer)?;
@@ -347,7 +338,7 @@ impl<F: Fn(Update)> Session<'_, F> {
         expect: u8,
         what: &str,
         timeout: Duration,
-    ) -> Result<Telegram, Fail> {
+    ) -> Result<Telegram, Error> {
         let bytes = telegram::request(body);
         for _ in 0..TRIES {
             self.link.flush();
@@ -357,28 +348,28 @@ impl<F: Fn(Update)> Session<'_, F> {
                 let left = deadline.saturating_duration_since(Instant::now());
                 match self.link.read(left)? {
                     Some(t) if t.cmd() == expect => return Ok(t),
-                    Some(t) if t.cmd() == cmd::NACK => return Err(Fail::Refused(what.into())),
+                    Some(t) if t.cmd() == cmd::NACK => return fail(Fail::Refused(what.into())),
                     Some(_) => continue,
                     None => break,
                 }
             }
         }
-        Err(Fail::NoReply(what.into()))
+        fail(Fail::NoReply(what.into()))
     }
 
     /// A mode change (0x20) and its 0xA0 reply, whose first data byte is 0 on success.
-    fn mode(&mut self, m: u8, extra: &[u8], what: &str, timeout: Duration) -> Result<(), Fail> {
+    fn mode(&mut self, m: u8, extra: &[u8], what: &str, timeout: Duration) -> Result<(), Error> {
         let mut body = vec![cmd::MODE, m];
         body.extend_from_slice(extra);
         let t = self.transact(&body, cmd::MODE | cmd::REPLY, what, timeout)?;
         match t.reply_data().first() {
             Some(0) => Ok(()),
-            Some(1) => Err(Fail::Refused(format!("{what}: wrong password"))),
-            _ => Err(Fail::Refused(what.into())),
+            Some(1) => fail(Fail::Refused(format!("{what}: wrong password"))),
+            _ => fail(Fail::Refused(what.into())),
         }
     }
 
-    fn kind(&mut self) -> Result<String, Fail> {
+    fn kind(&mut self) -> Result<String, Error> {
         let t = self.transact(
             &[cmd::TYPE],
             cmd::TYPE | cmd::REPLY,
@@ -396,7 +387,7 @@ impl<F: Fn(Update)> Session<'_, F> {
 
     /// Configuration mode, variant and configuration, each written only
     /// when it differs from what the scanner has (it is flash memory).
-    fn configure(&mut self, kind: &str, c: ScanConfig) -> Result<(), Fail> {
+    fn configure(&mut self, kind: &str, c: ScanConfig) -> Result<(), Error> {
         let mut password = b"SICK_".to_vec();
         password.extend(kind.bytes().chain(std::iter::repeat(b' ')).take(3));
         self.mode(
@@ -426,7 +417,7 @@ impl<F: Fn(Update)> Session<'_, F> {
                 Duration::from_secs(2),
             )?;
             if t.reply_data().first() != Some(&1) {
-                return Err(Fail::Refused(format!(
+                return fail(Fail::Refused(format!(
                     "the variant {}°/{}",
                     c.width(),
                     c.res
@@ -442,7 +433,7 @@ impl<F: Fn(Update)> Session<'_, F> {
         )?;
         let mut data = conf.reply_data().to_vec();
         if data.len() < 7 {
-            return Err(Fail::Refused(
+            return fail(Fail::Refused(
                 "the configuration request (short reply)".into(),
             ));
         }
@@ -467,13 +458,13 @@ impl<F: Fn(Update)> Session<'_, F> {
                 Duration::from_secs(10),
             )?;
             if t.reply_data().first() != Some(&1) {
-                return Err(Fail::Refused("the configuration".into()));
+                return fail(Fail::Refused("the configuration".into()));
             }
         }
         Ok(())
     }
 
-    fn stream_start(&mut self, c: ScanConfig) -> Result<(), Fail> {
+    fn stream_start(&mut self, c: ScanConfig) -> Result<(), Error> {
         let (a, b) = c.segments();
         let full = if c.res == 25 { 400 } else { 360 };
         if a == 0 && b == full {
@@ -496,7 +487,7 @@ impl<F: Fn(Update)> Session<'_, F> {
         }
     }
 
-    fn stream(&mut self, kind: &str) -> Result<(), Fail> {
+    fn stream(&mut self, kind: &str) -> Result<(), Error> {
         let mut config = self.settings.config;
         let mut patience = self.patience(config);
         let mut last = Instant::now();
@@ -504,7 +495,7 @@ impl<F: Fn(Update)> Session<'_, F> {
             match self.orders.try_recv() {
                 Ok(Order::Stop) | Err(TryRecvError::Disconnected) => {
                     self.shut_down();
-                    return Err(Fail::Stopped);
+                    return Err(Error::Stopped);
                 }
                 Ok(Order::Configure(c)) => {
                     let result = self.configure(kind, c).and_then(|()| self.stream_start(c));
@@ -521,7 +512,7 @@ impl<F: Fn(Update)> Session<'_, F> {
             let read = match self.link.read(Duration::from_millis(100)) {
                 Err(LinkError::Aborted) => {
                     self.shut_down();
-                    return Err(Fail::Stopped);
+                    return Err(Error::Stopped);
                 }
                 other => other?,
             };
@@ -549,7 +540,7 @@ impl<F: Fn(Update)> Session<'_, F> {
                     }
                 }
                 Some(t) => tracing::debug!("ignored telegram 0x{:02X}", t.cmd()),
-                None if last.elapsed() > patience => return Err(Fail::Silent(last.elapsed())),
+                None if last.elapsed() > patience => return fail(Fail::Silent(last.elapsed())),
                 None => {}
             }
         }
