@@ -83,7 +83,7 @@ impl Stack {
                 Instant::now() < deadline,
                 "{} still running after {limit:?}\nstack: {}",
                 ex.proc.name,
-                self.stderr_now()
+                self.describe()
             );
             if self.client.read_timeout(Duration::from_millis(200)).is_ok() {
                 watch();
@@ -92,7 +92,7 @@ impl Stack {
         ex.finish()
     }
 
-    fn stderr_now(&self) -> String {
+    fn describe(&self) -> String {
         format!(
             "(namespace {}, launched {:?} ago)",
             self.ns,

@@ -22,9 +22,7 @@ use troupe_msgs::laser;
 
 /// Distance from every cell to the nearest obstacle cell.
 pub struct DistanceMap {
-    /// Metres, row-major; 0 on obstacles.
-    dist: Vec<f32>,
-    /// The same in cells, for marching rays in grid units.
+    /// In cells, row-major; 0 on obstacles. Rays march in grid units.
     cells: Vec<f32>,
     /// Metres per cell and its inverse; the origin; the size in cells.
     res: f64,
@@ -37,20 +35,37 @@ impl DistanceMap {
     /// The distance field of `map`: cells with a state ≥ 0 (occupied or
     /// unknown) are obstacles.
     pub fn new(map: &OccMap) -> Self {
-        let dist = map.distance_field();
         let res = f64::from(map.info.resolution);
         let inv_res = if res > 0.0 { 1.0 / res } else { 0.0 };
         DistanceMap {
-            cells: dist
+            cells: map
+                .distance_field()
                 .iter()
                 .map(|&d| (f64::from(d) * inv_res) as f32)
                 .collect(),
-            dist,
             res,
             inv_res,
             origin: (map.info.origin.x, map.info.origin.y),
             size: (map.info.width as usize, map.info.height as usize),
         }
+    }
+
+    /// World point (x, y) in grid units.
+    #[inline]
+    fn grid(&self, x: f64, y: f64) -> (f64, f64) {
+        (
+            (x - self.origin.0) * self.inv_res,
+            (y - self.origin.1) * self.inv_res,
+        )
+    }
+
+    /// The distance in cells at grid point (gx, gy); `None` off the map.
+    /// Truncation is the floor there: the coordinates on the map are positive.
+    #[inline]
+    fn cells_at(&self, gx: f64, gy: f64) -> Option<f64> {
+        let (w, h) = self.size;
+        (gx >= 0.0 && gy >= 0.0 && gx < w as f64 && gy < h as f64)
+            .then(|| f64::from(self.cells[gy as usize * w + gx as usize]))
     }
 
     /// Distance at world point (x, y); 0 off the map (an obstacle).
@@ -62,14 +77,8 @@ impl DistanceMap {
     /// Distance at world point (x, y); `off` off the map.
     #[inline]
     pub fn at_or(&self, x: f64, y: f64, off: f64) -> f64 {
-        let gx = (x - self.origin.0) * self.inv_res;
-        let gy = (y - self.origin.1) * self.inv_res;
-        // Truncation is the floor for the non-negative coordinates on the map.
-        if gx >= 0.0 && gy >= 0.0 && gx < self.size.0 as f64 && gy < self.size.1 as f64 {
-            f64::from(self.dist[gy as usize * self.size.0 + gx as usize])
-        } else {
-            off
-        }
+        let (gx, gy) = self.grid(x, y);
+        self.cells_at(gx, gy).map_or(off, |d| d * self.res)
     }
 
     /// Range from (x, y) along `angle` to the first obstacle cell, at most
@@ -77,46 +86,19 @@ impl DistanceMap {
     /// minus a cell diagonal), at least half a cell at a time.
     pub fn range(&self, x: f64, y: f64, angle: f64, max: f64) -> f64 {
         let (s, c) = angle.sin_cos();
-        self.range_along(x, y, (c, s), max)
+        let mut out = [max];
+        self.ranges_along(x, y, &[(c, s)], max, &mut out);
+        out[0]
     }
 
-    /// [`DistanceMap::range`] along the unit vector `(cos, sin)`.
-    ///
-    /// The hot loop of the beam model: it works in cells (no division, and
-    /// truncation is the floor on the map, where coordinates are positive).
-    #[inline]
-    pub fn range_along(&self, x: f64, y: f64, (c, s): (f64, f64), max: f64) -> f64 {
-        let (w, h) = self.size;
-        let (wf, hf) = (w as f64, h as f64);
-        let gx = (x - self.origin.0) * self.inv_res;
-        let gy = (y - self.origin.1) * self.inv_res;
-        let tmax = max * self.inv_res;
-        let mut t = 0.0;
-        while t < tmax {
-            let (px, py) = (gx + t * c, gy + t * s);
-            if !(px >= 0.0 && py >= 0.0 && px < wf && py < hf) {
-                return t * self.res;
-            }
-            let d = f64::from(self.cells[py as usize * w + px as usize]);
-            if d <= 0.0 {
-                return t * self.res;
-            }
-            t += (d - std::f64::consts::SQRT_2).max(0.5);
-        }
-        max
-    }
-
-    /// [`DistanceMap::range_along`] for up to [`LANES`] rays from one point
-    /// at once: `out[k]` is the range along `dirs[k]`.
+    /// [`DistanceMap::range`] for up to [`LANES`] rays from one point at
+    /// once: `out[k]` is the range along the unit vector `dirs[k]` (cos, sin).
     ///
     /// One ray's march is a chain of dependent loads; marching several in
     /// lockstep lets the processor overlap their latencies.
     pub fn ranges_along(&self, x: f64, y: f64, dirs: &[(f64, f64)], max: f64, out: &mut [f64]) {
         let n = dirs.len().min(LANES).min(out.len());
-        let (w, h) = self.size;
-        let (wf, hf) = (w as f64, h as f64);
-        let gx = (x - self.origin.0) * self.inv_res;
-        let gy = (y - self.origin.1) * self.inv_res;
+        let (gx, gy) = self.grid(x, y);
         let tmax = max * self.inv_res;
         let mut t = [0.0f64; LANES];
         let mut live: u32 = if tmax > 0.0 { (1 << n) - 1 } else { 0 };
@@ -129,12 +111,7 @@ impl DistanceMap {
                     continue;
                 }
                 let (c, s) = dirs[k];
-                let (px, py) = (gx + t[k] * c, gy + t[k] * s);
-                let d = if px >= 0.0 && py >= 0.0 && px < wf && py < hf {
-                    f64::from(self.cells[py as usize * w + px as usize])
-                } else {
-                    0.0
-                };
+                let d = self.cells_at(gx + t[k] * c, gy + t[k] * s).unwrap_or(0.0);
                 if d <= 0.0 {
                     out[k] = t[k] * self.res;
                     live &= !(1 << k);
@@ -394,9 +371,9 @@ mod tests {
                     .collect();
                 let mut out = [f64::NAN; LANES];
                 d.ranges_along(x, y, &dirs, max, &mut out);
-                for (k, &(c, s)) in dirs.iter().enumerate() {
-                    let one = d.range_along(x, y, (c, s), max);
-                    assert_eq!(out[k], one, "ray {k} from ({x}, {y}), max {max}");
+                for (k, &lane) in out.iter().enumerate() {
+                    let one = d.range(x, y, 0.1 + k as f64 * 0.77, max);
+                    assert_eq!(lane, one, "ray {k} from ({x}, {y}), max {max}");
                 }
             }
         }
