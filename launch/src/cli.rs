@@ -76,7 +76,7 @@ subscriptions follow their keys (robot/6665/laser/0), commands and requests go t
 their drivers. `troupe launch` starts one for the robots of its plan.")]
     Bridge(crate::bridge::BridgeArgs),
 
-    /// Print the devices live on the network, like Player's \"Available devices\".
+    /// Print the devices live on the network, like Player's "Available devices".
     #[command(after_help = "Example:
   $ troupe list
   robot/6665  laser:0       rangertolaser  ready

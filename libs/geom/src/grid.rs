@@ -120,6 +120,17 @@ impl Grid {
             }
             return;
         }
+        self.polygon_centres(pts, &mut f);
+        // The outline too, so walls thinner than a cell still block rays.
+        for k in 0..pts.len() {
+            self.segment_cells(pts[k], pts[(k + 1) % pts.len()], &mut f);
+        }
+    }
+
+    /// Calls `f(i, j)` for every cell whose centre lies inside the polygon
+    /// (even-odd rule), once each; returns how many.
+    pub fn polygon_centres(&self, pts: &[(f64, f64)], mut f: impl FnMut(usize, usize)) -> usize {
+        let mut n = 0;
         let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
         for &(_, y) in pts {
             lo = lo.min(y);
@@ -148,14 +159,12 @@ impl Grid {
                     }
                     for i in i0..=(i1 as usize).min(self.w - 1) {
                         f(i, j);
+                        n += 1;
                     }
                 }
             }
         }
-        // The outline too, so walls thinner than a cell still block rays.
-        for k in 0..pts.len() {
-            self.segment_cells(pts[k], pts[(k + 1) % pts.len()], &mut f);
-        }
+        n
     }
 
     /// Calls `f(i, j)` for every cell the segment from `a` to `b` passes through.

@@ -33,7 +33,7 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 use troupe_geom::occmap::{OccMap, FREE, OCCUPIED, UNKNOWN};
 use troupe_msgs::{map, Device, Interface, Pose2d};
-use troupe_node::{Ctx, Driver, Event, NodeError, Result, Section, Unit};
+use troupe_node::{Ctx, Driver, Event, NodeError, Request, Result, Section, Unit};
 
 /// Options, by Player's names.
 #[derive(Debug, Default, Deserialize)]
@@ -126,6 +126,45 @@ pub fn load(
     }))
 }
 
+/// Answers a map device's requests from `map`: `GET_INFO`, `GET_DATA`
+/// tiles (cells off the map unknown, as Player's mapfile sends them), and a
+/// refusal naming anything else. Shared by every driver that serves a grid.
+///
+/// # Errors
+///
+/// A `GET_DATA` whose body does not decode.
+pub fn serve(map: &OccMap, device: &Device, r: Request) -> Result<()> {
+    if r.is::<map::GetInfo>() {
+        r.reply(&map.info);
+    } else if r.is::<map::GetData>() {
+        let q = r.decode::<map::GetData>()?;
+        let cells = u64::from(q.width) * u64::from(q.height);
+        let whole = u64::from(map.info.width) * u64::from(map.info.height);
+        if cells > whole.max(1) {
+            r.nack(format!(
+                "tile of {}x{} cells is larger than the {}x{} map",
+                q.width, q.height, map.info.width, map.info.height
+            ));
+            return Ok(());
+        }
+        let (tile, off) = map.tile(q.col, q.row, q.width, q.height);
+        if off > 0 {
+            tracing::warn!(
+                "{off} requested cells of tile ({}, {}) {}x{} are off the map",
+                q.col,
+                q.row,
+                q.width,
+                q.height
+            );
+        }
+        r.reply(&tile);
+    } else {
+        let why = format!("{device} does not handle request `{}`", r.name);
+        r.nack(why);
+    }
+    Ok(())
+}
+
 /// The mapfile driver.
 pub struct MapFile {
     device: Device,
@@ -181,39 +220,7 @@ impl Driver for MapFile {
 
     fn on_event(&mut self, _ctx: &mut Ctx, event: Event) -> Result<()> {
         match event {
-            Event::Request(r) if r.is::<map::GetInfo>() => {
-                r.reply(&self.map.info);
-                Ok(())
-            }
-            Event::Request(r) if r.is::<map::GetData>() => {
-                let q = r.decode::<map::GetData>()?;
-                let cells = u64::from(q.width) * u64::from(q.height);
-                let whole = u64::from(self.map.info.width) * u64::from(self.map.info.height);
-                if cells > whole.max(1) {
-                    r.nack(format!(
-                        "tile of {}x{} cells is larger than the {}x{} map",
-                        q.width, q.height, self.map.info.width, self.map.info.height
-                    ));
-                    return Ok(());
-                }
-                let (tile, off) = self.map.tile(q.col, q.row, q.width, q.height);
-                if off > 0 {
-                    tracing::warn!(
-                        "{off} requested cells of tile ({}, {}) {}x{} are off the map",
-                        q.col,
-                        q.row,
-                        q.width,
-                        q.height
-                    );
-                }
-                r.reply(&tile);
-                Ok(())
-            }
-            Event::Request(r) => {
-                let why = format!("{} does not handle request `{}`", self.device, r.name);
-                r.nack(why);
-                Ok(())
-            }
+            Event::Request(r) => serve(&self.map, &self.device, r),
             Event::Command(c) => {
                 tracing::debug!("map takes no commands; ignored `{}`", c.key);
                 Ok(())

@@ -16,14 +16,17 @@
 //! world-file order (so r0's sonar is `ranger:0` and its laser `ranger:1` in
 //! simple.world). Beyond Player 3's plugin, `laser:N` takes the first unused
 //! one-sensor, many-sample ranger (a scanner) and `sonar:N` the first unused
-//! many-sensor ranger, so Player 2 era cfgs need no converter.
+//! many-sensor ranger, so Player 2 era cfgs need no converter. `map:N`
+//! is the named model itself: `provides ["map:0"] model "cave"` serves the
+//! cave's body as an occupancy grid at its `map_resolution`, drawn once at
+//! start, as Stage 2/3's plugin did.
 
 use std::collections::HashSet;
 use std::path::PathBuf;
 use std::time::Duration;
 
 use serde::Deserialize;
-use troupe_geom::Pose;
+use troupe_geom::{OccMap, Pose};
 use troupe_msgs::{
     common, fiducial, gripper, laser, position2d, ranger, simulation, sonar, DevAddr, Device,
     Interface, Pose3d, Size3d,
@@ -90,12 +93,15 @@ enum Source {
     Blobfinder { model: usize },
     Fiducial { model: usize },
     Gripper { model: usize },
+    Map { model: usize },
 }
 
 /// The stage driver.
 pub struct Stage {
     sim: Sim,
     devices: Vec<(Device, Source)>,
+    /// The maps of `map` devices, by model, drawn once at start.
+    maps: Vec<(usize, OccMap)>,
     period: Option<Duration>,
     steps_per_tick: u32,
     quit_time: f64,
@@ -131,7 +137,9 @@ fn resolve(
         Interface::Blobfinder => free(&|m| w.models[m].kind == Kind::Blobfinder, used),
         Interface::Fiducial => free(&|m| w.models[m].kind == Kind::Fiducial, used),
         Interface::Gripper => free(&|m| w.models[m].kind == Kind::Gripper, used),
-        other => return Err(format!("{dev}: Troupe's stage does not simulate {other} devices yet (it serves position2d, ranger, laser, sonar, blobfinder, fiducial, gripper and simulation)")),
+        // The named model itself: `provides ["map:0"] model "cave"`.
+        Interface::Map => free(&|m| m == base, used),
+        other => return Err(format!("{dev}: Troupe's stage does not simulate {other} devices yet (it serves position2d, ranger, laser, sonar, blobfinder, fiducial, gripper, map and simulation)")),
     };
     let Some(m) = pick else {
         return Err(format!(
@@ -149,6 +157,7 @@ fn resolve(
         Interface::Blobfinder => Source::Blobfinder { model: m },
         Interface::Fiducial => Source::Fiducial { model: m },
         Interface::Gripper => Source::Gripper { model: m },
+        Interface::Map => Source::Map { model: m },
         _ => Source::Sonar { model: m },
     })
 }
@@ -230,6 +239,20 @@ impl Driver for Stage {
                 devices.push((dev, src));
             }
         }
+        let mut maps = Vec::new();
+        for &(dev, src) in &devices {
+            if let Source::Map { model } = src {
+                let map = sim.model_map(model).map_err(cfg_err)?;
+                tracing::info!(
+                    "{dev}: a {} x {} map at {} m/cell drawn from model `{}`",
+                    map.info.width,
+                    map.info.height,
+                    map.info.resolution,
+                    sim.world.models[model].name
+                );
+                maps.push((model, map));
+            }
+        }
         let speedup = o.speedup.unwrap_or(sim.world.speedup);
         let interval = sim.world.interval_sim;
         let rate = o.update_rate.filter(|r| r.is_finite() && *r > 0.0);
@@ -247,6 +270,7 @@ impl Driver for Stage {
             quit_time: o.quit_time.unwrap_or(sim.world.quit_time),
             sim,
             devices,
+            maps,
             period: (!told).then_some(period),
             steps_per_tick,
             snapshot: o.snapshot.clone(),
@@ -360,7 +384,7 @@ impl Stage {
     fn publish(&self, ctx: &mut Ctx) -> Result<()> {
         for &(dev, src) in &self.devices {
             match src {
-                Source::Simulation => {}
+                Source::Simulation | Source::Map { .. } => {}
                 Source::Position { base } => {
                     let b = &self.sim.bases[base];
                     ctx.publish(
@@ -618,6 +642,13 @@ impl Stage {
                 r.nack(format!("stage blobfinder does not handle `{n}`"));
             }
             Source::Simulation => self.simulation(r)?,
+            Source::Map { model } => {
+                let dev = r.sample.device;
+                match self.maps.iter().find(|(m, _)| *m == model) {
+                    Some((_, map)) => troupe_mapfile::serve(map, &dev, r)?,
+                    None => r.nack("this map was not drawn"),
+                }
+            }
         }
         Ok(())
     }
@@ -708,6 +739,7 @@ impl Stage {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use troupe_msgs::map;
     use troupe_node::testing::Harness;
 
     fn world_file(name: &str, text: &str) -> PathBuf {
@@ -736,6 +768,86 @@ mod tests {
 
     fn dev(i: Interface, n: u32) -> Device {
         Device::new(6665, i, n)
+    }
+
+    #[test]
+    fn map_device_draws_the_named_model() {
+        // A 4 x 2 m room at (10, 5): a 1 m square in its lower left corner,
+        // one in its upper right, and a wall 5 cm thick down the middle.
+        let w = world_file(
+            "map",
+            "model ( name \"room\" pose [10 5 0 0] size [4 2 1] map_resolution 0.5\n\
+               block ( points 4 point[0] [0 0] point[1] [1 0] point[2] [1 1] point[3] [0 1] )\n\
+               block ( points 4 point[0] [3 1] point[1] [4 1] point[2] [4 2] point[3] [3 2] )\n\
+               block ( points 4 point[0] [2 0] point[1] [2.05 0] point[2] [2.05 2] point[3] [2 2] ) )\n",
+        );
+        let mut h = Harness::<Stage>::from_json(&format!(
+            r#"{{"name":"stage","provides":["map:0"],"options":{{"worldfile":"{}","model":"room"}}}}"#,
+            w.display()
+        ))
+        .unwrap();
+        let m = dev(Interface::Map, 0);
+        let p = h.request(m, &map::GetInfo).unwrap();
+        let info: map::Info = h.reply(p).unwrap().unwrap();
+        assert_eq!((info.width, info.height, info.resolution), (8, 4, 0.5));
+        assert_eq!(
+            (info.origin.x, info.origin.y),
+            (8.0, 4.0),
+            "lower left corner"
+        );
+        let p = h
+            .request(
+                m,
+                &map::GetData {
+                    col: 0,
+                    row: 0,
+                    width: 8,
+                    height: 4,
+                },
+            )
+            .unwrap();
+        let tile: map::Data = h.reply(p).unwrap().unwrap();
+        let rows: Vec<String> = tile
+            .cells
+            .chunks(8)
+            .map(|r| r.iter().map(|&c| if c > 0 { '#' } else { '.' }).collect())
+            .collect();
+        assert_eq!(
+            rows,
+            ["##..#...", "##..#...", "....#.##", "....#.##"],
+            "row 0 is the bottom"
+        );
+        let p = h.request(m, &map::GetVector).unwrap();
+        assert!(h.reply::<map::Vector>(p).unwrap().is_err());
+        let p = h
+            .request(
+                m,
+                &map::GetData {
+                    col: 0,
+                    row: 0,
+                    width: 9,
+                    height: 4,
+                },
+            )
+            .unwrap();
+        let e = h.reply::<map::Data>(p).unwrap().unwrap_err();
+        assert!(e.contains("larger than the 8x4 map"), "{e}");
+        // A bad resolution is named with the model's place.
+        let w = world_file(
+            "badmap",
+            "model ( name \"room\" size [4 2 1] map_resolution 0 )\n",
+        );
+        let e = Harness::<Stage>::from_json(&format!(
+            r#"{{"name":"stage","provides":["map:0"],"options":{{"worldfile":"{}","model":"room"}}}}"#,
+            w.display()
+        ))
+        .err()
+        .unwrap()
+        .to_string();
+        assert!(
+            e.contains("t.world:1") && e.contains("map_resolution 0"),
+            "{e}"
+        );
     }
 
     #[test]
@@ -922,7 +1034,7 @@ mod tests {
         );
         assert!(e(r#"["position2d:0","position2d:1"]"#, "r0")
             .contains("has no unused position2d model"));
-        assert!(e(r#"["map:0"]"#, "r0").contains("does not simulate map devices yet"));
+        assert!(e(r#"["power:0"]"#, "r0").contains("does not simulate power devices yet"));
         assert!(e(r#"["blobfinder:0"]"#, "r0").contains("has no unused blobfinder model"));
         let e = Harness::<Stage>::from_json(r#"{"name":"stage","provides":["simulation:0"]}"#)
             .err()

@@ -6,8 +6,9 @@
 //! both grids; robots collide with cells of unrelated models whose
 //! `obstacle_return` is set, and then stop and report a stall, as in Stage.
 
-use troupe_geom::{normalize, Grid, Pose, EMPTY};
-use troupe_msgs::Color;
+use troupe_geom::occmap::{FREE, OCCUPIED};
+use troupe_geom::{normalize, Grid, OccMap, Pose, EMPTY};
+use troupe_msgs::{map, Color};
 
 use crate::world::{Drive, Kind, Localization, World};
 
@@ -805,8 +806,6 @@ impl Sim {
             ])
         };
         // Rays first, bodies over them.
-        let (x0, y0) = self.statics.origin();
-        let res = self.statics.resolution();
         for (r, rd) in self.readings.iter().enumerate() {
             if rd.is_empty() {
                 continue;
@@ -830,7 +829,6 @@ impl Sim {
                 }
             }
         }
-        let _ = (x0, y0, res);
         for (grid, _) in [(&self.statics, 0), (&self.dynamics, 1)] {
             for j in 0..h {
                 for i in 0..w {
@@ -850,6 +848,63 @@ impl Sim {
     /// The global pose of model `m`.
     pub fn global(&self, m: usize) -> Pose {
         self.world.global(&self.poses, m).0
+    }
+
+    /// The occupancy map of model `m`'s body, as the Stage plugin's `map`
+    /// device drew it: the model's `size` cut into cells of its
+    /// `map_resolution`, a cell occupied where a block covers part of it,
+    /// free elsewhere. The map's origin is the
+    /// body's lower left corner at the model's current pose.
+    ///
+    /// # Errors
+    ///
+    /// A `map_resolution` that is not a positive number.
+    pub fn model_map(&self, m: usize) -> Result<OccMap, String> {
+        let d = &self.world.models[m];
+        let res = d.map_resolution;
+        if !(res > 0.0 && res.is_finite()) {
+            return Err(format!(
+                "{}: model `{}` has map_resolution {res}; a map needs a positive cell size",
+                d.pos, d.name
+            ));
+        }
+        let (sx, sy) = (d.size[0], d.size[1]);
+        let (w, h) = (
+            ((sx / res).floor() as u32).max(1),
+            ((sy / res).floor() as u32).max(1),
+        );
+        // The body's box in the model's frame (blocks have the origin applied).
+        let (x0, y0) = (d.origin.x - sx / 2.0, d.origin.y - sy / 2.0);
+        // Blocks are sampled at four points a cell along each axis, so a
+        // cell is occupied when a block covers a sixteenth of it or so, and
+        // an edge lying on a cell boundary does not spill into the next one.
+        const SUB: usize = 4;
+        let (x1, y1) = (x0 + f64::from(w) * res, y0 + f64::from(h) * res);
+        let fine = Grid::new(x0, y0, x1, y1, res / SUB as f64);
+        let coarse = Grid::new(x0, y0, x1, y1, res);
+        let wc = w as usize;
+        let mut cells = vec![FREE; wc * h as usize];
+        for b in &d.blocks {
+            let n = fine.polygon_centres(b, |i, j| cells[(j / SUB) * wc + i / SUB] = OCCUPIED);
+            // A block thinner than that still shows, by its outline.
+            if n == 0 {
+                for k in 0..b.len() {
+                    coarse.segment_cells(b[k], b[(k + 1) % b.len()], &mut |i, j| {
+                        cells[j * wc + i] = OCCUPIED;
+                    });
+                }
+            }
+        }
+        let corner = self.global(m).compose(&Pose::new(x0, y0, 0.0));
+        Ok(OccMap {
+            info: map::Info {
+                width: w,
+                height: h,
+                resolution: res as f32,
+                origin: corner.into(),
+            },
+            cells,
+        })
     }
 }
 
@@ -1109,6 +1164,43 @@ mod compat {
             }
         }
         assert!(travelled > 20.0, "wandered only {travelled} m in 300 s");
+    }
+
+    #[test]
+    fn the_cave_map_agrees_with_the_simulated_cave() {
+        let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../../shared/compat/stage/simple.world");
+        if !p.exists() {
+            eprintln!("skipping: ../shared/compat is absent");
+            return;
+        }
+        let s = Sim::new(crate::world::load(&p).unwrap()).unwrap();
+        let cave = s.world.names["cave"];
+        let map = s.model_map(cave).unwrap();
+        // 16 m at Stage's default map_resolution 0.1, corner at (-8, -8).
+        assert_eq!((map.info.width, map.info.height), (160, 160));
+        assert_eq!((map.info.origin.x, map.info.origin.y), (-8.0, -8.0));
+        // Cell by cell against the 2 cm grid the robots move in: where that
+        // grid holds the cave at a map cell's centre, the cell is occupied;
+        // an occupied cell holds the cave somewhere (5 x 5 points a cell).
+        let (mut missed, mut extra, mut occupied) = (0, 0, 0);
+        for (k, &c) in map.cells.iter().enumerate() {
+            let (x, y) = map.centre(k);
+            let cave_at = |dx: f64, dy: f64| s.statics.at(x + dx, y + dy) == id(cave);
+            missed += usize::from(cave_at(0.0, 0.0) && c != OCCUPIED);
+            let near = (0..25).any(|q| {
+                let (u, v) = (f64::from(q % 5) - 2.0, f64::from(q / 5) - 2.0);
+                cave_at(u * 0.02, v * 0.02)
+            });
+            extra += usize::from(!near && c == OCCUPIED);
+            occupied += usize::from(c == OCCUPIED);
+        }
+        let n = map.cells.len();
+        assert_eq!((missed, extra), (0, 0), "cells the map gets wrong");
+        assert!(occupied * 100 > n * 5, "{occupied} of {n} occupied");
+        // `boundary 1` (map.inc): the outer ring is wall.
+        assert!(map.cells[..160].iter().all(|&c| c == OCCUPIED));
+        assert!(map.cells[n - 160..].iter().all(|&c| c == OCCUPIED));
     }
 
     #[test]

@@ -158,6 +158,9 @@ pub struct ModelDef {
     pub gripper_return: bool,
     /// Children stack on top of it.
     pub stack_children: bool,
+    /// Metres per cell of the map a `map` device draws from this model
+    /// (Stage's `map_resolution`, 0.1 by default).
+    pub map_resolution: f64,
     /// Position settings, for position models.
     pub position: Option<PositionCfg>,
     /// Sensors, for rangers.
@@ -736,6 +739,7 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
             fiducial_return: r.int(e, "fiducial_return", 0) as i32,
             gripper_return: r.int(e, "gripper_return", 0) != 0,
             stack_children: r.int(e, "stack_children", 1) != 0,
+            map_resolution: r.length(e, "map_resolution", 0.1),
             position,
             sensors,
             ctrl,
