@@ -236,28 +236,46 @@ impl Grid {
         max_range: f64,
         accept: impl FnMut(u16) -> bool,
     ) -> Option<Hit> {
-        self.cast_layers(None, x, y, angle, max_range, accept)
+        let (dy, dx) = angle.sin_cos();
+        self.cast_with(x, y, (dx, dy), max_range, accept, |_| None)
     }
 
-    /// [`Grid::cast`] through this grid and `other` at once (same geometry,
-    /// e.g. static and moving obstacles): the nearest accepted cell of either.
-    ///
-    /// # Panics
-    ///
-    /// If `other` does not have this grid's size.
-    pub fn cast_layers(
+    /// The tile holding cell (i, j), as [`Grid::cast_with`] names tiles.
+    pub fn tile_of(&self, i: usize, j: usize) -> usize {
+        (j / TILE) * self.tw + i / TILE
+    }
+
+    /// The tiles holding the cells of the box from `lo` to `hi` (corners
+    /// included).
+    pub fn tiles_of_box(
         &self,
-        other: Option<&Grid>,
+        lo: (usize, usize),
+        hi: (usize, usize),
+    ) -> impl Iterator<Item = usize> + '_ {
+        let (c0, r0) = (lo.0 / TILE, lo.1 / TILE);
+        let (c1, r1) = (hi.0 / TILE, hi.1 / TILE);
+        (r0..=r1).flat_map(move |r| (c0..=c1).map(move |c| r * self.tw + c))
+    }
+
+    /// How many tiles the grid has.
+    pub fn tile_count(&self) -> usize {
+        self.tiles.len()
+    }
+
+    /// [`Grid::cast`] along the unit vector `(dx, dy)`, with things kept
+    /// outside the grid: `in_tile(t)` is called once as the ray enters each
+    /// tile `t` on its way and answers the nearest hit (range from the ray's
+    /// origin) of what it keeps there, e.g. moving bodies tested exactly
+    /// against the ray. The nearest of those and the grid's cells wins.
+    pub fn cast_with(
+        &self,
         x: f64,
         y: f64,
-        angle: f64,
+        (dx, dy): (f64, f64),
         max_range: f64,
         mut accept: impl FnMut(u16) -> bool,
+        mut in_tile: impl FnMut(usize) -> Option<Hit>,
     ) -> Option<Hit> {
-        if let Some(o) = other {
-            assert!(o.w == self.w && o.h == self.h, "layers of different sizes");
-        }
-        let (dy, dx) = angle.sin_cos();
         let gx = (x - self.x0) / self.res;
         let gy = (y - self.y0) / self.res;
         let tmax = max_range / self.res;
@@ -316,14 +334,23 @@ impl Grid {
         // Which axis the ray last crossed a tile boundary on, if the cell
         // position must be recomputed on entering an occupied tile.
         let mut stale: Option<bool> = None;
+        // The nearest hit `in_tile` reported, and its parameter (cells).
+        let (mut best, mut best_t): (Option<Hit>, f64) = (None, f64::INFINITY);
+        let end = |best: Option<Hit>| best.filter(|h| h.range <= max_range);
         'tiles: loop {
             let tidx = tj as usize * self.tw + ti as usize;
-            if self.tiles[tidx] == 0 && other.is_none_or(|o| o.tiles[tidx] == 0) {
+            if let Some(h) = in_tile(tidx) {
+                if h.range / self.res < best_t {
+                    best_t = h.range / self.res;
+                    best = Some(h);
+                }
+            }
+            if self.tiles[tidx] == 0 {
                 // Skip the empty tile: step the tile-level walk only.
                 let cross_x = ttx < tty;
                 t = if cross_x { ttx } else { tty };
-                if t >= t1 {
-                    return None;
+                if t >= t1 || t >= best_t {
+                    return end(best);
                 }
                 if cross_x {
                     ttx += tdx;
@@ -337,7 +364,7 @@ impl Grid {
                     || ti >= self.tw as i64
                     || tj as usize * self.tw >= self.tiles.len()
                 {
-                    return None;
+                    return end(best);
                 }
                 stale = Some(cross_x);
                 continue;
@@ -356,12 +383,15 @@ impl Grid {
                     tx = first(i, sx, gx, dx);
                 }
                 if i >= w || j >= h {
-                    return None;
+                    return end(best);
                 }
             }
             // Walk the cells of this occupied tile.
             let mut idx = j as usize * self.w + i as usize;
             loop {
+                if t >= best_t {
+                    return end(best);
+                }
                 let a = self.cells[idx];
                 if a != EMPTY && accept(a) {
                     return Some(Hit {
@@ -369,24 +399,15 @@ impl Grid {
                         id: a,
                     });
                 }
-                if let Some(o) = other {
-                    let b = o.cells[idx];
-                    if b != EMPTY && accept(b) {
-                        return Some(Hit {
-                            range: t * self.res,
-                            id: b,
-                        });
-                    }
-                }
                 if tx < ty {
                     if tx >= t1 {
-                        return None;
+                        return end(best);
                     }
                     t = tx;
                     tx += ddx;
                     i += sx;
                     if i < 0 || i >= w {
-                        return None;
+                        return end(best);
                     }
                     idx = (idx as isize + istep) as usize;
                     if i >> shift != ti {
@@ -396,13 +417,13 @@ impl Grid {
                     }
                 } else {
                     if ty >= t1 {
-                        return None;
+                        return end(best);
                     }
                     t = ty;
                     ty += ddy;
                     j += sy;
                     if j < 0 || j >= h {
-                        return None;
+                        return end(best);
                     }
                     idx = (idx as isize + jstep) as usize;
                     if j >> shift != tj {

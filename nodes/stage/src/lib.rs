@@ -6,6 +6,7 @@
 #![warn(missing_docs)]
 
 pub mod colors;
+mod movers;
 mod node;
 pub mod sim;
 pub mod world;

@@ -7,9 +7,10 @@
 //! `obstacle_return` is set, and then stop and report a stall, as in Stage.
 
 use troupe_geom::occmap::{FREE, OCCUPIED};
-use troupe_geom::{normalize, Grid, OccMap, Pose, EMPTY};
+use troupe_geom::{normalize, Grid, Hit, OccMap, Pose, EMPTY};
 use troupe_msgs::{map, Color};
 
+use crate::movers::Movers;
 use crate::world::{Drive, Kind, Localization, World};
 
 /// What a position model was last told to do.
@@ -96,7 +97,16 @@ pub struct Sim {
     /// The cells each movable model occupies now.
     cells: Vec<Vec<(usize, usize)>>,
     statics: Grid,
+    /// Moving bodies, for collisions.
     dynamics: Grid,
+    /// Moving bodies, for sensors.
+    movers: Movers,
+}
+
+/// The unit vector at angle `a`.
+fn unit(a: f64) -> (f64, f64) {
+    let (s, c) = a.sin_cos();
+    (c, s)
 }
 
 fn id(m: usize) -> u16 {
@@ -227,6 +237,7 @@ impl Sim {
             roots,
             movable,
             cells: vec![Vec::new(); n],
+            movers: Movers::new(n, statics.tile_count()),
             statics,
             dynamics,
         };
@@ -264,6 +275,19 @@ impl Sim {
         }
     }
 
+    /// The tiles of the box around `cells` (a body's cells: a compact set).
+    fn tiles_under(&self, cells: &[(usize, usize)]) -> Vec<usize> {
+        let Some(&(i, j)) = cells.first() else {
+            return Vec::new();
+        };
+        let (mut lo, mut hi) = ((i, j), (i, j));
+        for &(i, j) in cells {
+            lo = (lo.0.min(i), lo.1.min(j));
+            hi = (hi.0.max(i), hi.1.max(j));
+        }
+        self.statics.tiles_of_box(lo, hi).collect()
+    }
+
     /// Moves model `m`'s body in its grid from its old cells to `cells`.
     fn occupy(&mut self, m: usize, cells: Vec<(usize, usize)>) {
         self.unplace(m);
@@ -274,6 +298,12 @@ impl Sim {
         };
         for &(i, j) in &cells {
             grid.set(i, j, id(m));
+        }
+        if self.movable[m] {
+            let g = self.global(m);
+            let tiles = self.tiles_under(&cells);
+            self.movers
+                .file(m, id(m), g, &self.world.models[m].blocks, tiles);
         }
         self.cells[m] = cells;
     }
@@ -529,25 +559,70 @@ impl Sim {
         self.rangers = rangers;
     }
 
+    /// The first body along the ray from (x, y) along the unit vector
+    /// `(dx, dy)`, within `range`, whose id `accept`s: walls and other static
+    /// bodies from the static grid, moving bodies tested exactly as the ray
+    /// passes their tiles.
+    fn cast(
+        &self,
+        x: f64,
+        y: f64,
+        (dx, dy): (f64, f64),
+        range: f64,
+        accept: impl Fn(u16) -> bool,
+    ) -> Option<Hit> {
+        // A body spans a few tiles: test each once (the first few, at least).
+        let mut tested = [0u16; 8];
+        let mut n = 0;
+        let movers = |t: usize| {
+            let mut best: Option<Hit> = None;
+            for &k in self.movers.in_tile(t) {
+                if tested[..n].contains(&k) {
+                    continue;
+                }
+                if n < tested.len() {
+                    tested[n] = k;
+                    n += 1;
+                }
+                if !accept(k) {
+                    continue;
+                }
+                if let Some(h) = self.movers.hit(usize::from(k) - 1, k, (x, y), (dx, dy)) {
+                    if best.is_none_or(|b| h.range < b.range) {
+                        best = Some(h);
+                    }
+                }
+            }
+            best
+        };
+        self.statics
+            .cast_with(x, y, (dx, dy), range, &accept, movers)
+    }
+
     fn sense_one(&self, r: usize, out: &mut [Reading]) {
         let (g, _) = self.world.global(&self.poses, r);
         let base = g.compose(&self.world.models[r].origin);
         let root = self.roots[r];
         for (s, rd) in self.world.models[r].sensors.iter().zip(out.iter_mut()) {
             let o = base.compose(&s.pose);
+            // Sample directions by rotating the first one step by step
+            // (no trigonometry per ray).
+            let (first, step) = if s.samples > 1 {
+                (o.yaw - s.fov / 2.0, s.fov / (s.samples - 1) as f64)
+            } else {
+                (o.yaw, 0.0)
+            };
+            let mut d = unit(first);
+            let rot = unit(step);
             for k in 0..s.samples {
-                let a = if s.samples > 1 {
-                    o.yaw - s.fov / 2.0 + s.fov * k as f64 / (s.samples - 1) as f64
-                } else {
-                    o.yaw
-                };
+                if k > 0 {
+                    d = (d.0 * rot.0 - d.1 * rot.1, d.0 * rot.1 + d.1 * rot.0);
+                }
                 let accept = |c: u16| {
                     let other = usize::from(c) - 1;
                     self.roots[other] != root && self.world.models[other].ranger_return >= 0.0
                 };
-                let hit =
-                    self.statics
-                        .cast_layers(Some(&self.dynamics), o.x, o.y, a, s.range.1, accept);
+                let hit = self.cast(o.x, o.y, d, s.range.1, accept);
                 let (range, intensity) = match hit {
                     Some(h) => (
                         h.range.max(s.range.0),
@@ -629,6 +704,7 @@ impl Sim {
             }
         }
         self.cells[m].clear();
+        self.movers.unfile(m, id(m));
     }
 
     /// Moves held objects with their grippers and updates the break beams.
@@ -674,8 +750,7 @@ impl Sim {
                 self.roots[o] != root && self.world.models[o].blob_return
             };
             let seen = self
-                .statics
-                .cast_layers(Some(&self.dynamics), eye.x, eye.y, a, cfg.range, accept)
+                .cast(eye.x, eye.y, unit(a), cfg.range, accept)
                 .and_then(|hit| {
                     let o = usize::from(hit.id) - 1;
                     let col = self.colors[o];
@@ -757,14 +832,7 @@ impl Sim {
             }
             // Seen only if the first thing along the line of sight is the target.
             let accept = |id: u16| self.roots[usize::from(id) - 1] != root;
-            let first = self.statics.cast_layers(
-                Some(&self.dynamics),
-                eye.x,
-                eye.y,
-                eye.yaw + bearing,
-                range,
-                accept,
-            );
+            let first = self.cast(eye.x, eye.y, unit(eye.yaw + bearing), range, accept);
             if first.is_some_and(|h| self.roots[usize::from(h.id) - 1] != self.roots[k]) {
                 continue;
             }
