@@ -87,6 +87,13 @@ impl Grid {
         }
     }
 
+    /// Whether the tile holding cell (i, j) holds anything (a lookup in a
+    /// small array: checking it first spares reading the cells of empty
+    /// space). False outside the grid.
+    pub fn tile_occupied(&self, i: usize, j: usize) -> bool {
+        i < self.w && j < self.h && self.tiles[(j / TILE) * self.tw + i / TILE] != 0
+    }
+
     /// The id at world point (x, y); `EMPTY` outside the grid.
     pub fn at(&self, x: f64, y: f64) -> u16 {
         self.cell_of(x, y).map_or(EMPTY, |(i, j)| self.get(i, j))
