@@ -2,11 +2,12 @@
 //!
 //! - [`worldfile`]: Stage's world-file language (includes, macros, entities);
 //! - [`world`]: typed models, bodies stretched to size, sensors;
-//! - [`sim`]: the simulation (kinematics, collisions, ranger ray casting).
+//! - [`sim`]: the simulation (kinematics, collisions, ranger ray casting);
+//! - [`movers`]: moving bodies as rays meet them, exactly.
 #![warn(missing_docs)]
 
 pub mod colors;
-mod movers;
+pub mod movers;
 mod node;
 pub mod sim;
 pub mod world;

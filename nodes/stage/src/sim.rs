@@ -2,9 +2,11 @@
 //!
 //! Static models (trees without a position model) are rasterised once into
 //! one grid; models that move are kept in a second grid, updated as they
-//! move. A grid cell holds `model index + 1`. Rangers cast their rays in
-//! both grids; robots collide with cells of unrelated models whose
-//! `obstacle_return` is set, and then stop and report a stall, as in Stage.
+//! move. A grid cell holds `model index + 1`. Robots collide with cells of
+//! unrelated models whose `obstacle_return` is set, and then stop and report
+//! a stall, as in Stage. Rays walk the static grid (skipping empty tiles)
+//! and meet moving bodies exactly, as polygons filed by tile
+//! ([`crate::movers`]): a robot's own body costs its rays nothing.
 
 use troupe_geom::occmap::{FREE, OCCUPIED};
 use troupe_geom::{normalize, Grid, Hit, OccMap, Pose, EMPTY};
