@@ -15,6 +15,7 @@ use crate::drivers;
 #[derive(Debug, Parser)]
 #[command(name = "troupe", version, propagate_version = true)]
 #[command(after_help = "Examples:
+  troupe launch worlds/simple.cfg                 # a stack from a .cfg (embedded router)
   troupe router                                   # a router for this host (tcp/[::]:7447)
   troupe node dummy --provides ranger:0 -o rate=10
   troupe node rangertolaser --requires ranger:0 --provides laser:0
