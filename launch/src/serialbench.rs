@@ -1,7 +1,6 @@
 //! `troupe bench serial`: scan rates of the sicklms200 driver against the
 //! emulated scanner, over a pseudo-terminal paced at the line's baud rate.
 
-use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use clap::Args;
@@ -69,9 +68,9 @@ fn case(baud: u32, res: u16, seconds: f64) -> anyhow::Result<(f64, f64, usize)> 
             max_angle: 9000,
         },
     };
-    let (tx, rx) = mpsc::channel();
     let t0 = Instant::now();
-    let line = device::spawn(settings, tx, Waker::none())?;
+    let line = device::spawn(settings, Waker::none())?;
+    let rx = line.updates();
     let mut connect = None;
     let mut first = None;
     let mut scans = 0u64;

@@ -9,8 +9,9 @@
 //!   `.cfg` names an emulated device as `port "/tmp/laser"`.
 //! - [`Pacer`]: writes at the speed a real line would carry the bytes.
 //! - [`arcos`]: the packet framing of Pioneer and Erratic controllers.
-//! - [`LineThread`], [`run_sessions`] and [`Link`]: a hardware driver's
-//!   line thread — sessions with the device, reconnection, a prompt stop;
+//! - [`LineThread`], [`run_sessions`], [`end_session`] and [`Link`]: a
+//!   hardware driver's line thread — orders in, updates out, sessions with
+//!   the device, reconnection, a prompt stop;
 //!   [`CommandWatchdog`]: the robot drivers' `watchdog` option.
 //! - [`EmuLine`] and [`Emulator`]: the device end of an emulated line, and
 //!   an emulator on a thread for tests and benchmarks.
@@ -34,5 +35,5 @@ pub use framer::{Codec, Decoded, FrameStats, Framer, Skipped};
 pub use link::{Link, LinkError, SessionError};
 pub use port::{baud_supported, LineError, Port, BAUD_RATES};
 pub use pty::{Pacer, Pty};
-pub use thread::{run_sessions, Emulator, Ended, LineThread, Linked};
+pub use thread::{end_session, run_sessions, Emulator, Ended, LineThread, Linked, Reports};
 pub use watchdog::CommandWatchdog;

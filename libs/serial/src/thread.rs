@@ -1,39 +1,68 @@
 //! The threads of hardware drivers and of device emulators.
 
+use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-/// A driver's line thread: it takes orders of type `O` and can be cut
-/// short. The body receives the orders and an abort flag for its
-/// [`crate::Link`]s.
+use crate::{FrameStats, SessionError};
+
+/// A driver's line thread: it takes orders of type `O`, reports updates
+/// of type `U` (each followed by a wake of the driver's loop) and can be
+/// cut short. The body receives the orders, its [`Reports`] and an abort
+/// flag for its [`crate::Link`]s.
 #[derive(Debug)]
-pub struct LineThread<O> {
+pub struct LineThread<O, U> {
     orders: Sender<O>,
+    updates: Receiver<U>,
     abort: Arc<AtomicBool>,
     thread: Option<JoinHandle<()>>,
 }
 
-impl<O: Send + 'static> LineThread<O> {
-    /// Starts `body` on a thread called `name`.
+/// A line thread's side of its updates: [`Reports::send`] queues one and
+/// wakes the driver.
+pub struct Reports<U> {
+    tx: Sender<U>,
+    wake: Box<dyn Fn() + Send>,
+}
+
+impl<U> Reports<U> {
+    /// Queues `update` for the driver and wakes it (nothing happens once
+    /// the driver has gone).
+    pub fn send(&self, update: U) {
+        let _ = self.tx.send(update);
+        (self.wake)();
+    }
+}
+
+impl<O: Send + 'static, U: Send + 'static> LineThread<O, U> {
+    /// Starts `body` on a thread called `name`; `wake` is called after each
+    /// update the body reports.
     ///
     /// # Errors
     ///
     /// When the thread cannot be started.
     pub fn spawn(
         name: &str,
-        body: impl FnOnce(Receiver<O>, Arc<AtomicBool>) + Send + 'static,
+        wake: impl Fn() + Send + 'static,
+        body: impl FnOnce(Receiver<O>, Reports<U>, Arc<AtomicBool>) + Send + 'static,
     ) -> std::io::Result<Self> {
         let (orders, rx) = std::sync::mpsc::channel();
+        let (tx, updates) = std::sync::mpsc::channel();
+        let reports = Reports {
+            tx,
+            wake: Box::new(wake),
+        };
         let abort = Arc::new(AtomicBool::new(false));
         let flag = abort.clone();
         let thread = std::thread::Builder::new()
             .name(name.into())
-            .spawn(move || body(rx, flag))?;
+            .spawn(move || body(rx, reports, flag))?;
         Ok(LineThread {
             orders,
+            updates,
             abort,
             thread: Some(thread),
         })
@@ -42,6 +71,11 @@ impl<O: Send + 'static> LineThread<O> {
     /// Queues an order; false when the thread has ended.
     pub fn send(&self, order: O) -> bool {
         self.orders.send(order).is_ok()
+    }
+
+    /// The updates the thread reports, in order.
+    pub fn updates(&self) -> &Receiver<U> {
+        &self.updates
     }
 
     /// Raises the abort flag, sends `last` (the order that says goodbye to
@@ -62,6 +96,37 @@ pub enum Ended {
     Stopped,
     /// The device failed or went away: try again after the delay.
     Failed,
+}
+
+/// Ends a session with the device at `port` from its outcome and its
+/// line's statistics: a stop ends the thread; a failure is logged as
+/// "`what` not ready" with the session's number and the frames the line
+/// dropped, handed to `lost` (to tell the driver), and retried after
+/// `delay`.
+pub fn end_session<E: std::fmt::Display>(
+    what: &str,
+    port: &Path,
+    session: u64,
+    (result, stats): (Result<(), SessionError<E>>, FrameStats),
+    delay: Duration,
+    lost: impl FnOnce(String),
+) -> Ended {
+    match result {
+        Ok(()) | Err(SessionError::Stopped) => Ended::Stopped,
+        Err(e) => {
+            tracing::warn!(
+                port = %port.display(),
+                session,
+                noise_bytes = stats.noise,
+                checksum_errors = stats.checksum,
+                malformed = stats.malformed,
+                "{what} not ready: {e}; retrying in {} s",
+                delay.as_secs()
+            );
+            lost(e.to_string());
+            Ended::Failed
+        }
+    }
 }
 
 /// A line thread's life: sessions with the device, one after another,

@@ -12,12 +12,12 @@
 
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
-use std::sync::mpsc::{Receiver, Sender, TryRecvError};
+use std::sync::mpsc::{Receiver, TryRecvError};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use troupe_node::Waker;
-use troupe_serial::{arcos, run_sessions, Ended, LineThread, Link, SessionError};
+use troupe_serial::{arcos, end_session, run_sessions, LineThread, Link, Reports, SessionError};
 
 use crate::packet::{self, cmd, kind, PacketCodec};
 use crate::params::{self, Params};
@@ -89,17 +89,19 @@ pub enum Order {
 }
 
 /// The line thread, as the driver holds it.
-pub type Line = LineThread<Order>;
+pub type Line = LineThread<Order, Update>;
 
 /// Starts the line thread.
 ///
 /// # Errors
 ///
 /// When the thread cannot be started.
-pub fn spawn(settings: Settings, updates: Sender<Update>, waker: Waker) -> std::io::Result<Line> {
-    LineThread::spawn("erratic line", move |orders, abort| {
-        run(settings, &updates, &orders, &waker, abort);
-    })
+pub fn spawn(settings: Settings, waker: Waker) -> std::io::Result<Line> {
+    LineThread::spawn(
+        "erratic line",
+        move || waker.wake(),
+        move |orders, reports, abort| run(settings, &reports, &orders, abort),
+    )
 }
 
 /// What can go wrong with the device itself; the line's failures and
@@ -131,44 +133,27 @@ fn fail<T>(f: Fail) -> Result<T, Error> {
 
 fn run(
     mut settings: Settings,
-    updates: &Sender<Update>,
+    reports: &Reports<Update>,
     orders: &Receiver<Order>,
-    waker: &Waker,
     abort: Arc<AtomicBool>,
 ) {
-    let send = |u: Update| {
-        let _ = updates.send(u);
-        waker.wake();
-    };
+    let send = |u: Update| reports.send(u);
     let mut sessions = 0u64;
     let session = |settings: &mut Settings| {
         sessions += 1;
         let port = settings.port.clone();
-        let (result, stats) =
-            Link::session(&port, BAUD_RATES[0], PacketCodec, abort.clone(), |link| {
-                Session {
-                    settings,
-                    link,
-                    orders,
-                    last_sent: Instant::now(),
-                }
-                .run(&send)
-            });
-        match result {
-            Ok(()) | Err(Error::Stopped) => Ended::Stopped,
-            Err(e) => {
-                tracing::warn!(
-                    session = sessions,
-                    noise_bytes = stats.noise,
-                    checksum_errors = stats.checksum,
-                    malformed = stats.malformed,
-                    "robot not ready: {e}; retrying in {} s",
-                    RECONNECT_DELAY.as_secs()
-                );
-                send(Update::Lost(e.to_string()));
-                Ended::Failed
+        let outcome = Link::session(&port, BAUD_RATES[0], PacketCodec, abort.clone(), |link| {
+            Session {
+                settings,
+                link,
+                orders,
+                last_sent: Instant::now(),
             }
-        }
+            .run(&send)
+        });
+        end_session("robot", &port, sessions, outcome, RECONNECT_DELAY, |why| {
+            send(Update::Lost(why));
+        })
     };
     let between = |settings: &mut Settings, order| match order {
         Order::Stop => false,

@@ -42,7 +42,6 @@ pub mod packet;
 pub mod params;
 
 use std::path::PathBuf;
-use std::sync::mpsc::{self, Receiver};
 
 use serde::Deserialize;
 use troupe_geom::{Odometry, Pose};
@@ -185,7 +184,7 @@ pub struct Erratic {
     dev: Devices,
     settings: Settings,
     watchdog: CommandWatchdog,
-    link: Option<(Receiver<Update>, Line)>,
+    line: Option<Line>,
     params: Option<&'static Params>,
     odom: Odometry,
     pose: Pose,
@@ -243,7 +242,7 @@ impl Driver for Erratic {
             },
             dev,
             watchdog: CommandWatchdog::new(o.watchdog),
-            link: None,
+            line: None,
             params: None,
             odom: Odometry::new(12),
             pose: Pose::default(),
@@ -253,11 +252,10 @@ impl Driver for Erratic {
 
     fn setup(&mut self, ctx: &mut Ctx) -> Result<()> {
         ctx.set_ready(false);
-        let (tx, rx) = mpsc::channel();
-        let line = device::spawn(self.settings.clone(), tx, ctx.waker())
+        let line = device::spawn(self.settings.clone(), ctx.waker())
             .map_err(|e| NodeError::Driver(format!("starting the line thread: {e}").into()))?;
         tracing::info!("robot initialising ({})", self.settings.port.display());
-        self.link = Some((rx, line));
+        self.line = Some(line);
         ctx.set_tick(self.watchdog.tick());
         Ok(())
     }
@@ -380,7 +378,7 @@ impl Driver for Erratic {
     }
 
     fn shutdown(&mut self, _: &mut Ctx) -> Result<()> {
-        if let Some((_, line)) = self.link.take() {
+        if let Some(line) = self.line.take() {
             line.stop(Order::Stop);
         }
         Ok(())
@@ -389,16 +387,16 @@ impl Driver for Erratic {
 
 impl Erratic {
     fn order(&self, o: Order) {
-        if let Some((_, line)) = &self.link {
+        if let Some(line) = &self.line {
             line.send(o);
         }
     }
 
     fn drain(&mut self, ctx: &mut Ctx) -> Result<()> {
-        let Some((rx, _)) = &self.link else {
+        let Some(line) = &self.line else {
             return Ok(());
         };
-        let updates: Vec<Update> = rx.try_iter().collect();
+        let updates: Vec<Update> = line.updates().try_iter().collect();
         for u in updates {
             match u {
                 Update::Ready { name, params, baud } => {

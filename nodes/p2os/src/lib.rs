@@ -43,7 +43,6 @@ pub mod packet;
 pub mod params;
 
 use std::path::PathBuf;
-use std::sync::mpsc::{self, Receiver};
 use std::time::Duration;
 
 use serde::Deserialize;
@@ -107,7 +106,7 @@ pub struct P2os {
     dev: Devices,
     settings: Settings,
     watchdog: CommandWatchdog,
-    link: Option<(Receiver<Update>, Line)>,
+    line: Option<Line>,
     params: Option<&'static Params>,
     odom: Odometry,
     pose: Pose,
@@ -176,7 +175,7 @@ impl Driver for P2os {
             },
             dev,
             watchdog: CommandWatchdog::new(o.watchdog),
-            link: None,
+            line: None,
             params: None,
             odom: Odometry::new(15),
             pose: Pose::default(),
@@ -186,11 +185,10 @@ impl Driver for P2os {
 
     fn setup(&mut self, ctx: &mut Ctx) -> Result<()> {
         ctx.set_ready(false);
-        let (tx, rx) = mpsc::channel();
-        let line = device::spawn(self.settings.clone(), tx, ctx.waker())
+        let line = device::spawn(self.settings.clone(), ctx.waker())
             .map_err(|e| NodeError::Driver(format!("starting the line thread: {e}").into()))?;
         tracing::info!("robot initialising ({})", self.settings.port.display());
-        self.link = Some((rx, line));
+        self.line = Some(line);
         ctx.set_tick(self.watchdog.tick());
         Ok(())
     }
@@ -289,7 +287,7 @@ impl Driver for P2os {
     }
 
     fn shutdown(&mut self, _: &mut Ctx) -> Result<()> {
-        if let Some((_, line)) = self.link.take() {
+        if let Some(line) = self.line.take() {
             line.stop(Order::Stop);
         }
         Ok(())
@@ -298,16 +296,16 @@ impl Driver for P2os {
 
 impl P2os {
     fn order(&self, o: Order) {
-        if let Some((_, line)) = &self.link {
-            let _ = line.send(o);
+        if let Some(line) = &self.line {
+            line.send(o);
         }
     }
 
     fn drain(&mut self, ctx: &mut Ctx) -> Result<()> {
-        let Some((rx, _)) = &self.link else {
+        let Some(line) = &self.line else {
             return Ok(());
         };
-        let updates: Vec<Update> = rx.try_iter().collect();
+        let updates: Vec<Update> = line.updates().try_iter().collect();
         for u in updates {
             match u {
                 Update::Ready { name, params, baud } => {

@@ -3,7 +3,7 @@
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] fns
 
 use std::path::PathBuf;
-use std::sync::mpsc::{self, Receiver};
+use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
 
 use troupe_node::Waker;
@@ -84,10 +84,10 @@ fn sip(u: &Update) -> Option<&troupe_p2os::packet::Sip> {
 #[test]
 fn handshake_sips_sonar_and_driving() {
     let mut emu = emulate("drive", Faults::default());
-    let (tx, rx) = mpsc::channel();
-    let line = device::spawn(settings(&emu.link), tx, Waker::none()).unwrap();
+    let line = device::spawn(settings(&emu.link), Waker::none()).unwrap();
+    let rx = line.updates();
     let Update::Ready { name, params, baud } =
-        wait_for(&rx, 20, |u| matches!(u, Update::Ready { .. }))
+        wait_for(rx, 20, |u| matches!(u, Update::Ready { .. }))
     else {
         unreachable!()
     };
@@ -98,7 +98,7 @@ fn handshake_sips_sonar_and_driving() {
     assert_eq!((params.subclass, baud), ("p3dx-sh", 9600));
     // Sonars on: all 16 ranges; the front right one, 166 mm ahead and aimed
     // 10° left, sees the wall 4 m ahead at 3.834 m / cos 10°.
-    let u = wait_for(&rx, 5, |u| sip(u).is_some_and(|s| s.sonars.len() == 16));
+    let u = wait_for(rx, 5, |u| sip(u).is_some_and(|s| s.sonars.len() == 16));
     let s = sip(&u).unwrap();
     let want = (4000.0 - 166.0) / 10f64.to_radians().cos();
     assert!(
@@ -113,7 +113,7 @@ fn handshake_sips_sonar_and_driving() {
         speed: 300,
         turn: 0,
     }));
-    let u = wait_for(&rx, 5, |u| sip(u).is_some_and(|s| s.xpos >= 600));
+    let u = wait_for(rx, 5, |u| sip(u).is_some_and(|s| s.xpos >= 600));
     let s = sip(&u).unwrap();
     assert_eq!((s.kind, s.flags & 1), (0x33, 1));
     assert!(
@@ -121,7 +121,7 @@ fn handshake_sips_sonar_and_driving() {
         "{s:?}"
     );
     assert!(line.send(Order::Vel { speed: 0, turn: 0 }));
-    wait_for(&rx, 5, |u| sip(u).is_some_and(|s| s.kind == 0x32));
+    wait_for(rx, 5, |u| sip(u).is_some_and(|s| s.kind == 0x32));
     line.stop(Order::Stop);
     let stats = emu.stop();
     assert!(stats.sips >= 10, "{stats:?}");
@@ -137,10 +137,10 @@ fn faults_are_survived_and_a_mute_robot_is_reported() {
         ..Faults::default()
     };
     let mut emu = emulate("noisy", faults);
-    let (tx, rx) = mpsc::channel();
-    let line = device::spawn(settings(&emu.link), tx, Waker::none()).unwrap();
+    let line = device::spawn(settings(&emu.link), Waker::none()).unwrap();
+    let rx = line.updates();
     let mut sips = 0;
-    wait_for(&rx, 60, |u| {
+    wait_for(rx, 60, |u| {
         if sip(u).is_some() {
             sips += 1;
         }
@@ -156,9 +156,9 @@ fn faults_are_survived_and_a_mute_robot_is_reported() {
             ..Faults::default()
         },
     );
-    let (tx, rx) = mpsc::channel();
-    let line = device::spawn(settings(&mute.link), tx, Waker::none()).unwrap();
-    let Update::Lost(why) = wait_for(&rx, 30, |u| matches!(u, Update::Lost(_))) else {
+    let line = device::spawn(settings(&mute.link), Waker::none()).unwrap();
+    let rx = line.updates();
+    let Update::Lost(why) = wait_for(rx, 30, |u| matches!(u, Update::Lost(_))) else {
         unreachable!()
     };
     assert!(why.contains("no answer to SYNC0"), "{why}");

@@ -12,12 +12,14 @@
 
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
-use std::sync::mpsc::{Receiver, Sender, TryRecvError};
+use std::sync::mpsc::{Receiver, TryRecvError};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use troupe_node::Waker;
-use troupe_serial::{run_sessions, Ended, LineThread, Link, LinkError, SessionError};
+use troupe_serial::{
+    end_session, run_sessions, LineThread, Link, LinkError, Reports, SessionError,
+};
 
 use crate::telegram::{self, cmd, mode, RawScan, Telegram, TelegramCodec};
 
@@ -187,30 +189,28 @@ fn fail<T>(f: Fail) -> Result<T, Error> {
 }
 
 /// The line thread, as the driver holds it.
-pub type Line = LineThread<Order>;
+pub type Line = LineThread<Order, Update>;
 
 /// Starts the line thread.
 ///
 /// # Errors
 ///
 /// When the thread cannot be started.
-pub fn spawn(settings: Settings, updates: Sender<Update>, waker: Waker) -> std::io::Result<Line> {
-    LineThread::spawn("sicklms200 line", move |orders, abort| {
-        run(settings, &updates, &orders, &waker, abort);
-    })
+pub fn spawn(settings: Settings, waker: Waker) -> std::io::Result<Line> {
+    LineThread::spawn(
+        "sicklms200 line",
+        move || waker.wake(),
+        move |orders, reports, abort| run(settings, &reports, &orders, abort),
+    )
 }
 
 fn run(
     mut settings: Settings,
-    updates: &Sender<Update>,
+    reports: &Reports<Update>,
     orders: &Receiver<Order>,
-    waker: &Waker,
     abort: Arc<AtomicBool>,
 ) {
-    let send = |u: Update| {
-        let _ = updates.send(u);
-        waker.wake();
-    };
+    let send = |u: Update| reports.send(u);
     let mut counts = Counts::default();
     let session = |settings: &mut Settings| {
         counts.sessions += 1;
@@ -220,7 +220,7 @@ fn run(
         };
         let rate = settings.connect_rates[0];
         let port = settings.port.clone();
-        let (result, stats) = Link::session(&port, rate, codec, abort.clone(), |link| {
+        let outcome = Link::session(&port, rate, codec, abort.clone(), |link| {
             Session {
                 settings,
                 link,
@@ -230,23 +230,20 @@ fn run(
             }
             .run(first)
         });
-        match result {
-            Ok(()) | Err(Error::Stopped) => Ended::Stopped,
-            Err(e) => {
-                tracing::warn!(
-                    port = %settings.port.display(),
-                    session = counts.sessions,
-                    scans = counts.scans,
-                    bad_scans = counts.bad_scans,
-                    noise_bytes = stats.noise,
-                    checksum_errors = stats.checksum,
-                    "laser not ready: {e}; retrying in {} s",
-                    RECONNECT_DELAY.as_secs()
-                );
-                send(Update::Lost(e.to_string()));
-                Ended::Failed
-            }
-        }
+        // The scan counts go with the failure's log line.
+        let _counts =
+            tracing::warn_span!("laser", scans = counts.scans, bad_scans = counts.bad_scans)
+                .entered();
+        end_session(
+            "laser",
+            &port,
+            counts.sessions,
+            outcome,
+            RECONNECT_DELAY,
+            |why| {
+                send(Update::Lost(why));
+            },
+        )
     };
     // A configuration that comes between sessions is taken up at the next.
     let between = |settings: &mut Settings, order| match order {

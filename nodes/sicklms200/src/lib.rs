@@ -37,7 +37,6 @@ pub mod telegram;
 
 use std::collections::VecDeque;
 use std::path::PathBuf;
-use std::sync::mpsc::{self, Receiver};
 use std::time::Duration;
 
 use serde::Deserialize;
@@ -100,15 +99,10 @@ pub struct SickLms200 {
     pose: [f64; 3],
     size: [f64; 2],
     config: ScanConfig,
-    link: Option<Link>,
+    line: Option<Line>,
     scan_id: u32,
     /// `set_config` requests waiting for the scanner, in order.
     pending: VecDeque<Responder>,
-}
-
-struct Link {
-    updates: Receiver<Update>,
-    line: Line,
 }
 
 impl Driver for SickLms200 {
@@ -160,7 +154,7 @@ impl Driver for SickLms200 {
             pose: o.pose,
             size: o.size,
             config,
-            link: None,
+            line: None,
             scan_id: 0,
             pending: VecDeque::new(),
         })
@@ -168,11 +162,10 @@ impl Driver for SickLms200 {
 
     fn setup(&mut self, ctx: &mut Ctx) -> Result<()> {
         ctx.set_ready(false);
-        let (updates_tx, updates) = mpsc::channel();
-        let line = device::spawn(self.settings.clone(), updates_tx, ctx.waker())
+        let line = device::spawn(self.settings.clone(), ctx.waker())
             .map_err(|e| NodeError::Driver(format!("starting the line thread: {e}").into()))?;
         tracing::info!("laser initialising ({})", self.settings.port.display());
-        self.link = Some(Link { updates, line });
+        self.line = Some(line);
         Ok(())
     }
 
@@ -190,10 +183,10 @@ impl Driver for SickLms200 {
             Event::Request(r) if r.is::<laser::SetConfig>() => {
                 let want = r.decode::<laser::SetConfig>()?.config;
                 let c = from_player(&want);
-                match (c.check(), &self.link) {
+                match (c.check(), &self.line) {
                     (Err(why), _) => r.nack(format!("invalid laser configuration: {why}")),
-                    (Ok(()), Some(link)) => {
-                        if link.line.send(Order::Configure(c)) {
+                    (Ok(()), Some(line)) => {
+                        if line.send(Order::Configure(c)) {
                             self.pending.push_back(r.responder);
                         } else {
                             r.nack("the laser's line thread has stopped");
@@ -214,8 +207,8 @@ impl Driver for SickLms200 {
     }
 
     fn shutdown(&mut self, _: &mut Ctx) -> Result<()> {
-        if let Some(link) = self.link.take() {
-            link.line.stop(Order::Stop);
+        if let Some(line) = self.line.take() {
+            line.stop(Order::Stop);
         }
         tracing::info!(scans = self.scan_id, "laser shutdown");
         Ok(())
@@ -235,10 +228,10 @@ impl SickLms200 {
     }
 
     fn drain(&mut self, ctx: &mut Ctx) -> Result<()> {
-        let Some(link) = &self.link else {
+        let Some(line) = &self.line else {
             return Ok(());
         };
-        let updates: Vec<Update> = link.updates.try_iter().collect();
+        let updates: Vec<Update> = line.updates().try_iter().collect();
         for u in updates {
             match u {
                 Update::Ready { kind, baud } => {

@@ -3,7 +3,7 @@
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] fns
 
 use std::path::PathBuf;
-use std::sync::mpsc::{self, Receiver};
+use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
 
 use troupe_node::Waker;
@@ -83,15 +83,15 @@ fn wait_for(rx: &Receiver<Update>, secs: u64, mut want: impl FnMut(&Update) -> b
 #[test]
 fn connects_at_9600_switches_to_500000_and_streams_room_scans() {
     let mut emu = emulate("fast", Faults::default());
-    let (tx, rx) = mpsc::channel();
-    let t = device::spawn(settings(&emu.link, 50, 500000), tx, Waker::none()).unwrap();
-    let ready = wait_for(&rx, 20, |u| matches!(u, Update::Ready { .. }));
+    let t = device::spawn(settings(&emu.link, 50, 500000), Waker::none()).unwrap();
+    let rx = t.updates();
+    let ready = wait_for(rx, 20, |u| matches!(u, Update::Ready { .. }));
     let Update::Ready { kind, baud } = ready else {
         unreachable!()
     };
     assert_eq!((kind.as_str(), baud), (emulator::KIND, 500000));
 
-    let Update::Scan(raw, config) = wait_for(&rx, 10, |u| matches!(u, Update::Scan(..))) else {
+    let Update::Scan(raw, config) = wait_for(rx, 10, |u| matches!(u, Update::Scan(..))) else {
         unreachable!()
     };
     assert_eq!(raw.values.len(), 361);
@@ -124,13 +124,12 @@ fn connects_at_9600_switches_to_500000_and_streams_room_scans() {
     let mut c = config;
     c.res = 100;
     assert!(t.send(Order::Configure(c)));
-    let Update::Configured(done) = wait_for(&rx, 20, |u| matches!(u, Update::Configured(..)))
-    else {
+    let Update::Configured(done) = wait_for(rx, 20, |u| matches!(u, Update::Configured(..))) else {
         unreachable!()
     };
     assert_eq!(done, Ok(c));
     wait_for(
-        &rx,
+        rx,
         10,
         |u| matches!(u, Update::Scan(r, _) if r.values.len() == 181),
     );
@@ -151,12 +150,12 @@ fn survives_noise_bad_checksums_truncation_and_dropped_bytes() {
         ..Faults::default()
     };
     let mut emu = emulate("noisy", faults);
-    let (tx, rx) = mpsc::channel();
-    let t = device::spawn(settings(&emu.link, 100, 500000), tx, Waker::none()).unwrap();
+    let t = device::spawn(settings(&emu.link, 100, 500000), Waker::none()).unwrap();
+    let rx = t.updates();
     // Whatever the faults did to the handshake, the driver gets through it
     // (reconnecting if it must) and good scans come out: every one whole.
     let mut good = 0;
-    wait_for(&rx, 60, |u| {
+    wait_for(rx, 60, |u| {
         if let Update::Scan(raw, _) = u {
             assert_eq!(raw.values.len(), 181);
             good += 1;
@@ -176,11 +175,11 @@ fn a_mute_device_is_reported_and_an_unplugged_one_reconnects() {
             ..Faults::default()
         },
     );
-    let (tx, rx) = mpsc::channel();
     let mut s = settings(&mute.link, 100, 38400);
     s.connect_rates = vec![9600];
-    let t = device::spawn(s, tx, Waker::none()).unwrap();
-    let Update::Lost(why) = wait_for(&rx, 20, |u| matches!(u, Update::Lost(_))) else {
+    let t = device::spawn(s, Waker::none()).unwrap();
+    let rx = t.updates();
+    let Update::Lost(why) = wait_for(rx, 20, |u| matches!(u, Update::Lost(_))) else {
         unreachable!()
     };
     assert!(
@@ -198,16 +197,16 @@ fn a_mute_device_is_reported_and_an_unplugged_one_reconnects() {
             ..Faults::default()
         },
     );
-    let (tx, rx) = mpsc::channel();
-    let t = device::spawn(settings(&unplug.link, 100, 38400), tx, Waker::none()).unwrap();
-    wait_for(&rx, 20, |u| matches!(u, Update::Ready { .. }));
-    let Update::Lost(why) = wait_for(&rx, 20, |u| matches!(u, Update::Lost(_))) else {
+    let t = device::spawn(settings(&unplug.link, 100, 38400), Waker::none()).unwrap();
+    let rx = t.updates();
+    wait_for(rx, 20, |u| matches!(u, Update::Ready { .. }));
+    let Update::Lost(why) = wait_for(rx, 20, |u| matches!(u, Update::Lost(_))) else {
         unreachable!()
     };
     assert!(why.contains("lost") || why.contains("no scan"), "{why}");
     // Plugged back in, powered up afresh at 9600: the whole sequence again.
-    wait_for(&rx, 30, |u| matches!(u, Update::Ready { .. }));
-    wait_for(&rx, 10, |u| matches!(u, Update::Scan(..)));
+    wait_for(rx, 30, |u| matches!(u, Update::Ready { .. }));
+    wait_for(rx, 10, |u| matches!(u, Update::Scan(..)));
     t.stop(Order::Stop);
     unplug.stop();
 }
