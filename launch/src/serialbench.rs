@@ -43,18 +43,16 @@ pub fn run(a: &SerialBenchArgs) -> anyhow::Result<()> {
 }
 
 fn case(baud: u32, res: u16, seconds: f64) -> anyhow::Result<(f64, f64, usize)> {
-    let dir = std::env::temp_dir().join(format!("troupe-bench-serial-{}", std::process::id()));
-    std::fs::create_dir_all(&dir)?;
-    let link = dir.join("laser");
-    let opts = EmulatorOptions {
-        link: link.clone(),
-        faults: Faults::default(),
-        seed: 1,
-    };
-    let emu =
-        Emulator::spawn(move |stop, linked| emulator::run_with(&opts, &mut Room, stop, linked))?;
+    let emu = Emulator::spawn("bench-serial", |link, stop, linked| {
+        let opts = EmulatorOptions {
+            link,
+            faults: Faults::default(),
+            seed: 1,
+        };
+        emulator::run_with(&opts, &mut Room, stop, linked)
+    })?;
     let settings = Settings {
-        port: link,
+        port: emu.link().to_owned(),
         connect_rates: vec![9600, 38400, 500000],
         transfer_rate: baud,
         retry: 0,
@@ -100,6 +98,5 @@ fn case(baud: u32, res: u16, seconds: f64) -> anyhow::Result<(f64, f64, usize)> 
     let elapsed = first.map_or(1.0, |f| f.elapsed().as_secs_f64());
     line.stop(device::Order::Stop);
     emu.stop()?;
-    let _ = std::fs::remove_dir_all(&dir);
     Ok((scans as f64 / elapsed, connect.unwrap_or(0.0), values))
 }

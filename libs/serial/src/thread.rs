@@ -1,6 +1,6 @@
 //! The threads of hardware drivers and of device emulators.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender};
 use std::sync::Arc;
@@ -160,26 +160,37 @@ pub fn run_sessions<S, O>(
 }
 
 /// An emulator running on a thread of its own, for tests and benchmarks:
-/// [`Emulator::spawn`] returns once the emulated device is linked.
+/// [`Emulator::spawn`] returns once the emulated device is linked, in a
+/// directory of its own that goes when the emulator does.
 #[derive(Debug)]
 pub struct Emulator<T> {
     stop: Arc<AtomicBool>,
     thread: Option<JoinHandle<std::io::Result<T>>>,
+    dir: PathBuf,
+    link: PathBuf,
 }
 
 /// What an emulator's body calls once its device can be opened.
 pub type Linked = Box<dyn FnOnce() + Send>;
 
 impl<T: Send + 'static> Emulator<T> {
-    /// Runs `body(stop, linked)` on a thread and waits (10 s at most) until
-    /// it calls `linked`.
+    /// Makes a fresh directory for `name` (in this process), then runs
+    /// `body(link, stop, linked)` on a thread, `link` being the path in it
+    /// to link the device at, and waits (10 s at most) until it calls
+    /// `linked`.
     ///
     /// # Errors
     ///
-    /// The body's own error when it ends before linking; a timeout.
+    /// The directory cannot be made; the body's own error when it ends
+    /// before linking; a timeout.
     pub fn spawn(
-        body: impl FnOnce(&AtomicBool, Linked) -> std::io::Result<T> + Send + 'static,
+        name: &str,
+        body: impl FnOnce(PathBuf, &AtomicBool, Linked) -> std::io::Result<T> + Send + 'static,
     ) -> std::io::Result<Self> {
+        let dir = std::env::temp_dir().join(format!("troupe-emu-{name}-{}", std::process::id()));
+        std::fs::create_dir_all(&dir)?;
+        let link = dir.join("device");
+        let at = link.clone();
         let stop = Arc::new(AtomicBool::new(false));
         let (tx, rx) = std::sync::mpsc::channel();
         let flag = stop.clone();
@@ -187,30 +198,38 @@ impl<T: Send + 'static> Emulator<T> {
             .name("emulator".into())
             .spawn(move || {
                 body(
+                    at,
                     &flag,
                     Box::new(move || {
                         let _ = tx.send(());
                     }),
                 )
             })?;
-        match rx.recv_timeout(Duration::from_secs(10)) {
-            Ok(()) => Ok(Emulator {
-                stop,
-                thread: Some(thread),
-            }),
+        let failed = match rx.recv_timeout(Duration::from_secs(10)) {
+            Ok(()) => {
+                return Ok(Emulator {
+                    stop,
+                    thread: Some(thread),
+                    dir,
+                    link,
+                })
+            }
             Err(RecvTimeoutError::Disconnected) => match thread.join() {
-                Ok(Err(e)) => Err(e),
-                _ => Err(std::io::Error::other(
-                    "the emulator ended before linking its line",
-                )),
+                Ok(Err(e)) => e,
+                _ => std::io::Error::other("the emulator ended before linking its line"),
             },
             Err(RecvTimeoutError::Timeout) => {
                 stop.store(true, Ordering::Relaxed);
-                Err(std::io::Error::other(
-                    "the emulator did not link its line within 10 s",
-                ))
+                std::io::Error::other("the emulator did not link its line within 10 s")
             }
-        }
+        };
+        let _ = std::fs::remove_dir_all(&dir);
+        Err(failed)
+    }
+
+    /// Where the emulated device is linked: a cfg's `port`.
+    pub fn link(&self) -> &Path {
+        &self.link
     }
 
     /// Stops the emulator and returns what its body returned.
@@ -230,5 +249,6 @@ impl<T: Send + 'static> Emulator<T> {
 impl<T> Drop for Emulator<T> {
     fn drop(&mut self) {
         self.stop.store(true, Ordering::Relaxed);
+        let _ = std::fs::remove_dir_all(&self.dir);
     }
 }

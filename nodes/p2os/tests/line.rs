@@ -2,7 +2,6 @@
 //! pseudo-terminal: the handshake, SIPs, driving, faults.
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] fns
 
-use std::path::PathBuf;
 use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
 
@@ -12,42 +11,18 @@ use troupe_p2os::emulator::{self, EmulatorOptions, EmulatorStats};
 use troupe_serial::{Emulator, Faults};
 
 /// An emulated Pioneer on a thread, its line linked in a directory of its own.
-struct Emu {
-    emulator: Option<Emulator<EmulatorStats>>,
-    link: PathBuf,
-    dir: PathBuf,
-}
-
-fn emulate(name: &str, faults: Faults) -> Emu {
-    let dir = std::env::temp_dir().join(format!("troupe-p2os-{name}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let link = dir.join("robot");
-    let opts = EmulatorOptions {
-        link: link.clone(),
-        faults,
-        seed: 2,
-        subclass: "p3dx-sh".into(),
-        name: "Troupe".into(),
-    };
-    let emulator =
-        Emulator::spawn(move |stop, linked| emulator::run_with(&opts, stop, linked)).unwrap();
-    Emu {
-        emulator: Some(emulator),
-        link,
-        dir,
-    }
-}
-
-impl Emu {
-    fn stop(&mut self) -> EmulatorStats {
-        self.emulator.take().unwrap().stop().unwrap()
-    }
-}
-
-impl Drop for Emu {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.dir);
-    }
+fn emulate(name: &str, faults: Faults) -> Emulator<EmulatorStats> {
+    Emulator::spawn(&format!("p2os-{name}"), move |link, stop, linked| {
+        let opts = EmulatorOptions {
+            link,
+            faults,
+            seed: 2,
+            subclass: "p3dx-sh".into(),
+            name: "Troupe".into(),
+        };
+        emulator::run_with(&opts, stop, linked)
+    })
+    .unwrap()
 }
 
 fn settings(link: &std::path::Path) -> Settings {
@@ -83,8 +58,8 @@ fn sip(u: &Update) -> Option<&troupe_p2os::packet::Sip> {
 
 #[test]
 fn handshake_sips_sonar_and_driving() {
-    let mut emu = emulate("drive", Faults::default());
-    let line = device::spawn(settings(&emu.link), Waker::none()).unwrap();
+    let emu = emulate("drive", Faults::default());
+    let line = device::spawn(settings(emu.link()), Waker::none()).unwrap();
     let rx = line.updates();
     let Update::Ready { name, params, baud } =
         wait_for(rx, 20, |u| matches!(u, Update::Ready { .. }))
@@ -123,7 +98,7 @@ fn handshake_sips_sonar_and_driving() {
     assert!(line.send(Order::Vel { speed: 0, turn: 0 }));
     wait_for(rx, 5, |u| sip(u).is_some_and(|s| s.kind == 0x32));
     line.stop(Order::Stop);
-    let stats = emu.stop();
+    let stats = emu.stop().unwrap();
     assert!(stats.sips >= 10, "{stats:?}");
 }
 
@@ -136,8 +111,8 @@ fn faults_are_survived_and_a_mute_robot_is_reported() {
         drop: 0.001,
         ..Faults::default()
     };
-    let mut emu = emulate("noisy", faults);
-    let line = device::spawn(settings(&emu.link), Waker::none()).unwrap();
+    let emu = emulate("noisy", faults);
+    let line = device::spawn(settings(emu.link()), Waker::none()).unwrap();
     let rx = line.updates();
     let mut sips = 0;
     wait_for(rx, 60, |u| {
@@ -147,21 +122,21 @@ fn faults_are_survived_and_a_mute_robot_is_reported() {
         sips >= 30
     });
     line.stop(Order::Stop);
-    emu.stop();
+    emu.stop().unwrap();
 
-    let mut mute = emulate(
+    let mute = emulate(
         "mute",
         Faults {
             mute: true,
             ..Faults::default()
         },
     );
-    let line = device::spawn(settings(&mute.link), Waker::none()).unwrap();
+    let line = device::spawn(settings(mute.link()), Waker::none()).unwrap();
     let rx = line.updates();
     let Update::Lost(why) = wait_for(rx, 30, |u| matches!(u, Update::Lost(_))) else {
         unreachable!()
     };
     assert!(why.contains("no answer to SYNC0"), "{why}");
     line.stop(Order::Stop);
-    mute.stop();
+    mute.stop().unwrap();
 }

@@ -2,7 +2,6 @@
 //! pseudo-terminal: Player's whole connection sequence, then scans.
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] fns
 
-use std::path::PathBuf;
 use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
 
@@ -12,41 +11,16 @@ use troupe_sicklms200::device::{self, Order, ScanConfig, Settings, Update};
 use troupe_sicklms200::emulator::{self, EmulatorOptions, EmulatorStats, Room, Scene};
 
 /// An emulated scanner on a thread, its line linked in a directory of its own.
-struct Emu {
-    emulator: Option<Emulator<EmulatorStats>>,
-    link: PathBuf,
-    dir: PathBuf,
-}
-
-fn emulate(name: &str, faults: Faults) -> Emu {
-    let dir = std::env::temp_dir().join(format!("troupe-lms-{name}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let link = dir.join("laser");
-    let opts = EmulatorOptions {
-        link: link.clone(),
-        faults,
-        seed: 1,
-    };
-    let emulator =
-        Emulator::spawn(move |stop, linked| emulator::run_with(&opts, &mut Room, stop, linked))
-            .expect("the emulator links its line");
-    Emu {
-        emulator: Some(emulator),
-        link,
-        dir,
-    }
-}
-
-impl Emu {
-    fn stop(&mut self) -> EmulatorStats {
-        self.emulator.take().unwrap().stop().unwrap()
-    }
-}
-
-impl Drop for Emu {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.dir);
-    }
+fn emulate(name: &str, faults: Faults) -> Emulator<EmulatorStats> {
+    Emulator::spawn(&format!("lms-{name}"), move |link, stop, linked| {
+        let opts = EmulatorOptions {
+            link,
+            faults,
+            seed: 1,
+        };
+        emulator::run_with(&opts, &mut Room, stop, linked)
+    })
+    .expect("the emulator links its line")
 }
 
 fn settings(link: &std::path::Path, res: u16, transfer: u32) -> Settings {
@@ -82,8 +56,8 @@ fn wait_for(rx: &Receiver<Update>, secs: u64, mut want: impl FnMut(&Update) -> b
 
 #[test]
 fn connects_at_9600_switches_to_500000_and_streams_room_scans() {
-    let mut emu = emulate("fast", Faults::default());
-    let t = device::spawn(settings(&emu.link, 50, 500000), Waker::none()).unwrap();
+    let emu = emulate("fast", Faults::default());
+    let t = device::spawn(settings(emu.link(), 50, 500000), Waker::none()).unwrap();
     let rx = t.updates();
     let ready = wait_for(rx, 20, |u| matches!(u, Update::Ready { .. }));
     let Update::Ready { kind, baud } = ready else {
@@ -135,7 +109,7 @@ fn connects_at_9600_switches_to_500000_and_streams_room_scans() {
     );
 
     t.stop(Order::Stop);
-    let stats = emu.stop();
+    let stats = emu.stop().unwrap();
     assert!(stats.scans >= 2 && stats.requests >= 8, "{stats:?}");
     assert_eq!(stats.refused, 0);
 }
@@ -149,8 +123,8 @@ fn survives_noise_bad_checksums_truncation_and_dropped_bytes() {
         drop: 0.0005,
         ..Faults::default()
     };
-    let mut emu = emulate("noisy", faults);
-    let t = device::spawn(settings(&emu.link, 100, 500000), Waker::none()).unwrap();
+    let emu = emulate("noisy", faults);
+    let t = device::spawn(settings(emu.link(), 100, 500000), Waker::none()).unwrap();
     let rx = t.updates();
     // Whatever the faults did to the handshake, the driver gets through it
     // (reconnecting if it must) and good scans come out: every one whole.
@@ -163,19 +137,19 @@ fn survives_noise_bad_checksums_truncation_and_dropped_bytes() {
         good >= 30
     });
     t.stop(Order::Stop);
-    emu.stop();
+    emu.stop().unwrap();
 }
 
 #[test]
 fn a_mute_device_is_reported_and_an_unplugged_one_reconnects() {
-    let mut mute = emulate(
+    let mute = emulate(
         "mute",
         Faults {
             mute: true,
             ..Faults::default()
         },
     );
-    let mut s = settings(&mute.link, 100, 38400);
+    let mut s = settings(mute.link(), 100, 38400);
     s.connect_rates = vec![9600];
     let t = device::spawn(s, Waker::none()).unwrap();
     let rx = t.updates();
@@ -187,9 +161,9 @@ fn a_mute_device_is_reported_and_an_unplugged_one_reconnects() {
         "{why}"
     );
     t.stop(Order::Stop);
-    mute.stop();
+    mute.stop().unwrap();
 
-    let mut unplug = emulate(
+    let unplug = emulate(
         "unplug",
         Faults {
             unplug_after: Some(Duration::from_secs(3)),
@@ -197,7 +171,7 @@ fn a_mute_device_is_reported_and_an_unplugged_one_reconnects() {
             ..Faults::default()
         },
     );
-    let t = device::spawn(settings(&unplug.link, 100, 38400), Waker::none()).unwrap();
+    let t = device::spawn(settings(unplug.link(), 100, 38400), Waker::none()).unwrap();
     let rx = t.updates();
     wait_for(rx, 20, |u| matches!(u, Update::Ready { .. }));
     let Update::Lost(why) = wait_for(rx, 20, |u| matches!(u, Update::Lost(_))) else {
@@ -208,5 +182,5 @@ fn a_mute_device_is_reported_and_an_unplugged_one_reconnects() {
     wait_for(rx, 30, |u| matches!(u, Update::Ready { .. }));
     wait_for(rx, 10, |u| matches!(u, Update::Scan(..)));
     t.stop(Order::Stop);
-    unplug.stop();
+    unplug.stop().unwrap();
 }
