@@ -3,6 +3,8 @@
 //! Each cell holds the id of what occupies it (`EMPTY` = nothing). Cells are
 //! grouped in `TILE`×`TILE` tiles whose occupied-cell counts let a ray jump
 //! over empty tiles: in open space a ray costs one step per tile, not per cell.
+//! A [`Lattice`] is the cells' geometry alone (which cells a point, polygon
+//! or segment covers), for rasterising without a grid's storage.
 
 /// The id of an empty cell.
 pub const EMPTY: u16 = 0;
@@ -19,22 +21,31 @@ pub struct Hit {
     pub id: u16,
 }
 
-/// An occupancy grid over a rectangle of the world.
-#[derive(Debug, Clone)]
-pub struct Grid {
+/// Square cells over a rectangle of the world: their geometry only (which
+/// cell holds a point, which cells a polygon or a segment covers), with no
+/// storage, so it costs nothing however fine.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Lattice {
     res: f64,
     x0: f64,
     y0: f64,
     w: usize,
     h: usize,
+}
+
+/// An occupancy grid over a rectangle of the world.
+#[derive(Debug, Clone)]
+pub struct Grid {
+    lat: Lattice,
     cells: Vec<u16>,
     tw: usize,
     tiles: Vec<u32>,
 }
 
-impl Grid {
-    /// A grid covering `[min_x, max_x] × [min_y, max_y]` with square cells of `res` metres.
-    pub fn new(min_x: f64, min_y: f64, max_x: f64, max_y: f64, res: f64) -> Grid {
+impl Lattice {
+    /// Cells of `res` metres covering `[min_x, max_x] × [min_y, max_y]`
+    /// (a non-positive or non-finite `res` is taken as 0.02).
+    pub fn new(min_x: f64, min_y: f64, max_x: f64, max_y: f64, res: f64) -> Lattice {
         let res = if res > 0.0 && res.is_finite() {
             res
         } else {
@@ -42,17 +53,12 @@ impl Grid {
         };
         let w = (((max_x - min_x) / res).ceil().max(1.0)) as usize;
         let h = (((max_y - min_y) / res).ceil().max(1.0)) as usize;
-        let (tw, th) = (w.div_ceil(TILE), h.div_ceil(TILE));
-        Grid {
-            res,
-            x0: min_x,
-            y0: min_y,
-            w,
-            h,
-            cells: vec![EMPTY; w * h],
-            tw,
-            tiles: vec![0; tw * th],
-        }
+        Lattice::of_cells(min_x, min_y, res, w, h)
+    }
+
+    /// `w` × `h` cells of `res` metres (positive) from the corner (x0, y0).
+    pub fn of_cells(x0: f64, y0: f64, res: f64, w: usize, h: usize) -> Lattice {
+        Lattice { res, x0, y0, w, h }
     }
 
     /// Metres per cell.
@@ -76,42 +82,6 @@ impl Grid {
         let j = ((y - self.y0) / self.res).floor();
         (i >= 0.0 && j >= 0.0 && (i as usize) < self.w && (j as usize) < self.h)
             .then_some((i as usize, j as usize))
-    }
-
-    /// The id in cell (i, j); `EMPTY` outside the grid.
-    pub fn get(&self, i: usize, j: usize) -> u16 {
-        if i < self.w && j < self.h {
-            self.cells[j * self.w + i]
-        } else {
-            EMPTY
-        }
-    }
-
-    /// Whether the tile holding cell (i, j) holds anything (a lookup in a
-    /// small array: checking it first spares reading the cells of empty
-    /// space). False outside the grid.
-    pub fn tile_occupied(&self, i: usize, j: usize) -> bool {
-        i < self.w && j < self.h && self.tiles[(j / TILE) * self.tw + i / TILE] != 0
-    }
-
-    /// The id at world point (x, y); `EMPTY` outside the grid.
-    pub fn at(&self, x: f64, y: f64) -> u16 {
-        self.cell_of(x, y).map_or(EMPTY, |(i, j)| self.get(i, j))
-    }
-
-    /// Sets cell (i, j) to `id`, keeping tile counts right. Ignores cells outside.
-    pub fn set(&mut self, i: usize, j: usize, id: u16) {
-        if i >= self.w || j >= self.h {
-            return;
-        }
-        let c = &mut self.cells[j * self.w + i];
-        let t = &mut self.tiles[(j / TILE) * self.tw + i / TILE];
-        match (*c == EMPTY, id == EMPTY) {
-            (true, false) => *t += 1,
-            (false, true) => *t -= 1,
-            _ => {}
-        }
-        *c = id;
     }
 
     /// Calls `f(i, j)` for every cell whose centre lies inside the polygon
@@ -204,11 +174,69 @@ impl Grid {
             }
         }
     }
+}
+
+impl Grid {
+    /// A grid covering `[min_x, max_x] × [min_y, max_y]` with square cells of `res` metres.
+    pub fn new(min_x: f64, min_y: f64, max_x: f64, max_y: f64, res: f64) -> Grid {
+        let lat = Lattice::new(min_x, min_y, max_x, max_y, res);
+        let (w, h) = lat.size();
+        let (tw, th) = (w.div_ceil(TILE), h.div_ceil(TILE));
+        Grid {
+            lat,
+            cells: vec![EMPTY; w * h],
+            tw,
+            tiles: vec![0; tw * th],
+        }
+    }
+
+    /// The grid's cells: their size, place and geometry.
+    pub fn lattice(&self) -> &Lattice {
+        &self.lat
+    }
+
+    /// The id in cell (i, j); `EMPTY` outside the grid.
+    pub fn get(&self, i: usize, j: usize) -> u16 {
+        if i < self.lat.w && j < self.lat.h {
+            self.cells[j * self.lat.w + i]
+        } else {
+            EMPTY
+        }
+    }
+
+    /// Whether the tile holding cell (i, j) holds anything (a lookup in a
+    /// small array: checking it first spares reading the cells of empty
+    /// space). False outside the grid.
+    pub fn tile_occupied(&self, i: usize, j: usize) -> bool {
+        i < self.lat.w && j < self.lat.h && self.tiles[(j / TILE) * self.tw + i / TILE] != 0
+    }
+
+    /// The id at world point (x, y); `EMPTY` outside the grid.
+    pub fn at(&self, x: f64, y: f64) -> u16 {
+        self.lat
+            .cell_of(x, y)
+            .map_or(EMPTY, |(i, j)| self.get(i, j))
+    }
+
+    /// Sets cell (i, j) to `id`, keeping tile counts right. Ignores cells outside.
+    pub fn set(&mut self, i: usize, j: usize, id: u16) {
+        if i >= self.lat.w || j >= self.lat.h {
+            return;
+        }
+        let c = &mut self.cells[j * self.lat.w + i];
+        let t = &mut self.tiles[(j / TILE) * self.tw + i / TILE];
+        match (*c == EMPTY, id == EMPTY) {
+            (true, false) => *t += 1,
+            (false, true) => *t -= 1,
+            _ => {}
+        }
+        *c = id;
+    }
 
     /// Marks every cell of the polygon with `id`.
     pub fn fill_polygon(&mut self, pts: &[(f64, f64)], id: u16) {
         let mut cells = Vec::new();
-        self.polygon_cells(pts, |i, j| cells.push((i, j)));
+        self.lat.polygon_cells(pts, |i, j| cells.push((i, j)));
         for (i, j) in cells {
             self.set(i, j, id);
         }
@@ -217,7 +245,7 @@ impl Grid {
     /// Empties the cells of the polygon that hold `id`.
     pub fn clear_polygon(&mut self, pts: &[(f64, f64)], id: u16) {
         let mut cells = Vec::new();
-        self.polygon_cells(pts, |i, j| cells.push((i, j)));
+        self.lat.polygon_cells(pts, |i, j| cells.push((i, j)));
         for (i, j) in cells {
             if self.get(i, j) == id {
                 self.set(i, j, EMPTY);
@@ -283,12 +311,12 @@ impl Grid {
         mut accept: impl FnMut(u16) -> bool,
         mut in_tile: impl FnMut(usize) -> Option<Hit>,
     ) -> Option<Hit> {
-        let gx = (x - self.x0) / self.res;
-        let gy = (y - self.y0) / self.res;
-        let tmax = max_range / self.res;
+        let gx = (x - self.lat.x0) / self.lat.res;
+        let gy = (y - self.lat.y0) / self.lat.res;
+        let tmax = max_range / self.lat.res;
         // Clip the ray to the grid box.
         let (mut t0, mut t1) = (0.0f64, tmax);
-        for (p, d, n) in [(gx, dx, self.w as f64), (gy, dy, self.h as f64)] {
+        for (p, d, n) in [(gx, dx, self.lat.w as f64), (gy, dy, self.lat.h as f64)] {
             if d.abs() < 1e-12 {
                 if p < 0.0 || p >= n {
                     return None;
@@ -316,7 +344,7 @@ impl Grid {
                 1.0 / dy.abs()
             },
         );
-        let (w, h) = (self.w as i64, self.h as i64);
+        let (w, h) = (self.lat.w as i64, self.lat.h as i64);
         let shift = TILE.trailing_zeros();
         let ts = TILE as i64;
         // Parameter of the next boundary after cell (or tile) `c` on an axis.
@@ -337,7 +365,7 @@ impl Grid {
         let mut ttx = first(ti, sx, gx / tsf, dx) * tsf;
         let mut tty = first(tj, sy, gy / tsf, dy) * tsf;
         let (tdx, tdy) = (ddx * tsf, ddy * tsf);
-        let (istep, jstep) = (sx as isize, sy as isize * self.w as isize);
+        let (istep, jstep) = (sx as isize, sy as isize * self.lat.w as isize);
         // Which axis the ray last crossed a tile boundary on, if the cell
         // position must be recomputed on entering an occupied tile.
         let mut stale: Option<bool> = None;
@@ -347,8 +375,8 @@ impl Grid {
         'tiles: loop {
             let tidx = tj as usize * self.tw + ti as usize;
             if let Some(h) = in_tile(tidx) {
-                if h.range / self.res < best_t {
-                    best_t = h.range / self.res;
+                if h.range / self.lat.res < best_t {
+                    best_t = h.range / self.lat.res;
                     best = Some(h);
                 }
             }
@@ -394,7 +422,7 @@ impl Grid {
                 }
             }
             // Walk the cells of this occupied tile.
-            let mut idx = j as usize * self.w + i as usize;
+            let mut idx = j as usize * self.lat.w + i as usize;
             loop {
                 if t >= best_t {
                     return end(best);
@@ -402,7 +430,7 @@ impl Grid {
                 let a = self.cells[idx];
                 if a != EMPTY && accept(a) {
                     return Some(Hit {
-                        range: t * self.res,
+                        range: t * self.lat.res,
                         id: a,
                     });
                 }
@@ -526,7 +554,7 @@ mod tests {
                 k + 1,
             );
         }
-        let (w, h) = g.size();
+        let (w, h) = g.lattice().size();
         let occupied: Vec<(usize, usize)> = (0..h)
             .flat_map(|j| (0..w).map(move |i| (i, j)))
             .filter(|&(i, j)| g.get(i, j) != EMPTY)
@@ -578,7 +606,8 @@ mod thin {
         assert!((hit.range - 1.5).abs() < 0.021, "{hit:?}");
         // A diagonal segment marks a connected run of cells.
         let mut n = 0;
-        g.segment_cells((0.01, 0.01), (0.99, 0.5), &mut |_, _| n += 1);
+        g.lattice()
+            .segment_cells((0.01, 0.01), (0.99, 0.5), &mut |_, _| n += 1);
         assert!(n >= 49 + 25 - 1, "{n}");
     }
 }

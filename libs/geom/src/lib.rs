@@ -20,7 +20,7 @@ mod odometry;
 mod pose;
 
 pub use drive::DiffDrive;
-pub use grid::{Grid, Hit, EMPTY};
+pub use grid::{Grid, Hit, Lattice, EMPTY};
 pub use occmap::OccMap;
 pub use odometry::Odometry;
 pub use pose::{normalize, ray_to_box, Pose};

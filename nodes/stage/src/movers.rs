@@ -31,19 +31,17 @@ impl Movers {
     }
 
     /// Files model `m` (id `id`), whose body is `blocks` (polygons in its
-    /// frame) at world pose `at`, under `tiles` (any order, repeats
-    /// allowed), replacing where it was.
+    /// frame) at world pose `at`, under `tiles` (each once), replacing
+    /// where it was.
     pub fn file(
         &mut self,
         m: usize,
         id: u16,
         at: Pose,
         blocks: &[Vec<(f64, f64)>],
-        mut tiles: Vec<usize>,
+        tiles: Vec<usize>,
     ) {
         self.unfile(m, id);
-        tiles.sort_unstable();
-        tiles.dedup();
         for &t in &tiles {
             if let Some(list) = self.in_tile.get_mut(t) {
                 list.push(id);
@@ -124,7 +122,7 @@ mod tests {
     fn rays_meet_filed_bodies_exactly() {
         let mut m = Movers::new(3, 4);
         let at = |x: f64| Pose::new(x, 0.0, 0.0);
-        m.file(1, 2, at(2.0), &[square(0.0, 0.0, 0.5)], vec![3, 1, 3]);
+        m.file(1, 2, at(2.0), &[square(0.0, 0.0, 0.5)], vec![3, 1]);
         assert_eq!(m.in_tile(3), &[2]);
         assert_eq!(m.in_tile(1), &[2]);
         assert!(m.in_tile(0).is_empty() && m.in_tile(99).is_empty());

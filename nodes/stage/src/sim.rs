@@ -9,7 +9,7 @@
 //! ([`crate::movers`]): a robot's own body costs its rays nothing.
 
 use troupe_geom::occmap::{FREE, OCCUPIED};
-use troupe_geom::{normalize, Grid, Hit, OccMap, Pose, EMPTY};
+use troupe_geom::{normalize, Grid, Hit, Lattice, OccMap, Pose, EMPTY};
 use troupe_msgs::{map, Color};
 
 use crate::movers::Movers;
@@ -264,7 +264,9 @@ impl Sim {
         let mut out = Vec::new();
         for b in &self.world.models[m].blocks {
             let pts: Vec<(f64, f64)> = b.iter().map(|&(x, y)| g.apply(x, y)).collect();
-            self.statics.polygon_cells(&pts, |i, j| out.push((i, j)));
+            self.statics
+                .lattice()
+                .polygon_cells(&pts, |i, j| out.push((i, j)));
         }
         out
     }
@@ -323,20 +325,23 @@ impl Sim {
 
     /// True when `cells` (of the tree of `root`) overlap an unrelated obstacle.
     fn collides(&self, root: usize, cells: &[(usize, Vec<(usize, usize)>)]) -> bool {
+        // Read cells only where something else may be (reading the cells of
+        // a large world is what costs: cache misses), judged once a tile.
+        let mut tile = None;
+        let (mut walls, mut others) = (false, false);
         for (_, cs) in cells {
             for &(i, j) in cs {
-                // Read cells only where something else may be: reading the
-                // cells of a large world is what costs (cache misses).
                 let t = self.statics.tile_of(i, j);
-                let others_moving = self
-                    .movers
-                    .in_tile(t)
-                    .iter()
-                    .any(|&k| self.roots[usize::from(k) - 1] != root);
-                for (grid, look) in [
-                    (&self.statics, self.statics.tile_occupied(i, j)),
-                    (&self.dynamics, others_moving),
-                ] {
+                if tile != Some(t) {
+                    tile = Some(t);
+                    walls = self.statics.tile_occupied(i, j);
+                    others = self
+                        .movers
+                        .in_tile(t)
+                        .iter()
+                        .any(|&k| self.roots[usize::from(k) - 1] != root);
+                }
+                for (grid, look) in [(&self.statics, walls), (&self.dynamics, others)] {
                     if !look {
                         continue;
                     }
@@ -869,7 +874,7 @@ impl Sim {
     /// A picture of the world: obstacles grey, bodies in their colours,
     /// range readings as light rays, at most `max_px` pixels across.
     pub fn snapshot(&self, max_px: u32) -> image::RgbImage {
-        let (w, h) = self.statics.size();
+        let (w, h) = self.statics.lattice().size();
         let scale = (w.max(h) as f64 / f64::from(max_px.max(16))).max(1.0);
         let (iw, ih) = (
             ((w as f64) / scale).ceil() as u32,
@@ -904,12 +909,14 @@ impl Sim {
                         o.yaw
                     };
                     let end = (o.x + range * a.cos(), o.y + range * a.sin());
-                    self.statics.segment_cells((o.x, o.y), end, &mut |i, j| {
-                        let (x, y) = px(i, j);
-                        if x < iw {
-                            img.put_pixel(x, y, image::Rgb([170, 210, 255]));
-                        }
-                    });
+                    self.statics
+                        .lattice()
+                        .segment_cells((o.x, o.y), end, &mut |i, j| {
+                            let (x, y) = px(i, j);
+                            if x < iw {
+                                img.put_pixel(x, y, image::Rgb([170, 210, 255]));
+                            }
+                        });
                 }
             }
         }
@@ -962,12 +969,12 @@ impl Sim {
         // Blocks are sampled at four points a cell along each axis, so a
         // cell is occupied when a block covers a sixteenth of it or so, and
         // an edge lying on a cell boundary does not spill into the next one.
+        // Lattices are geometry only: no storage, however fine.
         const SUB: usize = 4;
-        let (x1, y1) = (x0 + f64::from(w) * res, y0 + f64::from(h) * res);
-        let fine = Grid::new(x0, y0, x1, y1, res / SUB as f64);
-        let coarse = Grid::new(x0, y0, x1, y1, res);
-        let wc = w as usize;
-        let mut cells = vec![FREE; wc * h as usize];
+        let (wc, hc) = (w as usize, h as usize);
+        let fine = Lattice::of_cells(x0, y0, res / SUB as f64, wc * SUB, hc * SUB);
+        let coarse = Lattice::of_cells(x0, y0, res, wc, hc);
+        let mut cells = vec![FREE; wc * hc];
         for b in &d.blocks {
             let n = fine.polygon_centres(b, |i, j| cells[(j / SUB) * wc + i / SUB] = OCCUPIED);
             // A block thinner than that still shows, by its outline.
