@@ -8,7 +8,6 @@
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitStatus};
-use std::sync::Once;
 use std::time::{Duration, Instant};
 
 use troupe_client::{Client, GripperProxy, LocalizeProxy, Position2dProxy, SimulationProxy};
@@ -51,7 +50,7 @@ impl Stack {
 
     /// Starts `cargo run --example NAME -- ARGS` on this stack's network.
     fn example(&self, name: &str, args: &[&str]) -> Example {
-        let mut cmd = Command::new(example_bin(name));
+        let mut cmd = Command::new(troupe_tests::example_bin(name));
         cmd.args([
             "--connect",
             &self.endpoint,
@@ -148,29 +147,6 @@ impl Example {
 
 fn worlds() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds")
-}
-
-/// The example binary of this build, all examples built once per test run.
-fn example_bin(name: &str) -> PathBuf {
-    static BUILD: Once = Once::new();
-    // target/<profile>/deps/lessons-… → target/<profile>/examples/<name>
-    let exe = std::env::current_exe().expect("test exe");
-    let dir = exe.parent().and_then(|d| d.parent()).expect("target dir");
-    BUILD.call_once(|| {
-        // The stack's `troupe` too.
-        let _ = troupe_tests::troupe_bin();
-        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-        let mut cmd = Command::new(cargo);
-        cmd.args(["build", "--quiet", "-p", "troupe-examples", "--examples"]);
-        if dir.ends_with("release") {
-            cmd.arg("--release");
-        }
-        assert!(
-            cmd.status().expect("cargo build").success(),
-            "building the examples failed"
-        );
-    });
-    dir.join("examples").join(name)
 }
 
 /// Numbers after `key` in `text`'s lines: `number_after("zapped 8 of", …)`.

@@ -108,22 +108,40 @@ pub fn wait_live(session: &Session, devices: &[&str]) {
 
 /// The `troupe` binary of this build, built once per test run.
 pub fn troupe_bin() -> PathBuf {
+    build_dir().join("troupe")
+}
+
+/// The example program `name` of this build (`target/<profile>/examples/<name>`).
+pub fn example_bin(name: &str) -> PathBuf {
+    build_dir().join("examples").join(name)
+}
+
+/// `target/<profile>`, after building the workspace's binaries and examples
+/// there once per test process.
+///
+/// The build is `cargo build --workspace --bins --examples`: its features are
+/// the ones `cargo test --workspace` resolves, so under that command it finds
+/// every artifact fresh and only links `troupe`. A narrower build (`-p troupe`)
+/// would resolve other features and compile the whole dependency tree again.
+fn build_dir() -> PathBuf {
     static BUILD: Once = Once::new();
-    // target/<profile>/deps/integration-… → target/<profile>/troupe
+    // target/<profile>/deps/integration-… → target/<profile>
     let exe = std::env::current_exe().expect("test exe");
     let dir = exe.parent().and_then(|d| d.parent()).expect("target dir");
-    let profile_release = dir.ends_with("release");
     BUILD.call_once(|| {
         let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
         let mut cmd = Command::new(cargo);
-        cmd.args(["build", "--quiet", "-p", "troupe", "--bin", "troupe"]);
-        if profile_release {
+        cmd.args(["build", "--quiet", "--workspace", "--bins", "--examples"]);
+        if dir.ends_with("release") {
             cmd.arg("--release");
         }
         let status = cmd.status().expect("running cargo build");
-        assert!(status.success(), "cargo build of troupe failed");
+        assert!(
+            status.success(),
+            "cargo build of the workspace's binaries failed"
+        );
     });
-    dir.join("troupe")
+    dir.to_path_buf()
 }
 
 /// `troupe launch CFG EXTRA…` in namespace `ns`, with its router and its
