@@ -292,7 +292,16 @@ impl Session<'_> {
         }
     }
 
+    /// Servo commands already queued still go out (a pan-tilt command just
+    /// before shutdown is not lost); velocities do not, the stop follows.
     fn goodbye(&mut self) {
+        while let Ok(o) = self.orders.try_recv() {
+            if let Order::Servo(n, a) = o {
+                if self.send(&packet::servo(n, a)).is_err() {
+                    break;
+                }
+            }
+        }
         arcos::stop_and_close(&mut self.link.port);
     }
 }
