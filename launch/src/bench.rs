@@ -685,6 +685,8 @@ pub fn bridge_bench(a: &BridgeBenchArgs) -> anyhow::Result<()> {
     use troupe_msgs::{common, keys, map, position2d, Device, Interface, Pose2d, Pose3d, Size3d};
     let ns = format!("bench-bridge-{}", std::process::id());
     let router = ZenohArgs {
+        // As `troupe launch` opens its embedded router: in the namespace.
+        namespace: Some(ns.clone()),
         listen: vec!["tcp/127.0.0.1:0".into()],
         no_multicast: true,
         ..Default::default()
@@ -837,8 +839,8 @@ pub fn bridge_bench(a: &BridgeBenchArgs) -> anyhow::Result<()> {
             std::thread::sleep(Duration::from_millis(9));
         }
     });
-    // The bridge, as `troupe bridge` runs it.
-    let session = at.open(Mode::Client)?;
+    // The bridge, as `troupe launch` runs it: on its router's session.
+    let session = router.clone();
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -921,6 +923,25 @@ pub fn bridge_bench(a: &BridgeBenchArgs) -> anyhow::Result<()> {
         fetches.push(t0.elapsed());
     }
     fetches.sort();
+    // The same request as a bare Zenoh get from the bridge's session: what
+    // the bridge adds on top of Zenoh.
+    let mut raw = Vec::with_capacity(a.samples);
+    let info_key = keys::req(&map_dev, "info");
+    for i in 0..a.samples + a.samples / 10 {
+        let t0 = Instant::now();
+        let replies = router
+            .get(&info_key)
+            .wait()
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        let reply = replies
+            .recv()
+            .map_err(|e| anyhow::anyhow!("no reply to {info_key}: {e}"))?;
+        anyhow::ensure!(reply.result().is_ok(), "{info_key} refused");
+        if i >= a.samples / 10 {
+            raw.push(t0.elapsed());
+        }
+    }
+    raw.sort();
     stop.store(true, std::sync::atomic::Ordering::Relaxed);
     let _ = publisher.join();
     let _ = stop_tx.send(());
@@ -954,6 +975,12 @@ pub fn bridge_bench(a: &BridgeBenchArgs) -> anyhow::Result<()> {
         &format!("full {w}x{h} map fetch (zlib tiles)"),
         &fetches,
         "Player 2.1-2.4 ms; target <= 4 ms",
+    )?;
+    row(
+        &mut out,
+        "for scale: the GET_INFO as a bare Zenoh get",
+        &raw,
+        "Zenoh alone, no bridge, no TCP client",
     )?;
     Ok(())
 }

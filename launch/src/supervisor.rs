@@ -6,6 +6,8 @@
 //! watches liveliness to report readiness, prefixes every child's output with
 //! the node's name, restarts nodes by their policy, and on SIGINT/SIGTERM
 //! stops them in reverse start order: SIGTERM, a grace period, SIGKILL.
+//! The Player TCP bridge for the plan's robots runs in the launcher itself,
+//! on the router's session, once every device is live.
 //! Children ask the kernel to SIGTERM them if the launcher dies
 //! (PR_SET_PDEATHSIG), so no orphan survives a killed launcher.
 
@@ -28,7 +30,7 @@ use troupe_msgs::{keys, Device};
 use troupe_node::zenoh::Wait;
 use troupe_node::{Mode, ZenohArgs};
 
-use crate::plan::{self, DeviceRef, NodeSpec, Policy};
+use crate::plan::{self, NodeSpec, Policy};
 
 /// The environment variable that tells `troupe node` who supervises it.
 pub const SUPERVISOR_ENV: &str = "TROUPE_SUPERVISOR_PID";
@@ -180,18 +182,15 @@ struct Live {
 
 struct NodeState {
     spec: NodeSpec,
-    /// The `troupe` arguments that run it, when not `node DRIVER --section …`.
-    argv: Option<Vec<String>>,
     pid: Mutex<Option<u32>>,
     stopping: AtomicBool,
     failed: AtomicBool,
 }
 
 impl NodeState {
-    fn new(spec: NodeSpec, argv: Option<Vec<String>>) -> NodeState {
+    fn new(spec: NodeSpec) -> NodeState {
         NodeState {
             spec,
-            argv,
             pid: Mutex::new(None),
             stopping: AtomicBool::new(false),
             failed: AtomicBool::new(false),
@@ -214,8 +213,11 @@ async fn supervise(
         } else {
             z.listen.clone()
         };
+        // The namespace applies to the router's own session only (its
+        // watcher and the bridge), not to what it routes for others.
         let rz = ZenohArgs {
             listen: listen.clone(),
+            namespace: z.namespace.clone(),
             no_multicast: true,
             ..Default::default()
         };
@@ -249,24 +251,11 @@ async fn supervise(
         let session = z.open(Mode::Client)?;
         (session, z.to_child_args())
     };
-    // The launcher's view of liveliness, in the plan's namespace.
-    let watcher = match (&z.namespace, embedded) {
-        (Some(_), true) => {
-            let w = ZenohArgs {
-                connect: troupe_node::locators(&session),
-                namespace: z.namespace.clone(),
-                no_multicast: true,
-                ..Default::default()
-            };
-            Some(w.open(Mode::Client)?)
-        }
-        _ => None,
-    };
-    let watch_session = watcher.as_ref().unwrap_or(&session);
     let live = Arc::new(Live::default());
     let (live_tx, live_rx) = watch::channel(0u64);
     let l = live.clone();
-    let _liveliness = watch_session
+    // The launcher's view of liveliness, in the plan's namespace.
+    let _liveliness = session
         .liveliness()
         .declare_subscriber(keys::tokens(None))
         .history(true)
@@ -288,7 +277,7 @@ async fn supervise(
     let (stop_tx, stop_rx) = watch::channel(false);
     let states: Vec<Arc<NodeState>> = specs
         .into_iter()
-        .map(|spec| Arc::new(NodeState::new(spec, None)))
+        .map(|spec| Arc::new(NodeState::new(spec)))
         .collect();
     let local: BTreeSet<Device> = states
         .iter()
@@ -299,12 +288,20 @@ async fn supervise(
                 .filter_map(|r| keys::parse_data(&r.device).ok())
         })
         .collect();
-    let mut states = states;
-    if !a.no_bridge {
-        if let Some(b) = bridge_node(&a, &states) {
-            states.push(Arc::new(b));
-        }
-    }
+    let bridge = if a.no_bridge {
+        None
+    } else {
+        bridge_config(&a, &states).map(|cfg| {
+            tokio::spawn(serve_bridge(
+                session.clone(),
+                cfg,
+                live.clone(),
+                live_rx.clone(),
+                stop_rx.clone(),
+                local.clone(),
+            ))
+        })
+    };
     let exe = std::env::current_exe().context("finding the troupe binary")?;
     let mut tasks = Vec::new();
     for st in &states {
@@ -386,9 +383,14 @@ async fn supervise(
         _ = all_done => false,
     };
     reporter.abort();
+    // The bridge first: Player clients see the robot go, not a bridge
+    // serving devices that are stopping.
+    let _ = stop_tx.send(true);
+    if let Some(b) = bridge {
+        let _ = b.await;
+    }
     if signalled {
         tracing::info!("stopping {} nodes in reverse start order", states.len());
-        let _ = stop_tx.send(true);
         let grace = Duration::from_secs_f64(a.grace.max(0.0));
         let mut orders: Vec<u32> = states.iter().map(|s| s.spec.start_order).collect();
         orders.sort_unstable();
@@ -421,7 +423,6 @@ async fn supervise(
         }
     }
     drop(_liveliness);
-    drop(watcher);
     let _ = session.close().await;
     let failed: Vec<&str> = states
         .iter()
@@ -531,16 +532,10 @@ async fn run_node(st: Arc<NodeState>, mut ctx: NodeCtx) {
         }
         let mut cmd = Command::new(&ctx.exe);
         cmd.args(&ctx.net);
-        match &st.argv {
-            Some(argv) => cmd.args(argv),
-            None => cmd
-                .args(["node", &st.spec.driver, "--section", &section_json])
-                .args(if ctx.sim_time {
-                    &["--sim-time"][..]
-                } else {
-                    &[]
-                }),
-        };
+        cmd.args(["node", &st.spec.driver, "--section", &section_json]);
+        if ctx.sim_time {
+            cmd.arg("--sim-time");
+        }
         cmd
             .env(SUPERVISOR_ENV, std::process::id().to_string())
             .stdin(Stdio::null())
@@ -567,16 +562,11 @@ async fn run_node(st: Arc<NodeState>, mut ctx: NodeCtx) {
         );
         let mut forwarders = Vec::new();
         if let Some(out) = child.stdout.take() {
-            if st.argv.is_some() {
-                // The bridge's port lines are for scripts: our stdout, as they are.
-                forwarders.push(tokio::spawn(pass_through(BufReader::new(out))));
-            } else {
-                forwarders.push(tokio::spawn(forward(
-                    BufReader::new(out),
-                    name.clone(),
-                    log.clone(),
-                )));
-            }
+            forwarders.push(tokio::spawn(forward(
+                BufReader::new(out),
+                name.clone(),
+                log.clone(),
+            )));
         }
         if let Some(err) = child.stderr.take() {
             forwarders.push(tokio::spawn(forward(
@@ -645,60 +635,101 @@ async fn run_node(st: Arc<NodeState>, mut ctx: NodeCtx) {
     }
 }
 
-/// The Player TCP bridge for the robots of `states`, started after them:
-/// Player listened on every robot port of its .cfg, so `troupe launch` does too.
-fn bridge_node(a: &LaunchArgs, states: &[Arc<NodeState>]) -> Option<NodeState> {
-    let provided: Vec<(Device, DeviceRef)> = states
+/// The Player TCP bridge for the robots of `states`: Player listened on
+/// every robot port of its .cfg, so `troupe launch` does too. DEVLIST lists
+/// devices in the .cfg's order.
+fn bridge_config(a: &LaunchArgs, states: &[Arc<NodeState>]) -> Option<troupe_bridge::Config> {
+    let provided: Vec<Device> = states
         .iter()
         .flat_map(|s| s.spec.provides.iter())
-        .filter_map(|r| keys::parse_data(&r.device).ok().map(|d| (d, r.clone())))
+        .filter_map(|r| keys::parse_data(&r.device).ok())
         .collect();
-    let mut robots: Vec<u32> = provided.iter().map(|(d, _)| d.robot).collect();
+    let mut robots: Vec<u32> = provided.iter().map(|d| d.robot).collect();
     robots.sort_unstable();
     robots.dedup();
     if robots.is_empty() {
         return None;
     }
-    let mut argv = vec![
-        "bridge".to_owned(),
-        "--bind".into(),
-        a.bridge_bind.to_string(),
-    ];
-    for r in &robots {
-        argv.push("-p".into());
-        argv.push(if a.bridge_any_port {
-            format!("{r}={}", std::net::SocketAddr::new(a.bridge_bind, 0))
-        } else {
-            r.to_string()
-        });
-    }
-    let order: Vec<String> = provided.iter().map(|(d, _)| d.to_string()).collect();
-    argv.push(format!("--order={}", order.join(",")));
-    let spec = NodeSpec {
-        name: "bridge".into(),
-        driver: "bridge".into(),
-        host: None,
-        start_order: states.iter().map(|s| s.spec.start_order).max().unwrap_or(0) + 1,
-        restart: crate::plan::Restart::default(),
-        provides: Vec::new(),
-        requires: provided
-            .into_iter()
-            .map(|(_, r)| DeviceRef { role: None, ..r })
-            .collect(),
-        options: serde_json::Map::new(),
-        source: None,
-        option_pos: Default::default(),
-    };
-    Some(NodeState::new(spec, Some(argv)))
+    let ports = robots
+        .iter()
+        .map(|&robot| {
+            let port = match u16::try_from(robot) {
+                _ if a.bridge_any_port => 0,
+                Ok(p) => p,
+                Err(_) => {
+                    tracing::warn!("robot {robot} is not a TCP port: its bridge takes a free one");
+                    0
+                }
+            };
+            troupe_bridge::Port {
+                robot,
+                listen: std::net::SocketAddr::new(a.bridge_bind, port),
+            }
+        })
+        .collect();
+    Some(troupe_bridge::Config {
+        ports,
+        order: provided,
+        ..Default::default()
+    })
 }
 
-/// Copies a child's stdout lines to ours, unchanged.
-async fn pass_through<R: tokio::io::AsyncRead + Unpin>(reader: BufReader<R>) {
-    let mut lines = reader.lines();
-    while let Ok(Some(line)) = lines.next_line().await {
-        let mut out = std::io::stdout().lock();
-        let _ = writeln!(out, "{line}").and_then(|()| out.flush());
+/// Runs the bridge inside the launcher, on its router's session: a request
+/// from a Player client reaches the driver in one Zenoh hop, not the two a
+/// client of the router takes, and the router knows every device token, so
+/// DEVLIST is complete from the first request. The ports open once every
+/// device of this launch is live, as Player's did once its drivers were set
+/// up, and close when `stop` turns true.
+async fn serve_bridge(
+    session: troupe_node::zenoh::Session,
+    cfg: troupe_bridge::Config,
+    live: Arc<Live>,
+    mut live_rx: watch::Receiver<u64>,
+    mut stop: watch::Receiver<bool>,
+    local: BTreeSet<Device>,
+) {
+    loop {
+        let missing = {
+            let set = live.devices.lock().unwrap_or_else(|p| p.into_inner());
+            local.iter().any(|d| !set.contains(d))
+        };
+        if !missing || *stop.borrow() {
+            break;
+        }
+        tokio::select! {
+            _ = live_rx.changed() => {}
+            _ = stop.changed() => {}
+        }
     }
+    if *stop.borrow() {
+        return;
+    }
+    let bridge = match troupe_bridge::Bridge::bind(session, cfg).await {
+        Ok(b) => b,
+        Err(e) => {
+            tracing::error!(
+                "no Player bridge: {e}; --bridge-any-port takes free ports, --no-bridge starts none"
+            );
+            return;
+        }
+    };
+    {
+        // For scripts and tests that pass --bridge-any-port.
+        let mut out = std::io::stdout().lock();
+        for (robot, addr) in bridge.local_addrs() {
+            let _ = writeln!(out, "troupe bridge: robot {robot} on {addr}");
+        }
+        let _ = out.flush();
+    }
+    bridge
+        .run(async move {
+            while !*stop.borrow() {
+                if stop.changed().await.is_err() {
+                    return;
+                }
+            }
+        })
+        .await;
 }
 
 /// Copies a child's output lines to our stderr, prefixed by the node name.
