@@ -6,11 +6,11 @@
 
 use std::path::Path;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use troupe_client::{Client, LocalizeProxy, PlannerProxy, Position2dProxy, SimulationProxy};
-use troupe_msgs::{keys, sim};
+use troupe_msgs::{keys, position2d, sim, Device, Interface, Pose2d};
 use troupe_node::zenoh::Wait;
 
 /// The goal of the reference run, and what Player 3.1 achieved there.
@@ -42,11 +42,31 @@ fn planner_drives_r0_across_the_cave_to_the_goal() {
         .wait()
         .unwrap();
     let now = || f64::from_bits(sim_time.load(Ordering::Relaxed));
+    // r0's odometry is its true pose (`localization "gps"`, origin 0), and
+    // amcl stamps each estimate with the odometry it extends: the two
+    // streams, paired by stamp, say how far amcl is from the truth at the
+    // same simulated instant.
+    let record = |index: u32| {
+        let seen: Arc<Mutex<Vec<(f64, Pose2d)>>> = Arc::default();
+        let out = seen.clone();
+        let dev = Device::new(6665, Interface::Position2d, index);
+        let sub = session
+            .declare_subscriber(keys::data(&dev))
+            .callback(move |s| {
+                if let Ok(d) = troupe_msgs::decode::<position2d::Data>(&s.payload().to_bytes()) {
+                    out.lock().unwrap().push((d.stamp, d.msg.pose));
+                }
+            })
+            .wait()
+            .unwrap();
+        (sub, seen)
+    };
+    let (_truth_sub, truths) = record(0);
+    let (_amcl_sub, estimates) = record(2);
     let client = Client::with_session(session.clone(), 6665);
     let planner = PlannerProxy::new(&client, 0).unwrap();
     let localize = LocalizeProxy::new(&client, 0).unwrap();
     let odom = Position2dProxy::new(&client, 0).unwrap();
-    let amcl = Position2dProxy::new(&client, 2).unwrap();
     let sim = SimulationProxy::new(&client, 0);
 
     // amcl publishes once it has odometry, a scan and the map; wavefront
@@ -74,7 +94,7 @@ fn planner_drives_r0_across_the_cave_to_the_goal() {
         panic!("enable: {e}\n{}", launcher.stderr());
     }
     let mut valid_at = None;
-    let (mut worst_amcl, mut sum_amcl, mut n_amcl) = (0.0f64, 0.0, 0u32);
+    let route_from = t0;
     let deadline = Instant::now() + troupe_tests::DEADLINE * 3;
     loop {
         assert!(
@@ -93,19 +113,35 @@ fn planner_drives_r0_across_the_cave_to_the_goal() {
         if state.valid && valid_at.is_none() && state.goal.x == GOAL.0 {
             valid_at = Some(now() - t0);
         }
-        // amcl follows the robot along the route.
-        if let (Some(est), Ok(truth)) = (amcl.data(), sim.get_pose2d("r0")) {
-            let e = (est.pose.x - truth.x).hypot(est.pose.y - truth.y);
-            worst_amcl = worst_amcl.max(e);
-            sum_amcl += e;
-            n_amcl += 1;
-        }
         if state.done && state.goal.x == GOAL.0 {
             break;
         }
     }
     let took = now() - t0;
-    let mean_amcl = sum_amcl / f64::from(n_amcl.max(1));
+    // amcl follows the robot along the route.
+    let truth: std::collections::HashMap<u64, Pose2d> = truths
+        .lock()
+        .unwrap()
+        .iter()
+        .map(|&(t, p)| (t.to_bits(), p))
+        .collect();
+    let errors: Vec<f64> = estimates
+        .lock()
+        .unwrap()
+        .iter()
+        .filter(|(t, _)| *t >= route_from)
+        .filter_map(|(t, e)| {
+            let p = truth.get(&t.to_bits())?;
+            Some((e.x - p.x).hypot(e.y - p.y))
+        })
+        .collect();
+    assert!(
+        errors.len() > 50,
+        "only {} amcl estimates matched an odometry stamp",
+        errors.len()
+    );
+    let worst_amcl = errors.iter().copied().fold(0.0, f64::max);
+    let mean_amcl = errors.iter().sum::<f64>() / errors.len() as f64;
     let end = sim.get_pose2d("r0").unwrap();
     let off = (end.x - GOAL.0).hypot(end.y - GOAL.1);
     eprintln!(
@@ -119,9 +155,11 @@ fn planner_drives_r0_across_the_cave_to_the_goal() {
         took <= PLAYER_ARRIVAL_SIM_S,
         "took {took:.1} simulated s; Player's stack took {PLAYER_ARRIVAL_SIM_S}"
     );
+    // Player's amcl on this route: 3 cm mean, 8 cm worst.
     assert!(
-        worst_amcl < 0.35 && mean_amcl < 0.15,
-        "amcl strayed from the true pose: {mean_amcl:.3} m mean, {worst_amcl:.2} m worst"
+        worst_amcl <= 0.08 && mean_amcl <= 0.03,
+        "amcl strayed from the true pose: {mean_amcl:.3} m mean, {worst_amcl:.2} m worst \
+         (Player: 0.03 m mean, 0.08 m worst)"
     );
     let wps = planner.request_waypoints().unwrap();
     assert!(wps.len() >= 2, "{wps:?}");

@@ -107,13 +107,26 @@ impl Ctx {
     /// [`NodeError::NotProvided`] if `dev` is not in the section's `provides`;
     /// [`NodeError::Zenoh`] if the sample could not be sent.
     pub fn publish<M: Message>(&mut self, dev: &Device, msg: &M) -> Result<()> {
+        let now = self.clock.now();
+        self.publish_at(dev, msg, now)
+    }
+
+    /// [`Ctx::publish`] stamped `stamp`: a driver that turns another's data
+    /// into its own keeps the time the data was taken, not the time it was
+    /// passed on (a scan restamped a step late misplaces the robot by the
+    /// distance it drove in that step).
+    ///
+    /// # Errors
+    ///
+    /// As [`Ctx::publish`].
+    pub fn publish_at<M: Message>(&mut self, dev: &Device, msg: &M, stamp: f64) -> Result<()> {
         if !self.provided.contains(dev) {
             return Err(NodeError::NotProvided {
                 driver: self.driver.to_owned(),
                 device: *dev,
             });
         }
-        self.bus.publish(dev, codec::encode(msg, self.clock.now()))
+        self.bus.publish(dev, codec::encode(msg, stamp))
     }
 
     /// Delivers `dev`'s data as [`crate::Event::Data`] from now on (and its

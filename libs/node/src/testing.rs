@@ -260,12 +260,17 @@ impl<D: Driver> Harness<D> {
 
     /// Everything of type `M` the driver published on `dev`, oldest first.
     pub fn published<M: Message>(&self, dev: Device) -> Vec<M> {
+        self.published_at(dev).into_iter().map(|(_, m)| m).collect()
+    }
+
+    /// [`Harness::published`] with each sample's stamp.
+    pub fn published_at<M: Message>(&self, dev: Device) -> Vec<(f64, M)> {
         self.rec
             .lock()
             .published
             .iter()
             .filter(|(d, _)| *d == dev)
-            .filter_map(|(_, b)| codec::decode::<M>(b).ok().map(|s| s.msg))
+            .filter_map(|(_, b)| codec::decode::<M>(b).ok().map(|s| (s.stamp, s.msg)))
             .collect()
     }
 

@@ -99,6 +99,7 @@ impl DistanceMap {
     pub fn ranges_along(&self, x: f64, y: f64, dirs: &[(f64, f64)], max: f64, out: &mut [f64]) {
         let n = dirs.len().min(LANES).min(out.len());
         let (gx, gy) = self.grid(x, y);
+        let (w, h) = (self.size.0 as f64, self.size.1 as f64);
         let tmax = max * self.inv_res;
         let mut t = [0.0f64; LANES];
         let mut live: u32 = if tmax > 0.0 { (1 << n) - 1 } else { 0 };
@@ -111,18 +112,46 @@ impl DistanceMap {
                     continue;
                 }
                 let (c, s) = dirs[k];
-                let d = self.cells_at(gx + t[k] * c, gy + t[k] * s).unwrap_or(0.0);
+                let (px, py) = (gx + t[k] * c, gy + t[k] * s);
+                let d = self.cells_at(px, py).unwrap_or(0.0);
                 if d <= 0.0 {
-                    out[k] = t[k] * self.res;
+                    out[k] = self.boundary(gx, gy, (c, s), t[k]) * self.res;
                     live &= !(1 << k);
                     continue;
                 }
-                t[k] += (d - std::f64::consts::SQRT_2).max(0.5);
+                // Off the map is an obstacle too (Player's map_calc_range):
+                // the field does not know it, so the edge bounds the step.
+                let edge = px.min(py).min(w - px).min(h - py) + 1.0;
+                t[k] += (d.min(edge) - std::f64::consts::SQRT_2).max(0.5);
                 if t[k] >= tmax {
                     live &= !(1 << k); // out[k] stays `max`
                 }
             }
         }
+    }
+
+    /// Where the ray from grid point (gx, gy) along `dir` enters the
+    /// obstacle it reached at `t` cells, to a sixteenth of a cell: the march
+    /// lands up to half a cell inside, and a range that long on every beam
+    /// biases the pose away from walls.
+    fn boundary(&self, gx: f64, gy: f64, (c, s): (f64, f64), t: f64) -> f64 {
+        let blocked = |t: f64| {
+            self.cells_at(gx + t * c, gy + t * s)
+                .is_none_or(|d| d <= 0.0)
+        };
+        let (mut free, mut hit) = ((t - 0.5).max(0.0), t);
+        if blocked(free) {
+            return t;
+        }
+        for _ in 0..3 {
+            let mid = 0.5 * (free + hit);
+            if blocked(mid) {
+                hit = mid;
+            } else {
+                free = mid;
+            }
+        }
+        hit
     }
 
     /// The scan of 181 beams over 180° that a laser at `p` sees, ranges
@@ -351,11 +380,39 @@ mod tests {
         let d = DistanceMap::new(&room());
         // From the centre to the right wall (its cell starts at x = 9.9).
         let r = d.range(5.0, 5.0, 0.0, 20.0);
-        assert!((r - 4.9).abs() < 0.06, "{r}");
+        assert!(
+            (r - 4.9).abs() < 0.01,
+            "ends at the wall's face, not inside: {r}"
+        );
         let r = d.range(5.0, 5.0, std::f64::consts::FRAC_PI_4, 20.0);
         assert!((r - 4.9 * std::f64::consts::SQRT_2).abs() < 0.1, "{r}");
         assert_eq!(d.range(5.0, 5.0, 0.0, 2.0), 2.0);
         assert_eq!(d.range(0.05, 0.05, 0.0, 2.0), 0.0);
+    }
+
+    #[test]
+    fn rays_stop_at_the_edge_of_a_map_without_walls() {
+        // 10 m × 10 m, all free but one cell at the far corner: the field
+        // says the corner cell is far from everything, yet off the map is
+        // an obstacle (Player's map_calc_range) and Stage draws a boundary.
+        let info = map::Info {
+            width: 100,
+            height: 100,
+            resolution: 0.1,
+            origin: Pose2d::new(0.0, 0.0, 0.0),
+        };
+        let m = OccMap::from_fn(
+            info,
+            |i, j| if (i, j) == (99, 99) { OCCUPIED } else { FREE },
+        );
+        let d = DistanceMap::new(&m);
+        // From (1, 1) straight down and left: 1 m to the edge.
+        let r = d.range(1.0, 1.0, -std::f64::consts::FRAC_PI_2, 8.0);
+        assert!((r - 1.0).abs() < 0.01, "{r}");
+        let r = d.range(1.0, 1.0, std::f64::consts::PI, 8.0);
+        assert!((r - 1.0).abs() < 0.01, "{r}");
+        let r = d.range(1.0, 1.0, -3.0 * std::f64::consts::FRAC_PI_4, 8.0);
+        assert!((r - std::f64::consts::SQRT_2).abs() < 0.01, "{r}");
     }
 
     #[test]

@@ -156,6 +156,25 @@ fn relative(a: &Pose, b: &Pose) -> Pose {
     b.inverse().compose(a)
 }
 
+/// The angle between a scan's beams. The first beam looks along
+/// `min_angle` and the last along `max_angle`; where `resolution` says
+/// otherwise, the ends win. Stage's ranger, through rangertolaser, reports
+/// `fov / samples` for samples spread `fov / (samples − 1)` apart: read as
+/// given, the last beam of a 180-beam scan is a degree off and the pose
+/// estimate is pulled aside.
+fn bearing_step(scan: &laser_msg::Scan) -> f64 {
+    let (n, lo, hi) = (
+        scan.ranges.len(),
+        f64::from(scan.min_angle),
+        f64::from(scan.max_angle),
+    );
+    if n > 1 && hi > lo {
+        (hi - lo) / (n - 1) as f64
+    } else {
+        f64::from(scan.resolution)
+    }
+}
+
 /// The localizer without the network: odometry and scans in, estimates out.
 pub struct Localizer {
     filter: Filter,
@@ -333,7 +352,7 @@ impl Localizer {
         let beams = Beams::pick(
             &scan.ranges,
             f64::from(scan.min_angle),
-            f64::from(scan.resolution),
+            bearing_step(scan),
             f64::from(scan.max_range),
             self.max_beams,
         );
@@ -495,13 +514,15 @@ impl Driver for Amcl {
             Event::Data(s) if s.device == self.odom && s.is::<position2d::Data>() => {
                 let d = s.decode::<position2d::Data>()?;
                 let estimate = self.loc.odometry(d.msg.pose.into(), d.stamp);
+                // The estimate is of the pose at the odometry's time.
                 if let (Some(p), Some(dev)) = (estimate, self.position) {
-                    ctx.publish(
+                    ctx.publish_at(
                         &dev,
                         &position2d::Data {
                             pose: p.into(),
                             ..Default::default()
                         },
+                        d.stamp,
                     )?;
                 }
                 if self.loc.poll() {
@@ -735,6 +756,28 @@ mod tests {
         assert!(loc.filter().particles().len() < 5000, "KLD shrank the set");
         let h = loc.hypotheses();
         assert!(h[0].weight > 0.5 && h.windows(2).all(|w| w[0].weight >= w[1].weight));
+    }
+
+    #[test]
+    fn beams_span_the_scan_from_min_to_max_angle() {
+        let deg = |d: f64| d.to_radians() as f32;
+        let mut scan = laser_msg::Scan {
+            min_angle: deg(-90.0),
+            max_angle: deg(90.0),
+            // Stage's ranger through rangertolaser: fov / samples.
+            resolution: deg(1.0),
+            ranges: vec![1.0; 180],
+            ..Default::default()
+        };
+        let step = bearing_step(&scan);
+        assert!((step - 180f64.to_radians() / 179.0).abs() < 1e-6, "{step}");
+        // A SICK's own scan agrees with itself.
+        scan.resolution = deg(0.5);
+        scan.ranges = vec![1.0; 361];
+        assert!((bearing_step(&scan) - 0.5f64.to_radians()).abs() < 1e-6);
+        // Without a max_angle, the resolution is all there is.
+        scan.max_angle = scan.min_angle;
+        assert!((bearing_step(&scan) - 0.5f64.to_radians()).abs() < 1e-6);
     }
 
     #[test]

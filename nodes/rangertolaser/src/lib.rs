@@ -102,8 +102,8 @@ impl Driver for RangerToLaser {
     fn on_event(&mut self, ctx: &mut Ctx, event: Event) -> Result<()> {
         match event {
             Event::Data(s) if s.is::<ranger::Ranges>() => {
-                let ranges = s.decode::<ranger::Ranges>()?.msg.ranges;
-                self.publish(ctx, &ranges)
+                let d = s.decode::<ranger::Ranges>()?;
+                self.publish(ctx, &d.msg.ranges, d.stamp)
             }
             Event::Data(s) if s.is::<ranger::Intensities>() => {
                 self.intensities = s.decode::<ranger::Intensities>()?.msg.intensities;
@@ -193,7 +193,8 @@ impl Driver for RangerToLaser {
 }
 
 impl RangerToLaser {
-    fn publish(&mut self, ctx: &mut Ctx, ranges: &[f64]) -> Result<()> {
+    /// Publishes a scan of `ranges`, stamped as the ranger's data was.
+    fn publish(&mut self, ctx: &mut Ctx, ranges: &[f64], stamp: f64) -> Result<()> {
         let c = match &self.config {
             ConfigState::Known(c) => *c,
             ConfigState::Refused => laser::Config::default(),
@@ -217,13 +218,14 @@ impl RangerToLaser {
             id: self.scans,
         };
         self.scans = self.scans.wrapping_add(1);
-        ctx.publish(&self.output, &scan)
+        ctx.publish_at(&self.output, &scan, stamp)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use troupe_msgs::codec;
     use troupe_node::testing::Harness;
     use troupe_node::RequestError;
 
@@ -277,8 +279,22 @@ mod tests {
             },
         )
         .unwrap();
+        // The scan keeps the ranger's stamp, whatever the clock says now.
+        h.set_time(20.0);
+        h.input_raw(
+            RANGER,
+            codec::encode(
+                &ranger::Ranges {
+                    ranges: vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0],
+                },
+                19.9,
+            ),
+        )
+        .unwrap();
+        let stamped = h.published_at::<laser::Scan>(LASER);
+        assert_eq!(stamped.len(), 2);
+        assert_eq!(stamped[1].0, 19.9);
         let scans = h.published::<laser::Scan>(LASER);
-        assert_eq!(scans.len(), 1);
         let s = &scans[0];
         assert_eq!(
             (s.min_angle, s.max_angle, s.resolution, s.max_range),
