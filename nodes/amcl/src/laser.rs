@@ -102,6 +102,20 @@ impl DistanceMap {
         let (w, h) = (self.size.0 as f64, self.size.1 as f64);
         let tmax = max * self.inv_res;
         let mut t = [0.0f64; LANES];
+        // Where each ray leaves the map, in cells.
+        let leave = |p: f64, v: f64, size: f64| {
+            if v > 1e-12 {
+                (size - p) / v
+            } else if v < -1e-12 {
+                -p / v
+            } else {
+                f64::INFINITY
+            }
+        };
+        let mut exit = [0.0f64; LANES];
+        for (e, &(c, s)) in exit.iter_mut().zip(dirs) {
+            *e = leave(gx, c, w).min(leave(gy, s, h)).max(0.0);
+        }
         let mut live: u32 = if tmax > 0.0 { (1 << n) - 1 } else { 0 };
         for o in &mut out[..n] {
             *o = max;
@@ -112,19 +126,28 @@ impl DistanceMap {
                     continue;
                 }
                 let (c, s) = dirs[k];
-                let (px, py) = (gx + t[k] * c, gy + t[k] * s);
-                let d = self.cells_at(px, py).unwrap_or(0.0);
-                if d <= 0.0 {
-                    out[k] = self.boundary(gx, gy, (c, s), t[k]) * self.res;
+                let d = match self.cells_at(gx + t[k] * c, gy + t[k] * s) {
+                    // Off the map is an obstacle too (Player's
+                    // map_calc_range); the field does not know it, so a
+                    // step can land past the edge: the ray ends there.
+                    None => {
+                        out[k] = exit[k].min(t[k]) * self.res;
+                        live &= !(1 << k);
+                        continue;
+                    }
+                    Some(d) if d <= 0.0 => {
+                        out[k] = self.boundary(gx, gy, (c, s), t[k]) * self.res;
+                        live &= !(1 << k);
+                        continue;
+                    }
+                    Some(d) => d,
+                };
+                t[k] += (d - std::f64::consts::SQRT_2).max(0.5);
+                if t[k] >= exit[k].min(tmax) {
+                    if exit[k] < tmax {
+                        out[k] = exit[k] * self.res;
+                    } // else out[k] stays `max`
                     live &= !(1 << k);
-                    continue;
-                }
-                // Off the map is an obstacle too (Player's map_calc_range):
-                // the field does not know it, so the edge bounds the step.
-                let edge = px.min(py).min(w - px).min(h - py) + 1.0;
-                t[k] += (d.min(edge) - std::f64::consts::SQRT_2).max(0.5);
-                if t[k] >= tmax {
-                    live &= !(1 << k); // out[k] stays `max`
                 }
             }
         }
