@@ -195,6 +195,8 @@ pub struct Localizer {
     /// The first update weighs the initial cloud without moving it.
     moved: bool,
     best: Option<Pose>,
+    /// The stamp of the scan of the last update.
+    updated_at: Option<f64>,
     hypoths: Vec<pf::Cluster>,
     updates: u64,
 }
@@ -291,6 +293,7 @@ impl Localizer {
             due: false,
             moved: false,
             best: None,
+            updated_at: None,
             hypoths: Vec::new(),
             updates: 0,
         })
@@ -340,6 +343,20 @@ impl Localizer {
             self.moved = true;
         }
         self.best.map(|b| b.compose(&d))
+    }
+
+    /// The pose now: the best hypothesis of the last update carried along by
+    /// the odometry since, stamped with the newest odometry. The hypothesis
+    /// alone is of the pose when its scan was taken, which a slow update
+    /// leaves far behind.
+    pub fn now(&self) -> Option<(f64, Pose)> {
+        let (b, r, &(t, odom)) = (self.best?, self.odom_ref?, self.odom.back()?);
+        Some((t, b.compose(&relative(&odom, &r))))
+    }
+
+    /// The stamp of the scan of the last update.
+    pub fn updated_at(&self) -> Option<f64> {
+        self.updated_at
     }
 
     /// Takes a scan stamped `stamp`; returns true when it updated the
@@ -407,6 +424,7 @@ impl Localizer {
             self.best = Some(h.mean);
         }
         self.odom_ref = Some(odom);
+        self.updated_at = Some(stamp);
         self.due = false;
         self.moved = false;
         self.updates += 1;
@@ -660,22 +678,26 @@ impl Amcl {
                     weight: h.weight,
                 })
                 .collect();
-            ctx.publish(
+            // Of the time the scan was taken, as Player stamps them.
+            let stamp = self.loc.updated_at().unwrap_or_else(|| ctx.now());
+            ctx.publish_at(
                 &dev,
                 &localize::Hypoths {
                     pending_count: 0,
                     pending_time: 0.0,
                     hypoths,
                 },
+                stamp,
             )?;
         }
-        if let (Some(dev), Some(b)) = (self.position, self.loc.best()) {
-            ctx.publish(
+        if let (Some(dev), Some((stamp, pose))) = (self.position, self.loc.now()) {
+            ctx.publish_at(
                 &dev,
                 &position2d::Data {
-                    pose: b.into(),
+                    pose: pose.into(),
                     ..Default::default()
                 },
+                stamp,
             )?;
         }
         Ok(())
@@ -822,6 +844,16 @@ mod tests {
         assert!(loc.poll());
         let b = loc.best().unwrap();
         assert!((b.x - 1.0).abs() < 0.1 && (b.y - 1.0).abs() < 0.1, "{b:?}");
+        // The update was of the scan at 3 s; odometry has gone on to 4 s and
+        // then 5 s: the pose now is the hypothesis carried along by it.
+        assert_eq!(loc.updated_at(), Some(3.0));
+        loc.odometry(Pose::new(0.7, 0.0, 0.0), 5.0);
+        let (t, now) = loc.now().unwrap();
+        assert_eq!(t, 5.0);
+        let r = loc.odom_at(3.0).unwrap();
+        let want = b.compose(&relative(&Pose::new(0.7, 0.0, 0.0), &r));
+        assert!((now.x - want.x).abs() < 1e-12 && (now.y - want.y).abs() < 1e-12);
+        assert!(now.x - b.x > 0.5, "{now:?} is carried past {b:?}");
     }
 
     #[test]
