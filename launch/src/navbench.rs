@@ -18,6 +18,10 @@ pub struct NavBenchArgs {
     /// a synthetic 16 m cave without it.
     #[arg(long, value_name = "PNG")]
     pub map: Option<std::path::PathBuf>,
+    /// Stage's hospital_section.png, to time wavefront on it scaled to 2000
+    /// cells across (140 m at 0.07 m, as in the reference), end to end.
+    #[arg(long, value_name = "PNG")]
+    pub hospital: Option<std::path::PathBuf>,
     /// Particle counts to time amcl at.
     #[arg(long, value_delimiter = ',', default_value = "1000,5000,100000")]
     pub particles: Vec<usize>,
@@ -228,6 +232,27 @@ pub fn nav_bench(a: &NavBenchArgs) -> anyhow::Result<()> {
         (o.x + 1.0, o.y + 1.0),
         (o.x + span - 1.0, o.y + span - 1.0),
     )?;
+    if let Some(png) = &a.hospital {
+        let src = troupe_mapfile::load(png, 0.07, false, Some((0.0, 0.0)))?;
+        let (sw, sh) = src.size();
+        let (w, h) = (2000usize, (sh * 2000 + sw / 2) / sw);
+        let big = OccMap::from_fn(
+            map::Info {
+                width: w as u32,
+                height: h as u32,
+                resolution: 0.07,
+                origin: Pose2d::new(0.0, 0.0, 0.0),
+            },
+            |i, j| src.cells[(j * sh / h) * sw + i * sw / w],
+        );
+        let (span, mid) = (0.07 * w as f64, 0.07 * h as f64 / 2.0);
+        wavefront(
+            &format!("hospital {w}x{h}"),
+            &big,
+            (3.0, mid),
+            (span - 3.0, mid),
+        )?;
+    }
     vfh();
     Ok(())
 }
