@@ -31,6 +31,18 @@ pub struct BridgeArgs {
     #[arg(long, value_name = "N", default_value_t = troupe_bridge::queue::DEFAULT_MAXLEN)]
     pub queue_len: usize,
 
+    /// The other way round: connect to the Player server at HOST:PORT as a
+    /// client and publish its devices on Troupe's keys (commands sent to them
+    /// go back to the server), so a robot still running Player joins the
+    /// fleet. Serves no port.
+    #[arg(long, value_name = "HOST:PORT", conflicts_with_all = ["bind", "queue_len"])]
+    pub import: Option<String>,
+
+    /// With --import: publish the devices as this robot instead of the
+    /// server's own number (two servers both on port 6665).
+    #[arg(long = "as", value_name = "ROBOT", requires = "import")]
+    pub as_robot: Option<u32>,
+
     /// DEVLIST order, as the .cfg lists devices (set by `troupe launch`).
     #[arg(long, value_name = "DEVICES", value_delimiter = ',', hide = true)]
     pub order: Vec<String>,
@@ -61,8 +73,33 @@ fn port(spec: &str, bind: IpAddr) -> anyhow::Result<Port> {
     Ok(Port { robot, listen })
 }
 
+/// `troupe bridge --import HOST:PORT`.
+fn import(server: &str, as_robot: Option<u32>, z: &ZenohArgs) -> anyhow::Result<()> {
+    crate::cli::supervised()?;
+    let session = z.open(Mode::Client)?;
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("starting the bridge's runtime")?;
+    rt.block_on(troupe_bridge::import::run(
+        session,
+        server,
+        as_robot,
+        async {
+            if let Err(e) = crate::supervisor::wait_signal().await {
+                tracing::error!("cannot wait for signals: {e}");
+            }
+        },
+    ))?;
+    Ok(())
+}
+
 /// `troupe bridge`.
 pub fn run(a: BridgeArgs, z: &ZenohArgs) -> anyhow::Result<()> {
+    if let Some(server) = &a.import {
+        return import(server, a.as_robot, z);
+    }
     let ports = a
         .ports
         .iter()

@@ -8,6 +8,7 @@
 mod bridge;
 mod bridge_devices;
 mod hosts;
+mod import;
 mod launch;
 mod nav;
 mod player;

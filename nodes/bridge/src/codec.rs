@@ -8,6 +8,12 @@
 //!   with the function that turns the request's reply into Player's ACK body;
 //! - `None` from either: Player defines the message, Troupe does not serve it
 //!   (a REQ gets an empty NACK, as Player's drivers answer what they ignore).
+//!
+//! And the other way round, for `troupe bridge --import`, where Troupe is
+//! the client of a Player server:
+//!
+//! - [`data_from_player`]: a server's DATA → a Troupe data sample;
+//! - [`command_to_player`]: a Troupe command → a Player CMD subtype and body.
 
 use std::io::Write;
 
@@ -663,6 +669,165 @@ fn translate(
     Ok(Some(out))
 }
 
+// ---- server → Troupe (import) ---------------------------------------------
+
+fn r_f32s(r: &mut Reader) -> Result<Vec<f32>, XdrError> {
+    r.array(4, |r| r.f32())
+}
+
+fn r_f64s(r: &mut Reader) -> Result<Vec<f64>, XdrError> {
+    r.array(8, |r| r.f64())
+}
+
+fn r_laser_scan(r: &mut Reader) -> Result<laser::Scan, XdrError> {
+    Ok(laser::Scan {
+        min_angle: r.f32()?,
+        max_angle: r.f32()?,
+        resolution: r.f32()?,
+        max_range: r.f32()?,
+        ranges: r_f32s(r)?,
+        intensity: r.bytes()?.to_vec(),
+        id: r.u32()?,
+    })
+}
+
+/// A Player server's DATA message of `iface` as a Troupe sample stamped
+/// `stamp`, ready to publish on the device's data key. `Ok(None)`: a DATA
+/// subtype Troupe does not import.
+///
+/// # Errors
+///
+/// [`CodecError::Body`] when the body does not match Player's layout.
+pub fn data_from_player(
+    iface: Interface,
+    subtype: u8,
+    body: &[u8],
+    stamp: f64,
+) -> Result<Option<Vec<u8>>, CodecError> {
+    use Interface as I;
+    let mut r = Reader::new(body);
+    let r = &mut r;
+    let out = (|| -> Result<Option<Vec<u8>>, XdrError> {
+        let payload = match (iface, subtype) {
+            (I::Position2d, 1) => encode(
+                &position2d::Data {
+                    pose: r_pose2d(r)?,
+                    vel: r_pose2d(r)?,
+                    stall: r.flag()?,
+                },
+                stamp,
+            ),
+            (I::Laser, 1) => encode(&r_laser_scan(r)?, stamp),
+            (I::Laser, 2) => encode(
+                &laser::ScanPose {
+                    scan: r_laser_scan(r)?,
+                    pose: r_pose2d(r)?,
+                },
+                stamp,
+            ),
+            (I::Ranger, 1) => encode(&ranger::Ranges { ranges: r_f64s(r)? }, stamp),
+            (I::Ranger, 3) => encode(
+                &ranger::Intensities {
+                    intensities: r_f64s(r)?,
+                },
+                stamp,
+            ),
+            (I::Sonar, 1) => encode(&sonar::Ranges { ranges: r_f32s(r)? }, stamp),
+            (I::Power, 1) => encode(
+                &troupe_msgs::power::Data {
+                    valid: r.u32()?,
+                    volts: r.f32()?,
+                    percent: r.f32()?,
+                    joules: r.f32()?,
+                    watts: r.f32()?,
+                    charging: r.i32()? != 0,
+                },
+                stamp,
+            ),
+            (I::Ir, 1) => encode(
+                &ir::Data {
+                    voltages: r_f32s(r)?,
+                    ranges: r_f32s(r)?,
+                },
+                stamp,
+            ),
+            (I::Aio, 1) => encode(
+                &aio::Data {
+                    voltages: r_f32s(r)?,
+                },
+                stamp,
+            ),
+            (I::Dio, 1) => encode(
+                &dio::Data {
+                    count: r.u32()?,
+                    bits: r.u32()?,
+                },
+                stamp,
+            ),
+            _ => return Ok(None),
+        };
+        r.end()?;
+        Ok(Some(payload))
+    })();
+    out.map_err(|source| CodecError::Body {
+        interface: iface.name(),
+        kind: "DATA",
+        subtype,
+        source,
+    })
+}
+
+/// A Troupe command (an encoded payload) as the Player CMD that carries it
+/// to a device of a Player server: `(subtype, body)`. `None` for a command
+/// Player's interface has no CMD for, or a payload that is not a command.
+pub fn command_to_player(payload: &[u8]) -> Option<(u8, Vec<u8>)> {
+    let msg = troupe_msgs::decode_any(payload).ok()?.msg;
+    let mut w = Writer::new();
+    let subtype = match &msg {
+        AnyMsg::Position2dCmdVel(c) => {
+            w_pose2d(&mut w, &c.vel);
+            w.flag(c.state);
+            1
+        }
+        AnyMsg::Position2dCmdPos(c) => {
+            w_pose2d(&mut w, &c.pos);
+            w_pose2d(&mut w, &c.vel);
+            w.flag(c.state);
+            2
+        }
+        AnyMsg::Position2dCmdCar(c) => {
+            w.f64(c.velocity).f64(c.angle);
+            3
+        }
+        AnyMsg::PlannerGoal(g) => {
+            w_pose2d(&mut w, &g.goal);
+            1
+        }
+        AnyMsg::GripperOpen(_) => 1,
+        AnyMsg::GripperClose(_) => 2,
+        AnyMsg::GripperStop(_) => 3,
+        AnyMsg::AioCmd(c) => {
+            w.u32(c.id).f32(c.voltage);
+            1
+        }
+        AnyMsg::DioCmd(c) => {
+            w.u32(c.count).u32(c.bits);
+            1
+        }
+        AnyMsg::PtzCmd(c) => {
+            let t = &c.target;
+            w.f32(t.pan)
+                .f32(t.tilt)
+                .f32(t.zoom)
+                .f32(t.panspeed)
+                .f32(t.tiltspeed);
+            1
+        }
+        _ => return None,
+    };
+    Some((subtype, w.finish()))
+}
+
 /// Player's POWER request subtypes: laser 4, ranger 2, sonar 2.
 fn is_power(iface: Interface, subtype: u8) -> bool {
     matches!(
@@ -674,6 +839,123 @@ fn is_power(iface: Interface, subtype: u8) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// What a server sends, read back: every DATA the bridge writes comes
+    /// back as the message it was made from.
+    #[test]
+    fn imported_data_is_what_the_bridge_exported() {
+        let samples = [
+            AnyMsg::Position2dData(position2d::Data {
+                pose: Pose2d::new(1.5, -2.0, 0.3),
+                vel: Pose2d::new(0.2, 0.0, -0.1),
+                stall: true,
+            }),
+            AnyMsg::LaserScan(laser::Scan {
+                min_angle: -1.5,
+                max_angle: 1.5,
+                resolution: 0.5,
+                max_range: 8.0,
+                ranges: vec![1.0, 2.5, 8.0, 0.25, 3.0, 4.0, 5.0],
+                intensity: vec![0, 1, 0, 0, 2, 0, 1],
+                id: 41,
+            }),
+            AnyMsg::RangerRanges(ranger::Ranges {
+                ranges: vec![0.5, 1.25, 5.0],
+            }),
+            AnyMsg::RangerIntensities(ranger::Intensities {
+                intensities: vec![1.0, 0.0, 3.0],
+            }),
+            AnyMsg::SonarRanges(sonar::Ranges {
+                ranges: vec![0.5, 1.5, 4.75],
+            }),
+            AnyMsg::PowerData(troupe_msgs::power::Data {
+                valid: 1,
+                volts: 12.5,
+                percent: 80.0,
+                joules: 0.0,
+                watts: 0.0,
+                charging: true,
+            }),
+            AnyMsg::IrData(ir::Data {
+                voltages: vec![1.0, 2.0],
+                ranges: vec![0.5, 0.25],
+            }),
+            AnyMsg::AioData(aio::Data {
+                voltages: vec![3.25],
+            }),
+            AnyMsg::DioData(dio::Data {
+                count: 8,
+                bits: 0xA5,
+            }),
+        ];
+        for m in samples {
+            let (iface, subtype, body) = to_player(&m).unwrap();
+            let payload = data_from_player(iface, subtype, &body, 12.5)
+                .unwrap()
+                .unwrap_or_else(|| panic!("{m:?} is not imported"));
+            let back = troupe_msgs::decode_any(&payload).unwrap();
+            assert_eq!(back.msg, m);
+            assert_eq!(back.stamp, 12.5);
+        }
+        // A body of the wrong length is refused, naming the message.
+        let (iface, subtype, body) = to_player(&AnyMsg::DioData(dio::Data::default())).unwrap();
+        let e = data_from_player(iface, subtype, &body[..4], 0.0).unwrap_err();
+        assert!(e.to_string().contains("dio DATA subtype 1"), "{e}");
+        assert!(data_from_player(Interface::Map, 1, &[], 0.0)
+            .unwrap()
+            .is_none());
+    }
+
+    /// A Troupe command sent to a Player server is the CMD the bridge
+    /// would have turned back into that command.
+    #[test]
+    fn exported_commands_are_what_the_bridge_imports() {
+        let cmds: Vec<Vec<u8>> = vec![
+            encode(
+                &position2d::CmdVel {
+                    vel: Pose2d::new(0.3, 0.0, 0.2),
+                    state: true,
+                },
+                1.0,
+            ),
+            encode(
+                &position2d::CmdPos {
+                    pos: Pose2d::new(1.0, 2.0, 0.5),
+                    vel: Pose2d::new(0.1, 0.0, 0.0),
+                    state: true,
+                },
+                1.0,
+            ),
+            encode(
+                &planner::Goal {
+                    goal: Pose2d::new(-4.5, -5.5, 0.0),
+                },
+                1.0,
+            ),
+            encode(&gripper::Close, 1.0),
+            encode(&dio::Cmd { count: 4, bits: 9 }, 1.0),
+        ];
+        let iface_of = |p: &[u8]| match troupe_msgs::decode_any(p).unwrap().msg {
+            AnyMsg::PlannerGoal(_) => Interface::Planner,
+            AnyMsg::GripperClose(_) => Interface::Gripper,
+            AnyMsg::DioCmd(_) => Interface::Dio,
+            _ => Interface::Position2d,
+        };
+        for c in cmds {
+            let (subtype, body) = command_to_player(&c).unwrap();
+            let Some(ToDevice::Command { payload, .. }) =
+                from_player(iface_of(&c), CMD, subtype, &body, 1.0).unwrap()
+            else {
+                panic!("not a command");
+            };
+            assert_eq!(
+                troupe_msgs::decode_any(&payload).unwrap().msg,
+                troupe_msgs::decode_any(&c).unwrap().msg
+            );
+        }
+        assert!(command_to_player(&encode(&common::Ack, 0.0)).is_none());
+        assert!(command_to_player(b"junk").is_none());
+    }
 
     fn hex(s: &str) -> Vec<u8> {
         (0..s.len())

@@ -13,10 +13,12 @@
 //! - [`wire`]: banner, header, framing;
 //! - [`codec`]: Player bodies ↔ Troupe messages;
 //! - [`queue`]: a client's queue (PUSH/PULL, SYNCH, replace rules, overflow);
-//! - [`Bridge`]: listeners, connections, Zenoh subscriptions and requests.
+//! - [`Bridge`]: listeners, connections, Zenoh subscriptions and requests;
+//! - [`import`]: the other way round, a Player server's devices on Troupe.
 #![warn(missing_docs)]
 
 pub mod codec;
+pub mod import;
 pub mod queue;
 mod server;
 pub mod wire;

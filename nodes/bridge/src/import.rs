@@ -1,0 +1,367 @@
+//! The bridge the other way round: Troupe as a client of a running Player
+//! server, its devices published on Troupe's keys, so a robot still running
+//! Player joins a Troupe fleet (`troupe bridge --import HOST:PORT`).
+//!
+//! It does what libplayerc does at start: reads the banner, asks DEVLIST,
+//! DRIVERINFO for each device and subscribes to each (PUSH mode, Player's
+//! default). Then every DATA the server sends is published on the device's
+//! data key ([`codec::data_from_player`]), stamped with the server's time,
+//! and every command Troupe clients send to an imported device goes to the
+//! server as a Player CMD ([`codec::command_to_player`]). Each device gets a
+//! liveliness token naming its Player driver as `player-DRIVER`.
+//!
+//! Requests (GET_GEOM and the like) are not forwarded yet: a Troupe request
+//! to an imported device gets no reply.
+
+use std::collections::HashMap;
+use std::time::Duration;
+
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::TcpStream;
+use tokio::sync::mpsc;
+use troupe_msgs::{keys, Device, Interface};
+use troupe_node::zenoh::Session;
+
+use crate::codec;
+use crate::wire::{self, player, Header, BANNER_LEN, DATA, HEADER_LEN, REQ, RESP_ACK, RESP_NACK};
+use crate::xdr::{Reader, Writer, XdrError};
+
+/// How long the server may take to answer one of the start-up requests.
+const ANSWER_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// Why an import stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum ImportError {
+    /// The server could not be reached or the connection failed.
+    #[error("Player server at {server}: {source}")]
+    Io {
+        /// HOST:PORT.
+        server: String,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// The server said something that is not Player 3's protocol.
+    #[error("Player server at {server}: {reason}")]
+    Protocol {
+        /// HOST:PORT.
+        server: String,
+        /// What was wrong.
+        reason: String,
+    },
+    /// Zenoh refused a declaration.
+    #[error("{what}: {source}")]
+    Zenoh {
+        /// What was being declared.
+        what: String,
+        /// Zenoh's error.
+        source: troupe_node::zenoh::Error,
+    },
+}
+
+/// One imported device: where it is on the server, where it is on Troupe.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Imported {
+    /// The server's address of it: (host, robot, interface code, index).
+    addr: (u32, u32, u32, u32),
+    /// Its Troupe device.
+    dev: Device,
+}
+
+/// A Player connection: the socket and what was read past the last message.
+struct Conn {
+    server: String,
+    stream: TcpStream,
+    buf: Vec<u8>,
+}
+
+impl Conn {
+    fn io(&self, source: std::io::Error) -> ImportError {
+        ImportError::Io {
+            server: self.server.clone(),
+            source,
+        }
+    }
+
+    fn protocol(&self, reason: impl Into<String>) -> ImportError {
+        ImportError::Protocol {
+            server: self.server.clone(),
+            reason: reason.into(),
+        }
+    }
+
+    async fn send(&mut self, h: Header, body: &[u8]) -> Result<(), ImportError> {
+        let bytes = wire::message(h, body);
+        self.stream.write_all(&bytes).await.map_err(|e| self.io(e))
+    }
+
+    /// The next whole message.
+    async fn next(&mut self) -> Result<(Header, Vec<u8>), ImportError> {
+        loop {
+            match wire::frame(&self.buf) {
+                Ok(Some((h, len))) => {
+                    let body = self.buf[HEADER_LEN..len].to_vec();
+                    self.buf.drain(..len);
+                    return Ok((h, body));
+                }
+                Ok(None) => {}
+                Err(e) => return Err(self.protocol(e.to_string())),
+            }
+            let mut chunk = [0u8; 64 * 1024];
+            let n = self.stream.read(&mut chunk).await.map_err(|e| self.io(e))?;
+            if n == 0 {
+                return Err(self.protocol("closed the connection"));
+            }
+            self.buf.extend_from_slice(&chunk[..n]);
+        }
+    }
+
+    /// Sends a `player` request and waits for its answer (DATA that comes
+    /// meanwhile is handed to `data`): the ACK's body, or `None` for a NACK.
+    async fn ask(
+        &mut self,
+        subtype: u8,
+        body: &[u8],
+        data: &mut impl FnMut(Header, &[u8]),
+    ) -> Result<Option<Vec<u8>>, ImportError> {
+        let h = Header {
+            interf: u32::from(wire::PLAYER_CODE),
+            kind: u32::from(REQ),
+            subtype: u32::from(subtype),
+            ..Header::default()
+        };
+        self.send(h, body).await?;
+        let answer = async {
+            loop {
+                let (r, body) = self.next().await?;
+                let kind = u8::try_from(r.kind).unwrap_or(0);
+                if r.interf == h.interf && r.subtype == h.subtype {
+                    match kind {
+                        RESP_ACK => return Ok(Some(body)),
+                        RESP_NACK => return Ok(None),
+                        _ => {}
+                    }
+                }
+                if kind == DATA {
+                    data(r, &body);
+                }
+            }
+        };
+        match tokio::time::timeout(ANSWER_TIMEOUT, answer).await {
+            Ok(r) => r,
+            Err(_) => Err(self.protocol(format!(
+                "no answer to player request {subtype} within {ANSWER_TIMEOUT:?}"
+            ))),
+        }
+    }
+}
+
+fn w_addr(w: &mut Writer, a: (u32, u32, u32, u32)) {
+    w.u32(a.0).u32(a.1).u32(a.2).u32(a.3);
+}
+
+fn r_addr(r: &mut Reader) -> Result<(u32, u32, u32, u32), XdrError> {
+    Ok((r.u32()?, r.u32()?, r.u32()?, r.u32()?))
+}
+
+/// Imports the devices of the Player server at `server` (HOST:PORT) onto
+/// `session` until `shutdown` completes or the server goes. `as_robot`
+/// publishes them under another robot number than the server's own (two
+/// servers on port 6665 of two hosts).
+///
+/// # Errors
+///
+/// [`ImportError`]: the server is unreachable, speaks something else, or
+/// closed the connection; Zenoh refused a declaration.
+pub async fn run(
+    session: Session,
+    server: &str,
+    as_robot: Option<u32>,
+    shutdown: impl std::future::Future<Output = ()>,
+) -> Result<(), ImportError> {
+    let stream = TcpStream::connect(server)
+        .await
+        .map_err(|source| ImportError::Io {
+            server: server.to_owned(),
+            source,
+        })?;
+    let _ = stream.set_nodelay(true);
+    let mut conn = Conn {
+        server: server.to_owned(),
+        stream,
+        buf: Vec::new(),
+    };
+    let mut banner = [0u8; BANNER_LEN];
+    conn.stream
+        .read_exact(&mut banner)
+        .await
+        .map_err(|e| conn.io(e))?;
+    if !banner.starts_with(b"Player v.") {
+        let shown = String::from_utf8_lossy(&banner);
+        return Err(conn.protocol(format!(
+            "is not a Player server (banner {:?})",
+            shown.trim_end_matches('\0')
+        )));
+    }
+    let version = String::from_utf8_lossy(&banner);
+    tracing::info!("connected to {server}: {}", version.trim_end_matches('\0'));
+
+    let mut ignore = |_: Header, _: &[u8]| {};
+    // DEVLIST: libplayerc's request carries an empty list.
+    let mut w = Writer::new();
+    w.u32(0).array(&[] as &[u32], |_, _| {});
+    let list = conn
+        .ask(player::DEVLIST, &w.finish(), &mut ignore)
+        .await?
+        .ok_or_else(|| conn.protocol("refused DEVLIST"))?;
+    let mut r = Reader::new(&list);
+    let addrs = r
+        .array(16, r_addr)
+        .map_err(|e| conn.protocol(format!("DEVLIST reply: {e}")))?;
+
+    let mut devices: Vec<Imported> = Vec::new();
+    let mut tokens = Vec::new();
+    for a in addrs {
+        let Some(iface) = u16::try_from(a.2).ok().and_then(Interface::from_code) else {
+            tracing::warn!(
+                "device {}:{} of {server}: interface code unknown to Troupe; skipped",
+                a.2,
+                a.3
+            );
+            continue;
+        };
+        let dev = Device::new(as_robot.unwrap_or(a.1), iface, a.3);
+        let mut w = Writer::new();
+        w_addr(&mut w, a);
+        w.bytes(&[]);
+        let driver = match conn
+            .ask(player::DRIVERINFO, &w.finish(), &mut ignore)
+            .await?
+        {
+            Some(b) => {
+                let mut r = Reader::new(&b);
+                r_addr(&mut r)
+                    .and_then(|_| r.string())
+                    .map_err(|e| conn.protocol(format!("DRIVERINFO reply for {dev}: {e}")))?
+            }
+            None => "unknown".to_owned(),
+        };
+        let mut w = Writer::new();
+        w_addr(&mut w, a);
+        w.u32(player::OPEN).bytes(&[]);
+        if conn
+            .ask(player::DEV, &w.finish(), &mut ignore)
+            .await?
+            .is_none()
+        {
+            tracing::warn!("{server} refused the subscription to {dev} ({driver}); skipped");
+            continue;
+        }
+        // A key chunk: no separators or wildcards from a driver's name.
+        let name: String = driver
+            .chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                    c
+                } else {
+                    '_'
+                }
+            })
+            .collect();
+        let token = session
+            .liveliness()
+            .declare_token(keys::token(&dev, &format!("player-{name}")))
+            .await
+            .map_err(|source| ImportError::Zenoh {
+                what: format!("declaring {dev}"),
+                source,
+            })?;
+        tracing::info!("importing {dev} ({driver})");
+        tokens.push(token);
+        devices.push(Imported { addr: a, dev });
+    }
+    if devices.is_empty() {
+        return Err(conn.protocol("serves no device Troupe can import"));
+    }
+
+    // Commands from Troupe's side, for the connection to write.
+    let (cmd_tx, mut cmd_rx) = mpsc::unbounded_channel::<(Imported, u8, Vec<u8>)>();
+    let mut subs = Vec::new();
+    for &d in &devices {
+        let tx = cmd_tx.clone();
+        let sub = session
+            .declare_subscriber(keys::cmd_any(&d.dev))
+            .callback(move |sample| {
+                let payload = sample.payload().to_bytes();
+                match codec::command_to_player(&payload) {
+                    Some((subtype, body)) => {
+                        let _ = tx.send((d, subtype, body));
+                    }
+                    None => tracing::debug!(
+                        "{}: {} has no Player CMD; dropped",
+                        d.dev,
+                        sample.key_expr()
+                    ),
+                }
+            })
+            .await
+            .map_err(|source| ImportError::Zenoh {
+                what: format!("following commands to {}", d.dev),
+                source,
+            })?;
+        subs.push(sub);
+    }
+    drop(cmd_tx);
+
+    let by_addr: HashMap<(u32, u32), Imported> =
+        devices.iter().map(|d| ((d.addr.2, d.addr.3), *d)).collect();
+    let (mut published, mut bad) = (0u64, 0u64);
+    tokio::pin!(shutdown);
+    let outcome = loop {
+        tokio::select! {
+            () = &mut shutdown => break Ok(()),
+            cmd = cmd_rx.recv() => {
+                let Some((d, subtype, body)) = cmd else { continue };
+                let h = Header {
+                    host: d.addr.0,
+                    robot: d.addr.1,
+                    interf: d.addr.2,
+                    index: d.addr.3,
+                    kind: u32::from(wire::CMD),
+                    subtype: u32::from(subtype),
+                    ..Header::default()
+                };
+                if let Err(e) = conn.send(h, &body).await {
+                    break Err(e);
+                }
+            }
+            msg = conn.next() => {
+                let (h, body) = match msg {
+                    Ok(m) => m,
+                    Err(e) => break Err(e),
+                };
+                if u8::try_from(h.kind).ok() != Some(DATA) {
+                    continue;
+                }
+                let Some(d) = by_addr.get(&(h.interf, h.index)) else { continue };
+                let subtype = u8::try_from(h.subtype).unwrap_or(0);
+                match codec::data_from_player(d.dev.interface, subtype, &body, h.timestamp) {
+                    Ok(Some(payload)) => {
+                        if let Err(e) = session.put(keys::data(&d.dev), payload).await {
+                            tracing::warn!("publishing {}: {e}", d.dev);
+                        }
+                        published += 1;
+                    }
+                    Ok(None) => {}
+                    Err(e) => {
+                        bad += 1;
+                        tracing::warn!("{}: dropped: {e}", d.dev);
+                    }
+                }
+            }
+        }
+    };
+    tracing::info!("import of {server} ended: {published} samples published, {bad} malformed");
+    drop(subs);
+    drop(tokens);
+    outcome
+}

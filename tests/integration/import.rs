@@ -1,0 +1,138 @@
+//! `troupe bridge --import`: a Player server's devices on Troupe's keys. The
+//! Player server here is Troupe's own bridge in front of simple.cfg — it
+//! speaks Player 3 TCP byte for byte (the transcripts prove it) — and the
+//! import republishes its robot 6665 as robot 7000 on the same network.
+
+use std::collections::HashMap;
+use std::path::Path;
+use std::time::Instant;
+
+use troupe_client::{Client, Position2dProxy, SimulationProxy};
+use troupe_msgs::{keys, laser, Device, Interface};
+use troupe_node::zenoh::Wait;
+use troupe_tests::{Proc, DEADLINE};
+
+#[test]
+fn an_imported_player_server_streams_and_obeys_on_troupe_keys() {
+    let ns = troupe_tests::unique_namespace("import");
+    let cfg = Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/simple.cfg");
+    let mut launcher = troupe_tests::launch(&ns, &cfg, &["--speedup", "2"]);
+    // Its router, then its Player port, from its stdout.
+    let lines = launcher.lines();
+    let (mut router, mut player) = (None, None);
+    let deadline = Instant::now() + DEADLINE;
+    while router.is_none() || player.is_none() {
+        let left = deadline.saturating_duration_since(Instant::now());
+        let line = lines.recv_timeout(left).expect("the launcher's port lines");
+        if let Some(rest) = line.strip_prefix("troupe launch: router listening on ") {
+            router = rest.split_whitespace().next().map(str::to_owned);
+        } else if let Some(rest) = line.strip_prefix("troupe bridge: robot 6665 on ") {
+            player = Some(rest.trim().to_owned());
+        }
+    }
+    let (router, player) = (router.unwrap(), player.unwrap());
+    let mut import = Proc::troupe(
+        "import",
+        &[
+            "--connect",
+            &router,
+            "--namespace",
+            &ns,
+            "--no-multicast",
+            "bridge",
+            "--import",
+            &player,
+            "--as",
+            "7000",
+        ]
+        .map(str::to_owned),
+    );
+    let session = troupe_tests::client_at(&router, &ns);
+    troupe_tests::wait_live(&session, &["7000:laser:0", "7000:position2d:0"]);
+
+    // The same scans on both robots, stamp for stamp.
+    let (tx, rx) = std::sync::mpsc::channel::<(u32, u64, Vec<f32>)>();
+    let record = |robot: u32| {
+        let tx = tx.clone();
+        let dev = Device::new(robot, Interface::Laser, 0);
+        session
+            .declare_subscriber(keys::data(&dev))
+            .callback(move |s| {
+                if let Ok(d) = troupe_msgs::decode::<laser::Scan>(&s.payload().to_bytes()) {
+                    let _ = tx.send((robot, d.stamp.to_bits(), d.msg.ranges));
+                }
+            })
+            .wait()
+            .unwrap()
+    };
+    let (_s1, _s2) = (record(6665), record(7000));
+    let mut seen: HashMap<(u32, u64), Vec<f32>> = HashMap::new();
+    let deadline = Instant::now() + DEADLINE;
+    let common = loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        let (robot, t, ranges) = rx.recv_timeout(left).unwrap_or_else(|_| {
+            panic!("no imported scan matched an original: {}", import.stderr())
+        });
+        let other = if robot == 7000 { 6665 } else { 7000 };
+        if let Some(o) = seen.get(&(other, t)) {
+            let (imported, original) = if robot == 7000 {
+                (ranges, o.clone())
+            } else {
+                (o.clone(), ranges)
+            };
+            break (f64::from_bits(t), imported, original);
+        }
+        seen.insert((robot, t), ranges);
+    };
+    assert_eq!(common.1, common.2, "the scan at {} differs", common.0);
+    assert_eq!(common.1.len(), 180);
+
+    // A command to the imported robot drives the simulated one.
+    let client = Client::with_session(session.clone(), 7000);
+    let base = Position2dProxy::new(&client, 0).unwrap();
+    let sim = SimulationProxy::new(&Client::with_session(session.clone(), 6665), 0);
+    let start = sim.get_pose2d("r0").unwrap();
+    let deadline = Instant::now() + DEADLINE;
+    loop {
+        base.set_speed(0.4, 0.0).unwrap();
+        let now = sim.get_pose2d("r0").unwrap();
+        if (now.x - start.x).hypot(now.y - start.y) > 0.2 {
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "r0 did not move from {start:?}: {}",
+            import.stderr()
+        );
+        let _ = client.read_timeout(DEADLINE);
+    }
+    base.set_speed(0.0, 0.0).unwrap();
+    assert!(import.terminate().success(), "{}", import.stderr());
+    let log = import.stderr();
+    assert!(
+        log.contains("importing 7000:laser:0 (rangertolaser)"),
+        "{log}"
+    );
+    assert!(launcher.terminate().success(), "{}", launcher.stderr());
+}
+
+/// Something that is not a Player server is named as such, and the import
+/// fails instead of publishing nothing forever.
+#[test]
+fn importing_something_that_is_not_player_says_so() {
+    let net = troupe_tests::TestNet::new("import-bad");
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = listener.local_addr().unwrap().to_string();
+    std::thread::spawn(move || {
+        use std::io::Write;
+        if let Ok((mut s, _)) = listener.accept() {
+            let _ = s.write_all(b"SSH-2.0-OpenSSH_9.2p1 Debian-2\r\n");
+        }
+    });
+    let mut args = net.args().to_child_args();
+    args.extend(["bridge", "--import", &addr].map(str::to_owned));
+    let (status, _, err) = troupe_tests::troupe_output(&args);
+    assert!(!status.success());
+    assert!(err.contains("is not a Player server"), "{err}");
+    assert!(err.contains(&addr), "{err}");
+}
