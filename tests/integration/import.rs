@@ -1,13 +1,14 @@
 //! `troupe bridge --import`: a Player server's devices on Troupe's keys. The
 //! Player server here is Troupe's own bridge in front of simple.cfg — it
 //! speaks Player 3 TCP byte for byte (the transcripts prove it) — and the
-//! import republishes its robot 6665 as robot 7000 on the same network.
+//! import republishes its robot 6665 as robot 7000 on the same network:
+//! data, commands and requests all go through two Player hops.
 
 use std::collections::HashMap;
 use std::path::Path;
 use std::time::Instant;
 
-use troupe_client::{Client, Position2dProxy, SimulationProxy};
+use troupe_client::{Client, Position2dProxy, RangerProxy, SimulationProxy};
 use troupe_msgs::{keys, laser, Device, Interface};
 use troupe_node::zenoh::Wait;
 use troupe_tests::{Proc, DEADLINE};
@@ -87,10 +88,32 @@ fn an_imported_player_server_streams_and_obeys_on_troupe_keys() {
     assert_eq!(common.1, common.2, "the scan at {} differs", common.0);
     assert_eq!(common.1.len(), 180);
 
-    // A command to the imported robot drives the simulated one.
+    // Requests go to the server and its answers come back.
     let client = Client::with_session(session.clone(), 7000);
     let base = Position2dProxy::new(&client, 0).unwrap();
-    let sim = SimulationProxy::new(&Client::with_session(session.clone(), 6665), 0);
+    let original = Client::with_session(session.clone(), 6665);
+    assert_eq!(
+        base.request_geom().unwrap(),
+        Position2dProxy::new(&original, 0)
+            .unwrap()
+            .request_geom()
+            .unwrap()
+    );
+    let ranger = RangerProxy::new(&client, 1)
+        .unwrap()
+        .request_geom()
+        .unwrap();
+    assert_eq!(
+        ranger,
+        RangerProxy::new(&original, 1)
+            .unwrap()
+            .request_geom()
+            .unwrap()
+    );
+    assert!(!ranger.element_poses.is_empty());
+
+    // A command to the imported robot drives the simulated one.
+    let sim = SimulationProxy::new(&original, 0);
     let start = sim.get_pose2d("r0").unwrap();
     let deadline = Instant::now() + DEADLINE;
     loop {

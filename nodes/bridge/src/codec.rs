@@ -828,6 +828,188 @@ pub fn command_to_player(payload: &[u8]) -> Option<(u8, Vec<u8>)> {
     Some((subtype, w.finish()))
 }
 
+fn r_pose3d(r: &mut Reader) -> Result<Pose3d, XdrError> {
+    Ok(Pose3d {
+        x: r.f64()?,
+        y: r.f64()?,
+        z: r.f64()?,
+        roll: r.f64()?,
+        pitch: r.f64()?,
+        yaw: r.f64()?,
+    })
+}
+
+fn r_bbox3d(r: &mut Reader) -> Result<Size3d, XdrError> {
+    Ok(Size3d {
+        width: r.f64()?,
+        length: r.f64()?,
+        height: r.f64()?,
+    })
+}
+
+/// Turns a Player server's ACK body into the Troupe reply, stamped.
+pub type ReplyFromServer = Box<dyn Fn(&[u8], f64) -> Result<Vec<u8>, XdrError> + Send + Sync>;
+
+/// A Troupe request as the Player REQ that asks a server for it.
+pub struct ToServer {
+    /// The REQ subtype.
+    pub subtype: u8,
+    /// Its body.
+    pub body: Vec<u8>,
+    /// What makes the Troupe reply from the server's ACK body.
+    pub reply: ReplyFromServer,
+}
+
+fn answer<M: Message + 'static>(read: fn(&mut Reader) -> Result<M, XdrError>) -> ReplyFromServer {
+    Box::new(move |b, t| {
+        let mut r = Reader::new(b);
+        let m = read(&mut r)?;
+        r.end()?;
+        Ok(encode(&m, t))
+    })
+}
+
+/// Player's drivers answer these with an empty ACK (some echo the request;
+/// the body is not read).
+fn acked() -> ReplyFromServer {
+    Box::new(|_, t| Ok(encode(&common::Ack, t)))
+}
+
+fn r_laser_config(r: &mut Reader) -> Result<laser::Config, XdrError> {
+    Ok(laser::Config {
+        min_angle: r.f32()?,
+        max_angle: r.f32()?,
+        resolution: r.f32()?,
+        max_range: r.f32()?,
+        range_res: r.f32()?,
+        intensity: r.flag()?,
+        scanning_frequency: r.f32()?,
+    })
+}
+
+fn r_ranger_config(r: &mut Reader) -> Result<ranger::Config, XdrError> {
+    Ok(ranger::Config {
+        min_angle: r.f64()?,
+        max_angle: r.f64()?,
+        angular_res: r.f64()?,
+        min_range: r.f64()?,
+        max_range: r.f64()?,
+        range_res: r.f64()?,
+        frequency: r.f64()?,
+    })
+}
+
+/// A Troupe request (an encoded payload) to a device of `iface` as the REQ a
+/// Player server answers, with the reading of its ACK. `None`: a request
+/// Troupe does not forward to Player servers.
+pub fn request_to_player(iface: Interface, payload: &[u8]) -> Option<ToServer> {
+    let msg = troupe_msgs::decode_any(payload).ok()?.msg;
+    let mut w = Writer::new();
+    let (subtype, reply) = match &msg {
+        AnyMsg::Position2dGetGeom(_) => (
+            1,
+            answer(|r| {
+                Ok(position2d::Geom {
+                    pose: r_pose3d(r)?,
+                    size: r_bbox3d(r)?,
+                })
+            }),
+        ),
+        AnyMsg::Position2dMotorPower(q) => {
+            w.flag(q.state);
+            (2, acked())
+        }
+        AnyMsg::Position2dVelocityMode(q) => {
+            w.u32(q.value);
+            (3, acked())
+        }
+        AnyMsg::Position2dPositionMode(q) => {
+            w.flag(q.state);
+            (4, acked())
+        }
+        AnyMsg::Position2dSetOdom(q) => {
+            w_pose2d(&mut w, &q.pose);
+            (5, acked())
+        }
+        AnyMsg::Position2dResetOdom(_) => (6, acked()),
+        AnyMsg::LaserGetGeom(_) => (
+            1,
+            answer(|r| {
+                Ok(laser::Geom {
+                    pose: r_pose3d(r)?,
+                    size: r_bbox3d(r)?,
+                })
+            }),
+        ),
+        AnyMsg::LaserSetConfig(q) => {
+            laser_config(&q.config, &mut w);
+            (2, answer(r_laser_config))
+        }
+        AnyMsg::LaserGetConfig(_) => (3, answer(r_laser_config)),
+        AnyMsg::RangerGetGeom(_) => (
+            1,
+            answer(|r| {
+                Ok(ranger::Geom {
+                    pose: r_pose3d(r)?,
+                    size: r_bbox3d(r)?,
+                    element_poses: r.array(48, r_pose3d)?,
+                    element_sizes: r.array(24, r_bbox3d)?,
+                })
+            }),
+        ),
+        AnyMsg::RangerSetConfig(q) => {
+            ranger_config(&q.config, &mut w);
+            (4, answer(r_ranger_config))
+        }
+        AnyMsg::RangerGetConfig(_) => (5, answer(r_ranger_config)),
+        AnyMsg::SonarGetGeom(_) => (
+            1,
+            answer(|r| {
+                Ok(sonar::Geom {
+                    poses: r.array(48, r_pose3d)?,
+                })
+            }),
+        ),
+        AnyMsg::MapGetInfo(_) => (
+            1,
+            answer(|r| {
+                Ok(map::Info {
+                    resolution: r.f32()?,
+                    width: r.u32()?,
+                    height: r.u32()?,
+                    origin: r_pose2d(r)?,
+                })
+            }),
+        ),
+        AnyMsg::PlannerEnable(q) => {
+            w.flag(q.state);
+            (2, acked())
+        }
+        AnyMsg::LocalizeSetPose(q) => {
+            w_pose2d(&mut w, &q.mean);
+            for c in q.cov {
+                w.f64(c);
+            }
+            (1, acked())
+        }
+        AnyMsg::Power(q) => {
+            let subtype = match iface {
+                Interface::Laser => 4,
+                Interface::Ranger | Interface::Sonar | Interface::Ir => 2,
+                _ => return None,
+            };
+            w.flag(q.state);
+            (subtype, acked())
+        }
+        _ => return None,
+    };
+    Some(ToServer {
+        subtype,
+        body: w.finish(),
+        reply,
+    })
+}
+
 /// Player's POWER request subtypes: laser 4, ranger 2, sonar 2.
 fn is_power(iface: Interface, subtype: u8) -> bool {
     matches!(
@@ -904,6 +1086,113 @@ mod tests {
         assert!(data_from_player(Interface::Map, 1, &[], 0.0)
             .unwrap()
             .is_none());
+    }
+
+    /// A Troupe request asked of a Player server is the REQ the bridge would
+    /// turn back into that request, and the server's ACK for a reply comes
+    /// back as that reply.
+    #[test]
+    fn forwarded_requests_and_replies_round_trip() {
+        use troupe_msgs::{Pose3d, Size3d};
+        let geom = position2d::Geom {
+            pose: Pose3d::planar(-0.04, 0.0, 0.0),
+            size: Size3d {
+                width: 0.38,
+                length: 0.44,
+                height: 0.22,
+            },
+        };
+        let laser_cfg = laser::Config {
+            min_angle: -1.5,
+            max_angle: 1.5,
+            resolution: 0.5,
+            max_range: 8.0,
+            range_res: 0.01,
+            intensity: true,
+            scanning_frequency: 10.0,
+        };
+        let ranger_geom = ranger::Geom {
+            pose: Pose3d::planar(0.1, 0.0, 0.0),
+            size: geom.size,
+            element_poses: vec![
+                Pose3d::planar(0.0, 0.1, 1.0),
+                Pose3d::planar(0.0, -0.1, -1.0),
+            ],
+            element_sizes: vec![geom.size, geom.size],
+        };
+        let info = map::Info {
+            width: 500,
+            height: 400,
+            resolution: 0.032,
+            origin: Pose2d::new(-8.0, -6.4, 0.0),
+        };
+        let cases: Vec<(Interface, Vec<u8>, Vec<u8>)> = vec![
+            (
+                Interface::Position2d,
+                encode(&position2d::GetGeom, 0.0),
+                encode(&geom, 0.0),
+            ),
+            (
+                Interface::Position2d,
+                encode(&position2d::MotorPower { state: true }, 0.0),
+                encode(&common::Ack, 0.0),
+            ),
+            (
+                Interface::Position2d,
+                encode(
+                    &position2d::SetOdom {
+                        pose: Pose2d::new(1.0, 2.0, 0.5),
+                    },
+                    0.0,
+                ),
+                encode(&common::Ack, 0.0),
+            ),
+            (
+                Interface::Laser,
+                encode(&laser::GetConfig, 0.0),
+                encode(&laser_cfg, 0.0),
+            ),
+            (
+                Interface::Laser,
+                encode(&laser::SetConfig { config: laser_cfg }, 0.0),
+                encode(&laser_cfg, 0.0),
+            ),
+            (
+                Interface::Ranger,
+                encode(&ranger::GetGeom, 0.0),
+                encode(&ranger_geom, 0.0),
+            ),
+            (
+                Interface::Map,
+                encode(&map::GetInfo, 0.0),
+                encode(&info, 0.0),
+            ),
+            (
+                Interface::Sonar,
+                encode(&common::Power { state: false }, 0.0),
+                encode(&common::Ack, 0.0),
+            ),
+        ];
+        let any = |p: &[u8]| troupe_msgs::decode_any(p).unwrap().msg;
+        for (iface, q, want) in cases {
+            let out = request_to_player(iface, &q).unwrap_or_else(|| panic!("{:?}", any(&q)));
+            let Some(ToDevice::Request { payload, reply, .. }) =
+                from_player(iface, REQ, out.subtype, &out.body, 0.0).unwrap()
+            else {
+                panic!("{:?} is not a request", any(&q));
+            };
+            assert_eq!(any(&payload), any(&q));
+            // The ACK a bridge (Player's layout) sends for `want`.
+            let ack = reply(&want).unwrap();
+            let back = (out.reply)(&ack, 3.0).unwrap();
+            assert_eq!(any(&back), any(&want), "{:?}", any(&q));
+        }
+        assert!(request_to_player(Interface::Map, &encode(&map::GetVector, 0.0)).is_none());
+        assert!(request_to_player(
+            Interface::Position2d,
+            &encode(&common::Power { state: true }, 0.0)
+        )
+        .is_none());
     }
 
     /// A Troupe command sent to a Player server is the CMD the bridge

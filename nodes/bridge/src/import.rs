@@ -10,16 +10,20 @@
 //! server as a Player CMD ([`codec::command_to_player`]). Each device gets a
 //! liveliness token naming its Player driver as `player-DRIVER`.
 //!
-//! Requests (GET_GEOM and the like) are not forwarded yet: a Troupe request
-//! to an imported device gets no reply.
+//! Requests go the same way ([`codec::request_to_player`]): a Troupe get on
+//! an imported device becomes a REQ, and the server's ACK the reply (its
+//! NACK, a refusal). Player answers a device's requests in order, so the
+//! answer to a REQ is the oldest one pending for that device and subtype.
 
-use std::collections::HashMap;
-use std::time::Duration;
+use std::collections::{HashMap, VecDeque};
+use std::time::{Duration, Instant};
 
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
 use tokio::sync::mpsc;
+use troupe_msgs::common;
 use troupe_msgs::{keys, Device, Interface};
+use troupe_node::zenoh::query::Query;
 use troupe_node::zenoh::Session;
 
 use crate::codec;
@@ -312,6 +316,48 @@ pub async fn run(
     }
     drop(cmd_tx);
 
+    // Requests from Troupe's side, asked of the server in turn.
+    let (req_tx, mut req_rx) = mpsc::unbounded_channel::<(Imported, codec::ToServer, Query)>();
+    let mut queryables = Vec::new();
+    for &d in &devices {
+        let tx = req_tx.clone();
+        let q = session
+            .declare_queryable(keys::req_any(&d.dev))
+            .callback(move |q| {
+                let payload = q
+                    .payload()
+                    .map(|p| p.to_bytes().to_vec())
+                    .unwrap_or_default();
+                match codec::request_to_player(d.dev.interface, &payload) {
+                    Some(out) => {
+                        let _ = tx.send((d, out, q));
+                    }
+                    None => {
+                        let nack = troupe_msgs::codec::encode(
+                            &common::Nack {
+                                reason: format!(
+                                    "{} is not forwarded to Player servers",
+                                    q.key_expr()
+                                ),
+                            },
+                            0.0,
+                        );
+                        let _ = troupe_node::zenoh::Wait::wait(q.reply_err(nack));
+                    }
+                }
+            })
+            .await
+            .map_err(|source| ImportError::Zenoh {
+                what: format!("answering requests to {}", d.dev),
+                source,
+            })?;
+        queryables.push(q);
+    }
+    drop(req_tx);
+    // Asked and not yet answered, oldest first.
+    let mut pending: VecDeque<(Imported, u8, codec::ReplyFromServer, Query, Instant)> =
+        VecDeque::new();
+
     let by_addr: HashMap<(u32, u32), Imported> =
         devices.iter().map(|d| ((d.addr.2, d.addr.3), *d)).collect();
     let (mut published, mut bad) = (0u64, 0u64);
@@ -334,12 +380,40 @@ pub async fn run(
                     break Err(e);
                 }
             }
+            req = req_rx.recv() => {
+                let Some((d, out, query)) = req else { continue };
+                let h = Header {
+                    host: d.addr.0,
+                    robot: d.addr.1,
+                    interf: d.addr.2,
+                    index: d.addr.3,
+                    kind: u32::from(REQ),
+                    subtype: u32::from(out.subtype),
+                    ..Header::default()
+                };
+                if let Err(e) = conn.send(h, &out.body).await {
+                    break Err(e);
+                }
+                // The asker has long given up on what the server never answered.
+                pending.retain(|p| p.4.elapsed() < STALE);
+                pending.push_back((d, out.subtype, out.reply, query, Instant::now()));
+            }
             msg = conn.next() => {
                 let (h, body) = match msg {
                     Ok(m) => m,
                     Err(e) => break Err(e),
                 };
-                if u8::try_from(h.kind).ok() != Some(DATA) {
+                let kind = u8::try_from(h.kind).unwrap_or(0);
+                if kind == RESP_ACK || kind == RESP_NACK {
+                    let at = pending.iter().position(|p| {
+                        (p.0.addr.2, p.0.addr.3, u32::from(p.1)) == (h.interf, h.index, h.subtype)
+                    });
+                    if let Some((d, _, reply, query, _)) = at.and_then(|i| pending.remove(i)) {
+                        answer(&d, kind, &body, h.timestamp, &reply, query).await;
+                    }
+                    continue;
+                }
+                if kind != DATA {
                     continue;
                 }
                 let Some(d) = by_addr.get(&(h.interf, h.index)) else { continue };
@@ -362,6 +436,46 @@ pub async fn run(
     };
     tracing::info!("import of {server} ended: {published} samples published, {bad} malformed");
     drop(subs);
+    drop(queryables);
     drop(tokens);
     outcome
+}
+
+/// Requests unanswered this long are forgotten.
+const STALE: Duration = Duration::from_secs(60);
+
+/// Replies to `query` with the server's answer to it.
+async fn answer(
+    d: &Imported,
+    kind: u8,
+    body: &[u8],
+    stamp: f64,
+    reply: &codec::ReplyFromServer,
+    query: Query,
+) {
+    let nack = |reason: String| troupe_msgs::codec::encode(&common::Nack { reason }, stamp);
+    let sent = if kind == RESP_ACK {
+        match reply(body, stamp) {
+            Ok(payload) => query.reply(query.key_expr().clone(), payload).await,
+            Err(e) => {
+                tracing::warn!(
+                    "{}: the server's answer to {}: {e}",
+                    d.dev,
+                    query.key_expr()
+                );
+                query
+                    .reply_err(nack(format!(
+                        "malformed answer from the Player server: {e}"
+                    )))
+                    .await
+            }
+        }
+    } else {
+        query
+            .reply_err(nack("refused by the Player server".into()))
+            .await
+    };
+    if let Err(e) = sent {
+        tracing::debug!("{}: replying: {e}", d.dev);
+    }
 }
