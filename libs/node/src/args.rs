@@ -120,9 +120,19 @@ impl ZenohArgs {
     /// in use, a bad config).
     pub fn open(&self, default_mode: Mode) -> Result<Session> {
         let config = self.config(default_mode)?;
-        zenoh::open(config)
-            .wait()
-            .map_err(|e| NodeError::zenoh("opening the session", e))
+        zenoh::open(config).wait().map_err(|e| {
+            // Zenoh's own words name a source file; say what to do instead.
+            if e.to_string().contains("Unable to connect to any of") {
+                let endpoints = if self.connect.is_empty() {
+                    DEFAULT_ROUTER.to_owned()
+                } else {
+                    self.connect.join(", ")
+                };
+                NodeError::NoRouter { endpoints }
+            } else {
+                NodeError::zenoh("opening the session", e)
+            }
+        })
     }
 
     /// The flags to hand a child process so it joins the same network.
@@ -211,6 +221,26 @@ mod tests {
             d.get_json("connect/endpoints").unwrap(),
             format!("[\"{DEFAULT_ROUTER}\"]")
         );
+    }
+
+    #[test]
+    fn a_client_with_no_router_is_told_how_to_get_one() {
+        // A port nothing listens on: bound, then let go.
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .and_then(|l| l.local_addr())
+            .unwrap()
+            .port();
+        let args = ZenohArgs {
+            connect: vec![format!("tcp/127.0.0.1:{port}")],
+            no_multicast: true,
+            ..Default::default()
+        };
+        let e = args.open(Mode::Client).err().unwrap().to_string();
+        assert!(
+            e.contains(&format!("no Zenoh router answers at tcp/127.0.0.1:{port}")),
+            "{e}"
+        );
+        assert!(e.contains("troupe router"), "{e}");
     }
 
     #[test]

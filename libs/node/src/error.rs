@@ -18,6 +18,15 @@ pub enum NodeError {
         /// What is wrong and what is expected.
         reason: String,
     },
+    /// Nothing answers where the session was told to connect.
+    #[error(
+        "no Zenoh router answers at {endpoints}: start one (`troupe launch FILE` runs one \
+         inside, `troupe router` runs one alone) or point --connect at one"
+    )]
+    NoRouter {
+        /// The endpoints tried.
+        endpoints: String,
+    },
     /// Zenoh refused an operation.
     #[error("zenoh: {what}")]
     Zenoh {
