@@ -6,7 +6,6 @@ use std::net::{IpAddr, SocketAddr};
 use anyhow::Context;
 use clap::Args;
 use troupe_bridge::{Bridge, Config, Port};
-use troupe_msgs::DevAddr;
 use troupe_node::{Mode, ZenohArgs};
 
 /// Flags of `troupe bridge`.
@@ -42,10 +41,6 @@ pub struct BridgeArgs {
     /// server's own number (two servers both on port 6665).
     #[arg(long = "as", value_name = "ROBOT", requires = "import")]
     pub as_robot: Option<u32>,
-
-    /// DEVLIST order, as the .cfg lists devices (set by `troupe launch`).
-    #[arg(long, value_name = "DEVICES", value_delimiter = ',', hide = true)]
-    pub order: Vec<String>,
 }
 
 /// Parses `6665` or `6665=127.0.0.1:0`.
@@ -73,78 +68,59 @@ fn port(spec: &str, bind: IpAddr) -> anyhow::Result<Port> {
     Ok(Port { robot, listen })
 }
 
-/// `troupe bridge --import HOST:PORT`.
-fn import(server: &str, as_robot: Option<u32>, z: &ZenohArgs) -> anyhow::Result<()> {
-    crate::cli::supervised()?;
-    let session = z.open(Mode::Client)?;
-    let rt = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .context("starting the bridge's runtime")?;
-    rt.block_on(troupe_bridge::import::run(
-        session,
-        server,
-        as_robot,
-        async {
-            if let Err(e) = crate::supervisor::wait_signal().await {
-                tracing::error!("cannot wait for signals: {e}");
-            }
-        },
-    ))?;
-    Ok(())
-}
-
-/// `troupe bridge`.
+/// `troupe bridge`: serves robot ports, or with `--import` brings a Player
+/// server's devices in. Either way a client of the router, like the tools:
+/// its device listing at start is complete (a peer's first query can run
+/// before its routes exist).
 pub fn run(a: BridgeArgs, z: &ZenohArgs) -> anyhow::Result<()> {
-    if let Some(server) = &a.import {
-        return import(server, a.as_robot, z);
-    }
-    let ports = a
-        .ports
-        .iter()
-        .map(|s| port(s, a.bind))
-        .collect::<anyhow::Result<Vec<_>>>()?;
-    let order = a
-        .order
-        .iter()
-        .map(|s| {
-            let d: DevAddr = s.parse().with_context(|| format!("--order entry `{s}`"))?;
-            Ok(d.device(troupe_msgs::DEFAULT_ROBOT))
-        })
-        .collect::<anyhow::Result<Vec<_>>>()?;
+    let ports = match a.import {
+        Some(_) => Vec::new(),
+        None => a
+            .ports
+            .iter()
+            .map(|s| port(s, a.bind))
+            .collect::<anyhow::Result<Vec<_>>>()?,
+    };
     crate::cli::supervised()?;
-    // A client of the router, like the tools: its device listing at start is
-    // complete (a peer's first query can run before its routes exist).
     let session = z.open(Mode::Client)?;
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
         .build()
         .context("starting the bridge's runtime")?;
+    let stop = async {
+        if let Err(e) = crate::supervisor::wait_signal().await {
+            tracing::error!("cannot wait for signals: {e}");
+        }
+    };
+    if let Some(server) = &a.import {
+        rt.block_on(troupe_bridge::import::run(
+            session, server, a.as_robot, stop,
+        ))?;
+        return Ok(());
+    }
     rt.block_on(async move {
         let cfg = Config {
             ports,
-            order,
             maxlen: a.queue_len.max(1),
+            ..Config::default()
         };
         let bridge = Bridge::bind(session, cfg).await?;
-        let mut out = std::io::stdout().lock();
-        for (robot, addr) in bridge.local_addrs() {
-            writeln!(out, "troupe bridge: robot {robot} on {addr}")?;
-        }
-        out.flush()?;
-        drop(out);
-        bridge
-            .run(async {
-                if let Err(e) = crate::supervisor::wait_signal().await {
-                    tracing::error!("cannot wait for signals: {e}");
-                }
-            })
-            .await;
+        announce(&bridge);
+        bridge.run(stop).await;
         tracing::info!("bridge stopped");
         anyhow::Ok(())
     })
+}
+
+/// `troupe bridge: robot 6665 on ADDR:PORT` on stdout for each robot port,
+/// for scripts and tests that let the ports be chosen.
+pub(crate) fn announce(bridge: &Bridge) {
+    let mut out = std::io::stdout().lock();
+    for (robot, addr) in bridge.local_addrs() {
+        let _ = writeln!(out, "troupe bridge: robot {robot} on {addr}");
+    }
+    let _ = out.flush();
 }
 
 #[cfg(test)]

@@ -180,6 +180,34 @@ struct Live {
     devices: Mutex<BTreeSet<Device>>,
 }
 
+impl Live {
+    /// Waits until every device of `needs` is live (`changed` ticks with
+    /// each change); false when `stop` turned true first.
+    async fn wait_for(
+        &self,
+        needs: &[Device],
+        changed: &mut watch::Receiver<u64>,
+        stop: &mut watch::Receiver<bool>,
+    ) -> bool {
+        loop {
+            let missing = {
+                let set = self.devices.lock().unwrap_or_else(|p| p.into_inner());
+                needs.iter().any(|d| !set.contains(d))
+            };
+            if *stop.borrow() {
+                return false;
+            }
+            if !missing {
+                return true;
+            }
+            tokio::select! {
+                _ = changed.changed() => {}
+                _ = stop.changed() => {}
+            }
+        }
+    }
+}
+
 struct NodeState {
     spec: NodeSpec,
     pid: Mutex<Option<u32>>,
@@ -483,20 +511,11 @@ async fn run_node(st: Arc<NodeState>, mut ctx: NodeCtx) {
         .filter(|d| ctx.local.contains(d))
         .collect();
     // Start order: wait until what we require from this launch is live.
-    loop {
-        let missing = {
-            let set = ctx.live.devices.lock().unwrap_or_else(|p| p.into_inner());
-            needs.iter().any(|d| !set.contains(d))
-        };
-        if !missing || *ctx.stop_rx.borrow() {
-            break;
-        }
-        tokio::select! {
-            _ = ctx.live_rx.changed() => {}
-            _ = ctx.stop_rx.changed() => {}
-        }
-    }
-    if *ctx.stop_rx.borrow() {
+    if !ctx
+        .live
+        .wait_for(&needs, &mut ctx.live_rx, &mut ctx.stop_rx)
+        .await
+    {
         return;
     }
     let section = match st.spec.section() {
@@ -688,20 +707,8 @@ async fn serve_bridge(
     mut stop: watch::Receiver<bool>,
     local: BTreeSet<Device>,
 ) {
-    loop {
-        let missing = {
-            let set = live.devices.lock().unwrap_or_else(|p| p.into_inner());
-            local.iter().any(|d| !set.contains(d))
-        };
-        if !missing || *stop.borrow() {
-            break;
-        }
-        tokio::select! {
-            _ = live_rx.changed() => {}
-            _ = stop.changed() => {}
-        }
-    }
-    if *stop.borrow() {
+    let local: Vec<Device> = local.into_iter().collect();
+    if !live.wait_for(&local, &mut live_rx, &mut stop).await {
         return;
     }
     let bridge = match troupe_bridge::Bridge::bind(session, cfg).await {
@@ -713,21 +720,10 @@ async fn serve_bridge(
             return;
         }
     };
-    {
-        // For scripts and tests that pass --bridge-any-port.
-        let mut out = std::io::stdout().lock();
-        for (robot, addr) in bridge.local_addrs() {
-            let _ = writeln!(out, "troupe bridge: robot {robot} on {addr}");
-        }
-        let _ = out.flush();
-    }
+    crate::bridge::announce(&bridge);
     bridge
         .run(async move {
-            while !*stop.borrow() {
-                if stop.changed().await.is_err() {
-                    return;
-                }
-            }
+            let _ = stop.wait_for(|&s| s).await;
         })
         .await;
 }
