@@ -342,7 +342,7 @@ impl Localizer {
             self.due = true;
             self.moved = true;
         }
-        self.best.map(|b| b.compose(&d))
+        self.now().map(|(_, p)| p)
     }
 
     /// The pose now: the best hypothesis of the last update carried along by
@@ -531,22 +531,11 @@ impl Driver for Amcl {
         match event {
             Event::Data(s) if s.device == self.odom && s.is::<position2d::Data>() => {
                 let d = s.decode::<position2d::Data>()?;
-                let estimate = self.loc.odometry(d.msg.pose.into(), d.stamp);
-                // The estimate is of the pose at the odometry's time.
-                if let (Some(p), Some(dev)) = (estimate, self.position) {
-                    ctx.publish_at(
-                        &dev,
-                        &position2d::Data {
-                            pose: p.into(),
-                            ..Default::default()
-                        },
-                        d.stamp,
-                    )?;
-                }
+                self.loc.odometry(d.msg.pose.into(), d.stamp);
                 if self.loc.poll() {
-                    self.publish(ctx)?;
+                    self.publish_hypotheses(ctx)?;
                 }
-                Ok(())
+                self.publish_pose(ctx)
             }
             Event::Data(s) if s.device == self.laser && s.is::<laser_msg::Scan>() => {
                 let scan = s.decode::<laser_msg::Scan>()?;
@@ -666,7 +655,13 @@ impl Amcl {
         Ok(())
     }
 
+    /// The hypotheses of an update, then the pose.
     fn publish(&mut self, ctx: &mut Ctx) -> Result<()> {
+        self.publish_hypotheses(ctx)?;
+        self.publish_pose(ctx)
+    }
+
+    fn publish_hypotheses(&mut self, ctx: &mut Ctx) -> Result<()> {
         if let Some(dev) = self.localize {
             let hypoths = self
                 .loc
@@ -690,6 +685,11 @@ impl Amcl {
                 stamp,
             )?;
         }
+        Ok(())
+    }
+
+    /// The pose now, stamped with the odometry it extends.
+    fn publish_pose(&mut self, ctx: &mut Ctx) -> Result<()> {
         if let (Some(dev), Some((stamp, pose))) = (self.position, self.loc.now()) {
             ctx.publish_at(
                 &dev,
