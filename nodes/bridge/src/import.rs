@@ -71,6 +71,40 @@ struct Imported {
     dev: Device,
 }
 
+impl Imported {
+    /// The header of a message of `kind` and `subtype` to it.
+    fn header(&self, kind: u8, subtype: u8) -> Header {
+        let (host, robot, interf, index) = self.addr;
+        Header {
+            host,
+            robot,
+            interf,
+            index,
+            kind: u32::from(kind),
+            subtype: u32::from(subtype),
+            ..Header::default()
+        }
+    }
+
+    /// Whether `h` is the server's answer to a request of `subtype` to it.
+    fn answers(&self, subtype: u8, h: &Header) -> bool {
+        (self.addr.2, self.addr.3, u32::from(subtype)) == (h.interf, h.index, h.subtype)
+    }
+}
+
+/// A Troupe request asked of the server and not answered yet.
+struct Asked {
+    to: Imported,
+    subtype: u8,
+    reply: codec::ReplyFromServer,
+    query: Query,
+    at: Instant,
+}
+
+fn zenoh_error(what: String) -> impl FnOnce(troupe_node::zenoh::Error) -> ImportError {
+    move |source| ImportError::Zenoh { what, source }
+}
+
 /// A Player connection: the socket and what was read past the last message.
 struct Conn {
     server: String,
@@ -275,10 +309,7 @@ pub async fn run(
             .liveliness()
             .declare_token(keys::token(&dev, &format!("player-{name}")))
             .await
-            .map_err(|source| ImportError::Zenoh {
-                what: format!("declaring {dev}"),
-                source,
-            })?;
+            .map_err(zenoh_error(format!("declaring {dev}")))?;
         tracing::info!("importing {dev} ({driver})");
         tokens.push(token);
         devices.push(Imported { addr: a, dev });
@@ -308,10 +339,7 @@ pub async fn run(
                 }
             })
             .await
-            .map_err(|source| ImportError::Zenoh {
-                what: format!("following commands to {}", d.dev),
-                source,
-            })?;
+            .map_err(zenoh_error(format!("following commands to {}", d.dev)))?;
         subs.push(sub);
     }
     drop(cmd_tx);
@@ -347,16 +375,12 @@ pub async fn run(
                 }
             })
             .await
-            .map_err(|source| ImportError::Zenoh {
-                what: format!("answering requests to {}", d.dev),
-                source,
-            })?;
+            .map_err(zenoh_error(format!("answering requests to {}", d.dev)))?;
         queryables.push(q);
     }
     drop(req_tx);
     // Asked and not yet answered, oldest first.
-    let mut pending: VecDeque<(Imported, u8, codec::ReplyFromServer, Query, Instant)> =
-        VecDeque::new();
+    let mut pending: VecDeque<Asked> = VecDeque::new();
 
     let by_addr: HashMap<(u32, u32), Imported> =
         devices.iter().map(|d| ((d.addr.2, d.addr.3), *d)).collect();
@@ -367,36 +391,24 @@ pub async fn run(
             () = &mut shutdown => break Ok(()),
             cmd = cmd_rx.recv() => {
                 let Some((d, subtype, body)) = cmd else { continue };
-                let h = Header {
-                    host: d.addr.0,
-                    robot: d.addr.1,
-                    interf: d.addr.2,
-                    index: d.addr.3,
-                    kind: u32::from(wire::CMD),
-                    subtype: u32::from(subtype),
-                    ..Header::default()
-                };
-                if let Err(e) = conn.send(h, &body).await {
+                if let Err(e) = conn.send(d.header(wire::CMD, subtype), &body).await {
                     break Err(e);
                 }
             }
             req = req_rx.recv() => {
                 let Some((d, out, query)) = req else { continue };
-                let h = Header {
-                    host: d.addr.0,
-                    robot: d.addr.1,
-                    interf: d.addr.2,
-                    index: d.addr.3,
-                    kind: u32::from(REQ),
-                    subtype: u32::from(out.subtype),
-                    ..Header::default()
-                };
-                if let Err(e) = conn.send(h, &out.body).await {
+                if let Err(e) = conn.send(d.header(REQ, out.subtype), &out.body).await {
                     break Err(e);
                 }
                 // The asker has long given up on what the server never answered.
-                pending.retain(|p| p.4.elapsed() < STALE);
-                pending.push_back((d, out.subtype, out.reply, query, Instant::now()));
+                pending.retain(|p| p.at.elapsed() < STALE);
+                pending.push_back(Asked {
+                    to: d,
+                    subtype: out.subtype,
+                    reply: out.reply,
+                    query,
+                    at: Instant::now(),
+                });
             }
             msg = conn.next() => {
                 let (h, body) = match msg {
@@ -405,11 +417,9 @@ pub async fn run(
                 };
                 let kind = u8::try_from(h.kind).unwrap_or(0);
                 if kind == RESP_ACK || kind == RESP_NACK {
-                    let at = pending.iter().position(|p| {
-                        (p.0.addr.2, p.0.addr.3, u32::from(p.1)) == (h.interf, h.index, h.subtype)
-                    });
-                    if let Some((d, _, reply, query, _)) = at.and_then(|i| pending.remove(i)) {
-                        answer(&d, kind, &body, h.timestamp, &reply, query).await;
+                    let at = pending.iter().position(|p| p.to.answers(p.subtype, &h));
+                    if let Some(p) = at.and_then(|i| pending.remove(i)) {
+                        answer(&p, kind, &body, h.timestamp).await;
                     }
                     continue;
                 }
@@ -445,17 +455,11 @@ pub async fn run(
 const STALE: Duration = Duration::from_secs(60);
 
 /// Replies to `query` with the server's answer to it.
-async fn answer(
-    d: &Imported,
-    kind: u8,
-    body: &[u8],
-    stamp: f64,
-    reply: &codec::ReplyFromServer,
-    query: Query,
-) {
+async fn answer(p: &Asked, kind: u8, body: &[u8], stamp: f64) {
+    let (d, query) = (&p.to, &p.query);
     let nack = |reason: String| troupe_msgs::codec::encode(&common::Nack { reason }, stamp);
     let sent = if kind == RESP_ACK {
-        match reply(body, stamp) {
+        match (p.reply)(body, stamp) {
             Ok(payload) => query.reply(query.key_expr().clone(), payload).await,
             Err(e) => {
                 tracing::warn!(
