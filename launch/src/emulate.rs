@@ -64,6 +64,16 @@ pub struct EmulateArgs {
     /// global --connect/--namespace flags.
     #[arg(long, value_name = "ADDR")]
     pub stage_laser: Option<troupe_msgs::DevAddr>,
+    /// p2os, erratic: be this robot of a running Stage simulation instead
+    /// of a robot in the built-in room: wheel commands drive the model's
+    /// position2d, odometry and stall come from it, and the sonars read
+    /// its sonar (or first ranger) device. The model's devices are found
+    /// through --stage-sim. Reached through the global --connect/--namespace flags.
+    #[arg(long, value_name = "MODEL", conflicts_with = "stage_laser")]
+    pub stage_model: Option<String>,
+    /// The simulation device that knows --stage-model's devices.
+    #[arg(long, value_name = "ADDR", default_value = "simulation:0")]
+    pub stage_sim: troupe_msgs::DevAddr,
     /// Seed of the fault generator (runs with the same seed fail alike).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -126,6 +136,143 @@ impl troupe_sicklms200::emulator::Scene for LiveLaser {
     }
 }
 
+/// A robot body that is a Stage model: the emulator's wheel commands go
+/// to the model's position2d, its odometry and stall come back from it,
+/// and sonar `i` reads range `i` of the model's sonar or ranger device.
+struct StageBody {
+    _clients: Vec<troupe_client::Client>,
+    position: troupe_client::Position2dProxy,
+    sonar: Option<Ranges>,
+    /// The command last sent, so only changes go out.
+    sent: Option<(f64, f64)>,
+    /// Where odometry was last reset, in the model's odometry frame.
+    origin: troupe_geom::Pose,
+}
+
+/// Where a Stage-backed body reads its sonars.
+enum Ranges {
+    Sonar(troupe_client::SonarProxy),
+    Ranger(troupe_client::RangerProxy),
+}
+
+impl StageBody {
+    /// Finds `model`'s devices through the simulation device `sim` and
+    /// subscribes to them.
+    fn connect(
+        z: &troupe_node::ZenohArgs,
+        model: &str,
+        sim: &troupe_msgs::DevAddr,
+    ) -> anyhow::Result<Self> {
+        use troupe_msgs::{simulation::Value, Device, Interface};
+        let sim = sim.device(troupe_msgs::DEFAULT_ROBOT);
+        let client = troupe_client::Client::connect(z, sim.robot)
+            .context("connecting to the stack for --stage-model")?;
+        let listed = troupe_client::SimulationProxy::new(&client, sim.index)
+            .get_property(model, "devices")
+            .with_context(|| {
+                format!("asking {sim} for the devices of model `{model}` (is the Stage stack running, with {sim} provided?)")
+            })?;
+        let Value::Text(listed) = listed else {
+            anyhow::bail!("{sim} answered the devices of `{model}` with {listed:?}, not a list");
+        };
+        let devices: Vec<Device> = listed
+            .split_whitespace()
+            .map(|d| Ok(d.parse::<troupe_msgs::DevAddr>()?.device(sim.robot)))
+            .collect::<anyhow::Result<_>>()?;
+        let first = |i: Interface| devices.iter().find(|d| d.interface == i).copied();
+        let Some(pos) = first(Interface::Position2d) else {
+            anyhow::bail!(
+                "the Stage stack serves no position2d of model `{model}` (it serves: {}); give the model's section a position2d",
+                if listed.is_empty() { "nothing" } else { &listed }
+            );
+        };
+        let mut clients = vec![client];
+        let mut client_of = |robot: u32| -> anyhow::Result<troupe_client::Client> {
+            if let Some(c) = clients.iter().find(|c| c.robot() == robot) {
+                return Ok(c.clone());
+            }
+            let c = troupe_client::Client::connect(z, robot)?;
+            clients.push(c.clone());
+            Ok(c)
+        };
+        let position = troupe_client::Position2dProxy::new(&client_of(pos.robot)?, pos.index)?;
+        let sonar = match (first(Interface::Sonar), first(Interface::Ranger)) {
+            (Some(d), _) => Some(Ranges::Sonar(troupe_client::SonarProxy::new(
+                &client_of(d.robot)?,
+                d.index,
+            )?)),
+            (None, Some(d)) => Some(Ranges::Ranger(troupe_client::RangerProxy::new(
+                &client_of(d.robot)?,
+                d.index,
+            )?)),
+            (None, None) => None,
+        };
+        let sonar_dev = first(Interface::Sonar).or(first(Interface::Ranger));
+        tracing::info!(
+            "model `{model}`: driving {pos}; sonars from {}",
+            sonar_dev.map_or("nowhere (they read out of range)".into(), |d| d.to_string())
+        );
+        Ok(StageBody {
+            _clients: clients,
+            position,
+            sonar,
+            sent: None,
+            origin: troupe_geom::Pose::default(),
+        })
+    }
+
+    fn pose(&self) -> troupe_geom::Pose {
+        self.position
+            .data()
+            .map(|d| d.pose.into())
+            .unwrap_or_default()
+    }
+}
+
+impl troupe_geom::Body for StageBody {
+    fn drive(&mut self, v: f64, w: f64, _dt: f64) {
+        if self.sent != Some((v, w)) {
+            match self.position.set_speed(v, w) {
+                Ok(()) => self.sent = Some((v, w)),
+                Err(e) => tracing::warn!("driving {}: {e}", self.position.device()),
+            }
+        }
+    }
+
+    fn odometry(&self) -> troupe_geom::Pose {
+        self.origin.inverse().compose(&self.pose())
+    }
+
+    fn reset_odometry(&mut self) {
+        self.origin = self.pose();
+    }
+
+    fn stalled(&self) -> bool {
+        self.position.stall()
+    }
+
+    fn range(&mut self, index: usize, _sensor: troupe_geom::Pose, max: f64) -> f64 {
+        let r = match &self.sonar {
+            Some(Ranges::Sonar(s)) => s.range(index),
+            Some(Ranges::Ranger(r)) => r.range(index),
+            None => None,
+        };
+        r.unwrap_or(max).min(max)
+    }
+}
+
+/// The body of an emulated robot: a Stage model, or the built-in room.
+fn body(
+    a: &EmulateArgs,
+    z: &troupe_node::ZenohArgs,
+    room: troupe_geom::DiffDrive,
+) -> anyhow::Result<Box<dyn troupe_geom::Body>> {
+    Ok(match &a.stage_model {
+        Some(model) => Box::new(StageBody::connect(z, model, &a.stage_sim)?),
+        None => Box::new(room),
+    })
+}
+
 /// Runs the emulator until SIGINT or SIGTERM.
 pub fn run(a: EmulateArgs, z: &troupe_node::ZenohArgs) -> anyhow::Result<()> {
     let faults = Faults {
@@ -137,6 +284,15 @@ pub fn run(a: EmulateArgs, z: &troupe_node::ZenohArgs) -> anyhow::Result<()> {
         unplug_after: seconds("unplug-after", a.unplug_after)?,
         replug_after: seconds("replug-after", a.replug_after)?,
     };
+    match (a.device, &a.stage_laser, &a.stage_model) {
+        (Emulated::Sicklms200, _, Some(_)) => {
+            anyhow::bail!("--stage-model is for the robots (p2os, erratic); a sicklms200 takes its ranges from --stage-laser ADDR")
+        }
+        (Emulated::P2os | Emulated::Erratic, Some(_), _) => {
+            anyhow::bail!("--stage-laser is for a sicklms200; a robot is backed by a Stage model with --stage-model NAME")
+        }
+        _ => {}
+    }
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
     let rt = tokio::runtime::Builder::new_current_thread()
@@ -189,7 +345,8 @@ pub fn run(a: EmulateArgs, z: &troupe_node::ZenohArgs) -> anyhow::Result<()> {
                 subclass: a.subclass.clone(),
                 name: "Troupe".into(),
             };
-            emulator::run_with(&opts, &stop, || {
+            let mut body = body(&a, z, emulator::room())?;
+            emulator::run_with(&opts, body.as_mut(), &stop, || {
                 banner("p2os", &a.link);
                 tracing::info!("a Pioneer {} emulated; Ctrl-C stops it", a.subclass);
             })
@@ -203,7 +360,8 @@ pub fn run(a: EmulateArgs, z: &troupe_node::ZenohArgs) -> anyhow::Result<()> {
                 seed: a.seed,
                 revision: a.revision.clone(),
             };
-            emulator::run_with(&opts, &stop, || {
+            let mut body = body(&a, z, emulator::room())?;
+            emulator::run_with(&opts, body.as_mut(), &stop, || {
                 banner("erratic", &a.link);
                 tracing::info!("an Erratic {} emulated; Ctrl-C stops it", a.revision);
             })

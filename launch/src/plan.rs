@@ -372,7 +372,16 @@ pub fn from_cfg(file: &CfgFile, source: &Path, robot: u32, report: &mut Report) 
             let mut out = Vec::new();
             let mut host = None;
             for text in list {
-                match text.trim().parse::<DevAddr>() {
+                let text = text.trim();
+                let parsed = text.parse::<DevAddr>().or_else(|e| {
+                    let fixed = troupe_msgs::addr::player3_spelling(text).ok_or(e)?;
+                    report.warnings.push(format!(
+                        "{}: {field}: `{text}` uses a Player 2 interface name; read as `{fixed}`",
+                        f.pos
+                    ));
+                    fixed.parse::<DevAddr>()
+                });
+                match parsed {
                     Ok(a) => {
                         if a.host.is_some() {
                             host = a.host.clone();

@@ -114,16 +114,38 @@ impl FromStr for Interface {
     }
 }
 
+/// Player 2 interface names that Player 3 renamed: the new name, and
+/// whether the old one means the same thing (so an address can be read
+/// with the new name) or only something close.
+fn renamed(s: &str) -> Option<(&'static str, bool)> {
+    match s {
+        "position" => Some(("position2d", true)),
+        "sound" => Some(("audio", true)),
+        "truth" => Some(("simulation", false)),
+        "laser3d" | "pointcloud" => Some(("pointcloud3d", false)),
+        _ => None,
+    }
+}
+
+/// `text` with a Player 2 interface name that Player 3 only renamed
+/// (`sound:0`, `position:1`) spelled the Player 3 way (`audio:0`), or
+/// `None` when there is nothing to rename. Player's own sample cfgs still
+/// carry such names; a translator reads them this way, with a warning.
+pub fn player3_spelling(text: &str) -> Option<String> {
+    let mut fields: Vec<&str> = text.split(':').collect();
+    let n = fields.len();
+    let interface = fields.get_mut(n.checked_sub(2)?)?;
+    let (new, same) = renamed(interface)?;
+    if !same {
+        return None;
+    }
+    *interface = new;
+    Some(fields.join(":"))
+}
+
 /// Player 2 names that Player 3 renamed, so an old cfg gets a useful hint.
 fn interface_hint(s: &str) -> String {
-    let renamed = match s {
-        "position" => Some("position2d"),
-        "sound" => Some("audio"),
-        "truth" => Some("simulation"),
-        "laser3d" | "pointcloud" => Some("pointcloud3d"),
-        _ => None,
-    };
-    if let Some(new) = renamed {
+    if let Some((new, _)) = renamed(s) {
         return format!("`{s}` is a Player 2 interface; Player 3 calls it `{new}`");
     }
     let close: Vec<&str> = Interface::ALL
@@ -372,6 +394,19 @@ mod tests {
 
     fn p(s: &str) -> DevAddr {
         s.parse().unwrap()
+    }
+
+    #[test]
+    fn player2_names_that_were_only_renamed_are_spelled_the_player3_way() {
+        assert_eq!(player3_spelling("sound:0").as_deref(), Some("audio:0"));
+        assert_eq!(
+            player3_spelling("odometry:::position:0").as_deref(),
+            Some("odometry:::position2d:0")
+        );
+        // `truth` became a different interface; nothing to rename in `laser`.
+        assert_eq!(player3_spelling("truth:0"), None);
+        assert_eq!(player3_spelling("laser:0"), None);
+        assert_eq!(player3_spelling("sound"), None);
     }
 
     #[test]

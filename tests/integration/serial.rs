@@ -403,3 +403,129 @@ fn an_emulated_lms200_backed_by_stage_sees_the_simulated_world() {
     launcher.terminate();
     emu.terminate();
 }
+
+/// The whole robot path in a simulated world: `troupe emulate p2os
+/// --stage-model r0` is Stage's r0 (on robot port 6666) to the p2os driver
+/// (on 6665). A client on 6665 drives through p2os → serial → emulator →
+/// Stage, and reads r0's sonars and odometry back the same way; the
+/// gripper's paddles close through the same line.
+#[test]
+fn an_emulated_pioneer_backed_by_stage_drives_the_simulated_robot() {
+    use troupe_client::{GripperProxy, Position2dProxy, RangerProxy, SonarProxy};
+    let rig = Rig::new("p2os-stage");
+    let link = rig.dir.join("p2os");
+    let world = Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/simple.world");
+    let cfg = rig.cfg(&format!(
+        "driver ( name \"stage\" provides [\"6666:simulation:0\"] worldfile \"{}\" )\n\
+         driver ( name \"stage\" provides [\"6666:position2d:0\" \"6666:ranger:0\"] model \"r0\" )\n\
+         driver ( name \"p2os\" provides [\"odometry:::position2d:0\" \"sonar:0\" \"gripper:::gripper:0\"] port \"{}\" )\n",
+        world.display(),
+        link.display()
+    ));
+    let ns = troupe_tests::unique_namespace("p2os-stage");
+    let mut launcher = troupe_tests::launch(&ns, &cfg, &["--no-bridge"]);
+    let endpoint = launcher.endpoint("troupe launch: router listening on");
+    let sim = Client::with_session(client_at(&endpoint, &ns), 6666);
+    let truth = Position2dProxy::new(&sim, 0).unwrap();
+    let stage_sonar = RangerProxy::new(&sim, 0).unwrap();
+    // Stage is up once r0 reports.
+    let deadline = Instant::now() + DEADLINE;
+    while truth.data().is_none() {
+        assert!(Instant::now() < deadline, "no Stage: {}", launcher.stderr());
+        let _ = sim.read_timeout(DEADLINE);
+    }
+    let mut args = strings(&["--connect", &endpoint, "--namespace", &ns, "--no-multicast"]);
+    args.extend(strings(&[
+        "emulate",
+        "p2os",
+        "--link",
+        link.to_str().unwrap(),
+        "--stage-model",
+        "r0",
+        "--stage-sim",
+        "6666:simulation:0",
+    ]));
+    let mut emu = Proc::troupe("emulate", &args);
+    let line = emu.first_line();
+    assert!(
+        line.starts_with("troupe emulate: "),
+        "{line:?} {}",
+        emu.stderr()
+    );
+
+    let client = Client::with_session(client_at(&endpoint, &ns), 6665);
+    let base = Position2dProxy::new(&client, 0).unwrap();
+    let sonar = SonarProxy::new(&client, 0).unwrap();
+    let gripper = GripperProxy::new(&client, 0).unwrap();
+    let fail = |what: &str, emu: &mut Proc, launcher: &mut Proc| -> ! {
+        emu.terminate();
+        panic!("{what}\n{}\n{}", emu.stderr(), launcher.stderr());
+    };
+
+    // The sonars through the serial line are Stage's, to the millimetre
+    // (r1 wanders and may pass through a beam: most, not all, agree).
+    let deadline = Instant::now() + DEADLINE * 2;
+    loop {
+        if Instant::now() >= deadline {
+            let seen = format!("{:?} vs {:?}", sonar.count(), stage_sonar.ranges());
+            fail(
+                &format!("sonars never matched: {seen}"),
+                &mut emu,
+                &mut launcher,
+            );
+        }
+        let _ = client.read_timeout(DEADLINE);
+        let stage = stage_sonar.ranges();
+        if sonar.count() != 16 || stage.len() != 16 {
+            continue;
+        }
+        let agree = (0..16)
+            .filter(|&i| sonar.range(i).is_some_and(|r| (r - stage[i]).abs() < 0.002))
+            .count();
+        if agree >= 14 {
+            break;
+        }
+    }
+
+    // Drive forward through p2os: Stage's r0 moves, and the odometry that
+    // comes back over the line moved as far.
+    let start = truth.data().unwrap().pose;
+    let odom0 = base.x();
+    base.set_motor_enable(true).unwrap();
+    base.set_speed(0.3, 0.0).unwrap();
+    gripper.close().unwrap();
+    let deadline = Instant::now() + DEADLINE * 2;
+    loop {
+        if Instant::now() >= deadline {
+            fail("r0 did not move 0.5 m", &mut emu, &mut launcher);
+        }
+        let _ = client.read_timeout(DEADLINE);
+        let p = truth.data().unwrap().pose;
+        if (p.x - start.x).hypot(p.y - start.y) >= 0.5 && base.x() - odom0 >= 0.5 {
+            break;
+        }
+    }
+    base.set_speed(0.0, 0.0).unwrap();
+    let moved = |p: troupe_msgs::Pose2d| (p.x - start.x).hypot(p.y - start.y);
+    let deadline = Instant::now() + DEADLINE;
+    loop {
+        if Instant::now() >= deadline {
+            fail("r0 did not stop", &mut emu, &mut launcher);
+        }
+        let _ = client.read_timeout(DEADLINE);
+        let (p, v) = (truth.data().unwrap(), base.data().unwrap());
+        if p.vel.x == 0.0
+            && v.vel.x == 0.0
+            && gripper.state() == troupe_msgs::gripper::State::Closed
+        {
+            // Stopped on both sides: the serial odometry agrees with Stage's
+            // travel to the counters' resolution (and one SIP of lag).
+            let serial = v.pose.x - odom0;
+            if (serial - moved(p.pose)).abs() < 0.01 {
+                break;
+            }
+        }
+    }
+    launcher.terminate();
+    emu.terminate();
+}

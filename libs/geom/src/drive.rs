@@ -64,6 +64,47 @@ impl DiffDrive {
     }
 }
 
+/// The body an emulated robot drives: a room of its own ([`DiffDrive`]) or
+/// a robot in a simulator. The emulator turns wheel commands into `drive`
+/// calls and reads its packets' odometry, stall and ranges from here.
+pub trait Body {
+    /// Drives at `v` m/s and `w` rad/s for `dt` s (a simulator may keep
+    /// its own time: `dt` is the emulator's cycle).
+    fn drive(&mut self, v: f64, w: f64, dt: f64);
+    /// The motion since the last [`Body::reset_odometry`].
+    fn odometry(&self) -> Pose;
+    /// Odometry back to zero.
+    fn reset_odometry(&mut self);
+    /// The robot is pushing against something.
+    fn stalled(&self) -> bool;
+    /// The range seen by sensor `index` (a sonar), at `sensor` in the
+    /// robot's frame, out to `max` m.
+    fn range(&mut self, index: usize, sensor: Pose, max: f64) -> f64;
+}
+
+impl Body for DiffDrive {
+    fn drive(&mut self, v: f64, w: f64, dt: f64) {
+        self.step(v, w, dt);
+    }
+
+    fn odometry(&self) -> Pose {
+        self.odometry
+    }
+
+    fn reset_odometry(&mut self) {
+        DiffDrive::reset_odometry(self);
+    }
+
+    fn stalled(&self) -> bool {
+        self.stalled
+    }
+
+    fn range(&mut self, _index: usize, sensor: Pose, max: f64) -> f64 {
+        let at = self.pose.compose(&sensor);
+        crate::ray_to_box(at.x, at.y, at.yaw, self.room).min(max)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -19,7 +19,7 @@ pub mod occmap;
 mod odometry;
 mod pose;
 
-pub use drive::DiffDrive;
+pub use drive::{Body, DiffDrive};
 pub use grid::{Grid, Hit, Lattice, EMPTY};
 pub use occmap::OccMap;
 pub use odometry::Odometry;

@@ -8,12 +8,15 @@
 //! and the floor IR bits) when those are on. It obeys ENABLE, VEL, RVEL,
 //! VEL2, STOP, CLOSE and the servos, takes the settings Player sends and
 //! ignores them, and stops its wheels when nothing arrives for 2 s.
+//!
+//! The robot lives in a [`Body`]: the room by default ([`room`]), or any
+//! other, such as a robot in a simulator.
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use troupe_geom::{ray_to_box, DiffDrive};
+use troupe_geom::{Body, DiffDrive, Pose};
 use troupe_serial::{EmuLine, Faults, Framer, LineEvent};
 
 use crate::packet::{self, argument, cmd, Motor, PacketCodec};
@@ -25,6 +28,11 @@ pub const CYCLE: Duration = Duration::from_millis(100);
 pub const WATCHDOG: Duration = Duration::from_secs(2);
 const ROOM: (f64, f64, f64, f64) = (-4.0, 4.0, -3.0, 3.0);
 const RADIUS: f64 = 0.22;
+
+/// The emulator's own world: a robot in the middle of an 8 m × 6 m room.
+pub fn room() -> DiffDrive {
+    DiffDrive::new(ROOM, RADIUS)
+}
 
 /// What the emulator is told.
 #[derive(Debug, Clone)]
@@ -57,7 +65,8 @@ struct Robot {
     enabled: bool,
     sonar: bool,
     analog: bool,
-    body: DiffDrive,
+    /// The last step stalled.
+    stalled: bool,
     left: f64,
     right: f64,
     servos: [u16; 3],
@@ -71,7 +80,7 @@ impl Robot {
             enabled: false,
             sonar: false,
             analog: false,
-            body: DiffDrive::new(ROOM, RADIUS),
+            stalled: false,
             left: 0.0,
             right: 0.0,
             servos: [1650; 3],
@@ -85,27 +94,28 @@ impl Robot {
     }
 
     fn wheels(&self) -> (f64, f64) {
-        if self.enabled && !self.body.stalled {
+        if self.enabled && !self.stalled {
             (self.left, self.right)
         } else {
             (0.0, 0.0)
         }
     }
 
-    fn step(&mut self, dt: f64) {
+    /// Moves `body` for `dt`.
+    fn step(&mut self, body: &mut dyn Body, dt: f64) {
         let (l, r) = if self.enabled {
             (self.left, self.right)
         } else {
             (0.0, 0.0)
         };
-        self.body
-            .step((l + r) / 2.0 / 1000.0, (r - l) * DIFF_CONV / 2.0, dt);
+        body.drive((l + r) / 2.0 / 1000.0, (r - l) * DIFF_CONV / 2.0, dt);
+        self.stalled = body.stalled();
     }
 
-    fn motor(&self) -> Motor {
+    fn motor(&self, body: &dyn Body) -> Motor {
         let counter =
             |m: f64| ((m * 1000.0 / self.params.dist_conv).round() as i64).rem_euclid(4096) as u16;
-        let o = self.body.odometry;
+        let o = body.odometry();
         let (l, r) = self.wheels();
         Motor {
             kind: if l != 0.0 || r != 0.0 { 0x83 } else { 0x82 },
@@ -115,21 +125,18 @@ impl Robot {
             lvel: (l / VEL_CONV).round() as i16,
             rvel: (r / VEL_CONV).round() as i16,
             battery: 125,
-            lstall: u8::from(self.body.stalled),
-            rstall: u8::from(self.body.stalled),
+            lstall: u8::from(self.stalled),
+            rstall: u8::from(self.stalled),
         }
     }
 
-    fn sonar(&self) -> Vec<(u8, u16)> {
-        let p = self.body.pose;
+    fn sonar(&self, body: &mut dyn Body) -> Vec<(u8, u16)> {
         self.params
             .sonars
             .iter()
             .enumerate()
             .map(|(i, &(sx, sy, sa))| {
-                let wx = p.x + sx * p.yaw.cos() - sy * p.yaw.sin();
-                let wy = p.y + sx * p.yaw.sin() + sy * p.yaw.cos();
-                let d = ray_to_box(wx, wy, p.yaw + sa.to_radians(), ROOM).min(5.0);
+                let d = body.range(i, Pose::new(sx, sy, sa.to_radians()), 5.0);
                 (i as u8, (d * 1000.0).round() as u16)
             })
             .collect()
@@ -144,6 +151,7 @@ impl Robot {
 /// An unknown revision, or a pseudo-terminal that cannot be opened or linked.
 pub fn run_with(
     opts: &EmulatorOptions,
+    body: &mut dyn Body,
     stop: &AtomicBool,
     linked: impl FnOnce(),
 ) -> std::io::Result<EmulatorStats> {
@@ -157,6 +165,7 @@ pub fn run_with(
     linked();
     let baud = 38400;
     let mut robot = Robot::power_up(params);
+    body.reset_odometry();
     let mut framer = Framer::new(PacketCodec);
     let mut stats = EmulatorStats::default();
     let mut next = Instant::now();
@@ -168,11 +177,12 @@ pub fn run_with(
                 framer.push(&buf[..n]);
                 while let Some(p) = framer.next_frame() {
                     stats.packets += 1;
-                    obey(&mut robot, &p, &mut line, baud, &mut stats)?;
+                    obey(&mut robot, body, &p, &mut line, baud, &mut stats)?;
                 }
             }
             LineEvent::Replugged => {
                 robot = Robot::power_up(params);
+                body.reset_odometry();
                 framer.clear();
             }
             LineEvent::Idle | LineEvent::Unplugged => {}
@@ -190,11 +200,11 @@ pub fn run_with(
             robot.left = 0.0;
             robot.right = 0.0;
         }
-        robot.step(CYCLE.as_secs_f64());
-        line.send(&robot.motor().encode(), baud)?;
+        robot.step(body, CYCLE.as_secs_f64());
+        line.send(&robot.motor(body).encode(), baud)?;
         stats.motor += 1;
         if robot.sonar {
-            line.send(&packet::encode_sonar(&robot.sonar()), baud)?;
+            line.send(&packet::encode_sonar(&robot.sonar(body)), baud)?;
         }
         if robot.analog {
             // Four ADC channels at a quarter of the range; floor under both IR sensors.
@@ -219,6 +229,7 @@ pub fn run_with(
 
 fn obey(
     robot: &mut Robot,
+    body: &mut dyn Body,
     p: &[u8],
     line: &mut EmuLine,
     baud: u32,
@@ -239,6 +250,7 @@ fn obey(
         cmd::CLOSE => {
             tracing::info!("closed by the client");
             *robot = Robot::power_up(robot.params);
+            body.reset_odometry();
         }
         cmd::ENABLE => robot.enabled = argument(p) != 0,
         cmd::SONAR => robot.sonar = argument(p) != 0,
@@ -276,15 +288,16 @@ mod tests {
 
     #[test]
     fn motor_packets_report_odometry_and_speeds() {
+        let mut room = room();
         let mut r = Robot::power_up(params::find("Rev H").unwrap());
         r.enabled = true;
         r.wheels_from(300.0, 0.0);
         for _ in 0..10 {
-            r.step(0.1);
+            r.step(&mut room, 0.1);
         }
-        let m = r.motor();
+        let m = r.motor(&room);
         // 0.3 m at 0.930 mm per tick; 300 mm/s at 1.20482 mm/s per unit.
         assert_eq!((m.kind, m.x, m.lvel, m.rvel), (0x83, 323, 249, 249));
-        assert_eq!(r.sonar().len(), 8);
+        assert_eq!(r.sonar(&mut room).len(), 8);
     }
 }

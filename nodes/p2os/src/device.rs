@@ -49,6 +49,8 @@ pub struct Settings {
     pub pulse: Option<Duration>,
     /// BUMP_STALL setting 0–3 (Player's `bumpstall`), if any.
     pub bumpstall: Option<u8>,
+    /// Ask for gyro packets (a `gyro:::position2d` is provided).
+    pub gyro: bool,
 }
 
 /// What the line thread tells the driver.
@@ -65,6 +67,8 @@ pub enum Update {
     },
     /// A standard SIP.
     Sip(Sip),
+    /// A gyro packet's mean rate (0–1023, 512 still).
+    Gyro(u16),
     /// The session ended; the thread retries after [`RECONNECT_DELAY`].
     Lost(String),
 }
@@ -85,6 +89,8 @@ pub enum Order {
     ResetOdom,
     /// VEL2 (true) or VEL + RVEL (false).
     DirectWheel(bool),
+    /// GRIPPER with one of [`packet::grip`]'s arguments.
+    Gripper(i32),
     /// STOP, CLOSE and end.
     Stop,
 }
@@ -259,7 +265,10 @@ impl Session<'_> {
             i32::from(self.settings.sonar),
         ))?;
         if let Some(b) = self.settings.bumpstall {
-            self.send(&packet::command_int(44, i32::from(b)))?;
+            self.send(&packet::command_int(cmd::BUMP_STALL, i32::from(b)))?;
+        }
+        if self.settings.gyro {
+            self.send(&packet::command_int(cmd::GYRO, 1))?;
         }
         let baud = self.link.port.baud();
         send(Update::Ready {
@@ -313,6 +322,10 @@ impl Session<'_> {
                     last_sip = Instant::now();
                     self.forward(&d, send);
                 }
+                Some(d) if d.first() == Some(&packet::GYROPAC) => match packet::parse_gyro(&d) {
+                    Ok(rate) => send(Update::Gyro(rate)),
+                    Err(e) => tracing::warn!("gyro packet dropped: {e}"),
+                },
                 Some(d) => tracing::debug!(
                     "ignored packet type 0x{:02X}",
                     d.first().copied().unwrap_or(0)
@@ -343,6 +356,7 @@ impl Session<'_> {
                 }
                 Ok(())
             }
+            Order::Gripper(arg) => self.send(&packet::command_int(cmd::GRIPPER, arg)),
             Order::Stop => Ok(()),
         }
     }
@@ -383,6 +397,7 @@ mod tests {
             vel_band: false,
             pulse: None,
             bumpstall: None,
+            gyro: false,
         }
     }
 

@@ -7,12 +7,17 @@
 //! battery, stall bits and, when on, its sonar ring's ranges to the walls.
 //! It obeys ENABLE, SETO, VEL2, VEL/RVEL, SONAR, STOP and CLOSE, and
 //! stops the wheels when nothing arrives for 2 s, as ARCOS's watchdog does.
+//! It has a gripper (GRIPPER open, close, stop: the paddles take a second
+//! to move) and a gyro (GYRO on: a gyro packet after each SIP).
+//!
+//! The robot lives in a [`Body`]: the room by default ([`room`]), or any
+//! other, such as a robot in a simulator.
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use troupe_geom::DiffDrive;
+use troupe_geom::{Body, DiffDrive, Pose};
 use troupe_serial::{EmuLine, Faults, Framer, LineEvent};
 
 use crate::packet::{self, cmd, PacketCodec, Sip};
@@ -28,6 +33,45 @@ const ROOM: (f64, f64, f64, f64) = (-4.0, 4.0, -3.0, 3.0);
 const RADIUS: f64 = 0.25;
 /// The sonars' reach, m.
 const SONAR_MAX: f64 = 5.0;
+/// How long the gripper's paddles take to open or close.
+const PADDLES: Duration = Duration::from_secs(1);
+
+/// The emulator's own world: a robot in the middle of an 8 m × 6 m room.
+pub fn room() -> DiffDrive {
+    DiffDrive::new(ROOM, RADIUS)
+}
+
+/// The gripper's paddles, as the SIP reports them (Player's bits).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Paddles {
+    Open,
+    Closed,
+    /// Moving; open (`true`) or closed after this many more cycles.
+    Moving(bool, u32),
+    /// Stopped between open and closed.
+    Halted,
+}
+
+impl Paddles {
+    /// The state byte: 0x01 open, 0x02 closed, 0x04 moving.
+    fn bits(self) -> u8 {
+        match self {
+            Paddles::Open => 0x01,
+            Paddles::Closed => 0x02,
+            Paddles::Moving(..) => 0x04,
+            Paddles::Halted => 0x00,
+        }
+    }
+
+    fn step(self) -> Paddles {
+        match self {
+            Paddles::Moving(true, 0) => Paddles::Open,
+            Paddles::Moving(false, 0) => Paddles::Closed,
+            Paddles::Moving(open, n) => Paddles::Moving(open, n - 1),
+            other => other,
+        }
+    }
+}
 
 /// What the emulator is told.
 #[derive(Debug, Clone)]
@@ -67,11 +111,13 @@ struct Robot {
     state: State,
     enabled: bool,
     sonar: bool,
-    /// The robot in its room; odometry since the last SETO.
-    body: DiffDrive,
+    gyro: bool,
+    paddles: Paddles,
     /// Wheel speeds commanded, mm/s.
     left: f64,
     right: f64,
+    /// The body's turn rate in the last step, rad/s.
+    turning: f64,
 }
 
 impl Robot {
@@ -81,9 +127,11 @@ impl Robot {
             state: State::Unsynced,
             enabled: false,
             sonar: false,
-            body: DiffDrive::new(ROOM, RADIUS),
+            gyro: false,
+            paddles: Paddles::Open,
             left: 0.0,
             right: 0.0,
+            turning: 0.0,
         }
     }
 
@@ -93,8 +141,8 @@ impl Robot {
         self.right = speed + rot;
     }
 
-    /// Moves for `dt`, stalling at the walls.
-    fn step(&mut self, dt: f64) {
+    /// Moves `body` for `dt`.
+    fn step(&mut self, body: &mut dyn Body, dt: f64) {
         let (l, r) = if self.enabled {
             (self.left, self.right)
         } else {
@@ -102,55 +150,69 @@ impl Robot {
         };
         let v = (l + r) / 2.0 / 1000.0;
         let w = (r - l) * self.params.diff_conv / 2.0;
-        self.body.step(v, w, dt);
+        body.drive(v, w, dt);
+        self.turning = if body.stalled() { 0.0 } else { w };
+        self.paddles = self.paddles.step();
     }
 
-    fn sip(&self) -> Sip {
+    /// One gyro reading: 512 when still, less when turning
+    /// counter-clockwise, one unit per degree per second.
+    fn gyro_packet(&self) -> Vec<u8> {
+        let rate = (512.0 - self.turning.to_degrees())
+            .round()
+            .clamp(0.0, 1023.0) as u16;
+        packet::gyro_packet(&[(rate, 30)])
+    }
+
+    fn sip(&self, body: &mut dyn Body) -> Sip {
         let p = self.params;
         let counter = |m: f64| ((m * 1000.0 / p.dist_conv).round() as i64).rem_euclid(32768) as u16;
-        let th =
-            ((self.body.odometry.yaw / p.angle_conv).round() as i64 + 2048).rem_euclid(4096) - 2048;
+        let odometry = body.odometry();
+        let stalled = body.stalled();
+        let th = ((odometry.yaw / p.angle_conv).round() as i64 + 2048).rem_euclid(4096) - 2048;
         let (l, r) = if self.enabled {
             (self.left, self.right)
         } else {
             (0.0, 0.0)
         };
-        let (l, r) = if self.body.stalled {
-            (0.0, 0.0)
-        } else {
-            (l, r)
-        };
+        let (l, r) = if stalled { (0.0, 0.0) } else { (l, r) };
         let sonars = if self.sonar {
-            let (x, y, a) = (self.body.pose.x, self.body.pose.y, self.body.pose.yaw);
             p.sonars
                 .iter()
                 .enumerate()
                 .map(|(i, &(sx, sy, sa))| {
-                    let (sx, sy) = (f64::from(sx) / 1000.0, f64::from(sy) / 1000.0);
-                    let wx = x + sx * a.cos() - sy * a.sin();
-                    let wy = y + sx * a.sin() + sy * a.cos();
-                    let d = troupe_geom::ray_to_box(wx, wy, a + f64::from(sa).to_radians(), ROOM)
-                        .min(SONAR_MAX);
+                    let at = Pose::new(
+                        f64::from(sx) / 1000.0,
+                        f64::from(sy) / 1000.0,
+                        f64::from(sa).to_radians(),
+                    );
+                    let d = body.range(i, at, SONAR_MAX);
                     (i as u8, (d * 1000.0 / p.range_conv).round() as u16)
                 })
                 .collect()
         } else {
             Vec::new()
         };
+        let paddles = self.paddles.bits();
         Sip {
             kind: if l != 0.0 || r != 0.0 { 0x33 } else { 0x32 },
-            xpos: counter(self.body.odometry.x),
-            ypos: counter(self.body.odometry.y),
+            xpos: counter(odometry.x),
+            ypos: counter(odometry.y),
             th: th as i16,
             lvel: (l / p.vel_conv).round() as i16,
             rvel: (r / p.vel_conv).round() as i16,
             battery: 123,
-            lstall: u8::from(self.body.stalled),
-            rstall: u8::from(self.body.stalled),
+            lstall: u8::from(stalled),
+            rstall: u8::from(stalled),
             control: 0,
             flags: u16::from(self.enabled),
             compass: 0,
             sonars,
+            // ARCOS reports the gripper in the byte after the sonars;
+            // Player's driver reads the one after that (the high byte of
+            // P2OS's timer word). Both carry it, so both readers agree.
+            grip: paddles,
+            anport: paddles,
             ..Sip::default()
         }
     }
@@ -164,6 +226,7 @@ impl Robot {
 /// An unknown subclass, or a pseudo-terminal that cannot be opened or linked.
 pub fn run_with(
     opts: &EmulatorOptions,
+    body: &mut dyn Body,
     stop: &AtomicBool,
     linked: impl FnOnce(),
 ) -> std::io::Result<EmulatorStats> {
@@ -180,6 +243,7 @@ pub fn run_with(
     // A Pioneer's serial port speaks 9600 baud unless its FLASH says otherwise.
     let baud = 9600;
     let mut robot = Robot::power_up(params);
+    body.reset_odometry();
     let mut framer = Framer::new(PacketCodec);
     let mut stats = EmulatorStats::default();
     let mut next_sip = Instant::now();
@@ -193,11 +257,12 @@ pub fn run_with(
                 framer.push(&buf[..n]);
                 while let Some(p) = framer.next_frame() {
                     stats.packets += 1;
-                    obey(&mut robot, &p, &mut line, baud, opts)?;
+                    obey(&mut robot, body, &p, &mut line, baud, opts)?;
                 }
             }
             LineEvent::Replugged => {
                 robot = Robot::power_up(params);
+                body.reset_odometry();
                 framer.clear();
             }
             LineEvent::Idle | LineEvent::Unplugged => {}
@@ -209,9 +274,12 @@ pub fn run_with(
                 robot.left = 0.0;
                 robot.right = 0.0;
             }
-            robot.step(CYCLE.as_secs_f64());
-            line.send(&robot.sip().encode(), baud)?;
+            robot.step(body, CYCLE.as_secs_f64());
+            line.send(&robot.sip(body).encode(), baud)?;
             stats.sips += 1;
+            if robot.gyro {
+                line.send(&robot.gyro_packet(), baud)?;
+            }
             next_sip += CYCLE;
             if next_sip < now {
                 next_sip = now + CYCLE;
@@ -228,7 +296,7 @@ pub fn run_with(
         dropped = line.injected.dropped,
         corrupted = line.injected.corrupted,
         truncated = line.injected.truncated,
-        pose = ?robot.body.pose,
+        odometry = ?body.odometry(),
         "emulated p2os robot stopped"
     );
     Ok(stats)
@@ -236,6 +304,7 @@ pub fn run_with(
 
 fn obey(
     robot: &mut Robot,
+    body: &mut dyn Body,
     p: &[u8],
     line: &mut EmuLine,
     baud: u32,
@@ -275,7 +344,23 @@ fn obey(
             Ok(())
         }
         (State::Open, cmd::SETO) => {
-            robot.body.reset_odometry();
+            body.reset_odometry();
+            Ok(())
+        }
+        (State::Open, cmd::GYRO) => {
+            robot.gyro = packet::argument(p) != 0;
+            Ok(())
+        }
+        (State::Open, cmd::GRIPPER) => {
+            let cycles = (PADDLES.as_millis() / CYCLE.as_millis()) as u32;
+            robot.paddles = match packet::argument(p) {
+                packet::grip::OPEN => Paddles::Moving(true, cycles),
+                packet::grip::CLOSE => Paddles::Moving(false, cycles),
+                packet::grip::STOP if matches!(robot.paddles, Paddles::Moving(..)) => {
+                    Paddles::Halted
+                }
+                _ => robot.paddles,
+            };
             Ok(())
         }
         (State::Open, cmd::SONAR) => {
@@ -312,22 +397,43 @@ mod tests {
 
     #[test]
     fn sips_report_odometry_speeds_and_stall() {
+        let mut room = room();
         let mut r = Robot::power_up(params::find("p3dx").unwrap());
         r.enabled = true;
         r.wheels_from(500.0, 0.0);
         for _ in 0..10 {
-            r.step(0.1);
+            r.step(&mut room, 0.1);
         }
-        let sip = r.sip();
+        let sip = r.sip(&mut room);
         // 0.5 m at 0.485 mm per tick.
         assert_eq!(
             (sip.kind, sip.xpos, sip.lvel, sip.rvel),
             (0x33, 1031, 500, 500)
         );
         for _ in 0..200 {
-            r.step(0.1);
+            r.step(&mut room, 0.1);
         }
-        let sip = r.sip();
+        let sip = r.sip(&mut room);
         assert_eq!((sip.lstall & 1, sip.lvel), (1, 0));
+    }
+
+    #[test]
+    fn the_gripper_takes_a_second_and_the_gyro_reads_the_turn() {
+        let mut room = room();
+        let mut r = Robot::power_up(params::find("p3dx").unwrap());
+        r.enabled = true;
+        assert_eq!(r.sip(&mut room).anport, 0x01);
+        r.paddles = Paddles::Moving(false, 10);
+        for _ in 0..10 {
+            r.step(&mut room, 0.1);
+            assert_eq!(r.sip(&mut room).grip, 0x04);
+        }
+        r.step(&mut room, 0.1);
+        assert_eq!(r.sip(&mut room).anport, 0x02);
+        // 30°/s counter-clockwise: 30 units under 512.
+        r.wheels_from(0.0, 30.0);
+        r.step(&mut room, 0.1);
+        let g = r.gyro_packet();
+        assert_eq!(packet::parse_gyro(&g[3..g.len() - 2]), Ok(482));
     }
 }

@@ -8,9 +8,9 @@
 //!
 //! | | |
 //! |---|---|
-//! | provides | `position2d` (the first one, or keyed `odometry`: odometry and velocity commands), `compass:::position2d`, `sonar`, `power`, `bumper`, `aio`, `dio`; accessories Player offered (`gyro:::position2d`, `gripper`, `blobfinder`, `sound`…) are declared and stay silent, with a warning |
+//! | provides | `position2d` (the first one, or keyed `odometry`: odometry and velocity commands), `compass:::position2d`, `gyro:::position2d`, `sonar`, `power`, `bumper`, `aio`, `dio`, `gripper:::gripper`; other accessories Player offered (`blobfinder` of a CMUcam, `audio`, the arm…) are declared and stay silent, with a warning |
 //! | requires | none |
-//! | options | Player's: `port` ("/dev/ttyS0"), `max_xspeed` (0.5 m/s), `max_yawspeed` (100°/s), `direct_wheel_vel_control` (1), `use_vel_band` (0), `pulse` (−1: off), `bumpstall` (−1: leave); Troupe's `watchdog` (2 s) |
+//! | options | Player's: `port` ("/dev/ttyS0"), `max_xspeed` (0.5 m/s), `max_yawspeed` (100°/s), `direct_wheel_vel_control` (1), `use_vel_band` (0), `pulse` (−1: off), `bumpstall` (−1: leave), `gripper_pose` (6 values, m and rad: 0), `gripper_outersize` (0.315 0.195 0.035 m), `gripper_innersize` (0.205 0.095 0.035 m); Troupe's `watchdog` (2 s) |
 //!
 //! # Behavior
 //!
@@ -31,7 +31,16 @@
 //!   for a second; the driver resynchronises every 2 s, logging why.
 //! - Requests: position2d `geom` (Player's pose (−0.1, 0) and the robot's
 //!   size), `motor_power`, `set_odom`, `reset_odom` (SETO), `velocity_mode`;
-//!   sonar `geom` (the subclass's sonar ring); bumper `geom`.
+//!   sonar `geom` (the subclass's sonar ring); bumper `geom`; gripper
+//!   `geom` (the options' pose and sizes, two beams).
+//! - Gyro: with a `gyro:::position2d`, the driver asks for ARCOS's gyro
+//!   packets (GYRO 1) and publishes each packet's mean rate as Player did:
+//!   the raw reading (0–1023, 512 when still) read as degrees in the yaw
+//!   field, so Player clients see the numbers they saw.
+//! - Gripper: `open`, `close`, `stop` commands become GRIPPER 1/2/3; each
+//!   SIP publishes the paddles (open, closed, moving, or error) from the
+//!   byte Player reads and the two break beams from digital inputs 1 and 2
+//!   (Player ANDed those two bits into one that was always 0).
 //! - Differences from Player, on purpose: positions use all 15 bits of the
 //!   counters (Player masked 12 and dropped steps over 100 mm, so above
 //!   1 m/s its odometry lost distance); yaw keeps the counter's resolution
@@ -48,7 +57,8 @@ use std::time::Duration;
 use serde::Deserialize;
 use troupe_geom::{Odometry, Pose};
 use troupe_msgs::{
-    aio, bumper, common, dio, position2d, power, sonar, Device, Interface, Pose2d, Pose3d, Size3d,
+    aio, bumper, common, dio, gripper, position2d, power, sonar, Device, Interface, Pose2d, Pose3d,
+    Size3d,
 };
 use troupe_node::{Ctx, Driver, Event, NodeError, Result, Section, Unit};
 use troupe_serial::CommandWatchdog;
@@ -70,6 +80,9 @@ pub struct Options {
     pub pulse: f64,
     pub bumpstall: i64,
     pub watchdog: f64,
+    pub gripper_pose: [f64; 6],
+    pub gripper_outersize: [f64; 3],
+    pub gripper_innersize: [f64; 3],
 }
 
 impl Default for Options {
@@ -83,6 +96,9 @@ impl Default for Options {
             pulse: -1.0,
             bumpstall: -1,
             watchdog: 2.0,
+            gripper_pose: [0.0; 6],
+            gripper_outersize: [0.315, 0.195, 0.035],
+            gripper_innersize: [0.205, 0.095, 0.035],
         }
     }
 }
@@ -92,12 +108,14 @@ impl Default for Options {
 struct Devices {
     odometry: Option<Device>,
     compass: Option<Device>,
+    gyro: Option<Device>,
+    gripper: Option<Device>,
     sonar: Option<Device>,
     power: Option<Device>,
     bumper: Option<Device>,
     aio: Option<Device>,
     dio: Option<Device>,
-    /// Accessories declared but not served (gyro, gripper, blobfinder…).
+    /// Accessories declared but not served (a CMUcam's blobfinder, sound…).
     silent: Vec<Device>,
 }
 
@@ -111,6 +129,35 @@ pub struct P2os {
     odom: Odometry,
     pose: Pose,
     sonar: Vec<f32>,
+    gripper_geom: gripper::Geom,
+}
+
+fn size([width, length, height]: [f64; 3]) -> Size3d {
+    Size3d {
+        length,
+        width,
+        height,
+    }
+}
+
+/// Player's `FillStandard` gripper: the paddles' state from the high byte
+/// of the SIP's timer word, the two break beams from digital inputs 1 and
+/// 2. (Player ANDed the two input bits together, which is always 0; here
+/// each beam is a bit of its own.)
+fn gripper_data(sip: &Sip) -> gripper::Data {
+    let g = sip.anport;
+    let state = match (g & 0x01 != 0, g & 0x02 != 0, g & 0x04 != 0) {
+        (true, true, false) => gripper::State::Error,
+        (true, _, _) => gripper::State::Open,
+        (false, true, _) => gripper::State::Closed,
+        (false, false, true) => gripper::State::Moving,
+        (false, false, false) => gripper::State::Error,
+    };
+    gripper::Data {
+        state,
+        beams: u32::from((sip.digin >> 1) & 0b11),
+        stored: 0,
+    }
 }
 
 impl Driver for P2os {
@@ -136,6 +183,8 @@ impl Driver for P2os {
             let key = slot.key.as_deref();
             let place = match (d.interface, key) {
                 (Interface::Position2d, Some("compass")) => &mut dev.compass,
+                (Interface::Position2d, Some("gyro")) => &mut dev.gyro,
+                (Interface::Gripper, Some("gripper") | None) => &mut dev.gripper,
                 (Interface::Position2d, Some("odometry") | None) => &mut dev.odometry,
                 (Interface::Sonar, _) => &mut dev.sonar,
                 (Interface::Power, _) => &mut dev.power,
@@ -144,8 +193,8 @@ impl Driver for P2os {
                 (Interface::Dio, _) => &mut dev.dio,
                 _ => {
                     // Player's p2os offered these for optional hardware (a
-                    // gyro, a gripper, a CMUcam, sound) and served nothing
-                    // without it; its sample pioneer.cfg lists them all.
+                    // CMUcam, sound, an arm) and served nothing without it;
+                    // its sample pioneer.cfg lists them all.
                     tracing::warn!(
                         "{d}{}: no support for this p2os accessory yet; the device is declared and stays silent",
                         key.map(|k| format!(" ({k})")).unwrap_or_default()
@@ -172,6 +221,21 @@ impl Driver for P2os {
                 vel_band: o.use_vel_band != 0,
                 pulse: (o.pulse > 0.0).then(|| Duration::from_secs_f64(o.pulse)),
                 bumpstall: u8::try_from(o.bumpstall).ok(),
+                gyro: dev.gyro.is_some(),
+            },
+            gripper_geom: gripper::Geom {
+                pose: Pose3d {
+                    x: o.gripper_pose[0],
+                    y: o.gripper_pose[1],
+                    z: o.gripper_pose[2],
+                    roll: o.gripper_pose[3],
+                    pitch: o.gripper_pose[4],
+                    yaw: o.gripper_pose[5],
+                },
+                outer_size: size(o.gripper_outersize),
+                inner_size: size(o.gripper_innersize),
+                num_beams: 2,
+                capacity: 0,
             },
             dev,
             watchdog: CommandWatchdog::new(o.watchdog),
@@ -210,7 +274,23 @@ impl Driver for P2os {
                 self.order(Order::Vel { speed, turn });
                 Ok(())
             }
+            Event::Command(c) if c.is::<gripper::Open>() => {
+                self.order(Order::Gripper(packet::grip::OPEN));
+                Ok(())
+            }
+            Event::Command(c) if c.is::<gripper::Close>() => {
+                self.order(Order::Gripper(packet::grip::CLOSE));
+                Ok(())
+            }
+            Event::Command(c) if c.is::<gripper::Stop>() => {
+                self.order(Order::Gripper(packet::grip::STOP));
+                Ok(())
+            }
             Event::Command(c) => Err(c.unexpected()),
+            Event::Request(r) if r.is::<gripper::GetGeom>() => {
+                r.reply(&self.gripper_geom);
+                Ok(())
+            }
             Event::Request(r) if r.is::<position2d::GetGeom>() => {
                 let p = self.params.unwrap_or(&params::ROBOTS[0]);
                 r.reply(&position2d::Geom {
@@ -327,6 +407,24 @@ impl P2os {
                     ctx.set_ready(false);
                 }
                 Update::Sip(sip) => self.publish(ctx, &sip)?,
+                Update::Gyro(rate) => {
+                    if let Some(d) = self.dev.gyro {
+                        // Player's `FillGyro`: the raw rate, read as degrees.
+                        let yaw = f64::from(rate).to_radians();
+                        let pose = Pose2d {
+                            x: 0.0,
+                            y: 0.0,
+                            yaw,
+                        };
+                        ctx.publish(
+                            &d,
+                            &position2d::Data {
+                                pose,
+                                ..Default::default()
+                            },
+                        )?;
+                    }
+                }
             }
         }
         Ok(())
@@ -389,6 +487,9 @@ impl P2os {
                     ranges: self.sonar.clone(),
                 },
             )?;
+        }
+        if let Some(d) = self.dev.gripper {
+            ctx.publish(&d, &gripper_data(sip))?;
         }
         if let Some(d) = self.dev.power {
             let volts = f32::from(sip.battery) / 10.0;

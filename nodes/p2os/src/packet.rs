@@ -33,6 +33,62 @@ pub mod cmd {
     pub const STOP: u8 = 29;
     /// VEL2: wheel velocities, low byte right, high byte left, in Vel2Divisor mm/s.
     pub const VEL2: u8 = 32;
+    /// GRIPPER: one of the [`grip`](super::grip) orders.
+    pub const GRIPPER: u8 = 33;
+    /// BUMP_STALL: 0–3, which bumpers stall the robot.
+    pub const BUMP_STALL: u8 = 44;
+    /// GYRO: a gyro packet after each SIP (1) or not (0); ARCOS 1.8.
+    pub const GYRO: u8 = 58;
+}
+
+/// The arguments of GRIPPER that Player sends.
+pub mod grip {
+    /// Open the paddles.
+    pub const OPEN: i32 = 1;
+    /// Close the paddles.
+    pub const CLOSE: i32 = 2;
+    /// Stop the paddles where they are.
+    pub const STOP: i32 = 3;
+}
+
+/// The type byte of a gyro packet.
+pub const GYROPAC: u8 = 0x98;
+
+/// A gyro packet: the readings of one cycle, each a rate in 0–1023
+/// (512: still; below: turning counter-clockwise) and a temperature.
+pub fn gyro_packet(readings: &[(u16, u8)]) -> Vec<u8> {
+    let mut d = vec![GYROPAC, readings.len() as u8];
+    for (rate, temp) in readings {
+        d.extend_from_slice(&rate.to_le_bytes());
+        d.push(*temp);
+    }
+    frame(&d)
+}
+
+/// The mean rate of a gyro packet's data, as Player's `ParseGyro`.
+///
+/// # Errors
+///
+/// [`SipError`] when the packet has no readings or its length does not
+/// match its count.
+pub fn parse_gyro(d: &[u8]) -> Result<u16, SipError> {
+    let (&count, rest) = match d {
+        [GYROPAC, rest @ ..] => rest
+            .split_first()
+            .ok_or_else(|| SipError("gyro packet without a count".into()))?,
+        _ => return Err(SipError("not a gyro packet".into())),
+    };
+    if count == 0 || rest.len() != 3 * usize::from(count) {
+        return Err(SipError(format!(
+            "gyro packet of {} bytes says {count} readings",
+            d.len()
+        )));
+    }
+    let sum: f64 = rest
+        .chunks_exact(3)
+        .map(|r| f64::from(u16::from_le_bytes([r[0], r[1]])))
+        .sum();
+    Ok((sum / f64::from(count)).round() as u16)
 }
 
 /// The robot's answer to SYNC2: name, class, subclass.
@@ -250,6 +306,16 @@ mod tests {
         assert_eq!(sip.sonars, vec![(0, 1000), (1, 500)]);
         assert_eq!(sip.encode(), wire);
         assert_eq!(f.stats.noise, 3);
+    }
+
+    #[test]
+    fn gyro_packets_average_their_readings() {
+        let p = gyro_packet(&[(500, 30), (503, 30)]);
+        assert_eq!(p, hex("FA FB 0A 98 02 F4 01 1E F7 01 1E AC 18"));
+        assert_eq!(parse_gyro(&p[3..p.len() - 2]), Ok(502));
+        assert!(parse_gyro(&[GYROPAC, 2, 0, 2, 30]).is_err());
+        assert!(parse_gyro(&[GYROPAC, 0]).is_err());
+        assert!(parse_gyro(&[0x32]).is_err());
     }
 
     #[test]

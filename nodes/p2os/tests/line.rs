@@ -20,7 +20,7 @@ fn emulate(name: &str, faults: Faults) -> Emulator<EmulatorStats> {
             subclass: "p3dx-sh".into(),
             name: "Troupe".into(),
         };
-        emulator::run_with(&opts, stop, linked)
+        emulator::run_with(&opts, &mut emulator::room(), stop, linked)
     })
     .unwrap()
 }
@@ -35,6 +35,7 @@ fn settings(link: &std::path::Path) -> Settings {
         vel_band: false,
         pulse: None,
         bumpstall: None,
+        gyro: false,
     }
 }
 
@@ -139,4 +140,55 @@ fn faults_are_survived_and_a_mute_robot_is_reported() {
     assert!(why.contains("no answer to SYNC0"), "{why}");
     line.stop(Order::Stop);
     mute.stop().unwrap();
+}
+
+#[test]
+fn the_gripper_and_the_gyro_answer() {
+    let emu = emulate("gripper", Faults::default());
+    let line = device::spawn(
+        Settings {
+            gyro: true,
+            ..settings(emu.link())
+        },
+        Waker::none(),
+    )
+    .unwrap();
+    let rx = line.updates();
+    wait_for(rx, 20, |u| matches!(u, Update::Ready { .. }));
+    // Still: the gyro reads its middle value.
+    wait_for(rx, 5, |u| matches!(u, Update::Gyro(512)));
+    assert!(line.send(Order::Gripper(troupe_p2os::packet::grip::CLOSE)));
+    // Player reads the paddles in the timer word's high byte: moving, then closed.
+    wait_for(rx, 5, |u| sip(u).is_some_and(|s| s.anport == 0x04));
+    wait_for(rx, 5, |u| sip(u).is_some_and(|s| s.anport == 0x02));
+    // Turning counter-clockwise at 30°/s reads under 512.
+    assert!(line.send(Order::Enable(true)));
+    assert!(line.send(Order::Vel { speed: 0, turn: 30 }));
+    wait_for(rx, 5, |u| matches!(u, Update::Gyro(r) if *r < 500));
+    line.stop(Order::Stop);
+    emu.stop().unwrap();
+}
+
+#[test]
+fn an_unplugged_robot_is_lost_then_back() {
+    let emu = emulate(
+        "unplug",
+        Faults {
+            unplug_after: Some(Duration::from_secs(3)),
+            replug_after: Some(Duration::from_secs(1)),
+            ..Faults::default()
+        },
+    );
+    let line = device::spawn(settings(emu.link()), Waker::none()).unwrap();
+    let rx = line.updates();
+    wait_for(rx, 20, |u| matches!(u, Update::Ready { .. }));
+    let Update::Lost(why) = wait_for(rx, 20, |u| matches!(u, Update::Lost(_))) else {
+        unreachable!()
+    };
+    assert!(why.contains("lost") || why.contains("no SIP"), "{why}");
+    // Powered up afresh: the whole handshake again, then SIPs.
+    wait_for(rx, 30, |u| matches!(u, Update::Ready { .. }));
+    wait_for(rx, 10, |u| sip(u).is_some());
+    line.stop(Order::Stop);
+    emu.stop().unwrap();
 }

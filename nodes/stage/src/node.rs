@@ -672,6 +672,30 @@ impl Stage {
         Ok(())
     }
 
+    /// The devices this node serves from model `m` or its sensors, as
+    /// `6665:position2d:0 6665:sonar:0`: how a tool outside (an emulator
+    /// backed by a Stage robot) finds a model's devices by its name.
+    fn devices_of(&self, m: usize) -> String {
+        let tree = self.sim.world.subtree(m);
+        let list: Vec<String> = self
+            .devices
+            .iter()
+            .filter(|(_, src)| match *src {
+                Source::Position { base } => tree.contains(&self.sim.bases[base].model),
+                Source::Ranger { model }
+                | Source::Laser { model }
+                | Source::Sonar { model }
+                | Source::Blobfinder { model }
+                | Source::Fiducial { model }
+                | Source::Gripper { model }
+                | Source::Map { model } => tree.contains(&model),
+                Source::Simulation => false,
+            })
+            .map(|(d, _)| d.to_string())
+            .collect();
+        list.join(" ")
+    }
+
     fn simulation(&mut self, r: troupe_node::Request) -> Result<()> {
         let find = |sim: &Sim, name: &str| sim.world.names.get(name).copied();
         if r.is::<simulation::GetPose2d>() {
@@ -708,8 +732,18 @@ impl Stage {
                         value: simulation::Value::Number(t),
                     })
                 }
+                (Some(m), "devices") => {
+                    let value = simulation::Value::Text(self.devices_of(m));
+                    r.reply(&simulation::Property {
+                        name: q.name,
+                        prop: q.prop,
+                        value,
+                    })
+                }
                 (Some(_), p) => {
-                    let msg = format!("unknown property `{p}` (stage has \"color\" and \"time\")");
+                    let msg = format!(
+                        "unknown property `{p}` (stage has \"color\", \"time\" and \"devices\")"
+                    );
                     r.nack(msg)
                 }
                 (None, _) => r.nack(format!("no model named `{}`", q.name)),
@@ -975,6 +1009,20 @@ mod tests {
                 b: 0.0,
                 a: 1.0
             })
+        );
+        let p = h
+            .request(
+                sim,
+                &simulation::GetProperty {
+                    name: "r0".into(),
+                    prop: "devices".into(),
+                },
+            )
+            .unwrap();
+        let devices = h.reply::<simulation::Property>(p).unwrap().unwrap();
+        assert_eq!(
+            devices.value,
+            simulation::Value::Text("6665:position2d:0 6665:ranger:0 6665:ranger:1".into())
         );
         let p = h
             .request(
