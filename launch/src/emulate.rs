@@ -74,6 +74,11 @@ pub struct EmulateArgs {
     /// The simulation device that knows --stage-model's devices.
     #[arg(long, value_name = "ADDR", default_value = "simulation:0")]
     pub stage_sim: troupe_msgs::DevAddr,
+    /// Write what crosses the line, both ways, to FILE: `> HEX` from the
+    /// driver, `< HEX` from the device, `baud N` at each rate change. A
+    /// capture is a transcript that replay tests play back to a driver.
+    #[arg(long, value_name = "FILE")]
+    pub capture: Option<PathBuf>,
     /// Seed of the fault generator (runs with the same seed fail alike).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -311,6 +316,7 @@ pub fn run(a: EmulateArgs, z: &troupe_node::ZenohArgs) -> anyhow::Result<()> {
                 link: a.link.clone(),
                 faults,
                 seed: a.seed,
+                capture: a.capture.clone(),
             };
             let mut room = emulator::Room;
             let mut live;
@@ -342,6 +348,7 @@ pub fn run(a: EmulateArgs, z: &troupe_node::ZenohArgs) -> anyhow::Result<()> {
                 link: a.link.clone(),
                 faults,
                 seed: a.seed,
+                capture: a.capture.clone(),
                 subclass: a.subclass.clone(),
                 name: "Troupe".into(),
             };
@@ -358,6 +365,7 @@ pub fn run(a: EmulateArgs, z: &troupe_node::ZenohArgs) -> anyhow::Result<()> {
                 link: a.link.clone(),
                 faults,
                 seed: a.seed,
+                capture: a.capture.clone(),
                 revision: a.revision.clone(),
             };
             let mut body = body(&a, z, emulator::room())?;

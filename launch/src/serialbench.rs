@@ -46,6 +46,7 @@ fn case(baud: u32, res: u16, seconds: f64) -> anyhow::Result<(f64, f64, usize)> 
     let emu = Emulator::spawn("bench-serial", |link, stop, linked| {
         let opts = EmulatorOptions {
             link,
+            capture: None,
             faults: Faults::default(),
             seed: 1,
         };

@@ -6,6 +6,7 @@ use std::time::{Duration, Instant};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 
+use crate::capture::Recorder;
 use crate::faults::{Faults, Injected};
 use crate::pty::{Pacer, Pty};
 
@@ -41,6 +42,7 @@ pub struct EmuLine {
     pub injected: Injected,
     /// Bytes received at a baud rate other than the device's.
     pub wrong_baud: u64,
+    recorder: Option<Recorder>,
 }
 
 impl EmuLine {
@@ -69,7 +71,14 @@ impl EmuLine {
             barked: false,
             injected: Injected::default(),
             wrong_baud: 0,
+            recorder: None,
         })
+    }
+
+    /// From now on, writes what crosses the line (what the device
+    /// understood, and what it sent after the faults) to `recorder`.
+    pub fn record(&mut self, recorder: Recorder) {
+        self.recorder = Some(recorder);
     }
 
     /// The link path.
@@ -148,6 +157,9 @@ impl EmuLine {
         }
         self.last_heard = Instant::now();
         self.barked = false;
+        if let Some(r) = &mut self.recorder {
+            r.record(true, &buf[..n], baud);
+        }
         Ok(LineEvent::Received(n))
     }
 
@@ -165,6 +177,9 @@ impl EmuLine {
             return Ok(());
         };
         let bytes = self.faults.apply(frame, &mut self.rng, &mut self.injected);
+        if let Some(r) = &mut self.recorder {
+            r.record(false, &bytes, baud);
+        }
         self.pacer.send(pty, &bytes, baud)
     }
 

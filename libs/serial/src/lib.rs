@@ -15,11 +15,14 @@
 //!   [`CommandWatchdog`]: the robot drivers' `watchdog` option.
 //! - [`EmuLine`] and [`Emulator`]: the device end of an emulated line, and
 //!   an emulator on a thread for tests and benchmarks.
+//! - [`capture`]: what crossed a line, both ways, as text; a recorder for
+//!   emulators and a replay that checks a driver against a capture.
 //!
 //! Every call blocks for at most the time it is given: a driver runs its
 //! device on a thread of its own and hands results to its event loop.
 
 pub mod arcos;
+pub mod capture;
 mod emu;
 mod faults;
 mod framer;

@@ -43,6 +43,8 @@ pub struct EmulatorOptions {
     pub faults: Faults,
     /// Seed of the fault generator.
     pub seed: u64,
+    /// Write what crosses the line, both ways, to this capture file.
+    pub capture: Option<PathBuf>,
     /// The revision to report: "Rev E", "Rev G" or "Rev H".
     pub revision: String,
 }
@@ -162,6 +164,12 @@ pub fn run_with(
         ))
     })?;
     let mut line = EmuLine::open(&opts.link, opts.faults.clone(), opts.seed)?;
+    if let Some(path) = &opts.capture {
+        line.record(troupe_serial::capture::Recorder::create(
+            path,
+            "an emulated erratic",
+        )?);
+    }
     linked();
     let baud = 38400;
     let mut robot = Robot::power_up(params);

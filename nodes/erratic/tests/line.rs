@@ -16,6 +16,7 @@ fn emulate(name: &str, faults: Faults) -> Emulator<EmulatorStats> {
     Emulator::spawn(&format!("erratic-{name}"), move |link, stop, linked| {
         let opts = EmulatorOptions {
             link,
+            capture: None,
             faults,
             seed: 3,
             revision: "Rev H".into(),

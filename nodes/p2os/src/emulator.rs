@@ -82,6 +82,8 @@ pub struct EmulatorOptions {
     pub faults: Faults,
     /// Seed of the fault generator.
     pub seed: u64,
+    /// Write what crosses the line, both ways, to this capture file.
+    pub capture: Option<PathBuf>,
     /// The subclass to report (a key of Player's robot table).
     pub subclass: String,
     /// The robot's name.
@@ -239,6 +241,12 @@ pub fn run_with(
         ))
     })?;
     let mut line = EmuLine::open(&opts.link, opts.faults.clone(), opts.seed)?;
+    if let Some(path) = &opts.capture {
+        line.record(troupe_serial::capture::Recorder::create(
+            path,
+            "an emulated p2os robot",
+        )?);
+    }
     linked();
     // A Pioneer's serial port speaks 9600 baud unless its FLASH says otherwise.
     let baud = 9600;

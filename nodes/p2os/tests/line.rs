@@ -15,6 +15,7 @@ fn emulate(name: &str, faults: Faults) -> Emulator<EmulatorStats> {
     Emulator::spawn(&format!("p2os-{name}"), move |link, stop, linked| {
         let opts = EmulatorOptions {
             link,
+            capture: None,
             faults,
             seed: 2,
             subclass: "p3dx-sh".into(),

@@ -67,6 +67,8 @@ pub struct EmulatorOptions {
     pub faults: Faults,
     /// Seed of the fault generator.
     pub seed: u64,
+    /// Write what crosses the line, both ways, to this capture file.
+    pub capture: Option<PathBuf>,
 }
 
 /// Counts for the log.
@@ -157,6 +159,12 @@ pub fn run_with(
     linked: impl FnOnce(),
 ) -> std::io::Result<EmulatorStats> {
     let mut line = EmuLine::open(&opts.link, opts.faults.clone(), opts.seed)?;
+    if let Some(path) = &opts.capture {
+        line.record(troupe_serial::capture::Recorder::create(
+            path,
+            "an emulated sicklms200",
+        )?);
+    }
     linked();
     let mut lms = Lms::power_up();
     let mut framer = Framer::new(TelegramCodec {

@@ -15,6 +15,7 @@ fn emulate(name: &str, faults: Faults) -> Emulator<EmulatorStats> {
     Emulator::spawn(&format!("lms-{name}"), move |link, stop, linked| {
         let opts = EmulatorOptions {
             link,
+            capture: None,
             faults,
             seed: 1,
         };

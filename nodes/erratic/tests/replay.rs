@@ -1,0 +1,116 @@
+//! The driver's line thread against a captured session: the device's side
+//! of `tests/captures/rev-h.txt` is played back over a pseudo-terminal,
+//! and the driver must send exactly the captured bytes, at the captured
+//! baud rates, and pass on every captured motor packet.
+//!
+//! The capture was recorded from Troupe's emulated Erratic (no capture of
+//! a real one is available); `TROUPE_BLESS=1` records it afresh.
+#![allow(clippy::unwrap_used)] // test helpers outside #[test] fns
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use troupe_erratic::device::{self, Order, Settings, Update};
+use troupe_erratic::emulator::{self, EmulatorOptions};
+use troupe_erratic::packet::PacketCodec;
+use troupe_node::Waker;
+use troupe_serial::capture::{self, Capture};
+use troupe_serial::{Emulator, Faults, Framer};
+
+/// Motor packets the session runs for (under the driver's 1 s PULSE).
+const MOTOR: usize = 5;
+
+fn capture_path() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/captures/rev-h.txt")
+}
+
+fn is_motor(p: &[u8]) -> bool {
+    matches!(p.first(), Some(0x80..=0x8F))
+}
+
+/// The robot's name, class and subclass (or type and revision).
+type Names = (String, String, String);
+
+/// What the driver made of a session: the robot's names, then its motor packets.
+fn session(link: &Path) -> Result<(Names, Vec<Vec<u8>>), String> {
+    let settings = Settings {
+        port: link.to_owned(),
+        direct_wheel: true,
+        max_speed: 500,
+        max_turn: 100,
+        sonar: true,
+        analog: false,
+        startup: Vec::new(),
+    };
+    let line = device::spawn(settings, Waker::none()).unwrap();
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let (mut name, mut motor) = (None, Vec::new());
+    while motor.len() < MOTOR {
+        let left = deadline.saturating_duration_since(Instant::now());
+        match line.updates().recv_timeout(left) {
+            Ok(Update::Ready { name: n, .. }) => name = Some(n),
+            Ok(Update::Packet(p)) if is_motor(&p) => motor.push(p),
+            Ok(Update::Packet(_)) => {}
+            Ok(u) => {
+                line.stop(Order::Stop);
+                return Err(format!("unexpected {u:?}"));
+            }
+            Err(e) => {
+                line.stop(Order::Stop);
+                return Err(format!("{} motor packets within 20 s: {e}", motor.len()));
+            }
+        }
+    }
+    line.stop(Order::Stop);
+    Ok((name.unwrap(), motor))
+}
+
+fn record(path: PathBuf) {
+    let emu = Emulator::spawn("erratic-record", move |link, stop, linked| {
+        let opts = EmulatorOptions {
+            link,
+            capture: Some(path),
+            faults: Faults::default(),
+            seed: 1,
+            revision: "Rev H".into(),
+        };
+        emulator::run_with(&opts, &mut emulator::room(), stop, linked)
+    })
+    .unwrap();
+    session(emu.link()).unwrap();
+    emu.stop().unwrap();
+}
+
+#[test]
+fn a_captured_erratic_session_replays_byte_for_byte() {
+    let path = capture_path();
+    if std::env::var_os("TROUPE_BLESS").is_some() {
+        record(path.clone());
+    }
+    let cap = Capture::load(&path).unwrap();
+    let mut framer = Framer::new(PacketCodec);
+    for bytes in cap.from_device() {
+        framer.push(bytes);
+    }
+    let captured: Vec<Vec<u8>> = std::iter::from_fn(|| framer.next_frame())
+        .filter(|d| is_motor(d))
+        .collect();
+    assert!(captured.len() >= MOTOR, "{} captured", captured.len());
+
+    let played = cap.clone();
+    let emu = Emulator::spawn("erratic-replay", move |link, stop, linked| {
+        capture::replay(&link, &played, stop, linked)
+    })
+    .unwrap();
+    let outcome = session(emu.link());
+    // A difference from the capture ends the replay: its error says where.
+    let report = emu.stop().unwrap();
+    let (name, motor) = outcome.unwrap();
+    assert_eq!(name.2, "Rev H", "{name:?}");
+    assert_eq!(
+        motor[..],
+        captured[..MOTOR],
+        "the motor packets, as captured"
+    );
+    assert_eq!(report.entries, cap.entries.len(), "{report:?}");
+}

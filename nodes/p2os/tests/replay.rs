@@ -1,0 +1,118 @@
+//! The driver's line thread against a captured session: the device's side
+//! of `tests/captures/p3dx-sh.txt` is played back over a pseudo-terminal,
+//! and the driver must send exactly the captured bytes, at the captured
+//! baud rates, and decode every captured SIP.
+//!
+//! The capture was recorded from Troupe's emulated Pioneer (no capture of
+//! a real one is available); `TROUPE_BLESS=1` records it afresh.
+#![allow(clippy::unwrap_used)] // test helpers outside #[test] fns
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use troupe_node::Waker;
+use troupe_p2os::device::{self, Order, Settings, Update};
+use troupe_p2os::emulator::{self, EmulatorOptions};
+use troupe_p2os::packet::{PacketCodec, Sip};
+use troupe_serial::capture::{self, Capture};
+use troupe_serial::{Emulator, Faults, Framer};
+
+/// SIPs the session runs for.
+const SIPS: usize = 10;
+
+fn capture_path() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/captures/p3dx-sh.txt")
+}
+
+/// The robot's name, class and subclass (or type and revision).
+type Names = (String, String, String);
+
+/// What the driver made of a session: the robot's names, then its SIPs.
+fn session(link: &Path) -> Result<(Names, Vec<Sip>), String> {
+    let settings = Settings {
+        port: link.to_owned(),
+        sonar: true,
+        direct_wheel: true,
+        max_speed: 500,
+        max_turn: 100,
+        vel_band: false,
+        pulse: None,
+        bumpstall: None,
+        gyro: false,
+    };
+    let line = device::spawn(settings, Waker::none()).unwrap();
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let (mut name, mut sips) = (None, Vec::new());
+    while sips.len() < SIPS {
+        let left = deadline.saturating_duration_since(Instant::now());
+        match line.updates().recv_timeout(left) {
+            Ok(Update::Ready { name: n, .. }) => name = Some(n),
+            Ok(Update::Sip(s)) => sips.push(s),
+            Ok(u) => {
+                line.stop(Order::Stop);
+                return Err(format!("unexpected {u:?}"));
+            }
+            Err(e) => {
+                line.stop(Order::Stop);
+                return Err(format!("{} SIPs within 20 s: {e}", sips.len()));
+            }
+        }
+    }
+    line.stop(Order::Stop);
+    Ok((name.unwrap(), sips))
+}
+
+/// Records the capture from the emulated robot.
+fn record(path: PathBuf) {
+    let emu = Emulator::spawn("p2os-record", move |link, stop, linked| {
+        let opts = EmulatorOptions {
+            link,
+            capture: Some(path),
+            faults: Faults::default(),
+            seed: 1,
+            subclass: "p3dx-sh".into(),
+            name: "Troupe".into(),
+        };
+        emulator::run_with(&opts, &mut emulator::room(), stop, linked)
+    })
+    .unwrap();
+    session(emu.link()).unwrap();
+    emu.stop().unwrap();
+}
+
+#[test]
+fn a_captured_pioneer_session_replays_byte_for_byte() {
+    let path = capture_path();
+    if std::env::var_os("TROUPE_BLESS").is_some() {
+        record(path.clone());
+    }
+    let cap = Capture::load(&path).unwrap();
+    // The SIPs in the capture, decoded here independently of the driver.
+    let mut framer = Framer::new(PacketCodec);
+    for bytes in cap.from_device() {
+        framer.push(bytes);
+    }
+    let captured: Vec<Sip> = std::iter::from_fn(|| framer.next_frame())
+        .filter(|d| Sip::is_standard(d))
+        .map(|d| Sip::decode(&d).unwrap())
+        .collect();
+    assert!(captured.len() >= SIPS, "{} SIPs captured", captured.len());
+
+    let played = cap.clone();
+    let emu = Emulator::spawn("p2os-replay", move |link, stop, linked| {
+        capture::replay(&link, &played, stop, linked)
+    })
+    .unwrap();
+    let outcome = session(emu.link());
+    // A difference from the capture ends the replay: its error says where.
+    let report = emu.stop().unwrap();
+    let (name, sips) = outcome.unwrap();
+    assert_eq!(
+        (name.0.as_str(), name.1.as_str(), name.2.as_str()),
+        ("Troupe", "Pioneer", "p3dx-sh")
+    );
+    assert_eq!(sips[..], captured[..SIPS], "the SIPs, decoded as captured");
+    assert_eq!(report.entries, cap.entries.len(), "{report:?}");
+    // SYNC0, SYNC1, SYNC2, OPEN, PULSE and SONAR: 6 + 6 + 6 + 6 + 6 + 9.
+    assert_eq!(report.matched, 39, "{report:?}");
+}

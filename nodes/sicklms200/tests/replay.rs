@@ -1,0 +1,112 @@
+//! The driver's line thread against a captured session: the scanner's side
+//! of `tests/captures/lms200-38400.txt` is played back over a
+//! pseudo-terminal, and the driver must send exactly the captured
+//! telegrams, at the captured baud rates (9600, then 38400), and decode
+//! every captured scan.
+//!
+//! The capture was recorded from Troupe's emulated LMS200 (no capture of a
+//! real one is available); `TROUPE_BLESS=1` records it afresh.
+#![allow(clippy::unwrap_used)] // test helpers outside #[test] fns
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use troupe_node::Waker;
+use troupe_serial::capture::{self, Capture, Entry};
+use troupe_serial::{Emulator, Faults};
+use troupe_sicklms200::device::{self, Order, ScanConfig, Settings, Update};
+use troupe_sicklms200::emulator::{self, EmulatorOptions, Room};
+use troupe_sicklms200::telegram::RawScan;
+
+/// Scans the session runs for.
+const SCANS: usize = 5;
+
+fn capture_path() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/captures/lms200-38400.txt")
+}
+
+/// What the driver made of a session: the scanner's type and baud, then its scans.
+fn session(link: &Path) -> Result<((String, u32), Vec<RawScan>), String> {
+    let settings = Settings {
+        port: link.to_owned(),
+        connect_rates: vec![9600, 38400, 500000],
+        transfer_rate: 38400,
+        retry: 0,
+        delay: Duration::ZERO,
+        high_avail: false,
+        config: ScanConfig {
+            res: 100,
+            range_res: 1,
+            intensity: true,
+            min_angle: -9000,
+            max_angle: 9000,
+        },
+    };
+    let line = device::spawn(settings, Waker::none()).unwrap();
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let (mut ready, mut scans) = (None, Vec::new());
+    while scans.len() < SCANS {
+        let left = deadline.saturating_duration_since(Instant::now());
+        match line.updates().recv_timeout(left) {
+            Ok(Update::Ready { kind, baud }) => ready = Some((kind, baud)),
+            Ok(Update::Scan(s, _)) => scans.push(s),
+            Ok(u) => {
+                line.stop(Order::Stop);
+                return Err(format!("unexpected {u:?}"));
+            }
+            Err(e) => {
+                line.stop(Order::Stop);
+                return Err(format!("{} scans within 30 s: {e}", scans.len()));
+            }
+        }
+    }
+    line.stop(Order::Stop);
+    Ok((ready.unwrap(), scans))
+}
+
+fn record(path: PathBuf) {
+    let emu = Emulator::spawn("lms-record", move |link, stop, linked| {
+        let opts = EmulatorOptions {
+            link,
+            capture: Some(path),
+            faults: Faults::default(),
+            seed: 1,
+        };
+        emulator::run_with(&opts, &mut Room, stop, linked)
+    })
+    .unwrap();
+    session(emu.link()).unwrap();
+    emu.stop().unwrap();
+}
+
+#[test]
+fn a_captured_lms200_session_replays_byte_for_byte() {
+    let path = capture_path();
+    if std::env::var_os("TROUPE_BLESS").is_some() {
+        record(path.clone());
+    }
+    let cap = Capture::load(&path).unwrap();
+    let bauds: Vec<u32> = cap
+        .entries
+        .iter()
+        .filter_map(|(_, e)| match e {
+            Entry::Baud(b) => Some(*b),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(bauds, [9600, 38400], "the capture switches rate once");
+
+    let played = cap.clone();
+    let emu = Emulator::spawn("lms-replay", move |link, stop, linked| {
+        capture::replay(&link, &played, stop, linked)
+    })
+    .unwrap();
+    let outcome = session(emu.link());
+    // A difference from the capture ends the replay: its error says where.
+    let report = emu.stop().unwrap();
+    let ((kind, baud), scans) = outcome.unwrap();
+    assert_eq!(baud, 38400);
+    assert!(kind.starts_with("LMS200"), "{kind}");
+    assert!(scans.iter().all(|s| s.values.len() == 181 && s.units == 1));
+    assert_eq!(report.entries, cap.entries.len(), "{report:?}");
+}
