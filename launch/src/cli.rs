@@ -113,6 +113,8 @@ their drivers. `troupe launch` starts one for the robots of its plan.")]
   troupe emulate erratic --link /tmp/erratic --revision \"Rev G\"
   troupe --connect tcp/127.0.0.1:7447 emulate sicklms200 --link /tmp/laser --stage-laser 6665:laser:1
   troupe --connect tcp/127.0.0.1:7447 emulate p2os --link /tmp/pioneer --stage-model r0 --stage-sim 6666:simulation:0
+  troupe --connect tcp/127.0.0.1:7447 emulate sicklms200 --link /tmp/laser --stage-model r0 --stage-sim 6666:simulation:0
+  troupe emulate p2os --link /tmp/pioneer --capture pioneer.txt   # what crosses the line, both ways
   troupe emulate sicklms200 --link /tmp/laser --corrupt 0.1 --noise 0.1
   troupe emulate sicklms200 --link /tmp/laser --unplug-after 10 --replug-after 2
 

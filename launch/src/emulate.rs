@@ -64,10 +64,11 @@ pub struct EmulateArgs {
     /// global --connect/--namespace flags.
     #[arg(long, value_name = "ADDR")]
     pub stage_laser: Option<troupe_msgs::DevAddr>,
-    /// p2os, erratic: be this robot of a running Stage simulation instead
-    /// of a robot in the built-in room: wheel commands drive the model's
-    /// position2d, odometry and stall come from it, and the sonars read
-    /// its sonar (or first ranger) device. The model's devices are found
+    /// Be part of this model of a running Stage simulation instead of the
+    /// built-in room. p2os, erratic: wheel commands drive the model's
+    /// position2d, odometry and stall come from it, and the sonars read its
+    /// sonar (or first ranger) device. sicklms200: the ranges are the
+    /// model's laser (or its widest ranger). The model's devices are found
     /// through --stage-sim. Reached through the global --connect/--namespace flags.
     #[arg(long, value_name = "MODEL", conflicts_with = "stage_laser")]
     pub stage_model: Option<String>,
@@ -160,15 +161,22 @@ enum Ranges {
     Ranger(troupe_client::RangerProxy),
 }
 
-impl StageBody {
-    /// Finds `model`'s devices through the simulation device `sim` and
-    /// subscribes to them.
-    fn connect(
+/// The devices a running Stage serves for one model, found by its name
+/// through a simulation device, and the clients that reach them.
+struct ModelDevices {
+    model: String,
+    devices: Vec<troupe_msgs::Device>,
+    clients: Vec<troupe_client::Client>,
+}
+
+impl ModelDevices {
+    /// Asks the simulation device `sim` for `model`'s devices.
+    fn find(
         z: &troupe_node::ZenohArgs,
         model: &str,
         sim: &troupe_msgs::DevAddr,
     ) -> anyhow::Result<Self> {
-        use troupe_msgs::{simulation::Value, Device, Interface};
+        use troupe_msgs::simulation::Value;
         let sim = sim.device(troupe_msgs::DEFAULT_ROBOT);
         let client = troupe_client::Client::connect(z, sim.robot)
             .context("connecting to the stack for --stage-model")?;
@@ -180,28 +188,69 @@ impl StageBody {
         let Value::Text(listed) = listed else {
             anyhow::bail!("{sim} answered the devices of `{model}` with {listed:?}, not a list");
         };
-        let devices: Vec<Device> = listed
+        let devices = listed
             .split_whitespace()
             .map(|d| Ok(d.parse::<troupe_msgs::DevAddr>()?.device(sim.robot)))
             .collect::<anyhow::Result<_>>()?;
-        let first = |i: Interface| devices.iter().find(|d| d.interface == i).copied();
+        Ok(ModelDevices {
+            model: model.to_owned(),
+            devices,
+            clients: vec![client],
+        })
+    }
+
+    /// The model's devices of interface `i`, in the stack's order.
+    fn of(&self, i: troupe_msgs::Interface) -> Vec<troupe_msgs::Device> {
+        self.devices
+            .iter()
+            .filter(|d| d.interface == i)
+            .copied()
+            .collect()
+    }
+
+    /// An error naming what the model does serve, for when `what` is missing.
+    fn missing(&self, what: &str) -> anyhow::Error {
+        let list: Vec<String> = self.devices.iter().map(ToString::to_string).collect();
+        anyhow::anyhow!(
+            "the Stage stack serves no {what} of model `{}` (it serves: {}); give the model's section one",
+            self.model,
+            if list.is_empty() { "nothing".into() } else { list.join(" ") }
+        )
+    }
+
+    /// A client of robot (port) `robot`, connected once.
+    fn client(
+        &mut self,
+        z: &troupe_node::ZenohArgs,
+        robot: u32,
+    ) -> anyhow::Result<troupe_client::Client> {
+        if let Some(c) = self.clients.iter().find(|c| c.robot() == robot) {
+            return Ok(c.clone());
+        }
+        let c = troupe_client::Client::connect(z, robot)?;
+        self.clients.push(c.clone());
+        Ok(c)
+    }
+}
+
+impl StageBody {
+    /// Finds `model`'s devices through the simulation device `sim` and
+    /// subscribes to them.
+    fn connect(
+        z: &troupe_node::ZenohArgs,
+        model: &str,
+        sim: &troupe_msgs::DevAddr,
+    ) -> anyhow::Result<Self> {
+        use troupe_msgs::Interface;
+        let mut found = ModelDevices::find(z, model, sim)?;
+        let first = |i: Interface| found.of(i).first().copied();
         let Some(pos) = first(Interface::Position2d) else {
-            anyhow::bail!(
-                "the Stage stack serves no position2d of model `{model}` (it serves: {}); give the model's section a position2d",
-                if listed.is_empty() { "nothing" } else { &listed }
-            );
+            return Err(found.missing("position2d"));
         };
-        let mut clients = vec![client];
-        let mut client_of = |robot: u32| -> anyhow::Result<troupe_client::Client> {
-            if let Some(c) = clients.iter().find(|c| c.robot() == robot) {
-                return Ok(c.clone());
-            }
-            let c = troupe_client::Client::connect(z, robot)?;
-            clients.push(c.clone());
-            Ok(c)
-        };
+        let (sonar_dev, ranger_dev) = (first(Interface::Sonar), first(Interface::Ranger));
+        let mut client_of = |robot: u32| found.client(z, robot);
         let position = troupe_client::Position2dProxy::new(&client_of(pos.robot)?, pos.index)?;
-        let sonar = match (first(Interface::Sonar), first(Interface::Ranger)) {
+        let sonar = match (sonar_dev, ranger_dev) {
             (Some(d), _) => Some(Ranges::Sonar(troupe_client::SonarProxy::new(
                 &client_of(d.robot)?,
                 d.index,
@@ -212,13 +261,14 @@ impl StageBody {
             )?)),
             (None, None) => None,
         };
-        let sonar_dev = first(Interface::Sonar).or(first(Interface::Ranger));
         tracing::info!(
             "model `{model}`: driving {pos}; sonars from {}",
-            sonar_dev.map_or("nowhere (they read out of range)".into(), |d| d.to_string())
+            sonar_dev
+                .or(ranger_dev)
+                .map_or("nowhere (they read out of range)".into(), |d| d.to_string())
         );
         Ok(StageBody {
-            _clients: clients,
+            _clients: found.clients,
             position,
             sonar,
             sent: None,
@@ -278,6 +328,87 @@ fn body(
     })
 }
 
+/// Ranges from a live ranger device (a Stage laser served as a ranger):
+/// each angle reads the nearest beam of the latest ranges, the beams
+/// spread evenly over the configured fov.
+struct LiveRanger {
+    _clients: Vec<troupe_client::Client>,
+    ranger: troupe_client::RangerProxy,
+    config: troupe_msgs::ranger::Config,
+}
+
+impl troupe_sicklms200::emulator::Scene for LiveRanger {
+    fn ranges(&mut self, _t: f64, angles: &[f64]) -> Vec<f64> {
+        let ranges = self.ranger.ranges();
+        let c = &self.config;
+        // Stage's `angular_res` is fov/samples; its beams are fov/(samples − 1) apart.
+        let step = (c.max_angle - c.min_angle) / (ranges.len().max(2) - 1) as f64;
+        angles
+            .iter()
+            .map(|&a| {
+                let i = ((a - c.min_angle) / step).round();
+                match ranges.get(i as usize) {
+                    Some(&r) if i >= 0.0 && r < c.max_range => r,
+                    _ => f64::INFINITY,
+                }
+            })
+            .collect()
+    }
+}
+
+/// What the emulated LMS200 sees: a running stack's laser (`--stage-laser`),
+/// a Stage model's laser or widest ranger (`--stage-model`), or the room.
+fn laser_scene(
+    a: &EmulateArgs,
+    z: &troupe_node::ZenohArgs,
+) -> anyhow::Result<Box<dyn troupe_sicklms200::emulator::Scene>> {
+    use troupe_msgs::Interface;
+    let laser = |client: troupe_client::Client, dev: troupe_msgs::Device| {
+        let laser = troupe_client::LaserProxy::new(&client, dev.index)
+            .with_context(|| format!("subscribing to {dev}"))?;
+        tracing::info!("ranges from {dev}");
+        Ok::<_, anyhow::Error>(Box::new(LiveLaser {
+            _client: client,
+            laser,
+        }))
+    };
+    if let Some(addr) = &a.stage_laser {
+        let dev = addr.device(troupe_msgs::DEFAULT_ROBOT);
+        let client = troupe_client::Client::connect(z, dev.robot)
+            .context("connecting to the stack for --stage-laser")?;
+        return Ok(laser(client, dev)?);
+    }
+    let Some(model) = &a.stage_model else {
+        return Ok(Box::new(troupe_sicklms200::emulator::Room));
+    };
+    let mut found = ModelDevices::find(z, model, &a.stage_sim)?;
+    if let Some(&dev) = found.of(Interface::Laser).first() {
+        let client = found.client(z, dev.robot)?;
+        return Ok(laser(client, dev)?);
+    }
+    // The laser among the model's rangers: the widest field of view.
+    let mut best: Option<(troupe_client::RangerProxy, troupe_msgs::ranger::Config)> = None;
+    for dev in found.of(Interface::Ranger) {
+        let ranger = troupe_client::RangerProxy::new(&found.client(z, dev.robot)?, dev.index)?;
+        let config = ranger
+            .request_config()
+            .with_context(|| format!("asking {dev} for its configuration"))?;
+        let fov = |c: &troupe_msgs::ranger::Config| c.max_angle - c.min_angle;
+        if best.as_ref().is_none_or(|(_, b)| fov(&config) > fov(b)) {
+            tracing::info!("ranges from {dev}");
+            best = Some((ranger, config));
+        }
+    }
+    let Some((ranger, config)) = best else {
+        return Err(found.missing("laser or ranger"));
+    };
+    Ok(Box::new(LiveRanger {
+        _clients: found.clients,
+        ranger,
+        config,
+    }))
+}
+
 /// Runs the emulator until SIGINT or SIGTERM.
 pub fn run(a: EmulateArgs, z: &troupe_node::ZenohArgs) -> anyhow::Result<()> {
     let faults = Faults {
@@ -289,14 +420,8 @@ pub fn run(a: EmulateArgs, z: &troupe_node::ZenohArgs) -> anyhow::Result<()> {
         unplug_after: seconds("unplug-after", a.unplug_after)?,
         replug_after: seconds("replug-after", a.replug_after)?,
     };
-    match (a.device, &a.stage_laser, &a.stage_model) {
-        (Emulated::Sicklms200, _, Some(_)) => {
-            anyhow::bail!("--stage-model is for the robots (p2os, erratic); a sicklms200 takes its ranges from --stage-laser ADDR")
-        }
-        (Emulated::P2os | Emulated::Erratic, Some(_), _) => {
-            anyhow::bail!("--stage-laser is for a sicklms200; a robot is backed by a Stage model with --stage-model NAME")
-        }
-        _ => {}
+    if a.device != Emulated::Sicklms200 && a.stage_laser.is_some() {
+        anyhow::bail!("--stage-laser is for a sicklms200; a robot is backed by a Stage model with --stage-model NAME");
     }
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
@@ -318,25 +443,8 @@ pub fn run(a: EmulateArgs, z: &troupe_node::ZenohArgs) -> anyhow::Result<()> {
                 seed: a.seed,
                 capture: a.capture.clone(),
             };
-            let mut room = emulator::Room;
-            let mut live;
-            let scene: &mut dyn emulator::Scene = match &a.stage_laser {
-                None => &mut room,
-                Some(addr) => {
-                    let dev = addr.device(troupe_msgs::DEFAULT_ROBOT);
-                    let client = troupe_client::Client::connect(z, dev.robot)
-                        .context("connecting to the stack for --stage-laser")?;
-                    let laser = troupe_client::LaserProxy::new(&client, dev.index)
-                        .with_context(|| format!("subscribing to {dev}"))?;
-                    tracing::info!("ranges from {dev}");
-                    live = LiveLaser {
-                        _client: client,
-                        laser,
-                    };
-                    &mut live
-                }
-            };
-            emulator::run_with(&opts, scene, &stop, || {
+            let mut scene = laser_scene(&a, z)?;
+            emulator::run_with(&opts, scene.as_mut(), &stop, || {
                 banner("sicklms200", &a.link);
                 tracing::info!("{} emulated; Ctrl-C stops it", emulator::KIND);
             })

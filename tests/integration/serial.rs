@@ -405,22 +405,26 @@ fn an_emulated_lms200_backed_by_stage_sees_the_simulated_world() {
 }
 
 /// The whole robot path in a simulated world: `troupe emulate p2os
-/// --stage-model r0` is Stage's r0 (on robot port 6666) to the p2os driver
-/// (on 6665). A client on 6665 drives through p2os → serial → emulator →
-/// Stage, and reads r0's sonars and odometry back the same way; the
-/// gripper's paddles close through the same line.
+/// --stage-model r0` and `troupe emulate sicklms200 --stage-model r0` are
+/// Stage's r0 (on robot port 6666) to the p2os and sicklms200 drivers (on
+/// 6665), as a Pioneer with a SICK laser. A client on 6665 drives through
+/// p2os → serial → emulator → Stage, and reads r0's sonars, laser and
+/// odometry back the same way; the gripper's paddles close through the
+/// same line.
 #[test]
 fn an_emulated_pioneer_backed_by_stage_drives_the_simulated_robot() {
     use troupe_client::{GripperProxy, Position2dProxy, RangerProxy, SonarProxy};
     let rig = Rig::new("p2os-stage");
     let link = rig.dir.join("p2os");
+    let laser_link = rig.dir.join("sicklms200");
     let world = Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/simple.world");
     let cfg = rig.cfg(&format!(
         "driver ( name \"stage\" provides [\"6666:simulation:0\"] worldfile \"{}\" )\n\
-         driver ( name \"stage\" provides [\"6666:position2d:0\" \"6666:ranger:0\"] model \"r0\" )\n\
-         driver ( name \"p2os\" provides [\"odometry:::position2d:0\" \"sonar:0\" \"gripper:::gripper:0\"] port \"{}\" )\n",
+         driver ( name \"stage\" provides [\"6666:position2d:0\" \"6666:ranger:0\" \"6666:ranger:1\"] model \"r0\" )\n\
+         driver ( name \"p2os\" provides [\"odometry:::position2d:0\" \"sonar:0\" \"gripper:::gripper:0\"] port \"{}\" )\n{}",
         world.display(),
-        link.display()
+        link.display(),
+        sick_cfg(&laser_link, "transfer_rate 500000 resolution 100")
     ));
     let ns = troupe_tests::unique_namespace("p2os-stage");
     let mut launcher = troupe_tests::launch(&ns, &cfg, &["--no-bridge"]);
@@ -452,8 +456,28 @@ fn an_emulated_pioneer_backed_by_stage_drives_the_simulated_robot() {
         "{line:?} {}",
         emu.stderr()
     );
+    let mut args = strings(&["--connect", &endpoint, "--namespace", &ns, "--no-multicast"]);
+    args.extend(strings(&[
+        "emulate",
+        "sicklms200",
+        "--link",
+        laser_link.to_str().unwrap(),
+        "--stage-model",
+        "r0",
+        "--stage-sim",
+        "6666:simulation:0",
+    ]));
+    let mut laser_emu = Proc::troupe("emulate", &args);
+    let line = laser_emu.first_line();
+    assert!(
+        line.starts_with("troupe emulate: "),
+        "{line:?} {}",
+        laser_emu.stderr()
+    );
 
     let client = Client::with_session(client_at(&endpoint, &ns), 6665);
+    let laser = LaserProxy::new(&client, 0).unwrap();
+    let stage_laser = RangerProxy::new(&sim, 1).unwrap();
     let base = Position2dProxy::new(&client, 0).unwrap();
     let sonar = SonarProxy::new(&client, 0).unwrap();
     let gripper = GripperProxy::new(&client, 0).unwrap();
@@ -483,6 +507,37 @@ fn an_emulated_pioneer_backed_by_stage_drives_the_simulated_robot() {
             .filter(|&i| sonar.range(i).is_some_and(|r| (r - stage[i]).abs() < 0.002))
             .count();
         if agree >= 14 {
+            break;
+        }
+    }
+
+    // The laser through its serial line is Stage's ranger:1 (180 beams
+    // over 180°) read at each whole degree, to the millimetre (most beams:
+    // r1 wanders).
+    let deadline = Instant::now() + DEADLINE * 2;
+    loop {
+        if Instant::now() >= deadline {
+            laser_emu.terminate();
+            let seen = format!("{:?}", laser.scan().map(|s| s.ranges.len()));
+            let why = format!("the laser never matched: {seen}\n{}", laser_emu.stderr());
+            fail(&why, &mut emu, &mut launcher);
+        }
+        let _ = client.read_timeout(DEADLINE);
+        let (Some(scan), stage) = (laser.scan(), stage_laser.ranges()) else {
+            continue;
+        };
+        if scan.ranges.len() != 181 || stage.len() != 180 {
+            continue;
+        }
+        let step = std::f64::consts::PI / 179.0;
+        let agree = (0..181)
+            .filter(|&i| {
+                let j = ((i as f64).to_radians() / step).round() as usize;
+                let (a, b) = (f64::from(scan.ranges[i]), stage[j.min(179)]);
+                (a >= 8.0 && b >= 8.0) || (a - b).abs() < 0.002
+            })
+            .count();
+        if agree >= 170 {
             break;
         }
     }
@@ -528,4 +583,5 @@ fn an_emulated_pioneer_backed_by_stage_drives_the_simulated_robot() {
     }
     launcher.terminate();
     emu.terminate();
+    laser_emu.terminate();
 }
