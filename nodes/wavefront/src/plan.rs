@@ -7,7 +7,9 @@
 //! keep clear of walls — Player's wavefront cost. Player floods the whole
 //! map from the goal; this searches from the start with A* (the Euclidean
 //! distance is a lower bound on that cost), which finds a path of the same
-//! cost and touches a fraction of the cells.
+//! cost and touches a fraction of the cells. On large maps A* runs on a
+//! grid of 4×4 blocks first, then on the cells of a corridor around that
+//! route ([`Planner::plan`]).
 //!
 //! [`Planner::waypoints`] turns a path into waypoints as Player's does:
 //! the start cell, then each farthest path cell still in line of sight
@@ -129,18 +131,23 @@ impl RadixHeap {
 pub struct Planner {
     /// The map's size, resolution and origin.
     info: map::Info,
-    /// Cells across and up, from `info`, for the inner loops.
-    width: usize,
-    height: usize,
     params: Params,
     /// Distance to the nearest obstacle, capped at `max_radius`.
     dist: Vec<f32>,
-    /// The search's state, one 16-byte record per cell: a step to a
-    /// neighbour touches one cache line, not five arrays.
-    cells: Vec<Cell>,
-    generation: u32,
+    /// The full-resolution grid.
+    fine: Grid,
+    /// A grid of [`COARSE`]² blocks of cells, for large maps: a path on it
+    /// marks the corridor the fine search keeps to.
+    coarse: Option<Grid>,
     heap: RadixHeap,
 }
+
+/// Maps with more cells than this are searched coarse, then fine.
+const COARSE_ABOVE: usize = 500 * 500;
+/// Coarse cells are this many fine cells on a side (a power of two).
+const COARSE: usize = 4;
+/// The corridor reaches this many coarse cells to each side of the coarse path.
+const CORRIDOR: i64 = 2;
 
 const NONE: u32 = u32::MAX;
 
@@ -157,6 +164,139 @@ struct Cell {
     enter: f32,
 }
 
+/// A grid the search runs on: its cells (one 16-byte record each, so a
+/// step to a neighbour touches one cache line), their size in metres, and
+/// the generation that tells this search's records from older ones.
+struct Grid {
+    cells: Vec<Cell>,
+    width: usize,
+    height: usize,
+    res: f32,
+    generation: u32,
+}
+
+impl Grid {
+    fn new(enter: impl Iterator<Item = f32>, width: usize, height: usize, res: f32) -> Grid {
+        let cells = enter
+            .map(|enter| Cell {
+                g: 0.0,
+                stamp: 0,
+                parent: NONE,
+                enter,
+            })
+            .collect();
+        Grid {
+            cells,
+            width,
+            height,
+            res,
+            generation: 0,
+        }
+    }
+
+    /// A grid of `k`×`k` blocks: a block may be entered when any of its
+    /// cells may, at the least penalty among them. Every path on `fine`
+    /// crosses a chain of such blocks, so no path on the fine grid is
+    /// missed by this one.
+    fn coarsen(fine: &Grid, k: usize) -> Grid {
+        let (w, h) = (fine.width.div_ceil(k), fine.height.div_ceil(k));
+        let mut enter = vec![f32::INFINITY; w * h];
+        for (n, c) in fine.cells.iter().enumerate() {
+            let (i, j) = (n % fine.width / k, n / fine.width / k);
+            let e = &mut enter[j * w + i];
+            *e = e.min(c.enter);
+        }
+        Grid::new(enter.into_iter(), w, h, fine.res * k as f32)
+    }
+
+    /// The next search's generation.
+    fn next_generation(&mut self) -> u32 {
+        self.generation = self.generation.wrapping_add(1);
+        if self.generation == 0 {
+            for c in &mut self.cells {
+                c.stamp = 0;
+            }
+            self.generation = 1;
+        }
+        self.generation
+    }
+
+    /// A*: the cheapest path of cells from `s` to `t` through cells that
+    /// `allowed` admits, `None` when there is none. A step costs its length
+    /// plus the entered cell's penalty; the octile distance to `t` is the
+    /// heuristic (a lower bound on the lengths alone).
+    fn search(
+        &mut self,
+        heap: &mut RadixHeap,
+        s: usize,
+        t: usize,
+        allowed: impl Fn(i64, i64) -> bool,
+    ) -> Option<Vec<usize>> {
+        let gen = self.next_generation();
+        let w = self.width as i64;
+        let (tx, ty) = ((t % self.width) as i64, (t / self.width) as i64);
+        let res = self.res;
+        // Octile distance from cell (i, j) to the goal: a lower bound on the
+        // step lengths (no division: cells are passed as coordinates).
+        let h = |i: i64, j: i64| -> f32 {
+            let dx = (i - tx).abs() as f32;
+            let dy = (j - ty).abs() as f32;
+            (dx.max(dy) + (std::f32::consts::SQRT_2 - 1.0) * dx.min(dy)) * res
+        };
+        heap.clear();
+        let start = &mut self.cells[s];
+        (start.stamp, start.g, start.parent) = (gen, 0.0, NONE);
+        let (si, sj) = ((s % self.width) as i64, (s / self.width) as i64);
+        heap.push(h(si, sj), s as u32);
+        const STEPS: [(i64, i64, f32); 8] = [
+            (-1, -1, std::f32::consts::SQRT_2),
+            (0, -1, 1.0),
+            (1, -1, std::f32::consts::SQRT_2),
+            (-1, 0, 1.0),
+            (1, 0, 1.0),
+            (-1, 1, std::f32::consts::SQRT_2),
+            (0, 1, 1.0),
+            (1, 1, std::f32::consts::SQRT_2),
+        ];
+        let height = self.height as i64;
+        while let Some((f, cell)) = heap.pop() {
+            let c = cell as usize;
+            let gc = self.cells[c].g;
+            let (ci, cj) = ((c % self.width) as i64, (c / self.width) as i64);
+            if f > gc + h(ci, cj) + 1e-4 {
+                continue; // a stale entry
+            }
+            if c == t {
+                let mut path = vec![t];
+                let mut k = t;
+                while self.cells[k].parent != NONE {
+                    k = self.cells[k].parent as usize;
+                    path.push(k);
+                }
+                path.reverse();
+                return Some(path);
+            }
+            for &(di, dj, len) in &STEPS {
+                let (ni, nj) = (ci + di, cj + dj);
+                if ni < 0 || nj < 0 || ni >= w || nj >= height || !allowed(ni, nj) {
+                    continue;
+                }
+                let n = (nj * w + ni) as usize;
+                let next = &mut self.cells[n];
+                if next.enter == f32::INFINITY {
+                    continue; // blocked
+                }
+                let cost = gc + len * res + next.enter;
+                if next.stamp != gen || cost < next.g {
+                    (next.stamp, next.g, next.parent) = (gen, cost, c as u32);
+                    heap.push(cost + h(ni, nj), n as u32);
+                }
+            }
+        }
+        None
+    }
+}
+
 impl Planner {
     /// Builds the configuration space of `map`.
     pub fn new(map: &OccMap, params: Params) -> Self {
@@ -167,39 +307,24 @@ impl Planner {
             .into_iter()
             .map(|d| d.min(maxr))
             .collect();
-        let penalty: Vec<f32> = dist
-            .iter()
-            .map(|&d| {
-                if d < maxr {
-                    (params.dist_penalty * f64::from(maxr - d)) as f32
-                } else {
-                    0.0
-                }
-            })
-            .collect();
         let min_r = params.min_radius;
-        let cells = dist
-            .iter()
-            .zip(&penalty)
-            .map(|(&d, &p)| Cell {
-                g: 0.0,
-                stamp: 0,
-                parent: NONE,
-                enter: if f64::from(d) >= min_r {
-                    p
-                } else {
-                    f32::INFINITY
-                },
-            })
-            .collect();
+        let enter = dist.iter().map(|&d| {
+            if f64::from(d) < min_r {
+                f32::INFINITY
+            } else if d < maxr {
+                (params.dist_penalty * f64::from(maxr - d)) as f32
+            } else {
+                0.0
+            }
+        });
+        let fine = Grid::new(enter, width, height, map.info.resolution);
+        let coarse = (width * height > COARSE_ABOVE).then(|| Grid::coarsen(&fine, COARSE));
         Planner {
             info: map.info,
-            width,
-            height,
             params,
             dist,
-            cells,
-            generation: 0,
+            fine,
+            coarse,
             heap: RadixHeap::default(),
         }
     }
@@ -230,6 +355,13 @@ impl Planner {
     /// The start cell may be inside the safety margin (the robot is where
     /// it is); the goal may not.
     ///
+    /// On a large map the search runs twice: first on the coarse grid,
+    /// whose path marks a corridor a few blocks wide; then on the fine grid
+    /// within that corridor. The path is then the cheapest within the
+    /// corridor, which is the cheapest overall unless a cheaper route
+    /// strays outside it; a goal the corridor cannot reach is searched for
+    /// over the whole map. No coarse path means no path at all.
+    ///
     /// # Errors
     ///
     /// [`NoPath`] says why there is none.
@@ -239,107 +371,91 @@ impl Planner {
         if !self.free(t) && s != t {
             return Err(NoPath::GoalBlocked);
         }
-        self.generation = self.generation.wrapping_add(1);
-        if self.generation == 0 {
-            for c in &mut self.cells {
-                c.stamp = 0;
-            }
-            self.generation = 1;
-        }
-        let gen = self.generation;
-        let w = self.width as i64;
-        let (tx, ty) = ((t % self.width) as i64, (t / self.width) as i64);
-        let res = self.res() as f32;
-        // Octile distance from cell (i, j) to the goal: a lower bound on the
-        // step lengths (no division: cells are passed as coordinates).
-        let h = |i: i64, j: i64| -> f32 {
-            let dx = (i - tx).abs() as f32;
-            let dy = (j - ty).abs() as f32;
-            (dx.max(dy) + (std::f32::consts::SQRT_2 - 1.0) * dx.min(dy)) * res
-        };
-        self.heap.clear();
-        let start = &mut self.cells[s];
-        (start.stamp, start.g, start.parent) = (gen, 0.0, NONE);
-        let (si, sj) = ((s % self.width) as i64, (s / self.width) as i64);
-        self.heap.push(h(si, sj), s as u32);
-        const STEPS: [(i64, i64, f32); 8] = [
-            (-1, -1, std::f32::consts::SQRT_2),
-            (0, -1, 1.0),
-            (1, -1, std::f32::consts::SQRT_2),
-            (-1, 0, 1.0),
-            (1, 0, 1.0),
-            (-1, 1, std::f32::consts::SQRT_2),
-            (0, 1, 1.0),
-            (1, 1, std::f32::consts::SQRT_2),
-        ];
-        let height = self.height as i64;
-        while let Some((f, cell)) = self.heap.pop() {
-            let c = cell as usize;
-            let gc = self.cells[c].g;
-            let (ci, cj) = ((c % self.width) as i64, (c / self.width) as i64);
-            if f > gc + h(ci, cj) + 1e-4 {
-                continue; // a stale entry
-            }
-            if c == t {
-                let mut path = vec![t];
-                let mut k = t;
-                while self.cells[k].parent != NONE {
-                    k = self.cells[k].parent as usize;
-                    path.push(k);
+        if let Some(coarse) = &mut self.coarse {
+            let w = self.fine.width;
+            let block = |k: usize| (k % w / COARSE) + (k / w / COARSE) * coarse.width;
+            let route = coarse
+                .search(&mut self.heap, block(s), block(t), |_, _| true)
+                .ok_or(NoPath::Unreachable)?;
+            // The corridor: blocks within CORRIDOR of the route, stamped
+            // with a generation of their own.
+            let mark = coarse.next_generation();
+            let (cw, ch) = (coarse.width as i64, coarse.height as i64);
+            for &b in &route {
+                let (bi, bj) = ((b % coarse.width) as i64, (b / coarse.width) as i64);
+                for j in (bj - CORRIDOR).max(0)..=(bj + CORRIDOR).min(ch - 1) {
+                    for i in (bi - CORRIDOR).max(0)..=(bi + CORRIDOR).min(cw - 1) {
+                        coarse.cells[(j * cw + i) as usize].stamp = mark;
+                    }
                 }
-                path.reverse();
+            }
+            let blocks = &coarse.cells;
+            let shift = COARSE.trailing_zeros();
+            let inside =
+                |i: i64, j: i64| blocks[((j >> shift) * cw + (i >> shift)) as usize].stamp == mark;
+            if let Some(path) = self.fine.search(&mut self.heap, s, t, inside) {
                 return Ok(path);
             }
-            for &(di, dj, len) in &STEPS {
-                let (ni, nj) = (ci + di, cj + dj);
-                if ni < 0 || nj < 0 || ni >= w || nj >= height {
-                    continue;
-                }
-                let n = (nj * w + ni) as usize;
-                let next = &mut self.cells[n];
-                if next.enter == f32::INFINITY {
-                    continue; // blocked
-                }
-                let cost = gc + len * res + next.enter;
-                if next.stamp != gen || cost < next.g {
-                    (next.stamp, next.g, next.parent) = (gen, cost, c as u32);
-                    self.heap.push(cost + h(ni, nj), n as u32);
-                }
-            }
         }
-        Err(NoPath::Unreachable)
+        self.fine
+            .search(&mut self.heap, s, t, |_, _| true)
+            .ok_or(NoPath::Unreachable)
     }
 
     /// True when the straight line between cells `a` and `b` crosses only
     /// unblocked cells.
     pub fn visible(&self, a: usize, b: usize) -> bool {
-        let (ax, ay) = ((a % self.width) as f64, (a / self.width) as f64);
-        let (bx, by) = ((b % self.width) as f64, (b / self.width) as f64);
+        let (ax, ay) = ((a % self.fine.width) as f64, (a / self.fine.width) as f64);
+        let (bx, by) = ((b % self.fine.width) as f64, (b / self.fine.width) as f64);
         let n = (bx - ax).abs().max((by - ay).abs()).ceil() as usize * 2;
         (0..=n).all(|s| {
             let t = if n == 0 { 0.0 } else { s as f64 / n as f64 };
             let i = (ax + (bx - ax) * t + 0.5).floor() as usize;
             let j = (ay + (by - ay) * t + 0.5).floor() as usize;
-            self.free(j * self.width + i)
+            self.free(j * self.fine.width + i)
         })
     }
 
-    /// Waypoints (world points) along `path`, Player's way.
+    /// Waypoints (world points) along `path`, Player's way: from each
+    /// waypoint, the first 0.5 m of path is taken without looking, then the
+    /// next waypoint is the farthest path cell still in sight. Player tries
+    /// the cells one by one; this gallops (1, 2, 4… cells on) to the first
+    /// one out of sight, then halves the gap, so a long straight corridor
+    /// costs a few sight lines instead of one per cell. Every waypoint is
+    /// in sight of the one before.
     pub fn waypoints(&self, path: &[usize]) -> Vec<(f64, f64)> {
         let Some(&first) = path.first() else {
             return Vec::new();
         };
+        let seen = |from: usize, k: usize| self.visible(path[from], path[k]);
+        let blind = (0.5 / self.res()).floor() as usize + 1;
         let mut out = vec![self.centre(first)];
         let mut at = 0;
         while at + 1 < path.len() {
-            let mut dist = 0.0;
-            let mut k = at;
-            while k + 1 < path.len() {
-                if dist > 0.5 && !self.visible(path[at], path[k + 1]) {
-                    break;
+            let mut k = (at + blind).min(path.len() - 1);
+            if k + 1 < path.len() && seen(at, k + 1) {
+                // `lo` in sight; `hi` out of sight, or past the end.
+                let (mut lo, mut step) = (k + 1, 1);
+                let mut hi = loop {
+                    let next = lo + step;
+                    if next >= path.len() {
+                        break path.len();
+                    }
+                    if !seen(at, next) {
+                        break next;
+                    }
+                    lo = next;
+                    step *= 2;
+                };
+                while hi - lo > 1 {
+                    let mid = lo + (hi - lo) / 2;
+                    if seen(at, mid) {
+                        lo = mid;
+                    } else {
+                        hi = mid;
+                    }
                 }
-                dist += self.res();
-                k += 1;
+                k = lo;
             }
             at = k;
             out.push(self.centre(path[at]));
@@ -453,7 +569,7 @@ mod tests {
                     } else {
                         std::f32::consts::SQRT_2
                     };
-                    d * 0.1 + p.cells[w[1]].enter
+                    d * 0.1 + p.fine.cells[w[1]].enter
                 })
                 .sum()
         };
@@ -485,7 +601,7 @@ mod tests {
                     } else {
                         1.0
                     };
-                    let c = flood[k] + len * 0.1 + p.cells[k].enter;
+                    let c = flood[k] + len * 0.1 + p.fine.cells[k].enter;
                     if c + 1e-5 < flood[n] {
                         flood[n] = c;
                         changed = true;
@@ -495,6 +611,68 @@ mod tests {
         }
         let (a, f) = (cost(&path), flood[start]);
         assert!((a - f).abs() < 1e-3 * a, "A* {a} vs flood {f}");
+    }
+
+    /// 32 m × 32 m at 0.05 m (over the coarse threshold): four rows of
+    /// rooms, walls with doors at different places, so routes zigzag.
+    fn building(doors: bool) -> OccMap {
+        let info = map::Info {
+            width: 640,
+            height: 640,
+            resolution: 0.05,
+            origin: Pose2d::new(0.0, 0.0, 0.0),
+        };
+        OccMap::from_fn(info, |i, j| {
+            let wall = j % 160 == 80 && j < 560;
+            let door = doors && (i as i64 - if j % 320 == 80 { 560 } else { 80 }).abs() < 20;
+            if wall && !door {
+                OCCUPIED
+            } else {
+                FREE
+            }
+        })
+    }
+
+    fn path_cost(g: &Grid, path: &[usize]) -> f32 {
+        path.windows(2)
+            .map(|w| {
+                let (a, b) = (w[0] as i64, w[1] as i64);
+                let straight = (a - b).abs() == 1 || (a - b).abs() == g.width as i64;
+                let len = if straight {
+                    1.0
+                } else {
+                    std::f32::consts::SQRT_2
+                };
+                len * g.res + g.cells[w[1]].enter
+            })
+            .sum()
+    }
+
+    #[test]
+    fn large_maps_plan_coarse_then_fine_at_the_cost_of_a_full_search() {
+        let mut p = Planner::new(&building(true), params());
+        assert!(p.coarse.is_some());
+        let (a, b) = ((2.0, 2.0), (30.0, 30.0));
+        let path = p.plan(a, b).unwrap();
+        let (s, t) = (p.cell(a.0, a.1).unwrap(), p.cell(b.0, b.1).unwrap());
+        assert_eq!((path[0], *path.last().unwrap()), (s, t));
+        // Consecutive cells are neighbours, and none is blocked.
+        assert!(path.windows(2).all(|w| {
+            let (i0, j0) = ((w[0] % 640) as i64, (w[0] / 640) as i64);
+            let (i1, j1) = ((w[1] % 640) as i64, (w[1] / 640) as i64);
+            (i0 - i1).abs() <= 1 && (j0 - j1).abs() <= 1 && p.free(w[1])
+        }));
+        let full = p.fine.search(&mut p.heap, s, t, |_, _| true).unwrap();
+        let (got, best) = (path_cost(&p.fine, &path), path_cost(&p.fine, &full));
+        assert!(got <= best * 1.001, "corridor {got} vs full {best}");
+        // The waypoints see each other.
+        let wps = p.waypoints(&path);
+        let cells: Vec<usize> = wps.iter().map(|w| p.cell(w.0, w.1).unwrap()).collect();
+        assert!(cells.windows(2).all(|w| p.visible(w[0], w[1])));
+        assert!(wps.len() >= 5, "{} waypoints: start, 3 doors, goal", wps.len());
+        // Walls without doors: no coarse route, so no path.
+        let mut p = Planner::new(&building(false), params());
+        assert_eq!(p.plan(a, b), Err(NoPath::Unreachable));
     }
 
     #[test]
