@@ -669,7 +669,11 @@ mod tests {
         let wps = p.waypoints(&path);
         let cells: Vec<usize> = wps.iter().map(|w| p.cell(w.0, w.1).unwrap()).collect();
         assert!(cells.windows(2).all(|w| p.visible(w[0], w[1])));
-        assert!(wps.len() >= 5, "{} waypoints: start, 3 doors, goal", wps.len());
+        assert!(
+            wps.len() >= 5,
+            "{} waypoints: start, 3 doors, goal",
+            wps.len()
+        );
         // Walls without doors: no coarse route, so no path.
         let mut p = Planner::new(&building(false), params());
         assert_eq!(p.plan(a, b), Err(NoPath::Unreachable));
