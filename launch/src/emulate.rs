@@ -7,7 +7,7 @@ use std::time::Duration;
 
 use anyhow::Context;
 use clap::{Args, ValueEnum};
-use troupe_serial::Faults;
+use troupe_serial::{Faults, LineOptions};
 
 /// The devices Troupe can emulate.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -411,14 +411,19 @@ fn laser_scene(
 
 /// Runs the emulator until SIGINT or SIGTERM.
 pub fn run(a: EmulateArgs, z: &troupe_node::ZenohArgs) -> anyhow::Result<()> {
-    let faults = Faults {
-        noise: probability("noise", a.noise)?,
-        drop: probability("drop", a.drop)?,
-        corrupt: probability("corrupt", a.corrupt)?,
-        truncate: probability("truncate", a.truncate)?,
-        mute: a.mute,
-        unplug_after: seconds("unplug-after", a.unplug_after)?,
-        replug_after: seconds("replug-after", a.replug_after)?,
+    let line = LineOptions {
+        link: a.link.clone(),
+        faults: Faults {
+            noise: probability("noise", a.noise)?,
+            drop: probability("drop", a.drop)?,
+            corrupt: probability("corrupt", a.corrupt)?,
+            truncate: probability("truncate", a.truncate)?,
+            mute: a.mute,
+            unplug_after: seconds("unplug-after", a.unplug_after)?,
+            replug_after: seconds("replug-after", a.replug_after)?,
+        },
+        seed: a.seed,
+        capture: a.capture.clone(),
     };
     if a.device != Emulated::Sicklms200 && a.stage_laser.is_some() {
         anyhow::bail!("--stage-laser is for a sicklms200; a robot is backed by a Stage model with --stage-model NAME");
@@ -437,14 +442,8 @@ pub fn run(a: EmulateArgs, z: &troupe_node::ZenohArgs) -> anyhow::Result<()> {
     match a.device {
         Emulated::Sicklms200 => {
             use troupe_sicklms200::emulator;
-            let opts = emulator::EmulatorOptions {
-                link: a.link.clone(),
-                faults,
-                seed: a.seed,
-                capture: a.capture.clone(),
-            };
             let mut scene = laser_scene(&a, z)?;
-            emulator::run_with(&opts, scene.as_mut(), &stop, || {
+            emulator::run_with(&line, scene.as_mut(), &stop, || {
                 banner("sicklms200", &a.link);
                 tracing::info!("{} emulated; Ctrl-C stops it", emulator::KIND);
             })
@@ -453,10 +452,7 @@ pub fn run(a: EmulateArgs, z: &troupe_node::ZenohArgs) -> anyhow::Result<()> {
         Emulated::P2os => {
             use troupe_p2os::emulator;
             let opts = emulator::EmulatorOptions {
-                link: a.link.clone(),
-                faults,
-                seed: a.seed,
-                capture: a.capture.clone(),
+                line,
                 subclass: a.subclass.clone(),
                 name: "Troupe".into(),
             };
@@ -470,10 +466,7 @@ pub fn run(a: EmulateArgs, z: &troupe_node::ZenohArgs) -> anyhow::Result<()> {
         Emulated::Erratic => {
             use troupe_erratic::emulator;
             let opts = emulator::EmulatorOptions {
-                link: a.link.clone(),
-                faults,
-                seed: a.seed,
-                capture: a.capture.clone(),
+                line,
                 revision: a.revision.clone(),
             };
             let mut body = body(&a, z, emulator::room())?;

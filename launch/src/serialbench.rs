@@ -5,9 +5,9 @@ use std::time::{Duration, Instant};
 
 use clap::Args;
 use troupe_node::Waker;
-use troupe_serial::{Emulator, Faults};
+use troupe_serial::{Emulator, Faults, LineOptions};
 use troupe_sicklms200::device::{self, ScanConfig, Settings, Update};
-use troupe_sicklms200::emulator::{self, EmulatorOptions, Room};
+use troupe_sicklms200::emulator::{self, Room};
 
 #[derive(Debug, Args)]
 pub struct SerialBenchArgs {
@@ -44,11 +44,11 @@ pub fn run(a: &SerialBenchArgs) -> anyhow::Result<()> {
 
 fn case(baud: u32, res: u16, seconds: f64) -> anyhow::Result<(f64, f64, usize)> {
     let emu = Emulator::spawn("bench-serial", |link, stop, linked| {
-        let opts = EmulatorOptions {
+        let opts = LineOptions {
             link,
-            capture: None,
             faults: Faults::default(),
             seed: 1,
+            capture: None,
         };
         emulator::run_with(&opts, &mut Room, stop, linked)
     })?;

@@ -23,6 +23,19 @@ pub enum LineEvent {
     Replugged,
 }
 
+/// How an emulated line is set up: shared by every device emulator.
+#[derive(Debug, Clone)]
+pub struct LineOptions {
+    /// The path to link the pseudo-terminal at.
+    pub link: PathBuf,
+    /// Faults to inject on what the device sends.
+    pub faults: Faults,
+    /// Seed of the fault generator (runs with the same seed fail alike).
+    pub seed: u64,
+    /// Write what crosses the line, both ways, to this capture file.
+    pub capture: Option<PathBuf>,
+}
+
 /// A pseudo-terminal linked at a path, seen from the device: bytes sent at
 /// another baud rate than the device's are garbage to it, what it sends
 /// takes real line time, and [`Faults`] are applied on the way out.
@@ -42,16 +55,26 @@ pub struct EmuLine {
     pub injected: Injected,
     /// Bytes received at a baud rate other than the device's.
     pub wrong_baud: u64,
+    /// Where what crosses the line (what the device understood, and what
+    /// it sent after the faults) is written, if anywhere.
     recorder: Option<Recorder>,
 }
 
 impl EmuLine {
-    /// Opens a pseudo-terminal and links it at `link`.
+    /// Opens a pseudo-terminal for `device` (a name for the capture) and
+    /// links it at `opts.link`, recording to `opts.capture` if given.
     ///
     /// # Errors
     ///
-    /// When no pseudo-terminal can be had or the link cannot be made.
-    pub fn open(link: &Path, faults: Faults, seed: u64) -> std::io::Result<EmuLine> {
+    /// When no pseudo-terminal can be had, the link cannot be made, or the
+    /// capture file cannot be created.
+    pub fn open(opts: &LineOptions, device: &str) -> std::io::Result<EmuLine> {
+        let link = opts.link.as_path();
+        let recorder = opts
+            .capture
+            .as_deref()
+            .map(|path| Recorder::create(path, &format!("an emulated {device}")))
+            .transpose()?;
         let mut pty = Pty::open()?;
         pty.link(link)?;
         tracing::info!(
@@ -63,22 +86,16 @@ impl EmuLine {
             link: link.to_owned(),
             pty: Some(pty),
             pacer: Pacer::new(),
-            faults,
-            rng: StdRng::seed_from_u64(seed),
+            faults: opts.faults.clone(),
+            rng: StdRng::seed_from_u64(opts.seed),
             plugged_at: Instant::now(),
             unplugged_at: None,
             last_heard: Instant::now(),
             barked: false,
             injected: Injected::default(),
             wrong_baud: 0,
-            recorder: None,
+            recorder,
         })
-    }
-
-    /// From now on, writes what crosses the line (what the device
-    /// understood, and what it sent after the faults) to `recorder`.
-    pub fn record(&mut self, recorder: Recorder) {
-        self.recorder = Some(recorder);
     }
 
     /// The link path.

@@ -32,7 +32,7 @@ mod pty;
 mod thread;
 mod watchdog;
 
-pub use emu::{EmuLine, LineEvent};
+pub use emu::{EmuLine, LineEvent, LineOptions};
 pub use faults::{Faults, Injected};
 pub use framer::{Codec, Decoded, FrameStats, Framer, Skipped};
 pub use link::{Link, LinkError, SessionError};

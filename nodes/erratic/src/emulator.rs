@@ -12,12 +12,11 @@
 //! The robot lives in a [`Body`]: the room by default ([`room`]), or any
 //! other, such as a robot in a simulator.
 
-use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use troupe_geom::{Body, DiffDrive, Pose};
-use troupe_serial::{EmuLine, Faults, Framer, LineEvent};
+use troupe_serial::{EmuLine, Framer, LineEvent, LineOptions};
 
 use crate::packet::{self, argument, cmd, Motor, PacketCodec};
 use crate::params::{self, Params, DIFF_CONV, VEL2_DIV, VEL_CONV};
@@ -37,14 +36,8 @@ pub fn room() -> DiffDrive {
 /// What the emulator is told.
 #[derive(Debug, Clone)]
 pub struct EmulatorOptions {
-    /// The path to link the pseudo-terminal at.
-    pub link: PathBuf,
-    /// Faults to inject.
-    pub faults: Faults,
-    /// Seed of the fault generator.
-    pub seed: u64,
-    /// Write what crosses the line, both ways, to this capture file.
-    pub capture: Option<PathBuf>,
+    /// The line: its link, faults and capture.
+    pub line: LineOptions,
     /// The revision to report: "Rev E", "Rev G" or "Rev H".
     pub revision: String,
 }
@@ -163,13 +156,7 @@ pub fn run_with(
             opts.revision
         ))
     })?;
-    let mut line = EmuLine::open(&opts.link, opts.faults.clone(), opts.seed)?;
-    if let Some(path) = &opts.capture {
-        line.record(troupe_serial::capture::Recorder::create(
-            path,
-            "an emulated erratic",
-        )?);
-    }
+    let mut line = EmuLine::open(&opts.line, "erratic")?;
     linked();
     let baud = 38400;
     let mut robot = Robot::power_up(params);

@@ -9,16 +9,18 @@ use troupe_erratic::device::{self, Order, Settings, Update};
 use troupe_erratic::emulator::{self, EmulatorOptions, EmulatorStats};
 use troupe_erratic::packet::Motor;
 use troupe_node::Waker;
-use troupe_serial::{Emulator, Faults};
+use troupe_serial::{Emulator, Faults, LineOptions};
 
 /// An emulated Erratic on a thread, its line linked in a directory of its own.
 fn emulate(name: &str, faults: Faults) -> Emulator<EmulatorStats> {
     Emulator::spawn(&format!("erratic-{name}"), move |link, stop, linked| {
         let opts = EmulatorOptions {
-            link,
-            capture: None,
-            faults,
-            seed: 3,
+            line: LineOptions {
+                link,
+                faults,
+                seed: 3,
+                capture: None,
+            },
             revision: "Rev H".into(),
         };
         emulator::run_with(&opts, &mut emulator::room(), stop, linked)

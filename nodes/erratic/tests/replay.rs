@@ -15,7 +15,7 @@ use troupe_erratic::emulator::{self, EmulatorOptions};
 use troupe_erratic::packet::PacketCodec;
 use troupe_node::Waker;
 use troupe_serial::capture::{self, Capture};
-use troupe_serial::{Emulator, Faults, Framer};
+use troupe_serial::{Emulator, Faults, Framer, LineOptions};
 
 /// Motor packets the session runs for (under the driver's 1 s PULSE).
 const MOTOR: usize = 5;
@@ -68,10 +68,12 @@ fn session(link: &Path) -> Result<(Names, Vec<Vec<u8>>), String> {
 fn record(path: PathBuf) {
     let emu = Emulator::spawn("erratic-record", move |link, stop, linked| {
         let opts = EmulatorOptions {
-            link,
-            capture: Some(path),
-            faults: Faults::default(),
-            seed: 1,
+            line: LineOptions {
+                link,
+                faults: Faults::default(),
+                seed: 1,
+                capture: Some(path),
+            },
             revision: "Rev H".into(),
         };
         emulator::run_with(&opts, &mut emulator::room(), stop, linked)

@@ -13,12 +13,11 @@
 //! The robot lives in a [`Body`]: the room by default ([`room`]), or any
 //! other, such as a robot in a simulator.
 
-use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use troupe_geom::{Body, DiffDrive, Pose};
-use troupe_serial::{EmuLine, Faults, Framer, LineEvent};
+use troupe_serial::{EmuLine, Framer, LineEvent, LineOptions};
 
 use crate::packet::{self, cmd, PacketCodec, Sip};
 use crate::params::{self, Params};
@@ -76,14 +75,8 @@ impl Paddles {
 /// What the emulator is told.
 #[derive(Debug, Clone)]
 pub struct EmulatorOptions {
-    /// The path to link the pseudo-terminal at.
-    pub link: PathBuf,
-    /// Faults to inject.
-    pub faults: Faults,
-    /// Seed of the fault generator.
-    pub seed: u64,
-    /// Write what crosses the line, both ways, to this capture file.
-    pub capture: Option<PathBuf>,
+    /// The line: its link, faults and capture.
+    pub line: LineOptions,
     /// The subclass to report (a key of Player's robot table).
     pub subclass: String,
     /// The robot's name.
@@ -240,13 +233,7 @@ pub fn run_with(
             known.join(", ")
         ))
     })?;
-    let mut line = EmuLine::open(&opts.link, opts.faults.clone(), opts.seed)?;
-    if let Some(path) = &opts.capture {
-        line.record(troupe_serial::capture::Recorder::create(
-            path,
-            "an emulated p2os robot",
-        )?);
-    }
+    let mut line = EmuLine::open(&opts.line, "p2os robot")?;
     linked();
     // A Pioneer's serial port speaks 9600 baud unless its FLASH says otherwise.
     let baud = 9600;

@@ -8,16 +8,18 @@ use std::time::{Duration, Instant};
 use troupe_node::Waker;
 use troupe_p2os::device::{self, Order, Settings, Update};
 use troupe_p2os::emulator::{self, EmulatorOptions, EmulatorStats};
-use troupe_serial::{Emulator, Faults};
+use troupe_serial::{Emulator, Faults, LineOptions};
 
 /// An emulated Pioneer on a thread, its line linked in a directory of its own.
 fn emulate(name: &str, faults: Faults) -> Emulator<EmulatorStats> {
     Emulator::spawn(&format!("p2os-{name}"), move |link, stop, linked| {
         let opts = EmulatorOptions {
-            link,
-            capture: None,
-            faults,
-            seed: 2,
+            line: LineOptions {
+                link,
+                faults,
+                seed: 2,
+                capture: None,
+            },
             subclass: "p3dx-sh".into(),
             name: "Troupe".into(),
         };

@@ -15,7 +15,7 @@ use troupe_p2os::device::{self, Order, Settings, Update};
 use troupe_p2os::emulator::{self, EmulatorOptions};
 use troupe_p2os::packet::{PacketCodec, Sip};
 use troupe_serial::capture::{self, Capture};
-use troupe_serial::{Emulator, Faults, Framer};
+use troupe_serial::{Emulator, Faults, Framer, LineOptions};
 
 /// SIPs the session runs for.
 const SIPS: usize = 10;
@@ -66,10 +66,12 @@ fn session(link: &Path) -> Result<(Names, Vec<Sip>), String> {
 fn record(path: PathBuf) {
     let emu = Emulator::spawn("p2os-record", move |link, stop, linked| {
         let opts = EmulatorOptions {
-            link,
-            capture: Some(path),
-            faults: Faults::default(),
-            seed: 1,
+            line: LineOptions {
+                link,
+                faults: Faults::default(),
+                seed: 1,
+                capture: Some(path),
+            },
             subclass: "p3dx-sh".into(),
             name: "Troupe".into(),
         };

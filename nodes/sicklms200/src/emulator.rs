@@ -9,11 +9,10 @@
 //! 75 Hz mirror, interlaced at 0.5° and 0.25° — or the line's, whichever is
 //! slower. Ranges come from a [`Scene`].
 
-use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use troupe_serial::{EmuLine, Faults, Framer, LineEvent};
+use troupe_serial::{EmuLine, Framer, LineEvent, LineOptions};
 
 use crate::telegram::{self, cmd, mode, Telegram, TelegramCodec, ACK_BYTE, NAK_BYTE};
 
@@ -56,19 +55,6 @@ impl Scene for Room {
             })
             .collect()
     }
-}
-
-/// What the emulator is told.
-#[derive(Debug, Clone)]
-pub struct EmulatorOptions {
-    /// The path to link the pseudo-terminal at.
-    pub link: PathBuf,
-    /// Faults to inject.
-    pub faults: Faults,
-    /// Seed of the fault generator.
-    pub seed: u64,
-    /// Write what crosses the line, both ways, to this capture file.
-    pub capture: Option<PathBuf>,
 }
 
 /// Counts for the log.
@@ -139,7 +125,7 @@ impl Lms {
 ///
 /// When the pseudo-terminal cannot be opened or linked, or fails.
 pub fn run(
-    opts: &EmulatorOptions,
+    opts: &LineOptions,
     scene: &mut dyn Scene,
     stop: &AtomicBool,
 ) -> std::io::Result<EmulatorStats> {
@@ -153,18 +139,12 @@ pub fn run(
 ///
 /// As [`run`].
 pub fn run_with(
-    opts: &EmulatorOptions,
+    opts: &LineOptions,
     scene: &mut dyn Scene,
     stop: &AtomicBool,
     linked: impl FnOnce(),
 ) -> std::io::Result<EmulatorStats> {
-    let mut line = EmuLine::open(&opts.link, opts.faults.clone(), opts.seed)?;
-    if let Some(path) = &opts.capture {
-        line.record(troupe_serial::capture::Recorder::create(
-            path,
-            "an emulated sicklms200",
-        )?);
-    }
+    let mut line = EmuLine::open(opts, "sicklms200")?;
     linked();
     let mut lms = Lms::power_up();
     let mut framer = Framer::new(TelegramCodec {

@@ -6,18 +6,18 @@ use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
 
 use troupe_node::Waker;
-use troupe_serial::{Emulator, Faults};
+use troupe_serial::{Emulator, Faults, LineOptions};
 use troupe_sicklms200::device::{self, Order, ScanConfig, Settings, Update};
-use troupe_sicklms200::emulator::{self, EmulatorOptions, EmulatorStats, Room, Scene};
+use troupe_sicklms200::emulator::{self, EmulatorStats, Room, Scene};
 
 /// An emulated scanner on a thread, its line linked in a directory of its own.
 fn emulate(name: &str, faults: Faults) -> Emulator<EmulatorStats> {
     Emulator::spawn(&format!("lms-{name}"), move |link, stop, linked| {
-        let opts = EmulatorOptions {
+        let opts = LineOptions {
             link,
-            capture: None,
             faults,
             seed: 1,
+            capture: None,
         };
         emulator::run_with(&opts, &mut Room, stop, linked)
     })

@@ -13,9 +13,9 @@ use std::time::{Duration, Instant};
 
 use troupe_node::Waker;
 use troupe_serial::capture::{self, Capture, Entry};
-use troupe_serial::{Emulator, Faults};
+use troupe_serial::{Emulator, Faults, LineOptions};
 use troupe_sicklms200::device::{self, Order, ScanConfig, Settings, Update};
-use troupe_sicklms200::emulator::{self, EmulatorOptions, Room};
+use troupe_sicklms200::emulator::{self, Room};
 use troupe_sicklms200::telegram::RawScan;
 
 /// Scans the session runs for.
@@ -66,11 +66,11 @@ fn session(link: &Path) -> Result<((String, u32), Vec<RawScan>), String> {
 
 fn record(path: PathBuf) {
     let emu = Emulator::spawn("lms-record", move |link, stop, linked| {
-        let opts = EmulatorOptions {
+        let opts = LineOptions {
             link,
-            capture: Some(path),
             faults: Faults::default(),
             seed: 1,
+            capture: Some(path),
         };
         emulator::run_with(&opts, &mut Room, stop, linked)
     })
