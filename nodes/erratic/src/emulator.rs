@@ -60,22 +60,21 @@ struct Robot {
     enabled: bool,
     sonar: bool,
     analog: bool,
-    /// The last step stalled.
-    stalled: bool,
     left: f64,
     right: f64,
     servos: [u16; 3],
 }
 
 impl Robot {
-    fn power_up(params: &'static Params) -> Robot {
+    /// The robot as it powers up (or is closed), its odometry at zero.
+    fn power_up(params: &'static Params, body: &mut dyn Body) -> Robot {
+        body.reset_odometry();
         Robot {
             params,
             open: false,
             enabled: false,
             sonar: false,
             analog: false,
-            stalled: false,
             left: 0.0,
             right: 0.0,
             servos: [1650; 3],
@@ -88,8 +87,8 @@ impl Robot {
         self.right = speed + rot;
     }
 
-    fn wheels(&self) -> (f64, f64) {
-        if self.enabled && !self.stalled {
+    fn wheels(&self, body: &dyn Body) -> (f64, f64) {
+        if self.enabled && !body.stalled() {
             (self.left, self.right)
         } else {
             (0.0, 0.0)
@@ -104,14 +103,13 @@ impl Robot {
             (0.0, 0.0)
         };
         body.drive((l + r) / 2.0 / 1000.0, (r - l) * DIFF_CONV / 2.0, dt);
-        self.stalled = body.stalled();
     }
 
     fn motor(&self, body: &dyn Body) -> Motor {
         let counter =
             |m: f64| ((m * 1000.0 / self.params.dist_conv).round() as i64).rem_euclid(4096) as u16;
         let o = body.odometry();
-        let (l, r) = self.wheels();
+        let (l, r) = self.wheels(body);
         Motor {
             kind: if l != 0.0 || r != 0.0 { 0x83 } else { 0x82 },
             x: counter(o.x),
@@ -120,8 +118,8 @@ impl Robot {
             lvel: (l / VEL_CONV).round() as i16,
             rvel: (r / VEL_CONV).round() as i16,
             battery: 125,
-            lstall: u8::from(self.stalled),
-            rstall: u8::from(self.stalled),
+            lstall: u8::from(body.stalled()),
+            rstall: u8::from(body.stalled()),
         }
     }
 
@@ -159,8 +157,7 @@ pub fn run_with(
     let mut line = EmuLine::open(&opts.line, "erratic")?;
     linked();
     let baud = 38400;
-    let mut robot = Robot::power_up(params);
-    body.reset_odometry();
+    let mut robot = Robot::power_up(params, body);
     let mut framer = Framer::new(PacketCodec);
     let mut stats = EmulatorStats::default();
     let mut next = Instant::now();
@@ -176,8 +173,7 @@ pub fn run_with(
                 }
             }
             LineEvent::Replugged => {
-                robot = Robot::power_up(params);
-                body.reset_odometry();
+                robot = Robot::power_up(params, body);
                 framer.clear();
             }
             LineEvent::Idle | LineEvent::Unplugged => {}
@@ -244,8 +240,7 @@ fn obey(
         }
         cmd::CLOSE => {
             tracing::info!("closed by the client");
-            *robot = Robot::power_up(robot.params);
-            body.reset_odometry();
+            *robot = Robot::power_up(robot.params, body);
         }
         cmd::ENABLE => robot.enabled = argument(p) != 0,
         cmd::SONAR => robot.sonar = argument(p) != 0,
@@ -284,7 +279,7 @@ mod tests {
     #[test]
     fn motor_packets_report_odometry_and_speeds() {
         let mut room = room();
-        let mut r = Robot::power_up(params::find("Rev H").unwrap());
+        let mut r = Robot::power_up(params::find("Rev H").unwrap(), &mut room);
         r.enabled = true;
         r.wheels_from(300.0, 0.0);
         for _ in 0..10 {

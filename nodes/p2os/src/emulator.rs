@@ -116,7 +116,9 @@ struct Robot {
 }
 
 impl Robot {
-    fn power_up(params: &'static Params) -> Robot {
+    /// The robot as it powers up, its odometry at zero.
+    fn power_up(params: &'static Params, body: &mut dyn Body) -> Robot {
+        body.reset_odometry();
         Robot {
             params,
             state: State::Unsynced,
@@ -237,8 +239,7 @@ pub fn run_with(
     linked();
     // A Pioneer's serial port speaks 9600 baud unless its FLASH says otherwise.
     let baud = 9600;
-    let mut robot = Robot::power_up(params);
-    body.reset_odometry();
+    let mut robot = Robot::power_up(params, body);
     let mut framer = Framer::new(PacketCodec);
     let mut stats = EmulatorStats::default();
     let mut next_sip = Instant::now();
@@ -256,8 +257,7 @@ pub fn run_with(
                 }
             }
             LineEvent::Replugged => {
-                robot = Robot::power_up(params);
-                body.reset_odometry();
+                robot = Robot::power_up(params, body);
                 framer.clear();
             }
             LineEvent::Idle | LineEvent::Unplugged => {}
@@ -393,7 +393,7 @@ mod tests {
     #[test]
     fn sips_report_odometry_speeds_and_stall() {
         let mut room = room();
-        let mut r = Robot::power_up(params::find("p3dx").unwrap());
+        let mut r = Robot::power_up(params::find("p3dx").unwrap(), &mut room);
         r.enabled = true;
         r.wheels_from(500.0, 0.0);
         for _ in 0..10 {
@@ -415,7 +415,7 @@ mod tests {
     #[test]
     fn the_gripper_takes_a_second_and_the_gyro_reads_the_turn() {
         let mut room = room();
-        let mut r = Robot::power_up(params::find("p3dx").unwrap());
+        let mut r = Robot::power_up(params::find("p3dx").unwrap(), &mut room);
         r.enabled = true;
         assert_eq!(r.sip(&mut room).anport, 0x01);
         r.paddles = Paddles::Moving(false, 10);
