@@ -122,24 +122,36 @@ impl troupe_sicklms200::emulator::Scene for LiveLaser {
         let Some(scan) = self.laser.scan() else {
             return vec![f64::INFINITY; angles.len()];
         };
-        let (min, res) = (f64::from(scan.min_angle), f64::from(scan.resolution));
-        angles
-            .iter()
-            .map(|&a| {
-                let i = if res > 0.0 {
-                    ((a - min) / res).round()
-                } else {
-                    -1.0
-                };
-                match scan.ranges.get(i as usize) {
-                    Some(&r) if i >= 0.0 && f64::from(r) < f64::from(scan.max_range) => {
-                        f64::from(r)
-                    }
-                    _ => f64::INFINITY,
-                }
-            })
-            .collect()
+        let ranges: Vec<f64> = scan.ranges.iter().map(|&r| f64::from(r)).collect();
+        let f = f64::from;
+        nearest_beams(
+            angles,
+            f(scan.min_angle),
+            f(scan.resolution),
+            f(scan.max_range),
+            &ranges,
+        )
     }
+}
+
+/// For each of `angles`, the range of the nearest of `ranges` (beams
+/// `step` apart from `min`), or infinity where that is out of reach or
+/// there is no such beam.
+fn nearest_beams(angles: &[f64], min: f64, step: f64, max_range: f64, ranges: &[f64]) -> Vec<f64> {
+    angles
+        .iter()
+        .map(|&a| {
+            let i = if step > 0.0 {
+                ((a - min) / step).round()
+            } else {
+                -1.0
+            };
+            match ranges.get(i as usize) {
+                Some(&r) if i >= 0.0 && r < max_range => r,
+                _ => f64::INFINITY,
+            }
+        })
+        .collect()
 }
 
 /// A robot body that is a Stage model: the emulator's wheel commands go
@@ -343,16 +355,7 @@ impl troupe_sicklms200::emulator::Scene for LiveRanger {
         let c = &self.config;
         // Stage's `angular_res` is fov/samples; its beams are fov/(samples − 1) apart.
         let step = (c.max_angle - c.min_angle) / (ranges.len().max(2) - 1) as f64;
-        angles
-            .iter()
-            .map(|&a| {
-                let i = ((a - c.min_angle) / step).round();
-                match ranges.get(i as usize) {
-                    Some(&r) if i >= 0.0 && r < c.max_range => r,
-                    _ => f64::INFINITY,
-                }
-            })
-            .collect()
+        nearest_beams(angles, c.min_angle, step, c.max_range, &ranges)
     }
 }
 
