@@ -132,8 +132,6 @@ pub struct Planner {
     /// The map's size, resolution and origin.
     info: map::Info,
     params: Params,
-    /// Distance to the nearest obstacle, capped at `max_radius`.
-    dist: Vec<f32>,
     /// The full-resolution grid.
     fine: Grid,
     /// A grid of [`COARSE`]² blocks of cells, for large maps: a path on it
@@ -302,13 +300,10 @@ impl Planner {
     pub fn new(map: &OccMap, params: Params) -> Self {
         let (width, height) = map.size();
         let maxr = params.max_radius as f32;
-        let dist: Vec<f32> = map
-            .distance_field()
-            .into_iter()
-            .map(|d| d.min(maxr))
-            .collect();
         let min_r = params.min_radius;
-        let enter = dist.iter().map(|&d| {
+        let field = map.distance_field();
+        let enter = field.into_iter().map(|d| {
+            let d = d.min(maxr);
             if f64::from(d) < min_r {
                 f32::INFINITY
             } else if d < maxr {
@@ -322,7 +317,6 @@ impl Planner {
         Planner {
             info: map.info,
             params,
-            dist,
             fine,
             coarse,
             heap: RadixHeap::default(),
@@ -347,8 +341,9 @@ impl Planner {
         f64::from(self.info.resolution)
     }
 
+    /// True where the robot may be: not within `min_radius` of an obstacle.
     fn free(&self, k: usize) -> bool {
-        f64::from(self.dist[k]) >= self.params.min_radius
+        self.fine.cells[k].enter.is_finite()
     }
 
     /// The cheapest path of cells from `start` to `goal` (world points).
@@ -559,20 +554,6 @@ mod tests {
         let m = walled();
         let mut p = Planner::new(&m, params());
         let path = p.plan((2.0, 1.5), (3.0, 9.0)).unwrap();
-        let cost = |path: &[usize]| -> f32 {
-            path.windows(2)
-                .map(|w| {
-                    let d = if (w[0] as i64 - w[1] as i64).abs() == 1
-                        || (w[0] as i64 - w[1] as i64).abs() == 100
-                    {
-                        1.0
-                    } else {
-                        std::f32::consts::SQRT_2
-                    };
-                    d * 0.1 + p.fine.cells[w[1]].enter
-                })
-                .sum()
-        };
         // flood[n]: cheapest cost from n to the goal, a step into k costing
         // its length plus k's penalty, as A* counts it.
         let mut flood = vec![f32::INFINITY; 10_000];
@@ -609,7 +590,7 @@ mod tests {
                 }
             }
         }
-        let (a, f) = (cost(&path), flood[start]);
+        let (a, f) = (path_cost(&p.fine, &path), flood[start]);
         assert!((a - f).abs() < 1e-3 * a, "A* {a} vs flood {f}");
     }
 
