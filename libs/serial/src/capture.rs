@@ -20,6 +20,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use crate::pty::Pty;
+use crate::Emulator;
 
 /// One line of a capture.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -278,6 +279,18 @@ pub fn replay(
         pty.recv(&mut buf, Duration::from_millis(50))?;
     }
     Ok(report)
+}
+
+/// [`replay`] on a thread of its own (see [`Emulator`]), its device
+/// linked in a directory named after `name`: for tests.
+///
+/// # Errors
+///
+/// The directory cannot be made, or the pseudo-terminal cannot be linked.
+pub fn replay_on_thread(name: &str, capture: Capture) -> std::io::Result<Emulator<ReplayReport>> {
+    Emulator::spawn(&format!("{name}-replay"), move |link, stop, linked| {
+        replay(&link, &capture, stop, linked)
+    })
 }
 
 #[cfg(test)]

@@ -2,43 +2,16 @@
 //! pseudo-terminal: line faults, a mute robot, an unplugged one.
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] fns
 
+mod common;
+
 use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
 
-use troupe_erratic::device::{self, Order, Settings, Update};
-use troupe_erratic::emulator::{self, EmulatorOptions, EmulatorStats};
+use common::{emulate, settings};
+use troupe_erratic::device::{self, Order, Update};
 use troupe_erratic::packet::Motor;
 use troupe_node::Waker;
-use troupe_serial::{Emulator, Faults, LineOptions};
-
-/// An emulated Erratic on a thread, its line linked in a directory of its own.
-fn emulate(name: &str, faults: Faults) -> Emulator<EmulatorStats> {
-    Emulator::spawn(&format!("erratic-{name}"), move |link, stop, linked| {
-        let opts = EmulatorOptions {
-            line: LineOptions {
-                link,
-                faults,
-                seed: 3,
-                capture: None,
-            },
-            revision: "Rev H".into(),
-        };
-        emulator::run_with(&opts, &mut emulator::room(), stop, linked)
-    })
-    .unwrap()
-}
-
-fn settings(link: &std::path::Path) -> Settings {
-    Settings {
-        port: link.to_owned(),
-        direct_wheel: true,
-        max_speed: 500,
-        max_turn: 100,
-        sonar: true,
-        analog: false,
-        startup: Vec::new(),
-    }
-}
+use troupe_serial::Faults;
 
 fn wait_for(rx: &Receiver<Update>, secs: u64, mut want: impl FnMut(&Update) -> bool) -> Update {
     let deadline = Instant::now() + Duration::from_secs(secs);
@@ -68,7 +41,7 @@ fn line_faults_are_survived_and_the_robot_still_drives() {
         drop: 0.001,
         ..Faults::default()
     };
-    let emu = emulate("noisy", faults);
+    let emu = emulate("noisy", faults, None);
     let line = device::spawn(settings(emu.link()), Waker::none()).unwrap();
     let rx = line.updates();
     wait_for(rx, 60, |u| matches!(u, Update::Ready { .. }));
@@ -105,6 +78,7 @@ fn a_mute_robot_is_reported_and_an_unplugged_one_reconnects() {
             mute: true,
             ..Faults::default()
         },
+        None,
     );
     let line = device::spawn(settings(mute.link()), Waker::none()).unwrap();
     let rx = line.updates();
@@ -122,6 +96,7 @@ fn a_mute_robot_is_reported_and_an_unplugged_one_reconnects() {
             replug_after: Some(Duration::from_secs(1)),
             ..Faults::default()
         },
+        None,
     );
     let line = device::spawn(settings(unplug.link()), Waker::none()).unwrap();
     let rx = line.updates();

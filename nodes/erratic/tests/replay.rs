@@ -7,15 +7,17 @@
 //! a real one is available); `TROUPE_BLESS=1` records it afresh.
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] fns
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use troupe_erratic::device::{self, Order, Settings, Update};
-use troupe_erratic::emulator::{self, EmulatorOptions};
+use common::{emulate, settings};
+use troupe_erratic::device::{self, Order, Update};
 use troupe_erratic::packet::PacketCodec;
 use troupe_node::Waker;
 use troupe_serial::capture::{self, Capture};
-use troupe_serial::{Emulator, Faults, Framer, LineOptions};
+use troupe_serial::{Faults, Framer};
 
 /// Motor packets the session runs for (under the driver's 1 s PULSE).
 const MOTOR: usize = 5;
@@ -33,16 +35,7 @@ type Names = (String, String, String);
 
 /// What the driver made of a session: the robot's names, then its motor packets.
 fn session(link: &Path) -> Result<(Names, Vec<Vec<u8>>), String> {
-    let settings = Settings {
-        port: link.to_owned(),
-        direct_wheel: true,
-        max_speed: 500,
-        max_turn: 100,
-        sonar: true,
-        analog: false,
-        startup: Vec::new(),
-    };
-    let line = device::spawn(settings, Waker::none()).unwrap();
+    let line = device::spawn(settings(link), Waker::none()).unwrap();
     let deadline = Instant::now() + Duration::from_secs(20);
     let (mut name, mut motor) = (None, Vec::new());
     while motor.len() < MOTOR {
@@ -66,19 +59,7 @@ fn session(link: &Path) -> Result<(Names, Vec<Vec<u8>>), String> {
 }
 
 fn record(path: PathBuf) {
-    let emu = Emulator::spawn("erratic-record", move |link, stop, linked| {
-        let opts = EmulatorOptions {
-            line: LineOptions {
-                link,
-                faults: Faults::default(),
-                seed: 1,
-                capture: Some(path),
-            },
-            revision: "Rev H".into(),
-        };
-        emulator::run_with(&opts, &mut emulator::room(), stop, linked)
-    })
-    .unwrap();
+    let emu = emulate("record", Faults::default(), Some(path));
     session(emu.link()).unwrap();
     emu.stop().unwrap();
 }
@@ -100,10 +81,7 @@ fn a_captured_erratic_session_replays_byte_for_byte() {
     assert!(captured.len() >= MOTOR, "{} captured", captured.len());
 
     let played = cap.clone();
-    let emu = Emulator::spawn("erratic-replay", move |link, stop, linked| {
-        capture::replay(&link, &played, stop, linked)
-    })
-    .unwrap();
+    let emu = capture::replay_on_thread("erratic", played).unwrap();
     let outcome = session(emu.link());
     // A difference from the capture ends the replay: its error says where.
     let report = emu.stop().unwrap();

@@ -2,45 +2,15 @@
 //! pseudo-terminal: the handshake, SIPs, driving, faults.
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] fns
 
+mod common;
+
 use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
 
+use common::{emulate, settings};
 use troupe_node::Waker;
 use troupe_p2os::device::{self, Order, Settings, Update};
-use troupe_p2os::emulator::{self, EmulatorOptions, EmulatorStats};
-use troupe_serial::{Emulator, Faults, LineOptions};
-
-/// An emulated Pioneer on a thread, its line linked in a directory of its own.
-fn emulate(name: &str, faults: Faults) -> Emulator<EmulatorStats> {
-    Emulator::spawn(&format!("p2os-{name}"), move |link, stop, linked| {
-        let opts = EmulatorOptions {
-            line: LineOptions {
-                link,
-                faults,
-                seed: 2,
-                capture: None,
-            },
-            subclass: "p3dx-sh".into(),
-            name: "Troupe".into(),
-        };
-        emulator::run_with(&opts, &mut emulator::room(), stop, linked)
-    })
-    .unwrap()
-}
-
-fn settings(link: &std::path::Path) -> Settings {
-    Settings {
-        port: link.to_owned(),
-        sonar: true,
-        direct_wheel: true,
-        max_speed: 500,
-        max_turn: 100,
-        vel_band: false,
-        pulse: None,
-        bumpstall: None,
-        gyro: false,
-    }
-}
+use troupe_serial::Faults;
 
 fn wait_for(rx: &Receiver<Update>, secs: u64, mut want: impl FnMut(&Update) -> bool) -> Update {
     let deadline = Instant::now() + Duration::from_secs(secs);
@@ -62,7 +32,7 @@ fn sip(u: &Update) -> Option<&troupe_p2os::packet::Sip> {
 
 #[test]
 fn handshake_sips_sonar_and_driving() {
-    let emu = emulate("drive", Faults::default());
+    let emu = emulate("drive", Faults::default(), None);
     let line = device::spawn(settings(emu.link()), Waker::none()).unwrap();
     let rx = line.updates();
     let Update::Ready { name, params, baud } =
@@ -115,7 +85,7 @@ fn faults_are_survived_and_a_mute_robot_is_reported() {
         drop: 0.001,
         ..Faults::default()
     };
-    let emu = emulate("noisy", faults);
+    let emu = emulate("noisy", faults, None);
     let line = device::spawn(settings(emu.link()), Waker::none()).unwrap();
     let rx = line.updates();
     let mut sips = 0;
@@ -134,6 +104,7 @@ fn faults_are_survived_and_a_mute_robot_is_reported() {
             mute: true,
             ..Faults::default()
         },
+        None,
     );
     let line = device::spawn(settings(mute.link()), Waker::none()).unwrap();
     let rx = line.updates();
@@ -147,7 +118,7 @@ fn faults_are_survived_and_a_mute_robot_is_reported() {
 
 #[test]
 fn the_gripper_and_the_gyro_answer() {
-    let emu = emulate("gripper", Faults::default());
+    let emu = emulate("gripper", Faults::default(), None);
     let line = device::spawn(
         Settings {
             gyro: true,
@@ -181,6 +152,7 @@ fn an_unplugged_robot_is_lost_then_back() {
             replug_after: Some(Duration::from_secs(1)),
             ..Faults::default()
         },
+        None,
     );
     let line = device::spawn(settings(emu.link()), Waker::none()).unwrap();
     let rx = line.updates();

@@ -7,15 +7,17 @@
 //! a real one is available); `TROUPE_BLESS=1` records it afresh.
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] fns
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+use common::{emulate, settings};
 use troupe_node::Waker;
-use troupe_p2os::device::{self, Order, Settings, Update};
-use troupe_p2os::emulator::{self, EmulatorOptions};
+use troupe_p2os::device::{self, Order, Update};
 use troupe_p2os::packet::{PacketCodec, Sip};
 use troupe_serial::capture::{self, Capture};
-use troupe_serial::{Emulator, Faults, Framer, LineOptions};
+use troupe_serial::{Faults, Framer};
 
 /// SIPs the session runs for.
 const SIPS: usize = 10;
@@ -29,18 +31,7 @@ type Names = (String, String, String);
 
 /// What the driver made of a session: the robot's names, then its SIPs.
 fn session(link: &Path) -> Result<(Names, Vec<Sip>), String> {
-    let settings = Settings {
-        port: link.to_owned(),
-        sonar: true,
-        direct_wheel: true,
-        max_speed: 500,
-        max_turn: 100,
-        vel_band: false,
-        pulse: None,
-        bumpstall: None,
-        gyro: false,
-    };
-    let line = device::spawn(settings, Waker::none()).unwrap();
+    let line = device::spawn(settings(link), Waker::none()).unwrap();
     let deadline = Instant::now() + Duration::from_secs(20);
     let (mut name, mut sips) = (None, Vec::new());
     while sips.len() < SIPS {
@@ -64,20 +55,7 @@ fn session(link: &Path) -> Result<(Names, Vec<Sip>), String> {
 
 /// Records the capture from the emulated robot.
 fn record(path: PathBuf) {
-    let emu = Emulator::spawn("p2os-record", move |link, stop, linked| {
-        let opts = EmulatorOptions {
-            line: LineOptions {
-                link,
-                faults: Faults::default(),
-                seed: 1,
-                capture: Some(path),
-            },
-            subclass: "p3dx-sh".into(),
-            name: "Troupe".into(),
-        };
-        emulator::run_with(&opts, &mut emulator::room(), stop, linked)
-    })
-    .unwrap();
+    let emu = emulate("record", Faults::default(), Some(path));
     session(emu.link()).unwrap();
     emu.stop().unwrap();
 }
@@ -101,10 +79,7 @@ fn a_captured_pioneer_session_replays_byte_for_byte() {
     assert!(captured.len() >= SIPS, "{} SIPs captured", captured.len());
 
     let played = cap.clone();
-    let emu = Emulator::spawn("p2os-replay", move |link, stop, linked| {
-        capture::replay(&link, &played, stop, linked)
-    })
-    .unwrap();
+    let emu = capture::replay_on_thread("p2os", played).unwrap();
     let outcome = session(emu.link());
     // A difference from the capture ends the replay: its error says where.
     let report = emu.stop().unwrap();

@@ -2,45 +2,16 @@
 //! pseudo-terminal: Player's whole connection sequence, then scans.
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] fns
 
+mod common;
+
 use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
 
+use common::{emulate, settings};
 use troupe_node::Waker;
-use troupe_serial::{Emulator, Faults, LineOptions};
-use troupe_sicklms200::device::{self, Order, ScanConfig, Settings, Update};
-use troupe_sicklms200::emulator::{self, EmulatorStats, Room, Scene};
-
-/// An emulated scanner on a thread, its line linked in a directory of its own.
-fn emulate(name: &str, faults: Faults) -> Emulator<EmulatorStats> {
-    Emulator::spawn(&format!("lms-{name}"), move |link, stop, linked| {
-        let opts = LineOptions {
-            link,
-            faults,
-            seed: 1,
-            capture: None,
-        };
-        emulator::run_with(&opts, &mut Room, stop, linked)
-    })
-    .expect("the emulator links its line")
-}
-
-fn settings(link: &std::path::Path, res: u16, transfer: u32) -> Settings {
-    Settings {
-        port: link.to_owned(),
-        connect_rates: vec![9600, 38400, 500000],
-        transfer_rate: transfer,
-        retry: 0,
-        delay: Duration::ZERO,
-        high_avail: false,
-        config: ScanConfig {
-            res,
-            range_res: 1,
-            intensity: true,
-            min_angle: -9000,
-            max_angle: 9000,
-        },
-    }
-}
+use troupe_serial::Faults;
+use troupe_sicklms200::device::{self, Order, Update};
+use troupe_sicklms200::emulator::{self, Room, Scene};
 
 /// Waits for an update matching `want`, for at most `secs`.
 fn wait_for(rx: &Receiver<Update>, secs: u64, mut want: impl FnMut(&Update) -> bool) -> Update {
@@ -57,7 +28,7 @@ fn wait_for(rx: &Receiver<Update>, secs: u64, mut want: impl FnMut(&Update) -> b
 
 #[test]
 fn connects_at_9600_switches_to_500000_and_streams_room_scans() {
-    let emu = emulate("fast", Faults::default());
+    let emu = emulate("fast", Faults::default(), None);
     let t = device::spawn(settings(emu.link(), 50, 500000), Waker::none()).unwrap();
     let rx = t.updates();
     let ready = wait_for(rx, 20, |u| matches!(u, Update::Ready { .. }));
@@ -124,7 +95,7 @@ fn survives_noise_bad_checksums_truncation_and_dropped_bytes() {
         drop: 0.0005,
         ..Faults::default()
     };
-    let emu = emulate("noisy", faults);
+    let emu = emulate("noisy", faults, None);
     let t = device::spawn(settings(emu.link(), 100, 500000), Waker::none()).unwrap();
     let rx = t.updates();
     // Whatever the faults did to the handshake, the driver gets through it
@@ -149,6 +120,7 @@ fn a_mute_device_is_reported_and_an_unplugged_one_reconnects() {
             mute: true,
             ..Faults::default()
         },
+        None,
     );
     let mut s = settings(mute.link(), 100, 38400);
     s.connect_rates = vec![9600];
@@ -171,6 +143,7 @@ fn a_mute_device_is_reported_and_an_unplugged_one_reconnects() {
             replug_after: Some(Duration::from_secs(1)),
             ..Faults::default()
         },
+        None,
     );
     let t = device::spawn(settings(unplug.link(), 100, 38400), Waker::none()).unwrap();
     let rx = t.updates();

@@ -8,14 +8,16 @@
 //! real one is available); `TROUPE_BLESS=1` records it afresh.
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] fns
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+use common::{emulate, settings};
 use troupe_node::Waker;
 use troupe_serial::capture::{self, Capture, Entry};
-use troupe_serial::{Emulator, Faults, LineOptions};
-use troupe_sicklms200::device::{self, Order, ScanConfig, Settings, Update};
-use troupe_sicklms200::emulator::{self, Room};
+use troupe_serial::Faults;
+use troupe_sicklms200::device::{self, Order, Update};
 use troupe_sicklms200::telegram::RawScan;
 
 /// Scans the session runs for.
@@ -27,22 +29,7 @@ fn capture_path() -> PathBuf {
 
 /// What the driver made of a session: the scanner's type and baud, then its scans.
 fn session(link: &Path) -> Result<((String, u32), Vec<RawScan>), String> {
-    let settings = Settings {
-        port: link.to_owned(),
-        connect_rates: vec![9600, 38400, 500000],
-        transfer_rate: 38400,
-        retry: 0,
-        delay: Duration::ZERO,
-        high_avail: false,
-        config: ScanConfig {
-            res: 100,
-            range_res: 1,
-            intensity: true,
-            min_angle: -9000,
-            max_angle: 9000,
-        },
-    };
-    let line = device::spawn(settings, Waker::none()).unwrap();
+    let line = device::spawn(settings(link, 100, 38400), Waker::none()).unwrap();
     let deadline = Instant::now() + Duration::from_secs(30);
     let (mut ready, mut scans) = (None, Vec::new());
     while scans.len() < SCANS {
@@ -65,16 +52,7 @@ fn session(link: &Path) -> Result<((String, u32), Vec<RawScan>), String> {
 }
 
 fn record(path: PathBuf) {
-    let emu = Emulator::spawn("lms-record", move |link, stop, linked| {
-        let opts = LineOptions {
-            link,
-            faults: Faults::default(),
-            seed: 1,
-            capture: Some(path),
-        };
-        emulator::run_with(&opts, &mut Room, stop, linked)
-    })
-    .unwrap();
+    let emu = emulate("record", Faults::default(), Some(path));
     session(emu.link()).unwrap();
     emu.stop().unwrap();
 }
@@ -97,10 +75,7 @@ fn a_captured_lms200_session_replays_byte_for_byte() {
     assert_eq!(bauds, [9600, 38400], "the capture switches rate once");
 
     let played = cap.clone();
-    let emu = Emulator::spawn("lms-replay", move |link, stop, linked| {
-        capture::replay(&link, &played, stop, linked)
-    })
-    .unwrap();
+    let emu = capture::replay_on_thread("lms", played).unwrap();
     let outcome = session(emu.link());
     // A difference from the capture ends the replay: its error says where.
     let report = emu.stop().unwrap();
