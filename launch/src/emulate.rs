@@ -113,7 +113,6 @@ fn banner(device: &str, link: &std::path::Path) {
 /// Ranges from a live laser device: each angle reads the nearest beam of
 /// the latest scan (out of reach until the first scan arrives).
 struct LiveLaser {
-    _client: troupe_client::Client,
     laser: troupe_client::LaserProxy,
 }
 
@@ -158,7 +157,6 @@ fn nearest_beams(angles: &[f64], min: f64, step: f64, max_range: f64, ranges: &[
 /// to the model's position2d, its odometry and stall come back from it,
 /// and sonar `i` reads range `i` of the model's sonar or ranger device.
 struct StageBody {
-    _clients: Vec<troupe_client::Client>,
     position: troupe_client::Position2dProxy,
     sonar: Option<Ranges>,
     /// The command last sent, so only changes go out.
@@ -174,7 +172,8 @@ enum Ranges {
 }
 
 /// The devices a running Stage serves for one model, found by its name
-/// through a simulation device, and the clients that reach them.
+/// through a simulation device, and a client per robot port to reach them
+/// (each proxy keeps its own client alive).
 struct ModelDevices {
     model: String,
     devices: Vec<troupe_msgs::Device>,
@@ -280,7 +279,6 @@ impl StageBody {
                 .map_or("nowhere (they read out of range)".into(), |d| d.to_string())
         );
         Ok(StageBody {
-            _clients: found.clients,
             position,
             sonar,
             sent: None,
@@ -344,7 +342,6 @@ fn body(
 /// each angle reads the nearest beam of the latest ranges, the beams
 /// spread evenly over the configured fov.
 struct LiveRanger {
-    _clients: Vec<troupe_client::Client>,
     ranger: troupe_client::RangerProxy,
     config: troupe_msgs::ranger::Config,
 }
@@ -366,20 +363,17 @@ fn laser_scene(
     z: &troupe_node::ZenohArgs,
 ) -> anyhow::Result<Box<dyn troupe_sicklms200::emulator::Scene>> {
     use troupe_msgs::Interface;
-    let laser = |client: troupe_client::Client, dev: troupe_msgs::Device| {
-        let laser = troupe_client::LaserProxy::new(&client, dev.index)
+    let laser = |client: &troupe_client::Client, dev: troupe_msgs::Device| {
+        let laser = troupe_client::LaserProxy::new(client, dev.index)
             .with_context(|| format!("subscribing to {dev}"))?;
         tracing::info!("ranges from {dev}");
-        Ok::<_, anyhow::Error>(Box::new(LiveLaser {
-            _client: client,
-            laser,
-        }))
+        Ok::<_, anyhow::Error>(Box::new(LiveLaser { laser }))
     };
     if let Some(addr) = &a.stage_laser {
         let dev = addr.device(troupe_msgs::DEFAULT_ROBOT);
         let client = troupe_client::Client::connect(z, dev.robot)
             .context("connecting to the stack for --stage-laser")?;
-        return Ok(laser(client, dev)?);
+        return Ok(laser(&client, dev)?);
     }
     let Some(model) = &a.stage_model else {
         return Ok(Box::new(troupe_sicklms200::emulator::Room));
@@ -387,7 +381,7 @@ fn laser_scene(
     let mut found = ModelDevices::find(z, model, &a.stage_sim)?;
     if let Some(&dev) = found.of(Interface::Laser).first() {
         let client = found.client(z, dev.robot)?;
-        return Ok(laser(client, dev)?);
+        return Ok(laser(&client, dev)?);
     }
     // The laser among the model's rangers: the widest field of view.
     let mut best: Option<(troupe_client::RangerProxy, troupe_msgs::ranger::Config)> = None;
@@ -405,11 +399,7 @@ fn laser_scene(
     let Some((ranger, config)) = best else {
         return Err(found.missing("laser or ranger"));
     };
-    Ok(Box::new(LiveRanger {
-        _clients: found.clients,
-        ranger,
-        config,
-    }))
+    Ok(Box::new(LiveRanger { ranger, config }))
 }
 
 /// Runs the emulator until SIGINT or SIGTERM.
