@@ -15,6 +15,7 @@ use std::hash::{BuildHasherDefault, Hasher};
 
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
+use rand_distr::StandardNormal;
 use troupe_geom::{normalize, Pose};
 
 /// One particle.
@@ -67,11 +68,15 @@ pub struct Cluster {
 fn bin(p: &Pose) -> (i32, i32, i32) {
     const XY: f64 = 0.5;
     const A: f64 = 10.0 * std::f64::consts::PI / 180.0;
-    (
-        (p.x / XY).floor() as i32,
-        (p.y / XY).floor() as i32,
-        wrap_bin((p.yaw / A).floor() as i32),
-    )
+    (floor(p.x / XY), floor(p.y / XY), wrap_bin(floor(p.yaw / A)))
+}
+
+/// ⌊v⌋ as an integer, saturating: f64::floor is a libm call on the
+/// baseline x86-64 target, and every particle takes three per update.
+#[inline]
+fn floor(v: f64) -> i32 {
+    let t = v as i32;
+    t.saturating_sub(i32::from(f64::from(t) > v))
 }
 
 /// An angle bin number wrapped into -18..18.
@@ -116,14 +121,13 @@ pub struct Filter {
     bins: BinSet,
 }
 
-/// A sample of N(0, σ²) (Box–Muller).
+/// A sample of N(0, σ²) (ziggurat: a few nanoseconds, where Box–Muller's
+/// logarithm, root and cosine cost more than the rest of a motion update).
 fn gaussian(rng: &mut StdRng, sigma: f64) -> f64 {
     if sigma <= 0.0 {
         return 0.0;
     }
-    let u1: f64 = 1.0 - rng.gen::<f64>(); // (0, 1]
-    let u2: f64 = rng.gen::<f64>();
-    sigma * (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+    sigma * rng.sample::<f64, _>(StandardNormal)
 }
 
 /// Lower-triangular L with L Lᵀ = `c` (a covariance); directions with no
@@ -248,16 +252,17 @@ impl Filter {
         let total: f64 = if threads > 1 && self.particles.len() >= 2048 {
             let size = self.particles.len().div_ceil(threads);
             std::thread::scope(|s| {
-                let handles: Vec<_> = self
-                    .particles
-                    .chunks_mut(size)
-                    .map(|c| s.spawn(move || apply(c)))
-                    .collect();
+                // The calling thread weighs the first chunk itself: one
+                // thread fewer to start on every update.
+                let mut chunks = self.particles.chunks_mut(size);
+                let mine = chunks.next();
+                let handles: Vec<_> = chunks.map(|c| s.spawn(move || apply(c))).collect();
+                let own = mine.map_or(0.0, apply);
                 // A panicking likelihood is a bug; resurface it here.
-                handles
+                own + handles
                     .into_iter()
                     .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-                    .sum()
+                    .sum::<f64>()
             })
         } else {
             apply(&mut self.particles)
@@ -289,6 +294,7 @@ impl Filter {
         let mut c = self.particles[0].weight;
         let mut i = 0;
         let mut m = 0;
+        let mut limit = kld_limit(&self.config, 0);
         while self.spare.len() < self.config.max_samples {
             if m == n_a {
                 // A full pass drawn: start another with a fresh offset.
@@ -304,8 +310,10 @@ impl Filter {
             }
             let pose = self.particles[i].pose;
             self.spare.push(Particle { pose, weight: 1.0 });
-            self.bins.insert(bin(&pose));
-            if self.spare.len() > kld_limit(&self.config, self.bins.len()) {
+            if self.bins.insert(bin(&pose)) {
+                limit = kld_limit(&self.config, self.bins.len());
+            }
+            if self.spare.len() > limit {
                 break;
             }
             m += 1;
@@ -320,14 +328,26 @@ impl Filter {
     /// The hypotheses: particles grouped by connected occupied bins
     /// (26-neighbourhood, angle bins wrapping), heaviest first.
     pub fn clusters(&self) -> Vec<Cluster> {
-        let mut label: BinMap<usize> = BinMap::default();
-        for p in &self.particles {
-            label.insert(bin(&p.pose), usize::MAX);
-        }
-        let keys: Vec<(i32, i32, i32)> = label.keys().copied().collect();
+        // Each particle's bin as an index into `keys`, so that the sums
+        // below need no second lookup.
+        let mut index: BinMap<usize> = BinMap::default();
+        let mut keys: Vec<(i32, i32, i32)> = Vec::new();
+        let of: Vec<usize> = self
+            .particles
+            .iter()
+            .map(|p| {
+                let b = bin(&p.pose);
+                *index.entry(b).or_insert_with(|| {
+                    keys.push(b);
+                    keys.len() - 1
+                })
+            })
+            .collect();
+        let mut label = index.clone();
+        label.values_mut().for_each(|l| *l = usize::MAX);
         let mut count = 0;
         let mut stack = Vec::new();
-        for k in keys {
+        for &k in &keys {
             if label[&k] != usize::MAX {
                 continue;
             }
@@ -362,9 +382,10 @@ impl Filter {
             yy: f64,
             xy: f64,
         }
+        let labels: Vec<usize> = keys.iter().map(|k| label[k]).collect();
         let mut acc = vec![Acc::default(); count];
-        for p in &self.particles {
-            let a = &mut acc[label[&bin(&p.pose)]];
+        for (p, &b) in self.particles.iter().zip(&of) {
+            let a = &mut acc[labels[b]];
             let (w, x, y) = (p.weight, p.pose.x, p.pose.y);
             a.n += 1;
             a.w += w;
