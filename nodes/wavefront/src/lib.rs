@@ -18,7 +18,9 @@
 //! (either < 0 disables replanning), `update_rate` 10 Hz,
 //! `add_rotational_waypoints` 1. Player's `cspace_file`, `request_map` and
 //! `force_map_refresh` are accepted and have no effect (the map is always
-//! requested at setup; a configuration space takes milliseconds).
+//! requested at setup; a configuration space takes milliseconds). A `laser`
+//! in requires (Player's scans marked on the map) is accepted with a
+//! warning and not used: obstacles off the map are the local controller's.
 //!
 //! # Behavior
 //!
@@ -171,6 +173,19 @@ impl Driver for Wavefront {
         }
         if o.cspace_file.is_some() {
             tracing::warn!("cspace_file is not used: the configuration space is computed at setup");
+        }
+        // Player's wavefront could also mark laser returns on the map (a
+        // `laser` in requires, scans with poses) for its `velocity_control`
+        // mode; Troupe's plans on the map alone and leaves obstacles to the
+        // local controller (vfh), as Player's default configuration does.
+        for slot in section.required() {
+            if slot.device.interface == Interface::Laser {
+                tracing::warn!(
+                    "{} in requires is not used: wavefront plans on the map alone; \
+                     the local controller (vfh) avoids what the laser sees",
+                    slot.device
+                );
+            }
         }
         Ok(Wavefront {
             online: section.provided_one(Interface::Planner, None)?,
