@@ -211,6 +211,11 @@ impl Grid {
         i < self.lat.w && j < self.lat.h && self.tiles[(j / TILE) * self.tw + i / TILE] != 0
     }
 
+    /// Whether tile `t` (as [`Grid::tile_of`] names tiles) holds anything.
+    pub fn tile_holds(&self, t: usize) -> bool {
+        self.tiles.get(t).is_some_and(|&n| n != 0)
+    }
+
     /// The id at world point (x, y); `EMPTY` outside the grid.
     pub fn at(&self, x: f64, y: f64) -> u16 {
         self.lat

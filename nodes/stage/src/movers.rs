@@ -74,6 +74,34 @@ impl Movers {
         self.in_tile.get(t).map_or(&[], Vec::as_slice)
     }
 
+    /// Whether model `m`'s filed body overlaps any of `polys` (world
+    /// polygons): an edge of one crosses an edge of the other, or one holds
+    /// a corner of the other.
+    pub fn overlaps(&self, m: usize, polys: &[Vec<(f64, f64)>]) -> bool {
+        let bbox = |ps: &[(f64, f64)]| {
+            ps.iter().fold(
+                (
+                    f64::INFINITY,
+                    f64::INFINITY,
+                    f64::NEG_INFINITY,
+                    f64::NEG_INFINITY,
+                ),
+                |(a, b, c, d), &(x, y)| (a.min(x), b.min(y), c.max(x), d.max(y)),
+            )
+        };
+        self.shapes[m].iter().any(|a| {
+            let ba = bbox(a);
+            polys.iter().any(|b| {
+                let bb = bbox(b);
+                let apart = ba.2 < bb.0 || bb.2 < ba.0 || ba.3 < bb.1 || bb.3 < ba.1;
+                !apart
+                    && (edges_cross(a, b)
+                        || a.first().is_some_and(|&p| inside(b, p))
+                        || b.first().is_some_and(|&p| inside(a, p)))
+            })
+        })
+    }
+
     /// Where the ray from `o` along the unit vector `d` first meets model
     /// `m`'s body: metres, 0 when `o` is inside it.
     pub fn hit(&self, m: usize, id: u16, o: (f64, f64), d: (f64, f64)) -> Option<Hit> {
@@ -105,6 +133,39 @@ impl Movers {
     }
 }
 
+/// Whether an edge of polygon `a` crosses an edge of polygon `b`.
+fn edges_cross(a: &[(f64, f64)], b: &[(f64, f64)]) -> bool {
+    let cross = |o: (f64, f64), p: (f64, f64), q: (f64, f64)| {
+        (p.0 - o.0) * (q.1 - o.1) - (p.1 - o.1) * (q.0 - o.0)
+    };
+    edges(a).any(|(p, q)| {
+        edges(b).any(|(r, s)| {
+            let (d1, d2) = (cross(p, q, r), cross(p, q, s));
+            let (d3, d4) = (cross(r, s, p), cross(r, s, q));
+            (d1 > 0.0) != (d2 > 0.0) && (d3 > 0.0) != (d4 > 0.0)
+        })
+    })
+}
+
+/// The edges of a polygon, closing it.
+fn edges(ps: &[(f64, f64)]) -> impl Iterator<Item = ((f64, f64), (f64, f64))> + '_ {
+    let n = ps.len();
+    (0..n).map(move |k| (ps[k], ps[(k + 1) % n]))
+}
+
+/// Whether point `p` is inside polygon `poly` (even-odd rule).
+fn inside(poly: &[(f64, f64)], p: (f64, f64)) -> bool {
+    let n = poly.len();
+    let mut odd = false;
+    for k in 0..n {
+        let (a, b) = (poly[k], poly[(k + 1) % n]);
+        if (a.1 > p.1) != (b.1 > p.1) && p.0 < a.0 + (p.1 - a.1) / (b.1 - a.1) * (b.0 - a.0) {
+            odd = !odd;
+        }
+    }
+    odd
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -116,6 +177,27 @@ mod tests {
             (cx + h, cy + h),
             (cx - h, cy + h),
         ]
+    }
+
+    #[test]
+    fn bodies_overlap_when_they_cross_or_contain() {
+        let mut m = Movers::new(2, 1);
+        m.file(
+            0,
+            1,
+            Pose::new(0.0, 0.0, 0.0),
+            &[square(0.0, 0.0, 0.5)],
+            vec![0],
+        );
+        assert!(m.overlaps(0, &[square(0.9, 0.0, 0.5)]), "edges cross");
+        assert!(m.overlaps(0, &[square(0.1, 0.1, 0.1)]), "inside it");
+        assert!(m.overlaps(0, &[square(0.0, 0.0, 3.0)]), "around it");
+        assert!(!m.overlaps(0, &[square(1.1, 0.0, 0.5)]), "apart");
+        // Diagonal neighbours whose boxes overlap but bodies do not.
+        let diamond = vec![(1.0, 0.4), (1.5, 0.9), (1.0, 1.4), (0.5, 0.9)];
+        assert!(!m.overlaps(0, &[diamond]));
+        m.unfile(0, 1);
+        assert!(!m.overlaps(0, &[square(0.0, 0.0, 3.0)]), "unfiled");
     }
 
     #[test]

@@ -1,12 +1,13 @@
 //! The simulation: poses, kinematics, collisions and range sensing.
 //!
 //! Static models (trees without a position model) are rasterised once into
-//! one grid; models that move are kept in a second grid, updated as they
-//! move. A grid cell holds `model index + 1`. Robots collide with cells of
-//! unrelated models whose `obstacle_return` is set, and then stop and report
-//! a stall, as in Stage. Rays walk the static grid (skipping empty tiles)
-//! and meet moving bodies exactly, as polygons filed by tile
-//! ([`crate::movers`]): a robot's own body costs its rays nothing.
+//! a grid whose cells hold `model index + 1`. Models that move are kept as
+//! polygons filed by grid tile ([`crate::movers`]), refiled as they move:
+//! no rasterising per step. Robots collide with unrelated models whose
+//! `obstacle_return` is set (static cells under the body, moving polygons
+//! that overlap it), and then stop and report a stall, as in Stage. Rays
+//! walk the static grid (skipping empty tiles) and meet moving bodies
+//! exactly: a robot's own body costs its rays nothing.
 
 use troupe_geom::occmap::{FREE, OCCUPIED};
 use troupe_geom::{normalize, Grid, Hit, Lattice, OccMap, Pose, EMPTY};
@@ -96,12 +97,10 @@ pub struct Sim {
     /// Each model's subtree (itself first), depth-first.
     trees: Vec<Vec<usize>>,
     movable: Vec<bool>,
-    /// The cells each movable model occupies now.
+    /// The cells each static model occupies now.
     cells: Vec<Vec<(usize, usize)>>,
     statics: Grid,
-    /// Moving bodies, for collisions.
-    dynamics: Grid,
-    /// Moving bodies, for sensors.
+    /// Moving bodies, for sensors and collisions.
     movers: Movers,
 }
 
@@ -165,7 +164,6 @@ impl Sim {
         let margin = 2.0;
         let res = world.resolution;
         let statics = Grid::new(x0 - margin, y0 - margin, x1 + margin, y1 + margin, res);
-        let dynamics = statics.clone();
         let bases = (0..n)
             .filter(|&m| world.models[m].kind == Kind::Position)
             .map(|m| {
@@ -241,7 +239,6 @@ impl Sim {
             cells: vec![Vec::new(); n],
             movers: Movers::new(n, statics.tile_count()),
             statics,
-            dynamics,
         };
         for m in 0..n {
             sim.place(m);
@@ -271,86 +268,125 @@ impl Sim {
         out
     }
 
-    /// (Re)writes model `m`'s body into its grid at its current pose.
+    /// (Re)writes model `m`'s body at its current pose: into the static
+    /// grid, or filed with the moving bodies.
     fn place(&mut self, m: usize) {
-        if self.in_grid(m) {
+        if !self.in_grid(m) {
+            return;
+        }
+        if self.movable[m] {
+            self.file(m, self.global(m));
+        } else {
             let cells = self.body_cells(m, None);
             self.occupy(m, cells);
         }
     }
 
-    /// The tiles of the box around `cells` (a body's cells: a compact set).
-    fn tiles_under(&self, cells: &[(usize, usize)]) -> Vec<usize> {
-        let Some(&(i, j)) = cells.first() else {
-            return Vec::new();
-        };
-        let (mut lo, mut hi) = ((i, j), (i, j));
-        for &(i, j) in cells {
-            lo = (lo.0.min(i), lo.1.min(j));
-            hi = (hi.0.max(i), hi.1.max(j));
-        }
-        self.statics.tiles_of_box(lo, hi).collect()
+    /// Model `m`'s blocks in world coordinates at global pose `at`.
+    fn polygons(&self, m: usize, at: Pose) -> Vec<Vec<(f64, f64)>> {
+        self.world.models[m]
+            .blocks
+            .iter()
+            .map(|b| b.iter().map(|&(x, y)| at.apply(x, y)).collect())
+            .collect()
     }
 
-    /// Moves model `m`'s body in its grid from its old cells to `cells`.
+    /// The corner cells of the box around `polys`, clamped to the grid;
+    /// `None` when the box misses the grid.
+    fn cell_box(&self, polys: &[Vec<(f64, f64)>]) -> Option<((usize, usize), (usize, usize))> {
+        let (mut x0, mut y0, mut x1, mut y1) = (
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+        );
+        for &(x, y) in polys.iter().flatten() {
+            (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x), y1.max(y));
+        }
+        let lat = self.statics.lattice();
+        let ((ox, oy), res, (w, h)) = (lat.origin(), lat.resolution(), lat.size());
+        let (i0, j0) = ((x0 - ox) / res, (y0 - oy) / res);
+        let (i1, j1) = ((x1 - ox) / res, (y1 - oy) / res);
+        if !(i1 >= 0.0 && j1 >= 0.0 && i0 < w as f64 && j0 < h as f64) {
+            return None;
+        }
+        let clamp = |v: f64, n: usize| (v.max(0.0) as usize).min(n - 1);
+        Some(((clamp(i0, w), clamp(j0, h)), (clamp(i1, w), clamp(j1, h))))
+    }
+
+    /// Files moving model `m` at global pose `at` under the tiles its body
+    /// touches.
+    fn file(&mut self, m: usize, at: Pose) {
+        let polys = self.polygons(m, at);
+        let tiles = self.cell_box(&polys).map_or_else(Vec::new, |(lo, hi)| {
+            self.statics.tiles_of_box(lo, hi).collect()
+        });
+        self.movers
+            .file(m, id(m), at, &self.world.models[m].blocks, tiles);
+    }
+
+    /// Moves static model `m`'s body in the grid from its old cells to `cells`.
     fn occupy(&mut self, m: usize, cells: Vec<(usize, usize)>) {
         self.unplace(m);
-        let grid = if self.movable[m] {
-            &mut self.dynamics
-        } else {
-            &mut self.statics
-        };
         for &(i, j) in &cells {
-            grid.set(i, j, id(m));
-        }
-        if self.movable[m] {
-            let g = self.global(m);
-            let tiles = self.tiles_under(&cells);
-            self.movers
-                .file(m, id(m), g, &self.world.models[m].blocks, tiles);
+            self.statics.set(i, j, id(m));
         }
         self.cells[m] = cells;
     }
 
-    /// The cells of every body in the tree of `m` (itself and what it
+    /// The global pose of every body in the tree of `m` (itself and what it
     /// carries) if `m` were at the global pose `at`.
-    fn tree_cells(&self, m: usize, at: Pose) -> Vec<(usize, Vec<(usize, usize)>)> {
+    fn tree_poses(&self, m: usize, at: Pose) -> Vec<(usize, Pose)> {
         let shift = at.compose(&self.global(m).inverse());
         self.trees[m]
             .iter()
             .filter(|&&k| !self.world.models[k].blocks.is_empty())
-            .map(|&k| (k, self.body_cells(k, Some(shift.compose(&self.global(k))))))
+            .map(|&k| (k, shift.compose(&self.global(k))))
             .collect()
     }
 
-    /// True when `cells` (of the tree of `root`) overlap an unrelated obstacle.
-    fn collides(&self, root: usize, cells: &[(usize, Vec<(usize, usize)>)]) -> bool {
-        // Read cells only where something else may be (reading the cells of
-        // a large world is what costs: cache misses), judged once a tile.
-        let mut tile = None;
-        let (mut walls, mut others) = (false, false);
-        for (_, cs) in cells {
-            for &(i, j) in cs {
-                let t = self.statics.tile_of(i, j);
-                if tile != Some(t) {
-                    tile = Some(t);
-                    walls = self.statics.tile_occupied(i, j);
-                    others = self
-                        .movers
-                        .in_tile(t)
-                        .iter()
-                        .any(|&k| self.roots[usize::from(k) - 1] != root);
+    /// True when the `bodies` (of the tree of `root`, at global poses) would
+    /// overlap an unrelated obstacle: a static cell, or a moving body.
+    fn collides(&self, root: usize, bodies: &[(usize, Pose)]) -> bool {
+        let blocks = |c: usize| {
+            let other = c - 1;
+            self.roots[other] != root && self.world.models[other].obstacle_return
+        };
+        for &(k, at) in bodies {
+            let polys = self.polygons(k, at);
+            let Some((lo, hi)) = self.cell_box(&polys) else {
+                continue;
+            };
+            // Static cells, rasterised only where a tile holds any (reading
+            // the cells of a large world is what costs: cache misses).
+            if self
+                .statics
+                .tiles_of_box(lo, hi)
+                .any(|t| self.statics.tile_holds(t))
+            {
+                let mut hit = false;
+                let lat = *self.statics.lattice();
+                for p in &polys {
+                    lat.polygon_cells(p, |i, j| {
+                        if !hit && self.statics.tile_occupied(i, j) {
+                            let c = self.statics.get(i, j);
+                            hit = c != EMPTY && blocks(usize::from(c));
+                        }
+                    });
                 }
-                for (grid, look) in [(&self.statics, walls), (&self.dynamics, others)] {
-                    if !look {
+                if hit {
+                    return true;
+                }
+            }
+            let mut tested: Vec<u16> = Vec::new();
+            for t in self.statics.tiles_of_box(lo, hi) {
+                for &c in self.movers.in_tile(t) {
+                    if tested.contains(&c) {
                         continue;
                     }
-                    let c = grid.get(i, j);
-                    if c != EMPTY {
-                        let other = usize::from(c) - 1;
-                        if self.roots[other] != root && self.world.models[other].obstacle_return {
-                            return true;
-                        }
+                    tested.push(c);
+                    if blocks(usize::from(c)) && self.movers.overlaps(usize::from(c) - 1, &polys) {
+                        return true;
                     }
                 }
             }
@@ -358,11 +394,17 @@ impl Sim {
         false
     }
 
-    /// Moves bodies in the grids to `cells`, computed by `tree_cells`.
-    fn commit(&mut self, cells: Vec<(usize, Vec<(usize, usize)>)>) {
-        for (m, cs) in cells {
-            if self.in_grid(m) {
-                self.occupy(m, cs);
+    /// Moves the `bodies` (from `tree_poses`) to their poses.
+    fn commit(&mut self, bodies: Vec<(usize, Pose)>) {
+        for (k, at) in bodies {
+            if !self.in_grid(k) {
+                continue;
+            }
+            if self.movable[k] {
+                self.file(k, at);
+            } else {
+                let cells = self.body_cells(k, Some(at));
+                self.occupy(k, cells);
             }
         }
     }
@@ -519,15 +561,15 @@ impl Sim {
         let moving = v.x != 0.0 || v.y != 0.0 || v.yaw != 0.0;
         if moving {
             let root = self.roots[m];
-            let cells = self.tree_cells(m, g_next);
-            if self.collides(root, &cells) {
+            let bodies = self.tree_poses(m, g_next);
+            if self.collides(root, &bodies) {
                 let b = &mut self.bases[bi];
                 b.stall = true;
                 b.vel = Pose::default();
                 return;
             }
             self.poses[m] = next;
-            self.commit(cells);
+            self.commit(bodies);
             if cfg.localization == Localization::Gps {
                 let g = self.global(m);
                 let b = &mut self.bases[bi];
@@ -712,20 +754,19 @@ impl Sim {
         self.grippers[g] = Some(state);
     }
 
-    /// Empties the cells model `m` holds in its grid.
+    /// Takes model `m`'s body out: its cells from the static grid, or its
+    /// filing with the moving bodies.
     fn unplace(&mut self, m: usize) {
-        let grid = if self.movable[m] {
-            &mut self.dynamics
-        } else {
-            &mut self.statics
-        };
+        if self.movable[m] {
+            self.movers.unfile(m, id(m));
+            return;
+        }
         for &(i, j) in &self.cells[m] {
-            if grid.get(i, j) == id(m) {
-                grid.set(i, j, EMPTY);
+            if self.statics.get(i, j) == id(m) {
+                self.statics.set(i, j, EMPTY);
             }
         }
         self.cells[m].clear();
-        self.movers.unfile(m, id(m));
     }
 
     /// Moves held objects with their grippers and updates the break beams.
@@ -920,17 +961,26 @@ impl Sim {
                 }
             }
         }
-        for (grid, _) in [(&self.statics, 0), (&self.dynamics, 1)] {
-            for j in 0..h {
-                for i in 0..w {
-                    let c = grid.get(i, j);
-                    if c != EMPTY {
-                        let (x, y) = px(i, j);
-                        if x < iw {
-                            img.put_pixel(x, y, rgb(self.colors[usize::from(c) - 1]));
-                        }
+        for j in 0..h {
+            for i in 0..w {
+                let c = self.statics.get(i, j);
+                if c != EMPTY {
+                    let (x, y) = px(i, j);
+                    if x < iw {
+                        img.put_pixel(x, y, rgb(self.colors[usize::from(c) - 1]));
                     }
                 }
+            }
+        }
+        for m in (0..self.world.models.len()).filter(|&m| self.movable[m] && self.in_grid(m)) {
+            let lat = *self.statics.lattice();
+            for p in self.polygons(m, self.global(m)) {
+                lat.polygon_cells(&p, |i, j| {
+                    let (x, y) = px(i, j);
+                    if x < iw {
+                        img.put_pixel(x, y, rgb(self.colors[m]));
+                    }
+                });
             }
         }
         img
@@ -1077,6 +1127,24 @@ mod tests {
         // The wall's face is at x = 4.9; the robot's front at x + 0.2.
         assert!(p.x + 0.2 < 4.92 && p.x > 4.5, "{p:?}");
         assert_eq!(s.bases[0].vel, Pose::default());
+    }
+
+    #[test]
+    fn robots_meeting_head_on_stall_apart() {
+        let mut s = sim("headon", &format!("{ROOM}position ( name \"a\" pose [-1 0 0 0] size [0.4 0.4 0.2] acceleration_bounds [-9 9 -9 9 -9 9 -900 900] )\nposition ( name \"b\" pose [1 0.1 0 180] size [0.4 0.4 0.2] acceleration_bounds [-9 9 -9 9 -9 9 -900 900] )\n"));
+        for b in &mut s.bases {
+            b.cmd = Some(Command::Vel(Pose::new(0.5, 0.0, 0.0)));
+        }
+        steps(&mut s, 40);
+        let (a, b) = (s.global(s.bases[0].model), s.global(s.bases[1].model));
+        assert!(s.bases[0].stall && s.bases[1].stall, "both stalled");
+        // Fronts at a.x + 0.2 and b.x - 0.2: touching within a step (5 cm).
+        let gap = (b.x - 0.2) - (a.x + 0.2);
+        assert!((0.0..0.06).contains(&gap), "gap {gap}: {a:?} {b:?}");
+        // Turned away, a is free to go.
+        s.bases[0].cmd = Some(Command::Vel(Pose::new(-0.5, 0.0, 0.0)));
+        steps(&mut s, 5);
+        assert!(!s.bases[0].stall && s.global(s.bases[0].model).x < a.x - 0.1);
     }
 
     #[test]
