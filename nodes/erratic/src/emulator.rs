@@ -206,6 +206,20 @@ pub fn run_with(
             next = now + CYCLE;
         }
     }
+    // What the driver sent before the stop (its goodbye: queued servo
+    // commands, STOP, CLOSE) is still obeyed, not dropped with the line.
+    for _ in 0..10 {
+        match line.recv(&mut buf, baud, CYCLE)? {
+            LineEvent::Received(n) => {
+                framer.push(&buf[..n]);
+                while let Some(p) = framer.next_frame() {
+                    stats.packets += 1;
+                    obey(&mut robot, body, &p, &mut line, baud, &mut stats)?;
+                }
+            }
+            LineEvent::Replugged | LineEvent::Idle | LineEvent::Unplugged => break,
+        }
+    }
     tracing::info!(
         packets = stats.packets,
         motor_packets = stats.motor,
