@@ -167,10 +167,7 @@ pub fn run_with(
         match line.recv(&mut buf, baud, wait)? {
             LineEvent::Received(n) => {
                 framer.push(&buf[..n]);
-                while let Some(p) = framer.next_frame() {
-                    stats.packets += 1;
-                    obey(&mut robot, body, &p, &mut line, baud, &mut stats)?;
-                }
+                obey_all(&mut framer, &mut robot, body, &mut line, baud, &mut stats)?;
             }
             LineEvent::Replugged => {
                 robot = Robot::power_up(params, body);
@@ -212,10 +209,7 @@ pub fn run_with(
         match line.recv(&mut buf, baud, CYCLE)? {
             LineEvent::Received(n) => {
                 framer.push(&buf[..n]);
-                while let Some(p) = framer.next_frame() {
-                    stats.packets += 1;
-                    obey(&mut robot, body, &p, &mut line, baud, &mut stats)?;
-                }
+                obey_all(&mut framer, &mut robot, body, &mut line, baud, &mut stats)?;
             }
             LineEvent::Replugged | LineEvent::Idle | LineEvent::Unplugged => break,
         }
@@ -230,6 +224,22 @@ pub fn run_with(
         "emulated erratic stopped"
     );
     Ok(stats)
+}
+
+/// Obeys every whole packet the framer holds.
+fn obey_all(
+    framer: &mut Framer<PacketCodec>,
+    robot: &mut Robot,
+    body: &mut dyn Body,
+    line: &mut EmuLine,
+    baud: u32,
+    stats: &mut EmulatorStats,
+) -> std::io::Result<()> {
+    while let Some(p) = framer.next_frame() {
+        stats.packets += 1;
+        obey(robot, body, &p, line, baud, stats)?;
+    }
+    Ok(())
 }
 
 fn obey(
