@@ -130,13 +130,11 @@ impl DistanceMap {
         }
         // Per ray, in cells: where it leaves the map, and where the march
         // stops (the exit or the maximum range, whichever is nearer).
-        // A ray's two divisions, by its direction's components, are made
-        // once here for the exit and the face.
-        let leave = |p: f64, v: f64, inv: f64, size: f64| {
+        let leave = |p: f64, v: f64, size: f64| {
             if v > 1e-12 {
-                (size - p) * inv
+                (size - p) / v
             } else if v < -1e-12 {
-                -p * inv
+                -p / v
             } else {
                 f64::INFINITY
             }
@@ -144,15 +142,13 @@ impl DistanceMap {
         let mut exit = [0.0f64; LANES];
         let mut stop = [0.0f32; LANES];
         let mut dir = [(0.0f32, 0.0f32); LANES];
-        let mut inv = [(0.0f64, 0.0f64); LANES];
         for (k, &(c, s)) in dirs[..n].iter().enumerate() {
-            inv[k] = (1.0 / c, 1.0 / s);
-            exit[k] = leave(gx, c, inv[k].0, wf).min(leave(gy, s, inv[k].1, hf));
+            exit[k] = leave(gx, c, wf).min(leave(gy, s, hf));
             stop[k] = exit[k].min(tmax) as f32;
             dir[k] = (c as f32, s as f32);
         }
         // The march runs in f32 (a cell is found to a ten-thousandth on a
-        // 2000-cell map), each ray's distance and that before its last step.
+        // 2000-cell map).
         let (fx, fy) = (gx as f32, gy as f32);
         // Every ray's first step is from the same cell: one load for all.
         let first = self.steps[(gy as usize).min(h - 1) * w + (gx as usize).min(w - 1)];
@@ -169,7 +165,6 @@ impl DistanceMap {
             }
         };
         let mut t = [first; LANES];
-        let mut before = [0.0f32; LANES];
         let mut live: u32 = (1 << n) - 1;
         for k in 0..n {
             if t[k] >= stop[k] {
@@ -191,17 +186,11 @@ impl DistanceMap {
                 );
                 let step = self.steps[cell.1 * w + cell.0];
                 if step <= 0.0 {
-                    let ray = Ray {
-                        from: (gx, gy),
-                        dir: dirs[k],
-                        inv: inv[k],
-                    };
-                    let face = self.face(&ray, before[k].into(), t[k].into());
+                    let face = f64::from(self.boundary((fx, fy), dir[k], t[k]));
                     out[k] = face * self.res;
                     live &= !(1 << k);
                     continue;
                 }
-                before[k] = t[k];
                 t[k] += step;
                 if t[k] >= stop[k] {
                     out[k] = end(k);
@@ -211,58 +200,35 @@ impl DistanceMap {
         }
     }
 
-    /// Where the ray from grid point `from` along `dir` first enters an
-    /// obstacle cell between `free` (a point in a free cell) and `hit` (a
-    /// point in an obstacle cell), in cells along the ray: the cells between
-    /// are walked exactly (Amanatides and Woo). The march lands up to half a
-    /// cell inside, and a range that long on every beam biases the pose away
-    /// from walls; a half-cell step can also cut the corner of the cell
-    /// before.
-    fn face(&self, ray: &Ray, free: f64, hit: f64) -> f64 {
-        if hit <= free {
-            return hit;
-        }
+    /// Where the ray from grid point `from` along `dir` enters the
+    /// obstacle it reached at `t` cells, to a sixteenth of a cell: the march
+    /// lands up to half a cell inside, and a range that long on every beam
+    /// biases the pose away from walls. (An exact cell walk was tried: it
+    /// finds the face to the float, yet amcl's error on the nav route rose
+    /// from 1.6–2.0 cm to 2.1–3.2 cm mean against Stage's ranges, which are
+    /// cast on a finer grid; the bisection stays.)
+    fn boundary(&self, (gx, gy): (f32, f32), (c, s): (f32, f32), t: f32) -> f32 {
+        // Short of the ray's stop every point is on the map (clamped for
+        // rounding at the edge).
         let (w, h) = self.size;
-        let ((c, s), (ic, is)) = (ray.dir, ray.inv);
-        let (px, py) = (ray.from.0 + free * c, ray.from.1 + free * s);
-        let (mut i, mut j) = (px as usize, py as usize);
-        // Per axis: the ray distance to the next cell boundary, between
-        // boundaries, and the direction of the step.
-        let axis = |p: f64, v: f64, inv: f64, i: usize| {
-            if v > 1e-12 {
-                (free + (i as f64 + 1.0 - p) * inv, inv, true)
-            } else if v < -1e-12 {
-                (free + (i as f64 - p) * inv, -inv, false)
-            } else {
-                (f64::INFINITY, f64::INFINITY, true)
-            }
+        let blocked = |t: f32| {
+            let i = ((gx + t * c) as usize).min(w - 1);
+            let j = ((gy + t * s) as usize).min(h - 1);
+            self.steps[j * w + i] <= 0.0
         };
-        let (mut tx, dx, right) = axis(px, c, ic, i);
-        let (mut ty, dy, up) = axis(py, s, is, j);
-        loop {
-            let t = tx.min(ty);
-            if t >= hit {
-                return hit;
-            }
-            if tx <= ty {
-                tx += dx;
-                match (right, i) {
-                    (true, _) if i + 1 < w => i += 1,
-                    (false, 1..) => i -= 1,
-                    _ => return t,
-                }
+        let (mut free, mut hit) = ((t - 0.5).max(0.0), t);
+        if blocked(free) {
+            return t;
+        }
+        for _ in 0..3 {
+            let mid = 0.5 * (free + hit);
+            if blocked(mid) {
+                hit = mid;
             } else {
-                ty += dy;
-                match (up, j) {
-                    (true, _) if j + 1 < h => j += 1,
-                    (false, 1..) => j -= 1,
-                    _ => return t,
-                }
-            }
-            if self.cells[j * w + i] <= 0.0 {
-                return t.max(free);
+                free = mid;
             }
         }
+        hit
     }
 
     /// The scan of 181 beams over 180° that a laser at `p` sees, ranges
@@ -283,14 +249,6 @@ impl DistanceMap {
             ..Default::default()
         }
     }
-}
-
-/// A ray in grid units: its origin, its direction (cos, sin) and the
-/// direction's reciprocals.
-struct Ray {
-    from: (f64, f64),
-    dir: (f64, f64),
-    inv: (f64, f64),
 }
 
 /// e^x for x ≤ 0, to 1e-11 relative: libm's `exp` is a call the compiler
@@ -503,8 +461,8 @@ mod tests {
     #[test]
     fn rays_end_on_the_face_a_fine_march_finds() {
         // Scattered single-cell and block obstacles; the march's face
-        // against a walk in thousandths of a cell, to half a millimetre
-        // (a two-hundredth of a cell).
+        // against a walk in thousandths of a cell: at most a sixteenth of a
+        // cell beyond it, but where a half-cell step cut a corner.
         let mut m = room();
         for &(i, j) in &[(30, 40), (70, 20), (55, 55), (56, 55), (56, 56), (20, 80)] {
             m.cells[j * 100 + i] = OCCUPIED;
@@ -518,16 +476,20 @@ mod tests {
             }
             t
         };
+        let (mut close, mut all) = (0, 0);
         for (x, y) in [(5.0, 5.0), (2.5, 2.5), (7.7, 3.1), (4.4, 6.6)] {
             for k in 0..90 {
                 let a = f64::from(k) * 0.0698;
                 let (got, want) = (d.range(x, y, a, 20.0), fine(x, y, a));
                 assert!(
-                    (got - want).abs() < 0.0005,
+                    (-0.0005..0.05).contains(&(got - want)),
                     "from ({x}, {y}) at {a}: {got} vs {want}"
                 );
+                all += 1;
+                close += usize::from(got - want < 0.1 / 16.0 + 0.0005);
             }
         }
+        assert!(close * 100 >= all * 90, "{close} of {all} within 1/16 cell");
     }
 
     #[test]
