@@ -7,7 +7,7 @@
 //! exactly (ray against polygon edges) when it enters one of those tiles,
 //! and a robot's own body costs nothing because it is never tested.
 
-use troupe_geom::{Hit, Pose};
+use troupe_geom::Hit;
 
 /// The polygons of every moving body, filed by tile.
 #[derive(Debug, Clone, Default)]
@@ -30,31 +30,22 @@ impl Movers {
         }
     }
 
-    /// Files model `m` (id `id`), whose body is `blocks` (polygons in its
-    /// frame) at world pose `at`, under `tiles` (each once), replacing
-    /// where it was.
-    pub fn file(
-        &mut self,
-        m: usize,
-        id: u16,
-        at: Pose,
-        blocks: &[Vec<(f64, f64)>],
-        tiles: Vec<usize>,
-    ) {
+    /// Files model `m` (id `id`), whose body is `shapes` (polygons in world
+    /// coordinates), under `tiles` (each once), replacing where it was.
+    pub fn file(&mut self, m: usize, id: u16, shapes: Vec<Vec<(f64, f64)>>, tiles: Vec<usize>) {
         self.unfile(m, id);
         for &t in &tiles {
             if let Some(list) = self.in_tile.get_mut(t) {
                 list.push(id);
             }
         }
-        // Refilled in place: bodies move every step.
-        let shapes = &mut self.shapes[m];
-        shapes.resize_with(blocks.len(), Vec::new);
-        for (shape, block) in shapes.iter_mut().zip(blocks) {
-            shape.clear();
-            shape.extend(block.iter().map(|&(x, y)| at.apply(x, y)));
-        }
+        self.shapes[m] = shapes;
         self.tiles_of[m] = tiles;
+    }
+
+    /// Model `m`'s filed polygons, in world coordinates (none when not filed).
+    pub fn shapes(&self, m: usize) -> &[Vec<(f64, f64)>] {
+        &self.shapes[m]
     }
 
     /// Takes model `m` (id `id`) out of every tile.
@@ -65,8 +56,7 @@ impl Movers {
             }
         }
         self.tiles_of[m].clear();
-        // Emptied, not freed: the storage is refilled when it moves again.
-        self.shapes[m].iter_mut().for_each(Vec::clear);
+        self.shapes[m].clear();
     }
 
     /// The ids filed under tile `t`.
@@ -182,13 +172,7 @@ mod tests {
     #[test]
     fn bodies_overlap_when_they_cross_or_contain() {
         let mut m = Movers::new(2, 1);
-        m.file(
-            0,
-            1,
-            Pose::new(0.0, 0.0, 0.0),
-            &[square(0.0, 0.0, 0.5)],
-            vec![0],
-        );
+        m.file(0, 1, vec![square(0.0, 0.0, 0.5)], vec![0]);
         assert!(m.overlaps(0, &[square(0.9, 0.0, 0.5)]), "edges cross");
         assert!(m.overlaps(0, &[square(0.1, 0.1, 0.1)]), "inside it");
         assert!(m.overlaps(0, &[square(0.0, 0.0, 3.0)]), "around it");
@@ -203,8 +187,7 @@ mod tests {
     #[test]
     fn rays_meet_filed_bodies_exactly() {
         let mut m = Movers::new(3, 4);
-        let at = |x: f64| Pose::new(x, 0.0, 0.0);
-        m.file(1, 2, at(2.0), &[square(0.0, 0.0, 0.5)], vec![3, 1]);
+        m.file(1, 2, vec![square(2.0, 0.0, 0.5)], vec![3, 1]);
         assert_eq!(m.in_tile(3), &[2]);
         assert_eq!(m.in_tile(1), &[2]);
         assert!(m.in_tile(0).is_empty() && m.in_tile(99).is_empty());
@@ -218,7 +201,7 @@ mod tests {
         assert!(m.hit(1, 2, (0.0, 0.0), (0.0, 1.0)).is_none(), "beside");
         assert_eq!(m.hit(1, 2, (2.1, 0.2), (1.0, 0.0)).unwrap().range, 0.0);
         // Moving re-files; unfiling empties the tiles.
-        m.file(1, 2, at(5.0), &[square(0.0, 0.0, 0.5)], vec![0]);
+        m.file(1, 2, vec![square(5.0, 0.0, 0.5)], vec![0]);
         assert!(m.in_tile(3).is_empty() && m.in_tile(0) == [2]);
         assert!((m.hit(1, 2, (0.0, 0.0), (1.0, 0.0)).unwrap().range - 4.5).abs() < 1e-12);
         m.unfile(1, 2);

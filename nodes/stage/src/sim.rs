@@ -104,6 +104,16 @@ pub struct Sim {
     movers: Movers,
 }
 
+/// A body as it would stand at a global pose: its polygons in world
+/// coordinates and the cells of their box (`None` off the grid), made once
+/// for both the collision test and the filing.
+struct Placed {
+    model: usize,
+    at: Pose,
+    polys: Vec<Vec<(f64, f64)>>,
+    cells: Option<((usize, usize), (usize, usize))>,
+}
+
 /// The unit vector at angle `a`.
 fn unit(a: f64) -> (f64, f64) {
     let (s, c) = a.sin_cos();
@@ -275,20 +285,26 @@ impl Sim {
             return;
         }
         if self.movable[m] {
-            self.file(m, self.global(m));
+            self.file(self.placed(m, self.global(m)));
         } else {
             let cells = self.body_cells(m, None);
             self.occupy(m, cells);
         }
     }
 
-    /// Model `m`'s blocks in world coordinates at global pose `at`.
-    fn polygons(&self, m: usize, at: Pose) -> Vec<Vec<(f64, f64)>> {
-        self.world.models[m]
+    /// Model `m`'s body at global pose `at`.
+    fn placed(&self, m: usize, at: Pose) -> Placed {
+        let polys: Vec<Vec<(f64, f64)>> = self.world.models[m]
             .blocks
             .iter()
             .map(|b| b.iter().map(|&(x, y)| at.apply(x, y)).collect())
-            .collect()
+            .collect();
+        Placed {
+            model: m,
+            at,
+            cells: self.cell_box(&polys),
+            polys,
+        }
     }
 
     /// The corner cells of the box around `polys`, clamped to the grid;
@@ -314,15 +330,13 @@ impl Sim {
         Some(((clamp(i0, w), clamp(j0, h)), (clamp(i1, w), clamp(j1, h))))
     }
 
-    /// Files moving model `m` at global pose `at` under the tiles its body
-    /// touches.
-    fn file(&mut self, m: usize, at: Pose) {
-        let polys = self.polygons(m, at);
-        let tiles = self.cell_box(&polys).map_or_else(Vec::new, |(lo, hi)| {
+    /// Files a moving body under the tiles it touches.
+    fn file(&mut self, body: Placed) {
+        let tiles = body.cells.map_or_else(Vec::new, |(lo, hi)| {
             self.statics.tiles_of_box(lo, hi).collect()
         });
-        self.movers
-            .file(m, id(m), at, &self.world.models[m].blocks, tiles);
+        let m = body.model;
+        self.movers.file(m, id(m), body.polys, tiles);
     }
 
     /// Moves static model `m`'s body in the grid from its old cells to `cells`.
@@ -334,27 +348,26 @@ impl Sim {
         self.cells[m] = cells;
     }
 
-    /// The global pose of every body in the tree of `m` (itself and what it
-    /// carries) if `m` were at the global pose `at`.
-    fn tree_poses(&self, m: usize, at: Pose) -> Vec<(usize, Pose)> {
+    /// Every body in the tree of `m` (itself and what it carries) as it
+    /// would be if `m` were at the global pose `at`.
+    fn tree_at(&self, m: usize, at: Pose) -> Vec<Placed> {
         let shift = at.compose(&self.global(m).inverse());
         self.trees[m]
             .iter()
             .filter(|&&k| !self.world.models[k].blocks.is_empty())
-            .map(|&k| (k, shift.compose(&self.global(k))))
+            .map(|&k| self.placed(k, shift.compose(&self.global(k))))
             .collect()
     }
 
-    /// True when the `bodies` (of the tree of `root`, at global poses) would
-    /// overlap an unrelated obstacle: a static cell, or a moving body.
-    fn collides(&self, root: usize, bodies: &[(usize, Pose)]) -> bool {
+    /// True when the `bodies` (of the tree of `root`) would overlap an
+    /// unrelated obstacle: a static cell, or a moving body.
+    fn collides(&self, root: usize, bodies: &[Placed]) -> bool {
         let blocks = |c: usize| {
             let other = c - 1;
             self.roots[other] != root && self.world.models[other].obstacle_return
         };
-        for &(k, at) in bodies {
-            let polys = self.polygons(k, at);
-            let Some((lo, hi)) = self.cell_box(&polys) else {
+        for body in bodies {
+            let (polys, Some((lo, hi))) = (&body.polys, body.cells) else {
                 continue;
             };
             // Static cells, rasterised only where a tile holds any (reading
@@ -366,7 +379,7 @@ impl Sim {
             {
                 let mut hit = false;
                 let lat = *self.statics.lattice();
-                for p in &polys {
+                for p in polys {
                     lat.polygon_cells(p, |i, j| {
                         if !hit && self.statics.tile_occupied(i, j) {
                             let c = self.statics.get(i, j);
@@ -385,7 +398,7 @@ impl Sim {
                         continue;
                     }
                     tested.push(c);
-                    if blocks(usize::from(c)) && self.movers.overlaps(usize::from(c) - 1, &polys) {
+                    if blocks(usize::from(c)) && self.movers.overlaps(usize::from(c) - 1, polys) {
                         return true;
                     }
                 }
@@ -394,16 +407,17 @@ impl Sim {
         false
     }
 
-    /// Moves the `bodies` (from `tree_poses`) to their poses.
-    fn commit(&mut self, bodies: Vec<(usize, Pose)>) {
-        for (k, at) in bodies {
+    /// Moves the `bodies` (from `tree_at`) where they were placed.
+    fn commit(&mut self, bodies: Vec<Placed>) {
+        for body in bodies {
+            let k = body.model;
             if !self.in_grid(k) {
                 continue;
             }
             if self.movable[k] {
-                self.file(k, at);
+                self.file(body);
             } else {
-                let cells = self.body_cells(k, Some(at));
+                let cells = self.body_cells(k, Some(body.at));
                 self.occupy(k, cells);
             }
         }
@@ -561,7 +575,7 @@ impl Sim {
         let moving = v.x != 0.0 || v.y != 0.0 || v.yaw != 0.0;
         if moving {
             let root = self.roots[m];
-            let bodies = self.tree_poses(m, g_next);
+            let bodies = self.tree_at(m, g_next);
             if self.collides(root, &bodies) {
                 let b = &mut self.bases[bi];
                 b.stall = true;
@@ -972,10 +986,10 @@ impl Sim {
                 }
             }
         }
-        for m in (0..self.world.models.len()).filter(|&m| self.movable[m] && self.in_grid(m)) {
-            let lat = *self.statics.lattice();
-            for p in self.polygons(m, self.global(m)) {
-                lat.polygon_cells(&p, |i, j| {
+        let lat = *self.statics.lattice();
+        for m in (0..self.world.models.len()).filter(|&m| self.movable[m]) {
+            for p in self.movers.shapes(m) {
+                lat.polygon_cells(p, |i, j| {
                     let (x, y) = px(i, j);
                     if x < iw {
                         img.put_pixel(x, y, rgb(self.colors[m]));
