@@ -114,8 +114,8 @@ impl DistanceMap {
     /// One ray's march is a chain of dependent loads; marching several in
     /// lockstep lets the processor overlap their latencies. A ray takes 3–6
     /// steps on a cave map, so what surrounds the march counts as much: the
-    /// exit from the map and the face of the obstacle hit are computed, not
-    /// searched for.
+    /// exit from the map is computed once per ray, and every ray shares the
+    /// first step.
     pub fn ranges_along(&self, x: f64, y: f64, dirs: &[(f64, f64)], max: f64, out: &mut [f64]) {
         let n = dirs.len().min(LANES).min(out.len());
         let (gx, gy) = self.grid(x, y);
@@ -151,7 +151,7 @@ impl DistanceMap {
         // 2000-cell map).
         let (fx, fy) = (gx as f32, gy as f32);
         // Every ray's first step is from the same cell: one load for all.
-        let first = self.steps[(gy as usize).min(h - 1) * w + (gx as usize).min(w - 1)];
+        let first = self.step_at(fx, fy);
         if first <= 0.0 {
             out[..n].fill(0.0);
             return;
@@ -178,13 +178,7 @@ impl DistanceMap {
                     continue;
                 }
                 let (c, s) = dir[k];
-                // Short of the exit the point is on the map; the clamp only
-                // absorbs rounding at the edge.
-                let cell = (
-                    ((fx + t[k] * c) as usize).min(w - 1),
-                    ((fy + t[k] * s) as usize).min(h - 1),
-                );
-                let step = self.steps[cell.1 * w + cell.0];
+                let step = self.step_at(fx + t[k] * c, fy + t[k] * s);
                 if step <= 0.0 {
                     let face = f64::from(self.boundary((fx, fy), dir[k], t[k]));
                     out[k] = face * self.res;
@@ -200,6 +194,15 @@ impl DistanceMap {
         }
     }
 
+    /// The march step at grid point (gx, gy), which a ray reaches only short
+    /// of its exit from the map: on the map but for rounding at the edge,
+    /// which the clamp absorbs.
+    #[inline]
+    fn step_at(&self, gx: f32, gy: f32) -> f32 {
+        let (w, h) = self.size;
+        self.steps[(gy as usize).min(h - 1) * w + (gx as usize).min(w - 1)]
+    }
+
     /// Where the ray from grid point `from` along `dir` enters the
     /// obstacle it reached at `t` cells, to a sixteenth of a cell: the march
     /// lands up to half a cell inside, and a range that long on every beam
@@ -208,14 +211,7 @@ impl DistanceMap {
     /// from 1.6–2.0 cm to 2.1–3.2 cm mean against Stage's ranges, which are
     /// cast on a finer grid; the bisection stays.)
     fn boundary(&self, (gx, gy): (f32, f32), (c, s): (f32, f32), t: f32) -> f32 {
-        // Short of the ray's stop every point is on the map (clamped for
-        // rounding at the edge).
-        let (w, h) = self.size;
-        let blocked = |t: f32| {
-            let i = ((gx + t * c) as usize).min(w - 1);
-            let j = ((gy + t * s) as usize).min(h - 1);
-            self.steps[j * w + i] <= 0.0
-        };
+        let blocked = |t: f32| self.step_at(gx + t * c, gy + t * s) <= 0.0;
         let (mut free, mut hit) = ((t - 0.5).max(0.0), t);
         if blocked(free) {
             return t;

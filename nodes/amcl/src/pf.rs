@@ -343,24 +343,24 @@ impl Filter {
                 })
             })
             .collect();
-        let mut label = index.clone();
-        label.values_mut().for_each(|l| *l = usize::MAX);
+        // Each bin's cluster, by its index in `keys`; flood-filled.
+        let mut label = vec![usize::MAX; keys.len()];
         let mut count = 0;
         let mut stack = Vec::new();
-        for &k in &keys {
-            if label[&k] != usize::MAX {
+        for start in 0..keys.len() {
+            if label[start] != usize::MAX {
                 continue;
             }
-            label.insert(k, count);
-            stack.push(k);
+            label[start] = count;
+            stack.push(keys[start]);
             while let Some((x, y, a)) = stack.pop() {
                 for dx in -1..=1 {
                     for dy in -1..=1 {
                         for da in -1..=1 {
                             let n = (x + dx, y + dy, wrap_bin(a + da));
-                            if let Some(l) = label.get_mut(&n) {
-                                if *l == usize::MAX {
-                                    *l = count;
+                            if let Some(&k) = index.get(&n) {
+                                if label[k] == usize::MAX {
+                                    label[k] = count;
                                     stack.push(n);
                                 }
                             }
@@ -382,10 +382,9 @@ impl Filter {
             yy: f64,
             xy: f64,
         }
-        let labels: Vec<usize> = keys.iter().map(|k| label[k]).collect();
         let mut acc = vec![Acc::default(); count];
         for (p, &b) in self.particles.iter().zip(&of) {
-            let a = &mut acc[labels[b]];
+            let a = &mut acc[label[b]];
             let (w, x, y) = (p.weight, p.pose.x, p.pose.y);
             a.n += 1;
             a.w += w;
