@@ -21,6 +21,7 @@ use std::time::{Duration, Instant};
 
 use crate::pty::Pty;
 use crate::Emulator;
+use crate::{Codec, Framer};
 
 /// One line of a capture.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -129,6 +130,28 @@ impl Capture {
             why: e.to_string(),
         })?;
         Capture::parse(&text, &origin)
+    }
+
+    /// The capture at `path`; when the environment sets `TROUPE_BLESS` (as
+    /// for the golden files), `record` writes it afresh first.
+    ///
+    /// # Errors
+    ///
+    /// As [`Capture::load`].
+    pub fn blessed(path: &Path, record: impl FnOnce(&Path)) -> Result<Capture, CaptureError> {
+        if std::env::var_os("TROUPE_BLESS").is_some() {
+            record(path);
+        }
+        Capture::load(path)
+    }
+
+    /// The frames in the bytes the device sends, as `codec` cuts them.
+    pub fn device_frames<C: Codec>(&self, codec: C) -> Vec<C::Frame> {
+        let mut framer = Framer::new(codec);
+        for bytes in self.from_device() {
+            framer.push(bytes);
+        }
+        std::iter::from_fn(|| framer.next_frame()).collect()
     }
 
     /// The bytes the device sends, in order.

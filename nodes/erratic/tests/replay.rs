@@ -17,7 +17,7 @@ use troupe_erratic::device::{self, Order, Update};
 use troupe_erratic::packet::PacketCodec;
 use troupe_node::Waker;
 use troupe_serial::capture::{self, Capture};
-use troupe_serial::{Faults, Framer};
+use troupe_serial::Faults;
 
 /// Motor packets the session runs for (under the driver's 1 s PULSE).
 const MOTOR: usize = 5;
@@ -58,24 +58,18 @@ fn session(link: &Path) -> Result<(Names, Vec<Vec<u8>>), String> {
     Ok((name.unwrap(), motor))
 }
 
-fn record(path: PathBuf) {
-    let emu = emulate("record", Faults::default(), Some(path));
+fn record(path: &Path) {
+    let emu = emulate("record", Faults::default(), Some(path.to_owned()));
     session(emu.link()).unwrap();
     emu.stop().unwrap();
 }
 
 #[test]
 fn a_captured_erratic_session_replays_byte_for_byte() {
-    let path = capture_path();
-    if std::env::var_os("TROUPE_BLESS").is_some() {
-        record(path.clone());
-    }
-    let cap = Capture::load(&path).unwrap();
-    let mut framer = Framer::new(PacketCodec);
-    for bytes in cap.from_device() {
-        framer.push(bytes);
-    }
-    let captured: Vec<Vec<u8>> = std::iter::from_fn(|| framer.next_frame())
+    let cap = Capture::blessed(&capture_path(), record).unwrap();
+    let captured: Vec<Vec<u8>> = cap
+        .device_frames(PacketCodec)
+        .into_iter()
         .filter(|d| is_motor(d))
         .collect();
     assert!(captured.len() >= MOTOR, "{} captured", captured.len());

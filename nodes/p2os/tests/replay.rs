@@ -17,7 +17,7 @@ use troupe_node::Waker;
 use troupe_p2os::device::{self, Order, Update};
 use troupe_p2os::packet::{PacketCodec, Sip};
 use troupe_serial::capture::{self, Capture};
-use troupe_serial::{Faults, Framer};
+use troupe_serial::Faults;
 
 /// SIPs the session runs for.
 const SIPS: usize = 10;
@@ -54,25 +54,19 @@ fn session(link: &Path) -> Result<(Names, Vec<Sip>), String> {
 }
 
 /// Records the capture from the emulated robot.
-fn record(path: PathBuf) {
-    let emu = emulate("record", Faults::default(), Some(path));
+fn record(path: &Path) {
+    let emu = emulate("record", Faults::default(), Some(path.to_owned()));
     session(emu.link()).unwrap();
     emu.stop().unwrap();
 }
 
 #[test]
 fn a_captured_pioneer_session_replays_byte_for_byte() {
-    let path = capture_path();
-    if std::env::var_os("TROUPE_BLESS").is_some() {
-        record(path.clone());
-    }
-    let cap = Capture::load(&path).unwrap();
+    let cap = Capture::blessed(&capture_path(), record).unwrap();
     // The SIPs in the capture, decoded here independently of the driver.
-    let mut framer = Framer::new(PacketCodec);
-    for bytes in cap.from_device() {
-        framer.push(bytes);
-    }
-    let captured: Vec<Sip> = std::iter::from_fn(|| framer.next_frame())
+    let captured: Vec<Sip> = cap
+        .device_frames(PacketCodec)
+        .into_iter()
         .filter(|d| Sip::is_standard(d))
         .map(|d| Sip::decode(&d).unwrap())
         .collect();

@@ -51,19 +51,15 @@ fn session(link: &Path) -> Result<((String, u32), Vec<RawScan>), String> {
     Ok((ready.unwrap(), scans))
 }
 
-fn record(path: PathBuf) {
-    let emu = emulate("record", Faults::default(), Some(path));
+fn record(path: &Path) {
+    let emu = emulate("record", Faults::default(), Some(path.to_owned()));
     session(emu.link()).unwrap();
     emu.stop().unwrap();
 }
 
 #[test]
 fn a_captured_lms200_session_replays_byte_for_byte() {
-    let path = capture_path();
-    if std::env::var_os("TROUPE_BLESS").is_some() {
-        record(path.clone());
-    }
-    let cap = Capture::load(&path).unwrap();
+    let cap = Capture::blessed(&capture_path(), record).unwrap();
     let bauds: Vec<u32> = cap
         .entries
         .iter()
