@@ -38,5 +38,7 @@ pub use framer::{Codec, Decoded, FrameStats, Framer, Skipped};
 pub use link::{Link, LinkError, SessionError};
 pub use port::{baud_supported, LineError, Port, BAUD_RATES};
 pub use pty::{Pacer, Pty};
-pub use thread::{end_session, run_sessions, Emulator, Ended, LineThread, Linked, Reports};
+pub use thread::{
+    end_session, recv_where, run_sessions, Emulator, Ended, LineThread, Linked, Reports,
+};
 pub use watchdog::CommandWatchdog;

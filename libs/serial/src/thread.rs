@@ -89,6 +89,26 @@ impl<O: Send + 'static, U: Send + 'static> LineThread<O, U> {
     }
 }
 
+/// The next message on `rx` that `want` accepts, the others skipped,
+/// within `within`: how tests and tools wait for a line thread's update.
+///
+/// # Errors
+///
+/// The time ran out, or the sender is gone.
+pub fn recv_where<U>(
+    rx: &Receiver<U>,
+    within: Duration,
+    mut want: impl FnMut(&U) -> bool,
+) -> Result<U, RecvTimeoutError> {
+    let deadline = Instant::now() + within;
+    loop {
+        let u = rx.recv_timeout(deadline.saturating_duration_since(Instant::now()))?;
+        if want(&u) {
+            return Ok(u);
+        }
+    }
+}
+
 /// How a session with a device ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Ended {

@@ -5,23 +5,17 @@
 mod common;
 
 use std::sync::mpsc::Receiver;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use common::{emulate, settings};
 use troupe_erratic::device::{self, Order, Update};
 use troupe_erratic::packet::Motor;
 use troupe_node::Waker;
-use troupe_serial::Faults;
+use troupe_serial::{recv_where, Faults};
 
-fn wait_for(rx: &Receiver<Update>, secs: u64, mut want: impl FnMut(&Update) -> bool) -> Update {
-    let deadline = Instant::now() + Duration::from_secs(secs);
-    loop {
-        match rx.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
-            Ok(u) if want(&u) => return u,
-            Ok(_) => {}
-            Err(e) => panic!("no matching update within {secs} s: {e}"),
-        }
-    }
+fn wait_for(rx: &Receiver<Update>, secs: u64, want: impl FnMut(&Update) -> bool) -> Update {
+    recv_where(rx, Duration::from_secs(secs), want)
+        .unwrap_or_else(|e| panic!("no matching update within {secs} s: {e}"))
 }
 
 /// The motor packet in an update, if it is one.

@@ -5,22 +5,16 @@
 mod common;
 
 use std::sync::mpsc::Receiver;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use common::{emulate, settings};
 use troupe_node::Waker;
 use troupe_p2os::device::{self, Order, Settings, Update};
-use troupe_serial::Faults;
+use troupe_serial::{recv_where, Faults};
 
-fn wait_for(rx: &Receiver<Update>, secs: u64, mut want: impl FnMut(&Update) -> bool) -> Update {
-    let deadline = Instant::now() + Duration::from_secs(secs);
-    loop {
-        match rx.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
-            Ok(u) if want(&u) => return u,
-            Ok(_) => {}
-            Err(e) => panic!("no matching update within {secs} s: {e}"),
-        }
-    }
+fn wait_for(rx: &Receiver<Update>, secs: u64, want: impl FnMut(&Update) -> bool) -> Update {
+    recv_where(rx, Duration::from_secs(secs), want)
+        .unwrap_or_else(|e| panic!("no matching update within {secs} s: {e}"))
 }
 
 fn sip(u: &Update) -> Option<&troupe_p2os::packet::Sip> {

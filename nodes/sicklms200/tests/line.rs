@@ -5,25 +5,18 @@
 mod common;
 
 use std::sync::mpsc::Receiver;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use common::{emulate, settings};
 use troupe_node::Waker;
-use troupe_serial::Faults;
+use troupe_serial::{recv_where, Faults};
 use troupe_sicklms200::device::{self, Order, Update};
 use troupe_sicklms200::emulator::{self, Room, Scene};
 
 /// Waits for an update matching `want`, for at most `secs`.
-fn wait_for(rx: &Receiver<Update>, secs: u64, mut want: impl FnMut(&Update) -> bool) -> Update {
-    let deadline = Instant::now() + Duration::from_secs(secs);
-    loop {
-        let left = deadline.saturating_duration_since(Instant::now());
-        match rx.recv_timeout(left) {
-            Ok(u) if want(&u) => return u,
-            Ok(_) => {}
-            Err(e) => panic!("no matching update within {secs} s: {e}"),
-        }
-    }
+fn wait_for(rx: &Receiver<Update>, secs: u64, want: impl FnMut(&Update) -> bool) -> Update {
+    recv_where(rx, Duration::from_secs(secs), want)
+        .unwrap_or_else(|e| panic!("no matching update within {secs} s: {e}"))
 }
 
 #[test]
