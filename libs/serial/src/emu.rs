@@ -108,6 +108,31 @@ impl EmuLine {
         &self.faults
     }
 
+    /// How many times an emulator told to stop asks for
+    /// [`EmuLine::leftover`] bytes at most.
+    pub const LAST_WORDS: usize = 10;
+
+    /// Once the emulator is told to stop: the next bytes the driver had
+    /// written (its goodbye: last commands, STOP, CLOSE), or `None` when
+    /// none come within `quiet`. Emulators obey them before they go, so that
+    /// nothing the driver sent is lost with the line; they ask a bounded
+    /// number of times, as a driver may still be talking.
+    ///
+    /// # Errors
+    ///
+    /// As [`EmuLine::recv`].
+    pub fn leftover(
+        &mut self,
+        buf: &mut [u8],
+        baud: u32,
+        quiet: Duration,
+    ) -> std::io::Result<Option<usize>> {
+        Ok(match self.recv(buf, baud, quiet)? {
+            LineEvent::Received(n) => Some(n),
+            LineEvent::Replugged | LineEvent::Idle | LineEvent::Unplugged => None,
+        })
+    }
+
     /// Waits up to `timeout` for bytes from the driver that a device at
     /// `baud` can read, and runs the unplug plan.
     ///

@@ -203,16 +203,13 @@ pub fn run_with(
             next = now + CYCLE;
         }
     }
-    // What the driver sent before the stop (its goodbye: queued servo
-    // commands, STOP, CLOSE) is still obeyed, not dropped with the line.
-    for _ in 0..10 {
-        match line.recv(&mut buf, baud, CYCLE)? {
-            LineEvent::Received(n) => {
-                framer.push(&buf[..n]);
-                obey_all(&mut framer, &mut robot, body, &mut line, baud, &mut stats)?;
-            }
-            LineEvent::Replugged | LineEvent::Idle | LineEvent::Unplugged => break,
-        }
+    // The driver's goodbye (queued servo commands, STOP, CLOSE) is obeyed.
+    for _ in 0..EmuLine::LAST_WORDS {
+        let Some(n) = line.leftover(&mut buf, baud, CYCLE)? else {
+            break;
+        };
+        framer.push(&buf[..n]);
+        obey_all(&mut framer, &mut robot, body, &mut line, baud, &mut stats)?;
     }
     tracing::info!(
         packets = stats.packets,
