@@ -9,6 +9,7 @@ use rand::SeedableRng;
 use crate::capture::Recorder;
 use crate::faults::{Faults, Injected};
 use crate::pty::{Pacer, Pty};
+use crate::{Codec, Framer};
 
 /// What [`EmuLine::recv`] saw.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -108,29 +109,33 @@ impl EmuLine {
         &self.faults
     }
 
-    /// How many times an emulator told to stop asks for
-    /// [`EmuLine::leftover`] bytes at most.
-    pub const LAST_WORDS: usize = 10;
-
-    /// Once the emulator is told to stop: the next bytes the driver had
-    /// written (its goodbye: last commands, STOP, CLOSE), or `None` when
-    /// none come within `quiet`. Emulators obey them before they go, so that
-    /// nothing the driver sent is lost with the line; they ask a bounded
-    /// number of times, as a driver may still be talking.
+    /// Once the emulator is told to stop: the driver's goodbye (last
+    /// commands, STOP, CLOSE), which it had written already, cut by `framer`
+    /// and handed frame by frame to `obey`, until nothing comes within
+    /// `quiet` (ten reads at most: a driver may still be talking). So
+    /// nothing the driver sent is lost with the line.
     ///
     /// # Errors
     ///
-    /// As [`EmuLine::recv`].
-    pub fn leftover(
+    /// As [`EmuLine::recv`], or the first error of `obey`.
+    pub fn obey_leftover<C: Codec>(
         &mut self,
-        buf: &mut [u8],
         baud: u32,
         quiet: Duration,
-    ) -> std::io::Result<Option<usize>> {
-        Ok(match self.recv(buf, baud, quiet)? {
-            LineEvent::Received(n) => Some(n),
-            LineEvent::Replugged | LineEvent::Idle | LineEvent::Unplugged => None,
-        })
+        framer: &mut Framer<C>,
+        mut obey: impl FnMut(&mut EmuLine, C::Frame) -> std::io::Result<()>,
+    ) -> std::io::Result<()> {
+        let mut buf = [0u8; 512];
+        for _ in 0..10 {
+            let LineEvent::Received(n) = self.recv(&mut buf, baud, quiet)? else {
+                break;
+            };
+            framer.push(&buf[..n]);
+            while let Some(frame) = framer.next_frame() {
+                obey(self, frame)?;
+            }
+        }
+        Ok(())
     }
 
     /// Waits up to `timeout` for bytes from the driver that a device at

@@ -167,7 +167,10 @@ pub fn run_with(
         match line.recv(&mut buf, baud, wait)? {
             LineEvent::Received(n) => {
                 framer.push(&buf[..n]);
-                obey_all(&mut framer, &mut robot, body, &mut line, baud, &mut stats)?;
+                while let Some(p) = framer.next_frame() {
+                    stats.packets += 1;
+                    obey(&mut robot, body, &p, &mut line, baud, &mut stats)?;
+                }
             }
             LineEvent::Replugged => {
                 robot = Robot::power_up(params, body);
@@ -204,13 +207,10 @@ pub fn run_with(
         }
     }
     // The driver's goodbye (queued servo commands, STOP, CLOSE) is obeyed.
-    for _ in 0..EmuLine::LAST_WORDS {
-        let Some(n) = line.leftover(&mut buf, baud, CYCLE)? else {
-            break;
-        };
-        framer.push(&buf[..n]);
-        obey_all(&mut framer, &mut robot, body, &mut line, baud, &mut stats)?;
-    }
+    line.obey_leftover(baud, CYCLE, &mut framer, |line, p| {
+        stats.packets += 1;
+        obey(&mut robot, body, &p, line, baud, &mut stats)
+    })?;
     tracing::info!(
         packets = stats.packets,
         motor_packets = stats.motor,
@@ -221,22 +221,6 @@ pub fn run_with(
         "emulated erratic stopped"
     );
     Ok(stats)
-}
-
-/// Obeys every whole packet the framer holds.
-fn obey_all(
-    framer: &mut Framer<PacketCodec>,
-    robot: &mut Robot,
-    body: &mut dyn Body,
-    line: &mut EmuLine,
-    baud: u32,
-    stats: &mut EmulatorStats,
-) -> std::io::Result<()> {
-    while let Some(p) = framer.next_frame() {
-        stats.packets += 1;
-        obey(robot, body, &p, line, baud, stats)?;
-    }
-    Ok(())
 }
 
 fn obey(

@@ -251,15 +251,10 @@ pub fn run_with(
         match line.recv(&mut buf, baud, wait)? {
             LineEvent::Received(n) => {
                 framer.push(&buf[..n]);
-                obey_all(
-                    &mut framer,
-                    &mut robot,
-                    body,
-                    &mut line,
-                    baud,
-                    opts,
-                    &mut stats,
-                )?;
+                while let Some(p) = framer.next_frame() {
+                    stats.packets += 1;
+                    obey(&mut robot, body, &p, &mut line, baud, opts)?;
+                }
             }
             LineEvent::Replugged => {
                 robot = Robot::power_up(params, body);
@@ -289,21 +284,10 @@ pub fn run_with(
         }
     }
     // The driver's goodbye (last commands, STOP, CLOSE) is obeyed.
-    for _ in 0..EmuLine::LAST_WORDS {
-        let Some(n) = line.leftover(&mut buf, baud, CYCLE)? else {
-            break;
-        };
-        framer.push(&buf[..n]);
-        obey_all(
-            &mut framer,
-            &mut robot,
-            body,
-            &mut line,
-            baud,
-            opts,
-            &mut stats,
-        )?;
-    }
+    line.obey_leftover(baud, CYCLE, &mut framer, |line, p| {
+        stats.packets += 1;
+        obey(&mut robot, body, &p, line, baud, opts)
+    })?;
     tracing::info!(
         packets = stats.packets,
         sips = stats.sips,
@@ -316,23 +300,6 @@ pub fn run_with(
         "emulated p2os robot stopped"
     );
     Ok(stats)
-}
-
-/// Obeys every whole packet the framer holds.
-fn obey_all(
-    framer: &mut Framer<PacketCodec>,
-    robot: &mut Robot,
-    body: &mut dyn Body,
-    line: &mut EmuLine,
-    baud: u32,
-    opts: &EmulatorOptions,
-    stats: &mut EmulatorStats,
-) -> std::io::Result<()> {
-    while let Some(p) = framer.next_frame() {
-        stats.packets += 1;
-        obey(robot, body, &p, line, baud, opts)?;
-    }
-    Ok(())
 }
 
 fn obey(
