@@ -39,6 +39,24 @@ pub struct Injected {
 }
 
 impl Faults {
+    /// A device that never answers.
+    pub fn mute() -> Faults {
+        Faults {
+            mute: true,
+            ..Faults::default()
+        }
+    }
+
+    /// A device unplugged `after` its line opens and plugged back in
+    /// `back_after` later.
+    pub fn unplug(after: Duration, back_after: Duration) -> Faults {
+        Faults {
+            unplug_after: Some(after),
+            replug_after: Some(back_after),
+            ..Faults::default()
+        }
+    }
+
     /// True when no byte is ever altered.
     pub fn clean(&self) -> bool {
         self.noise <= 0.0 && self.drop <= 0.0 && self.corrupt <= 0.0 && self.truncate <= 0.0

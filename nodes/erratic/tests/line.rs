@@ -66,14 +66,7 @@ fn line_faults_are_survived_and_the_robot_still_drives() {
 
 #[test]
 fn a_mute_robot_is_reported_and_an_unplugged_one_reconnects() {
-    let mute = emulate(
-        "mute",
-        Faults {
-            mute: true,
-            ..Faults::default()
-        },
-        None,
-    );
+    let mute = emulate("mute", Faults::mute(), None);
     let line = device::spawn(settings(mute.link()), Waker::none()).unwrap();
     let rx = line.updates();
     let Update::Lost(why) = wait_for(rx, 30, |u| matches!(u, Update::Lost(_))) else {
@@ -85,11 +78,7 @@ fn a_mute_robot_is_reported_and_an_unplugged_one_reconnects() {
 
     let unplug = emulate(
         "unplug",
-        Faults {
-            unplug_after: Some(Duration::from_secs(3)),
-            replug_after: Some(Duration::from_secs(1)),
-            ..Faults::default()
-        },
+        Faults::unplug(Duration::from_secs(3), Duration::from_secs(1)),
         None,
     );
     let line = device::spawn(settings(unplug.link()), Waker::none()).unwrap();

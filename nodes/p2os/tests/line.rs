@@ -92,14 +92,7 @@ fn faults_are_survived_and_a_mute_robot_is_reported() {
     line.stop(Order::Stop);
     emu.stop().unwrap();
 
-    let mute = emulate(
-        "mute",
-        Faults {
-            mute: true,
-            ..Faults::default()
-        },
-        None,
-    );
+    let mute = emulate("mute", Faults::mute(), None);
     let line = device::spawn(settings(mute.link()), Waker::none()).unwrap();
     let rx = line.updates();
     let Update::Lost(why) = wait_for(rx, 30, |u| matches!(u, Update::Lost(_))) else {
@@ -141,11 +134,7 @@ fn the_gripper_and_the_gyro_answer() {
 fn an_unplugged_robot_is_lost_then_back() {
     let emu = emulate(
         "unplug",
-        Faults {
-            unplug_after: Some(Duration::from_secs(3)),
-            replug_after: Some(Duration::from_secs(1)),
-            ..Faults::default()
-        },
+        Faults::unplug(Duration::from_secs(3), Duration::from_secs(1)),
         None,
     );
     let line = device::spawn(settings(emu.link()), Waker::none()).unwrap();

@@ -107,14 +107,7 @@ fn survives_noise_bad_checksums_truncation_and_dropped_bytes() {
 
 #[test]
 fn a_mute_device_is_reported_and_an_unplugged_one_reconnects() {
-    let mute = emulate(
-        "mute",
-        Faults {
-            mute: true,
-            ..Faults::default()
-        },
-        None,
-    );
+    let mute = emulate("mute", Faults::mute(), None);
     let mut s = settings(mute.link(), 100, 38400);
     s.connect_rates = vec![9600];
     let t = device::spawn(s, Waker::none()).unwrap();
@@ -131,11 +124,7 @@ fn a_mute_device_is_reported_and_an_unplugged_one_reconnects() {
 
     let unplug = emulate(
         "unplug",
-        Faults {
-            unplug_after: Some(Duration::from_secs(3)),
-            replug_after: Some(Duration::from_secs(1)),
-            ..Faults::default()
-        },
+        Faults::unplug(Duration::from_secs(3), Duration::from_secs(1)),
         None,
     );
     let t = device::spawn(settings(unplug.link(), 100, 38400), Waker::none()).unwrap();
