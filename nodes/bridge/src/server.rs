@@ -1,5 +1,7 @@
-//! The bridge itself: a TCP listener per robot port, one task pair per
-//! client, one Zenoh subscriber per device that at least one client opened.
+//! The bridge itself: a TCP listener per robot port, three tasks per client
+//! (reading, asking devices in order, finishing writes a full socket
+//! refused), one Zenoh subscriber per device that at least one client
+//! opened. Answers and data are written by the thread that has them.
 
 use std::collections::HashMap;
 use std::net::SocketAddr;
@@ -7,12 +9,14 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
-use tokio::net::{TcpListener, TcpStream};
-use tokio::sync::{mpsc, Notify};
+use tokio::io::AsyncReadExt;
+use tokio::net::tcp::{OwnedReadHalf, OwnedWriteHalf};
+use tokio::net::TcpListener;
+use tokio::sync::{mpsc, oneshot, Notify};
 use troupe_msgs::codec::{self, schema_of, Message};
 use troupe_msgs::{common, decode_any, keys, sim, Device, Interface};
 use troupe_node::zenoh::pubsub::Subscriber;
+use troupe_node::zenoh::query::{ConsolidationMode, Reply};
 use troupe_node::zenoh::sample::SampleKind;
 use troupe_node::zenoh::{Session, Wait};
 use troupe_node::REQUEST_TIMEOUT;
@@ -82,16 +86,92 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     m.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
-/// A client's queue and the bell its writer waits on.
+/// A client's queue and its socket.
+///
+/// Whoever queues a message writes what the socket takes at once, on its own
+/// thread: a request's answer goes out from the Zenoh callback that received
+/// it, with no task to wake in between. The writer task only finishes what a
+/// full socket could not take, so a stuck client holds up no one else.
 struct ClientQueue {
-    queue: Mutex<Queue>,
+    out: Mutex<Outbox>,
     bell: Notify,
+    wire: OwnedWriteHalf,
+}
+
+/// What waits to go to one client.
+struct Outbox {
+    queue: Queue,
+    /// Bytes taken from the queue that the socket has not taken yet.
+    unsent: Vec<u8>,
+    sent: usize,
+    /// The socket failed: nothing more goes out.
+    closed: bool,
 }
 
 impl ClientQueue {
+    fn new(maxlen: usize, wire: OwnedWriteHalf) -> ClientQueue {
+        ClientQueue {
+            out: Mutex::new(Outbox {
+                queue: Queue::new(maxlen),
+                // The banner goes before anything else.
+                unsent: wire::banner().to_vec(),
+                sent: 0,
+                closed: false,
+            }),
+            bell: Notify::new(),
+            wire,
+        }
+    }
+
     fn push(&self, m: Out) {
-        lock(&self.queue).push(m);
-        self.bell.notify_one();
+        self.with(|q| q.push(m));
+    }
+
+    /// Changes the queue, then writes what may go now; whatever the socket
+    /// cannot take yet is left to the writer task.
+    fn with<R>(&self, f: impl FnOnce(&mut Queue) -> R) -> R {
+        let mut out = lock(&self.out);
+        let r = f(&mut out.queue);
+        if !out.flush(&self.wire) {
+            self.bell.notify_one();
+        }
+        r
+    }
+}
+
+impl Outbox {
+    /// Writes what the queue lets go until the socket would block; `true`
+    /// when nothing is left over.
+    fn flush(&mut self, wire: &OwnedWriteHalf) -> bool {
+        while !self.closed {
+            if self.sent == self.unsent.len() {
+                self.unsent.clear();
+                self.sent = 0;
+                while self.unsent.len() < 1 << 20 {
+                    match self.queue.pop() {
+                        Some(m) => self.unsent.extend_from_slice(&m.bytes),
+                        None => break,
+                    }
+                }
+                if self.unsent.is_empty() {
+                    return true;
+                }
+            }
+            match wire.try_write(&self.unsent[self.sent..]) {
+                Ok(n) if n > 0 => self.sent += n,
+                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => return false,
+                Ok(_) => self.close("the socket took nothing".into()),
+                Err(e) => self.close(e.to_string()),
+            }
+        }
+        true
+    }
+
+    fn close(&mut self, why: String) {
+        tracing::debug!("write failed: {why}");
+        self.closed = true;
+        self.unsent = Vec::new();
+        self.sent = 0;
     }
 }
 
@@ -312,11 +392,11 @@ async fn accept_loop(shared: Arc<Shared>, robot: u32, host: u32, listener: TcpLi
                 Ok((stream, peer)) => {
                     let id = shared.next_client.fetch_add(1, Ordering::Relaxed);
                     tracing::info!("robot {robot}: client {id} connected from {peer}");
-                    let conn = Conn { shared: shared.clone(), robot, host, id, queue: Arc::new(ClientQueue {
-                        queue: Mutex::new(Queue::new(shared.maxlen)),
-                        bell: Notify::new(),
-                    }), subscribed: Vec::new() };
-                    clients.spawn(conn.serve(stream));
+                    let _ = stream.set_nodelay(true);
+                    let (rd, wr) = stream.into_split();
+                    let queue = Arc::new(ClientQueue::new(shared.maxlen, wr));
+                    let conn = Conn { shared: shared.clone(), robot, host, id, queue, subscribed: Vec::new() };
+                    clients.spawn(conn.serve(rd));
                 }
                 Err(e) => {
                     tracing::warn!("robot {robot}: accept failed: {e}");
@@ -348,10 +428,8 @@ struct Pending {
 }
 
 impl Conn {
-    async fn serve(mut self, stream: TcpStream) {
-        let _ = stream.set_nodelay(true);
-        let (mut rd, wr) = stream.into_split();
-        let writer = tokio::spawn(write_loop(self.queue.clone(), wr));
+    async fn serve(mut self, mut rd: OwnedReadHalf) {
+        let writer = tokio::spawn(write_loop(self.queue.clone()));
         let (req_tx, req_rx) = mpsc::unbounded_channel();
         let requests = tokio::spawn(request_loop(
             self.shared.clone(),
@@ -393,7 +471,7 @@ impl Conn {
         for dev in std::mem::take(&mut self.subscribed) {
             self.unsubscribe(dev);
         }
-        let dropped = lock(&self.queue.queue).dropped_total();
+        let dropped = lock(&self.queue.out).queue.dropped_total();
         if dropped > 0 {
             tracing::warn!(
                 "robot {}: client {} was too slow: {dropped} data messages dropped",
@@ -565,14 +643,13 @@ impl Conn {
             }
             player::DATA => {
                 let ack = Out::new(self.header(h.interf, h.index, RESP_ACK, h.subtype), &[]);
-                lock(&self.queue.queue).request_data(ack);
-                self.queue.bell.notify_one();
+                self.queue.with(|q| q.request_data(ack));
             }
             player::DATAMODE => {
                 let mode = r.u32().and_then(|m| r.end().map(|()| m)).map_err(bad)?;
                 match mode {
-                    player::PUSH => lock(&self.queue.queue).set_pull(false),
-                    player::PULL => lock(&self.queue.queue).set_pull(true),
+                    player::PUSH => self.queue.with(|q| q.set_pull(false)),
+                    player::PULL => self.queue.with(|q| q.set_pull(true)),
                     m => tracing::warn!("client {}: unknown data mode {m} requested", self.id),
                 }
                 self.reply(&h, RESP_ACK, &[]);
@@ -583,12 +660,14 @@ impl Conn {
                     *v = r.i32().map_err(bad)?;
                 }
                 r.end().map_err(bad)?;
-                lock(&self.queue.queue).add_rule(Rule {
-                    interf: f[0],
-                    index: f[1],
-                    kind: f[2],
-                    subtype: f[3],
-                    replace: Replace::from_player(f[4]),
+                self.queue.with(|q| {
+                    q.add_rule(Rule {
+                        interf: f[0],
+                        index: f[1],
+                        kind: f[2],
+                        subtype: f[3],
+                        replace: Replace::from_player(f[4]),
+                    })
                 });
                 self.reply(&h, RESP_ACK, &[]);
             }
@@ -702,73 +781,101 @@ fn data_message(dev: Device, host: u32, payload: &[u8]) -> Option<Out> {
     Some(Out::new(h, &body))
 }
 
-/// Writes the banner, then whatever the queue lets go, in batches.
-async fn write_loop(q: Arc<ClientQueue>, mut wr: tokio::net::tcp::OwnedWriteHalf) {
-    if wr.write_all(&wire::banner()).await.is_err() {
-        return;
-    }
-    let mut batch = Vec::with_capacity(64 * 1024);
+/// Finishes what a full socket could not take when it was queued.
+async fn write_loop(q: Arc<ClientQueue>) {
     loop {
-        batch.clear();
-        {
-            let mut queue = lock(&q.queue);
-            while batch.len() < 1 << 20 {
-                match queue.pop() {
-                    Some(m) => batch.extend_from_slice(&m.bytes),
-                    None => break,
-                }
-            }
-        }
-        if batch.is_empty() {
+        let done = lock(&q.out).flush(&q.wire);
+        if done {
             q.bell.notified().await;
-            continue;
-        }
-        if let Err(e) = wr.write_all(&batch).await {
-            tracing::debug!("write failed: {e}");
+        } else if q.wire.writable().await.is_err() {
             return;
         }
     }
 }
 
-/// Sends a client's device requests one at a time and queues the answers.
+/// Sends a client's device requests one at a time, as Player drivers answer
+/// them in order.
+///
+/// A small answer is turned into Player's and written from the Zenoh
+/// callback that receives it; a large one (a map tile to compress) comes
+/// back here, off Zenoh's receiving thread.
 async fn request_loop(
     shared: Arc<Shared>,
     q: Arc<ClientQueue>,
     mut rx: mpsc::UnboundedReceiver<Pending>,
 ) {
     while let Some(p) = rx.recv().await {
-        let (kind, body, stamp) = ask(&shared, &p).await;
-        let h = Header {
-            kind: u32::from(kind),
-            timestamp: stamp.unwrap_or_else(|| shared.now()),
-            size: 0,
-            ..p.header
-        };
-        q.push(Out::new(h, &body));
+        let p = Arc::new(p);
+        let key = keys::req(&p.dev, p.name);
+        let (tx, back) = oneshot::channel::<Option<Reply>>();
+        let tx = Mutex::new(Some(tx));
+        let (sh, cq, asked) = (shared.clone(), q.clone(), p.clone());
+        let sent = shared
+            .session
+            .get(&key)
+            .payload(p.payload.clone())
+            .timeout(REQUEST_TIMEOUT)
+            // Each answer as it arrives, not held until the query closes.
+            .consolidation(ConsolidationMode::None)
+            .callback(move |reply| {
+                // The first answer counts; a second queryable's is ignored.
+                let Some(tx) = lock(&tx).take() else { return };
+                let small = reply
+                    .result()
+                    .map_or(true, |s| s.payload().len() <= INLINE_ANSWER);
+                if small {
+                    cq.push(answer(&sh, &asked, reply));
+                    let _ = tx.send(None);
+                } else {
+                    let _ = tx.send(Some(reply));
+                }
+            })
+            .await;
+        if let Err(e) = sent {
+            tracing::warn!("{key}: {e}");
+            q.push(nack(&shared, &p));
+            continue;
+        }
+        match back.await {
+            Ok(None) => {}
+            Ok(Some(reply)) => q.push(answer(&shared, &p, reply)),
+            // The query ended with no answer: Zenoh dropped the callback.
+            Err(_) => {
+                tracing::info!("{key}: no answer within {REQUEST_TIMEOUT:?}; NACK");
+                q.push(nack(&shared, &p));
+            }
+        }
     }
 }
 
-/// One request's answer: ACK with its body, or NACK with none.
-async fn ask(shared: &Shared, p: &Pending) -> (u8, Vec<u8>, Option<f64>) {
-    let key = keys::req(&p.dev, p.name);
+/// Answers above this size are converted off Zenoh's receiving thread.
+const INLINE_ANSWER: usize = 16 * 1024;
+
+fn nack(shared: &Shared, p: &Pending) -> Out {
+    let h = Header {
+        kind: u32::from(RESP_NACK),
+        timestamp: shared.now(),
+        size: 0,
+        ..p.header
+    };
+    Out::new(h, &[])
+}
+
+/// A device's reply as Player's ACK with its body, or a NACK with none.
+fn answer(shared: &Shared, p: &Pending, reply: Reply) -> Out {
+    let (kind, body, stamp) = player_answer(p, reply);
+    let h = Header {
+        kind: u32::from(kind),
+        timestamp: stamp.unwrap_or_else(|| shared.now()),
+        size: 0,
+        ..p.header
+    };
+    Out::new(h, &body)
+}
+
+fn player_answer(p: &Pending, reply: Reply) -> (u8, Vec<u8>, Option<f64>) {
+    let key = || keys::req(&p.dev, p.name);
     let nack = (RESP_NACK, Vec::new(), None);
-    let replies = match shared
-        .session
-        .get(&key)
-        .payload(p.payload.clone())
-        .timeout(REQUEST_TIMEOUT)
-        .await
-    {
-        Ok(r) => r,
-        Err(e) => {
-            tracing::warn!("{key}: {e}");
-            return nack;
-        }
-    };
-    let Ok(reply) = replies.recv_async().await else {
-        tracing::info!("{key}: no answer within {REQUEST_TIMEOUT:?}; NACK");
-        return nack;
-    };
     match reply.into_result() {
         Ok(s) => {
             let bytes = s.payload().to_bytes();
@@ -779,7 +886,7 @@ async fn ask(shared: &Shared, p: &Pending) -> (u8, Vec<u8>, Option<f64>) {
             match (p.reply)(&bytes) {
                 Ok(body) => (RESP_ACK, body, stamp),
                 Err(e) => {
-                    tracing::warn!("{key}: {e}; NACK");
+                    tracing::warn!("{}: {e}; NACK", key());
                     nack
                 }
             }
@@ -788,7 +895,7 @@ async fn ask(shared: &Shared, p: &Pending) -> (u8, Vec<u8>, Option<f64>) {
             let reason = codec::decode::<common::Nack>(&e.payload().to_bytes())
                 .map(|n| n.msg.reason)
                 .unwrap_or_default();
-            tracing::debug!("{key}: refused: {reason}");
+            tracing::debug!("{}: refused: {reason}", key());
             nack
         }
     }
