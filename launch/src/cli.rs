@@ -246,7 +246,7 @@ pub enum BenchCmd {
     /// Player clients through the bridge: request round trips and a full map fetch.
     #[command(after_help = "Example:
   cargo run --release -- bench bridge --map ../shared/compat/stage/bitmaps/cave.png")]
-    Bridge(crate::bench::BridgeBenchArgs),
+    Bridge(crate::bridgebench::BridgeBenchArgs),
     /// Navigation cores: amcl updates/s by particle count, wavefront plan time, vfh decision time.
     #[command(after_help = "Example:
   cargo run --release -- bench nav --map ../shared/compat/stage/bitmaps/cave.png")]

@@ -6,6 +6,7 @@
 
 mod bench;
 mod bridge;
+mod bridgebench;
 mod cfg;
 mod cli;
 mod drivers;

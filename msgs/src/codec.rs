@@ -101,6 +101,22 @@ pub fn split(payload: &[u8]) -> Result<(&str, f64, &[u8]), DecodeError> {
     Ok((tag, f64::from_le_bytes(b), &payload[9 + n..]))
 }
 
+/// Rewrites an encoded payload's timestamp in place (an answer kept ready
+/// and sent again later is stamped when it is sent).
+///
+/// # Errors
+///
+/// [`DecodeError::Truncated`] if `payload` is shorter than its header.
+pub fn restamp(payload: &mut [u8], stamp: f64) -> Result<(), DecodeError> {
+    let len = payload.len();
+    let n = *payload.first().ok_or(DecodeError::Truncated { len })? as usize;
+    payload
+        .get_mut(1 + n..9 + n)
+        .ok_or(DecodeError::Truncated { len })?
+        .copy_from_slice(&stamp.to_le_bytes());
+    Ok(())
+}
+
 /// The schema tag of a payload, without decoding its body.
 pub fn schema_of(payload: &[u8]) -> Result<&str, DecodeError> {
     split(payload).map(|(t, _, _)| t)
@@ -152,6 +168,20 @@ mod tests {
         assert_eq!(got.stamp, 12.5);
         assert_eq!(got.msg, m);
         assert_eq!(schema_of(&bytes).unwrap(), "position2d/cmd_vel@1");
+    }
+
+    #[test]
+    fn restamp_changes_the_stamp_only() {
+        let m = laser::Scan {
+            ranges: vec![1.0, 2.0],
+            ..Default::default()
+        };
+        let mut bytes = encode(&m, 1.0);
+        restamp(&mut bytes, 42.25).unwrap();
+        assert_eq!(bytes, encode(&m, 42.25));
+        for n in 0..10 {
+            assert!(restamp(&mut bytes.clone()[..n], 0.0).is_err(), "prefix {n}");
+        }
     }
 
     #[test]

@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 use serde::Deserialize;
 use troupe_client::{Client, ClientError, LaserProxy, Position2dProxy, RangerProxy};
 use troupe_msgs::{
-    common, keys, laser, position2d, ranger, Device, Interface, Pose2d, Pose3d, Size3d,
+    codec, common, keys, laser, position2d, ranger, Device, Interface, Pose2d, Pose3d, Size3d,
 };
 use troupe_node::zenoh::Wait;
 use troupe_node::{
@@ -354,4 +354,88 @@ fn under_sim_time_ticks_and_stamps_follow_sim_clock() {
         "stamps are wall time, not sim time: {stamps:?}"
     );
     node.stop().unwrap();
+}
+
+/// Requests that reached [`Ready`]'s thread.
+static READY_SAW: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
+/// A driver that keeps its geometry ready, and would answer it wrongly
+/// (and count it) if a geometry request ever reached it.
+struct Ready {
+    dev: Device,
+}
+
+impl Driver for Ready {
+    const NAME: &'static str = "ready";
+    type Options = NoOpts;
+
+    fn new(section: &Section, _: NoOpts) -> Result<Self> {
+        Ok(Ready {
+            dev: section.provided_one(Interface::Position2d, None)?,
+        })
+    }
+
+    fn setup(&mut self, ctx: &mut Ctx) -> Result<()> {
+        let geom = position2d::Geom {
+            size: Size3d {
+                width: 0.3,
+                length: 0.4,
+                height: 0.2,
+            },
+            ..Default::default()
+        };
+        ctx.answer_always::<position2d::GetGeom>(&self.dev, &geom)
+    }
+
+    fn on_event(&mut self, _: &mut Ctx, event: Event) -> Result<()> {
+        if let Event::Request(r) = event {
+            READY_SAW.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+            if r.is::<position2d::GetGeom>() {
+                r.reply(&position2d::Geom::default());
+            } else {
+                r.nack("only geometry here");
+            }
+        }
+        Ok(())
+    }
+}
+
+#[test]
+fn answers_kept_ready_skip_the_driver_and_are_stamped_when_sent() {
+    let net = TestNet::new("ready");
+    let node = start::<Ready>(&net, r#"{"name":"ready","provides":["position2d:0"]}"#);
+    net.wait_live(&["6665:position2d:0"]);
+    let dev = Device::new(6665, Interface::Position2d, 0);
+    let session = net.client();
+    let ask = |name: &str, payload: Vec<u8>| {
+        let replies = session
+            .get(keys::req(&dev, name))
+            .payload(payload)
+            .timeout(DEADLINE)
+            .wait()
+            .unwrap();
+        replies.recv().expect("an answer").into_result()
+    };
+    for _ in 0..3 {
+        let before = troupe_node::Clock::wall().now();
+        let s = ask("geom", codec::encode(&position2d::GetGeom, 0.0)).expect("an ACK");
+        let got = codec::decode::<position2d::Geom>(&s.payload().to_bytes()).unwrap();
+        assert_eq!(
+            got.msg.size.width, 0.3,
+            "the ready answer, not the driver's"
+        );
+        assert!(
+            got.stamp >= before && got.stamp <= troupe_node::Clock::wall().now(),
+            "stamped when sent: {} not after {before}",
+            got.stamp
+        );
+    }
+    // Any other request still reaches the driver.
+    assert!(ask(
+        "motor_power",
+        codec::encode(&position2d::MotorPower { state: true }, 0.0)
+    )
+    .is_err());
+    node.stop().unwrap();
+    assert_eq!(READY_SAW.load(std::sync::atomic::Ordering::SeqCst), 1);
 }

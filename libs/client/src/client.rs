@@ -6,6 +6,7 @@ use std::time::{Duration, Instant};
 
 use troupe_msgs::{codec, keys, Command, DecodeError, Device, Interface, Message, Request};
 use troupe_node::zenoh::pubsub::Subscriber;
+use troupe_node::zenoh::query::ConsolidationMode;
 use troupe_node::zenoh::{Session, Wait};
 use troupe_node::{Mode, NodeError, ZenohArgs, REQUEST_TIMEOUT};
 
@@ -237,6 +238,8 @@ impl Client {
             .get(&key)
             .payload(codec::encode(req, now()))
             .timeout(REQUEST_TIMEOUT)
+            // The answer as it arrives, not held until the query closes.
+            .consolidation(ConsolidationMode::None)
             .wait()
             .map_err(|e| NodeError::zenoh(format!("sending {key}"), e))?;
         let reply = replies.recv().map_err(|_| ClientError::NoAnswer {

@@ -27,6 +27,9 @@ pub(crate) trait Bus: Send {
         payload: Vec<u8>,
         timeout: Duration,
     ) -> Result<()>;
+    /// Answers every request `name` to `dev` with `reply` (encoded, to be
+    /// restamped when sent) without delivering it to the driver.
+    fn answer_always(&mut self, dev: &Device, name: &'static str, reply: Vec<u8>);
 }
 
 /// What a driver may do from inside a hook: publish, subscribe, command,
@@ -127,6 +130,29 @@ impl Ctx {
             });
         }
         self.bus.publish(dev, codec::encode(msg, stamp))
+    }
+
+    /// Answers every `R` sent to the provided device `dev` with `reply`,
+    /// stamped when it is sent, straight from the thread that receives the
+    /// request: the driver's thread is not woken and the request never
+    /// reaches [`crate::Driver::on_event`]. For answers that depend neither
+    /// on the request nor on the moment (a device's geometry, a map's
+    /// info), which clients ask often and expect fast. Call it again when
+    /// the answer changes.
+    ///
+    /// # Errors
+    ///
+    /// [`NodeError::NotProvided`] if `dev` is not in the section's `provides`.
+    pub fn answer_always<R: Request>(&mut self, dev: &Device, reply: &R::Reply) -> Result<()> {
+        if !self.provided.contains(dev) {
+            return Err(NodeError::NotProvided {
+                driver: self.driver.to_owned(),
+                device: *dev,
+            });
+        }
+        self.bus
+            .answer_always(dev, R::NAME, codec::encode(reply, 0.0));
+        Ok(())
     }
 
     /// Delivers `dev`'s data as [`crate::Event::Data`] from now on (and its

@@ -22,7 +22,7 @@ use troupe_msgs::{codec, keys, sim, Device};
 use zenoh::bytes::ZBytes;
 use zenoh::liveliness::LivelinessToken;
 use zenoh::pubsub::{Publisher, Subscriber};
-use zenoh::query::{Query, Queryable};
+use zenoh::query::{ConsolidationMode, Query, Queryable};
 use zenoh::{Session, Wait};
 
 use crate::args::{Mode, ZenohArgs};
@@ -196,6 +196,7 @@ pub fn spawn<D: Driver>(
         inbox: inbox.clone(),
         publishers: HashMap::new(),
         latest: Arc::new(Mutex::new(HashMap::new())),
+        standing: Arc::new(Mutex::new(HashMap::new())),
         subscribers: Vec::new(),
         queryables: Vec::new(),
         clock_pub: None,
@@ -469,6 +470,9 @@ fn sim_clock(
 
 /// The latest payload of each schema tag, per provided device.
 type Latest = Arc<Mutex<HashMap<Device, Vec<(String, ZBytes)>>>>;
+/// Answers the receiving thread gives without waking the driver, by device
+/// and request name ([`Ctx::answer_always`]).
+type Standing = Arc<Mutex<HashMap<Device, Vec<(&'static str, Vec<u8>)>>>>;
 
 struct ZenohBus {
     session: Session,
@@ -478,6 +482,7 @@ struct ZenohBus {
     latest: Latest,
     subscribers: Vec<Subscriber<()>>,
     queryables: Vec<Queryable<()>>,
+    standing: Standing,
     clock_pub: Option<Publisher<'static>>,
 }
 
@@ -545,6 +550,7 @@ impl ZenohBus {
 
         let inbox = self.inbox.clone();
         let clock = clock.clone();
+        let standing = self.standing.clone();
         let q = s
             .declare_queryable(keys::req_any(dev))
             .callback(move |query: Query| {
@@ -553,6 +559,19 @@ impl ZenohBus {
                     Ok((_, n)) => n,
                     Err(e) => return tracing::warn!("ignored request: {e}"),
                 };
+                let ready = standing
+                    .lock()
+                    .unwrap_or_else(|p| p.into_inner())
+                    .get(&d)
+                    .and_then(|v| v.iter().find(|(n, _)| *n == name).map(|(_, r)| r.clone()));
+                if let Some(mut reply) = ready {
+                    // Encoded by `codec::encode`: the stamp is there to rewrite.
+                    let _ = codec::restamp(&mut reply, clock.now());
+                    if let Err(e) = query.reply(query.key_expr().clone(), reply).wait() {
+                        tracing::warn!("could not answer request on `{key}`: {e}");
+                    }
+                    return;
+                }
                 let payload = query.payload().cloned().unwrap_or_default();
                 let what = format!("request `{name}` to {d} ({driver})");
                 let responder = Responder::new(Box::new(ZenohSink(query)), clock.clone(), what);
@@ -655,6 +674,15 @@ impl Bus for ZenohBus {
             .map_err(z(|| format!("sending command {key}")))
     }
 
+    fn answer_always(&mut self, dev: &Device, name: &'static str, reply: Vec<u8>) {
+        let mut standing = self.standing.lock().unwrap_or_else(|p| p.into_inner());
+        let answers = standing.entry(*dev).or_default();
+        match answers.iter_mut().find(|(n, _)| *n == name) {
+            Some(slot) => slot.1 = reply,
+            None => answers.push((name, reply)),
+        }
+    }
+
     fn request(
         &mut self,
         id: RequestId,
@@ -676,6 +704,8 @@ impl Bus for ZenohBus {
             .get(key.clone())
             .payload(payload)
             .timeout(timeout)
+            // Each answer as it arrives, not held until the query closes.
+            .consolidation(ConsolidationMode::None)
             .callback(move |r| {
                 let k = r
                     .result()

@@ -218,6 +218,11 @@ impl Driver for MapFile {
         Ok(MapFile { device, map })
     }
 
+    fn setup(&mut self, ctx: &mut Ctx) -> Result<()> {
+        // Clients ask for the info first and often: answered without a wake.
+        ctx.answer_always::<map::GetInfo>(&self.device, &self.map.info)
+    }
+
     fn on_event(&mut self, _ctx: &mut Ctx, event: Event) -> Result<()> {
         match event {
             Event::Request(r) => serve(&self.map, &self.device, r),

@@ -278,6 +278,7 @@ impl Driver for Stage {
     }
 
     fn setup(&mut self, ctx: &mut Ctx) -> Result<()> {
+        self.answer_always(ctx)?;
         ctx.set_time(self.sim.time)?;
         self.publish(ctx)?;
         ctx.set_tick(self.period);
@@ -493,6 +494,75 @@ impl Stage {
         }
     }
 
+    fn position_geom(&self, model: usize) -> position2d::Geom {
+        let d = &self.sim.world.models[model];
+        position2d::Geom {
+            pose: pose3(d.origin, 0.0),
+            size: size3(d.size),
+        }
+    }
+
+    fn laser_geom(&self, model: usize) -> laser::Geom {
+        let g = self.ranger_geom(model);
+        laser::Geom {
+            pose: g.pose,
+            size: g.size,
+        }
+    }
+
+    fn laser_config(&self, model: usize) -> Option<laser::Config> {
+        let c = self.ranger_config(model)?;
+        let s = &self.sim.world.models[model].sensors[0];
+        Some(laser::Config {
+            min_angle: c.min_angle as f32,
+            max_angle: c.max_angle as f32,
+            resolution: if s.samples > 1 {
+                (s.fov / (s.samples - 1) as f64) as f32
+            } else {
+                0.0
+            },
+            max_range: c.max_range as f32,
+            range_res: c.range_res as f32,
+            intensity: true,
+            scanning_frequency: c.frequency as f32,
+        })
+    }
+
+    /// Keeps ready the answers that cannot change while the world runs, so
+    /// that clients' geometry and map-info requests wait for no step: a
+    /// robot's body, the rangers mounted on it (a top-level model's pose
+    /// moves with `set_pose`, so its rangers are asked each time), maps.
+    fn answer_always(&self, ctx: &mut Ctx) -> Result<()> {
+        for &(dev, src) in &self.devices {
+            let mounted = |m: usize| self.sim.world.models[m].parent.is_some();
+            match src {
+                Source::Position { base } => {
+                    let m = self.sim.bases[base].model;
+                    ctx.answer_always::<position2d::GetGeom>(&dev, &self.position_geom(m))?;
+                }
+                Source::Ranger { model } if mounted(model) => {
+                    ctx.answer_always::<ranger::GetGeom>(&dev, &self.ranger_geom(model))?;
+                    if let Some(c) = self.ranger_config(model) {
+                        ctx.answer_always::<ranger::GetConfig>(&dev, &c)?;
+                    }
+                }
+                Source::Laser { model } if mounted(model) => {
+                    ctx.answer_always::<laser::GetGeom>(&dev, &self.laser_geom(model))?;
+                    if let Some(c) = self.laser_config(model) {
+                        ctx.answer_always::<laser::GetConfig>(&dev, &c)?;
+                    }
+                }
+                Source::Map { model } => {
+                    if let Some((_, map)) = self.maps.iter().find(|(m, _)| *m == model) {
+                        ctx.answer_always::<troupe_msgs::map::GetInfo>(&dev, &map.info)?;
+                    }
+                }
+                _ => {}
+            }
+        }
+        Ok(())
+    }
+
     fn ranger_config(&self, model: usize) -> Option<ranger::Config> {
         let s = self.sim.world.models[model].sensors.first()?;
         Some(ranger::Config {
@@ -511,11 +581,7 @@ impl Stage {
             Source::Position { base } => {
                 let m = self.sim.bases[base].model;
                 if r.is::<position2d::GetGeom>() {
-                    let d = &self.sim.world.models[m];
-                    r.reply(&position2d::Geom {
-                        pose: pose3(d.origin, 0.0),
-                        size: size3(d.size),
-                    });
+                    r.reply(&self.position_geom(m));
                 } else if r.is::<position2d::MotorPower>() {
                     self.sim.bases[base].enabled = r.decode::<position2d::MotorPower>()?.state;
                     r.reply(&common::Ack);
@@ -553,29 +619,10 @@ impl Stage {
             }
             Source::Laser { model } => {
                 if r.is::<laser::GetGeom>() {
-                    let g = self.ranger_geom(model);
-                    r.reply(&laser::Geom {
-                        pose: g.pose,
-                        size: g.size,
-                    });
+                    r.reply(&self.laser_geom(model));
                 } else if r.is::<laser::GetConfig>() {
-                    match self.ranger_config(model) {
-                        Some(c) => {
-                            let s = &self.sim.world.models[model].sensors[0];
-                            r.reply(&laser::Config {
-                                min_angle: c.min_angle as f32,
-                                max_angle: c.max_angle as f32,
-                                resolution: if s.samples > 1 {
-                                    (s.fov / (s.samples - 1) as f64) as f32
-                                } else {
-                                    0.0
-                                },
-                                max_range: c.max_range as f32,
-                                range_res: c.range_res as f32,
-                                intensity: true,
-                                scanning_frequency: c.frequency as f32,
-                            });
-                        }
+                    match self.laser_config(model) {
+                        Some(c) => r.reply(&c),
                         None => r.nack("this ranger has no sensors"),
                     }
                 } else if r.is::<common::Power>() {

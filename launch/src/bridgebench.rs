@@ -1,0 +1,449 @@
+//! `troupe bench bridge`: Player clients through the bridge to real drivers.
+//!
+//! The bridge runs as `troupe launch` runs it, on its router's session. The
+//! devices are served by the real drivers on a session of their own, as if
+//! in another process: `mapfile` serves the map, Stage serves r0 of a world
+//! stepped at Player's 100 Hz, so position2d data flows while requests are
+//! timed. The clients speak raw XDR over plain sockets, as libplayerc does.
+
+use std::io::{Read, Write};
+use std::net::{SocketAddr, TcpStream};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use clap::Args;
+use troupe_bridge::wire::{self, player, Header, HEADER_LEN};
+use troupe_msgs::{codec, keys, map, Device, Interface};
+use troupe_node::zenoh::query::ConsolidationMode;
+use troupe_node::zenoh::Wait;
+use troupe_node::{Mode, NodeConfig, NodeHandle, Section, Stop, ZenohArgs};
+
+use crate::bench::{percentile, us};
+
+/// Flags of `troupe bench bridge`.
+#[derive(Debug, Args)]
+pub struct BridgeBenchArgs {
+    /// Timed requests of each kind.
+    #[arg(long, default_value_t = 2000)]
+    pub samples: usize,
+    /// Full map fetches.
+    #[arg(long, default_value_t = 50)]
+    pub fetches: usize,
+    /// The map image for `mapfile` (500x500 cave.png in the reference);
+    /// a synthetic 500x500 cave without it.
+    #[arg(long, value_name = "PNG")]
+    pub map: Option<PathBuf>,
+    /// The world whose r0 Stage serves (the repo's worlds/simple.world
+    /// without it).
+    #[arg(long, value_name = "FILE")]
+    pub world: Option<PathBuf>,
+    /// Clients reading position2d at 10 Hz each, all at once.
+    #[arg(long, default_value_t = 100)]
+    pub clients: usize,
+    /// How long the many clients read.
+    #[arg(long, default_value_t = 5.0)]
+    pub seconds: f64,
+}
+
+const ROBOT: u32 = troupe_msgs::DEFAULT_ROBOT;
+
+/// A Player message header from its six leading fields.
+fn header(h: [u32; 6]) -> Header {
+    let [host, robot, interf, index, kind, subtype] = h;
+    Header {
+        host,
+        robot,
+        interf,
+        index,
+        kind,
+        subtype,
+        ..Header::default()
+    }
+}
+
+/// The next message from the bridge.
+fn next(s: &mut TcpStream) -> anyhow::Result<(Header, Vec<u8>)> {
+    let mut hdr = [0u8; HEADER_LEN];
+    s.read_exact(&mut hdr)?;
+    let got = Header::read(&hdr)?;
+    let mut b = vec![0; got.size as usize];
+    s.read_exact(&mut b)?;
+    Ok((got, b))
+}
+
+/// A Player client's side of a request, in raw XDR over a socket without
+/// TCP_NODELAY, as libplayerc: send, then read until the answer (DATA ahead
+/// of it is read and dropped, as the client queues it).
+fn request(s: &mut TcpStream, h: [u32; 6], body: &[u8]) -> anyhow::Result<Vec<u8>> {
+    let [_, _, interf, _, _, subtype] = h;
+    s.write_all(&wire::message(header(h), body))?;
+    loop {
+        let (got, b) = next(s)?;
+        match u8::try_from(got.kind) {
+            Ok(wire::RESP_ACK) if (got.interf, got.subtype) == (interf, subtype) => return Ok(b),
+            Ok(wire::RESP_NACK) => anyhow::bail!("request {h:?} refused"),
+            _ => {}
+        }
+    }
+}
+
+/// The `player` device's request `sub`.
+fn player_req(sub: u8) -> [u32; 6] {
+    [
+        0,
+        0,
+        u32::from(wire::PLAYER_CODE),
+        0,
+        u32::from(wire::REQ),
+        u32::from(sub),
+    ]
+}
+
+/// A client past the banner, in PULL mode as libplayerc puts itself.
+fn connect(addr: SocketAddr) -> anyhow::Result<TcpStream> {
+    let mut s = TcpStream::connect(addr)?;
+    let mut banner = [0u8; 32];
+    s.read_exact(&mut banner)?;
+    request(
+        &mut s,
+        player_req(player::DATAMODE),
+        &player::PULL.to_be_bytes(),
+    )?;
+    Ok(s)
+}
+
+fn open(s: &mut TcpStream, interf: Interface) -> anyhow::Result<()> {
+    let mut body = Vec::new();
+    for v in [0, 0, u32::from(interf.code()), 0, player::OPEN] {
+        body.extend_from_slice(&v.to_be_bytes());
+    }
+    // An empty driver name: XDR arrays carry their count twice.
+    body.extend_from_slice(&[0; 8]);
+    request(s, player_req(player::DEV), &body).map(drop)
+}
+
+/// `n` timed requests after `n / 10` untimed ones, sorted.
+fn timed(s: &mut TcpStream, h: [u32; 6], n: usize) -> anyhow::Result<Vec<Duration>> {
+    let mut v = Vec::with_capacity(n);
+    for i in 0..n + n / 10 {
+        let t0 = Instant::now();
+        request(s, h, &[])?;
+        if i >= n / 10 {
+            v.push(t0.elapsed());
+        }
+    }
+    v.sort();
+    Ok(v)
+}
+
+/// The whole map, as libplayerc fetches it: GET_INFO, then tiles of at
+/// most 640x640, each zlib-compressed.
+fn fetch_map(s: &mut TcpStream) -> anyhow::Result<usize> {
+    let mi = u32::from(Interface::Map.code());
+    let info = request(s, [0, ROBOT, mi, 0, 3, 1], &[])?;
+    let word = |b: &[u8], at: usize| u32::from_be_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]]);
+    let (w, h) = (word(&info, 4), word(&info, 8));
+    let mut got = 0usize;
+    for row in (0..h).step_by(640) {
+        for col in (0..w).step_by(640) {
+            let (tw, th) = ((w - col).min(640), (h - row).min(640));
+            let mut q = Vec::new();
+            for v in [col, row, tw, th, 0, 0, 0] {
+                q.extend_from_slice(&v.to_be_bytes());
+            }
+            let b = request(s, [0, ROBOT, mi, 0, 3, 2], &q)?;
+            let n = word(&b, 24) as usize;
+            let mut cells = Vec::with_capacity((tw * th) as usize);
+            flate2::read::ZlibDecoder::new(&b[28..28 + n]).read_to_end(&mut cells)?;
+            got += cells.len();
+        }
+    }
+    anyhow::ensure!(
+        got == (w * h) as usize,
+        "map fetch got {got} cells of {}",
+        w * h
+    );
+    Ok(got)
+}
+
+/// What one of the many clients saw.
+#[derive(Default)]
+struct Reader {
+    /// Each read's round trip: REQ DATA to SYNCH.
+    reads: Vec<Duration>,
+    /// Reads whose SYNCH said data was dropped.
+    overflows: usize,
+    /// Reads that brought position2d data.
+    with_data: usize,
+}
+
+/// A libplayerc client's `playerc_client_read` at 10 Hz for `seconds`.
+/// Clients are independent: each starts its 100 ms cycle at `phase`.
+fn read_at_10hz(addr: SocketAddr, phase: Duration, seconds: f64) -> anyhow::Result<Reader> {
+    let mut s = connect(addr)?;
+    open(&mut s, Interface::Position2d)?;
+    let mut r = Reader::default();
+    let start = Instant::now();
+    let period = Duration::from_millis(100);
+    let mut due = start + phase;
+    let req = wire::message(header(player_req(player::DATA)), &[]);
+    while start.elapsed().as_secs_f64() < seconds {
+        // Pacing the client, not synchronising with anything.
+        std::thread::sleep(due.saturating_duration_since(Instant::now()));
+        due += period;
+        let t0 = Instant::now();
+        s.write_all(&req)?;
+        let mut data = false;
+        loop {
+            let (h, _) = next(&mut s)?;
+            match u8::try_from(h.kind) {
+                Ok(wire::DATA) => data = true,
+                Ok(wire::SYNCH) => {
+                    r.overflows += usize::from(h.subtype == u32::from(player::SYNCH_OVERFLOW));
+                    break;
+                }
+                _ => {}
+            }
+        }
+        r.reads.push(t0.elapsed());
+        r.with_data += usize::from(data);
+    }
+    Ok(r)
+}
+
+/// A 500x500 cave-like map as a PNG, for runs without `--map`.
+fn synthetic_map() -> anyhow::Result<PathBuf> {
+    let img = image::GrayImage::from_fn(500, 500, |x, y| {
+        let (x, y) = (f64::from(x), f64::from(y));
+        let wall = (x / 37.0).sin() * (y / 23.0).cos() > 0.6;
+        image::Luma([if wall { 0 } else { 255 }])
+    });
+    let path = std::env::temp_dir().join(format!("troupe-bench-map-{}.png", std::process::id()));
+    img.save(&path)
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(path)
+}
+
+fn world_file(given: Option<&Path>) -> anyhow::Result<PathBuf> {
+    if let Some(p) = given {
+        return Ok(p.to_owned());
+    }
+    let local = PathBuf::from("worlds/simple.world");
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/simple.world");
+    [local, repo]
+        .into_iter()
+        .find(|p| p.exists())
+        .context("worlds/simple.world not found: run from the repository, or give --world FILE")
+}
+
+fn spawn<D: troupe_node::Driver>(
+    at: &ZenohArgs,
+    json: &serde_json::Value,
+) -> anyhow::Result<(NodeHandle, Stop)> {
+    let session = at.open(Mode::Peer)?;
+    let section = Section::from_json(&json.to_string())?;
+    let stop = Stop::default();
+    let node = troupe_node::spawn::<D>(session, section, &NodeConfig::default(), stop.clone())?;
+    Ok((node, stop))
+}
+
+/// Runs `troupe bench bridge`.
+pub fn run(a: &BridgeBenchArgs) -> anyhow::Result<()> {
+    let ns = format!("bench-bridge-{}", std::process::id());
+    let router = ZenohArgs {
+        // As `troupe launch` opens its embedded router: in the namespace.
+        namespace: Some(ns.clone()),
+        listen: vec!["tcp/127.0.0.1:0".into()],
+        no_multicast: true,
+        ..Default::default()
+    }
+    .open(Mode::Router)?;
+    let at = ZenohArgs {
+        connect: troupe_node::locators(&router),
+        namespace: Some(ns),
+        no_multicast: true,
+        ..Default::default()
+    };
+    let (map, made) = match &a.map {
+        Some(p) => (p.clone(), false),
+        None => (synthetic_map()?, true),
+    };
+    let world = world_file(a.world.as_deref())?;
+    let mapfile = spawn::<troupe_mapfile::MapFile>(
+        &at,
+        &serde_json::json!({
+            "name": "mapfile", "provides": ["map:0"],
+            "options": {"filename": map, "resolution": 0.032},
+        }),
+    );
+    if made {
+        let _ = std::fs::remove_file(&map);
+    }
+    let mapfile = mapfile?;
+    // Stepped as Player stepped its Stage plugin: once per server update, 100 Hz.
+    let stage = spawn::<troupe_stage::Stage>(
+        &at,
+        &serde_json::json!({
+            "name": "stage", "provides": ["position2d:0"],
+            "options": {"worldfile": world, "model": "r0", "speedup": -1, "update_rate": 100},
+        }),
+    )?;
+    let result = measure(a, &router);
+    for (node, stop) in [mapfile, stage] {
+        stop.stop();
+        let _ = node.join();
+    }
+    result
+}
+
+fn measure(a: &BridgeBenchArgs, router: &troupe_node::zenoh::Session) -> anyhow::Result<()> {
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()?;
+    let bridge = rt.block_on(troupe_bridge::Bridge::bind(
+        router.clone(),
+        troupe_bridge::Config {
+            ports: vec![troupe_bridge::Port {
+                robot: ROBOT,
+                listen: "127.0.0.1:0".parse()?,
+            }],
+            ..Default::default()
+        },
+    ))?;
+    let addr = bridge.local_addrs()[0].1;
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let server = rt.spawn(bridge.run(async {
+        let _ = stop_rx.await;
+    }));
+
+    let (mi, pi) = (
+        u32::from(Interface::Map.code()),
+        u32::from(Interface::Position2d.code()),
+    );
+    let mut s = connect(addr)?;
+    let idle = timed(&mut s, [0, ROBOT, mi, 0, 3, 1], a.samples)?;
+    open(&mut s, Interface::Position2d)?;
+    let busy = timed(&mut s, [0, ROBOT, pi, 0, 3, 1], a.samples)?;
+    let mut fetches = Vec::with_capacity(a.fetches);
+    let mut cells = 0;
+    for _ in 0..a.fetches {
+        let t0 = Instant::now();
+        cells = fetch_map(&mut s)?;
+        fetches.push(t0.elapsed());
+    }
+    fetches.sort();
+
+    // Many clients at once, and one that opened the device and never reads.
+    let mut stuck = connect(addr)?;
+    open(&mut stuck, Interface::Position2d)?;
+    request(
+        &mut stuck,
+        player_req(player::DATAMODE),
+        &player::PUSH.to_be_bytes(),
+    )?;
+    let readers = (0..a.clients)
+        .map(|i| {
+            let seconds = a.seconds;
+            let phase = Duration::from_millis(100) * i as u32 / a.clients as u32;
+            std::thread::spawn(move || read_at_10hz(addr, phase, seconds))
+        })
+        .collect::<Vec<_>>();
+    let readers = readers
+        .into_iter()
+        .map(|t| {
+            t.join()
+                .map_err(|_| anyhow::anyhow!("a client thread panicked"))?
+        })
+        .collect::<anyhow::Result<Vec<Reader>>>()?;
+    drop(stuck);
+
+    // The same request as a bare Zenoh get from the bridge's session, as
+    // the bridge asks: what the bridge adds on top of Zenoh.
+    let mut raw = Vec::with_capacity(a.samples);
+    let info_key = keys::req(&Device::new(ROBOT, Interface::Map, 0), "info");
+    for i in 0..a.samples + a.samples / 10 {
+        let t0 = Instant::now();
+        let replies = router
+            .get(&info_key)
+            .payload(codec::encode(&map::GetInfo, 0.0))
+            .consolidation(ConsolidationMode::None)
+            .wait()
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        let reply = replies
+            .recv()
+            .map_err(|e| anyhow::anyhow!("no reply to {info_key}: {e}"))?;
+        anyhow::ensure!(reply.result().is_ok(), "{info_key} refused");
+        if i >= a.samples / 10 {
+            raw.push(t0.elapsed());
+        }
+    }
+    raw.sort();
+    let _ = stop_tx.send(());
+    let _ = rt.block_on(server);
+
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "troupe bench bridge: Player clients in raw XDR (no TCP_NODELAY, PULL mode) → bridge → Zenoh → mapfile and Stage (r0 at 100 Hz), loopback")?;
+    let row = |out: &mut std::io::StdoutLock, name: &str, v: &[Duration], target: &str| {
+        writeln!(
+            out,
+            "  {name:<48} p50 {:>8}  p99 {:>8}   {target}",
+            us(percentile(v, 0.5)),
+            us(percentile(v, 0.99)),
+        )
+    };
+    row(
+        &mut out,
+        "map GET_INFO round trip (mapfile)",
+        &idle,
+        "Player 66 µs; target <= 250 µs",
+    )?;
+    row(
+        &mut out,
+        "position2d GET_GEOM round trip (Stage, data flowing)",
+        &busy,
+        "Player 44 ms; target <= 250 µs",
+    )?;
+    let side = (cells as f64).sqrt().round();
+    row(
+        &mut out,
+        &format!("full map fetch, {cells} cells (~{side}² zlib tiles)"),
+        &fetches,
+        "Player 2.1-2.4 ms; target <= 4 ms",
+    )?;
+    let mut all: Vec<Duration> = readers.iter().flat_map(|r| r.reads.clone()).collect();
+    all.sort();
+    let mut p50s: Vec<Duration> = readers
+        .iter()
+        .map(|r| {
+            let mut v = r.reads.clone();
+            v.sort();
+            percentile(&v, 0.5)
+        })
+        .collect();
+    p50s.sort();
+    let reads: usize = readers.iter().map(|r| r.reads.len()).sum();
+    let with_data: usize = readers.iter().map(|r| r.with_data).sum();
+    let overflows: usize = readers.iter().map(|r| r.overflows).sum();
+    row(
+        &mut out,
+        &format!("{} clients reading at 10 Hz: REQ DATA to SYNCH", a.clients),
+        &all,
+        "target: no overflow, none slowed",
+    )?;
+    writeln!(
+        out,
+        "  {:<48} {reads} reads, {with_data} with data, {overflows} overflowed; per-client p50 from {} to {}, one stuck client beside them",
+        "",
+        us(p50s.first().copied().unwrap_or_default()),
+        us(p50s.last().copied().unwrap_or_default()),
+    )?;
+    row(
+        &mut out,
+        "for scale: the GET_INFO as a bare Zenoh get",
+        &raw,
+        "Zenoh alone, no bridge, no TCP client",
+    )?;
+    Ok(())
+}
