@@ -243,7 +243,7 @@ pub enum BenchCmd {
     #[command(after_help = "Example:
   cargo run --release -- bench stage --bitmaps ../shared/compat/stage/bitmaps")]
     Stage(crate::bench::StageBenchArgs),
-    /// Player clients through the bridge: request round trips and a full map fetch.
+    /// Player clients through the bridge to real mapfile and Stage drivers: request round trips, a full map fetch, 100 clients at 10 Hz.
     #[command(after_help = "Example:
   cargo run --release -- bench bridge --map ../shared/compat/stage/bitmaps/cave.png")]
     Bridge(crate::bridgebench::BridgeBenchArgs),
