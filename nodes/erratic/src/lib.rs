@@ -179,6 +179,27 @@ struct Devices {
     tilt: Option<Device>,
 }
 
+/// Player's erratic geometry: the body, centred on the axle offset.
+fn base_geom() -> position2d::Geom {
+    position2d::Geom {
+        pose: Pose3d::planar(-params::AXLE_OFFSET, 0.0, 0.0),
+        size: Size3d {
+            length: params::SIZE.0,
+            width: params::SIZE.1,
+            height: 0.0,
+        },
+    }
+}
+
+fn ir_geom() -> ir::Geom {
+    ir::Geom {
+        poses: params::IR_POSES
+            .iter()
+            .map(|&(x, y)| Pose3d::planar(x, y, 0.0))
+            .collect(),
+    }
+}
+
 /// The erratic driver.
 pub struct Erratic {
     dev: Devices,
@@ -252,6 +273,14 @@ impl Driver for Erratic {
 
     fn setup(&mut self, ctx: &mut Ctx) -> Result<()> {
         ctx.set_ready(false);
+        // Every Erratic has the same body and IR sensors: answered without
+        // waking this thread (its sonars depend on the revision it reports).
+        if let Some(d) = self.dev.position {
+            ctx.answer_always::<position2d::GetGeom>(&d, &base_geom())?;
+        }
+        if let Some(d) = self.dev.ir {
+            ctx.answer_always::<ir::GetGeom>(&d, &ir_geom())?;
+        }
         let line = device::spawn(self.settings.clone(), ctx.waker())
             .map_err(|e| NodeError::Driver(format!("starting the line thread: {e}").into()))?;
         tracing::info!("robot initialising ({})", self.settings.port.display());
@@ -310,14 +339,7 @@ impl Driver for Erratic {
             }
             Event::Command(c) => Err(c.unexpected()),
             Event::Request(r) if r.is::<position2d::GetGeom>() => {
-                r.reply(&position2d::Geom {
-                    pose: Pose3d::planar(-params::AXLE_OFFSET, 0.0, 0.0),
-                    size: Size3d {
-                        length: params::SIZE.0,
-                        width: params::SIZE.1,
-                        height: 0.0,
-                    },
-                });
+                r.reply(&base_geom());
                 Ok(())
             }
             Event::Request(r) if r.is::<position2d::MotorPower>() => {
@@ -357,12 +379,7 @@ impl Driver for Erratic {
                 Ok(())
             }
             Event::Request(r) if r.is::<ir::GetGeom>() => {
-                r.reply(&ir::Geom {
-                    poses: params::IR_POSES
-                        .iter()
-                        .map(|&(x, y)| Pose3d::planar(x, y, 0.0))
-                        .collect(),
-                });
+                r.reply(&ir_geom());
                 Ok(())
             }
             Event::Request(r) => {

@@ -119,6 +119,35 @@ struct Devices {
     silent: Vec<Device>,
 }
 
+/// Player's p2os geometry of a robot type: its body, 10 cm behind centre.
+fn base_geom(p: &Params) -> position2d::Geom {
+    position2d::Geom {
+        pose: Pose3d::planar(-0.1, 0.0, 0.0),
+        size: Size3d {
+            length: p.length / 1000.0,
+            width: p.width / 1000.0,
+            height: 0.0,
+        },
+    }
+}
+
+/// The sonar ring of a robot type, in metres and radians.
+fn sonar_geom(p: &Params) -> sonar::Geom {
+    sonar::Geom {
+        poses: p
+            .sonars
+            .iter()
+            .map(|&(x, y, a)| {
+                Pose3d::planar(
+                    f64::from(x) / 1000.0,
+                    f64::from(y) / 1000.0,
+                    f64::from(a).to_radians(),
+                )
+            })
+            .collect(),
+    }
+}
+
 /// The p2os driver.
 pub struct P2os {
     dev: Devices,
@@ -292,15 +321,7 @@ impl Driver for P2os {
                 Ok(())
             }
             Event::Request(r) if r.is::<position2d::GetGeom>() => {
-                let p = self.params.unwrap_or(&params::ROBOTS[0]);
-                r.reply(&position2d::Geom {
-                    pose: Pose3d::planar(-0.1, 0.0, 0.0),
-                    size: Size3d {
-                        length: p.length / 1000.0,
-                        width: p.width / 1000.0,
-                        height: 0.0,
-                    },
-                });
+                r.reply(&base_geom(self.params.unwrap_or(&params::ROBOTS[0])));
                 Ok(())
             }
             Event::Request(r) if r.is::<position2d::MotorPower>() => {
@@ -329,20 +350,7 @@ impl Driver for P2os {
                 Ok(())
             }
             Event::Request(r) if r.is::<sonar::GetGeom>() => {
-                let p = self.params.unwrap_or(&params::ROBOTS[0]);
-                r.reply(&sonar::Geom {
-                    poses: p
-                        .sonars
-                        .iter()
-                        .map(|&(x, y, a)| {
-                            Pose3d::planar(
-                                f64::from(x) / 1000.0,
-                                f64::from(y) / 1000.0,
-                                f64::from(a).to_radians(),
-                            )
-                        })
-                        .collect(),
-                });
+                r.reply(&sonar_geom(self.params.unwrap_or(&params::ROBOTS[0])));
                 Ok(())
             }
             Event::Request(r) if r.is::<bumper::GetGeom>() => {
@@ -396,6 +404,13 @@ impl P2os {
                         name.2
                     );
                     self.params = Some(params);
+                    // The robot's type fixes these: answered without waking this thread.
+                    if let Some(d) = self.dev.odometry {
+                        ctx.answer_always::<position2d::GetGeom>(&d, &base_geom(params))?;
+                    }
+                    if let Some(d) = self.dev.sonar {
+                        ctx.answer_always::<sonar::GetGeom>(&d, &sonar_geom(params))?;
+                    }
                     self.odom = Odometry::new(15);
                     self.sonar = vec![0.0; params.sonars.len()];
                     ctx.set_ready(true);

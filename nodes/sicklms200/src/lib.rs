@@ -162,6 +162,8 @@ impl Driver for SickLms200 {
 
     fn setup(&mut self, ctx: &mut Ctx) -> Result<()> {
         ctx.set_ready(false);
+        // The mounting is the cfg's: answered without waking this thread.
+        ctx.answer_always::<laser::GetGeom>(&self.laser, &self.geom())?;
         let line = device::spawn(self.settings.clone(), ctx.waker())
             .map_err(|e| NodeError::Driver(format!("starting the line thread: {e}").into()))?;
         tracing::info!("laser initialising ({})", self.settings.port.display());
