@@ -1,6 +1,7 @@
 //! [`Ctx`]: a driver's handle on the world during a hook.
 
-use std::sync::Arc;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use troupe_msgs::{codec, Command, Device, Message, Request};
@@ -30,6 +31,32 @@ pub(crate) trait Bus: Send {
     /// Answers every request `name` to `dev` with `reply` (encoded, to be
     /// restamped when sent) without delivering it to the driver.
     fn answer_always(&mut self, dev: &Device, name: &'static str, reply: Vec<u8>);
+}
+
+/// The answers drivers keep ready ([`Ctx::answer_always`]), by device and
+/// request name: what a bus answers without delivering the request.
+#[derive(Default)]
+pub(crate) struct ReadyAnswers(Mutex<HashMap<Device, Vec<(&'static str, Vec<u8>)>>>);
+
+impl ReadyAnswers {
+    /// Keeps `reply` (as `codec::encode` made it) for request `name` to `dev`.
+    pub(crate) fn set(&self, dev: &Device, name: &'static str, reply: Vec<u8>) {
+        let mut all = self.0.lock().unwrap_or_else(|p| p.into_inner());
+        let answers = all.entry(*dev).or_default();
+        match answers.iter_mut().find(|(n, _)| *n == name) {
+            Some(slot) => slot.1 = reply,
+            None => answers.push((name, reply)),
+        }
+    }
+
+    /// The kept answer to request `name` to `dev`, stamped `now`.
+    pub(crate) fn get(&self, dev: &Device, name: &str, now: f64) -> Option<Vec<u8>> {
+        let all = self.0.lock().unwrap_or_else(|p| p.into_inner());
+        let (_, reply) = all.get(dev)?.iter().find(|(n, _)| *n == name)?;
+        let mut reply = reply.clone();
+        codec::restamp(&mut reply, now).ok()?;
+        Some(reply)
+    }
 }
 
 /// What a driver may do from inside a hook: publish, subscribe, command,

@@ -27,7 +27,7 @@ use zenoh::{Session, Wait};
 
 use crate::args::{Mode, ZenohArgs};
 use crate::clock::Clock;
-use crate::ctx::{Bus, Ctx};
+use crate::ctx::{Bus, Ctx, ReadyAnswers};
 use crate::driver::{
     nack_reason, Driver, Event, Reply, ReplySink, Request, RequestError, RequestId, Responder,
     Sample,
@@ -196,7 +196,7 @@ pub fn spawn<D: Driver>(
         inbox: inbox.clone(),
         publishers: HashMap::new(),
         latest: Arc::new(Mutex::new(HashMap::new())),
-        standing: Arc::new(Mutex::new(HashMap::new())),
+        ready: Arc::default(),
         subscribers: Vec::new(),
         queryables: Vec::new(),
         clock_pub: None,
@@ -470,9 +470,6 @@ fn sim_clock(
 
 /// The latest payload of each schema tag, per provided device.
 type Latest = Arc<Mutex<HashMap<Device, Vec<(String, ZBytes)>>>>;
-/// Answers the receiving thread gives without waking the driver, by device
-/// and request name ([`Ctx::answer_always`]).
-type Standing = Arc<Mutex<HashMap<Device, Vec<(&'static str, Vec<u8>)>>>>;
 
 struct ZenohBus {
     session: Session,
@@ -482,7 +479,8 @@ struct ZenohBus {
     latest: Latest,
     subscribers: Vec<Subscriber<()>>,
     queryables: Vec<Queryable<()>>,
-    standing: Standing,
+    /// Answered from the receiving thread, without waking the driver.
+    ready: Arc<ReadyAnswers>,
     clock_pub: Option<Publisher<'static>>,
 }
 
@@ -550,7 +548,7 @@ impl ZenohBus {
 
         let inbox = self.inbox.clone();
         let clock = clock.clone();
-        let standing = self.standing.clone();
+        let ready = self.ready.clone();
         let q = s
             .declare_queryable(keys::req_any(dev))
             .callback(move |query: Query| {
@@ -559,18 +557,8 @@ impl ZenohBus {
                     Ok((_, n)) => n,
                     Err(e) => return tracing::warn!("ignored request: {e}"),
                 };
-                let ready = standing
-                    .lock()
-                    .unwrap_or_else(|p| p.into_inner())
-                    .get(&d)
-                    .and_then(|v| v.iter().find(|(n, _)| *n == name).map(|(_, r)| r.clone()));
-                if let Some(mut reply) = ready {
-                    // Encoded by `codec::encode`: the stamp is there to rewrite.
-                    let _ = codec::restamp(&mut reply, clock.now());
-                    if let Err(e) = query.reply(query.key_expr().clone(), reply).wait() {
-                        tracing::warn!("could not answer request on `{key}`: {e}");
-                    }
-                    return;
+                if let Some(reply) = ready.get(&d, &name, clock.now()) {
+                    return Box::new(ZenohSink(query)).send(Ok(reply));
                 }
                 let payload = query.payload().cloned().unwrap_or_default();
                 let what = format!("request `{name}` to {d} ({driver})");
@@ -675,12 +663,7 @@ impl Bus for ZenohBus {
     }
 
     fn answer_always(&mut self, dev: &Device, name: &'static str, reply: Vec<u8>) {
-        let mut standing = self.standing.lock().unwrap_or_else(|p| p.into_inner());
-        let answers = standing.entry(*dev).or_default();
-        match answers.iter_mut().find(|(n, _)| *n == name) {
-            Some(slot) => slot.1 = reply,
-            None => answers.push((name, reply)),
-        }
+        self.ready.set(dev, name, reply);
     }
 
     fn request(

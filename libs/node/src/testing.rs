@@ -24,7 +24,7 @@ use std::time::Duration;
 use troupe_msgs::{codec, keys, Command, Device, Message, Request};
 
 use crate::clock::Clock;
-use crate::ctx::{Bus, Ctx};
+use crate::ctx::{Bus, Ctx, ReadyAnswers};
 use crate::driver::{
     nack_reason, Driver, Event, Reply, ReplySink, RequestError, RequestId, Responder, Sample,
 };
@@ -41,7 +41,7 @@ struct Recorder {
     commands: Vec<(Device, String, Vec<u8>)>,
     requests: Vec<SentRequest>,
     answers: HashMap<u64, Answer>,
-    standing: HashMap<(Device, &'static str), Vec<u8>>,
+    ready: ReadyAnswers,
     clock: Vec<Vec<u8>>,
 }
 
@@ -111,7 +111,7 @@ impl Bus for Rec {
         Ok(())
     }
     fn answer_always(&mut self, dev: &Device, name: &'static str, reply: Vec<u8>) {
-        self.lock().standing.insert((*dev, name), reply);
+        self.lock().ready.set(dev, name, reply);
     }
 }
 
@@ -230,15 +230,14 @@ impl<D: Driver> Harness<D> {
     pub fn request<R: Request>(&mut self, dev: Device, req: &R) -> Result<Pending> {
         self.next_pending += 1;
         let id = self.next_pending;
-        let sink = Box::new(RecSink(self.rec.clone(), id));
         // An answer the driver keeps ready never reaches it, as on the network.
-        let ready = self.rec.lock().standing.get(&(dev, R::NAME)).cloned();
-        if let Some(mut reply) = ready {
-            // Encoded by `codec::encode`: the stamp is there to rewrite.
-            let _ = codec::restamp(&mut reply, self.clock.now());
-            self.rec.lock().answers.insert(id, Ok(reply));
+        let mut rec = self.rec.lock();
+        if let Some(reply) = rec.ready.get(&dev, R::NAME, self.clock.now()) {
+            rec.answers.insert(id, Ok(reply));
             return Ok(Pending(id));
         }
+        drop(rec);
+        let sink = Box::new(RecSink(self.rec.clone(), id));
         let what = format!("request `{}` to {dev}", R::NAME);
         let responder = Responder::new(sink, self.clock.clone(), what);
         let p = codec::encode(req, self.clock.now());

@@ -804,7 +804,8 @@ async fn request_loop(
     q: Arc<ClientQueue>,
     mut rx: mpsc::UnboundedReceiver<Pending>,
 ) {
-    while let Some(p) = rx.recv().await {
+    while let Some(mut p) = rx.recv().await {
+        let payload = std::mem::take(&mut p.payload);
         let p = Arc::new(p);
         let key = keys::req(&p.dev, p.name);
         let (tx, back) = oneshot::channel::<Option<Reply>>();
@@ -813,7 +814,7 @@ async fn request_loop(
         let sent = shared
             .session
             .get(&key)
-            .payload(p.payload.clone())
+            .payload(payload)
             .timeout(REQUEST_TIMEOUT)
             // Each answer as it arrives, not held until the query closes.
             .consolidation(ConsolidationMode::None)
@@ -852,18 +853,17 @@ async fn request_loop(
 const INLINE_ANSWER: usize = 16 * 1024;
 
 fn nack(shared: &Shared, p: &Pending) -> Out {
-    let h = Header {
-        kind: u32::from(RESP_NACK),
-        timestamp: shared.now(),
-        size: 0,
-        ..p.header
-    };
-    Out::new(h, &[])
+    response(shared, p, (RESP_NACK, Vec::new(), None))
 }
 
 /// A device's reply as Player's ACK with its body, or a NACK with none.
 fn answer(shared: &Shared, p: &Pending, reply: Reply) -> Out {
-    let (kind, body, stamp) = player_answer(p, reply);
+    response(shared, p, player_answer(p, reply))
+}
+
+/// The response to `p`: its kind and body, stamped with the device's time
+/// or else the server's.
+fn response(shared: &Shared, p: &Pending, (kind, body, stamp): (u8, Vec<u8>, Option<f64>)) -> Out {
     let h = Header {
         kind: u32::from(kind),
         timestamp: stamp.unwrap_or_else(|| shared.now()),
