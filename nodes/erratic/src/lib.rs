@@ -273,14 +273,16 @@ impl Driver for Erratic {
 
     fn setup(&mut self, ctx: &mut Ctx) -> Result<()> {
         ctx.set_ready(false);
-        // Every Erratic has the same body and IR sensors: answered without
-        // waking this thread (its sonars depend on the revision it reports).
+        // Every Erratic has the same body and IR sensors, answered without
+        // waking this thread; its sonars are the first revision's until the
+        // robot says which it is.
         if let Some(d) = self.dev.position {
             ctx.answer_always::<position2d::GetGeom>(&d, &base_geom())?;
         }
         if let Some(d) = self.dev.ir {
             ctx.answer_always::<ir::GetGeom>(&d, &ir_geom())?;
         }
+        self.keep_sonar_geometry(ctx, &params::REVISIONS[0])?;
         let line = device::spawn(self.settings.clone(), ctx.waker())
             .map_err(|e| NodeError::Driver(format!("starting the line thread: {e}").into()))?;
         tracing::info!("robot initialising ({})", self.settings.port.display());
@@ -338,10 +340,6 @@ impl Driver for Erratic {
                 Ok(())
             }
             Event::Command(c) => Err(c.unexpected()),
-            Event::Request(r) if r.is::<position2d::GetGeom>() => {
-                r.reply(&base_geom());
-                Ok(())
-            }
             Event::Request(r) if r.is::<position2d::MotorPower>() => {
                 let on = r.decode::<position2d::MotorPower>()?.state;
                 self.order(Order::Enable(on));
@@ -365,21 +363,6 @@ impl Driver for Erratic {
                 let separate = r.decode::<position2d::VelocityMode>()?.value != 0;
                 self.order(Order::DirectWheel(!separate));
                 r.reply(&common::Ack);
-                Ok(())
-            }
-            Event::Request(r) if r.is::<sonar::GetGeom>() => {
-                let p = self.params.unwrap_or(&params::REVISIONS[0]);
-                r.reply(&sonar::Geom {
-                    poses: p
-                        .sonars
-                        .iter()
-                        .map(|&(x, y, a)| Pose3d::planar(x, y, a.to_radians()))
-                        .collect(),
-                });
-                Ok(())
-            }
-            Event::Request(r) if r.is::<ir::GetGeom>() => {
-                r.reply(&ir_geom());
                 Ok(())
             }
             Event::Request(r) => {
@@ -409,6 +392,20 @@ impl Erratic {
         }
     }
 
+    /// The sonar ring of a revision, answered without waking this thread.
+    fn keep_sonar_geometry(&self, ctx: &mut Ctx, p: &params::Params) -> Result<()> {
+        let Some(d) = self.dev.sonar else {
+            return Ok(());
+        };
+        let geom = sonar::Geom {
+            poses: p
+                .sonars
+                .iter()
+                .map(|&(x, y, a)| Pose3d::planar(x, y, a.to_radians()))
+                .collect(),
+        };
+        ctx.answer_always::<sonar::GetGeom>(&d, &geom)
+    }
     fn drain(&mut self, ctx: &mut Ctx) -> Result<()> {
         let Some(line) = &self.line else {
             return Ok(());
@@ -424,6 +421,7 @@ impl Erratic {
                         name.2
                     );
                     self.params = Some(params);
+                    self.keep_sonar_geometry(ctx, params)?;
                     self.odom = Odometry::new(12);
                     ctx.set_ready(true);
                 }

@@ -278,6 +278,8 @@ impl Driver for P2os {
 
     fn setup(&mut self, ctx: &mut Ctx) -> Result<()> {
         ctx.set_ready(false);
+        // Player's first robot type until the robot says which it is.
+        self.keep_geometry(ctx, &params::ROBOTS[0])?;
         let line = device::spawn(self.settings.clone(), ctx.waker())
             .map_err(|e| NodeError::Driver(format!("starting the line thread: {e}").into()))?;
         tracing::info!("robot initialising ({})", self.settings.port.display());
@@ -316,14 +318,6 @@ impl Driver for P2os {
                 Ok(())
             }
             Event::Command(c) => Err(c.unexpected()),
-            Event::Request(r) if r.is::<gripper::GetGeom>() => {
-                r.reply(&self.gripper_geom);
-                Ok(())
-            }
-            Event::Request(r) if r.is::<position2d::GetGeom>() => {
-                r.reply(&base_geom(self.params.unwrap_or(&params::ROBOTS[0])));
-                Ok(())
-            }
             Event::Request(r) if r.is::<position2d::MotorPower>() => {
                 let on = r.decode::<position2d::MotorPower>()?.state;
                 self.order(Order::Enable(on));
@@ -347,19 +341,6 @@ impl Driver for P2os {
                 let separate = r.decode::<position2d::VelocityMode>()?.value != 0;
                 self.order(Order::DirectWheel(!separate));
                 r.reply(&common::Ack);
-                Ok(())
-            }
-            Event::Request(r) if r.is::<sonar::GetGeom>() => {
-                r.reply(&sonar_geom(self.params.unwrap_or(&params::ROBOTS[0])));
-                Ok(())
-            }
-            Event::Request(r) if r.is::<bumper::GetGeom>() => {
-                let p = self.params.unwrap_or(&params::ROBOTS[0]);
-                let n = usize::from(p.front_bumpers + p.rear_bumpers);
-                // Player's tables give every bumper a zero geometry.
-                r.reply(&bumper::Geom {
-                    bumpers: vec![bumper::Define::default(); n],
-                });
                 Ok(())
             }
             Event::Request(r) => {
@@ -389,6 +370,28 @@ impl P2os {
         }
     }
 
+    /// The geometry of the robot's type and the cfg's gripper, answered
+    /// without waking this thread ([`Ctx::answer_always`]).
+    fn keep_geometry(&self, ctx: &mut Ctx, p: &Params) -> Result<()> {
+        if let Some(d) = self.dev.odometry {
+            ctx.answer_always::<position2d::GetGeom>(&d, &base_geom(p))?;
+        }
+        if let Some(d) = self.dev.sonar {
+            ctx.answer_always::<sonar::GetGeom>(&d, &sonar_geom(p))?;
+        }
+        if let Some(d) = self.dev.bumper {
+            let n = usize::from(p.front_bumpers + p.rear_bumpers);
+            // Player's tables give every bumper a zero geometry.
+            let geom = bumper::Geom {
+                bumpers: vec![bumper::Define::default(); n],
+            };
+            ctx.answer_always::<bumper::GetGeom>(&d, &geom)?;
+        }
+        if let Some(d) = self.dev.gripper {
+            ctx.answer_always::<gripper::GetGeom>(&d, &self.gripper_geom)?;
+        }
+        Ok(())
+    }
     fn drain(&mut self, ctx: &mut Ctx) -> Result<()> {
         let Some(line) = &self.line else {
             return Ok(());
@@ -404,13 +407,7 @@ impl P2os {
                         name.2
                     );
                     self.params = Some(params);
-                    // The robot's type fixes these: answered without waking this thread.
-                    if let Some(d) = self.dev.odometry {
-                        ctx.answer_always::<position2d::GetGeom>(&d, &base_geom(params))?;
-                    }
-                    if let Some(d) = self.dev.sonar {
-                        ctx.answer_always::<sonar::GetGeom>(&d, &sonar_geom(params))?;
-                    }
+                    self.keep_geometry(ctx, params)?;
                     self.odom = Odometry::new(15);
                     self.sonar = vec![0.0; params.sonars.len()];
                     ctx.set_ready(true);

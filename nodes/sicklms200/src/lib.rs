@@ -174,10 +174,6 @@ impl Driver for SickLms200 {
     fn on_event(&mut self, ctx: &mut Ctx, event: Event) -> Result<()> {
         match event {
             Event::Wake => self.drain(ctx),
-            Event::Request(r) if r.is::<laser::GetGeom>() => {
-                r.reply(&self.geom());
-                Ok(())
-            }
             Event::Request(r) if r.is::<laser::GetConfig>() => {
                 r.reply(&player_config(&self.config));
                 Ok(())

@@ -278,7 +278,7 @@ impl Driver for Stage {
     }
 
     fn setup(&mut self, ctx: &mut Ctx) -> Result<()> {
-        self.answer_always(ctx)?;
+        self.keep_ready(ctx)?;
         ctx.set_time(self.sim.time)?;
         self.publish(ctx)?;
         ctx.set_tick(self.period);
@@ -528,25 +528,23 @@ impl Stage {
         })
     }
 
-    /// Keeps ready the answers that cannot change while the world runs, so
-    /// that clients' geometry and map-info requests wait for no step: a
-    /// robot's body, the rangers mounted on it (a top-level model's pose
-    /// moves with `set_pose`, so its rangers are asked each time), maps.
-    fn answer_always(&self, ctx: &mut Ctx) -> Result<()> {
+    /// Keeps ready the answers that cannot change while the world runs
+    /// (geometry is the world file's, whatever `set_pose` does later), so
+    /// that clients' geometry and map-info requests wait for no step.
+    fn keep_ready(&self, ctx: &mut Ctx) -> Result<()> {
         for &(dev, src) in &self.devices {
-            let mounted = |m: usize| self.sim.world.models[m].parent.is_some();
             match src {
                 Source::Position { base } => {
                     let m = self.sim.bases[base].model;
                     ctx.answer_always::<position2d::GetGeom>(&dev, &self.position_geom(m))?;
                 }
-                Source::Ranger { model } if mounted(model) => {
+                Source::Ranger { model } => {
                     ctx.answer_always::<ranger::GetGeom>(&dev, &self.ranger_geom(model))?;
                     if let Some(c) = self.ranger_config(model) {
                         ctx.answer_always::<ranger::GetConfig>(&dev, &c)?;
                     }
                 }
-                Source::Laser { model } if mounted(model) => {
+                Source::Laser { model } => {
                     ctx.answer_always::<laser::GetGeom>(&dev, &self.laser_geom(model))?;
                     if let Some(c) = self.laser_config(model) {
                         ctx.answer_always::<laser::GetConfig>(&dev, &c)?;
