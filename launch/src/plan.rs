@@ -15,6 +15,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
+use troupe_msgs::addr::AddrError;
 use troupe_msgs::{keys, DevAddr, Device};
 use troupe_node::{Section, Unit};
 
@@ -374,6 +375,10 @@ pub fn from_cfg(file: &CfgFile, source: &Path, robot: u32, report: &mut Report) 
             for text in list {
                 let text = text.trim();
                 let parsed = text.parse::<DevAddr>().or_else(|e| {
+                    // Only an unknown interface may be a Player 2 name.
+                    if !matches!(e, AddrError::UnknownInterface { .. }) {
+                        return Err(e);
+                    }
                     let fixed = troupe_msgs::addr::player3_spelling(text).ok_or(e)?;
                     report.warnings.push(format!(
                         "{}: {field}: `{text}` uses a Player 2 interface name; read as `{fixed}`",

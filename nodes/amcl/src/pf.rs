@@ -240,7 +240,6 @@ impl Filter {
     where
         F: Fn(&Pose) -> f64 + Sync,
     {
-        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
         let apply = |chunk: &mut [Particle]| -> f64 {
             let mut total = 0.0;
             for p in chunk {
@@ -249,7 +248,14 @@ impl Filter {
             }
             total
         };
-        let total: f64 = if threads > 1 && self.particles.len() >= 2048 {
+        // Asked only for large sets: it reads the affinity mask and cgroup
+        // files each time (std does not cache it).
+        let threads = if self.particles.len() >= 2048 {
+            std::thread::available_parallelism().map_or(1, |n| n.get())
+        } else {
+            1
+        };
+        let total: f64 = if threads > 1 {
             let size = self.particles.len().div_ceil(threads);
             std::thread::scope(|s| {
                 // The calling thread weighs the first chunk itself: one
