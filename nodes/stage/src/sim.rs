@@ -391,14 +391,20 @@ impl Sim {
                     return true;
                 }
             }
-            let mut tested: Vec<u16> = Vec::new();
+            // The body itself is filed in these tiles: only other blockers
+            // are tested, each once (the first few, at least), as in `cast`.
+            let mut tested = [0u16; 8];
+            let mut n = 0;
             for t in self.statics.tiles_of_box(lo, hi) {
                 for &c in self.movers.in_tile(t) {
-                    if tested.contains(&c) {
+                    if !blocks(usize::from(c)) || tested[..n].contains(&c) {
                         continue;
                     }
-                    tested.push(c);
-                    if blocks(usize::from(c)) && self.movers.overlaps(usize::from(c) - 1, polys) {
+                    if n < tested.len() {
+                        tested[n] = c;
+                        n += 1;
+                    }
+                    if self.movers.overlaps(usize::from(c) - 1, polys) {
                         return true;
                     }
                 }
