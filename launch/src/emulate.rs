@@ -229,18 +229,15 @@ impl ModelDevices {
         )
     }
 
-    /// A client of robot (port) `robot`, connected once.
-    fn client(
-        &mut self,
-        z: &troupe_node::ZenohArgs,
-        robot: u32,
-    ) -> anyhow::Result<troupe_client::Client> {
+    /// A client of robot (port) `robot`, on the session `find` opened.
+    fn client(&mut self, robot: u32) -> troupe_client::Client {
         if let Some(c) = self.clients.iter().find(|c| c.robot() == robot) {
-            return Ok(c.clone());
+            return c.clone();
         }
-        let c = troupe_client::Client::connect(z, robot)?;
+        let session = self.clients[0].session().clone();
+        let c = troupe_client::Client::with_session(session, robot);
         self.clients.push(c.clone());
-        Ok(c)
+        c
     }
 }
 
@@ -259,15 +256,15 @@ impl StageBody {
             return Err(found.missing("position2d"));
         };
         let (sonar_dev, ranger_dev) = (first(Interface::Sonar), first(Interface::Ranger));
-        let mut client_of = |robot: u32| found.client(z, robot);
-        let position = troupe_client::Position2dProxy::new(&client_of(pos.robot)?, pos.index)?;
+        let mut client_of = |robot: u32| found.client(robot);
+        let position = troupe_client::Position2dProxy::new(&client_of(pos.robot), pos.index)?;
         let sonar = match (sonar_dev, ranger_dev) {
             (Some(d), _) => Some(Ranges::Sonar(troupe_client::SonarProxy::new(
-                &client_of(d.robot)?,
+                &client_of(d.robot),
                 d.index,
             )?)),
             (None, Some(d)) => Some(Ranges::Ranger(troupe_client::RangerProxy::new(
-                &client_of(d.robot)?,
+                &client_of(d.robot),
                 d.index,
             )?)),
             (None, None) => None,
@@ -380,13 +377,13 @@ fn laser_scene(
     };
     let mut found = ModelDevices::find(z, model, &a.stage_sim)?;
     if let Some(&dev) = found.of(Interface::Laser).first() {
-        let client = found.client(z, dev.robot)?;
+        let client = found.client(dev.robot);
         return Ok(laser(&client, dev)?);
     }
     // The laser among the model's rangers: the widest field of view.
     let mut best: Option<(troupe_client::RangerProxy, troupe_msgs::ranger::Config)> = None;
     for dev in found.of(Interface::Ranger) {
-        let ranger = troupe_client::RangerProxy::new(&found.client(z, dev.robot)?, dev.index)?;
+        let ranger = troupe_client::RangerProxy::new(&found.client(dev.robot), dev.index)?;
         let config = ranger
             .request_config()
             .with_context(|| format!("asking {dev} for its configuration"))?;
