@@ -109,7 +109,6 @@ pub struct Sim {
 /// for both the collision test and the filing.
 struct Placed {
     model: usize,
-    at: Pose,
     polys: Vec<Vec<(f64, f64)>>,
     cells: Option<((usize, usize), (usize, usize))>,
 }
@@ -263,11 +262,8 @@ impl Sim {
     }
 
     /// The cells model `m`'s body covers at its current pose.
-    fn body_cells(&self, m: usize, at: Option<Pose>) -> Vec<(usize, usize)> {
-        let g = match at {
-            Some(p) => p,
-            None => self.world.global(&self.poses, m).0,
-        };
+    fn body_cells(&self, m: usize) -> Vec<(usize, usize)> {
+        let g = self.world.global(&self.poses, m).0;
         let mut out = Vec::new();
         for b in &self.world.models[m].blocks {
             let pts: Vec<(f64, f64)> = b.iter().map(|&(x, y)| g.apply(x, y)).collect();
@@ -287,7 +283,7 @@ impl Sim {
         if self.movable[m] {
             self.file(self.placed(m, self.global(m)));
         } else {
-            let cells = self.body_cells(m, None);
+            let cells = self.body_cells(m);
             self.occupy(m, cells);
         }
     }
@@ -301,7 +297,6 @@ impl Sim {
             .collect();
         Placed {
             model: m,
-            at,
             cells: self.cell_box(&polys),
             polys,
         }
@@ -413,18 +408,14 @@ impl Sim {
         false
     }
 
-    /// Moves the `bodies` (from `tree_at`) where they were placed.
+    /// Files the `bodies` (from `tree_at` of a robot: all movable, as
+    /// everything on a robot and everything it carries is) where they were
+    /// placed.
     fn commit(&mut self, bodies: Vec<Placed>) {
         for body in bodies {
-            let k = body.model;
-            if !self.in_grid(k) {
-                continue;
-            }
-            if self.movable[k] {
+            debug_assert!(self.movable[body.model], "a static body in a robot's tree");
+            if self.in_grid(body.model) {
                 self.file(body);
-            } else {
-                let cells = self.body_cells(k, Some(body.at));
-                self.occupy(k, cells);
             }
         }
     }
