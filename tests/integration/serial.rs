@@ -20,14 +20,29 @@ impl Rig {
         Rig { dir }
     }
 
-    /// `troupe emulate DEVICE --link DIR/dev FLAGS…`, once its line is linked.
+    /// `troupe emulate DEVICE --link DIR/DEVICE FLAGS…`, once its line is linked.
     fn emulate(&self, device: &str, flags: &[&str]) -> (Proc, PathBuf) {
+        self.emulate_on(&[], device, flags)
+    }
+
+    /// [`Rig::emulate`] after the global flags `on` (`--connect …`).
+    fn emulate_on(&self, on: &[&str], device: &str, flags: &[&str]) -> (Proc, PathBuf) {
         let link = self.dir.join(device);
-        let mut args = strings(&["emulate", device, "--link", link.to_str().unwrap()]);
+        let mut args = strings(on);
+        args.extend(strings(&[
+            "emulate",
+            device,
+            "--link",
+            link.to_str().unwrap(),
+        ]));
         args.extend(strings(flags));
         let mut p = Proc::troupe("emulate", &args);
         let line = p.first_line();
-        assert!(line.starts_with("troupe emulate: "), "{line:?}");
+        assert!(
+            line.starts_with("troupe emulate: "),
+            "{line:?} {}",
+            p.stderr()
+        );
         (p, link)
     }
 
@@ -438,42 +453,10 @@ fn an_emulated_pioneer_backed_by_stage_drives_the_simulated_robot() {
         assert!(Instant::now() < deadline, "no Stage: {}", launcher.stderr());
         let _ = sim.read_timeout(DEADLINE);
     }
-    let mut args = strings(&["--connect", &endpoint, "--namespace", &ns, "--no-multicast"]);
-    args.extend(strings(&[
-        "emulate",
-        "p2os",
-        "--link",
-        link.to_str().unwrap(),
-        "--stage-model",
-        "r0",
-        "--stage-sim",
-        "6666:simulation:0",
-    ]));
-    let mut emu = Proc::troupe("emulate", &args);
-    let line = emu.first_line();
-    assert!(
-        line.starts_with("troupe emulate: "),
-        "{line:?} {}",
-        emu.stderr()
-    );
-    let mut args = strings(&["--connect", &endpoint, "--namespace", &ns, "--no-multicast"]);
-    args.extend(strings(&[
-        "emulate",
-        "sicklms200",
-        "--link",
-        laser_link.to_str().unwrap(),
-        "--stage-model",
-        "r0",
-        "--stage-sim",
-        "6666:simulation:0",
-    ]));
-    let mut laser_emu = Proc::troupe("emulate", &args);
-    let line = laser_emu.first_line();
-    assert!(
-        line.starts_with("troupe emulate: "),
-        "{line:?} {}",
-        laser_emu.stderr()
-    );
+    let on = ["--connect", &endpoint, "--namespace", &ns, "--no-multicast"];
+    let backed = ["--stage-model", "r0", "--stage-sim", "6666:simulation:0"];
+    let (mut emu, _) = rig.emulate_on(&on, "p2os", &backed);
+    let (mut laser_emu, _) = rig.emulate_on(&on, "sicklms200", &backed);
 
     let client = Client::with_session(client_at(&endpoint, &ns), 6665);
     let laser = LaserProxy::new(&client, 0).unwrap();
