@@ -33,6 +33,11 @@ impl Movers {
     /// Files model `m` (id `id`), whose body is `shapes` (polygons in world
     /// coordinates), under `tiles` (each once), replacing where it was.
     pub fn file(&mut self, m: usize, id: u16, shapes: Vec<Vec<(f64, f64)>>, tiles: Vec<usize>) {
+        if tiles == self.tiles_of[m] {
+            // Most steps a body stays in its tiles: only its shape moved.
+            self.shapes[m] = shapes;
+            return;
+        }
         self.unfile(m, id);
         for &t in &tiles {
             if let Some(list) = self.in_tile.get_mut(t) {
