@@ -36,7 +36,10 @@ pub(crate) trait Bus: Send {
 /// The answers drivers keep ready ([`Ctx::answer_always`]), by device and
 /// request name: what a bus answers without delivering the request.
 #[derive(Default)]
-pub(crate) struct ReadyAnswers(Mutex<HashMap<Device, Vec<(&'static str, Vec<u8>)>>>);
+pub(crate) struct ReadyAnswers(Mutex<HashMap<Device, Vec<Kept>>>);
+
+/// A request name and its encoded answer.
+type Kept = (&'static str, Vec<u8>);
 
 impl ReadyAnswers {
     /// Keeps `reply` (as `codec::encode` made it) for request `name` to `dev`.
