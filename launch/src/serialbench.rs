@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 use clap::Args;
 use troupe_node::Waker;
 use troupe_serial::{Emulator, Faults, LineOptions};
-use troupe_sicklms200::device::{self, ScanConfig, Settings, Update};
+use troupe_sicklms200::device::{self, Settings, Update};
 use troupe_sicklms200::emulator::{self, Room};
 
 #[derive(Debug, Args)]
@@ -52,21 +52,7 @@ fn case(baud: u32, res: u16, seconds: f64) -> anyhow::Result<(f64, f64, usize)> 
         };
         emulator::run_with(&opts, &mut Room, stop, linked)
     })?;
-    let settings = Settings {
-        port: emu.link().to_owned(),
-        connect_rates: vec![9600, 38400, 500000],
-        transfer_rate: baud,
-        retry: 0,
-        delay: Duration::ZERO,
-        high_avail: false,
-        config: ScanConfig {
-            res,
-            range_res: 1,
-            intensity: true,
-            min_angle: -9000,
-            max_angle: 9000,
-        },
-    };
+    let settings = Settings::scan_180(emu.link().to_owned(), res, baud);
     let t0 = Instant::now();
     let line = device::spawn(settings, Waker::none())?;
     let rx = line.updates();

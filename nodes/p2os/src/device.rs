@@ -53,6 +53,24 @@ pub struct Settings {
     pub gyro: bool,
 }
 
+impl Settings {
+    /// Player's defaults (sonars on, VEL2 wheel commands, 500 mm/s,
+    /// 100°/s) for the robot at `port`.
+    pub fn player_defaults(port: PathBuf) -> Settings {
+        Settings {
+            port,
+            sonar: true,
+            direct_wheel: true,
+            max_speed: 500,
+            max_turn: 100,
+            vel_band: false,
+            pulse: None,
+            bumpstall: None,
+            gyro: false,
+        }
+    }
+}
+
 /// What the line thread tells the driver.
 #[derive(Debug)]
 pub enum Update {
@@ -388,17 +406,7 @@ mod tests {
     use super::*;
 
     fn settings() -> Settings {
-        Settings {
-            port: PathBuf::new(),
-            sonar: true,
-            direct_wheel: true,
-            max_speed: 500,
-            max_turn: 100,
-            vel_band: false,
-            pulse: None,
-            bumpstall: None,
-            gyro: false,
-        }
+        Settings::player_defaults(PathBuf::new())
     }
 
     /// Player's worked example: p3dx-sh, 0.3 m/s and 0.5 rad/s (29°/s).

@@ -126,6 +126,28 @@ pub struct Settings {
     pub config: ScanConfig,
 }
 
+impl Settings {
+    /// Player's connect rates and a 180° scan at `res` hundredths of a
+    /// degree, in millimetres with intensity, streamed at `transfer` baud.
+    pub fn scan_180(port: PathBuf, res: u16, transfer: u32) -> Settings {
+        Settings {
+            port,
+            connect_rates: vec![9600, 38400, 500000],
+            transfer_rate: transfer,
+            retry: 0,
+            delay: Duration::ZERO,
+            high_avail: false,
+            config: ScanConfig {
+                res,
+                range_res: 1,
+                intensity: true,
+                min_angle: -9000,
+                max_angle: 9000,
+            },
+        }
+    }
+}
+
 /// What the device thread tells the driver.
 #[derive(Debug)]
 pub enum Update {

@@ -28,15 +28,5 @@ pub fn emulate(name: &str, faults: Faults, capture: Option<PathBuf>) -> Emulator
 
 /// Player's defaults, sonars on, for the robot at `link`.
 pub fn settings(link: &Path) -> Settings {
-    Settings {
-        port: link.to_owned(),
-        sonar: true,
-        direct_wheel: true,
-        max_speed: 500,
-        max_turn: 100,
-        vel_band: false,
-        pulse: None,
-        bumpstall: None,
-        gyro: false,
-    }
+    Settings::player_defaults(link.to_owned())
 }

@@ -2,10 +2,9 @@
 //! and the driver's settings for it.
 
 use std::path::{Path, PathBuf};
-use std::time::Duration;
 
 use troupe_serial::{Emulator, Faults, LineOptions};
-use troupe_sicklms200::device::{ScanConfig, Settings};
+use troupe_sicklms200::device::Settings;
 use troupe_sicklms200::emulator::{self, EmulatorStats, Room};
 
 /// An emulated scanner in its room on a thread, its line linked in a
@@ -26,19 +25,5 @@ pub fn emulate(name: &str, faults: Faults, capture: Option<PathBuf>) -> Emulator
 /// Player's connect rates and a 180° scan at `res` hundredths of a degree,
 /// in millimetres with intensity, streamed at `transfer` baud.
 pub fn settings(link: &Path, res: u16, transfer: u32) -> Settings {
-    Settings {
-        port: link.to_owned(),
-        connect_rates: vec![9600, 38400, 500000],
-        transfer_rate: transfer,
-        retry: 0,
-        delay: Duration::ZERO,
-        high_avail: false,
-        config: ScanConfig {
-            res,
-            range_res: 1,
-            intensity: true,
-            min_angle: -9000,
-            max_angle: 9000,
-        },
-    }
+    Settings::scan_180(link.to_owned(), res, transfer)
 }
