@@ -28,34 +28,64 @@ pub(crate) trait Bus: Send {
         payload: Vec<u8>,
         timeout: Duration,
     ) -> Result<()>;
-    /// Answers every request `name` to `dev` with `reply` (encoded, to be
-    /// restamped when sent) without delivering it to the driver.
-    fn answer_always(&mut self, dev: &Device, name: &'static str, reply: Vec<u8>);
+    /// Answers every request `name` to `dev` (with body `body`, or any
+    /// body) with `reply` (encoded, to be restamped when sent) without
+    /// delivering it to the driver.
+    fn answer_always(
+        &mut self,
+        dev: &Device,
+        name: &'static str,
+        body: Option<Vec<u8>>,
+        reply: Vec<u8>,
+    );
 }
 
-/// The answers drivers keep ready ([`Ctx::answer_always`]), by device and
-/// request name: what a bus answers without delivering the request.
+/// The answers drivers keep ready ([`Ctx::answer_always`],
+/// [`Ctx::answer_always_to`]), by device, request name and request body: what
+/// a bus answers without delivering the request.
 #[derive(Default)]
 pub(crate) struct ReadyAnswers(Mutex<HashMap<Device, Vec<Kept>>>);
 
-/// A request name and its encoded answer.
-type Kept = (&'static str, Vec<u8>);
+/// A request name, the request body it answers (`None`: any), and the
+/// encoded answer.
+type Kept = (&'static str, Option<Vec<u8>>, Vec<u8>);
 
 impl ReadyAnswers {
-    /// Keeps `reply` (as `codec::encode` made it) for request `name` to `dev`.
-    pub(crate) fn set(&self, dev: &Device, name: &'static str, reply: Vec<u8>) {
+    /// Keeps `reply` (as `codec::encode` made it) for request `name` to
+    /// `dev` with body `body` (`None`: any body).
+    pub(crate) fn set(
+        &self,
+        dev: &Device,
+        name: &'static str,
+        body: Option<Vec<u8>>,
+        reply: Vec<u8>,
+    ) {
         let mut all = self.0.lock().unwrap_or_else(|p| p.into_inner());
         let answers = all.entry(*dev).or_default();
-        match answers.iter_mut().find(|(n, _)| *n == name) {
-            Some(slot) => slot.1 = reply,
-            None => answers.push((name, reply)),
+        match answers
+            .iter_mut()
+            .find(|(n, b, _)| *n == name && *b == body)
+        {
+            Some(slot) => slot.2 = reply,
+            None => answers.push((name, body, reply)),
         }
     }
 
-    /// The kept answer to request `name` to `dev`, stamped `now`.
-    pub(crate) fn get(&self, dev: &Device, name: &str, now: f64) -> Option<Vec<u8>> {
+    /// The kept answer to request `name` to `dev` whose payload is
+    /// `request` (as `codec::encode` made it), stamped `now`.
+    pub(crate) fn get(
+        &self,
+        dev: &Device,
+        name: &str,
+        request: &[u8],
+        now: f64,
+    ) -> Option<Vec<u8>> {
         let all = self.0.lock().unwrap_or_else(|p| p.into_inner());
-        let (_, reply) = all.get(dev)?.iter().find(|(n, _)| *n == name)?;
+        let body = codec::split(request).map(|(_, _, b)| b).ok();
+        let (_, _, reply) = all
+            .get(dev)?
+            .iter()
+            .find(|(n, b, _)| *n == name && b.as_deref().is_none_or(|b| Some(b) == body))?;
         let mut reply = reply.clone();
         codec::restamp(&mut reply, now).ok()?;
         Some(reply)
@@ -181,7 +211,37 @@ impl Ctx {
             });
         }
         self.bus
-            .answer_always(dev, R::NAME, codec::encode(reply, 0.0));
+            .answer_always(dev, R::NAME, None, codec::encode(reply, 0.0));
+        Ok(())
+    }
+
+    /// Answers every request equal to `request` sent to the provided device
+    /// `dev` with `reply`, as [`Ctx::answer_always`] does for every `R`:
+    /// for answers that depend on what is asked, and change only when the
+    /// driver says (a named model's pose between simulation steps). Call it
+    /// again whenever the answer changes, before answering anything that
+    /// changed it, so a client that waits for each answer never sees an old
+    /// one.
+    ///
+    /// # Errors
+    ///
+    /// [`NodeError::NotProvided`] if `dev` is not in the section's `provides`.
+    pub fn answer_always_to<R: Request>(
+        &mut self,
+        dev: &Device,
+        request: &R,
+        reply: &R::Reply,
+    ) -> Result<()> {
+        if !self.provided.contains(dev) {
+            return Err(NodeError::NotProvided {
+                driver: self.driver.to_owned(),
+                device: *dev,
+            });
+        }
+        let asked = codec::encode(request, 0.0);
+        let body = codec::split(&asked).map(|(_, _, b)| b.to_vec()).ok();
+        self.bus
+            .answer_always(dev, R::NAME, body, codec::encode(reply, 0.0));
         Ok(())
     }
 
@@ -289,5 +349,62 @@ impl Ctx {
     /// The devices this driver provides.
     pub fn provided(&self) -> &[Device] {
         &self.provided
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use troupe_msgs::{simulation, Interface};
+
+    #[test]
+    fn ready_answers_match_the_request_they_were_kept_for() {
+        let ready = ReadyAnswers::default();
+        let dev = Device::new(6665, Interface::Simulation, 0);
+        let ask = |name: &str| codec::encode(&simulation::GetPose2d { name: name.into() }, 3.0);
+        let body = |name: &str| {
+            let asked = ask(name);
+            codec::split(&asked).map(|(_, _, b)| b.to_vec()).ok()
+        };
+        let answer = |x: f64| codec::encode(&common_pose("r0", x), 0.0);
+        ready.set(&dev, "get_pose2d", body("r0"), answer(1.0));
+        let got = ready.get(&dev, "get_pose2d", &ask("r0"), 7.5).unwrap();
+        let got = codec::decode::<simulation::Pose2dOf>(&got).unwrap();
+        assert_eq!((got.stamp, got.msg.pose.x), (7.5, 1.0));
+        // Another body, another name or another device: not this answer.
+        assert!(ready.get(&dev, "get_pose2d", &ask("r1"), 0.0).is_none());
+        assert!(ready.get(&dev, "set_pose2d", &ask("r0"), 0.0).is_none());
+        let other = Device::new(6665, Interface::Simulation, 1);
+        assert!(ready.get(&other, "get_pose2d", &ask("r0"), 0.0).is_none());
+        // Kept again: replaced, not added.
+        ready.set(&dev, "get_pose2d", body("r0"), answer(2.0));
+        let got = ready.get(&dev, "get_pose2d", &ask("r0"), 0.0).unwrap();
+        assert_eq!(
+            codec::decode::<simulation::Pose2dOf>(&got)
+                .unwrap()
+                .msg
+                .pose
+                .x,
+            2.0
+        );
+        // An answer kept for any body answers them all.
+        ready.set(&dev, "get_pose2d", None, answer(9.0));
+        let got = ready.get(&dev, "get_pose2d", &ask("r1"), 0.0).unwrap();
+        assert_eq!(
+            codec::decode::<simulation::Pose2dOf>(&got)
+                .unwrap()
+                .msg
+                .pose
+                .x,
+            9.0
+        );
+    }
+
+    fn common_pose(name: &str, x: f64) -> simulation::Pose2dOf {
+        simulation::Pose2dOf {
+            name: name.into(),
+            pose: troupe_msgs::Pose2d::new(x, 0.0, 0.0),
+        }
     }
 }

@@ -557,10 +557,10 @@ impl ZenohBus {
                     Ok((_, n)) => n,
                     Err(e) => return tracing::warn!("ignored request: {e}"),
                 };
-                if let Some(reply) = ready.get(&d, &name, clock.now()) {
+                let payload = query.payload().cloned().unwrap_or_default();
+                if let Some(reply) = ready.get(&d, &name, &payload.to_bytes(), clock.now()) {
                     return Box::new(ZenohSink(query)).send(Ok(reply));
                 }
-                let payload = query.payload().cloned().unwrap_or_default();
                 let what = format!("request `{name}` to {d} ({driver})");
                 let responder = Responder::new(Box::new(ZenohSink(query)), clock.clone(), what);
                 inbox.push(Event::Request(Request {
@@ -662,8 +662,14 @@ impl Bus for ZenohBus {
             .map_err(z(|| format!("sending command {key}")))
     }
 
-    fn answer_always(&mut self, dev: &Device, name: &'static str, reply: Vec<u8>) {
-        self.ready.set(dev, name, reply);
+    fn answer_always(
+        &mut self,
+        dev: &Device,
+        name: &'static str,
+        body: Option<Vec<u8>>,
+        reply: Vec<u8>,
+    ) {
+        self.ready.set(dev, name, body, reply);
     }
 
     fn request(

@@ -110,8 +110,14 @@ impl Bus for Rec {
         });
         Ok(())
     }
-    fn answer_always(&mut self, dev: &Device, name: &'static str, reply: Vec<u8>) {
-        self.lock().ready.set(dev, name, reply);
+    fn answer_always(
+        &mut self,
+        dev: &Device,
+        name: &'static str,
+        body: Option<Vec<u8>>,
+        reply: Vec<u8>,
+    ) {
+        self.lock().ready.set(dev, name, body, reply);
     }
 }
 
@@ -231,8 +237,9 @@ impl<D: Driver> Harness<D> {
         self.next_pending += 1;
         let id = self.next_pending;
         // An answer the driver keeps ready never reaches it, as on the network.
+        let p = codec::encode(req, self.clock.now());
         let mut rec = self.rec.lock();
-        if let Some(reply) = rec.ready.get(&dev, R::NAME, self.clock.now()) {
+        if let Some(reply) = rec.ready.get(&dev, R::NAME, &p, self.clock.now()) {
             rec.answers.insert(id, Ok(reply));
             return Ok(Pending(id));
         }
@@ -240,7 +247,6 @@ impl<D: Driver> Harness<D> {
         let sink = Box::new(RecSink(self.rec.clone(), id));
         let what = format!("request `{}` to {dev}", R::NAME);
         let responder = Responder::new(sink, self.clock.clone(), what);
-        let p = codec::encode(req, self.clock.now());
         self.deliver(Event::Request(crate::driver::Request {
             sample: Sample::new(dev, keys::req(&dev, R::NAME), p),
             name: R::NAME.to_owned(),

@@ -106,6 +106,9 @@ pub struct Stage {
     steps_per_tick: u32,
     quit_time: f64,
     snapshot: Option<PathBuf>,
+    /// The simulation devices and model names whose pose was asked for:
+    /// their answers are kept ready, renewed whenever the model may move.
+    watched: Vec<(Device, String)>,
 }
 
 /// Models already serving a device of each interface. A laser or sonar may
@@ -274,6 +277,7 @@ impl Driver for Stage {
             period: (!told).then_some(period),
             steps_per_tick,
             snapshot: o.snapshot.clone(),
+            watched: Vec::new(),
         })
     }
 
@@ -331,7 +335,7 @@ impl Driver for Stage {
                     r.reply(&common::Ack);
                     return Ok(());
                 }
-                self.request(src, r)
+                self.request(ctx, src, r)
             }
             Event::Data(_) | Event::Reply(_) | Event::Wake => Ok(()),
         }
@@ -574,7 +578,7 @@ impl Stage {
         })
     }
 
-    fn request(&mut self, src: Source, r: troupe_node::Request) -> Result<()> {
+    fn request(&mut self, ctx: &mut Ctx, src: Source, r: troupe_node::Request) -> Result<()> {
         match src {
             Source::Position { base } => {
                 let m = self.sim.bases[base].model;
@@ -686,7 +690,7 @@ impl Stage {
                 let n = r.name.clone();
                 r.nack(format!("stage blobfinder does not handle `{n}`"));
             }
-            Source::Simulation => self.simulation(r)?,
+            Source::Simulation => self.simulation(ctx, r)?,
             Source::Map { model } => {
                 let dev = r.sample.device;
                 match self.maps.iter().find(|(m, _)| *m == model) {
@@ -704,6 +708,7 @@ impl Stage {
             self.sim.step();
             ctx.set_time(self.sim.time)?;
             self.publish(ctx)?;
+            self.keep_poses_ready(ctx)?;
             if self.quit_time > 0.0 && self.sim.time >= self.quit_time - 1e-9 {
                 tracing::info!(
                     "quit_time {} s reached after {} steps",
@@ -741,15 +746,42 @@ impl Stage {
         list.join(" ")
     }
 
-    fn simulation(&mut self, r: troupe_node::Request) -> Result<()> {
+    /// Keeps the pose of each watched model ready to answer, as it is now.
+    fn keep_poses_ready(&self, ctx: &mut Ctx) -> Result<()> {
+        for (dev, name) in &self.watched {
+            if let Some(&m) = self.sim.world.names.get(name) {
+                let asked = simulation::GetPose2d { name: name.clone() };
+                let pose = simulation::Pose2dOf {
+                    name: name.clone(),
+                    pose: self.sim.poses[m].into(),
+                };
+                ctx.answer_always_to(dev, &asked, &pose)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn simulation(&mut self, ctx: &mut Ctx, r: troupe_node::Request) -> Result<()> {
         let find = |sim: &Sim, name: &str| sim.world.names.get(name).copied();
         if r.is::<simulation::GetPose2d>() {
             let q = r.decode::<simulation::GetPose2d>()?;
             match find(&self.sim, &q.name) {
-                Some(m) => r.reply(&simulation::Pose2dOf {
-                    name: q.name,
-                    pose: self.sim.poses[m].into(),
-                }),
+                Some(m) => {
+                    let pose = simulation::Pose2dOf {
+                        name: q.name.clone(),
+                        pose: self.sim.poses[m].into(),
+                    };
+                    // A pose asked for once is asked for again (a client
+                    // following a robot): from now on it waits ready,
+                    // renewed after every step, and Stage's thread is not
+                    // woken for it.
+                    let dev = r.sample.device;
+                    if !self.watched.iter().any(|(d, n)| *d == dev && *n == q.name) {
+                        ctx.answer_always_to(&dev, &q, &pose)?;
+                        self.watched.push((dev, q.name));
+                    }
+                    r.reply(&pose);
+                }
                 None => r.nack(format!("no model named `{}`", q.name)),
             }
         } else if r.is::<simulation::SetPose2d>() {
@@ -757,6 +789,9 @@ impl Stage {
             match find(&self.sim, &q.name) {
                 Some(m) => {
                     self.sim.set_pose(m, q.pose.into());
+                    // Renewed before the answer: a client that set a pose
+                    // and then asks for it gets the new one.
+                    self.keep_poses_ready(ctx)?;
                     r.reply(&common::Ack);
                 }
                 None => r.nack(format!("no model named `{}`", q.name)),
@@ -1082,6 +1117,66 @@ mod tests {
             .unwrap()
             .unwrap_err()
             .contains("no model named `nobody`"));
+    }
+
+    #[test]
+    fn a_pose_asked_for_is_kept_ready_and_renewed_as_the_model_moves() {
+        let w = world_file("watched", WORLD);
+        let mut h = Harness::<Stage>::from_json(&format!(
+            r#"{{"name":"stage","provides":["simulation:0","position2d:0"],"options":{{"worldfile":"{}","model":"r0","step_when_told":1}}}}"#,
+            w.display()
+        ))
+        .unwrap();
+        let (sim, pos) = (dev(Interface::Simulation, 0), dev(Interface::Position2d, 0));
+        let pose_of = |h: &mut Harness<Stage>, name: &str| {
+            let p = h
+                .request(sim, &simulation::GetPose2d { name: name.into() })
+                .unwrap();
+            h.reply::<simulation::Pose2dOf>(p).unwrap().unwrap().pose
+        };
+        let start = pose_of(&mut h, "r0");
+        assert_eq!((start.x, start.y), (0.0, 0.0));
+        assert_eq!(pose_of(&mut h, "r0"), start, "the kept answer");
+        assert_eq!(h.driver().watched, [(sim, "r0".to_owned())]);
+        // Set: the kept answer is renewed before the set is acknowledged.
+        let to = troupe_msgs::Pose2d::new(1.0, -1.0, 0.5);
+        let p = h
+            .request(
+                sim,
+                &simulation::SetPose2d {
+                    name: "r0".into(),
+                    pose: to,
+                },
+            )
+            .unwrap();
+        assert!(h.reply::<common::Ack>(p).unwrap().is_ok());
+        assert_eq!(pose_of(&mut h, "r0"), to);
+        // Driven for a second: renewed after every step.
+        h.command(
+            pos,
+            &position2d::CmdVel {
+                vel: troupe_msgs::Pose2d::new(0.5, 0.0, 0.0),
+                state: true,
+            },
+        )
+        .unwrap();
+        let p = h.request(sim, &simulation::Step { steps: 10 }).unwrap();
+        assert!(h.reply::<common::Ack>(p).unwrap().is_ok());
+        let moved = pose_of(&mut h, "r0");
+        let gone = (moved.x - to.x).hypot(moved.y - to.y);
+        assert!((gone - 0.5).abs() < 0.06, "{moved:?}");
+        // Other models are asked for separately; unknown ones still fail.
+        assert_eq!(pose_of(&mut h, "wall").x, 4.0);
+        assert_eq!(h.driver().watched.len(), 2);
+        let p = h
+            .request(
+                sim,
+                &simulation::GetPose2d {
+                    name: "nobody".into(),
+                },
+            )
+            .unwrap();
+        assert!(h.reply::<simulation::Pose2dOf>(p).unwrap().is_err());
     }
 
     #[test]
