@@ -77,8 +77,10 @@ fn a_captured_erratic_session_replays_byte_for_byte() {
     let played = cap.clone();
     let emu = capture::replay_on_thread("erratic", played).unwrap();
     let outcome = session(emu.link());
-    // A difference from the capture ends the replay: its error says where.
-    let report = emu.stop().unwrap();
+    // The replay ends well only once every entry of the capture was played
+    // and every byte it expects was matched; a difference ends it with an
+    // error that says where.
+    emu.stop().unwrap();
     let (name, motor) = outcome.unwrap();
     assert_eq!(name.2, "Rev H", "{name:?}");
     assert_eq!(
@@ -86,5 +88,4 @@ fn a_captured_erratic_session_replays_byte_for_byte() {
         captured[..MOTOR],
         "the motor packets, as captured"
     );
-    assert_eq!(report.entries, cap.entries.len(), "{report:?}");
 }

@@ -75,7 +75,9 @@ fn a_captured_pioneer_session_replays_byte_for_byte() {
     let played = cap.clone();
     let emu = capture::replay_on_thread("p2os", played).unwrap();
     let outcome = session(emu.link());
-    // A difference from the capture ends the replay: its error says where.
+    // The replay ends well only once every entry of the capture was played
+    // and every byte it expects was matched; a difference ends it with an
+    // error that says where.
     let report = emu.stop().unwrap();
     let (name, sips) = outcome.unwrap();
     assert_eq!(
@@ -83,7 +85,6 @@ fn a_captured_pioneer_session_replays_byte_for_byte() {
         ("Troupe", "Pioneer", "p3dx-sh")
     );
     assert_eq!(sips[..], captured[..SIPS], "the SIPs, decoded as captured");
-    assert_eq!(report.entries, cap.entries.len(), "{report:?}");
     // SYNC0, SYNC1, SYNC2, OPEN, PULSE and SONAR: 6 + 6 + 6 + 6 + 6 + 9.
     assert_eq!(report.matched, 39, "{report:?}");
 }

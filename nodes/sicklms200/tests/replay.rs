@@ -73,11 +73,12 @@ fn a_captured_lms200_session_replays_byte_for_byte() {
     let played = cap.clone();
     let emu = capture::replay_on_thread("lms", played).unwrap();
     let outcome = session(emu.link());
-    // A difference from the capture ends the replay: its error says where.
-    let report = emu.stop().unwrap();
+    // The replay ends well only once every entry of the capture was played
+    // and every byte it expects was matched; a difference ends it with an
+    // error that says where.
+    emu.stop().unwrap();
     let ((kind, baud), scans) = outcome.unwrap();
     assert_eq!(baud, 38400);
     assert!(kind.starts_with("LMS200"), "{kind}");
     assert!(scans.iter().all(|s| s.values.len() == 181 && s.units == 1));
-    assert_eq!(report.entries, cap.entries.len(), "{report:?}");
 }
