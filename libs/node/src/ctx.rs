@@ -379,26 +379,20 @@ mod tests {
         assert!(ready.get(&other, "get_pose2d", &ask("r0"), 0.0).is_none());
         // Kept again: replaced, not added.
         ready.set(&dev, "get_pose2d", body("r0"), answer(2.0));
-        let got = ready.get(&dev, "get_pose2d", &ask("r0"), 0.0).unwrap();
-        assert_eq!(
-            codec::decode::<simulation::Pose2dOf>(&got)
-                .unwrap()
-                .msg
-                .pose
-                .x,
-            2.0
-        );
+        assert_eq!(x_of(ready.get(&dev, "get_pose2d", &ask("r0"), 0.0)), 2.0);
         // An answer kept for any body answers them all.
         ready.set(&dev, "get_pose2d", None, answer(9.0));
-        let got = ready.get(&dev, "get_pose2d", &ask("r1"), 0.0).unwrap();
-        assert_eq!(
-            codec::decode::<simulation::Pose2dOf>(&got)
-                .unwrap()
-                .msg
-                .pose
-                .x,
-            9.0
-        );
+        assert_eq!(x_of(ready.get(&dev, "get_pose2d", &ask("r1"), 0.0)), 9.0);
+    }
+
+    /// The x of a kept pose answer.
+    fn x_of(answer: Option<Vec<u8>>) -> f64 {
+        let answer = answer.unwrap();
+        codec::decode::<simulation::Pose2dOf>(&answer)
+            .unwrap()
+            .msg
+            .pose
+            .x
     }
 
     fn common_pose(name: &str, x: f64) -> simulation::Pose2dOf {
