@@ -15,7 +15,6 @@ use anyhow::Context;
 use clap::Args;
 use troupe_bridge::wire::{self, player, Header, HEADER_LEN};
 use troupe_msgs::{codec, keys, map, Device, Interface};
-use troupe_node::zenoh::query::ConsolidationMode;
 use troupe_node::zenoh::Wait;
 use troupe_node::{Mode, NodeConfig, NodeHandle, Section, Stop, ZenohArgs};
 
@@ -384,10 +383,8 @@ fn measure(a: &BridgeBenchArgs, router: &troupe_node::zenoh::Session) -> anyhow:
     let info_key = keys::req(&Device::new(ROBOT, Interface::Map, 0), "info");
     for i in 0..a.samples + a.samples / 10 {
         let t0 = Instant::now();
-        let replies = router
-            .get(&info_key)
+        let replies = troupe_node::ask(router, &info_key, troupe_node::REQUEST_TIMEOUT)
             .payload(codec::encode(&map::GetInfo, 0.0))
-            .consolidation(ConsolidationMode::None)
             .wait()
             .map_err(|e| anyhow::anyhow!("{e}"))?;
         let reply = replies

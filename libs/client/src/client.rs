@@ -6,7 +6,6 @@ use std::time::{Duration, Instant};
 
 use troupe_msgs::{codec, keys, Command, DecodeError, Device, Interface, Message, Request};
 use troupe_node::zenoh::pubsub::Subscriber;
-use troupe_node::zenoh::query::ConsolidationMode;
 use troupe_node::zenoh::{Session, Wait};
 use troupe_node::{Mode, NodeError, ZenohArgs, REQUEST_TIMEOUT};
 
@@ -232,14 +231,8 @@ impl Client {
     /// Sends request `req` to `dev` and waits for its answer.
     pub(crate) fn request<R: Request>(&self, dev: Device, req: &R) -> Result<R::Reply> {
         let key = keys::req(&dev, R::NAME);
-        let replies = self
-            .0
-            .session
-            .get(&key)
+        let replies = troupe_node::ask(&self.0.session, &key, REQUEST_TIMEOUT)
             .payload(codec::encode(req, now()))
-            .timeout(REQUEST_TIMEOUT)
-            // The answer as it arrives, not held until the query closes.
-            .consolidation(ConsolidationMode::None)
             .wait()
             .map_err(|e| NodeError::zenoh(format!("sending {key}"), e))?;
         let reply = replies.recv().map_err(|_| ClientError::NoAnswer {

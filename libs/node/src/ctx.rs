@@ -28,21 +28,12 @@ pub(crate) trait Bus: Send {
         payload: Vec<u8>,
         timeout: Duration,
     ) -> Result<()>;
-    /// Answers every request `name` to `dev` (with body `body`, or any
-    /// body) with `reply` (encoded, to be restamped when sent) without
-    /// delivering it to the driver.
-    fn answer_always(
-        &mut self,
-        dev: &Device,
-        name: &'static str,
-        body: Option<Vec<u8>>,
-        reply: Vec<u8>,
-    );
 }
 
 /// The answers drivers keep ready ([`Ctx::answer_always`],
-/// [`Ctx::answer_always_to`]), by device, request name and request body: what
-/// a bus answers without delivering the request.
+/// [`Ctx::answer_always_to`]), by device, request name and request body:
+/// shared by the [`Ctx`] that keeps them and whatever receives requests,
+/// which answers with them instead of delivering the request.
 #[derive(Default)]
 pub(crate) struct ReadyAnswers(Mutex<HashMap<Device, Vec<Kept>>>);
 
@@ -81,9 +72,9 @@ impl ReadyAnswers {
         now: f64,
     ) -> Option<Vec<u8>> {
         let all = self.0.lock().unwrap_or_else(|p| p.into_inner());
+        let kept = all.get(dev)?;
         let body = codec::split(request).map(|(_, _, b)| b).ok();
-        let (_, _, reply) = all
-            .get(dev)?
+        let (_, _, reply) = kept
             .iter()
             .find(|(n, b, _)| *n == name && b.as_deref().is_none_or(|b| Some(b) == body))?;
         let mut reply = reply.clone();
@@ -100,6 +91,7 @@ pub struct Ctx {
     bus: Box<dyn Bus>,
     provided: Vec<Device>,
     next_id: u64,
+    answers: Arc<ReadyAnswers>,
     pub(crate) tick: Option<Duration>,
     pub(crate) stop: bool,
     pub(crate) ready: bool,
@@ -139,6 +131,7 @@ impl Ctx {
         bus: Box<dyn Bus>,
         provided: Vec<Device>,
         inbox: Option<Arc<Inbox>>,
+        answers: Arc<ReadyAnswers>,
     ) -> Self {
         Ctx {
             driver,
@@ -146,6 +139,7 @@ impl Ctx {
             bus,
             provided,
             next_id: 0,
+            answers,
             tick: None,
             stop: false,
             ready: true,
@@ -183,13 +177,20 @@ impl Ctx {
     ///
     /// As [`Ctx::publish`].
     pub fn publish_at<M: Message>(&mut self, dev: &Device, msg: &M, stamp: f64) -> Result<()> {
-        if !self.provided.contains(dev) {
-            return Err(NodeError::NotProvided {
+        self.check_provided(dev)?;
+        self.bus.publish(dev, codec::encode(msg, stamp))
+    }
+
+    /// Ok if `dev` is in the section's `provides`.
+    fn check_provided(&self, dev: &Device) -> Result<()> {
+        if self.provided.contains(dev) {
+            Ok(())
+        } else {
+            Err(NodeError::NotProvided {
                 driver: self.driver.to_owned(),
                 device: *dev,
-            });
+            })
         }
-        self.bus.publish(dev, codec::encode(msg, stamp))
     }
 
     /// Answers every `R` sent to the provided device `dev` with `reply`,
@@ -204,14 +205,9 @@ impl Ctx {
     ///
     /// [`NodeError::NotProvided`] if `dev` is not in the section's `provides`.
     pub fn answer_always<R: Request>(&mut self, dev: &Device, reply: &R::Reply) -> Result<()> {
-        if !self.provided.contains(dev) {
-            return Err(NodeError::NotProvided {
-                driver: self.driver.to_owned(),
-                device: *dev,
-            });
-        }
-        self.bus
-            .answer_always(dev, R::NAME, None, codec::encode(reply, 0.0));
+        self.check_provided(dev)?;
+        self.answers
+            .set(dev, R::NAME, None, codec::encode(reply, 0.0));
         Ok(())
     }
 
@@ -232,16 +228,11 @@ impl Ctx {
         request: &R,
         reply: &R::Reply,
     ) -> Result<()> {
-        if !self.provided.contains(dev) {
-            return Err(NodeError::NotProvided {
-                driver: self.driver.to_owned(),
-                device: *dev,
-            });
-        }
+        self.check_provided(dev)?;
         let asked = codec::encode(request, 0.0);
         let body = codec::split(&asked).map(|(_, _, b)| b.to_vec()).ok();
-        self.bus
-            .answer_always(dev, R::NAME, body, codec::encode(reply, 0.0));
+        self.answers
+            .set(dev, R::NAME, body, codec::encode(reply, 0.0));
         Ok(())
     }
 

@@ -20,9 +20,11 @@ use std::time::{Duration, Instant};
 
 use troupe_msgs::{codec, keys, sim, Device};
 use zenoh::bytes::ZBytes;
+use zenoh::handlers::DefaultHandler;
 use zenoh::liveliness::LivelinessToken;
 use zenoh::pubsub::{Publisher, Subscriber};
 use zenoh::query::{ConsolidationMode, Query, Queryable};
+use zenoh::session::SessionGetBuilder;
 use zenoh::{Session, Wait};
 
 use crate::args::{Mode, ZenohArgs};
@@ -191,12 +193,13 @@ pub fn spawn<D: Driver>(
     }
 
     let provided: Vec<Device> = section.provided().into_iter().map(|s| s.device).collect();
+    let ready = Arc::<ReadyAnswers>::default();
     let mut bus = ZenohBus {
         session: session.clone(),
         inbox: inbox.clone(),
         publishers: HashMap::new(),
         latest: Arc::new(Mutex::new(HashMap::new())),
-        ready: Arc::default(),
+        ready: ready.clone(),
         subscribers: Vec::new(),
         queryables: Vec::new(),
         clock_pub: None,
@@ -210,6 +213,7 @@ pub fn spawn<D: Driver>(
         Box::new(bus),
         provided.clone(),
         Some(inbox.clone()),
+        ready,
     );
     let thread_session = session.clone();
     let thread = std::thread::Builder::new()
@@ -221,6 +225,20 @@ pub fn spawn<D: Driver>(
         })
         .map_err(|e| NodeError::Driver(format!("starting the driver thread: {e}").into()))?;
     Ok(NodeHandle { thread, stop })
+}
+
+/// A get on request key `key` as every Troupe requester asks (drivers, the
+/// client, the bridge): each answer taken as it arrives, not held until the
+/// query closes as Zenoh's default consolidation does, within `timeout`.
+pub fn ask<'a>(
+    session: &'a Session,
+    key: &'a str,
+    timeout: Duration,
+) -> SessionGetBuilder<'a, 'a, DefaultHandler> {
+    session
+        .get(key)
+        .timeout(timeout)
+        .consolidation(ConsolidationMode::None)
 }
 
 /// Checks a section for driver `D` without starting it: builds the driver
@@ -662,16 +680,6 @@ impl Bus for ZenohBus {
             .map_err(z(|| format!("sending command {key}")))
     }
 
-    fn answer_always(
-        &mut self,
-        dev: &Device,
-        name: &'static str,
-        body: Option<Vec<u8>>,
-        reply: Vec<u8>,
-    ) {
-        self.ready.set(dev, name, body, reply);
-    }
-
     fn request(
         &mut self,
         id: RequestId,
@@ -689,12 +697,8 @@ impl Bus for ZenohBus {
             timeout,
             done: AtomicBool::new(false),
         };
-        self.session
-            .get(key.clone())
+        ask(&self.session, &key, timeout)
             .payload(payload)
-            .timeout(timeout)
-            // Each answer as it arrives, not held until the query closes.
-            .consolidation(ConsolidationMode::None)
             .callback(move |r| {
                 let k = r
                     .result()

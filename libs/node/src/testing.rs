@@ -41,7 +41,6 @@ struct Recorder {
     commands: Vec<(Device, String, Vec<u8>)>,
     requests: Vec<SentRequest>,
     answers: HashMap<u64, Answer>,
-    ready: ReadyAnswers,
     clock: Vec<Vec<u8>>,
 }
 
@@ -110,15 +109,6 @@ impl Bus for Rec {
         });
         Ok(())
     }
-    fn answer_always(
-        &mut self,
-        dev: &Device,
-        name: &'static str,
-        body: Option<Vec<u8>>,
-        reply: Vec<u8>,
-    ) {
-        self.lock().ready.set(dev, name, body, reply);
-    }
 }
 
 struct RecSink(Rec, u64);
@@ -134,6 +124,8 @@ pub struct Harness<D: Driver> {
     driver: D,
     ctx: Ctx,
     rec: Rec,
+    /// The answers the driver keeps ready, as the runtime shares them.
+    ready: Arc<ReadyAnswers>,
     clock: Clock,
     stats: Stats,
     next_pending: u64,
@@ -150,18 +142,21 @@ impl<D: Driver> Harness<D> {
         let rec = Rec(Arc::default());
         let clock = Clock::manual(0.0);
         let provided = section.provided().into_iter().map(|s| s.device).collect();
+        let ready = Arc::<ReadyAnswers>::default();
         let mut ctx = Ctx::new(
             D::NAME,
             clock.clone(),
             Box::new(rec.clone()),
             provided,
             None,
+            ready.clone(),
         );
         driver.setup(&mut ctx)?;
         Ok(Harness {
             driver,
             ctx,
             rec,
+            ready,
             clock,
             stats: Stats::default(),
             next_pending: 0,
@@ -238,12 +233,10 @@ impl<D: Driver> Harness<D> {
         let id = self.next_pending;
         // An answer the driver keeps ready never reaches it, as on the network.
         let p = codec::encode(req, self.clock.now());
-        let mut rec = self.rec.lock();
-        if let Some(reply) = rec.ready.get(&dev, R::NAME, &p, self.clock.now()) {
-            rec.answers.insert(id, Ok(reply));
+        if let Some(reply) = self.ready.get(&dev, R::NAME, &p, self.clock.now()) {
+            self.rec.lock().answers.insert(id, Ok(reply));
             return Ok(Pending(id));
         }
-        drop(rec);
         let sink = Box::new(RecSink(self.rec.clone(), id));
         let what = format!("request `{}` to {dev}", R::NAME);
         let responder = Responder::new(sink, self.clock.clone(), what);

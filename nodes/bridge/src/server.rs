@@ -16,7 +16,7 @@ use tokio::sync::{mpsc, oneshot, Notify};
 use troupe_msgs::codec::{self, schema_of, Message};
 use troupe_msgs::{common, decode_any, keys, sim, Device, Interface};
 use troupe_node::zenoh::pubsub::Subscriber;
-use troupe_node::zenoh::query::{ConsolidationMode, Reply};
+use troupe_node::zenoh::query::Reply;
 use troupe_node::zenoh::sample::SampleKind;
 use troupe_node::zenoh::{Session, Wait};
 use troupe_node::REQUEST_TIMEOUT;
@@ -811,13 +811,8 @@ async fn request_loop(
         let (tx, back) = oneshot::channel::<Option<Reply>>();
         let tx = Mutex::new(Some(tx));
         let (sh, cq, asked) = (shared.clone(), q.clone(), p.clone());
-        let sent = shared
-            .session
-            .get(&key)
+        let sent = troupe_node::ask(&shared.session, &key, REQUEST_TIMEOUT)
             .payload(payload)
-            .timeout(REQUEST_TIMEOUT)
-            // Each answer as it arrives, not held until the query closes.
-            .consolidation(ConsolidationMode::None)
             .callback(move |reply| {
                 // The first answer counts; a second queryable's is ignored.
                 let Some(tx) = lock(&tx).take() else { return };

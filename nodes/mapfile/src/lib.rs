@@ -126,9 +126,11 @@ pub fn load(
     }))
 }
 
-/// Answers a map device's requests from `map`: `GET_INFO`, `GET_DATA`
-/// tiles (cells off the map unknown, as Player's mapfile sends them), and a
-/// refusal naming anything else. Shared by every driver that serves a grid.
+/// Answers a map device's requests from `map`: `GET_DATA` tiles (cells off
+/// the map unknown, as Player's mapfile sends them), `GET_INFO` (drivers keep
+/// it ready with `Ctx::answer_always`; this answers one that reached the
+/// driver before), and a refusal naming anything else. Shared by every
+/// driver that serves a grid.
 ///
 /// # Errors
 ///

@@ -746,16 +746,20 @@ impl Stage {
         list.join(" ")
     }
 
+    /// The answer to a `GetPose2d` of model `m`, asked for as `name`.
+    fn pose_of(&self, m: usize, name: &str) -> simulation::Pose2dOf {
+        simulation::Pose2dOf {
+            name: name.to_owned(),
+            pose: self.sim.poses[m].into(),
+        }
+    }
+
     /// Keeps the pose of each watched model ready to answer, as it is now.
     fn keep_poses_ready(&self, ctx: &mut Ctx) -> Result<()> {
         for (dev, name) in &self.watched {
             if let Some(&m) = self.sim.world.names.get(name) {
                 let asked = simulation::GetPose2d { name: name.clone() };
-                let pose = simulation::Pose2dOf {
-                    name: name.clone(),
-                    pose: self.sim.poses[m].into(),
-                };
-                ctx.answer_always_to(dev, &asked, &pose)?;
+                ctx.answer_always_to(dev, &asked, &self.pose_of(m, name))?;
             }
         }
         Ok(())
@@ -767,10 +771,7 @@ impl Stage {
             let q = r.decode::<simulation::GetPose2d>()?;
             match find(&self.sim, &q.name) {
                 Some(m) => {
-                    let pose = simulation::Pose2dOf {
-                        name: q.name.clone(),
-                        pose: self.sim.poses[m].into(),
-                    };
+                    let pose = self.pose_of(m, &q.name);
                     // A pose asked for once is asked for again (a client
                     // following a robot): from now on it waits ready,
                     // renewed after every step, and Stage's thread is not
