@@ -14,6 +14,7 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use clap::Args;
 use troupe_bridge::wire::{self, player, Header, HEADER_LEN};
+use troupe_bridge::xdr::{self, Writer};
 use troupe_msgs::{codec, keys, map, Device, Interface};
 use troupe_node::zenoh::Wait;
 use troupe_node::{Mode, NodeConfig, NodeHandle, Section, Stop, ZenohArgs};
@@ -46,6 +47,12 @@ pub struct BridgeBenchArgs {
 }
 
 const ROBOT: u32 = troupe_msgs::DEFAULT_ROBOT;
+
+/// The header of request `subtype` to `interf`:0 of the bench's robot.
+fn req(interf: Interface, subtype: u32) -> [u32; 6] {
+    let code = u32::from(interf.code());
+    [0, ROBOT, code, 0, u32::from(wire::REQ), subtype]
+}
 
 /// A Player message header from its six leading fields.
 fn header(h: [u32; 6]) -> Header {
@@ -102,7 +109,7 @@ fn player_req(sub: u8) -> [u32; 6] {
 /// A client past the banner, in PULL mode as libplayerc puts itself.
 fn connect(addr: SocketAddr) -> anyhow::Result<TcpStream> {
     let mut s = TcpStream::connect(addr)?;
-    let mut banner = [0u8; 32];
+    let mut banner = [0u8; wire::BANNER_LEN];
     s.read_exact(&mut banner)?;
     request(
         &mut s,
@@ -113,13 +120,13 @@ fn connect(addr: SocketAddr) -> anyhow::Result<TcpStream> {
 }
 
 fn open(s: &mut TcpStream, interf: Interface) -> anyhow::Result<()> {
-    let mut body = Vec::new();
+    let mut body = Writer::new();
     for v in [0, 0, u32::from(interf.code()), 0, player::OPEN] {
-        body.extend_from_slice(&v.to_be_bytes());
+        body.u32(v);
     }
-    // An empty driver name: XDR arrays carry their count twice.
-    body.extend_from_slice(&[0; 8]);
-    request(s, player_req(player::DEV), &body).map(drop)
+    // An empty driver name.
+    body.bytes(&[]);
+    request(s, player_req(player::DEV), &body.finish()).map(drop)
 }
 
 /// `n` timed requests after `n / 10` untimed ones, sorted.
@@ -137,24 +144,30 @@ fn timed(s: &mut TcpStream, h: [u32; 6], body: &[u8], n: usize) -> anyhow::Resul
 }
 
 /// The whole map, as libplayerc fetches it: GET_INFO, then tiles of at
-/// most 640x640, each zlib-compressed.
-fn fetch_map(s: &mut TcpStream) -> anyhow::Result<usize> {
-    let mi = u32::from(Interface::Map.code());
-    let info = request(s, [0, ROBOT, mi, 0, 3, 1], &[])?;
-    let word = |b: &[u8], at: usize| u32::from_be_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]]);
-    let (w, h) = (word(&info, 4), word(&info, 8));
+/// most 640x640, each zlib-compressed. Returns its width and height.
+fn fetch_map(s: &mut TcpStream) -> anyhow::Result<(u32, u32)> {
+    let info = request(s, req(Interface::Map, 1), &[])?;
+    // Resolution, then width and height.
+    let mut r = xdr::Reader::new(&info);
+    r.f32()?;
+    let (w, h) = (r.u32()?, r.u32()?);
     let mut got = 0usize;
     for row in (0..h).step_by(640) {
         for col in (0..w).step_by(640) {
             let (tw, th) = ((w - col).min(640), (h - row).min(640));
-            let mut q = Vec::new();
-            for v in [col, row, tw, th, 0, 0, 0] {
-                q.extend_from_slice(&v.to_be_bytes());
+            let mut q = Writer::new();
+            for v in [col, row, tw, th, 0] {
+                q.u32(v);
             }
-            let b = request(s, [0, ROBOT, mi, 0, 3, 2], &q)?;
-            let n = word(&b, 24) as usize;
+            q.bytes(&[]);
+            let b = request(s, req(Interface::Map, 2), &q.finish())?;
+            // Column, row, width, height, cell count, then the zlib data.
+            let mut r = xdr::Reader::new(&b);
+            for _ in 0..5 {
+                r.u32()?;
+            }
             let mut cells = Vec::with_capacity((tw * th) as usize);
-            flate2::read::ZlibDecoder::new(&b[28..28 + n]).read_to_end(&mut cells)?;
+            flate2::read::ZlibDecoder::new(r.bytes()?).read_to_end(&mut cells)?;
             got += cells.len();
         }
     }
@@ -163,7 +176,7 @@ fn fetch_map(s: &mut TcpStream) -> anyhow::Result<usize> {
         "map fetch got {got} cells of {}",
         w * h
     );
-    Ok(got)
+    Ok((w, h))
 }
 
 /// What one of the many clients saw.
@@ -317,38 +330,30 @@ fn measure(a: &BridgeBenchArgs, router: &troupe_node::zenoh::Session) -> anyhow:
         let _ = stop_rx.await;
     }));
 
-    let (mi, pi) = (
-        u32::from(Interface::Map.code()),
-        u32::from(Interface::Position2d.code()),
-    );
     let mut s = connect(addr)?;
-    let idle = timed(&mut s, [0, ROBOT, mi, 0, 3, 1], &[], a.samples)?;
+    let idle = timed(&mut s, req(Interface::Map, 1), &[], a.samples)?;
     open(&mut s, Interface::Position2d)?;
-    let busy = timed(&mut s, [0, ROBOT, pi, 0, 3, 1], &[], a.samples)?;
+    let busy = timed(&mut s, req(Interface::Position2d, 1), &[], a.samples)?;
     // r0's pose: Stage's thread answers the first ask, then keeps the
     // answer ready, renewed after every step.
-    let mut pose = troupe_bridge::xdr::Writer::new();
+    let (get_pose, set_pose) = (req(Interface::Simulation, 1), req(Interface::Simulation, 2));
+    let mut pose = Writer::new();
     pose.string("r0").f64(0.0).f64(0.0).f64(0.0);
-    let si = u32::from(Interface::Simulation.code());
     let pose = pose.finish();
-    let live = timed(&mut s, [0, ROBOT, si, 0, 3, 1], &pose, a.samples)?;
+    let live = timed(&mut s, get_pose, &pose, a.samples)?;
     // A request only Stage's own thread can answer, between steps: setting
-    // r0's pose, to where it is. The answer ends with x, y, yaw (XDR doubles).
-    let at = request(&mut s, [0, ROBOT, si, 0, 3, 1], &pose)?;
-    anyhow::ensure!(at.len() >= 24, "a short pose answer ({} bytes)", at.len());
-    let mut set = troupe_bridge::xdr::Writer::new();
-    set.string("r0");
-    for k in (0..3).rev() {
-        let end = at.len() - 8 * k;
-        let v: [u8; 8] = at[end - 8..end].try_into()?;
-        set.f64(f64::from_be_bytes(v));
-    }
-    let moved = timed(&mut s, [0, ROBOT, si, 0, 3, 2], &set.finish(), a.samples)?;
+    // r0's pose, to where it is (the answer: name, x, y, yaw).
+    let at = request(&mut s, get_pose, &pose)?;
+    let mut r = xdr::Reader::new(&at);
+    r.string()?;
+    let mut set = Writer::new();
+    set.string("r0").f64(r.f64()?).f64(r.f64()?).f64(r.f64()?);
+    let moved = timed(&mut s, set_pose, &set.finish(), a.samples)?;
     let mut fetches = Vec::with_capacity(a.fetches);
-    let mut cells = 0;
+    let mut size = (0, 0);
     for _ in 0..a.fetches {
         let t0 = Instant::now();
-        cells = fetch_map(&mut s)?;
+        size = fetch_map(&mut s)?;
         fetches.push(t0.elapsed());
     }
     fetches.sort();
@@ -433,10 +438,9 @@ fn measure(a: &BridgeBenchArgs, router: &troupe_node::zenoh::Session) -> anyhow:
         &moved,
         "target <= 250 µs",
     )?;
-    let side = (cells as f64).sqrt().round();
     row(
         &mut out,
-        &format!("full map fetch, {cells} cells (~{side}² zlib tiles)"),
+        &format!("full map fetch, {}x{} cells (zlib tiles)", size.0, size.1),
         &fetches,
         "Player 2.1-2.4 ms; target <= 4 ms",
     )?;

@@ -198,8 +198,10 @@ impl Queue {
 
     /// The next message to send, if one may go now.
     pub fn pop(&mut self) -> Option<Out> {
-        let flush = !self.data_requested && self.items.iter().any(Out::is_response);
-        if !self.items.is_empty() && (flush || !self.pull || self.data_requested) {
+        // Between rounds a PULL client still gets answers (and what is
+        // queued ahead of them) at once; the scan only runs then.
+        let may_go = !self.pull || self.data_requested || self.items.iter().any(Out::is_response);
+        if !self.items.is_empty() && may_go {
             let m = self.items.pop_front()?;
             if self.data_requested && m.kind == wire::DATA {
                 self.data_delivered = true;

@@ -810,7 +810,9 @@ async fn request_loop(
         let key = keys::req(&p.dev, p.name);
         let (tx, back) = oneshot::channel::<Option<Reply>>();
         let tx = Mutex::new(Some(tx));
-        let (sh, cq, asked) = (shared.clone(), q.clone(), p.clone());
+        // Weak: a client that left closes its socket now, not when a
+        // request still in flight times out.
+        let (sh, cq, asked) = (shared.clone(), Arc::downgrade(&q), p.clone());
         let sent = troupe_node::ask(&shared.session, &key, REQUEST_TIMEOUT)
             .payload(payload)
             .callback(move |reply| {
@@ -820,7 +822,9 @@ async fn request_loop(
                     .result()
                     .map_or(true, |s| s.payload().len() <= INLINE_ANSWER);
                 if small {
-                    cq.push(answer(&sh, &asked, reply));
+                    if let Some(cq) = cq.upgrade() {
+                        cq.push(answer(&sh, &asked, reply));
+                    }
                     let _ = tx.send(None);
                 } else {
                     let _ = tx.send(Some(reply));
