@@ -84,6 +84,24 @@ impl Lattice {
             .then_some((i as usize, j as usize))
     }
 
+    /// The corner cells of the world box `[x0, y0, x1, y1]`, clamped to the
+    /// grid; `None` when the box misses it.
+    pub fn cells_of_box(
+        &self,
+        [x0, y0, x1, y1]: [f64; 4],
+    ) -> Option<((usize, usize), (usize, usize))> {
+        let (i0, j0) = ((x0 - self.x0) / self.res, (y0 - self.y0) / self.res);
+        let (i1, j1) = ((x1 - self.x0) / self.res, (y1 - self.y0) / self.res);
+        if !(i1 >= 0.0 && j1 >= 0.0 && i0 < self.w as f64 && j0 < self.h as f64) {
+            return None;
+        }
+        let clamp = |v: f64, n: usize| (v.max(0.0) as usize).min(n - 1);
+        Some((
+            (clamp(i0, self.w), clamp(j0, self.h)),
+            (clamp(i1, self.w), clamp(j1, self.h)),
+        ))
+    }
+
     /// Calls `f(i, j)` for every cell whose centre lies inside the polygon
     /// (even-odd rule) and every cell its outline crosses, so that walls and
     /// polygons thinner than a cell still mark cells. A cell may be reported
@@ -208,7 +226,7 @@ impl Grid {
     /// small array: checking it first spares reading the cells of empty
     /// space). False outside the grid.
     pub fn tile_occupied(&self, i: usize, j: usize) -> bool {
-        i < self.lat.w && j < self.lat.h && self.tiles[(j / TILE) * self.tw + i / TILE] != 0
+        i < self.lat.w && j < self.lat.h && self.tiles[self.tile_of(i, j)] != 0
     }
 
     /// Whether tile `t` (as [`Grid::tile_of`] names tiles) holds anything.
@@ -291,7 +309,7 @@ impl Grid {
         &self,
         lo: (usize, usize),
         hi: (usize, usize),
-    ) -> impl Iterator<Item = usize> + '_ {
+    ) -> impl Iterator<Item = usize> + Clone + '_ {
         let (c0, r0) = (lo.0 / TILE, lo.1 / TILE);
         let (c1, r1) = (hi.0 / TILE, hi.1 / TILE);
         (r0..=r1).flat_map(move |r| (c0..=c1).map(move |c| r * self.tw + c))
@@ -528,6 +546,21 @@ mod tests {
         assert_eq!(g.at(1.0, 1.0), EMPTY);
         assert!(g.tiles.iter().all(|&t| t == 0));
         assert!(g.cast(0.0, 1.0, 0.0, 5.0, |_| true).is_none());
+    }
+
+    #[test]
+    fn boxes_map_to_clamped_corner_cells() {
+        let lat = Lattice::of_cells(0.0, 0.0, 0.5, 4, 2);
+        assert_eq!(crate::bounds([]), None);
+        let b = crate::bounds([(0.7, 0.2), (-1.0, 0.6), (0.9, -3.0)]).unwrap();
+        assert_eq!(b, [-1.0, -3.0, 0.9, 0.6]);
+        assert_eq!(lat.cells_of_box(b), Some(((0, 0), (1, 1))));
+        assert_eq!(
+            lat.cells_of_box([1.2, 0.1, 9.0, 0.2]),
+            Some(((2, 0), (3, 0)))
+        );
+        assert_eq!(lat.cells_of_box([2.5, 0.0, 3.0, 1.0]), None, "beyond x");
+        assert_eq!(lat.cells_of_box([0.0, -2.0, 1.0, -0.1]), None, "below");
     }
 
     #[test]

@@ -23,4 +23,4 @@ pub use drive::{Body, DiffDrive};
 pub use grid::{Grid, Hit, Lattice, EMPTY};
 pub use occmap::OccMap;
 pub use odometry::Odometry;
-pub use pose::{normalize, ray_to_box, Pose};
+pub use pose::{bounds, normalize, ray_to_box, Pose};

@@ -131,3 +131,14 @@ mod box_tests {
         assert!((corner - 5.0).abs() < 1e-9);
     }
 }
+
+/// The box `[min x, min y, max x, max y]` around `pts`; `None` when there
+/// are none.
+pub fn bounds(pts: impl IntoIterator<Item = (f64, f64)>) -> Option<[f64; 4]> {
+    pts.into_iter().fold(None, |b, (x, y)| {
+        Some(match b {
+            None => [x, y, x, y],
+            Some([x0, y0, x1, y1]) => [x0.min(x), y0.min(y), x1.max(x), y1.max(y)],
+        })
+    })
+}

@@ -7,7 +7,7 @@
 //! exactly (ray against polygon edges) when it enters one of those tiles,
 //! and a robot's own body costs nothing because it is never tested.
 
-use troupe_geom::Hit;
+use troupe_geom::{bounds, Hit};
 
 /// The polygons of every moving body, filed by tile.
 #[derive(Debug, Clone, Default)]
@@ -32,13 +32,19 @@ impl Movers {
 
     /// Files model `m` (id `id`), whose body is `shapes` (polygons in world
     /// coordinates), under `tiles` (each once), replacing where it was.
-    pub fn file(&mut self, m: usize, id: u16, shapes: Vec<Vec<(f64, f64)>>, tiles: Vec<usize>) {
-        if tiles == self.tiles_of[m] {
+    pub fn file<T>(&mut self, m: usize, id: u16, shapes: Vec<Vec<(f64, f64)>>, tiles: T)
+    where
+        T: IntoIterator<Item = usize>,
+        T::IntoIter: Clone,
+    {
+        let tiles = tiles.into_iter();
+        if tiles.clone().eq(self.tiles_of[m].iter().copied()) {
             // Most steps a body stays in its tiles: only its shape moved.
             self.shapes[m] = shapes;
             return;
         }
         self.unfile(m, id);
+        let tiles: Vec<usize> = tiles.collect();
         for &t in &tiles {
             if let Some(list) = self.in_tile.get_mut(t) {
                 list.push(id);
@@ -73,23 +79,16 @@ impl Movers {
     /// polygons): an edge of one crosses an edge of the other, or one holds
     /// a corner of the other.
     pub fn overlaps(&self, m: usize, polys: &[Vec<(f64, f64)>]) -> bool {
-        let bbox = |ps: &[(f64, f64)]| {
-            ps.iter().fold(
-                (
-                    f64::INFINITY,
-                    f64::INFINITY,
-                    f64::NEG_INFINITY,
-                    f64::NEG_INFINITY,
-                ),
-                |(a, b, c, d), &(x, y)| (a.min(x), b.min(y), c.max(x), d.max(y)),
-            )
+        let bbox = |ps: &[(f64, f64)]| bounds(ps.iter().copied());
+        // Boxes that do not meet (or polygons with no points) are apart.
+        let apart = |a: Option<[f64; 4]>, b: Option<[f64; 4]>| match (a, b) {
+            (Some(a), Some(b)) => a[2] < b[0] || b[2] < a[0] || a[3] < b[1] || b[3] < a[1],
+            _ => true,
         };
         self.shapes[m].iter().any(|a| {
             let ba = bbox(a);
             polys.iter().any(|b| {
-                let bb = bbox(b);
-                let apart = ba.2 < bb.0 || bb.2 < ba.0 || ba.3 < bb.1 || bb.3 < ba.1;
-                !apart
+                !apart(ba, bbox(b))
                     && (edges_cross(a, b)
                         || a.first().is_some_and(|&p| inside(b, p))
                         || b.first().is_some_and(|&p| inside(a, p)))
@@ -103,9 +102,7 @@ impl Movers {
         let mut best = f64::INFINITY;
         for poly in &self.shapes[m] {
             let mut crossings = 0;
-            let n = poly.len();
-            for k in 0..n {
-                let (a, b) = (poly[k], poly[(k + 1) % n]);
+            for (a, b) in edges(poly) {
                 let e = (b.0 - a.0, b.1 - a.1);
                 let den = d.0 * e.1 - d.1 * e.0;
                 if den.abs() < 1e-15 {
@@ -150,10 +147,8 @@ fn edges(ps: &[(f64, f64)]) -> impl Iterator<Item = ((f64, f64), (f64, f64))> + 
 
 /// Whether point `p` is inside polygon `poly` (even-odd rule).
 fn inside(poly: &[(f64, f64)], p: (f64, f64)) -> bool {
-    let n = poly.len();
     let mut odd = false;
-    for k in 0..n {
-        let (a, b) = (poly[k], poly[(k + 1) % n]);
+    for (a, b) in edges(poly) {
         if (a.1 > p.1) != (b.1 > p.1) && p.0 < a.0 + (p.1 - a.1) / (b.1 - a.1) * (b.0 - a.0) {
             odd = !odd;
         }

@@ -10,7 +10,7 @@
 //! exactly: a robot's own body costs its rays nothing.
 
 use troupe_geom::occmap::{FREE, OCCUPIED};
-use troupe_geom::{normalize, Grid, Hit, Lattice, OccMap, Pose, EMPTY};
+use troupe_geom::{bounds, normalize, Grid, Hit, Lattice, OccMap, Pose, EMPTY};
 use troupe_msgs::{map, Color};
 
 use crate::movers::Movers;
@@ -113,6 +113,29 @@ struct Placed {
     cells: Option<((usize, usize), (usize, usize))>,
 }
 
+/// The moving bodies already tested along one ray or under one body: a
+/// body spans a few tiles and is tested once (the first few are
+/// remembered; past them a body may be tested again, which is only slower).
+#[derive(Default)]
+struct Seen {
+    ids: [u16; 8],
+    n: usize,
+}
+
+impl Seen {
+    /// True the first time `id` is seen (and remembers it, room allowing).
+    fn first(&mut self, id: u16) -> bool {
+        if self.ids[..self.n].contains(&id) {
+            return false;
+        }
+        if self.n < self.ids.len() {
+            self.ids[self.n] = id;
+            self.n += 1;
+        }
+        true
+    }
+}
+
 /// The unit vector at angle `a`.
 fn unit(a: f64) -> (f64, f64) {
     let (s, c) = a.sin_cos();
@@ -149,27 +172,15 @@ impl Sim {
             }
         }
         // The grids cover every body, with a margin for robots that wander off.
-        let (mut x0, mut y0, mut x1, mut y1) = (
-            f64::INFINITY,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::NEG_INFINITY,
-        );
-        for m in 0..n {
+        let [x0, y0, x1, y1] = bounds((0..n).flat_map(|m| {
             let (g, _) = world.global(&poses, m);
-            for b in &world.models[m].blocks {
-                for &(x, y) in b {
-                    let (wx, wy) = g.apply(x, y);
-                    x0 = x0.min(wx);
-                    x1 = x1.max(wx);
-                    y0 = y0.min(wy);
-                    y1 = y1.max(wy);
-                }
-            }
-        }
-        if !x0.is_finite() {
-            (x0, y0, x1, y1) = (-1.0, -1.0, 1.0, 1.0);
-        }
+            world.models[m]
+                .blocks
+                .iter()
+                .flatten()
+                .map(move |&(x, y)| g.apply(x, y))
+        }))
+        .unwrap_or([-1.0, -1.0, 1.0, 1.0]);
         let margin = 2.0;
         let res = world.resolution;
         let statics = Grid::new(x0 - margin, y0 - margin, x1 + margin, y1 + margin, res);
@@ -263,10 +274,8 @@ impl Sim {
 
     /// The cells model `m`'s body covers at its current pose.
     fn body_cells(&self, m: usize) -> Vec<(usize, usize)> {
-        let g = self.world.global(&self.poses, m).0;
         let mut out = Vec::new();
-        for b in &self.world.models[m].blocks {
-            let pts: Vec<(f64, f64)> = b.iter().map(|&(x, y)| g.apply(x, y)).collect();
+        for pts in self.placed(m, self.global(m)).polys {
             self.statics
                 .lattice()
                 .polygon_cells(&pts, |i, j| out.push((i, j)));
@@ -297,39 +306,18 @@ impl Sim {
             .collect();
         Placed {
             model: m,
-            cells: self.cell_box(&polys),
+            cells: bounds(polys.iter().flatten().copied())
+                .and_then(|b| self.statics.lattice().cells_of_box(b)),
             polys,
         }
     }
 
-    /// The corner cells of the box around `polys`, clamped to the grid;
-    /// `None` when the box misses the grid.
-    fn cell_box(&self, polys: &[Vec<(f64, f64)>]) -> Option<((usize, usize), (usize, usize))> {
-        let (mut x0, mut y0, mut x1, mut y1) = (
-            f64::INFINITY,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::NEG_INFINITY,
-        );
-        for &(x, y) in polys.iter().flatten() {
-            (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x), y1.max(y));
-        }
-        let lat = self.statics.lattice();
-        let ((ox, oy), res, (w, h)) = (lat.origin(), lat.resolution(), lat.size());
-        let (i0, j0) = ((x0 - ox) / res, (y0 - oy) / res);
-        let (i1, j1) = ((x1 - ox) / res, (y1 - oy) / res);
-        if !(i1 >= 0.0 && j1 >= 0.0 && i0 < w as f64 && j0 < h as f64) {
-            return None;
-        }
-        let clamp = |v: f64, n: usize| (v.max(0.0) as usize).min(n - 1);
-        Some(((clamp(i0, w), clamp(j0, h)), (clamp(i1, w), clamp(j1, h))))
-    }
-
     /// Files a moving body under the tiles it touches.
     fn file(&mut self, body: Placed) {
-        let tiles = body.cells.map_or_else(Vec::new, |(lo, hi)| {
-            self.statics.tiles_of_box(lo, hi).collect()
-        });
+        let tiles = body
+            .cells
+            .into_iter()
+            .flat_map(|(lo, hi)| self.statics.tiles_of_box(lo, hi));
         let m = body.model;
         self.movers.file(m, id(m), body.polys, tiles);
     }
@@ -388,16 +376,11 @@ impl Sim {
             }
             // The body itself is filed in these tiles: only other blockers
             // are tested, each once (the first few, at least), as in `cast`.
-            let mut tested = [0u16; 8];
-            let mut n = 0;
+            let mut tested = Seen::default();
             for t in self.statics.tiles_of_box(lo, hi) {
                 for &c in self.movers.in_tile(t) {
-                    if !blocks(usize::from(c)) || tested[..n].contains(&c) {
+                    if !blocks(usize::from(c)) || !tested.first(c) {
                         continue;
-                    }
-                    if n < tested.len() {
-                        tested[n] = c;
-                        n += 1;
                     }
                     if self.movers.overlaps(usize::from(c) - 1, polys) {
                         return true;
@@ -646,19 +629,11 @@ impl Sim {
         accept: impl Fn(u16) -> bool,
     ) -> Option<Hit> {
         // A body spans a few tiles: test each once (the first few, at least).
-        let mut tested = [0u16; 8];
-        let mut n = 0;
+        let mut tested = Seen::default();
         let movers = |t: usize| {
             let mut best: Option<Hit> = None;
             for &k in self.movers.in_tile(t) {
-                if tested[..n].contains(&k) {
-                    continue;
-                }
-                if n < tested.len() {
-                    tested[n] = k;
-                    n += 1;
-                }
-                if !accept(k) {
+                if !tested.first(k) || !accept(k) {
                     continue;
                 }
                 if let Some(h) = self.movers.hit(usize::from(k) - 1, k, (x, y), (dx, dy)) {

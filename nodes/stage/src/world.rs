@@ -10,7 +10,7 @@ use std::f64::consts::PI;
 use std::path::Path;
 
 use troupe_geom::bitmap::Bitmap;
-use troupe_geom::Pose;
+use troupe_geom::{bounds, Pose};
 use troupe_msgs::Color;
 
 use crate::colors;
@@ -338,21 +338,9 @@ fn kind_of(e: &Entity) -> Result<Option<Kind>, WorldError> {
 
 /// Scales polygons so their bounding box is `size` (x, y), centred on (0, 0).
 fn stretch(blocks: &mut [Vec<(f64, f64)>], sx: f64, sy: f64) {
-    let (mut x0, mut y0, mut x1, mut y1) = (
-        f64::INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::NEG_INFINITY,
-    );
-    for p in blocks.iter().flatten() {
-        x0 = x0.min(p.0);
-        x1 = x1.max(p.0);
-        y0 = y0.min(p.1);
-        y1 = y1.max(p.1);
-    }
-    if !x0.is_finite() {
+    let Some([x0, y0, x1, y1]) = bounds(blocks.iter().flatten().copied()) else {
         return;
-    }
+    };
     let (ex, ey) = ((x1 - x0).max(f64::EPSILON), (y1 - y0).max(f64::EPSILON));
     let (cx, cy) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
     for p in blocks.iter_mut().flatten() {
