@@ -166,15 +166,14 @@ impl DistanceMap {
         };
         let mut t = [first; LANES];
         let mut live: u32 = (1 << n) - 1;
-        for k in 0..n {
-            if t[k] >= stop[k] {
-                out[k] = end(k);
-                live &= !(1 << k);
-            }
-        }
         while live != 0 {
             for k in 0..n {
                 if live & (1 << k) == 0 {
+                    continue;
+                }
+                if t[k] >= stop[k] {
+                    out[k] = end(k);
+                    live &= !(1 << k);
                     continue;
                 }
                 let (c, s) = dir[k];
@@ -186,10 +185,6 @@ impl DistanceMap {
                     continue;
                 }
                 t[k] += step;
-                if t[k] >= stop[k] {
-                    out[k] = end(k);
-                    live &= !(1 << k);
-                }
             }
         }
     }

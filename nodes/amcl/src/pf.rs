@@ -119,6 +119,9 @@ pub struct Filter {
     spare: Vec<Particle>,
     rng: StdRng,
     bins: BinSet,
+    /// The cores weighing may use, read once (std asks the affinity mask
+    /// and cgroup files each time).
+    cores: usize,
 }
 
 /// A sample of N(0, σ²) (ziggurat: a few nanoseconds, where Box–Muller's
@@ -176,6 +179,7 @@ impl Filter {
             spare: Vec::new(),
             rng: StdRng::seed_from_u64(seed),
             bins: BinSet::default(),
+            cores: std::thread::available_parallelism().map_or(1, |n| n.get()),
         }
     }
 
@@ -248,10 +252,9 @@ impl Filter {
             }
             total
         };
-        // Asked only for large sets: it reads the affinity mask and cgroup
-        // files each time (std does not cache it).
+        // Threads pay off only for large sets.
         let threads = if self.particles.len() >= 2048 {
-            std::thread::available_parallelism().map_or(1, |n| n.get())
+            self.cores
         } else {
             1
         };
