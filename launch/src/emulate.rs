@@ -121,14 +121,12 @@ impl troupe_sicklms200::emulator::Scene for LiveLaser {
         let Some(scan) = self.laser.scan() else {
             return vec![f64::INFINITY; angles.len()];
         };
-        let ranges: Vec<f64> = scan.ranges.iter().map(|&r| f64::from(r)).collect();
-        let f = f64::from;
         nearest_beams(
             angles,
-            f(scan.min_angle),
-            f(scan.resolution),
-            f(scan.max_range),
-            &ranges,
+            f64::from(scan.min_angle),
+            f64::from(scan.resolution),
+            f64::from(scan.max_range),
+            &scan.ranges,
         )
     }
 }
@@ -136,7 +134,13 @@ impl troupe_sicklms200::emulator::Scene for LiveLaser {
 /// For each of `angles`, the range of the nearest of `ranges` (beams
 /// `step` apart from `min`), or infinity where that is out of reach or
 /// there is no such beam.
-fn nearest_beams(angles: &[f64], min: f64, step: f64, max_range: f64, ranges: &[f64]) -> Vec<f64> {
+fn nearest_beams<R: Copy + Into<f64>>(
+    angles: &[f64],
+    min: f64,
+    step: f64,
+    max_range: f64,
+    ranges: &[R],
+) -> Vec<f64> {
     angles
         .iter()
         .map(|&a| {
@@ -145,8 +149,8 @@ fn nearest_beams(angles: &[f64], min: f64, step: f64, max_range: f64, ranges: &[
             } else {
                 -1.0
             };
-            match ranges.get(i as usize) {
-                Some(&r) if i >= 0.0 && r < max_range => r,
+            match ranges.get(i as usize).map(|&r| r.into()) {
+                Some(r) if i >= 0.0 && r < max_range => r,
                 _ => f64::INFINITY,
             }
         })

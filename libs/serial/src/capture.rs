@@ -213,8 +213,6 @@ impl Recorder {
 /// How a replay went.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct ReplayReport {
-    /// Entries played or matched.
-    pub entries: usize,
     /// Bytes the driver sent that the capture has.
     pub matched: usize,
 }
@@ -296,7 +294,6 @@ pub fn replay(
                 pending = rest;
             }
         }
-        report.entries += 1;
     }
     while !stop.load(Ordering::Relaxed) {
         pty.recv(&mut buf, Duration::from_millis(50))?;

@@ -87,8 +87,9 @@ impl Robot {
         self.right = speed + rot;
     }
 
-    fn wheels(&self, body: &dyn Body) -> (f64, f64) {
-        if self.enabled && !body.stalled() {
+    /// The wheel speeds the robot reports: none while disabled or stalled.
+    fn wheels(&self, stalled: bool) -> (f64, f64) {
+        if self.enabled && !stalled {
             (self.left, self.right)
         } else {
             (0.0, 0.0)
@@ -109,7 +110,9 @@ impl Robot {
         let counter =
             |m: f64| ((m * 1000.0 / self.params.dist_conv).round() as i64).rem_euclid(4096) as u16;
         let o = body.odometry();
-        let (l, r) = self.wheels(body);
+        // Read once: the speeds and the stall flags of a packet agree.
+        let stalled = body.stalled();
+        let (l, r) = self.wheels(stalled);
         Motor {
             kind: if l != 0.0 || r != 0.0 { 0x83 } else { 0x82 },
             x: counter(o.x),
@@ -118,8 +121,8 @@ impl Robot {
             lvel: (l / VEL_CONV).round() as i16,
             rvel: (r / VEL_CONV).round() as i16,
             battery: 125,
-            lstall: u8::from(body.stalled()),
-            rstall: u8::from(body.stalled()),
+            lstall: u8::from(stalled),
+            rstall: u8::from(stalled),
         }
     }
 

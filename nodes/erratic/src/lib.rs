@@ -406,6 +406,7 @@ impl Erratic {
         };
         ctx.answer_always::<sonar::GetGeom>(&d, &geom)
     }
+
     fn drain(&mut self, ctx: &mut Ctx) -> Result<()> {
         let Some(line) = &self.line else {
             return Ok(());

@@ -74,8 +74,7 @@ fn a_captured_erratic_session_replays_byte_for_byte() {
         .collect();
     assert!(captured.len() >= MOTOR, "{} captured", captured.len());
 
-    let played = cap.clone();
-    let emu = capture::replay_on_thread("erratic", played).unwrap();
+    let emu = capture::replay_on_thread("erratic", cap).unwrap();
     let outcome = session(emu.link());
     // The replay ends well only once every entry of the capture was played
     // and every byte it expects was matched; a difference ends it with an

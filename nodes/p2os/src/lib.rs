@@ -280,6 +280,10 @@ impl Driver for P2os {
         ctx.set_ready(false);
         // Player's first robot type until the robot says which it is.
         self.keep_geometry(ctx, &params::ROBOTS[0])?;
+        // The gripper's comes from the cfg: the robot's type changes nothing.
+        if let Some(d) = self.dev.gripper {
+            ctx.answer_always::<gripper::GetGeom>(&d, &self.gripper_geom)?;
+        }
         let line = device::spawn(self.settings.clone(), ctx.waker())
             .map_err(|e| NodeError::Driver(format!("starting the line thread: {e}").into()))?;
         tracing::info!("robot initialising ({})", self.settings.port.display());
@@ -370,8 +374,8 @@ impl P2os {
         }
     }
 
-    /// The geometry of the robot's type and the cfg's gripper, answered
-    /// without waking this thread ([`Ctx::answer_always`]).
+    /// The geometry of the robot's type, answered without waking this
+    /// thread ([`Ctx::answer_always`]).
     fn keep_geometry(&self, ctx: &mut Ctx, p: &Params) -> Result<()> {
         if let Some(d) = self.dev.odometry {
             ctx.answer_always::<position2d::GetGeom>(&d, &base_geom(p))?;
@@ -387,11 +391,9 @@ impl P2os {
             };
             ctx.answer_always::<bumper::GetGeom>(&d, &geom)?;
         }
-        if let Some(d) = self.dev.gripper {
-            ctx.answer_always::<gripper::GetGeom>(&d, &self.gripper_geom)?;
-        }
         Ok(())
     }
+
     fn drain(&mut self, ctx: &mut Ctx) -> Result<()> {
         let Some(line) = &self.line else {
             return Ok(());

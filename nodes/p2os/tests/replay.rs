@@ -72,8 +72,7 @@ fn a_captured_pioneer_session_replays_byte_for_byte() {
         .collect();
     assert!(captured.len() >= SIPS, "{} SIPs captured", captured.len());
 
-    let played = cap.clone();
-    let emu = capture::replay_on_thread("p2os", played).unwrap();
+    let emu = capture::replay_on_thread("p2os", cap).unwrap();
     let outcome = session(emu.link());
     // The replay ends well only once every entry of the capture was played
     // and every byte it expects was matched; a difference ends it with an

@@ -70,8 +70,7 @@ fn a_captured_lms200_session_replays_byte_for_byte() {
         .collect();
     assert_eq!(bauds, [9600, 38400], "the capture switches rate once");
 
-    let played = cap.clone();
-    let emu = capture::replay_on_thread("lms", played).unwrap();
+    let emu = capture::replay_on_thread("lms", cap).unwrap();
     let outcome = session(emu.link());
     // The replay ends well only once every entry of the capture was played
     // and every byte it expects was matched; a difference ends it with an
