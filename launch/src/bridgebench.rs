@@ -131,10 +131,15 @@ fn open(s: &mut TcpStream, interf: Interface) -> anyhow::Result<()> {
 
 /// `n` timed requests after `n / 10` untimed ones, sorted.
 fn timed(s: &mut TcpStream, h: [u32; 6], body: &[u8], n: usize) -> anyhow::Result<Vec<Duration>> {
+    times(n, || request(s, h, body).map(drop))
+}
+
+/// `n` timed runs of `f` after `n / 10` untimed ones, sorted.
+fn times(n: usize, mut f: impl FnMut() -> anyhow::Result<()>) -> anyhow::Result<Vec<Duration>> {
     let mut v = Vec::with_capacity(n);
     for i in 0..n + n / 10 {
         let t0 = Instant::now();
-        request(s, h, body)?;
+        f()?;
         if i >= n / 10 {
             v.push(t0.elapsed());
         }
@@ -384,10 +389,8 @@ fn measure(a: &BridgeBenchArgs, router: &troupe_node::zenoh::Session) -> anyhow:
 
     // The same request as a bare Zenoh get from the bridge's session, as
     // the bridge asks: what the bridge adds on top of Zenoh.
-    let mut raw = Vec::with_capacity(a.samples);
     let info_key = keys::req(&Device::new(ROBOT, Interface::Map, 0), "info");
-    for i in 0..a.samples + a.samples / 10 {
-        let t0 = Instant::now();
+    let raw = times(a.samples, || {
         let replies = troupe_node::ask(router, &info_key, troupe_node::REQUEST_TIMEOUT)
             .payload(codec::encode(&map::GetInfo, 0.0))
             .wait()
@@ -396,11 +399,8 @@ fn measure(a: &BridgeBenchArgs, router: &troupe_node::zenoh::Session) -> anyhow:
             .recv()
             .map_err(|e| anyhow::anyhow!("no reply to {info_key}: {e}"))?;
         anyhow::ensure!(reply.result().is_ok(), "{info_key} refused");
-        if i >= a.samples / 10 {
-            raw.push(t0.elapsed());
-        }
-    }
-    raw.sort();
+        Ok(())
+    })?;
     let _ = stop_tx.send(());
     let _ = rt.block_on(server);
 
