@@ -14,6 +14,9 @@ use troupe_geom::{bounds, Hit};
 pub struct Movers {
     /// World-frame polygons of each model (empty when not filed).
     shapes: Vec<Vec<Vec<(f64, f64)>>>,
+    /// A circle around each model's polygons (centre x, y, radius): a ray
+    /// that misses it misses them.
+    circles: Vec<(f64, f64, f64)>,
     /// The tiles each model is filed under.
     tiles_of: Vec<Vec<usize>>,
     /// Model ids (index + 1) filed under each tile.
@@ -25,6 +28,7 @@ impl Movers {
     pub fn new(models: usize, tiles: usize) -> Self {
         Movers {
             shapes: vec![Vec::new(); models],
+            circles: vec![(0.0, 0.0, -1.0); models],
             tiles_of: vec![Vec::new(); models],
             in_tile: vec![Vec::new(); tiles],
         }
@@ -38,12 +42,15 @@ impl Movers {
         T::IntoIter: Clone,
     {
         let tiles = tiles.into_iter();
+        let circle = circle_around(&shapes);
         if tiles.clone().eq(self.tiles_of[m].iter().copied()) {
             // Most steps a body stays in its tiles: only its shape moved.
             self.shapes[m] = shapes;
+            self.circles[m] = circle;
             return;
         }
         self.unfile(m, id);
+        self.circles[m] = circle;
         let tiles: Vec<usize> = tiles.collect();
         for &t in &tiles {
             if let Some(list) = self.in_tile.get_mut(t) {
@@ -68,6 +75,7 @@ impl Movers {
         }
         self.tiles_of[m].clear();
         self.shapes[m].clear();
+        self.circles[m] = (0.0, 0.0, -1.0);
     }
 
     /// The ids filed under tile `t`.
@@ -98,7 +106,21 @@ impl Movers {
 
     /// Where the ray from `o` along the unit vector `d` first meets model
     /// `m`'s body: metres, 0 when `o` is inside it.
+    #[inline]
     pub fn hit(&self, m: usize, id: u16, o: (f64, f64), d: (f64, f64)) -> Option<Hit> {
+        // Most rays that pass a body's tiles miss it: the circle says so
+        // without testing edges.
+        let (cx, cy, r) = self.circles[m];
+        let w = (cx - o.0, cy - o.1);
+        if (w.0 * d.1 - w.1 * d.0).abs() > r || w.0 * d.0 + w.1 * d.1 < -r {
+            return None;
+        }
+        self.hit_edges(m, id, o, d)
+    }
+
+    /// [`Movers::hit`] by testing the ray against every edge.
+    #[inline(never)]
+    fn hit_edges(&self, m: usize, id: u16, o: (f64, f64), d: (f64, f64)) -> Option<Hit> {
         let mut best = f64::INFINITY;
         for poly in &self.shapes[m] {
             let mut crossings = 0;
@@ -123,6 +145,22 @@ impl Movers {
         }
         best.is_finite().then_some(Hit { range: best, id })
     }
+}
+
+/// A circle holding every point of `polys`: centre and radius (negative
+/// when there are no points).
+fn circle_around(polys: &[Vec<(f64, f64)>]) -> (f64, f64, f64) {
+    let Some([x0, y0, x1, y1]) = bounds(polys.iter().flatten().copied()) else {
+        return (0.0, 0.0, -1.0);
+    };
+    let (cx, cy) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
+    let r2 = polys
+        .iter()
+        .flatten()
+        .map(|&(x, y)| (x - cx).powi(2) + (y - cy).powi(2))
+        .fold(0.0, f64::max);
+    // A hair more, so rays grazing a corner are still tested exactly.
+    (cx, cy, r2.sqrt() * (1.0 + 1e-9) + 1e-12)
 }
 
 /// Whether an edge of polygon `a` crosses an edge of polygon `b`.
@@ -206,5 +244,48 @@ mod tests {
         assert!((m.hit(1, 2, (0.0, 0.0), (1.0, 0.0)).unwrap().range - 4.5).abs() < 1e-12);
         m.unfile(1, 2);
         assert!(m.in_tile(0).is_empty() && m.hit(1, 2, (0.0, 0.0), (1.0, 0.0)).is_none());
+    }
+
+    #[test]
+    fn the_bounding_circle_never_hides_a_hit() {
+        // A rotated rectangle; rays from all around, most near its corners.
+        let body = vec![(1.0, 0.2), (1.8, 0.6), (1.5, 1.2), (0.7, 0.8)];
+        let mut m = Movers::new(1, 1);
+        m.file(0, 1, vec![body.clone()], vec![0]);
+        let mut x: u32 = 3;
+        let mut rnd = || {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            f64::from(x) / f64::from(u32::MAX)
+        };
+        let mut hits = 0;
+        for _ in 0..5000 {
+            let o = (rnd() * 4.0 - 1.0, rnd() * 4.0 - 1.5);
+            let (tx, ty) = body[(rnd() * 4.0) as usize % 4];
+            let a = (ty - o.1).atan2(tx - o.0) + (rnd() - 0.5) * 0.2;
+            let d = (a.cos(), a.sin());
+            // Edges alone, as hit() would without the circle.
+            let mut exact = f64::INFINITY;
+            for (p, q) in edges(&body) {
+                let e = (q.0 - p.0, q.1 - p.1);
+                let den = d.0 * e.1 - d.1 * e.0;
+                let w = (p.0 - o.0, p.1 - o.1);
+                let (t, u) = ((w.0 * e.1 - w.1 * e.0) / den, (w.0 * d.1 - w.1 * d.0) / den);
+                if (0.0..1.0).contains(&u) && t >= 0.0 {
+                    exact = exact.min(t);
+                }
+            }
+            let got = m.hit(0, 1, o, d).map(|h| h.range);
+            if inside(&body, o) {
+                assert_eq!(got, Some(0.0));
+            } else if exact.is_finite() {
+                hits += 1;
+                assert!((got.unwrap() - exact).abs() < 1e-12, "{o:?} {a}");
+            } else {
+                assert_eq!(got, None, "{o:?} {a}");
+            }
+        }
+        assert!(hits > 1000, "{hits}");
     }
 }

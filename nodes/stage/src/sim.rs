@@ -9,6 +9,9 @@
 //! walk the static grid (skipping empty tiles) and meet moving bodies
 //! exactly: a robot's own body costs its rays nothing.
 
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Mutex, PoisonError};
+
 use troupe_geom::occmap::{FREE, OCCUPIED};
 use troupe_geom::{bounds, normalize, Grid, Hit, Lattice, OccMap, Pose, EMPTY};
 use troupe_msgs::{map, Color};
@@ -599,17 +602,27 @@ impl Sim {
             .iter()
             .map(|&r| (r, std::mem::take(&mut self.readings[r])))
             .collect();
-        let per = work.len().div_ceil(threads);
+        // Rangers are taken a few at a time by whichever thread is free (this
+        // one too): rays differ in length, so equal shares would not finish
+        // together.
+        let batches: Vec<Mutex<&mut [_]>> = work.chunks_mut(4).map(Mutex::new).collect();
+        let next = AtomicUsize::new(0);
         let me = &*self;
-        std::thread::scope(|scope| {
-            for chunk in work.chunks_mut(per) {
-                scope.spawn(move || {
-                    for (r, out) in chunk.iter_mut() {
-                        me.sense_one(*r, out);
-                    }
-                });
+        let run = || {
+            while let Some(batch) = batches.get(next.fetch_add(1, Ordering::Relaxed)) {
+                let mut batch = batch.lock().unwrap_or_else(PoisonError::into_inner);
+                for (r, out) in batch.iter_mut() {
+                    me.sense_one(*r, out);
+                }
             }
+        };
+        std::thread::scope(|scope| {
+            for _ in 1..threads {
+                scope.spawn(run);
+            }
+            run();
         });
+        drop(batches);
         for (r, out) in work {
             self.readings[r] = out;
         }
