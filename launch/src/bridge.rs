@@ -34,7 +34,11 @@ pub struct BridgeArgs {
     /// client and publish its devices on Troupe's keys (commands sent to them
     /// go back to the server), so a robot still running Player joins the
     /// fleet. Serves no port.
-    #[arg(long, value_name = "HOST:PORT", conflicts_with_all = ["bind", "queue_len"])]
+    #[arg(
+        long,
+        value_name = "HOST:PORT",
+        conflicts_with_all = ["ports", "bind", "queue_len"]
+    )]
     pub import: Option<String>,
 
     /// With --import: publish the devices as this robot instead of the
@@ -145,5 +149,17 @@ mod tests {
         assert!(e.contains("`x`"), "{e}");
         let e = format!("{:#}", port("70000", lo).unwrap_err());
         assert!(e.contains("70000=ADDR:PORT"), "{e}");
+    }
+
+    #[test]
+    fn import_serves_no_port_so_it_refuses_one() {
+        use clap::Parser;
+        let parse = |args: &[&str]| crate::cli::Cli::try_parse_from(args);
+        assert!(parse(&["troupe", "bridge", "--import", "robot7:6665"]).is_ok());
+        assert!(parse(&["troupe", "bridge", "-p", "6666"]).is_ok());
+        let e = parse(&["troupe", "bridge", "--import", "robot7:6665", "-p", "6666"])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("--port"), "{e}");
     }
 }
