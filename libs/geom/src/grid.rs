@@ -544,6 +544,16 @@ mod tests {
     use super::*;
     use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, PI};
 
+    /// Repeatable uniform numbers in [0, 1] (xorshift) from a seed.
+    fn uniform(mut x: u32) -> impl FnMut() -> f64 {
+        move || {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            f64::from(x) / f64::from(u32::MAX)
+        }
+    }
+
     fn walls() -> Grid {
         // A 10 m box with 1 m resolution 0.05, walls one cell thick at x = ±4.
         let mut g = Grid::new(-5.0, -5.0, 5.0, 5.0, 0.05);
@@ -617,13 +627,7 @@ mod tests {
     #[test]
     fn random_rays_agree_with_a_brute_force_march() {
         let mut g = Grid::new(0.0, 0.0, 8.0, 8.0, 0.05);
-        let mut x: u32 = 99;
-        let mut rnd = || {
-            x ^= x << 13;
-            x ^= x >> 17;
-            x ^= x << 5;
-            f64::from(x) / f64::from(u32::MAX)
-        };
+        let mut rnd = uniform(99);
         for k in 0..40u16 {
             let (cx, cy) = (rnd() * 8.0, rnd() * 8.0);
             g.fill_polygon(
@@ -676,11 +680,6 @@ mod tests {
             }
         }
     }
-}
-
-#[cfg(test)]
-mod tiles {
-    use super::*;
 
     /// Every tile a ray passes through is offered to `in_tile`, once, in
     /// order along the ray, and no other.
@@ -689,13 +688,7 @@ mod tiles {
         // 10 × 7 tiles of 16 cells (the last row and column partly).
         let g = Grid::new(0.0, 0.0, 15.5, 10.5, 0.1);
         let (tw, tsize) = (g.tw, TILE as f64 * 0.1);
-        let mut x: u32 = 7;
-        let mut rnd = || {
-            x ^= x << 13;
-            x ^= x >> 17;
-            x ^= x << 5;
-            f64::from(x) / f64::from(u32::MAX)
-        };
+        let mut rnd = uniform(7);
         for _ in 0..2000 {
             let (ox, oy) = (rnd() * 19.0 - 2.0, rnd() * 14.0 - 2.0);
             let a = rnd() * std::f64::consts::TAU;
