@@ -181,6 +181,8 @@ enum Ranges {
 struct ModelDevices {
     model: String,
     devices: Vec<troupe_msgs::Device>,
+    /// The session every client here shares, and a client per robot.
+    session: troupe_node::zenoh::Session,
     clients: Vec<troupe_client::Client>,
 }
 
@@ -210,6 +212,7 @@ impl ModelDevices {
         Ok(ModelDevices {
             model: model.to_owned(),
             devices,
+            session: client.session().clone(),
             clients: vec![client],
         })
     }
@@ -238,8 +241,7 @@ impl ModelDevices {
         if let Some(c) = self.clients.iter().find(|c| c.robot() == robot) {
             return c.clone();
         }
-        let session = self.clients[0].session().clone();
-        let c = troupe_client::Client::with_session(session, robot);
+        let c = troupe_client::Client::with_session(self.session.clone(), robot);
         self.clients.push(c.clone());
         c
     }

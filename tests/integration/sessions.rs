@@ -408,10 +408,8 @@ fn answers_kept_ready_skip_the_driver_and_are_stamped_when_sent() {
     let dev = Device::new(6665, Interface::Position2d, 0);
     let session = net.client();
     let ask = |name: &str, payload: Vec<u8>| {
-        let replies = session
-            .get(keys::req(&dev, name))
+        let replies = troupe_node::ask(&session, &keys::req(&dev, name), DEADLINE)
             .payload(payload)
-            .timeout(DEADLINE)
             .wait()
             .unwrap();
         replies.recv().expect("an answer").into_result()

@@ -42,15 +42,16 @@ pub(crate) struct ReadyAnswers(Mutex<HashMap<Device, Vec<Kept>>>);
 type Kept = (&'static str, Option<Vec<u8>>, Vec<u8>);
 
 impl ReadyAnswers {
-    /// Keeps `reply` (as `codec::encode` made it) for request `name` to
-    /// `dev` with body `body` (`None`: any body).
+    /// Keeps `reply` for request `name` to `dev` whose payload is `request`
+    /// (`None`: any request), both as `codec::encode` made them.
     pub(crate) fn set(
         &self,
         dev: &Device,
         name: &'static str,
-        body: Option<Vec<u8>>,
+        request: Option<&[u8]>,
         reply: Vec<u8>,
     ) {
+        let body = request.and_then(|r| codec::split(r).ok().map(|(_, _, b)| b.to_vec()));
         let mut all = self.0.lock().unwrap_or_else(|p| p.into_inner());
         let answers = all.entry(*dev).or_default();
         match answers
@@ -230,9 +231,8 @@ impl Ctx {
     ) -> Result<()> {
         self.check_provided(dev)?;
         let asked = codec::encode(request, 0.0);
-        let body = codec::split(&asked).map(|(_, _, b)| b.to_vec()).ok();
         self.answers
-            .set(dev, R::NAME, body, codec::encode(reply, 0.0));
+            .set(dev, R::NAME, Some(&asked), codec::encode(reply, 0.0));
         Ok(())
     }
 
@@ -354,12 +354,8 @@ mod tests {
         let ready = ReadyAnswers::default();
         let dev = Device::new(6665, Interface::Simulation, 0);
         let ask = |name: &str| codec::encode(&simulation::GetPose2d { name: name.into() }, 3.0);
-        let body = |name: &str| {
-            let asked = ask(name);
-            codec::split(&asked).map(|(_, _, b)| b.to_vec()).ok()
-        };
         let answer = |x: f64| codec::encode(&common_pose("r0", x), 0.0);
-        ready.set(&dev, "get_pose2d", body("r0"), answer(1.0));
+        ready.set(&dev, "get_pose2d", Some(&ask("r0")), answer(1.0));
         let got = ready.get(&dev, "get_pose2d", &ask("r0"), 7.5).unwrap();
         let got = codec::decode::<simulation::Pose2dOf>(&got).unwrap();
         assert_eq!((got.stamp, got.msg.pose.x), (7.5, 1.0));
@@ -369,7 +365,7 @@ mod tests {
         let other = Device::new(6665, Interface::Simulation, 1);
         assert!(ready.get(&other, "get_pose2d", &ask("r0"), 0.0).is_none());
         // Kept again: replaced, not added.
-        ready.set(&dev, "get_pose2d", body("r0"), answer(2.0));
+        ready.set(&dev, "get_pose2d", Some(&ask("r0")), answer(2.0));
         assert_eq!(x_of(ready.get(&dev, "get_pose2d", &ask("r0"), 0.0)), 2.0);
         // An answer kept for any body answers them all.
         ready.set(&dev, "get_pose2d", None, answer(9.0));

@@ -106,9 +106,9 @@ pub struct Stage {
     steps_per_tick: u32,
     quit_time: f64,
     snapshot: Option<PathBuf>,
-    /// The simulation devices and model names whose pose was asked for:
-    /// their answers are kept ready, renewed whenever the model may move.
-    watched: Vec<(Device, String)>,
+    /// The simulation devices, model names and models whose pose was asked
+    /// for: their answers are kept ready, renewed whenever the model may move.
+    watched: Vec<(Device, String, usize)>,
 }
 
 /// Models already serving a device of each interface. A laser or sonar may
@@ -756,11 +756,9 @@ impl Stage {
 
     /// Keeps the pose of each watched model ready to answer, as it is now.
     fn keep_poses_ready(&self, ctx: &mut Ctx) -> Result<()> {
-        for (dev, name) in &self.watched {
-            if let Some(&m) = self.sim.world.names.get(name) {
-                let asked = simulation::GetPose2d { name: name.clone() };
-                ctx.answer_always_to(dev, &asked, &self.pose_of(m, name))?;
-            }
+        for (dev, name, m) in &self.watched {
+            let asked = simulation::GetPose2d { name: name.clone() };
+            ctx.answer_always_to(dev, &asked, &self.pose_of(*m, name))?;
         }
         Ok(())
     }
@@ -777,9 +775,13 @@ impl Stage {
                     // renewed after every step, and Stage's thread is not
                     // woken for it.
                     let dev = r.sample.device;
-                    if !self.watched.iter().any(|(d, n)| *d == dev && *n == q.name) {
+                    if !self
+                        .watched
+                        .iter()
+                        .any(|(d, n, _)| *d == dev && *n == q.name)
+                    {
                         ctx.answer_always_to(&dev, &q, &pose)?;
-                        self.watched.push((dev, q.name));
+                        self.watched.push((dev, q.name, m));
                     }
                     r.reply(&pose);
                 }
@@ -1138,7 +1140,8 @@ mod tests {
         let start = pose_of(&mut h, "r0");
         assert_eq!((start.x, start.y), (0.0, 0.0));
         assert_eq!(pose_of(&mut h, "r0"), start, "the kept answer");
-        assert_eq!(h.driver().watched, [(sim, "r0".to_owned())]);
+        let r0 = h.driver().sim.world.names["r0"];
+        assert_eq!(h.driver().watched, [(sim, "r0".to_owned(), r0)]);
         // Set: the kept answer is renewed before the set is acknowledged.
         let to = troupe_msgs::Pose2d::new(1.0, -1.0, 0.5);
         let p = h
