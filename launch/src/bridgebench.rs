@@ -129,22 +129,27 @@ fn open(s: &mut TcpStream, interf: Interface) -> anyhow::Result<()> {
     request(s, player_req(player::DEV), &body.finish()).map(drop)
 }
 
-/// `n` timed requests after `n / 10` untimed ones, sorted.
-fn timed(s: &mut TcpStream, h: [u32; 6], body: &[u8], n: usize) -> anyhow::Result<Vec<Duration>> {
-    times(n, || request(s, h, body).map(drop))
-}
-
-/// `n` timed runs of `f` after `n / 10` untimed ones, sorted.
-fn times(n: usize, mut f: impl FnMut() -> anyhow::Result<()>) -> anyhow::Result<Vec<Duration>> {
-    let mut v = Vec::with_capacity(n);
+/// `n` timed runs of each of `kinds` kinds of round trip (`run(k)` makes
+/// one of kind `k`), taken in turn so that the machine's drift touches every
+/// kind alike, after `n / 10` untimed rounds. Each kind's times, sorted.
+fn rounds(
+    n: usize,
+    kinds: usize,
+    mut run: impl FnMut(usize) -> anyhow::Result<()>,
+) -> anyhow::Result<Vec<Vec<Duration>>> {
+    let mut v = vec![Vec::with_capacity(n); kinds];
     for i in 0..n + n / 10 {
-        let t0 = Instant::now();
-        f()?;
-        if i >= n / 10 {
-            v.push(t0.elapsed());
+        for (k, times) in v.iter_mut().enumerate() {
+            let t0 = Instant::now();
+            run(k)?;
+            if i >= n / 10 {
+                times.push(t0.elapsed());
+            }
         }
     }
-    v.sort();
+    for times in &mut v {
+        times.sort();
+    }
     Ok(v)
 }
 
@@ -306,7 +311,17 @@ pub fn run(a: &BridgeBenchArgs) -> anyhow::Result<()> {
             "options": {"worldfile": world, "model": "r0", "speedup": -1, "update_rate": 100},
         }),
     )?;
-    let result = measure(a, &router);
+    // The drivers announce their devices from their own threads: the
+    // bridge lists only devices that are live.
+    let live = [Interface::Map, Interface::Position2d, Interface::Simulation]
+        .into_iter()
+        .try_for_each(|i| {
+            let dev = Device::new(ROBOT, i, 0);
+            troupe_node::wait_live(&router, &dev, Duration::from_secs(30))
+        });
+    let result = live
+        .map_err(anyhow::Error::from)
+        .and_then(|()| measure(a, &router));
     for (node, stop) in [mapfile, stage] {
         stop.stop();
         let _ = node.join();
@@ -336,24 +351,45 @@ fn measure(a: &BridgeBenchArgs, router: &troupe_node::zenoh::Session) -> anyhow:
     }));
 
     let mut s = connect(addr)?;
-    let idle = timed(&mut s, req(Interface::Map, 1), &[], a.samples)?;
     open(&mut s, Interface::Position2d)?;
-    let busy = timed(&mut s, req(Interface::Position2d, 1), &[], a.samples)?;
+    let (info, geom) = (req(Interface::Map, 1), req(Interface::Position2d, 1));
     // r0's pose: Stage's thread answers the first ask, then keeps the
     // answer ready, renewed after every step.
     let (get_pose, set_pose) = (req(Interface::Simulation, 1), req(Interface::Simulation, 2));
     let mut pose = Writer::new();
     pose.string("r0").f64(0.0).f64(0.0).f64(0.0);
     let pose = pose.finish();
-    let live = timed(&mut s, get_pose, &pose, a.samples)?;
-    // A request only Stage's own thread can answer, between steps: setting
+    // A request only Stage's driver can answer, between steps: setting
     // r0's pose, to where it is (the answer: name, x, y, yaw).
     let at = request(&mut s, get_pose, &pose)?;
     let mut r = xdr::Reader::new(&at);
     r.string()?;
     let mut set = Writer::new();
     set.string("r0").f64(r.f64()?).f64(r.f64()?).f64(r.f64()?);
-    let moved = timed(&mut s, set_pose, &set.finish(), a.samples)?;
+    let set = set.finish();
+    // The GET_INFO as a bare Zenoh get from the bridge's session, as the
+    // bridge asks: what the bridge adds on top of Zenoh.
+    let info_key = keys::req(&Device::new(ROBOT, Interface::Map, 0), "info");
+    let bare = || {
+        let replies = troupe_node::ask(router, &info_key, troupe_node::REQUEST_TIMEOUT)
+            .payload(codec::encode(&map::GetInfo, 0.0))
+            .wait()
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        let reply = replies
+            .recv()
+            .map_err(|e| anyhow::anyhow!("no reply to {info_key}: {e}"))?;
+        anyhow::ensure!(reply.result().is_ok(), "{info_key} refused");
+        Ok(())
+    };
+    let timed = rounds(a.samples, 5, |kind| match kind {
+        0 => request(&mut s, info, &[]).map(drop),
+        1 => request(&mut s, geom, &[]).map(drop),
+        2 => request(&mut s, get_pose, &pose).map(drop),
+        3 => request(&mut s, set_pose, &set).map(drop),
+        _ => bare(),
+    })?;
+    let [idle, busy, live, moved, raw] = <[Vec<Duration>; 5]>::try_from(timed)
+        .map_err(|_| anyhow::anyhow!("five kinds of round trip"))?;
     let mut fetches = Vec::with_capacity(a.fetches);
     let mut size = (0, 0);
     for _ in 0..a.fetches {
@@ -387,20 +423,6 @@ fn measure(a: &BridgeBenchArgs, router: &troupe_node::zenoh::Session) -> anyhow:
         .collect::<anyhow::Result<Vec<Reader>>>()?;
     drop(stuck);
 
-    // The same request as a bare Zenoh get from the bridge's session, as
-    // the bridge asks: what the bridge adds on top of Zenoh.
-    let info_key = keys::req(&Device::new(ROBOT, Interface::Map, 0), "info");
-    let raw = times(a.samples, || {
-        let replies = troupe_node::ask(router, &info_key, troupe_node::REQUEST_TIMEOUT)
-            .payload(codec::encode(&map::GetInfo, 0.0))
-            .wait()
-            .map_err(|e| anyhow::anyhow!("{e}"))?;
-        let reply = replies
-            .recv()
-            .map_err(|e| anyhow::anyhow!("no reply to {info_key}: {e}"))?;
-        anyhow::ensure!(reply.result().is_ok(), "{info_key} refused");
-        Ok(())
-    })?;
     let _ = stop_tx.send(());
     let _ = rt.block_on(server);
 
@@ -434,7 +456,7 @@ fn measure(a: &BridgeBenchArgs, router: &troupe_node::zenoh::Session) -> anyhow:
     )?;
     row(
         &mut out,
-        "simulation SET_POSE2D round trip (Stage's thread)",
+        "simulation SET_POSE2D round trip (Stage's driver)",
         &moved,
         "target <= 250 µs",
     )?;

@@ -437,3 +437,125 @@ fn answers_kept_ready_skip_the_driver_and_are_stamped_when_sent() {
     node.stop().unwrap();
     assert_eq!(READY_SAW.load(std::sync::atomic::Ordering::SeqCst), 1);
 }
+
+/// Held by a test to keep a [`Turns`] command hook running.
+static TURNS_GATE: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// A driver that ticks fast, remembers the last commanded speed (holding
+/// [`TURNS_GATE`] while it takes a negative one) and answers a geometry
+/// request with that speed as width and, as length, 1 when its own thread
+/// ran the hook, 0 when another did.
+struct Turns {
+    speed: f64,
+}
+
+impl Driver for Turns {
+    const NAME: &'static str = "turns";
+    type Options = NoOpts;
+
+    fn new(_: &Section, _: NoOpts) -> Result<Self> {
+        Ok(Turns { speed: 0.0 })
+    }
+
+    fn setup(&mut self, ctx: &mut Ctx) -> Result<()> {
+        ctx.set_tick(Some(Duration::from_millis(1)));
+        Ok(())
+    }
+
+    fn on_event(&mut self, _: &mut Ctx, event: Event) -> Result<()> {
+        match event {
+            Event::Command(c) => {
+                self.speed = c.decode::<position2d::CmdVel>()?.msg.vel.x;
+                if self.speed < 0.0 {
+                    drop(TURNS_GATE.lock());
+                }
+            }
+            Event::Request(r) => {
+                let own = std::thread::current().name() == Some("driver turns");
+                r.reply(&position2d::Geom {
+                    size: Size3d {
+                        width: self.speed,
+                        length: if own { 1.0 } else { 0.0 },
+                        height: 0.0,
+                    },
+                    ..Default::default()
+                });
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+}
+
+/// Asks [`Turns`] for its geometry: (speed seen, answered on its own thread).
+fn ask_turns(session: &troupe_node::zenoh::Session) -> (f64, bool) {
+    let dev = Device::new(6665, Interface::Position2d, 0);
+    let replies = troupe_node::ask(session, &keys::req(&dev, "geom"), DEADLINE)
+        .payload(codec::encode(&position2d::GetGeom, 0.0))
+        .wait()
+        .unwrap();
+    let s = replies.recv().expect("an answer").into_result().unwrap();
+    let g = codec::decode::<position2d::Geom>(&s.payload().to_bytes()).unwrap();
+    (g.msg.size.width, g.msg.size.length == 1.0)
+}
+
+#[test]
+fn requests_to_an_idle_driver_run_at_once_on_the_receiving_thread() {
+    let net = TestNet::new("inline");
+    let node = start::<Turns>(&net, r#"{"name":"turns","provides":["position2d:0"]}"#);
+    net.wait_live(&["6665:position2d:0"]);
+    // Two clients asking at once, while the driver ticks at 1 kHz: a
+    // request that finds the driver between ticks runs at once, the others
+    // wait their turn on its thread; each is answered once.
+    let asks = || {
+        let session = net.client();
+        move || {
+            (0..100)
+                .map(|_| ask_turns(&session))
+                .filter(|&(speed, own)| speed == 0.0 && !own)
+                .count()
+        }
+    };
+    let other = std::thread::spawn(asks());
+    let here = asks()();
+    let there = other.join().unwrap();
+    node.stop().unwrap();
+    assert!(
+        here + there > 0,
+        "no request was answered off the driver's thread"
+    );
+}
+
+#[test]
+fn a_request_behind_a_running_hook_waits_and_sees_its_effect() {
+    let net = TestNet::new("behind");
+    let node = start::<Turns>(&net, r#"{"name":"turns","provides":["position2d:0"]}"#);
+    net.wait_live(&["6665:position2d:0"]);
+    let session = net.client();
+    let dev = Device::new(6665, Interface::Position2d, 0);
+    for speed in [-2.5, 0.5, -1.0] {
+        let gate = TURNS_GATE.lock().unwrap();
+        let cmd = position2d::CmdVel {
+            vel: Pose2d::new(speed, 0.0, 0.0),
+            state: true,
+        };
+        session
+            .put(keys::cmd(&dev, "vel"), codec::encode(&cmd, 0.0))
+            .wait()
+            .unwrap();
+        // Asked while the command's hook may still hold the gate.
+        let dev_key = keys::req(&dev, "geom");
+        let replies = troupe_node::ask(&session, &dev_key, DEADLINE)
+            .payload(codec::encode(&position2d::GetGeom, 0.0))
+            .wait()
+            .unwrap();
+        drop(gate);
+        let s = replies.recv().expect("an answer").into_result().unwrap();
+        let g = codec::decode::<position2d::Geom>(&s.payload().to_bytes()).unwrap();
+        assert_eq!(
+            g.msg.size.width, speed,
+            "the request saw the command before it"
+        );
+    }
+    node.stop().unwrap();
+}

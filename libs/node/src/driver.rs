@@ -16,9 +16,11 @@ use crate::section::Section;
 ///
 /// The runtime owns the session, the loop, signals and logging; a driver only
 /// reacts to [`Event`]s through its hooks and talks to the world through
-/// [`Ctx`]. Hooks are plain synchronous calls made one at a time from one
-/// thread, so a driver needs no locks; a hook must not block for long (use a
-/// tick or a request whose reply arrives as an event instead of waiting).
+/// [`Ctx`]. Hooks are plain synchronous calls made one at a time, so a
+/// driver needs no locks; a hook must not block for long (use a tick or a
+/// request whose reply arrives as an event instead of waiting). They run on
+/// the driver's own thread, save requests that find the driver idle (see
+/// [`Driver::quick`]).
 pub trait Driver: Sized + Send + 'static {
     /// The Player driver name (`"sicklms200"`, `"rangertolaser"`…).
     const NAME: &'static str;
@@ -61,6 +63,18 @@ pub trait Driver: Sized + Send + 'static {
     /// and counts the malformed input and goes on. Any other error stops the
     /// node (and the supervisor may restart it).
     fn on_event(&mut self, ctx: &mut Ctx, event: Event) -> Result<()>;
+
+    /// True when `request`'s hook returns quickly (the default, as every
+    /// hook should), so that the runtime may run it at once on the thread
+    /// that received it while the driver is idle with nothing queued: the
+    /// answer then skips a thread wake. Return false for a request whose
+    /// hook does long work (stepping a simulation, planning a path); it
+    /// then always waits its turn on the driver's thread. Either way hooks
+    /// run one at a time, in arrival order.
+    fn quick(&self, request: &Request) -> bool {
+        let _ = request;
+        true
+    }
 
     /// Stops the driver: stop the motors, close the device.
     ///

@@ -4,6 +4,11 @@
 //! handled sample of the same device and schema (Player's "replace" rule), so
 //! a slow driver always works on fresh data instead of a growing backlog.
 //! Requests and replies are never coalesced or dropped.
+//!
+//! The inbox also knows whether a hook is running (`busy`): the driver's
+//! thread marks it when it pops, and a Zenoh callback may [`Inbox::claim`] an
+//! idle driver with nothing queued to run a request's hook at once, on its
+//! own thread. Hooks so stay one at a time and in arrival order.
 
 use std::collections::VecDeque;
 use std::sync::{Condvar, Mutex, MutexGuard};
@@ -16,12 +21,21 @@ struct State {
     events: VecDeque<Event>,
     shutdown: bool,
     replaced: u64,
+    /// A hook is running, on the driver's thread or a claiming one.
+    busy: bool,
+    /// A hook run by a claiming thread changed what the loop must look at
+    /// (readiness, tick, stop, an error).
+    recheck: bool,
+    /// The driver's thread waits for the condition variable.
+    waiting: bool,
 }
 
 /// What [`Inbox::pop`] found.
 pub(crate) enum Popped {
     Event(Event),
     Timeout,
+    /// A hook ran elsewhere and left the loop something to look at.
+    Recheck,
     Shutdown,
 }
 
@@ -32,6 +46,13 @@ pub(crate) struct Inbox {
 }
 
 impl Inbox {
+    /// An inbox whose driver is busy (starting) until [`Inbox::idle`].
+    pub(crate) fn busy() -> Self {
+        let inbox = Inbox::default();
+        inbox.lock().busy = true;
+        inbox
+    }
+
     fn lock(&self) -> MutexGuard<'_, State> {
         // A panic in another thread while holding the lock leaves plain data behind.
         self.state.lock().unwrap_or_else(|p| p.into_inner())
@@ -59,8 +80,11 @@ impl Inbox {
             }
             None => st.events.push_back(event),
         }
+        let waiting = st.waiting;
         drop(st);
-        self.ready.notify_one();
+        if waiting {
+            self.ready.notify_one();
+        }
     }
 
     pub(crate) fn shutdown(&self) {
@@ -73,29 +97,66 @@ impl Inbox {
         self.lock().replaced
     }
 
-    /// The next event, waiting until `deadline` (forever if `None`).
+    /// The next event, waiting until `deadline` (forever if `None`), once
+    /// no hook is running; the caller is then the one running hooks until
+    /// it calls [`Inbox::idle`]. `Shutdown` comes once no hook is running.
     pub(crate) fn pop(&self, deadline: Option<Instant>) -> Popped {
         let mut st = self.lock();
         loop {
-            if st.shutdown {
-                return Popped::Shutdown;
+            if !st.busy {
+                if st.shutdown {
+                    return Popped::Shutdown;
+                }
+                let found = if std::mem::take(&mut st.recheck) {
+                    Some(Popped::Recheck)
+                } else if let Some(e) = st.events.pop_front() {
+                    Some(Popped::Event(e))
+                } else if deadline.is_some_and(|d| Instant::now() >= d) {
+                    Some(Popped::Timeout)
+                } else {
+                    None
+                };
+                if let Some(p) = found {
+                    st.busy = true;
+                    return p;
+                }
             }
-            if let Some(e) = st.events.pop_front() {
-                return Popped::Event(e);
-            }
+            st.waiting = true;
             st = match deadline {
-                None => self.ready.wait(st).unwrap_or_else(|p| p.into_inner()),
-                Some(d) => {
-                    let now = Instant::now();
-                    if now >= d {
-                        return Popped::Timeout;
-                    }
+                Some(d) if !st.busy => {
+                    let left = d.saturating_duration_since(Instant::now());
                     self.ready
-                        .wait_timeout(st, d - now)
+                        .wait_timeout(st, left)
                         .unwrap_or_else(|p| p.into_inner())
                         .0
                 }
+                _ => self.ready.wait(st).unwrap_or_else(|p| p.into_inner()),
             };
+            st.waiting = false;
+        }
+    }
+
+    /// Marks the driver busy when it is idle with nothing queued and the
+    /// inbox is open: the caller may then run one hook, and must call
+    /// [`Inbox::idle`] after.
+    pub(crate) fn claim(&self) -> bool {
+        let mut st = self.lock();
+        let free = !st.busy && !st.shutdown && st.events.is_empty();
+        st.busy |= free;
+        free
+    }
+
+    /// Ends what [`Inbox::pop`] or [`Inbox::claim`] started; `recheck`
+    /// makes the driver's thread look at its state before the next event.
+    pub(crate) fn idle(&self, recheck: bool) {
+        let mut st = self.lock();
+        st.busy = false;
+        st.recheck |= recheck;
+        let waiting = st.waiting;
+        drop(st);
+        // The driver's thread may be waiting for the hook to end.
+        if waiting {
+            self.ready.notify_one();
         }
     }
 }
@@ -128,9 +189,54 @@ mod tests {
             panic!("expected data first")
         };
         assert_eq!(s.decode::<laser::Scan>().unwrap().msg.id, 2);
+        inbox.idle(false);
         assert!(matches!(inbox.pop(None), Popped::Event(Event::Tick)));
+        inbox.idle(false);
         assert!(matches!(inbox.pop(Some(Instant::now())), Popped::Timeout));
+        inbox.idle(false);
         inbox.shutdown();
         assert!(matches!(inbox.pop(None), Popped::Shutdown));
+    }
+
+    #[test]
+    fn only_an_idle_driver_with_nothing_queued_is_claimed() {
+        let inbox = Inbox::default();
+        assert!(inbox.claim(), "idle and empty");
+        assert!(!inbox.claim(), "a hook is already running");
+        inbox.idle(false);
+        inbox.push(Event::Tick);
+        assert!(!inbox.claim(), "a queued event goes first");
+        assert!(matches!(inbox.pop(None), Popped::Event(Event::Tick)));
+        assert!(!inbox.claim(), "the driver's thread runs a hook");
+        inbox.idle(false);
+        assert!(inbox.claim());
+        inbox.idle(true);
+        assert!(matches!(inbox.pop(None), Popped::Recheck));
+        inbox.idle(false);
+        inbox.shutdown();
+        assert!(!inbox.claim(), "a closed inbox runs no more hooks");
+    }
+
+    #[test]
+    fn the_driver_thread_waits_for_a_claimed_hook_to_end() {
+        let inbox = std::sync::Arc::new(Inbox::default());
+        assert!(inbox.claim());
+        inbox.push(Event::Tick);
+        inbox.shutdown();
+        let (tx, rx) = std::sync::mpsc::channel();
+        let waiter = {
+            let inbox = inbox.clone();
+            std::thread::spawn(move || {
+                let first = matches!(inbox.pop(None), Popped::Shutdown);
+                tx.send(first).unwrap();
+            })
+        };
+        // Nothing may come out while the claimed hook runs.
+        assert!(rx
+            .recv_timeout(std::time::Duration::from_millis(50))
+            .is_err());
+        inbox.idle(false);
+        assert!(rx.recv().unwrap(), "shutdown once the hook ended");
+        waiter.join().unwrap();
     }
 }

@@ -1,8 +1,10 @@
 //! The node runtime: one driver, one Zenoh session, one event loop.
 //!
-//! Zenoh's callbacks push [`Event`]s into an [`Inbox`]; one thread pops them
-//! and calls the driver's hooks, so drivers are plain synchronous code. The
-//! runtime also declares what the section provides:
+//! Zenoh's callbacks push [`Event`]s into an [`Inbox`]; the driver's thread
+//! pops them and calls the driver's hooks, one at a time, so drivers are
+//! plain synchronous code. A request that finds the driver idle with nothing
+//! queued runs its hook at once on the receiving thread instead ([`Inline`]).
+//! The runtime also declares what the section provides:
 //!
 //! - a publisher on each data key, and a queryable on the same key that
 //!   answers with the latest sample of each message type (late joiners get
@@ -174,7 +176,8 @@ pub fn spawn<D: Driver>(
     stop: Stop,
 ) -> Result<NodeHandle> {
     let driver = build::<D>(&section)?;
-    let inbox = Arc::new(Inbox::default());
+    // Busy with `setup` until the loop first waits.
+    let inbox = Arc::new(Inbox::busy());
     stop.attach(inbox.clone());
 
     let ticks = Arc::new(SimTicks::default());
@@ -194,9 +197,11 @@ pub fn spawn<D: Driver>(
 
     let provided: Vec<Device> = section.provided().into_iter().map(|s| s.device).collect();
     let ready = Arc::<ReadyAnswers>::default();
+    let inline = Arc::<Inline>::default();
     let mut bus = ZenohBus {
         session: session.clone(),
         inbox: inbox.clone(),
+        inline: inline.clone(),
         publishers: HashMap::new(),
         latest: Arc::new(Mutex::new(HashMap::new())),
         ready: ready.clone(),
@@ -207,7 +212,7 @@ pub fn spawn<D: Driver>(
     for dev in &provided {
         bus.provide(dev, &clock, D::NAME)?;
     }
-    let mut ctx = Ctx::new(
+    let ctx = Ctx::new(
         D::NAME,
         clock,
         Box::new(bus),
@@ -221,7 +226,13 @@ pub fn spawn<D: Driver>(
         .spawn(move || {
             // The clock subscription lives as long as the loop.
             let _clock_sub = clock_sub;
-            run_loop(driver, &mut ctx, &inbox, &ticks, &thread_session, &provided)
+            let core = Core {
+                driver,
+                ctx,
+                stats: Stats::default(),
+                fatal: None,
+            };
+            run_loop(core, &inbox, &inline, &ticks, &thread_session, &provided)
         })
         .map_err(|e| NodeError::Driver(format!("starting the driver thread: {e}").into()))?;
     Ok(NodeHandle { thread, stop })
@@ -274,34 +285,128 @@ pub(crate) fn build<D: Driver>(section: &Section) -> Result<D> {
     D::new(section, options)
 }
 
+/// A driver and what its hooks use: run by one thread at a time, the
+/// driver's own or one that claimed it idle (see [`Inline`]).
+struct Core<D> {
+    driver: D,
+    ctx: Ctx,
+    stats: Stats,
+    /// The error that stopped a hook run away from the driver's thread.
+    fatal: Option<NodeError>,
+}
+
+impl<D: Driver> Core<D> {
+    /// What the loop must act on when a hook changes it.
+    fn watched(&self) -> (bool, bool, Option<Duration>) {
+        (self.ctx.ready, self.ctx.stop, self.ctx.tick)
+    }
+}
+
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    // A panicking hook leaves the driver as it was; the loop reports the rest.
+    m.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// Runs a request's hook at once on the thread that received it (Zenoh's)
+/// when the driver is idle with nothing queued and [`Driver::quick`] agrees,
+/// instead of waking the driver's thread: a thread wake less per round trip.
+/// Hooks stay one at a time and in arrival order ([`Inbox::claim`]).
+#[derive(Default)]
+struct Inline(std::sync::OnceLock<Box<dyn Fn(Event) -> Option<Event> + Send + Sync>>);
+
+impl Inline {
+    /// Runs `event`'s hook here if the driver is free, else queues it.
+    fn deliver(&self, inbox: &Inbox, event: Event) {
+        let event = match self.0.get() {
+            Some(run) => match run(event) {
+                Some(e) => e,
+                None => return,
+            },
+            None => event,
+        };
+        inbox.push(event);
+    }
+
+    /// Lets other threads run `core`'s hooks while the loop is idle.
+    fn enable<D: Driver>(&self, core: &Arc<Mutex<Core<D>>>, inbox: &Arc<Inbox>) {
+        let (core, inbox) = (Arc::downgrade(core), inbox.clone());
+        let run = move |event: Event| {
+            if !inbox.claim() {
+                return Some(event);
+            }
+            // Claimed: the loop waits for `idle` before it drops the core.
+            let Some(core) = core.upgrade() else {
+                inbox.idle(false);
+                return Some(event);
+            };
+            let mut c = lock(&core);
+            let before = c.watched();
+            let Core {
+                driver, ctx, stats, ..
+            } = &mut *c;
+            if matches!(&event, Event::Request(r) if !driver.quick(r)) {
+                // Queued while still claimed: it keeps its place.
+                inbox.push(event);
+                drop(c);
+                drop(core);
+                inbox.idle(false);
+                return None;
+            }
+            stats.inline += 1;
+            let result = dispatch(driver, ctx, event, stats);
+            let recheck = result.is_err() || c.watched() != before;
+            if let Err(e) = result {
+                c.fatal = Some(e);
+            }
+            drop(c);
+            drop(core);
+            inbox.idle(recheck);
+            None
+        };
+        if self.0.set(Box::new(run)).is_err() {
+            tracing::error!(driver = D::NAME, "inline hooks enabled twice");
+        }
+    }
+}
+
 fn run_loop<D: Driver>(
-    mut driver: D,
-    ctx: &mut Ctx,
-    inbox: &Inbox,
+    core: Core<D>,
+    inbox: &Arc<Inbox>,
+    inline: &Inline,
     ticks: &SimTicks,
     session: &Session,
     provided: &[Device],
 ) -> Result<()> {
+    let core = Arc::new(Mutex::new(core));
+    inline.enable(&core, inbox);
+    let mut c = lock(&core);
+    let Core { driver, ctx, .. } = &mut *c;
     driver.setup(ctx)?;
     let mut tokens: Vec<LivelinessToken> = Vec::new();
     announce::<D>(ctx.ready, &mut tokens, session, provided)?;
     let mut announced = ctx.ready;
-    let mut stats = Stats::default();
+    drop(c);
+    inbox.idle(false);
     let mut next_tick: Option<Instant> = None;
     let result = loop {
+        let (tick, manual) = {
+            let c = lock(&core);
+            (c.ctx.tick, c.ctx.clock().is_manual())
+        };
         // Ticks follow sim/clock only for nodes that follow a simulator,
         // not for the simulator itself (whose clock is also set by hand).
-        let sim = ctx.clock().is_manual() && !D::CLOCK_SOURCE;
-        ticks.set_period(if sim { ctx.tick } else { None });
-        next_tick = match (ctx.tick, next_tick) {
+        let sim = manual && !D::CLOCK_SOURCE;
+        ticks.set_period(if sim { tick } else { None });
+        next_tick = match (tick, next_tick) {
             (Some(p), None) if !sim => Some(Instant::now() + p),
             (Some(_), t) if !sim => t,
             _ => None,
         };
         let event = match inbox.pop(next_tick) {
             Popped::Shutdown => break Ok(()),
+            Popped::Recheck => None,
             Popped::Timeout => {
-                if let (Some(p), Some(t)) = (ctx.tick, next_tick) {
+                if let (Some(p), Some(t)) = (tick, next_tick) {
                     // Keep the phase; skip ticks missed while a hook ran long.
                     let mut n = t + p;
                     while n <= Instant::now() {
@@ -309,33 +414,58 @@ fn run_loop<D: Driver>(
                     }
                     next_tick = Some(n);
                 }
-                Event::Tick
+                Some(Event::Tick)
             }
-            Popped::Event(e) => e,
+            Popped::Event(e) => Some(e),
         };
-        if let Err(e) = dispatch(&mut driver, ctx, event, &mut stats) {
-            break Err(e);
-        }
-        if ctx.ready != announced {
-            announced = ctx.ready;
-            if let Err(e) = announce::<D>(ctx.ready, &mut tokens, session, provided) {
-                break Err(e);
+        let mut c = lock(&core);
+        let Core {
+            driver,
+            ctx,
+            stats,
+            fatal,
+        } = &mut *c;
+        let result = match (fatal.take(), event) {
+            (Some(e), _) => Err(e),
+            (None, Some(event)) => dispatch(driver, ctx, event, stats),
+            (None, None) => Ok(()),
+        };
+        let step = result.and_then(|()| {
+            if ctx.ready != announced {
+                announced = ctx.ready;
+                announce::<D>(ctx.ready, &mut tokens, session, provided)?;
             }
+            Ok(ctx.stop)
+        });
+        drop(c);
+        if !matches!(step, Ok(false)) {
+            // No hook runs anywhere after the one that ended the loop.
+            inbox.shutdown();
         }
-        if ctx.stop {
-            tracing::info!(driver = D::NAME, "the driver asked to stop");
-            break Ok(());
+        inbox.idle(false);
+        match step {
+            Err(e) => break Err(e),
+            Ok(true) => {
+                tracing::info!(driver = D::NAME, "the driver asked to stop");
+                break Ok(());
+            }
+            Ok(false) => {}
         }
     };
     drop(tokens);
     if let Err(e) = &result {
         tracing::error!(driver = D::NAME, "stopping after a fatal error: {e}");
     }
+    let mut c = lock(&core);
+    let Core {
+        driver, ctx, stats, ..
+    } = &mut *c;
     let down = driver.shutdown(ctx);
     tracing::info!(
         driver = D::NAME,
         events = stats.events,
         malformed = stats.malformed,
+        inline = stats.inline,
         replaced = inbox.replaced(),
         "stopped"
     );
@@ -345,6 +475,8 @@ fn run_loop<D: Driver>(
 #[derive(Default)]
 pub(crate) struct Stats {
     pub(crate) events: u64,
+    /// Requests whose hook ran on the thread that received them.
+    pub(crate) inline: u64,
     pub(crate) malformed: u64,
 }
 
@@ -407,7 +539,14 @@ pub(crate) fn dispatch<D: Driver>(
     }
 }
 
-fn wait_live(session: &Session, dev: &Device, timeout: Duration) -> Result<()> {
+/// Waits until some driver announces `dev` (its liveliness token), at most
+/// `timeout`.
+///
+/// # Errors
+///
+/// [`NodeError::RequiresTimeout`] when it does not appear in time, or the
+/// Zenoh error of watching for it.
+pub fn wait_live(session: &Session, dev: &Device, timeout: Duration) -> Result<()> {
     let key = keys::token_any(dev);
     let sub = session
         .liveliness()
@@ -492,6 +631,7 @@ type Latest = Arc<Mutex<HashMap<Device, Vec<(String, ZBytes)>>>>;
 struct ZenohBus {
     session: Session,
     inbox: Arc<Inbox>,
+    inline: Arc<Inline>,
     publishers: HashMap<Device, Publisher<'static>>,
     /// Latest payload of each schema (by tag) published on each provided device.
     latest: Latest,
@@ -564,7 +704,7 @@ impl ZenohBus {
             .map_err(z(|| format!("subscribing to commands of {d}")))?;
         self.subscribers.push(sub);
 
-        let inbox = self.inbox.clone();
+        let (inbox, inline) = (self.inbox.clone(), self.inline.clone());
         let clock = clock.clone();
         let ready = self.ready.clone();
         let q = s
@@ -581,11 +721,12 @@ impl ZenohBus {
                 }
                 let what = format!("request `{name}` to {d} ({driver})");
                 let responder = Responder::new(Box::new(ZenohSink(query)), clock.clone(), what);
-                inbox.push(Event::Request(Request {
+                let request = Request {
                     sample: Sample::new(d, key, payload),
                     name,
                     responder,
-                }));
+                };
+                inline.deliver(&inbox, Event::Request(request));
             })
             .wait()
             .map_err(z(|| format!("declaring request queryable of {d}")))?;

@@ -170,6 +170,12 @@ impl Driver for Stage {
     type Options = Options;
     const CLOCK_SOURCE: bool = true;
 
+    /// Stepping the world on request is long work: it waits its turn on
+    /// Stage's thread.
+    fn quick(&self, request: &troupe_node::Request) -> bool {
+        !request.is::<simulation::Step>()
+    }
+
     fn new(section: &Section, o: Options) -> Result<Self> {
         let cfg_err = |m: String| NodeError::config(Self::NAME, m);
         let path = o.worldfile.clone().ok_or_else(|| {

@@ -164,6 +164,12 @@ impl Driver for Wavefront {
         ("cspace_file", Unit::Path),
     ];
 
+    /// Enabling may plan a path (milliseconds on a large map): that waits
+    /// its turn on the planner's thread.
+    fn quick(&self, request: &troupe_node::Request) -> bool {
+        !request.is::<planner::Enable>()
+    }
+
     fn new(section: &Section, o: Options) -> Result<Self> {
         if o.update_rate.is_nan() || o.update_rate <= 0.0 {
             return Err(NodeError::config(
