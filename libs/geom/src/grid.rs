@@ -12,6 +12,11 @@ pub const EMPTY: u16 = 0;
 /// Cells per tile side.
 const TILE: usize = 16;
 
+/// The most cells of clearance a grid records (see [`Grid::clearance`]):
+/// enough to skip the open space around a sensor, small enough that a
+/// change to the grid is redrawn in a small window.
+const CLEAR: u8 = 64;
+
 /// What a ray hit.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Hit {
@@ -40,6 +45,12 @@ pub struct Grid {
     cells: Vec<u16>,
     tw: usize,
     tiles: Vec<u32>,
+    /// Per cell, the Chebyshev distance in cells to the nearest occupied
+    /// cell, at most [`CLEAR`]; 0 in an occupied cell. Empty unless kept.
+    clear: Vec<u8>,
+    /// The box (i0, j0, i1, j1) of cells filled or emptied since `clear`
+    /// was last brought up to date.
+    stale: Option<[usize; 4]>,
 }
 
 impl Lattice {
@@ -205,6 +216,8 @@ impl Grid {
             cells: vec![EMPTY; w * h],
             tw,
             tiles: vec![0; tw * th],
+            clear: Vec::new(),
+            stale: None,
         }
     }
 
@@ -251,9 +264,90 @@ impl Grid {
         match (*c == EMPTY, id == EMPTY) {
             (true, false) => *t += 1,
             (false, true) => *t -= 1,
-            _ => {}
+            _ => {
+                *c = id;
+                return;
+            }
         }
         *c = id;
+        if self.clear.is_empty() {
+            return;
+        }
+        self.stale = Some(match self.stale {
+            Some([i0, j0, i1, j1]) => [i0.min(i), j0.min(j), i1.max(i), j1.max(j)],
+            None => [i, j, i, j],
+        });
+    }
+
+    /// The radius of the disc around world point (x, y) that holds no
+    /// occupied cell, as far as the grid records it (a little over a metre
+    /// at 0.02 m cells): a ray from (x, y) can start its walk that far out.
+    /// 0 outside the grid, when the grid does not keep it
+    /// ([`Grid::keep_clearance`]), and whenever cells changed since the last
+    /// [`Grid::refresh_clearance`].
+    pub fn clearance(&self, x: f64, y: f64) -> f64 {
+        if self.stale.is_some() || self.clear.is_empty() {
+            return 0.0;
+        }
+        match self.lat.cell_of(x, y) {
+            // The free square of cells around (i, j) reaches this far
+            // beyond the cell, wherever in it the point lies.
+            Some((i, j)) => {
+                f64::from(self.clear[j * self.lat.w + i].saturating_sub(1)) * self.lat.res
+            }
+            None => 0.0,
+        }
+    }
+
+    /// Starts keeping [`Grid::clearance`] (one byte per cell; a grid does
+    /// not keep it unless asked).
+    pub fn keep_clearance(&mut self) {
+        if self.clear.is_empty() {
+            let (w, h) = self.lat.size();
+            self.clear = vec![CLEAR; w * h];
+            self.stale = Some([0, 0, w - 1, h - 1]);
+        }
+    }
+
+    /// Brings [`Grid::clearance`] up to date with the cells changed since
+    /// the last call: a window around them is redrawn.
+    pub fn refresh_clearance(&mut self) {
+        let Some([i0, j0, i1, j1]) = self.stale.take() else {
+            return;
+        };
+        let (w, h) = (self.lat.w, self.lat.h);
+        let cap = usize::from(CLEAR);
+        let grow = |[i0, j0, i1, j1]: [usize; 4]| {
+            [
+                i0.saturating_sub(cap),
+                j0.saturating_sub(cap),
+                (i1 + cap).min(w - 1),
+                (j1 + cap).min(h - 1),
+            ]
+        };
+        // The cells whose clearance may have changed, and the cells that
+        // decide it (within CLEAR of them).
+        let win = grow([i0, j0, i1, j1]);
+        let src = grow(win);
+        let of = |c: u16| if c == EMPTY { CLEAR } else { 0 };
+        if src == [0, 0, w - 1, h - 1] {
+            // The whole grid: in place.
+            for (d, &c) in self.clear.iter_mut().zip(&self.cells) {
+                *d = of(c);
+            }
+            chamfer(&mut self.clear, w);
+            return;
+        }
+        let sw = src[2] - src[0] + 1;
+        let mut d: Vec<u8> = (src[1]..=src[3])
+            .flat_map(|y| self.cells[y * w + src[0]..][..sw].iter().map(|&c| of(c)))
+            .collect();
+        chamfer(&mut d, sw);
+        let n = win[2] - win[0] + 1;
+        for y in win[1]..=win[3] {
+            let from = (y - src[1]) * sw + win[0] - src[0];
+            self.clear[y * w + win[0]..][..n].copy_from_slice(&d[from..from + n]);
+        }
     }
 
     /// Marks every cell of the polygon with `id`.
@@ -295,7 +389,7 @@ impl Grid {
         accept: impl FnMut(u16) -> bool,
     ) -> Option<Hit> {
         let (dy, dx) = angle.sin_cos();
-        self.cast_with(x, y, (dx, dy), max_range, accept, |_| None)
+        self.cast_with(x, y, (dx, dy), (0.0, max_range), accept, |_| None)
     }
 
     /// The tile holding cell (i, j), as [`Grid::cast_with`] names tiles.
@@ -325,6 +419,8 @@ impl Grid {
     /// tile `t` on its way and answers the nearest hit (range from the ray's
     /// origin) of what it keeps there, e.g. moving bodies tested exactly
     /// against the ray. The nearest of those and the grid's cells wins.
+    /// The ray is looked at from `from` to `max_range` metres: a caller that
+    /// knows the first stretch empty (see [`Grid::clearance`]) skips it.
     ///
     /// # Behavior
     ///
@@ -339,7 +435,7 @@ impl Grid {
         x: f64,
         y: f64,
         (dx, dy): (f64, f64),
-        max_range: f64,
+        (from, max_range): (f64, f64),
         mut accept: impl FnMut(u16) -> bool,
         mut in_tile: impl FnMut(usize) -> Option<Hit>,
     ) -> Option<Hit> {
@@ -360,7 +456,7 @@ impl Grid {
         // Clip the ray to the grid box; parameters are in cells along the ray.
         // (|du| ≥ √½, so only the minor axis can run parallel to a side.)
         let inv_du = 1.0 / du;
-        let (mut t0, mut t1) = (0.0f64, max_range * inv_res);
+        let (mut t0, mut t1) = (from.max(0.0) * inv_res, max_range * inv_res);
         let (a, b) = (-gu * inv_du, (nu as f64 - gu) * inv_du);
         t0 = t0.max(a.min(b));
         t1 = t1.min(a.max(b));
@@ -497,6 +593,53 @@ impl Grid {
             k += m;
         }
         end(best)
+    }
+}
+
+/// Turns `d` (rows of `w` cells: 0 where occupied, [`CLEAR`] where not)
+/// into each cell's Chebyshev distance to the nearest 0, at most `CLEAR`:
+/// two passes of the 8-neighbour chamfer, which is exact for this metric.
+fn chamfer(d: &mut [u8], w: usize) {
+    let h = d.len() / w;
+    for y in 0..h {
+        for x in 0..w {
+            let k = y * w + x;
+            let mut v = d[k];
+            if x > 0 {
+                v = v.min(d[k - 1] + 1);
+            }
+            if y > 0 {
+                let up = k - w;
+                v = v.min(d[up] + 1);
+                if x > 0 {
+                    v = v.min(d[up - 1] + 1);
+                }
+                if x + 1 < w {
+                    v = v.min(d[up + 1] + 1);
+                }
+            }
+            d[k] = v;
+        }
+    }
+    for y in (0..h).rev() {
+        for x in (0..w).rev() {
+            let k = y * w + x;
+            let mut v = d[k];
+            if x + 1 < w {
+                v = v.min(d[k + 1] + 1);
+            }
+            if y + 1 < h {
+                let down = k + w;
+                v = v.min(d[down] + 1);
+                if x + 1 < w {
+                    v = v.min(d[down + 1] + 1);
+                }
+                if x > 0 {
+                    v = v.min(d[down - 1] + 1);
+                }
+            }
+            d[k] = v;
+        }
     }
 }
 
@@ -698,7 +841,7 @@ mod tests {
                 ox,
                 oy,
                 (dx, dy),
-                6.0,
+                (0.0, 6.0),
                 |_| true,
                 |t| {
                     seen.push(t);
@@ -725,6 +868,81 @@ mod tests {
             let exact: Vec<usize> = exact.into_iter().map(|(_, t)| t).collect();
             assert_eq!(seen, exact, "ray {ox} {oy} {a}");
         }
+    }
+
+    /// The clearance is the exact Chebyshev distance to the nearest
+    /// occupied cell (capped), kept right as cells fill and empty.
+    #[test]
+    fn clearance_follows_the_cells() {
+        let mut g = Grid::new(0.0, 0.0, 8.0, 6.0, 0.02);
+        g.fill_polygon(&[(1.0, 1.0), (1.5, 1.0), (1.5, 1.2)], 2);
+        assert_eq!(g.clearance(4.0, 3.0), 0.0, "not kept unless asked");
+        g.keep_clearance();
+        let (w, h) = g.lat.size();
+        let mut rnd = uniform(11);
+        let check = |g: &Grid, rnd: &mut dyn FnMut() -> f64| {
+            let occupied: Vec<(usize, usize)> = (0..h)
+                .flat_map(|j| (0..w).map(move |i| (i, j)))
+                .filter(|&(i, j)| g.get(i, j) != EMPTY)
+                .collect();
+            for _ in 0..300 {
+                let (i, j) = (
+                    (rnd() * (w - 1) as f64) as usize,
+                    (rnd() * (h - 1) as f64) as usize,
+                );
+                let want = occupied
+                    .iter()
+                    .map(|&(a, b)| a.abs_diff(i).max(b.abs_diff(j)))
+                    .min()
+                    .unwrap_or(usize::MAX)
+                    .min(usize::from(CLEAR));
+                assert_eq!(usize::from(g.clear[j * w + i]), want, "cell ({i}, {j})");
+            }
+        };
+        for round in 0..6 {
+            // Boxes come and go; a disc around them must stay empty.
+            let (x, y) = (rnd() * 7.0, rnd() * 5.0);
+            let square = [(x, y), (x + 0.3, y), (x + 0.3, y + 0.2), (x, y + 0.2)];
+            if round % 3 == 2 {
+                g.clear_polygon(&square, 1);
+                for j in 0..h {
+                    for i in 0..w {
+                        if g.get(i, j) == 1 && rnd() < 0.5 {
+                            g.set(i, j, EMPTY);
+                        }
+                    }
+                }
+            } else {
+                g.fill_polygon(&square, 1);
+            }
+            assert_eq!(g.clearance(4.0, 3.0), 0.0, "stale until refreshed");
+            g.refresh_clearance();
+            check(&g, &mut rnd);
+        }
+        // The disc it promises holds no occupied cell.
+        for _ in 0..2000 {
+            let (x, y) = (rnd() * 8.0, rnd() * 6.0);
+            let r = g.clearance(x, y);
+            if r == 0.0 {
+                continue;
+            }
+            let a = rnd() * std::f64::consts::TAU;
+            let (px, py) = (x + r * 0.999 * a.cos(), y + r * 0.999 * a.sin());
+            assert_eq!(g.at(px, py), EMPTY, "({px}, {py}) within {r} of ({x}, {y})");
+        }
+    }
+
+    /// A ray looked at from `from` finds what lies beyond, at the same range.
+    #[test]
+    fn a_ray_from_a_distance_sees_what_lies_beyond() {
+        let g = walls();
+        let full = g.cast(0.0, 0.0, 0.0, 10.0, |_| true).unwrap();
+        let part = g
+            .cast_with(0.0, 0.0, (1.0, 0.0), (2.5, 10.0), |_| true, |_| None)
+            .unwrap();
+        assert_eq!(full, part);
+        let none = g.cast_with(0.0, 0.0, (1.0, 0.0), (4.5, 10.0), |_| true, |_| None);
+        assert_eq!(none, None, "the wall lies before the stretch looked at");
     }
 }
 

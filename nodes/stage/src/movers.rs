@@ -78,6 +78,13 @@ impl Movers {
         self.circles[m] = (0.0, 0.0, -1.0);
     }
 
+    /// How far point `p` is from model `m`'s body, at least (the distance to
+    /// the circle around it; negative inside the circle).
+    pub fn clearance(&self, m: usize, p: (f64, f64)) -> f64 {
+        let (cx, cy, r) = self.circles[m];
+        (cx - p.0).hypot(cy - p.1) - r
+    }
+
     /// The ids filed under tile `t`.
     pub fn in_tile(&self, t: usize) -> &[u16] {
         self.in_tile.get(t).map_or(&[], Vec::as_slice)

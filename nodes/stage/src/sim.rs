@@ -139,6 +139,11 @@ impl Seen {
     }
 }
 
+/// Sensors with at least this many rays look around their origin once, so
+/// that their rays start beyond the open space there (for fewer rays the
+/// look costs more than it spares).
+const FAN: usize = 16;
+
 /// The unit vector at angle `a`.
 fn unit(a: f64) -> (f64, f64) {
     let (s, c) = a.sin_cos();
@@ -186,7 +191,16 @@ impl Sim {
         .unwrap_or([-1.0, -1.0, 1.0, 1.0]);
         let margin = 2.0;
         let res = world.resolution;
-        let statics = Grid::new(x0 - margin, y0 - margin, x1 + margin, y1 + margin, res);
+        let mut statics = Grid::new(x0 - margin, y0 - margin, x1 + margin, y1 + margin, res);
+        // Fans of rays start beyond the open space around them (see
+        // `open_around`): the grid keeps its clearance for them.
+        if world
+            .models
+            .iter()
+            .any(|m| m.sensors.iter().any(|s| s.samples >= FAN))
+        {
+            statics.keep_clearance();
+        }
         let bases = (0..n)
             .filter(|&m| world.models[m].kind == Kind::Position)
             .map(|m| {
@@ -588,6 +602,7 @@ impl Sim {
 
     /// Updates every ranger's readings, on `world.threads` threads.
     pub fn sense(&mut self) {
+        self.statics.refresh_clearance();
         let (rangers, threads) = (std::mem::take(&mut self.rangers), self.sense_threads);
         if threads <= 1 {
             for &r in &rangers {
@@ -632,13 +647,14 @@ impl Sim {
     /// The first body along the ray from (x, y) along the unit vector
     /// `(dx, dy)`, within `range`, whose id `accept`s: walls and other static
     /// bodies from the static grid, moving bodies tested exactly as the ray
-    /// passes their tiles.
+    /// passes their tiles. The ray is looked at from `range.0` on: the
+    /// caller knows nothing it accepts lies nearer.
     fn cast(
         &self,
         x: f64,
         y: f64,
         (dx, dy): (f64, f64),
-        range: f64,
+        range: (f64, f64),
         accept: impl Fn(u16) -> bool,
     ) -> Option<Hit> {
         // A body spans a few tiles: test each once (the first few, at least).
@@ -661,12 +677,46 @@ impl Sim {
             .cast_with(x, y, (dx, dy), range, &accept, movers)
     }
 
+    /// How far from (x, y) nothing `accept`ed lies, in any direction: the
+    /// static grid's clearance there, less for a moving body within it.
+    fn open_around(&self, x: f64, y: f64, accept: impl Fn(u16) -> bool) -> f64 {
+        let free = self.statics.clearance(x, y);
+        if free <= 0.0 {
+            return 0.0;
+        }
+        let lat = self.statics.lattice();
+        let ((x0, y0), res, (w, h)) = (lat.origin(), lat.resolution(), lat.size());
+        let cell = |v: f64, o: f64, n: usize| (((v - o) / res).max(0.0) as usize).min(n - 1);
+        let lo = (cell(x - free, x0, w), cell(y - free, y0, h));
+        let hi = (cell(x + free, x0, w), cell(y + free, y0, h));
+        let mut open = free;
+        for t in self.statics.tiles_of_box(lo, hi) {
+            for &k in self.movers.in_tile(t) {
+                if accept(k) {
+                    open = open.min(self.movers.clearance(usize::from(k) - 1, (x, y)));
+                }
+            }
+        }
+        open.max(0.0)
+    }
+
     fn sense_one(&self, r: usize, out: &mut [Reading]) {
         let (g, _) = self.world.global(&self.poses, r);
         let base = g.compose(&self.world.models[r].origin);
         let root = self.roots[r];
+        let accept = |c: u16| {
+            let other = usize::from(c) - 1;
+            self.roots[other] != root && self.world.models[other].ranger_return >= 0.0
+        };
         for (s, rd) in self.world.models[r].sensors.iter().zip(out.iter_mut()) {
             let o = base.compose(&s.pose);
+            // A fan of rays shares one look around its origin: none of its
+            // rays walks the open space there.
+            let from = if s.samples >= FAN {
+                self.open_around(o.x, o.y, accept)
+            } else {
+                0.0
+            };
             // Sample directions by rotating the first one step by step
             // (no trigonometry per ray).
             let (first, step) = if s.samples > 1 {
@@ -680,11 +730,7 @@ impl Sim {
                 if k > 0 {
                     d = (d.0 * rot.0 - d.1 * rot.1, d.0 * rot.1 + d.1 * rot.0);
                 }
-                let accept = |c: u16| {
-                    let other = usize::from(c) - 1;
-                    self.roots[other] != root && self.world.models[other].ranger_return >= 0.0
-                };
-                let hit = self.cast(o.x, o.y, d, s.range.1, accept);
+                let hit = self.cast(o.x, o.y, d, (from, s.range.1), accept);
                 let (range, intensity) = match hit {
                     Some(h) => (
                         h.range.max(s.range.0),
@@ -811,7 +857,7 @@ impl Sim {
                 self.roots[o] != root && self.world.models[o].blob_return
             };
             let seen = self
-                .cast(eye.x, eye.y, unit(a), cfg.range, accept)
+                .cast(eye.x, eye.y, unit(a), (0.0, cfg.range), accept)
                 .and_then(|hit| {
                     let o = usize::from(hit.id) - 1;
                     let col = self.colors[o];
@@ -893,7 +939,7 @@ impl Sim {
             }
             // Seen only if the first thing along the line of sight is the target.
             let accept = |id: u16| self.roots[usize::from(id) - 1] != root;
-            let first = self.cast(eye.x, eye.y, unit(eye.yaw + bearing), range, accept);
+            let first = self.cast(eye.x, eye.y, unit(eye.yaw + bearing), (0.0, range), accept);
             if first.is_some_and(|h| self.roots[usize::from(h.id) - 1] != self.roots[k]) {
                 continue;
             }
@@ -1070,6 +1116,58 @@ mod tests {
         for _ in 0..n {
             s.step();
         }
+    }
+
+    /// Fans start their rays beyond the open space around them; every
+    /// reading stays what a ray walked from its origin reads, with robots
+    /// crowding each other, a box and the wall nearby.
+    #[test]
+    fn fans_read_as_rays_walked_from_their_origin() {
+        let mut text = format!("{ROOM}model ( name \"box\" pose [2 1 0 30] size [0.5 0.3 0.5] )\n");
+        for k in 0..12 {
+            let (x, y, a) = (
+                1.0 + 0.35 * f64::from(k % 4 * 3),
+                0.45 * f64::from(k / 4) - 0.5,
+                37 * k,
+            );
+            text += &format!(
+                "position ( name \"r{k}\" pose [{x} {y} 0 {a}] size [0.3 0.3 0.2] \
+                ranger ( sensor ( pose [0.1 0 0 0] range [0.02 6] fov 270 samples 271 ) ) \
+                acceleration_bounds [-9 9 -9 9 -9 9 -900 900] )\n"
+            );
+        }
+        let mut s = sim("fans", &text);
+        let rangers = s.rangers.clone();
+        let mut skipped = 0.0;
+        for round in 0..4 {
+            for (i, b) in s.bases.iter_mut().enumerate() {
+                let turn = if (i + round) % 2 == 0 { 0.6 } else { -0.6 };
+                b.cmd = Some(Command::Vel(Pose::new(0.3, 0.0, turn)));
+            }
+            steps(&mut s, 3);
+            for &r in &rangers {
+                let (g, _) = s.world.global(&s.poses, r);
+                let root = s.roots[r];
+                let accept = |c: u16| {
+                    let other = usize::from(c) - 1;
+                    s.roots[other] != root && s.world.models[other].ranger_return >= 0.0
+                };
+                let sensor = &s.world.models[r].sensors[0];
+                let o = g.compose(&s.world.models[r].origin).compose(&sensor.pose);
+                skipped += s.open_around(o.x, o.y, accept);
+                for (k, &got) in s.readings[r][0].ranges.iter().enumerate() {
+                    let a = o.yaw - sensor.fov / 2.0 + sensor.fov * k as f64 / 270.0;
+                    let want = s
+                        .cast(o.x, o.y, unit(a), (0.0, sensor.range.1), accept)
+                        .map_or(sensor.range.1, |h| h.range.max(sensor.range.0));
+                    assert!(
+                        (got - want).abs() < 1e-9,
+                        "ranger {r} ray {k}: {got} vs {want}"
+                    );
+                }
+            }
+        }
+        assert!(skipped > 1.0, "the fans skipped only {skipped} m in all");
     }
 
     #[test]
