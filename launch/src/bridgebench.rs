@@ -129,15 +129,14 @@ fn open(s: &mut TcpStream, interf: Interface) -> anyhow::Result<()> {
     request(s, player_req(player::DEV), &body.finish()).map(drop)
 }
 
-/// `n` timed runs of each of `kinds` kinds of round trip (`run(k)` makes
-/// one of kind `k`), taken in turn so that the machine's drift touches every
+/// `n` timed runs of each of `K` kinds of round trip (`run(k)` makes one
+/// of kind `k`), taken in turn so that the machine's drift touches every
 /// kind alike, after `n / 10` untimed rounds. Each kind's times, sorted.
-fn rounds(
+fn rounds<const K: usize>(
     n: usize,
-    kinds: usize,
     mut run: impl FnMut(usize) -> anyhow::Result<()>,
-) -> anyhow::Result<Vec<Vec<Duration>>> {
-    let mut v = vec![Vec::with_capacity(n); kinds];
+) -> anyhow::Result<[Vec<Duration>; K]> {
+    let mut v: [Vec<Duration>; K] = std::array::from_fn(|_| Vec::with_capacity(n));
     for i in 0..n + n / 10 {
         for (k, times) in v.iter_mut().enumerate() {
             let t0 = Instant::now();
@@ -381,15 +380,13 @@ fn measure(a: &BridgeBenchArgs, router: &troupe_node::zenoh::Session) -> anyhow:
         anyhow::ensure!(reply.result().is_ok(), "{info_key} refused");
         Ok(())
     };
-    let timed = rounds(a.samples, 5, |kind| match kind {
+    let [idle, busy, live, moved, raw] = rounds(a.samples, |kind| match kind {
         0 => request(&mut s, info, &[]).map(drop),
         1 => request(&mut s, geom, &[]).map(drop),
         2 => request(&mut s, get_pose, &pose).map(drop),
         3 => request(&mut s, set_pose, &set).map(drop),
         _ => bare(),
     })?;
-    let [idle, busy, live, moved, raw] = <[Vec<Duration>; 5]>::try_from(timed)
-        .map_err(|_| anyhow::anyhow!("five kinds of round trip"))?;
     let mut fetches = Vec::with_capacity(a.fetches);
     let mut size = (0, 0);
     for _ in 0..a.fetches {

@@ -261,16 +261,19 @@ impl Grid {
         }
         let c = &mut self.cells[j * self.lat.w + i];
         let t = &mut self.tiles[(j / TILE) * self.tw + i / TILE];
-        match (*c == EMPTY, id == EMPTY) {
-            (true, false) => *t += 1,
-            (false, true) => *t -= 1,
-            _ => {
-                *c = id;
-                return;
+        let filled_or_emptied = match (*c == EMPTY, id == EMPTY) {
+            (true, false) => {
+                *t += 1;
+                true
             }
-        }
+            (false, true) => {
+                *t -= 1;
+                true
+            }
+            _ => false,
+        };
         *c = id;
-        if self.clear.is_empty() {
+        if !filled_or_emptied || self.clear.is_empty() {
             return;
         }
         self.stale = Some(match self.stale {

@@ -71,7 +71,7 @@ pub trait Driver: Sized + Send + 'static {
     /// hook does long work (stepping a simulation, planning a path); it
     /// then always waits its turn on the driver's thread. Either way hooks
     /// run one at a time, in arrival order.
-    fn quick(&self, request: &Request) -> bool {
+    fn quick(request: &Request) -> bool {
         let _ = request;
         true
     }

@@ -308,52 +308,44 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 }
 
 /// Runs a request's hook at once on the thread that received it (Zenoh's)
-/// when the driver is idle with nothing queued and [`Driver::quick`] agrees,
+/// when [`Driver::quick`] agrees and the driver is idle with nothing queued,
 /// instead of waking the driver's thread: a thread wake less per round trip.
 /// Hooks stay one at a time and in arrival order ([`Inbox::claim`]).
 #[derive(Default)]
-struct Inline(std::sync::OnceLock<Box<dyn Fn(Event) -> Option<Event> + Send + Sync>>);
+struct Inline(std::sync::OnceLock<Box<dyn Fn(Request) -> Option<Request> + Send + Sync>>);
 
 impl Inline {
-    /// Runs `event`'s hook here if the driver is free, else queues it.
-    fn deliver(&self, inbox: &Inbox, event: Event) {
-        let event = match self.0.get() {
-            Some(run) => match run(event) {
-                Some(e) => e,
+    /// Runs `request`'s hook here if the driver is free, else queues it.
+    fn deliver(&self, inbox: &Inbox, request: Request) {
+        let request = match self.0.get() {
+            Some(run) => match run(request) {
+                Some(r) => r,
                 None => return,
             },
-            None => event,
+            None => request,
         };
-        inbox.push(event);
+        inbox.push(Event::Request(request));
     }
 
-    /// Lets other threads run `core`'s hooks while the loop is idle.
+    /// Lets other threads run `core`'s request hooks while the loop is idle.
     fn enable<D: Driver>(&self, core: &Arc<Mutex<Core<D>>>, inbox: &Arc<Inbox>) {
         let (core, inbox) = (Arc::downgrade(core), inbox.clone());
-        let run = move |event: Event| {
-            if !inbox.claim() {
-                return Some(event);
+        let run = move |request: Request| {
+            if !D::quick(&request) || !inbox.claim() {
+                return Some(request);
             }
             // Claimed: the loop waits for `idle` before it drops the core.
             let Some(core) = core.upgrade() else {
                 inbox.idle(false);
-                return Some(event);
+                return Some(request);
             };
             let mut c = lock(&core);
             let before = c.watched();
             let Core {
                 driver, ctx, stats, ..
             } = &mut *c;
-            if matches!(&event, Event::Request(r) if !driver.quick(r)) {
-                // Queued while still claimed: it keeps its place.
-                inbox.push(event);
-                drop(c);
-                drop(core);
-                inbox.idle(false);
-                return None;
-            }
             stats.inline += 1;
-            let result = dispatch(driver, ctx, event, stats);
+            let result = dispatch(driver, ctx, Event::Request(request), stats);
             let recheck = result.is_err() || c.watched() != before;
             if let Err(e) = result {
                 c.fatal = Some(e);
@@ -385,14 +377,15 @@ fn run_loop<D: Driver>(
     let mut tokens: Vec<LivelinessToken> = Vec::new();
     announce::<D>(ctx.ready, &mut tokens, session, provided)?;
     let mut announced = ctx.ready;
+    // The tick, read after each hook while the loop holds the driver (a
+    // hook run elsewhere that changes it asks for a recheck, which reads it
+    // again); the clock's kind never changes.
+    let mut tick = ctx.tick;
+    let manual = ctx.clock().is_manual();
     drop(c);
     inbox.idle(false);
     let mut next_tick: Option<Instant> = None;
     let result = loop {
-        let (tick, manual) = {
-            let c = lock(&core);
-            (c.ctx.tick, c.ctx.clock().is_manual())
-        };
         // Ticks follow sim/clock only for nodes that follow a simulator,
         // not for the simulator itself (whose clock is also set by hand).
         let sim = manual && !D::CLOCK_SOURCE;
@@ -437,6 +430,7 @@ fn run_loop<D: Driver>(
             }
             Ok(ctx.stop)
         });
+        tick = ctx.tick;
         drop(c);
         if !matches!(step, Ok(false)) {
             // No hook runs anywhere after the one that ended the loop.
@@ -726,7 +720,7 @@ impl ZenohBus {
                     name,
                     responder,
                 };
-                inline.deliver(&inbox, Event::Request(request));
+                inline.deliver(&inbox, request);
             })
             .wait()
             .map_err(z(|| format!("declaring request queryable of {d}")))?;

@@ -172,7 +172,7 @@ impl Driver for Stage {
 
     /// Stepping the world on request is long work: it waits its turn on
     /// Stage's thread.
-    fn quick(&self, request: &troupe_node::Request) -> bool {
+    fn quick(request: &troupe_node::Request) -> bool {
         !request.is::<simulation::Step>()
     }
 

@@ -684,11 +684,10 @@ impl Sim {
         if free <= 0.0 {
             return 0.0;
         }
-        let lat = self.statics.lattice();
-        let ((x0, y0), res, (w, h)) = (lat.origin(), lat.resolution(), lat.size());
-        let cell = |v: f64, o: f64, n: usize| (((v - o) / res).max(0.0) as usize).min(n - 1);
-        let lo = (cell(x - free, x0, w), cell(y - free, y0, h));
-        let hi = (cell(x + free, x0, w), cell(y + free, y0, h));
+        let disc = [x - free, y - free, x + free, y + free];
+        let Some((lo, hi)) = self.statics.lattice().cells_of_box(disc) else {
+            return 0.0;
+        };
         let mut open = free;
         for t in self.statics.tiles_of_box(lo, hi) {
             for &k in self.movers.in_tile(t) {
@@ -700,14 +699,20 @@ impl Sim {
         open.max(0.0)
     }
 
+    /// What ranger `r`'s rays stop at: anything with a ranger return that
+    /// is not part of its own robot.
+    fn ranger_sees(&self, r: usize) -> impl Fn(u16) -> bool + Copy + '_ {
+        let root = self.roots[r];
+        move |c: u16| {
+            let other = usize::from(c) - 1;
+            self.roots[other] != root && self.world.models[other].ranger_return >= 0.0
+        }
+    }
+
     fn sense_one(&self, r: usize, out: &mut [Reading]) {
         let (g, _) = self.world.global(&self.poses, r);
         let base = g.compose(&self.world.models[r].origin);
-        let root = self.roots[r];
-        let accept = |c: u16| {
-            let other = usize::from(c) - 1;
-            self.roots[other] != root && self.world.models[other].ranger_return >= 0.0
-        };
+        let accept = self.ranger_sees(r);
         for (s, rd) in self.world.models[r].sensors.iter().zip(out.iter_mut()) {
             let o = base.compose(&s.pose);
             // A fan of rays shares one look around its origin: none of its
@@ -1147,11 +1152,7 @@ mod tests {
             steps(&mut s, 3);
             for &r in &rangers {
                 let (g, _) = s.world.global(&s.poses, r);
-                let root = s.roots[r];
-                let accept = |c: u16| {
-                    let other = usize::from(c) - 1;
-                    s.roots[other] != root && s.world.models[other].ranger_return >= 0.0
-                };
+                let accept = s.ranger_sees(r);
                 let sensor = &s.world.models[r].sensors[0];
                 let o = g.compose(&s.world.models[r].origin).compose(&sensor.pose);
                 skipped += s.open_around(o.x, o.y, accept);

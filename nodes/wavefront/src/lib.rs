@@ -166,7 +166,7 @@ impl Driver for Wavefront {
 
     /// Enabling may plan a path (milliseconds on a large map): that waits
     /// its turn on the planner's thread.
-    fn quick(&self, request: &troupe_node::Request) -> bool {
+    fn quick(request: &troupe_node::Request) -> bool {
         !request.is::<planner::Enable>()
     }
 
