@@ -132,17 +132,24 @@ impl Movers {
         for poly in &self.shapes[m] {
             let mut crossings = 0;
             for (a, b) in edges(poly) {
+                // The ray o + t·d meets the edge a + u·e where t = tn/den and
+                // u = un/den: compared as products, so that only a crossing
+                // pays a division.
                 let e = (b.0 - a.0, b.1 - a.1);
                 let den = d.0 * e.1 - d.1 * e.0;
                 if den.abs() < 1e-15 {
                     continue;
                 }
                 let w = (a.0 - o.0, a.1 - o.1);
-                let t = (w.0 * e.1 - w.1 * e.0) / den;
-                let u = (w.0 * d.1 - w.1 * d.0) / den;
-                if (0.0..1.0).contains(&u) && t >= 0.0 {
+                let (tn, un) = (w.0 * e.1 - w.1 * e.0, w.0 * d.1 - w.1 * d.0);
+                let (tn, un, den) = if den > 0.0 {
+                    (tn, un, den)
+                } else {
+                    (-tn, -un, -den)
+                };
+                if un >= 0.0 && un < den && tn >= 0.0 {
                     crossings += 1;
-                    best = best.min(t);
+                    best = best.min(tn / den);
                 }
             }
             if crossings % 2 == 1 {
@@ -184,10 +191,14 @@ fn edges_cross(a: &[(f64, f64)], b: &[(f64, f64)]) -> bool {
     })
 }
 
-/// The edges of a polygon, closing it.
+/// The edges of a polygon, closing it: (last, first), then each point to
+/// the next.
 fn edges(ps: &[(f64, f64)]) -> impl Iterator<Item = ((f64, f64), (f64, f64))> + '_ {
-    let n = ps.len();
-    (0..n).map(move |k| (ps[k], ps[(k + 1) % n]))
+    ps.last()
+        .into_iter()
+        .chain(ps)
+        .zip(ps)
+        .map(|(&a, &b)| (a, b))
 }
 
 /// Whether point `p` is inside polygon `poly` (even-odd rule).

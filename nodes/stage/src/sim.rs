@@ -9,15 +9,16 @@
 //! walk the static grid (skipping empty tiles) and meet moving bodies
 //! exactly: a robot's own body costs its rays nothing.
 
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::{Mutex, PoisonError};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Mutex, OnceLock, PoisonError};
+use std::time::{Duration, Instant};
 
 use troupe_geom::occmap::{FREE, OCCUPIED};
 use troupe_geom::{bounds, normalize, Grid, Hit, Lattice, OccMap, Pose, EMPTY};
 use troupe_msgs::{map, Color};
 
 use crate::movers::Movers;
-use crate::world::{Drive, Kind, Localization, World};
+use crate::world::{Drive, Kind, Localization, Sensor, World};
 
 /// What a position model was last told to do.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -65,7 +66,7 @@ pub struct GripperState {
 }
 
 /// One sensor's latest readings.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct Reading {
     /// Metres, one per sample.
     pub ranges: Vec<f64>,
@@ -105,6 +106,8 @@ pub struct Sim {
     statics: Grid,
     /// Moving bodies, for sensors and collisions.
     movers: Movers,
+    /// Each model's sensors' rays.
+    fans: Vec<Vec<Rays>>,
 }
 
 /// A body as it would stand at a global pose: its polygons in world
@@ -143,6 +146,43 @@ impl Seen {
 /// that their rays start beyond the open space there (for fewer rays the
 /// look costs more than it spares).
 const FAN: usize = 16;
+
+/// A sensor's rays as unit vectors: the first, relative to its ranger,
+/// and the turn from one to the next (see [`fan`]).
+struct Rays {
+    first: (f64, f64),
+    turn: (f64, f64),
+}
+
+/// A sensor's rays: the angle of the first relative to the sensor, and
+/// the angle from one to the next.
+fn fan(s: &Sensor) -> (f64, f64) {
+    if s.samples > 1 {
+        (s.pose.yaw - s.fov / 2.0, s.fov / (s.samples - 1) as f64)
+    } else {
+        (s.pose.yaw, 0.0)
+    }
+}
+
+/// How long a helper thread spins waiting for a step's moves (a hundred
+/// robots move in a fifth of this), and how long it then sleeps between
+/// looks.
+const SPIN: Duration = Duration::from_millis(1);
+const NAP: Duration = Duration::from_micros(100);
+
+/// Sets its flag when dropped.
+struct Release<'a>(&'a AtomicBool);
+
+impl Drop for Release<'_> {
+    fn drop(&mut self) {
+        self.0.store(true, Ordering::Release);
+    }
+}
+
+/// `v` turned by the angle whose unit vector is `by`.
+fn turned(by: (f64, f64), v: (f64, f64)) -> (f64, f64) {
+    (by.0 * v.0 - by.1 * v.1, by.1 * v.0 + by.0 * v.1)
+}
 
 /// The unit vector at angle `a`.
 fn unit(a: f64) -> (f64, f64) {
@@ -246,9 +286,20 @@ impl Sim {
             .map(|m| (m.kind == Kind::Gripper).then(GripperState::default))
             .collect();
         let trees: Vec<Vec<usize>> = (0..n).map(|m| world.subtree(m)).collect();
-        let rangers: Vec<usize> = (0..n)
+        // Those with the most rays first: threads sharing the work finish
+        // on short ones.
+        let mut rangers: Vec<usize> = (0..n)
             .filter(|&r| !world.models[r].sensors.is_empty())
             .collect();
+        rangers.sort_by_key(|&r| {
+            std::cmp::Reverse(
+                world.models[r]
+                    .sensors
+                    .iter()
+                    .map(|s| s.samples)
+                    .sum::<usize>(),
+            )
+        });
         let rays: usize = rangers
             .iter()
             .flat_map(|&r| &world.models[r].sensors)
@@ -259,7 +310,24 @@ impl Sim {
         } else {
             world.threads.clamp(1, 64).min(rangers.len().max(1))
         };
+        let fans = world
+            .models
+            .iter()
+            .map(|m| {
+                m.sensors
+                    .iter()
+                    .map(|s| {
+                        let (first, step) = fan(s);
+                        Rays {
+                            first: unit(first),
+                            turn: unit(step),
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
         let mut sim = Sim {
+            fans,
             world,
             time: 0.0,
             steps: 0,
@@ -371,11 +439,13 @@ impl Sim {
                 continue;
             };
             // Static cells, rasterised only where a tile holds any (reading
-            // the cells of a large world is what costs: cache misses).
-            if self
-                .statics
-                .tiles_of_box(lo, hi)
-                .any(|t| self.statics.tile_holds(t))
+            // the cells of a large world is what costs: cache misses) and
+            // the open space around the body does not hold all of it.
+            if !self.in_the_open(polys)
+                && self
+                    .statics
+                    .tiles_of_box(lo, hi)
+                    .any(|t| self.statics.tile_holds(t))
             {
                 let mut hit = false;
                 let lat = *self.statics.lattice();
@@ -406,6 +476,19 @@ impl Sim {
             }
         }
         false
+    }
+
+    /// True when the static grid's clearance shows no static cell under
+    /// any of `polys` (false when the grid does not keep it).
+    fn in_the_open(&self, polys: &[Vec<(f64, f64)>]) -> bool {
+        let Some([x0, y0, x1, y1]) = bounds(polys.iter().flatten().copied()) else {
+            return true;
+        };
+        let (cx, cy) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
+        let reach = (x1 - x0).hypot(y1 - y0) / 2.0;
+        // A cell's width to spare: a polygon's outline marks the cells it
+        // touches, even those it only grazes.
+        self.statics.clearance(cx, cy) > reach + self.statics.lattice().resolution()
     }
 
     /// Files the `bodies` (from `tree_at` of a robot: all movable, as
@@ -441,11 +524,12 @@ impl Sim {
     /// Advances the world by one `interval_sim`.
     pub fn step(&mut self) {
         let dt = self.world.interval_sim;
-        for bi in 0..self.bases.len() {
-            self.drive(bi, dt);
-        }
-        self.carry();
-        self.sense();
+        self.sense_after(|sim| {
+            for bi in 0..sim.bases.len() {
+                sim.drive(bi, dt);
+            }
+            sim.carry();
+        });
         self.time += dt;
         self.steps += 1;
     }
@@ -453,31 +537,26 @@ impl Sim {
     fn wander(&mut self, bi: usize) -> Pose {
         let m = self.bases[bi].model;
         // The robot's first ranger with many samples, else its first ranger.
-        let rangers: Vec<usize> = self
-            .world
-            .subtree(m)
-            .into_iter()
-            .filter(|&k| !self.readings[k].is_empty())
-            .collect();
-        let laser = rangers
+        let mut rangers = self.trees[m]
             .iter()
             .copied()
+            .filter(|&k| !self.readings[k].is_empty());
+        let first = rangers.clone().next();
+        let laser = rangers
             .find(|&k| self.world.models[k].sensors[0].samples > 1)
-            .or(rangers.first().copied());
+            .or(first);
         let Some(r) = laser else {
             return Pose::new(0.4, 0.0, 0.0);
         };
         let sensors = &self.world.models[r].sensors;
         let (mut left, mut right) = (f64::INFINITY, f64::INFINITY);
-        for (si, s) in sensors.iter().enumerate() {
-            for (k, &range) in self.readings[r][si].ranges.iter().enumerate() {
-                let a = s.pose.yaw
-                    + if s.samples > 1 {
-                        -s.fov / 2.0 + s.fov * k as f64 / (s.samples - 1) as f64
-                    } else {
-                        0.0
-                    };
-                if a.abs() > std::f64::consts::FRAC_PI_2 {
+        for (s, rd) in sensors.iter().zip(&self.readings[r]) {
+            let (start, step) = fan(s);
+            for (k, &range) in rd.ranges.iter().enumerate() {
+                let a = start + step * k as f64;
+                // (A hair over a right angle: the fan's last ray may land
+                // on it by rounding.)
+                if a.abs() > std::f64::consts::FRAC_PI_2 + 1e-9 {
                     continue;
                 }
                 if a >= 0.0 {
@@ -602,46 +681,85 @@ impl Sim {
 
     /// Updates every ranger's readings, on `world.threads` threads.
     pub fn sense(&mut self) {
-        self.statics.refresh_clearance();
-        let (rangers, threads) = (std::mem::take(&mut self.rangers), self.sense_threads);
+        self.sense_after(|_| ());
+    }
+
+    /// Runs `before` (the step's moves), then updates every ranger's
+    /// readings on `world.threads` threads.
+    ///
+    /// # Behavior
+    ///
+    /// The helper threads are started before `before` runs and wait for
+    /// it, spinning: starting a thread takes longer than a step's moves,
+    /// and a sleeping thread wakes as slowly, so the rays start on every
+    /// thread at once. Rangers are taken one at a time by whichever thread
+    /// is free, those with the most rays first, so that the threads finish
+    /// together.
+    fn sense_after(&mut self, before: impl FnOnce(&mut Sim)) {
+        let threads = self.sense_threads;
         if threads <= 1 {
-            for &r in &rangers {
+            before(self);
+            self.statics.refresh_clearance();
+            for i in 0..self.rangers.len() {
+                let r = self.rangers[i];
                 let mut out = std::mem::take(&mut self.readings[r]);
                 self.sense_one(r, &mut out);
                 self.readings[r] = out;
             }
-            self.rangers = rangers;
             return;
         }
-        let mut work: Vec<(usize, Vec<Reading>)> = rangers
+        let work: Vec<Mutex<(usize, Vec<Reading>)>> = self
+            .rangers
             .iter()
-            .map(|&r| (r, std::mem::take(&mut self.readings[r])))
+            .map(|&r| Mutex::new((r, Vec::new())))
             .collect();
-        // Rangers are taken a few at a time by whichever thread is free (this
-        // one too): rays differ in length, so equal shares would not finish
-        // together.
-        let batches: Vec<Mutex<&mut [_]>> = work.chunks_mut(4).map(Mutex::new).collect();
         let next = AtomicUsize::new(0);
-        let me = &*self;
-        let run = || {
-            while let Some(batch) = batches.get(next.fetch_add(1, Ordering::Relaxed)) {
-                let mut batch = batch.lock().unwrap_or_else(PoisonError::into_inner);
-                for (r, out) in batch.iter_mut() {
-                    me.sense_one(*r, out);
-                }
+        let ready: OnceLock<&Sim> = OnceLock::new();
+        let over = AtomicBool::new(false);
+        let run = |me: &Sim| {
+            while let Some(slot) = work.get(next.fetch_add(1, Ordering::Relaxed)) {
+                let mut slot = slot.lock().unwrap_or_else(PoisonError::into_inner);
+                let (r, out) = &mut *slot;
+                me.sense_one(*r, out);
             }
         };
+        let this = &mut *self;
         std::thread::scope(|scope| {
             for _ in 1..threads {
-                scope.spawn(run);
+                scope.spawn(|| {
+                    let start = Instant::now();
+                    loop {
+                        if let Some(me) = ready.get() {
+                            return run(me);
+                        }
+                        if over.load(Ordering::Acquire) {
+                            return;
+                        }
+                        if start.elapsed() < SPIN {
+                            std::hint::spin_loop();
+                        } else {
+                            std::thread::park_timeout(NAP);
+                        }
+                    }
+                });
             }
-            run();
+            // However this ends (a panic too), the helpers stop waiting.
+            let _release = Release(&over);
+            before(this);
+            this.statics.refresh_clearance();
+            for slot in &work {
+                let mut slot = slot.lock().unwrap_or_else(PoisonError::into_inner);
+                slot.1 = std::mem::take(&mut this.readings[slot.0]);
+            }
+            let me: &Sim = this;
+            let me = *ready.get_or_init(|| me);
+            run(me);
         });
-        drop(batches);
-        for (r, out) in work {
+        drop(ready);
+        for slot in work {
+            let (r, out) = slot.into_inner().unwrap_or_else(PoisonError::into_inner);
             self.readings[r] = out;
         }
-        self.rangers = rangers;
     }
 
     /// The first body along the ray from (x, y) along the unit vector
@@ -662,7 +780,7 @@ impl Sim {
         let movers = |t: usize| {
             let mut best: Option<Hit> = None;
             for &k in self.movers.in_tile(t) {
-                if !tested.first(k) || !accept(k) {
+                if !accept(k) || !tested.first(k) {
                     continue;
                 }
                 if let Some(h) = self.movers.hit(usize::from(k) - 1, k, (x, y), (dx, dy)) {
@@ -712,30 +830,29 @@ impl Sim {
     fn sense_one(&self, r: usize, out: &mut [Reading]) {
         let (g, _) = self.world.global(&self.poses, r);
         let base = g.compose(&self.world.models[r].origin);
+        // One sine and cosine per ranger: its sensors' poses and first rays
+        // are turned by it.
+        let turn = unit(base.yaw);
         let accept = self.ranger_sees(r);
-        for (s, rd) in self.world.models[r].sensors.iter().zip(out.iter_mut()) {
-            let o = base.compose(&s.pose);
+        let sensors = &self.world.models[r].sensors;
+        for ((s, rays), rd) in sensors.iter().zip(&self.fans[r]).zip(out.iter_mut()) {
+            let (ox, oy) = turned(turn, (s.pose.x, s.pose.y));
+            let (ox, oy) = (base.x + ox, base.y + oy);
             // A fan of rays shares one look around its origin: none of its
             // rays walks the open space there.
             let from = if s.samples >= FAN {
-                self.open_around(o.x, o.y, accept)
+                self.open_around(ox, oy, accept)
             } else {
                 0.0
             };
             // Sample directions by rotating the first one step by step
             // (no trigonometry per ray).
-            let (first, step) = if s.samples > 1 {
-                (o.yaw - s.fov / 2.0, s.fov / (s.samples - 1) as f64)
-            } else {
-                (o.yaw, 0.0)
-            };
-            let mut d = unit(first);
-            let rot = unit(step);
+            let mut d = turned(turn, rays.first);
             for k in 0..s.samples {
                 if k > 0 {
-                    d = (d.0 * rot.0 - d.1 * rot.1, d.0 * rot.1 + d.1 * rot.0);
+                    d = turned(rays.turn, d);
                 }
-                let hit = self.cast(o.x, o.y, d, (from, s.range.1), accept);
+                let hit = self.cast(ox, oy, d, (from, s.range.1), accept);
                 let (range, intensity) = match hit {
                     Some(h) => (
                         h.range.max(s.range.0),
@@ -1225,6 +1342,49 @@ mod tests {
         // The wall's face is at x = 4.9; the robot's front at x + 0.2.
         assert!(p.x + 0.2 < 4.92 && p.x > 4.5, "{p:?}");
         assert_eq!(s.bases[0].vel, Pose::default());
+    }
+
+    #[test]
+    fn a_robot_with_a_fan_stalls_where_one_without_does() {
+        // A fan makes the grid keep its clearance, which spares most moves
+        // their cell-by-cell test: the stall must not move.
+        let robot = |fan: &str| {
+            format!("{ROOM}position ( name \"r\" pose [3 0.3 0 10] size [0.4 0.4 0.2] acceleration_bounds [-9 9 -9 9 -9 9 -900 900] {fan} )\n")
+        };
+        let mut stops = Vec::new();
+        for fan in ["", "ranger ( sensor ( range [0 4] fov 180 samples 181 ) )"] {
+            let mut s = sim("fanstall", &robot(fan));
+            s.bases[0].cmd = Some(Command::Vel(Pose::new(0.7, 0.0, 0.0)));
+            steps(&mut s, 40);
+            assert!(s.bases[0].stall, "stalled ({fan})");
+            stops.push(s.global(s.bases[0].model));
+        }
+        assert_eq!(stops[0], stops[1]);
+        assert!(stops[0].x > 4.4 && stops[0].x < 4.7, "{:?}", stops[0]);
+    }
+
+    #[test]
+    fn two_threads_read_and_move_as_one_does() {
+        let world = |threads: usize| {
+            let mut text = format!("threads {threads}\n{ROOM}");
+            for k in 0..12 {
+                let (x, y, a) = (0.6 * f64::from(k % 4) - 1.0, 0.7 * f64::from(k / 4) - 0.7, 41 * k);
+                text += &format!(
+                    "position ( name \"r{k}\" pose [{x} {y} 0 {a}] size [0.3 0.3 0.2] ctrl \"wander\" \
+                    ranger ( sensor ( pose [0.1 0 0 0] range [0.02 6] fov 270 samples 271 ) ) )\n"
+                );
+            }
+            sim("threads", &text)
+        };
+        let (mut one, mut two) = (world(1), world(2));
+        assert_eq!((one.sense_threads, two.sense_threads), (1, 2));
+        for _ in 0..30 {
+            one.step();
+            two.step();
+            assert_eq!(one.poses, two.poses);
+            assert_eq!(one.readings, two.readings);
+        }
+        assert!(one.bases.iter().any(|b| b.odom != Pose::default()), "nobody moved");
     }
 
     #[test]
