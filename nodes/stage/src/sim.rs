@@ -1368,7 +1368,11 @@ mod tests {
         let world = |threads: usize| {
             let mut text = format!("threads {threads}\n{ROOM}");
             for k in 0..12 {
-                let (x, y, a) = (0.6 * f64::from(k % 4) - 1.0, 0.7 * f64::from(k / 4) - 0.7, 41 * k);
+                let (x, y, a) = (
+                    0.6 * f64::from(k % 4) - 1.0,
+                    0.7 * f64::from(k / 4) - 0.7,
+                    41 * k,
+                );
                 text += &format!(
                     "position ( name \"r{k}\" pose [{x} {y} 0 {a}] size [0.3 0.3 0.2] ctrl \"wander\" \
                     ranger ( sensor ( pose [0.1 0 0 0] range [0.02 6] fov 270 samples 271 ) ) )\n"
@@ -1384,7 +1388,10 @@ mod tests {
             assert_eq!(one.poses, two.poses);
             assert_eq!(one.readings, two.readings);
         }
-        assert!(one.bases.iter().any(|b| b.odom != Pose::default()), "nobody moved");
+        assert!(
+            one.bases.iter().any(|b| b.odom != Pose::default()),
+            "nobody moved"
+        );
     }
 
     #[test]
