@@ -144,6 +144,12 @@ pub struct Planner {
 const COARSE_ABOVE: usize = 500 * 500;
 /// Coarse cells are this many fine cells on a side (a power of two).
 const COARSE: usize = 4;
+
+/// The index of the [`COARSE`]² block holding cell (i, j), in a grid of
+/// blocks `width` blocks wide.
+fn block_of(i: usize, j: usize, width: usize) -> usize {
+    (j / COARSE) * width + i / COARSE
+}
 /// The corridor reaches this many coarse cells to each side of the coarse path.
 const CORRIDOR: i64 = 2;
 
@@ -160,6 +166,13 @@ struct Cell {
     /// What entering the cell costs beyond the step's length: the
     /// proximity penalty, infinite where the cell is blocked.
     enter: f32,
+}
+
+impl Cell {
+    /// True when no path may enter the cell.
+    fn blocked(&self) -> bool {
+        self.enter == f32::INFINITY
+    }
 }
 
 /// A grid the search runs on: its cells (one 16-byte record each, so a
@@ -192,19 +205,18 @@ impl Grid {
         }
     }
 
-    /// A grid of `k`×`k` blocks: a block may be entered when any of its
-    /// cells may, at the least penalty among them. Every path on `fine`
+    /// A grid of [`COARSE`]² blocks: a block may be entered when any of
+    /// its cells may, at the least penalty among them. Every path on `fine`
     /// crosses a chain of such blocks, so no path on the fine grid is
     /// missed by this one.
-    fn coarsen(fine: &Grid, k: usize) -> Grid {
-        let (w, h) = (fine.width.div_ceil(k), fine.height.div_ceil(k));
+    fn coarsen(fine: &Grid) -> Grid {
+        let (w, h) = (fine.width.div_ceil(COARSE), fine.height.div_ceil(COARSE));
         let mut enter = vec![f32::INFINITY; w * h];
         for (n, c) in fine.cells.iter().enumerate() {
-            let (i, j) = (n % fine.width / k, n / fine.width / k);
-            let e = &mut enter[j * w + i];
+            let e = &mut enter[block_of(n % fine.width, n / fine.width, w)];
             *e = e.min(c.enter);
         }
-        Grid::new(enter.into_iter(), w, h, fine.res * k as f32)
+        Grid::new(enter.into_iter(), w, h, fine.res * COARSE as f32)
     }
 
     /// The next search's generation.
@@ -281,8 +293,8 @@ impl Grid {
                 }
                 let n = (nj * w + ni) as usize;
                 let next = &mut self.cells[n];
-                if next.enter == f32::INFINITY {
-                    continue; // blocked
+                if next.blocked() {
+                    continue;
                 }
                 let cost = gc + len * res + next.enter;
                 if next.stamp != gen || cost < next.g {
@@ -313,7 +325,7 @@ impl Planner {
             }
         });
         let fine = Grid::new(enter, width, height, map.info.resolution);
-        let coarse = (width * height > COARSE_ABOVE).then(|| Grid::coarsen(&fine, COARSE));
+        let coarse = (width * height > COARSE_ABOVE).then(|| Grid::coarsen(&fine));
         Planner {
             info: map.info,
             params,
@@ -343,7 +355,7 @@ impl Planner {
 
     /// True where the robot may be: not within `min_radius` of an obstacle.
     fn free(&self, k: usize) -> bool {
-        self.fine.cells[k].enter.is_finite()
+        !self.fine.cells[k].blocked()
     }
 
     /// The cheapest path of cells from `start` to `goal` (world points).
@@ -368,7 +380,7 @@ impl Planner {
         }
         if let Some(coarse) = &mut self.coarse {
             let w = self.fine.width;
-            let block = |k: usize| (k % w / COARSE) + (k / w / COARSE) * coarse.width;
+            let block = |k: usize| block_of(k % w, k / w, coarse.width);
             let route = coarse
                 .search(&mut self.heap, block(s), block(t), |_, _| true)
                 .ok_or(NoPath::Unreachable)?;
@@ -385,9 +397,10 @@ impl Planner {
                 }
             }
             let blocks = &coarse.cells;
-            let shift = COARSE.trailing_zeros();
-            let inside =
-                |i: i64, j: i64| blocks[((j >> shift) * cw + (i >> shift)) as usize].stamp == mark;
+            let inside = |i: i64, j: i64| {
+                // (The search asks only of cells on the map: i, j ≥ 0.)
+                blocks[block_of(i as usize, j as usize, coarse.width)].stamp == mark
+            };
             if let Some(path) = self.fine.search(&mut self.heap, s, t, inside) {
                 return Ok(path);
             }
