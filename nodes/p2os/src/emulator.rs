@@ -111,8 +111,6 @@ struct Robot {
     /// Wheel speeds commanded, mm/s.
     left: f64,
     right: f64,
-    /// The body's turn rate in the last step, rad/s.
-    turning: f64,
 }
 
 impl Robot {
@@ -128,7 +126,6 @@ impl Robot {
             paddles: Paddles::Open,
             left: 0.0,
             right: 0.0,
-            turning: 0.0,
         }
     }
 
@@ -138,26 +135,33 @@ impl Robot {
         self.right = speed + rot;
     }
 
-    /// Moves `body` for `dt`.
-    fn step(&mut self, body: &mut dyn Body, dt: f64) {
-        let (l, r) = if self.enabled {
+    /// The wheel speeds the robot runs at, mm/s: those commanded, none
+    /// while its motors are disabled or it is `stalled`.
+    fn wheels(&self, stalled: bool) -> (f64, f64) {
+        if self.enabled && !stalled {
             (self.left, self.right)
         } else {
             (0.0, 0.0)
-        };
-        let v = (l + r) / 2.0 / 1000.0;
-        let w = (r - l) * self.params.diff_conv / 2.0;
-        body.drive(v, w, dt);
-        self.turning = if body.stalled() { 0.0 } else { w };
+        }
+    }
+
+    /// The turn rate of wheel speeds `(l, r)`, rad/s.
+    fn turn_rate(&self, (l, r): (f64, f64)) -> f64 {
+        (r - l) * self.params.diff_conv / 2.0
+    }
+
+    /// Moves `body` for `dt`.
+    fn step(&mut self, body: &mut dyn Body, dt: f64) {
+        let (l, r) = self.wheels(false);
+        body.drive((l + r) / 2.0 / 1000.0, self.turn_rate((l, r)), dt);
         self.paddles = self.paddles.step();
     }
 
-    /// One gyro reading: 512 when still, less when turning
+    /// One gyro reading of `body`: 512 when still, less when turning
     /// counter-clockwise, one unit per degree per second.
-    fn gyro_packet(&self) -> Vec<u8> {
-        let rate = (512.0 - self.turning.to_degrees())
-            .round()
-            .clamp(0.0, 1023.0) as u16;
+    fn gyro_packet(&self, body: &dyn Body) -> Vec<u8> {
+        let turning = self.turn_rate(self.wheels(body.stalled()));
+        let rate = (512.0 - turning.to_degrees()).round().clamp(0.0, 1023.0) as u16;
         packet::gyro_packet(&[(rate, 30)])
     }
 
@@ -167,12 +171,7 @@ impl Robot {
         let odometry = body.odometry();
         let stalled = body.stalled();
         let th = ((odometry.yaw / p.angle_conv).round() as i64 + 2048).rem_euclid(4096) - 2048;
-        let (l, r) = if self.enabled {
-            (self.left, self.right)
-        } else {
-            (0.0, 0.0)
-        };
-        let (l, r) = if stalled { (0.0, 0.0) } else { (l, r) };
+        let (l, r) = self.wheels(stalled);
         let sonars = if self.sonar {
             p.sonars
                 .iter()
@@ -273,7 +272,7 @@ pub fn run_with(
             line.send(&robot.sip(body).encode(), baud)?;
             stats.sips += 1;
             if robot.gyro {
-                line.send(&robot.gyro_packet(), baud)?;
+                line.send(&robot.gyro_packet(body), baud)?;
             }
             next_sip += CYCLE;
             if next_sip < now {
@@ -433,7 +432,7 @@ mod tests {
         // 30°/s counter-clockwise: 30 units under 512.
         r.wheels_from(0.0, 30.0);
         r.step(&mut room, 0.1);
-        let g = r.gyro_packet();
+        let g = r.gyro_packet(&room);
         assert_eq!(packet::parse_gyro(&g[3..g.len() - 2]), Ok(482));
     }
 }
