@@ -305,10 +305,13 @@ impl Sim {
             .flat_map(|&r| &world.models[r].sensors)
             .map(|s| s.samples)
             .sum();
+        // No more threads than cores: the helpers spin while the bases
+        // move, and one without a core of its own would slow the moves.
+        let cores = std::thread::available_parallelism().map_or(1, usize::from);
         let sense_threads = if rays < 2000 {
             1
         } else {
-            world.threads.clamp(1, 64).min(rangers.len().max(1))
+            world.threads.clamp(1, cores).min(rangers.len().max(1))
         };
         let fans = world
             .models
@@ -1381,7 +1384,9 @@ mod tests {
             sim("threads", &text)
         };
         let (mut one, mut two) = (world(1), world(2));
-        assert_eq!((one.sense_threads, two.sense_threads), (1, 2));
+        assert_eq!(one.sense_threads, 1);
+        // (Two even on a machine of one core.)
+        two.sense_threads = 2;
         for _ in 0..30 {
             one.step();
             two.step();
