@@ -1,6 +1,6 @@
 //! The drivers this binary can run, by Player name.
 
-use troupe_node::{Driver, NodeConfig, Result, Section, Unit, ZenohArgs};
+use troupe_node::{Driver, NodeConfig, Result, Section, Unit, Unused, ZenohArgs};
 
 /// A driver this build carries.
 pub struct Entry {
@@ -12,8 +12,9 @@ pub struct Entry {
     pub units: &'static [(&'static str, Unit)],
     /// The simulator: other nodes of its plan follow its clock.
     pub clock_source: bool,
-    /// Checks a section without starting anything; returns unused options.
-    pub check: fn(&Section) -> Result<Vec<String>>,
+    /// Checks a section without starting anything; returns what it gives
+    /// that the driver does not use.
+    pub check: fn(&Section) -> Result<Unused>,
     run: fn(Section, &ZenohArgs, &NodeConfig) -> Result<()>,
 }
 

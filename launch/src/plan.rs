@@ -138,13 +138,11 @@ impl NodeSpec {
                 index: d.index,
             })
         };
-        Ok(Section {
-            name: self.driver.clone(),
-            provides: self.provides.iter().map(addr).collect::<Result<_, _>>()?,
-            requires: self.requires.iter().map(addr).collect::<Result<_, _>>()?,
-            robot: troupe_msgs::DEFAULT_ROBOT,
-            options: self.options.clone(),
-        })
+        let mut s = Section::new(&self.driver);
+        s.provides = self.provides.iter().map(addr).collect::<Result<_, _>>()?;
+        s.requires = self.requires.iter().map(addr).collect::<Result<_, _>>()?;
+        s.options = self.options.clone();
+        Ok(s)
     }
 }
 
@@ -530,10 +528,16 @@ pub fn check(plan: &mut Plan, report: &mut Report) {
             Err(e) => report.errors.push(format!("{at}: {e}")),
             Ok(section) => match (entry.check)(&section) {
                 Ok(unused) => {
-                    for o in unused {
+                    for o in unused.options {
                         let place = n.option_pos.get(&o).unwrap_or(&at);
                         report.warnings.push(format!(
                             "{place}: option `{o}` is not used by driver `{}`",
+                            n.driver
+                        ));
+                    }
+                    for r in unused.requires {
+                        report.warnings.push(format!(
+                            "{at}: `{r}` in requires is not used by driver `{}`",
                             n.driver
                         ));
                     }
@@ -785,6 +789,22 @@ mod tests {
 
     const STACK: &str = "driver( name \"dummy\" provides [\"ranger:0\"] rate 20 colour \"red\" )\n\
                          driver( name \"rangertolaser\" requires [\"ranger:0\"] provides [\"laser:0\"] )\n";
+
+    #[test]
+    fn requires_a_driver_does_not_use_are_warned_about() {
+        let (_, warnings) = plan_of(
+            "driver( name \"dummy\" provides [\"ranger:0\" \"laser:1\"] )\n\
+             driver( name \"rangertolaser\" requires [\"ranger:0\" \"laser:1\"] provides [\"laser:0\"] )\n",
+        )
+        .unwrap();
+        assert_eq!(
+            warnings,
+            vec![
+                "t.cfg:2:1: `6665:laser:1` in requires is not used by driver `rangertolaser`"
+                    .to_owned()
+            ]
+        );
+    }
 
     #[test]
     fn a_stack_becomes_ordered_nodes_and_round_trips_through_toml() {

@@ -29,6 +29,6 @@ pub use clock::Clock;
 pub use ctx::{Ctx, Waker, REQUEST_TIMEOUT};
 pub use driver::{Driver, Event, Reply, Request, RequestError, RequestId, Responder, Sample, Unit};
 pub use error::{BoxError, NodeError, Result};
-pub use runtime::{ask, check, run, spawn, wait_live, NodeConfig, NodeHandle, Stop};
+pub use runtime::{ask, check, run, spawn, wait_live, NodeConfig, NodeHandle, Stop, Unused};
 pub use section::{NoOptions, Section, Slot};
 pub use zenoh;

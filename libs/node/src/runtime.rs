@@ -252,17 +252,33 @@ pub fn ask<'a>(
         .consolidation(ConsolidationMode::None)
 }
 
+/// What a section gives that its driver does not use.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Unused {
+    /// Options, by name.
+    pub options: Vec<String>,
+    /// `requires` entries, as the section spells them.
+    pub requires: Vec<String>,
+}
+
 /// Checks a section for driver `D` without starting it: builds the driver
-/// (which touches no device and no network) and returns the options it does
-/// not use.
+/// (which touches no device and no network) and returns what it does not
+/// use.
 ///
 /// # Errors
 ///
 /// What building the driver returns: a wrong option type, a missing device.
-pub fn check<D: Driver>(section: &Section) -> Result<Vec<String>> {
+pub fn check<D: Driver>(section: &Section) -> Result<Unused> {
     let (options, unused) = section.options::<D::Options>()?;
     D::new(section, options)?;
-    Ok(unused)
+    Ok(Unused {
+        options: unused,
+        requires: section
+            .unused_requires()
+            .iter()
+            .map(ToString::to_string)
+            .collect(),
+    })
 }
 
 /// Builds the driver from its section, warning about unused options.
@@ -282,7 +298,15 @@ pub(crate) fn build<D: Driver>(section: &Section) -> Result<D> {
         );
     }
     tracing::debug!(driver = D::NAME, ?options, "options");
-    D::new(section, options)
+    let driver = D::new(section, options)?;
+    for r in section.unused_requires() {
+        tracing::warn!(
+            driver = D::NAME,
+            "`{r}` in requires is not used by driver `{}` (it is still waited for)",
+            D::NAME
+        );
+    }
+    Ok(driver)
 }
 
 /// A driver and what its hooks use: run by one thread at a time, the

@@ -11,6 +11,8 @@
 //! give none. Options keep Player's names; unknown ones are warned about, as
 //! Player warned about unused options.
 
+use std::sync::{Mutex, PoisonError};
+
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use troupe_msgs::{DevAddr, Device, Interface, DEFAULT_ROBOT};
@@ -35,6 +37,50 @@ pub struct Section {
     /// Driver-specific options, by Player's names.
     #[serde(default)]
     pub options: serde_json::Map<String, serde_json::Value>,
+    /// Which `requires` entries the driver has looked up.
+    #[serde(skip)]
+    claims: Claims,
+}
+
+/// The indices of the `requires` entries a driver looked up
+/// ([`Section::required_one`], [`Section::required_where`]): the others
+/// are not used. Not part of the section's value: copies start afresh and
+/// compare equal.
+#[derive(Default)]
+struct Claims(Mutex<Vec<usize>>);
+
+impl Claims {
+    fn add(&self, i: usize) {
+        let mut v = self.0.lock().unwrap_or_else(PoisonError::into_inner);
+        if !v.contains(&i) {
+            v.push(i);
+        }
+    }
+
+    fn has(&self, i: usize) -> bool {
+        self.0
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .contains(&i)
+    }
+}
+
+impl Clone for Claims {
+    fn clone(&self) -> Self {
+        Claims::default()
+    }
+}
+
+impl PartialEq for Claims {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
+}
+
+impl std::fmt::Debug for Claims {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Claims")
+    }
 }
 
 fn default_robot() -> u32 {
@@ -59,6 +105,7 @@ impl Section {
             requires: Vec::new(),
             robot: DEFAULT_ROBOT,
             options: Default::default(),
+            claims: Claims::default(),
         }
     }
 
@@ -99,13 +146,47 @@ impl Section {
         self.one(&self.provided(), "provides", interface, key)
     }
 
-    /// The one required device of `interface` (with `key`, if given).
+    /// The one required device of `interface` (with `key`, if given),
+    /// which the driver then uses.
     ///
     /// # Errors
     ///
     /// [`NodeError::Config`] when there is none, or more than one.
     pub fn required_one(&self, interface: Interface, key: Option<&str>) -> Result<Device> {
-        self.one(&self.required(), "requires", interface, key)
+        let d = self.one(&self.required(), "requires", interface, key)?;
+        self.claim(|s| s.device == d);
+        Ok(d)
+    }
+
+    /// The required devices of the interfaces `want` accepts, which the
+    /// driver then uses.
+    pub fn required_where(&self, want: impl Fn(Interface) -> bool) -> Vec<Device> {
+        let found: Vec<Device> = self
+            .required()
+            .into_iter()
+            .map(|s| s.device)
+            .filter(|d| want(d.interface))
+            .collect();
+        self.claim(|s| found.contains(&s.device));
+        found
+    }
+
+    fn claim(&self, used: impl Fn(&Slot) -> bool) {
+        for (i, s) in self.required().iter().enumerate() {
+            if used(s) {
+                self.claims.add(i);
+            }
+        }
+    }
+
+    /// The `requires` entries the driver has not looked up (see
+    /// [`Section::required_one`]): once the driver is built, those it does
+    /// not use.
+    pub fn unused_requires(&self) -> Vec<&DevAddr> {
+        (0..self.requires.len())
+            .filter(|&i| !self.claims.has(i))
+            .map(|i| &self.requires[i])
+            .collect()
     }
 
     fn one(&self, slots: &[Slot], field: &str, i: Interface, key: Option<&str>) -> Result<Device> {
@@ -191,6 +272,31 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("`requires` needs a `ranger:N` device"), "{e}");
+    }
+
+    #[test]
+    fn requires_a_driver_never_looks_up_are_unused() {
+        let s = Section::from_json(
+            r#"{"name":"amcl","requires":["odometry::position2d:0","laser:0","laser:::map:0","sonar:1"]}"#,
+        )
+        .unwrap();
+        assert_eq!(s.unused_requires().len(), 4);
+        s.required_one(Interface::Position2d, Some("odometry"))
+            .unwrap();
+        assert_eq!(
+            s.required_where(|i| i == Interface::Laser),
+            vec![Device::new(DEFAULT_ROBOT, Interface::Laser, 0)]
+        );
+        let unused: Vec<String> = s
+            .unused_requires()
+            .iter()
+            .map(ToString::to_string)
+            .collect();
+        assert_eq!(unused, vec!["laser:::map:0", "sonar:1"]);
+        // A copy is the same section, its lookups not yet made.
+        let copy = s.clone();
+        assert_eq!(copy, s);
+        assert_eq!(copy.unused_requires().len(), 4);
     }
 
     #[test]

@@ -290,17 +290,9 @@ impl Driver for Vfh {
                 o.max_speed
             )));
         }
-        let sensors: Vec<Device> = section
-            .required()
-            .iter()
-            .map(|s| s.device)
-            .filter(|d| {
-                matches!(
-                    d.interface,
-                    Interface::Laser | Interface::Sonar | Interface::Ranger
-                )
-            })
-            .collect();
+        let sensors = section.required_where(|i| {
+            matches!(i, Interface::Laser | Interface::Sonar | Interface::Ranger)
+        });
         let sensor = match sensors.as_slice() {
             [d] if d.interface == Interface::Laser => Sensor::Laser(*d),
             [d] => Sensor::Cones {

@@ -183,16 +183,8 @@ impl Driver for Wavefront {
         // Player's wavefront could also mark laser returns on the map (a
         // `laser` in requires, scans with poses) for its `velocity_control`
         // mode; Troupe's plans on the map alone and leaves obstacles to the
-        // local controller (vfh), as Player's default configuration does.
-        for slot in section.required() {
-            if slot.device.interface == Interface::Laser {
-                tracing::warn!(
-                    "{} in requires is not used: wavefront plans on the map alone; \
-                     the local controller (vfh) avoids what the laser sees",
-                    slot.device
-                );
-            }
-        }
+        // local controller (vfh), as Player's default configuration does:
+        // a `laser` in requires is warned about as unused.
         Ok(Wavefront {
             online: section.provided_one(Interface::Planner, None)?,
             output: section.required_one(Interface::Position2d, Some("output"))?,
