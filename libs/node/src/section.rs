@@ -153,26 +153,28 @@ impl Section {
     ///
     /// [`NodeError::Config`] when there is none, or more than one.
     pub fn required_one(&self, interface: Interface, key: Option<&str>) -> Result<Device> {
-        let d = self.one(&self.required(), "requires", interface, key)?;
-        self.claim(|s| s.device == d);
+        let slots = self.required();
+        let d = self.one(&slots, "requires", interface, key)?;
+        self.claim(&slots, |s| s.device == d);
         Ok(d)
     }
 
     /// The required devices of the interfaces `want` accepts, which the
     /// driver then uses.
     pub fn required_where(&self, want: impl Fn(Interface) -> bool) -> Vec<Device> {
-        let found: Vec<Device> = self
-            .required()
+        let slots = self.required();
+        self.claim(&slots, |s| want(s.device.interface));
+        slots
             .into_iter()
             .map(|s| s.device)
             .filter(|d| want(d.interface))
-            .collect();
-        self.claim(|s| found.contains(&s.device));
-        found
+            .collect()
     }
 
-    fn claim(&self, used: impl Fn(&Slot) -> bool) {
-        for (i, s) in self.required().iter().enumerate() {
+    /// Marks the `requires` entries (`slots`, as [`Section::required`]
+    /// makes them) that `used` picks as looked up.
+    fn claim(&self, slots: &[Slot], used: impl Fn(&Slot) -> bool) {
+        for (i, s) in slots.iter().enumerate() {
             if used(s) {
                 self.claims.add(i);
             }

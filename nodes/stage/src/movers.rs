@@ -163,7 +163,7 @@ impl Movers {
 
 /// A circle holding every point of `polys`: centre and radius (negative
 /// when there are no points).
-fn circle_around(polys: &[Vec<(f64, f64)>]) -> (f64, f64, f64) {
+pub(crate) fn circle_around(polys: &[Vec<(f64, f64)>]) -> (f64, f64, f64) {
     let Some([x0, y0, x1, y1]) = bounds(polys.iter().flatten().copied()) else {
         return (0.0, 0.0, -1.0);
     };

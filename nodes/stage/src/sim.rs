@@ -17,7 +17,7 @@ use troupe_geom::occmap::{FREE, OCCUPIED};
 use troupe_geom::{bounds, normalize, Grid, Hit, Lattice, OccMap, Pose, EMPTY};
 use troupe_msgs::{map, Color};
 
-use crate::movers::Movers;
+use crate::movers::{circle_around, Movers};
 use crate::world::{Drive, Kind, Localization, Sensor, World};
 
 /// What a position model was last told to do.
@@ -484,14 +484,10 @@ impl Sim {
     /// True when the static grid's clearance shows no static cell under
     /// any of `polys` (false when the grid does not keep it).
     fn in_the_open(&self, polys: &[Vec<(f64, f64)>]) -> bool {
-        let Some([x0, y0, x1, y1]) = bounds(polys.iter().flatten().copied()) else {
-            return true;
-        };
-        let (cx, cy) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
-        let reach = (x1 - x0).hypot(y1 - y0) / 2.0;
+        let (cx, cy, reach) = circle_around(polys);
         // A cell's width to spare: a polygon's outline marks the cells it
         // touches, even those it only grazes.
-        self.statics.clearance(cx, cy) > reach + self.statics.lattice().resolution()
+        reach < 0.0 || self.statics.clearance(cx, cy) > reach + self.statics.lattice().resolution()
     }
 
     /// Files the `bodies` (from `tree_at` of a robot: all movable, as
@@ -695,22 +691,11 @@ impl Sim {
     /// The helper threads are started before `before` runs and wait for
     /// it, spinning: starting a thread takes longer than a step's moves,
     /// and a sleeping thread wakes as slowly, so the rays start on every
-    /// thread at once. Rangers are taken one at a time by whichever thread
-    /// is free, those with the most rays first, so that the threads finish
-    /// together.
+    /// thread at once (with one thread, none is started). Rangers are taken
+    /// one at a time by whichever thread is free, those with the most rays
+    /// first, so that the threads finish together.
     fn sense_after(&mut self, before: impl FnOnce(&mut Sim)) {
         let threads = self.sense_threads;
-        if threads <= 1 {
-            before(self);
-            self.statics.refresh_clearance();
-            for i in 0..self.rangers.len() {
-                let r = self.rangers[i];
-                let mut out = std::mem::take(&mut self.readings[r]);
-                self.sense_one(r, &mut out);
-                self.readings[r] = out;
-            }
-            return;
-        }
         let work: Vec<Mutex<(usize, Vec<Reading>)>> = self
             .rangers
             .iter()
