@@ -10,7 +10,7 @@
 //! exactly: a robot's own body costs its rays nothing.
 
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::{Mutex, OnceLock, PoisonError};
+use std::sync::{Mutex, PoisonError, RwLock};
 use std::time::{Duration, Instant};
 
 use troupe_geom::occmap::{FREE, OCCUPIED};
@@ -108,11 +108,14 @@ pub struct Sim {
     movers: Movers,
     /// Each model's sensors' rays.
     fans: Vec<Vec<Rays>>,
+    /// Each base's plan for the step, kept for its buffers.
+    plans: Vec<Plan>,
 }
 
 /// A body as it would stand at a global pose: its polygons in world
 /// coordinates and the cells of their box (`None` off the grid), made once
 /// for both the collision test and the filing.
+#[derive(Default)]
 struct Placed {
     model: usize,
     polys: Vec<Vec<(f64, f64)>>,
@@ -169,6 +172,50 @@ fn fan(s: &Sensor) -> (f64, f64) {
 /// looks.
 const SPIN: Duration = Duration::from_millis(1);
 const NAP: Duration = Duration::from_micros(100);
+
+/// Waits (spinning, then napping) until `go` is set: false when `over`
+/// is set first.
+fn wait_for(go: &AtomicBool, over: &AtomicBool) -> bool {
+    let start = Instant::now();
+    loop {
+        if go.load(Ordering::Acquire) {
+            return true;
+        }
+        if over.load(Ordering::Acquire) {
+            return false;
+        }
+        if start.elapsed() < SPIN {
+            std::hint::spin_loop();
+        } else {
+            std::thread::park_timeout(NAP);
+        }
+    }
+}
+
+/// Locks `m`, through a panic elsewhere.
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// What a base does in a step (see [`Sim::plan`]); kept from step to step
+/// for its buffers.
+#[derive(Default)]
+struct Plan {
+    /// Planned from the poses at the step's start (else planned as it moves).
+    ready: bool,
+    /// Whether the base is a position model at all.
+    act: bool,
+    /// Its velocity this step, and its pose at the end of it.
+    v: Pose,
+    next: Pose,
+    /// Whether it moves, and the way its wander controller turns.
+    moving: bool,
+    turn: f64,
+    /// Its tree's bodies where it would move to, and whether they would
+    /// meet a static obstacle.
+    bodies: Vec<Placed>,
+    walled: bool,
+}
 
 /// Sets its flag when dropped.
 struct Release<'a>(&'a AtomicBool);
@@ -331,6 +378,7 @@ impl Sim {
             .collect();
         let mut sim = Sim {
             fans,
+            plans: Vec::new(),
             world,
             time: 0.0,
             steps: 0,
@@ -378,7 +426,7 @@ impl Sim {
             return;
         }
         if self.movable[m] {
-            self.file(self.placed(m, self.global(m)));
+            self.file(&self.placed(m, self.global(m)));
         } else {
             let cells = self.body_cells(m);
             self.occupy(m, cells);
@@ -387,27 +435,32 @@ impl Sim {
 
     /// Model `m`'s body at global pose `at`.
     fn placed(&self, m: usize, at: Pose) -> Placed {
-        let polys: Vec<Vec<(f64, f64)>> = self.world.models[m]
-            .blocks
-            .iter()
-            .map(|b| b.iter().map(|&(x, y)| at.apply(x, y)).collect())
-            .collect();
-        Placed {
-            model: m,
-            cells: bounds(polys.iter().flatten().copied())
-                .and_then(|b| self.statics.lattice().cells_of_box(b)),
-            polys,
+        let mut body = Placed::default();
+        self.place_into(m, at, &mut body);
+        body
+    }
+
+    /// [`Sim::placed`] into `body`, reusing its buffers.
+    fn place_into(&self, m: usize, at: Pose, body: &mut Placed) {
+        let blocks = &self.world.models[m].blocks;
+        body.model = m;
+        body.polys.resize_with(blocks.len(), Vec::new);
+        for (poly, b) in body.polys.iter_mut().zip(blocks) {
+            poly.clear();
+            poly.extend(b.iter().map(|&(x, y)| at.apply(x, y)));
         }
+        body.cells = bounds(body.polys.iter().flatten().copied())
+            .and_then(|b| self.statics.lattice().cells_of_box(b));
     }
 
     /// Files a moving body under the tiles it touches.
-    fn file(&mut self, body: Placed) {
+    fn file(&mut self, body: &Placed) {
         let tiles = body
             .cells
             .into_iter()
             .flat_map(|(lo, hi)| self.statics.tiles_of_box(lo, hi));
         let m = body.model;
-        self.movers.file(m, id(m), body.polys, tiles);
+        self.movers.file(m, id(m), &body.polys, tiles);
     }
 
     /// Moves static model `m`'s body in the grid from its old cells to `cells`.
@@ -420,23 +473,33 @@ impl Sim {
     }
 
     /// Every body in the tree of `m` (itself and what it carries) as it
-    /// would be if `m` were at the global pose `at`.
-    fn tree_at(&self, m: usize, at: Pose) -> Vec<Placed> {
+    /// would be if `m` were at the global pose `at`, into `bodies` (whose
+    /// buffers are reused).
+    fn tree_at(&self, m: usize, at: Pose, bodies: &mut Vec<Placed>) {
         let shift = at.compose(&self.global(m).inverse());
-        self.trees[m]
-            .iter()
-            .filter(|&&k| !self.world.models[k].blocks.is_empty())
-            .map(|&k| self.placed(k, shift.compose(&self.global(k))))
-            .collect()
+        let mut n = 0;
+        for &k in &self.trees[m] {
+            if self.world.models[k].blocks.is_empty() {
+                continue;
+            }
+            if bodies.len() == n {
+                bodies.push(Placed::default());
+            }
+            self.place_into(k, shift.compose(&self.global(k)), &mut bodies[n]);
+            n += 1;
+        }
+        bodies.truncate(n);
+    }
+
+    /// Whether model `other` blocks the bodies of the tree of `root`.
+    fn blocks(&self, root: usize, other: usize) -> bool {
+        self.roots[other] != root && self.world.models[other].obstacle_return
     }
 
     /// True when the `bodies` (of the tree of `root`) would overlap an
-    /// unrelated obstacle: a static cell, or a moving body.
-    fn collides(&self, root: usize, bodies: &[Placed]) -> bool {
-        let blocks = |c: usize| {
-            let other = c - 1;
-            self.roots[other] != root && self.world.models[other].obstacle_return
-        };
+    /// unrelated static obstacle.
+    fn hits_statics(&self, root: usize, bodies: &[Placed]) -> bool {
+        let blocks = |c: usize| self.blocks(root, c - 1);
         for body in bodies {
             let (polys, Some((lo, hi))) = (&body.polys, body.cells) else {
                 continue;
@@ -464,6 +527,18 @@ impl Sim {
                     return true;
                 }
             }
+        }
+        false
+    }
+
+    /// True when the `bodies` (of the tree of `root`) would overlap an
+    /// unrelated moving body.
+    fn hits_movers(&self, root: usize, bodies: &[Placed]) -> bool {
+        let blocks = |c: usize| self.blocks(root, c - 1);
+        for body in bodies {
+            let (polys, Some((lo, hi))) = (&body.polys, body.cells) else {
+                continue;
+            };
             // The body itself is filed in these tiles: only other blockers
             // are tested, each once (the first few, at least), as in `cast`.
             let mut tested = Seen::default();
@@ -493,7 +568,7 @@ impl Sim {
     /// Files the `bodies` (from `tree_at` of a robot: all movable, as
     /// everything on a robot and everything it carries is) where they were
     /// placed.
-    fn commit(&mut self, bodies: Vec<Placed>) {
+    fn commit(&mut self, bodies: &[Placed]) {
         for body in bodies {
             debug_assert!(self.movable[body.model], "a static body in a robot's tree");
             if self.in_grid(body.model) {
@@ -523,17 +598,14 @@ impl Sim {
     /// Advances the world by one `interval_sim`.
     pub fn step(&mut self) {
         let dt = self.world.interval_sim;
-        self.sense_after(|sim| {
-            for bi in 0..sim.bases.len() {
-                sim.drive(bi, dt);
-            }
-            sim.carry();
-        });
+        self.run(Some(dt));
         self.time += dt;
         self.steps += 1;
     }
 
-    fn wander(&mut self, bi: usize) -> Pose {
+    /// The built-in `wander` controller of base `bi`: the velocity it asks
+    /// for, and the way it turns from obstacles (+1 left, -1 right).
+    fn wander(&self, bi: usize) -> (Pose, f64) {
         let m = self.bases[bi].model;
         // The robot's first ranger with many samples, else its first ranger.
         let mut rangers = self.trees[m]
@@ -544,8 +616,9 @@ impl Sim {
         let laser = rangers
             .find(|&k| self.world.models[k].sensors[0].samples > 1)
             .or(first);
+        let turn = self.bases[bi].wander_turn;
         let Some(r) = laser else {
-            return Pose::new(0.4, 0.0, 0.0);
+            return (Pose::new(0.4, 0.0, 0.0), turn);
         };
         let sensors = &self.world.models[r].sensors;
         let (mut left, mut right) = (f64::INFINITY, f64::INFINITY);
@@ -565,22 +638,42 @@ impl Sim {
                 }
             }
         }
-        let b = &mut self.bases[bi];
         if left.min(right) < 0.6 {
-            if (left - right).abs() > 0.1 {
-                b.wander_turn = if left < right { -1.0 } else { 1.0 };
-            }
-            Pose::new(0.0, 0.0, b.wander_turn)
+            let turn = if (left - right).abs() > 0.1 {
+                if left < right {
+                    -1.0
+                } else {
+                    1.0
+                }
+            } else {
+                turn
+            };
+            (Pose::new(0.0, 0.0, turn), turn)
         } else {
-            Pose::new(0.4, 0.0, 0.0)
+            (Pose::new(0.4, 0.0, 0.0), turn)
         }
     }
 
-    fn drive(&mut self, bi: usize, dt: f64) {
+    /// Works out what base `bi` does in a step of `dt`, from the poses at
+    /// the step's start, into `plan`.
+    ///
+    /// # Behavior
+    ///
+    /// Bases move one after another, each seeing those before it where they
+    /// moved to; but what a base asks for and whether it would meet a wall
+    /// depend on it alone, so every base is planned at once (on every
+    /// thread), and only the test against the other robots and the move
+    /// itself are left for [`Sim::apply`], in order. A base on another
+    /// model's back is planned there too, as it stands once that has moved.
+    fn plan(&self, bi: usize, dt: f64, plan: &mut Plan) {
         let m = self.bases[bi].model;
-        let Some(cfg) = self.world.models[m].position.clone() else {
+        plan.ready = self.roots[m] == m;
+        plan.act = false;
+        let Some(cfg) = &self.world.models[m].position else {
             return;
         };
+        plan.act = true;
+        plan.turn = self.bases[bi].wander_turn;
         let want = match self.bases[bi].cmd {
             _ if !self.bases[bi].enabled => Pose::default(),
             Some(Command::Vel(v)) => v,
@@ -619,7 +712,11 @@ impl Sim {
                     )
                 }
             }
-            None if self.bases[bi].wander => self.wander(bi),
+            None if self.bases[bi].wander => {
+                let (want, turn) = self.wander(bi);
+                plan.turn = turn;
+                want
+            }
             None => Pose::default(),
         };
         let vb = &cfg.velocity_bounds;
@@ -647,19 +744,37 @@ impl Sim {
                 .0
                 .compose(&Pose::new(v.x * dt, v.y * dt, v.yaw * dt))
         };
-        let moving = v.x != 0.0 || v.y != 0.0 || v.yaw != 0.0;
-        if moving {
-            let root = self.roots[m];
-            let bodies = self.tree_at(m, g_next);
-            if self.collides(root, &bodies) {
+        plan.v = v;
+        plan.next = next;
+        plan.moving = v.x != 0.0 || v.y != 0.0 || v.yaw != 0.0;
+        if plan.moving {
+            self.tree_at(m, g_next, &mut plan.bodies);
+            plan.walled = self.hits_statics(self.roots[m], &plan.bodies);
+        }
+    }
+
+    /// Carries out base `bi`'s `plan` (see [`Sim::plan`]).
+    fn apply(&mut self, bi: usize, dt: f64, plan: &mut Plan) {
+        if !plan.ready {
+            self.plan(bi, dt, plan);
+        }
+        let m = self.bases[bi].model;
+        let Some(cfg) = &self.world.models[m].position else {
+            return;
+        };
+        let (localization, e) = (cfg.localization, cfg.odom_error);
+        let v = plan.v;
+        self.bases[bi].wander_turn = plan.turn;
+        if plan.moving {
+            if plan.walled || self.hits_movers(self.roots[m], &plan.bodies) {
                 let b = &mut self.bases[bi];
                 b.stall = true;
                 b.vel = Pose::default();
                 return;
             }
-            self.poses[m] = next;
-            self.commit(bodies);
-            if cfg.localization == Localization::Gps {
+            self.poses[m] = plan.next;
+            self.commit(&plan.bodies);
+            if localization == Localization::Gps {
                 let g = self.global(m);
                 let b = &mut self.bases[bi];
                 b.odom = b.origin.inverse().compose(&g);
@@ -667,8 +782,7 @@ impl Sim {
         }
         self.bases[bi].stall = false;
         self.bases[bi].vel = v;
-        if cfg.localization == Localization::Odom {
-            let e = cfg.odom_error;
+        if localization == Localization::Odom {
             let b = &mut self.bases[bi];
             b.odom = b.odom.compose(&Pose::new(
                 v.x * dt * (1.0 + e[0]),
@@ -680,74 +794,95 @@ impl Sim {
 
     /// Updates every ranger's readings, on `world.threads` threads.
     pub fn sense(&mut self) {
-        self.sense_after(|_| ());
+        self.run(None);
     }
 
-    /// Runs `before` (the step's moves), then updates every ranger's
-    /// readings on `world.threads` threads.
+    /// Moves every base by a step of `dt` (none when `None`), then updates
+    /// every ranger's readings, on `world.threads` threads.
     ///
     /// # Behavior
     ///
-    /// The helper threads are started before `before` runs and wait for
-    /// it, spinning: starting a thread takes longer than a step's moves,
-    /// and a sleeping thread wakes as slowly, so the rays start on every
-    /// thread at once (with one thread, none is started). Rangers are taken
-    /// one at a time by whichever thread is free, those with the most rays
-    /// first, so that the threads finish together.
-    fn sense_after(&mut self, before: impl FnOnce(&mut Sim)) {
+    /// Every thread plans bases (see [`Sim::plan`]), taking them one at a
+    /// time; this thread then carries the plans out in order, while the
+    /// helpers wait for it, spinning (a sleeping thread wakes as slowly as
+    /// a new one starts: later than the moves end). Then every thread casts
+    /// rays, taking rangers one at a time, those with the most rays first,
+    /// so that the threads finish together. With one thread, none is
+    /// started; a helper that starts late finds the bases planned.
+    fn run(&mut self, dt: Option<f64>) {
         let threads = self.sense_threads;
+        let mut kept = std::mem::take(&mut self.plans);
+        kept.resize_with(
+            if dt.is_some() { self.bases.len() } else { 0 },
+            Plan::default,
+        );
+        let plans: Vec<Mutex<Plan>> = kept.into_iter().map(Mutex::new).collect();
         let work: Vec<Mutex<(usize, Vec<Reading>)>> = self
             .rangers
             .iter()
             .map(|&r| Mutex::new((r, Vec::new())))
             .collect();
-        let next = AtomicUsize::new(0);
-        let ready: OnceLock<&Sim> = OnceLock::new();
+        let (next_plan, next_ranger) = (AtomicUsize::new(0), AtomicUsize::new(0));
+        let sensing = AtomicBool::new(false);
         let over = AtomicBool::new(false);
-        let run = |me: &Sim| {
-            while let Some(slot) = work.get(next.fetch_add(1, Ordering::Relaxed)) {
-                let mut slot = slot.lock().unwrap_or_else(PoisonError::into_inner);
-                let (r, out) = &mut *slot;
-                me.sense_one(*r, out);
-            }
+        let moves = dt.is_some();
+        let dt = dt.unwrap_or(0.0);
+        let plan = |me: &Sim| loop {
+            let bi = next_plan.fetch_add(1, Ordering::Relaxed);
+            let Some(slot) = plans.get(bi) else {
+                return;
+            };
+            me.plan(bi, dt, &mut lock(slot));
         };
-        let this = &mut *self;
+        let sense = |me: &Sim| loop {
+            let Some(slot) = work.get(next_ranger.fetch_add(1, Ordering::Relaxed)) else {
+                return;
+            };
+            let mut slot = lock(slot);
+            let (r, out) = &mut *slot;
+            me.sense_one(*r, out);
+        };
+        let sim = RwLock::new(&mut *self);
+        let read = || sim.read().unwrap_or_else(PoisonError::into_inner);
         std::thread::scope(|scope| {
             for _ in 1..threads {
                 scope.spawn(|| {
-                    let start = Instant::now();
-                    loop {
-                        if let Some(me) = ready.get() {
-                            return run(me);
-                        }
-                        if over.load(Ordering::Acquire) {
-                            return;
-                        }
-                        if start.elapsed() < SPIN {
-                            std::hint::spin_loop();
-                        } else {
-                            std::thread::park_timeout(NAP);
-                        }
+                    plan(&read());
+                    if wait_for(&sensing, &over) {
+                        sense(&read());
                     }
                 });
             }
             // However this ends (a panic too), the helpers stop waiting.
             let _release = Release(&over);
-            before(this);
-            this.statics.refresh_clearance();
-            for slot in &work {
-                let mut slot = slot.lock().unwrap_or_else(PoisonError::into_inner);
-                slot.1 = std::mem::take(&mut this.readings[slot.0]);
+            plan(&read());
+            {
+                // Waits for helpers still planning a base.
+                let mut me = sim.write().unwrap_or_else(PoisonError::into_inner);
+                let me: &mut Sim = &mut me;
+                for (bi, slot) in plans.iter().enumerate() {
+                    me.apply(bi, dt, &mut lock(slot));
+                }
+                if moves {
+                    me.carry();
+                }
+                me.statics.refresh_clearance();
+                for slot in &work {
+                    let mut slot = lock(slot);
+                    slot.1 = std::mem::take(&mut me.readings[slot.0]);
+                }
             }
-            let me: &Sim = this;
-            let me = *ready.get_or_init(|| me);
-            run(me);
+            sensing.store(true, Ordering::Release);
+            sense(&read());
         });
-        drop(ready);
         for slot in work {
             let (r, out) = slot.into_inner().unwrap_or_else(PoisonError::into_inner);
             self.readings[r] = out;
         }
+        self.plans = plans
+            .into_iter()
+            .map(|p| p.into_inner().unwrap_or_else(PoisonError::into_inner))
+            .collect();
     }
 
     /// The first body along the ray from (x, y) along the unit vector
