@@ -109,7 +109,7 @@ pub struct Sim {
     /// Each model's sensors' rays.
     fans: Vec<Vec<Rays>>,
     /// Each base's plan for the step, kept for its buffers.
-    plans: Vec<Plan>,
+    plans: Vec<Mutex<Plan>>,
 }
 
 /// A body as it would stand at a global pose: its polygons in world
@@ -201,10 +201,6 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 /// for its buffers.
 #[derive(Default)]
 struct Plan {
-    /// Planned from the poses at the step's start (else planned as it moves).
-    ready: bool,
-    /// Whether the base is a position model at all.
-    act: bool,
     /// Its velocity this step, and its pose at the end of it.
     v: Pose,
     next: Pose,
@@ -667,12 +663,9 @@ impl Sim {
     /// model's back is planned there too, as it stands once that has moved.
     fn plan(&self, bi: usize, dt: f64, plan: &mut Plan) {
         let m = self.bases[bi].model;
-        plan.ready = self.roots[m] == m;
-        plan.act = false;
         let Some(cfg) = &self.world.models[m].position else {
             return;
         };
-        plan.act = true;
         plan.turn = self.bases[bi].wander_turn;
         let want = match self.bases[bi].cmd {
             _ if !self.bases[bi].enabled => Pose::default(),
@@ -755,10 +748,11 @@ impl Sim {
 
     /// Carries out base `bi`'s `plan` (see [`Sim::plan`]).
     fn apply(&mut self, bi: usize, dt: f64, plan: &mut Plan) {
-        if !plan.ready {
+        let m = self.bases[bi].model;
+        if self.roots[m] != m {
+            // On another model's back: planned where that one moved to.
             self.plan(bi, dt, plan);
         }
-        let m = self.bases[bi].model;
         let Some(cfg) = &self.world.models[m].position else {
             return;
         };
@@ -812,11 +806,8 @@ impl Sim {
     fn run(&mut self, dt: Option<f64>) {
         let threads = self.sense_threads;
         let mut kept = std::mem::take(&mut self.plans);
-        kept.resize_with(
-            if dt.is_some() { self.bases.len() } else { 0 },
-            Plan::default,
-        );
-        let plans: Vec<Mutex<Plan>> = kept.into_iter().map(Mutex::new).collect();
+        kept.resize_with(self.bases.len(), Mutex::default);
+        let plans = if dt.is_some() { &kept[..] } else { &[] };
         let work: Vec<Mutex<(usize, Vec<Reading>)>> = self
             .rangers
             .iter()
@@ -879,10 +870,7 @@ impl Sim {
             let (r, out) = slot.into_inner().unwrap_or_else(PoisonError::into_inner);
             self.readings[r] = out;
         }
-        self.plans = plans
-            .into_iter()
-            .map(|p| p.into_inner().unwrap_or_else(PoisonError::into_inner))
-            .collect();
+        self.plans = kept;
     }
 
     /// The first body along the ray from (x, y) along the unit vector
