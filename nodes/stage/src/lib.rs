@@ -7,6 +7,7 @@
 #![warn(missing_docs)]
 
 pub mod colors;
+mod crew;
 pub mod movers;
 mod node;
 pub mod sim;

@@ -9,7 +9,7 @@
 //! walk the static grid (skipping empty tiles) and meet moving bodies
 //! exactly: a robot's own body costs its rays nothing.
 
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Mutex, PoisonError, RwLock};
 use std::time::{Duration, Instant};
 
@@ -17,6 +17,7 @@ use troupe_geom::occmap::{FREE, OCCUPIED};
 use troupe_geom::{bounds, normalize, Grid, Hit, Lattice, OccMap, Pose, EMPTY};
 use troupe_msgs::{map, Color};
 
+use crate::crew::{Crew, Job};
 use crate::movers::{circle_around, Movers};
 use crate::world::{Drive, Kind, Localization, Sensor, World};
 
@@ -93,11 +94,9 @@ pub struct Sim {
     /// Gripper state of each gripper model (`None` for other models).
     pub grippers: Vec<Option<GripperState>>,
     roots: Vec<usize>,
-    /// The models with range sensors.
-    rangers: Vec<usize>,
-    /// Threads that cast rays: the world's `threads`, but one for small worlds
-    /// (threads pay off only when a step casts thousands of rays).
-    sense_threads: usize,
+    /// The threads that plan moves and cast rays, and the models with
+    /// range sensors among them.
+    crew: Crew,
     /// Each model's subtree (itself first), depth-first.
     trees: Vec<Vec<usize>>,
     movable: Vec<bool>,
@@ -329,33 +328,6 @@ impl Sim {
             .map(|m| (m.kind == Kind::Gripper).then(GripperState::default))
             .collect();
         let trees: Vec<Vec<usize>> = (0..n).map(|m| world.subtree(m)).collect();
-        // Those with the most rays first: threads sharing the work finish
-        // on short ones.
-        let mut rangers: Vec<usize> = (0..n)
-            .filter(|&r| !world.models[r].sensors.is_empty())
-            .collect();
-        rangers.sort_by_key(|&r| {
-            std::cmp::Reverse(
-                world.models[r]
-                    .sensors
-                    .iter()
-                    .map(|s| s.samples)
-                    .sum::<usize>(),
-            )
-        });
-        let rays: usize = rangers
-            .iter()
-            .flat_map(|&r| &world.models[r].sensors)
-            .map(|s| s.samples)
-            .sum();
-        // No more threads than cores: the helpers spin while the bases
-        // move, and one without a core of its own would slow the moves.
-        let cores = std::thread::available_parallelism().map_or(1, usize::from);
-        let sense_threads = if rays < 2000 {
-            1
-        } else {
-            world.threads.clamp(1, cores).min(rangers.len().max(1))
-        };
         let fans = world
             .models
             .iter()
@@ -384,8 +356,7 @@ impl Sim {
             readings,
             grippers,
             trees,
-            rangers,
-            sense_threads,
+            crew: Crew::default(),
             roots,
             movable,
             cells: vec![Vec::new(); n],
@@ -395,8 +366,41 @@ impl Sim {
         for m in 0..n {
             sim.place(m);
         }
+        // Threads pay off only when a step casts thousands of rays. No more
+        // than the cores: the helpers spin while the bases move, and one
+        // without a core of its own would slow the moves.
+        let rays: usize = sim.jobs().iter().map(|j| j.rays).sum();
+        let cores = std::thread::available_parallelism().map_or(1, usize::from);
+        if rays >= 2000 {
+            sim.set_threads(sim.world.threads.clamp(1, cores));
+        } else {
+            sim.set_threads(1);
+        }
         sim.sense();
         Ok(sim)
+    }
+
+    /// Every ranger, as the crew deals them.
+    fn jobs(&self) -> Vec<Job> {
+        let mut base_of = vec![None; self.world.models.len()];
+        for (bi, b) in self.bases.iter().enumerate() {
+            base_of[b.model] = Some(bi);
+        }
+        (0..self.world.models.len())
+            .filter(|&r| !self.world.models[r].sensors.is_empty())
+            .map(|r| Job {
+                ranger: r,
+                rays: self.world.models[r].sensors.iter().map(|s| s.samples).sum(),
+                base: base_of[self.roots[r]],
+            })
+            .collect()
+    }
+
+    /// Plans moves and casts rays on `threads` threads (no more than there
+    /// are rangers).
+    fn set_threads(&mut self, threads: usize) {
+        let jobs = self.jobs();
+        self.crew = Crew::new(threads.min(jobs.len()).max(1), self.bases.len(), &jobs);
     }
 
     fn in_grid(&self, m: usize) -> bool {
@@ -792,58 +796,54 @@ impl Sim {
     }
 
     /// Moves every base by a step of `dt` (none when `None`), then updates
-    /// every ranger's readings, on `world.threads` threads.
+    /// every ranger's readings, on the crew's threads.
     ///
     /// # Behavior
     ///
-    /// Every thread plans bases (see [`Sim::plan`]), taking them one at a
-    /// time; this thread then carries the plans out in order, while the
-    /// helpers wait for it, spinning (a sleeping thread wakes as slowly as
-    /// a new one starts: later than the moves end). Then every thread casts
-    /// rays, taking rangers one at a time, those with the most rays first,
-    /// so that the threads finish together. With one thread, none is
-    /// started; a helper that starts late finds the bases planned.
+    /// Every thread plans bases (see [`Sim::plan`]); one thread then
+    /// carries the plans out in order, while the others wait for it,
+    /// spinning (a sleeping thread wakes later than the moves end). Then
+    /// every thread casts rays. Each thread takes the bases and rangers of
+    /// its share of the robots first (see [`crate::crew`]). With one
+    /// thread, none waits; a helper that starts late finds the bases
+    /// planned.
     fn run(&mut self, dt: Option<f64>) {
-        let threads = self.sense_threads;
+        let crew = std::mem::take(&mut self.crew);
         let mut kept = std::mem::take(&mut self.plans);
         kept.resize_with(self.bases.len(), Mutex::default);
-        let plans = if dt.is_some() { &kept[..] } else { &[] };
-        let work: Vec<Mutex<(usize, Vec<Reading>)>> = self
-            .rangers
+        let moves = dt.is_some();
+        let dt = dt.unwrap_or(0.0);
+        let work: Vec<Mutex<(usize, Vec<Reading>)>> = crew
+            .rangers()
             .iter()
             .map(|&r| Mutex::new((r, Vec::new())))
             .collect();
-        let (next_plan, next_ranger) = (AtomicUsize::new(0), AtomicUsize::new(0));
+        let (to_plan, to_sense) = (crew.bases_to_plan(), crew.rangers_to_sense());
         let sensing = AtomicBool::new(false);
         let over = AtomicBool::new(false);
-        let moves = dt.is_some();
-        let dt = dt.unwrap_or(0.0);
-        let plan = |me: &Sim| loop {
-            let bi = next_plan.fetch_add(1, Ordering::Relaxed);
-            let Some(slot) = plans.get(bi) else {
-                return;
-            };
-            me.plan(bi, dt, &mut lock(slot));
+        let plan = |me: &Sim| {
+            while let Some(bi) = to_plan.take() {
+                if moves {
+                    me.plan(bi, dt, &mut lock(&kept[bi]));
+                }
+            }
         };
-        let sense = |me: &Sim| loop {
-            let Some(slot) = work.get(next_ranger.fetch_add(1, Ordering::Relaxed)) else {
-                return;
-            };
-            let mut slot = lock(slot);
-            let (r, out) = &mut *slot;
-            me.sense_one(*r, out);
+        let sense = |me: &Sim| {
+            while let Some(k) = to_sense.take() {
+                let mut slot = lock(&work[k]);
+                let (r, out) = &mut *slot;
+                me.sense_one(*r, out);
+            }
         };
         let sim = RwLock::new(&mut *self);
         let read = || sim.read().unwrap_or_else(PoisonError::into_inner);
-        std::thread::scope(|scope| {
-            for _ in 1..threads {
-                scope.spawn(|| {
-                    plan(&read());
-                    if wait_for(&sensing, &over) {
-                        sense(&read());
-                    }
-                });
+        let helper = || {
+            plan(&read());
+            if wait_for(&sensing, &over) {
+                sense(&read());
             }
+        };
+        let main = || {
             // However this ends (a panic too), the helpers stop waiting.
             let _release = Release(&over);
             plan(&read());
@@ -851,10 +851,10 @@ impl Sim {
                 // Waits for helpers still planning a base.
                 let mut me = sim.write().unwrap_or_else(PoisonError::into_inner);
                 let me: &mut Sim = &mut me;
-                for (bi, slot) in plans.iter().enumerate() {
-                    me.apply(bi, dt, &mut lock(slot));
-                }
                 if moves {
+                    for (bi, slot) in kept.iter().enumerate() {
+                        me.apply(bi, dt, &mut lock(slot));
+                    }
                     me.carry();
                 }
                 me.statics.refresh_clearance();
@@ -865,12 +865,14 @@ impl Sim {
             }
             sensing.store(true, Ordering::Release);
             sense(&read());
-        });
+        };
+        crew.run(helper, main);
         for slot in work {
             let (r, out) = slot.into_inner().unwrap_or_else(PoisonError::into_inner);
             self.readings[r] = out;
         }
         self.plans = kept;
+        self.crew = crew;
     }
 
     /// The first body along the ray from (x, y) along the unit vector
@@ -1370,7 +1372,7 @@ mod tests {
             );
         }
         let mut s = sim("fans", &text);
-        let rangers = s.rangers.clone();
+        let rangers = s.crew.rangers().to_vec();
         let mut skipped = 0.0;
         for round in 0..4 {
             for (i, b) in s.bases.iter_mut().enumerate() {
@@ -1492,9 +1494,9 @@ mod tests {
             sim("threads", &text)
         };
         let (mut one, mut two) = (world(1), world(2));
-        assert_eq!(one.sense_threads, 1);
+        assert_eq!(one.crew.threads(), 1);
         // (Two even on a machine of one core.)
-        two.sense_threads = 2;
+        two.set_threads(2);
         for _ in 0..30 {
             one.step();
             two.step();
