@@ -9,16 +9,17 @@
 //! about 8% slower). A thread done with its share takes what is left of
 //! the others', from their far end, so that all finish together.
 //!
-//! The threads are a pool kept for the simulation's life: starting threads
-//! every step cost more than a tenth of a millisecond per step, and new
-//! threads land on whichever core.
+//! The thread that steps the simulation is one of the crew; the others are
+//! a pool kept for the simulation's life: starting threads every step cost
+//! more than a tenth of a millisecond per step, and new threads land on
+//! whichever core.
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
 /// The threads of a simulation and the shares of its work.
 #[derive(Default)]
 pub struct Crew {
-    /// The pool (none for one thread).
+    /// The helpers (none for one thread).
     pool: Option<rayon::ThreadPool>,
     /// Where each thread's bases start, then the number of bases.
     bases: Vec<usize>,
@@ -45,8 +46,8 @@ impl Crew {
         let pool = (threads > 1)
             .then(|| {
                 rayon::ThreadPoolBuilder::new()
-                    .num_threads(threads)
-                    .thread_name(|i| format!("stage-{i}"))
+                    .num_threads(threads - 1)
+                    .thread_name(|i| format!("stage-{}", i + 1))
                     .build()
                     .map_err(|e| tracing::warn!("stage: one thread only: {e}"))
                     .ok()
@@ -112,54 +113,64 @@ impl Crew {
     }
 
     /// The bases to plan this step, dealt.
-    pub fn bases_to_plan(&self) -> Shares {
-        Shares::new(&self.bases)
+    pub fn bases_to_plan(&self) -> Shares<'_> {
+        Shares::new(self, &self.bases)
     }
 
     /// Positions in [`Crew::rangers`] to sense this step, dealt.
-    pub fn rangers_to_sense(&self) -> Shares {
-        Shares::new(&self.ranger_starts)
+    pub fn rangers_to_sense(&self) -> Shares<'_> {
+        Shares::new(self, &self.ranger_starts)
     }
 
-    /// Runs `main` on one thread of the crew and `helper` on each other;
-    /// returns when all have returned.
-    pub fn run(&self, helper: impl Fn() + Sync, main: impl FnOnce() + Send) {
+    /// Runs `main` on the calling thread and `helper` on each other thread
+    /// of the crew; returns when all have returned.
+    pub fn run(&self, helper: impl Fn() + Sync, main: impl FnOnce()) {
         match &self.pool {
-            Some(pool) => pool.install(|| {
-                rayon::scope(|s| {
-                    for _ in 1..self.threads() {
-                        s.spawn(|_| helper());
-                    }
-                    main();
-                })
+            Some(pool) => pool.in_place_scope(|s| {
+                for _ in 1..self.threads() {
+                    s.spawn(|_| helper());
+                }
+                main();
             }),
             None => main(),
         }
+    }
+
+    /// Which of the crew the calling thread is: 0 for the one stepping
+    /// the simulation (or any thread outside the crew).
+    fn me(&self) -> usize {
+        self.pool
+            .as_ref()
+            .and_then(rayon::ThreadPool::current_thread_index)
+            .map_or(0, |i| i + 1)
     }
 }
 
 /// Items dealt in shares, one per thread of a [`Crew`]: a thread takes its
 /// own from the front, then the others' from the back.
-pub struct Shares(Vec<AtomicU64>);
+pub struct Shares<'a> {
+    crew: &'a Crew,
+    /// Per share, its front and back packed in one word.
+    left: Vec<AtomicU64>,
+}
 
-impl Shares {
+impl<'a> Shares<'a> {
     /// Share `t` is `starts[t]..starts[t + 1]`.
-    fn new(starts: &[usize]) -> Shares {
+    fn new(crew: &'a Crew, starts: &[usize]) -> Shares<'a> {
         let pack = |front: usize, back: usize| ((front as u64) << 32) | back as u64;
-        Shares(
-            starts
-                .windows(2)
-                .map(|s| AtomicU64::new(pack(s[0], s[1])))
-                .collect(),
-        )
+        let left = starts
+            .windows(2)
+            .map(|s| AtomicU64::new(pack(s[0], s[1])))
+            .collect();
+        Shares { crew, left }
     }
 
     /// The next item for the calling thread, or `None` when all are taken.
     pub fn take(&self) -> Option<usize> {
-        let n = self.0.len();
-        let me = rayon::current_thread_index().unwrap_or(0);
+        let n = self.left.len();
+        let me = self.crew.me();
         (0..n).find_map(|k| {
-            let share = &self.0[(me + k) % n];
+            let share = &self.left[(me + k) % n];
             let mut now = share.load(Ordering::Relaxed);
             loop {
                 let (front, back) = (now >> 32, now & 0xffff_ffff);
@@ -223,12 +234,13 @@ mod tests {
 
     #[test]
     fn a_thread_done_with_its_share_takes_the_others_from_the_back() {
-        // Outside a pool a thread counts as thread 0.
-        let shares = Shares::new(&[0, 2, 5]);
+        // The calling thread counts as thread 0.
+        let crew = Crew::default();
+        let shares = Shares::new(&crew, &[0, 2, 5]);
         let got: Vec<usize> = std::iter::from_fn(|| shares.take()).collect();
         assert_eq!(got, [0, 1, 4, 3, 2]);
-        assert_eq!(Shares::new(&[]).take(), None);
-        assert_eq!(Shares::new(&[3, 3]).take(), None);
+        assert_eq!(Shares::new(&crew, &[]).take(), None);
+        assert_eq!(Shares::new(&crew, &[3, 3]).take(), None);
     }
 
     #[test]

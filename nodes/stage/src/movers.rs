@@ -36,9 +36,10 @@ impl Movers {
 
     /// Files model `m` (id `id`), whose body is `shapes` (polygons in world
     /// coordinates), under `tiles` (each once), replacing where it was. The
-    /// polygons are copied into buffers kept from the last filing: a body
-    /// that moves every step allocates nothing.
-    pub fn file<T>(&mut self, m: usize, id: u16, shapes: &[Vec<(f64, f64)>], tiles: T)
+    /// polygons are swapped in, not copied: `shapes` gets the last filing's
+    /// buffers back for the next, so a body that moves every step allocates
+    /// nothing.
+    pub fn file<T>(&mut self, m: usize, id: u16, shapes: &mut Vec<Vec<(f64, f64)>>, tiles: T)
     where
         T: IntoIterator<Item = usize>,
         T::IntoIter: Clone,
@@ -55,11 +56,7 @@ impl Movers {
             }
         }
         // (Most steps a body stays in its tiles: only its shape moved.)
-        let kept = &mut self.shapes[m];
-        kept.resize_with(shapes.len(), Vec::new);
-        for (k, s) in kept.iter_mut().zip(shapes) {
-            k.clone_from(s);
-        }
+        std::mem::swap(&mut self.shapes[m], shapes);
         self.circles[m] = circle;
     }
 
@@ -235,7 +232,7 @@ mod tests {
     #[test]
     fn bodies_overlap_when_they_cross_or_contain() {
         let mut m = Movers::new(2, 1);
-        m.file(0, 1, &[square(0.0, 0.0, 0.5)], vec![0]);
+        m.file(0, 1, &mut vec![square(0.0, 0.0, 0.5)], vec![0]);
         assert!(m.overlaps(0, &[square(0.9, 0.0, 0.5)]), "edges cross");
         assert!(m.overlaps(0, &[square(0.1, 0.1, 0.1)]), "inside it");
         assert!(m.overlaps(0, &[square(0.0, 0.0, 3.0)]), "around it");
@@ -250,7 +247,7 @@ mod tests {
     #[test]
     fn rays_meet_filed_bodies_exactly() {
         let mut m = Movers::new(3, 4);
-        m.file(1, 2, &[square(2.0, 0.0, 0.5)], vec![3, 1]);
+        m.file(1, 2, &mut vec![square(2.0, 0.0, 0.5)], vec![3, 1]);
         assert_eq!(m.in_tile(3), &[2]);
         assert_eq!(m.in_tile(1), &[2]);
         assert!(m.in_tile(0).is_empty() && m.in_tile(99).is_empty());
@@ -264,7 +261,7 @@ mod tests {
         assert!(m.hit(1, 2, (0.0, 0.0), (0.0, 1.0)).is_none(), "beside");
         assert_eq!(m.hit(1, 2, (2.1, 0.2), (1.0, 0.0)).unwrap().range, 0.0);
         // Moving re-files; unfiling empties the tiles.
-        m.file(1, 2, &[square(5.0, 0.0, 0.5)], vec![0]);
+        m.file(1, 2, &mut vec![square(5.0, 0.0, 0.5)], vec![0]);
         assert!(m.in_tile(3).is_empty() && m.in_tile(0) == [2]);
         assert!((m.hit(1, 2, (0.0, 0.0), (1.0, 0.0)).unwrap().range - 4.5).abs() < 1e-12);
         m.unfile(1, 2);
@@ -276,7 +273,7 @@ mod tests {
         // A rotated rectangle; rays from all around, most near its corners.
         let body = vec![(1.0, 0.2), (1.8, 0.6), (1.5, 1.2), (0.7, 0.8)];
         let mut m = Movers::new(1, 1);
-        m.file(0, 1, std::slice::from_ref(&body), vec![0]);
+        m.file(0, 1, &mut vec![body.clone()], vec![0]);
         let mut x: u32 = 3;
         let mut rnd = || {
             x ^= x << 13;

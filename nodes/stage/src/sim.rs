@@ -426,7 +426,7 @@ impl Sim {
             return;
         }
         if self.movable[m] {
-            self.file(&self.placed(m, self.global(m)));
+            self.file(&mut self.placed(m, self.global(m)));
         } else {
             let cells = self.body_cells(m);
             self.occupy(m, cells);
@@ -453,14 +453,15 @@ impl Sim {
             .and_then(|b| self.statics.lattice().cells_of_box(b));
     }
 
-    /// Files a moving body under the tiles it touches.
-    fn file(&mut self, body: &Placed) {
+    /// Files a moving body under the tiles it touches (taking its polygons,
+    /// and leaving it buffers to reuse).
+    fn file(&mut self, body: &mut Placed) {
         let tiles = body
             .cells
             .into_iter()
             .flat_map(|(lo, hi)| self.statics.tiles_of_box(lo, hi));
         let m = body.model;
-        self.movers.file(m, id(m), &body.polys, tiles);
+        self.movers.file(m, id(m), &mut body.polys, tiles);
     }
 
     /// Moves static model `m`'s body in the grid from its old cells to `cells`.
@@ -568,7 +569,7 @@ impl Sim {
     /// Files the `bodies` (from `tree_at` of a robot: all movable, as
     /// everything on a robot and everything it carries is) where they were
     /// placed.
-    fn commit(&mut self, bodies: &[Placed]) {
+    fn commit(&mut self, bodies: &mut [Placed]) {
         for body in bodies {
             debug_assert!(self.movable[body.model], "a static body in a robot's tree");
             if self.in_grid(body.model) {
@@ -771,7 +772,7 @@ impl Sim {
                 return;
             }
             self.poses[m] = plan.next;
-            self.commit(&plan.bodies);
+            self.commit(&mut plan.bodies);
             if localization == Localization::Gps {
                 let g = self.global(m);
                 let b = &mut self.bases[bi];
