@@ -4,8 +4,9 @@
 //! own body and its neighbours would make every ray walk dozens of cells of
 //! the moving grid. Instead each moving body keeps its polygons in world
 //! coordinates, filed under the grid tiles it touches; a ray tests a body
-//! exactly (ray against polygon edges) when it enters one of those tiles,
-//! and a robot's own body costs nothing because it is never tested.
+//! exactly when it enters one of those tiles (a rectangle, the usual body,
+//! as a box in its own frame; any other polygon edge by edge), and a
+//! robot's own body costs nothing because it is never tested.
 
 use troupe_geom::{bounds, Hit};
 
@@ -17,6 +18,9 @@ pub struct Movers {
     /// A circle around each model's polygons (centre x, y, radius): a ray
     /// that misses it misses them.
     circles: Vec<(f64, f64, f64)>,
+    /// Each model's body as a rectangle, when it is one (most are: a
+    /// model's default body is its box): rays test it in its own frame.
+    rects: Vec<Option<Rect>>,
     /// The tiles each model is filed under.
     tiles_of: Vec<Vec<usize>>,
     /// Model ids (index + 1) filed under each tile.
@@ -29,6 +33,7 @@ impl Movers {
         Movers {
             shapes: vec![Vec::new(); models],
             circles: vec![(0.0, 0.0, -1.0); models],
+            rects: vec![None; models],
             tiles_of: vec![Vec::new(); models],
             in_tile: vec![Vec::new(); tiles],
         }
@@ -58,6 +63,10 @@ impl Movers {
         // (Most steps a body stays in its tiles: only its shape moved.)
         std::mem::swap(&mut self.shapes[m], shapes);
         self.circles[m] = circle;
+        self.rects[m] = match &self.shapes[m][..] {
+            [one] => Rect::of(one),
+            _ => None,
+        };
     }
 
     /// Model `m`'s filed polygons, in world coordinates (none when not filed).
@@ -70,6 +79,7 @@ impl Movers {
         self.untile(m, id);
         self.shapes[m].clear();
         self.circles[m] = (0.0, 0.0, -1.0);
+        self.rects[m] = None;
     }
 
     /// Takes model `m` (id `id`) out of every tile, keeping its shape.
@@ -126,6 +136,9 @@ impl Movers {
         if (w.0 * d.1 - w.1 * d.0).abs() > r || w.0 * d.0 + w.1 * d.1 < -r {
             return None;
         }
+        if let Some(rect) = &self.rects[m] {
+            return rect.hit(o, d).map(|range| Hit { range, id });
+        }
         self.hit_edges(m, id, o, d)
     }
 
@@ -162,6 +175,59 @@ impl Movers {
             }
         }
         best.is_finite().then_some(Hit { range: best, id })
+    }
+}
+
+/// A rectangle in the world: its centre, the unit vector along its first
+/// side, and its half extents along that side and across it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Rect {
+    c: (f64, f64),
+    u: (f64, f64),
+    half: (f64, f64),
+}
+
+impl Rect {
+    /// The rectangle `poly` is, if it is one (four corners in order, right
+    /// angles, to a hair).
+    fn of(poly: &[(f64, f64)]) -> Option<Rect> {
+        let &[p0, p1, p2, p3] = poly else {
+            return None;
+        };
+        let a = (p1.0 - p0.0, p1.1 - p0.1);
+        let b = (p3.0 - p0.0, p3.1 - p0.1);
+        let (la, lb) = (a.0.hypot(a.1), b.0.hypot(b.1));
+        let tol = 1e-9 * (la + lb);
+        let square = (a.0 * b.0 + a.1 * b.1).abs() <= tol * (la + lb);
+        let closes =
+            (p0.0 + a.0 + b.0 - p2.0).abs() <= tol && (p0.1 + a.1 + b.1 - p2.1).abs() <= tol;
+        (la > 0.0 && lb > 0.0 && square && closes).then(|| Rect {
+            c: ((p0.0 + p2.0) / 2.0, (p0.1 + p2.1) / 2.0),
+            u: (a.0 / la, a.1 / la),
+            half: (la / 2.0, lb / 2.0),
+        })
+    }
+
+    /// Where the ray from `o` along the unit vector `d` enters the
+    /// rectangle: metres, 0 when `o` is inside it. In the rectangle's frame
+    /// it is a box: the ray's span in each slab, met.
+    #[inline]
+    fn hit(&self, o: (f64, f64), d: (f64, f64)) -> Option<f64> {
+        let (ux, uy) = self.u;
+        let w = (o.0 - self.c.0, o.1 - self.c.1);
+        // Origin and direction along the sides: u, and v = u turned left.
+        let (ox, oy) = (w.0 * ux + w.1 * uy, w.1 * ux - w.0 * uy);
+        let (dx, dy) = (d.0 * ux + d.1 * uy, d.1 * ux - d.0 * uy);
+        // Parallel to a side, 1/0 is infinite and the slab spans all or none.
+        let slab = |o: f64, d: f64, h: f64| {
+            let inv = 1.0 / d;
+            let (a, b) = ((-h - o) * inv, (h - o) * inv);
+            (a.min(b), a.max(b))
+        };
+        let (x0, x1) = slab(ox, dx, self.half.0);
+        let (y0, y1) = slab(oy, dy, self.half.1);
+        let (enter, exit) = (x0.max(y0), x1.min(y1));
+        (enter <= exit && exit >= 0.0).then_some(enter.max(0.0))
     }
 }
 
@@ -269,45 +335,69 @@ mod tests {
     }
 
     #[test]
-    fn the_bounding_circle_never_hides_a_hit() {
-        // A rotated rectangle; rays from all around, most near its corners.
-        let body = vec![(1.0, 0.2), (1.8, 0.6), (1.5, 1.2), (0.7, 0.8)];
-        let mut m = Movers::new(1, 1);
-        m.file(0, 1, &mut vec![body.clone()], vec![0]);
-        let mut x: u32 = 3;
-        let mut rnd = || {
-            x ^= x << 13;
-            x ^= x >> 17;
-            x ^= x << 5;
-            f64::from(x) / f64::from(u32::MAX)
-        };
-        let mut hits = 0;
-        for _ in 0..5000 {
-            let o = (rnd() * 4.0 - 1.0, rnd() * 4.0 - 1.5);
-            let (tx, ty) = body[(rnd() * 4.0) as usize % 4];
-            let a = (ty - o.1).atan2(tx - o.0) + (rnd() - 0.5) * 0.2;
-            let d = (a.cos(), a.sin());
-            // Edges alone, as hit() would without the circle.
-            let mut exact = f64::INFINITY;
-            for (p, q) in edges(&body) {
-                let e = (q.0 - p.0, q.1 - p.1);
-                let den = d.0 * e.1 - d.1 * e.0;
-                let w = (p.0 - o.0, p.1 - o.1);
-                let (t, u) = ((w.0 * e.1 - w.1 * e.0) / den, (w.0 * d.1 - w.1 * d.0) / den);
-                if (0.0..1.0).contains(&u) && t >= 0.0 {
-                    exact = exact.min(t);
+    fn rays_meet_rectangles_and_other_polygons_exactly() {
+        // A rotated rectangle (tested in its own frame, either winding) and
+        // a kite (tested edge by edge); rays from all around, most near
+        // their corners, against the edges alone.
+        let rect = vec![(1.0, 0.2), (1.8, 0.6), (1.5, 1.2), (0.7, 0.8)];
+        let mut clockwise = rect.clone();
+        clockwise.reverse();
+        let kite = vec![(1.0, 0.2), (1.9, 0.5), (1.5, 1.2), (0.7, 0.8)];
+        for (body, is_rect) in [(rect, true), (clockwise, true), (kite, false)] {
+            let mut m = Movers::new(1, 1);
+            m.file(0, 1, &mut vec![body.clone()], vec![0]);
+            assert_eq!(m.rects[0].is_some(), is_rect, "{body:?}");
+            let mut x: u32 = 3;
+            let mut rnd = || {
+                x ^= x << 13;
+                x ^= x >> 17;
+                x ^= x << 5;
+                f64::from(x) / f64::from(u32::MAX)
+            };
+            let mut hits = 0;
+            for _ in 0..5000 {
+                let o = (rnd() * 4.0 - 1.0, rnd() * 4.0 - 1.5);
+                let (tx, ty) = body[(rnd() * 4.0) as usize % 4];
+                let a = (ty - o.1).atan2(tx - o.0) + (rnd() - 0.5) * 0.2;
+                let d = (a.cos(), a.sin());
+                let mut exact = f64::INFINITY;
+                for (p, q) in edges(&body) {
+                    let e = (q.0 - p.0, q.1 - p.1);
+                    let den = d.0 * e.1 - d.1 * e.0;
+                    let w = (p.0 - o.0, p.1 - o.1);
+                    let (t, u) = ((w.0 * e.1 - w.1 * e.0) / den, (w.0 * d.1 - w.1 * d.0) / den);
+                    if (0.0..1.0).contains(&u) && t >= 0.0 {
+                        exact = exact.min(t);
+                    }
+                }
+                let got = m.hit(0, 1, o, d).map(|h| h.range);
+                if inside(&body, o) {
+                    assert_eq!(got, Some(0.0));
+                } else if exact.is_finite() {
+                    hits += 1;
+                    assert!((got.unwrap() - exact).abs() < 1e-12, "{o:?} {a}");
+                } else {
+                    assert_eq!(got, None, "{o:?} {a}");
                 }
             }
-            let got = m.hit(0, 1, o, d).map(|h| h.range);
-            if inside(&body, o) {
-                assert_eq!(got, Some(0.0));
-            } else if exact.is_finite() {
-                hits += 1;
-                assert!((got.unwrap() - exact).abs() < 1e-12, "{o:?} {a}");
-            } else {
-                assert_eq!(got, None, "{o:?} {a}");
-            }
+            assert!(hits > 1000, "{hits}");
         }
-        assert!(hits > 1000, "{hits}");
+    }
+
+    #[test]
+    fn a_ray_along_a_rectangles_side_line_is_judged_by_its_offset() {
+        let mut m = Movers::new(1, 1);
+        m.file(0, 1, &mut vec![square(2.0, 0.0, 0.5)], vec![0]);
+        assert!(m.rects[0].is_some());
+        // Parallel to the sides: through the middle, just inside and just
+        // outside the side at y = 0.5.
+        assert!((m.hit(0, 1, (0.0, 0.0), (1.0, 0.0)).unwrap().range - 1.5).abs() < 1e-12);
+        assert!((m.hit(0, 1, (0.0, 0.49), (1.0, 0.0)).unwrap().range - 1.5).abs() < 1e-12);
+        assert!(m.hit(0, 1, (0.0, 0.51), (1.0, 0.0)).is_none());
+        assert!(
+            m.hit(0, 1, (2.0, 0.51), (0.0, 1.0)).is_none(),
+            "above, going away"
+        );
+        assert!((m.hit(0, 1, (2.0, 1.5), (0.0, -1.0)).unwrap().range - 1.0).abs() < 1e-12);
     }
 }
