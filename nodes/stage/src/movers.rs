@@ -13,44 +13,76 @@ use troupe_geom::{bounds, Hit};
 /// The polygons of every moving body, filed by tile.
 #[derive(Debug, Clone, Default)]
 pub struct Movers {
-    /// World-frame polygons of each model (empty when not filed).
-    shapes: Vec<Vec<Vec<(f64, f64)>>>,
-    /// A circle around each model's polygons (centre x, y, radius): a ray
-    /// that misses it misses them.
-    circles: Vec<(f64, f64, f64)>,
-    /// Each model's body as a rectangle, when it is one (most are: a
-    /// model's default body is its box): rays test it in its own frame.
-    rects: Vec<Option<Rect>>,
+    /// Each model's body (no polygons when not filed).
+    bodies: Vec<Body>,
     /// The tiles each model is filed under.
     tiles_of: Vec<Vec<usize>>,
     /// Model ids (index + 1) filed under each tile.
     in_tile: Vec<Vec<u16>>,
 }
 
+/// A moving body: its polygons in world coordinates, and what rays and
+/// collisions look at first.
+#[derive(Debug, Clone)]
+pub struct Body {
+    /// The polygons.
+    pub polys: Vec<Vec<(f64, f64)>>,
+    /// A circle around them (centre x, y, radius; negative when there are
+    /// no points): what misses it misses them.
+    circle: (f64, f64, f64),
+    /// The body as a rectangle, when it is one (most are: a model's
+    /// default body is its box): rays test it in its own frame.
+    rect: Option<Rect>,
+}
+
+impl Default for Body {
+    fn default() -> Self {
+        Body {
+            polys: Vec::new(),
+            circle: (0.0, 0.0, -1.0),
+            rect: None,
+        }
+    }
+}
+
+impl Body {
+    /// Works out the circle and the rectangle again, after `polys` changed.
+    pub fn update(&mut self) {
+        self.circle = circle_around(&self.polys);
+        self.rect = match &self.polys[..] {
+            [one] => Rect::of(one),
+            _ => None,
+        };
+    }
+
+    /// The circle around the polygons: centre x, y and radius (negative
+    /// when there are none).
+    pub fn circle(&self) -> (f64, f64, f64) {
+        self.circle
+    }
+}
+
 impl Movers {
     /// Room for `models` models over a grid of `tiles` tiles.
     pub fn new(models: usize, tiles: usize) -> Self {
         Movers {
-            shapes: vec![Vec::new(); models],
-            circles: vec![(0.0, 0.0, -1.0); models],
-            rects: vec![None; models],
+            bodies: vec![Body::default(); models],
             tiles_of: vec![Vec::new(); models],
             in_tile: vec![Vec::new(); tiles],
         }
     }
 
-    /// Files model `m` (id `id`), whose body is `shapes` (polygons in world
-    /// coordinates), under `tiles` (each once), replacing where it was. The
-    /// polygons are swapped in, not copied: `shapes` gets the last filing's
-    /// buffers back for the next, so a body that moves every step allocates
-    /// nothing.
-    pub fn file<T>(&mut self, m: usize, id: u16, shapes: &mut Vec<Vec<(f64, f64)>>, tiles: T)
+    /// Files model `m` (id `id`), whose body is `body` (brought up to date
+    /// by [`Body::update`]), under `tiles` (each once), replacing where it
+    /// was. The body is swapped in, not copied: `body` gets the last
+    /// filing's buffers back for the next, so a body that moves every step
+    /// allocates nothing, and whoever placed it worked out its circle.
+    pub fn file<T>(&mut self, m: usize, id: u16, body: &mut Body, tiles: T)
     where
         T: IntoIterator<Item = usize>,
         T::IntoIter: Clone,
     {
         let tiles = tiles.into_iter();
-        let circle = circle_around(shapes);
         if !tiles.clone().eq(self.tiles_of[m].iter().copied()) {
             self.untile(m, id);
             for t in tiles {
@@ -61,25 +93,20 @@ impl Movers {
             }
         }
         // (Most steps a body stays in its tiles: only its shape moved.)
-        std::mem::swap(&mut self.shapes[m], shapes);
-        self.circles[m] = circle;
-        self.rects[m] = match &self.shapes[m][..] {
-            [one] => Rect::of(one),
-            _ => None,
-        };
+        std::mem::swap(&mut self.bodies[m], body);
     }
 
     /// Model `m`'s filed polygons, in world coordinates (none when not filed).
     pub fn shapes(&self, m: usize) -> &[Vec<(f64, f64)>] {
-        &self.shapes[m]
+        &self.bodies[m].polys
     }
 
     /// Takes model `m` (id `id`) out of every tile.
     pub fn unfile(&mut self, m: usize, id: u16) {
         self.untile(m, id);
-        self.shapes[m].clear();
-        self.circles[m] = (0.0, 0.0, -1.0);
-        self.rects[m] = None;
+        let body = &mut self.bodies[m];
+        body.polys.clear();
+        body.update();
     }
 
     /// Takes model `m` (id `id`) out of every tile, keeping its shape.
@@ -95,8 +122,8 @@ impl Movers {
     /// How far point `p` is from model `m`'s body, at least (the distance to
     /// the circle around it; negative inside the circle).
     pub fn clearance(&self, m: usize, p: (f64, f64)) -> f64 {
-        let (cx, cy, r) = self.circles[m];
-        (cx - p.0).hypot(cy - p.1) - r
+        let (cx, cy, r) = self.bodies[m].circle;
+        ((cx - p.0).powi(2) + (cy - p.1).powi(2)).sqrt() - r
     }
 
     /// The ids filed under tile `t`.
@@ -104,17 +131,21 @@ impl Movers {
         self.in_tile.get(t).map_or(&[], Vec::as_slice)
     }
 
-    /// Whether model `m`'s filed body overlaps any of `polys` (world
-    /// polygons): an edge of one crosses an edge of the other, or one holds
-    /// a corner of the other.
-    pub fn overlaps(&self, m: usize, polys: &[Vec<(f64, f64)>]) -> bool {
+    /// Whether model `m`'s filed body overlaps `body`: an edge of one
+    /// crosses an edge of the other, or one holds a corner of the other.
+    pub fn overlaps(&self, m: usize, body: &Body) -> bool {
+        let ((ax, ay, ar), (bx, by, br)) = (self.bodies[m].circle, body.circle);
+        if (ax - bx).powi(2) + (ay - by).powi(2) > (ar + br).powi(2) || ar < 0.0 || br < 0.0 {
+            return false;
+        }
+        let polys = &body.polys;
         let bbox = |ps: &[(f64, f64)]| bounds(ps.iter().copied());
         // Boxes that do not meet (or polygons with no points) are apart.
         let apart = |a: Option<[f64; 4]>, b: Option<[f64; 4]>| match (a, b) {
             (Some(a), Some(b)) => a[2] < b[0] || b[2] < a[0] || a[3] < b[1] || b[3] < a[1],
             _ => true,
         };
-        self.shapes[m].iter().any(|a| {
+        self.bodies[m].polys.iter().any(|a| {
             let ba = bbox(a);
             polys.iter().any(|b| {
                 !apart(ba, bbox(b))
@@ -131,12 +162,13 @@ impl Movers {
     pub fn hit(&self, m: usize, id: u16, o: (f64, f64), d: (f64, f64)) -> Option<Hit> {
         // Most rays that pass a body's tiles miss it: the circle says so
         // without testing edges.
-        let (cx, cy, r) = self.circles[m];
+        let body = &self.bodies[m];
+        let (cx, cy, r) = body.circle;
         let w = (cx - o.0, cy - o.1);
         if (w.0 * d.1 - w.1 * d.0).abs() > r || w.0 * d.0 + w.1 * d.1 < -r {
             return None;
         }
-        if let Some(rect) = &self.rects[m] {
+        if let Some(rect) = &body.rect {
             return rect.hit(o, d).map(|range| Hit { range, id });
         }
         self.hit_edges(m, id, o, d)
@@ -146,7 +178,7 @@ impl Movers {
     #[inline(never)]
     fn hit_edges(&self, m: usize, id: u16, o: (f64, f64), d: (f64, f64)) -> Option<Hit> {
         let mut best = f64::INFINITY;
-        for poly in &self.shapes[m] {
+        for poly in &self.bodies[m].polys {
             let mut crossings = 0;
             for (a, b) in edges(poly) {
                 // The ray o + t·d meets the edge a + u·e where t = tn/den and
@@ -233,7 +265,7 @@ impl Rect {
 
 /// A circle holding every point of `polys`: centre and radius (negative
 /// when there are no points).
-pub(crate) fn circle_around(polys: &[Vec<(f64, f64)>]) -> (f64, f64, f64) {
+fn circle_around(polys: &[Vec<(f64, f64)>]) -> (f64, f64, f64) {
     let Some([x0, y0, x1, y1]) = bounds(polys.iter().flatten().copied()) else {
         return (0.0, 0.0, -1.0);
     };
@@ -286,6 +318,15 @@ fn inside(poly: &[(f64, f64)], p: (f64, f64)) -> bool {
 mod tests {
     use super::*;
 
+    fn shape(polys: Vec<Vec<(f64, f64)>>) -> Body {
+        let mut b = Body {
+            polys,
+            ..Body::default()
+        };
+        b.update();
+        b
+    }
+
     fn square(cx: f64, cy: f64, h: f64) -> Vec<(f64, f64)> {
         vec![
             (cx - h, cy - h),
@@ -298,22 +339,34 @@ mod tests {
     #[test]
     fn bodies_overlap_when_they_cross_or_contain() {
         let mut m = Movers::new(2, 1);
-        m.file(0, 1, &mut vec![square(0.0, 0.0, 0.5)], vec![0]);
-        assert!(m.overlaps(0, &[square(0.9, 0.0, 0.5)]), "edges cross");
-        assert!(m.overlaps(0, &[square(0.1, 0.1, 0.1)]), "inside it");
-        assert!(m.overlaps(0, &[square(0.0, 0.0, 3.0)]), "around it");
-        assert!(!m.overlaps(0, &[square(1.1, 0.0, 0.5)]), "apart");
+        m.file(0, 1, &mut shape(vec![square(0.0, 0.0, 0.5)]), vec![0]);
+        assert!(
+            m.overlaps(0, &shape(vec![square(0.9, 0.0, 0.5)])),
+            "edges cross"
+        );
+        assert!(
+            m.overlaps(0, &shape(vec![square(0.1, 0.1, 0.1)])),
+            "inside it"
+        );
+        assert!(
+            m.overlaps(0, &shape(vec![square(0.0, 0.0, 3.0)])),
+            "around it"
+        );
+        assert!(!m.overlaps(0, &shape(vec![square(1.1, 0.0, 0.5)])), "apart");
         // Diagonal neighbours whose boxes overlap but bodies do not.
         let diamond = vec![(1.0, 0.4), (1.5, 0.9), (1.0, 1.4), (0.5, 0.9)];
-        assert!(!m.overlaps(0, &[diamond]));
+        assert!(!m.overlaps(0, &shape(vec![diamond])));
         m.unfile(0, 1);
-        assert!(!m.overlaps(0, &[square(0.0, 0.0, 3.0)]), "unfiled");
+        assert!(
+            !m.overlaps(0, &shape(vec![square(0.0, 0.0, 3.0)])),
+            "unfiled"
+        );
     }
 
     #[test]
     fn rays_meet_filed_bodies_exactly() {
         let mut m = Movers::new(3, 4);
-        m.file(1, 2, &mut vec![square(2.0, 0.0, 0.5)], vec![3, 1]);
+        m.file(1, 2, &mut shape(vec![square(2.0, 0.0, 0.5)]), vec![3, 1]);
         assert_eq!(m.in_tile(3), &[2]);
         assert_eq!(m.in_tile(1), &[2]);
         assert!(m.in_tile(0).is_empty() && m.in_tile(99).is_empty());
@@ -327,7 +380,7 @@ mod tests {
         assert!(m.hit(1, 2, (0.0, 0.0), (0.0, 1.0)).is_none(), "beside");
         assert_eq!(m.hit(1, 2, (2.1, 0.2), (1.0, 0.0)).unwrap().range, 0.0);
         // Moving re-files; unfiling empties the tiles.
-        m.file(1, 2, &mut vec![square(5.0, 0.0, 0.5)], vec![0]);
+        m.file(1, 2, &mut shape(vec![square(5.0, 0.0, 0.5)]), vec![0]);
         assert!(m.in_tile(3).is_empty() && m.in_tile(0) == [2]);
         assert!((m.hit(1, 2, (0.0, 0.0), (1.0, 0.0)).unwrap().range - 4.5).abs() < 1e-12);
         m.unfile(1, 2);
@@ -345,8 +398,8 @@ mod tests {
         let kite = vec![(1.0, 0.2), (1.9, 0.5), (1.5, 1.2), (0.7, 0.8)];
         for (body, is_rect) in [(rect, true), (clockwise, true), (kite, false)] {
             let mut m = Movers::new(1, 1);
-            m.file(0, 1, &mut vec![body.clone()], vec![0]);
-            assert_eq!(m.rects[0].is_some(), is_rect, "{body:?}");
+            m.file(0, 1, &mut shape(vec![body.clone()]), vec![0]);
+            assert_eq!(m.bodies[0].rect.is_some(), is_rect, "{body:?}");
             let mut x: u32 = 3;
             let mut rnd = || {
                 x ^= x << 13;
@@ -387,8 +440,8 @@ mod tests {
     #[test]
     fn a_ray_along_a_rectangles_side_line_is_judged_by_its_offset() {
         let mut m = Movers::new(1, 1);
-        m.file(0, 1, &mut vec![square(2.0, 0.0, 0.5)], vec![0]);
-        assert!(m.rects[0].is_some());
+        m.file(0, 1, &mut shape(vec![square(2.0, 0.0, 0.5)]), vec![0]);
+        assert!(m.bodies[0].rect.is_some());
         // Parallel to the sides: through the middle, just inside and just
         // outside the side at y = 0.5.
         assert!((m.hit(0, 1, (0.0, 0.0), (1.0, 0.0)).unwrap().range - 1.5).abs() < 1e-12);

@@ -18,7 +18,7 @@ use troupe_geom::{bounds, normalize, Grid, Hit, Lattice, OccMap, Pose, EMPTY};
 use troupe_msgs::{map, Color};
 
 use crate::crew::{Crew, Job};
-use crate::movers::{circle_around, Movers};
+use crate::movers::{Body, Movers};
 use crate::world::{Drive, Kind, Localization, Sensor, World};
 
 /// What a position model was last told to do.
@@ -111,13 +111,13 @@ pub struct Sim {
     plans: Vec<Mutex<Plan>>,
 }
 
-/// A body as it would stand at a global pose: its polygons in world
-/// coordinates and the cells of their box (`None` off the grid), made once
-/// for both the collision test and the filing.
+/// A body as it would stand at a global pose: in world coordinates, with
+/// the cells of its box (`None` off the grid), made once (by the thread
+/// that plans the move) for both the collision tests and the filing.
 #[derive(Default)]
 struct Placed {
     model: usize,
-    polys: Vec<Vec<(f64, f64)>>,
+    body: Body,
     cells: Option<((usize, usize), (usize, usize))>,
 }
 
@@ -411,7 +411,7 @@ impl Sim {
     /// The cells model `m`'s body covers at its current pose.
     fn body_cells(&self, m: usize) -> Vec<(usize, usize)> {
         let mut out = Vec::new();
-        for pts in self.placed(m, self.global(m)).polys {
+        for pts in self.placed(m, self.global(m)).body.polys {
             self.statics
                 .lattice()
                 .polygon_cells(&pts, |i, j| out.push((i, j)));
@@ -444,13 +444,15 @@ impl Sim {
     fn place_into(&self, m: usize, at: Pose, body: &mut Placed) {
         let blocks = &self.world.models[m].blocks;
         body.model = m;
-        body.polys.resize_with(blocks.len(), Vec::new);
-        for (poly, b) in body.polys.iter_mut().zip(blocks) {
+        let polys = &mut body.body.polys;
+        polys.resize_with(blocks.len(), Vec::new);
+        for (poly, b) in polys.iter_mut().zip(blocks) {
             poly.clear();
             poly.extend(b.iter().map(|&(x, y)| at.apply(x, y)));
         }
-        body.cells = bounds(body.polys.iter().flatten().copied())
+        body.cells = bounds(polys.iter().flatten().copied())
             .and_then(|b| self.statics.lattice().cells_of_box(b));
+        body.body.update();
     }
 
     /// Files a moving body under the tiles it touches (taking its polygons,
@@ -461,7 +463,7 @@ impl Sim {
             .into_iter()
             .flat_map(|(lo, hi)| self.statics.tiles_of_box(lo, hi));
         let m = body.model;
-        self.movers.file(m, id(m), &mut body.polys, tiles);
+        self.movers.file(m, id(m), &mut body.body, tiles);
     }
 
     /// Moves static model `m`'s body in the grid from its old cells to `cells`.
@@ -502,13 +504,13 @@ impl Sim {
     fn hits_statics(&self, root: usize, bodies: &[Placed]) -> bool {
         let blocks = |c: usize| self.blocks(root, c - 1);
         for body in bodies {
-            let (polys, Some((lo, hi))) = (&body.polys, body.cells) else {
+            let (polys, Some((lo, hi))) = (&body.body.polys, body.cells) else {
                 continue;
             };
             // Static cells, rasterised only where a tile holds any (reading
             // the cells of a large world is what costs: cache misses) and
             // the open space around the body does not hold all of it.
-            if !self.in_the_open(polys)
+            if !self.in_the_open(&body.body)
                 && self
                     .statics
                     .tiles_of_box(lo, hi)
@@ -537,7 +539,7 @@ impl Sim {
     fn hits_movers(&self, root: usize, bodies: &[Placed]) -> bool {
         let blocks = |c: usize| self.blocks(root, c - 1);
         for body in bodies {
-            let (polys, Some((lo, hi))) = (&body.polys, body.cells) else {
+            let Some((lo, hi)) = body.cells else {
                 continue;
             };
             // The body itself is filed in these tiles: only other blockers
@@ -548,7 +550,7 @@ impl Sim {
                     if !blocks(usize::from(c)) || !tested.first(c) {
                         continue;
                     }
-                    if self.movers.overlaps(usize::from(c) - 1, polys) {
+                    if self.movers.overlaps(usize::from(c) - 1, &body.body) {
                         return true;
                     }
                 }
@@ -558,9 +560,9 @@ impl Sim {
     }
 
     /// True when the static grid's clearance shows no static cell under
-    /// any of `polys` (false when the grid does not keep it).
-    fn in_the_open(&self, polys: &[Vec<(f64, f64)>]) -> bool {
-        let (cx, cy, reach) = circle_around(polys);
+    /// `body` (false when the grid does not keep it).
+    fn in_the_open(&self, body: &Body) -> bool {
+        let (cx, cy, reach) = body.circle();
         // A cell's width to spare: a polygon's outline marks the cells it
         // touches, even those it only grazes.
         reach < 0.0 || self.statics.clearance(cx, cy) > reach + self.statics.lattice().resolution()
