@@ -191,6 +191,36 @@ fn wait_for(go: &AtomicBool, over: &AtomicBool) -> bool {
     }
 }
 
+/// The first of `0..n` for which `p` holds, where it holds for all after
+/// it too (`n` when there is none).
+fn first_where(n: usize, p: impl Fn(usize) -> bool) -> usize {
+    let (mut lo, mut hi) = (0, n);
+    while lo < hi {
+        let mid = (lo + hi) / 2;
+        if p(mid) {
+            hi = mid;
+        } else {
+            lo = mid + 1;
+        }
+    }
+    lo
+}
+
+/// The least of `ranges` (infinite when there are none), four at a time.
+fn nearest(ranges: &[f64]) -> f64 {
+    let mut least = [f64::INFINITY; 4];
+    let fours = ranges.chunks_exact(4);
+    let rest = fours.remainder();
+    for four in fours {
+        for (l, &r) in least.iter_mut().zip(four) {
+            *l = l.min(r);
+        }
+    }
+    rest.iter()
+        .chain(&least)
+        .fold(f64::INFINITY, |a, &b| a.min(b))
+}
+
 /// Locks `m`, through a panic elsewhere.
 fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     m.lock().unwrap_or_else(PoisonError::into_inner)
@@ -625,21 +655,22 @@ impl Sim {
         };
         let sensors = &self.world.models[r].sensors;
         let (mut left, mut right) = (f64::INFINITY, f64::INFINITY);
+        // (A hair over a right angle: the fan's last ray may land on it by
+        // rounding.)
+        let side = std::f64::consts::FRAC_PI_2 + 1e-9;
         for (s, rd) in sensors.iter().zip(&self.readings[r]) {
+            // Bearings grow ray by ray: those from -side to 0 are on the
+            // right, from 0 to side on the left.
             let (start, step) = fan(s);
-            for (k, &range) in rd.ranges.iter().enumerate() {
-                let a = start + step * k as f64;
-                // (A hair over a right angle: the fan's last ray may land
-                // on it by rounding.)
-                if a.abs() > std::f64::consts::FRAC_PI_2 + 1e-9 {
-                    continue;
-                }
-                if a >= 0.0 {
-                    left = left.min(range);
-                } else {
-                    right = right.min(range);
-                }
-            }
+            let n = rd.ranges.len();
+            let first = |p: &dyn Fn(f64) -> bool| first_where(n, |k| p(start + step * k as f64));
+            let (r0, mid, l1) = (
+                first(&|a| a >= -side),
+                first(&|a| a >= 0.0),
+                first(&|a| a > side),
+            );
+            right = right.min(nearest(&rd.ranges[r0..mid.max(r0)]));
+            left = left.min(nearest(&rd.ranges[mid..l1.max(mid)]));
         }
         if left.min(right) < 0.6 {
             let turn = if (left - right).abs() > 0.1 {
@@ -1510,6 +1541,18 @@ mod tests {
             one.bases.iter().any(|b| b.odom != Pose::default()),
             "nobody moved"
         );
+    }
+
+    #[test]
+    fn the_wander_controller_looks_at_each_side_of_its_fan() {
+        assert_eq!(nearest(&[]), f64::INFINITY);
+        for n in 1..12 {
+            let ranges: Vec<f64> = (0..n).map(|k| 10.0 - k as f64).collect();
+            assert_eq!(nearest(&ranges), 11.0 - n as f64, "{n}");
+        }
+        assert_eq!(first_where(0, |_| true), 0);
+        assert_eq!(first_where(10, |k| k >= 7), 7);
+        assert_eq!(first_where(10, |_| false), 10);
     }
 
     #[test]
