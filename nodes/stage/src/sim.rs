@@ -1544,7 +1544,7 @@ mod tests {
     }
 
     #[test]
-    fn the_wander_controller_looks_at_each_side_of_its_fan() {
+    fn nearest_and_first_where_cover_every_length() {
         assert_eq!(nearest(&[]), f64::INFINITY);
         for n in 1..12 {
             let ranges: Vec<f64> = (0..n).map(|k| 10.0 - k as f64).collect();
