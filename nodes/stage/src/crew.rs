@@ -14,7 +14,8 @@
 //! more than a tenth of a millisecond per step, and new threads land on
 //! whichever core.
 
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::time::{Duration, Instant};
 
 /// The threads of a simulation and the shares of its work.
 #[derive(Default)]
@@ -126,12 +127,22 @@ impl Crew {
     /// of the crew; returns when all have returned.
     pub fn run(&self, helper: impl Fn() + Sync, main: impl FnOnce()) {
         match &self.pool {
-            Some(pool) => pool.in_place_scope(|s| {
-                for _ in 1..self.threads() {
-                    s.spawn(|_| helper());
-                }
-                main();
-            }),
+            Some(pool) => {
+                let running = AtomicUsize::new(self.threads() - 1);
+                pool.in_place_scope(|s| {
+                    for _ in 1..self.threads() {
+                        s.spawn(|_| {
+                            let _done = Done(&running);
+                            helper();
+                        });
+                    }
+                    main();
+                    // The helpers finish about when this thread does: spin
+                    // for them, or the scope's wait puts this thread to
+                    // sleep, and waking it takes longer.
+                    spin_until(|| running.load(Ordering::Acquire) == 0);
+                })
+            }
             None => main(),
         }
     }
@@ -143,6 +154,32 @@ impl Crew {
             .as_ref()
             .and_then(rayon::ThreadPool::current_thread_index)
             .map_or(0, |i| i + 1)
+    }
+}
+
+/// How long a thread spins waiting for the others (a hundred robots move
+/// in a fifth of this), and how long it then sleeps between looks.
+const SPIN: Duration = Duration::from_millis(1);
+const NAP: Duration = Duration::from_micros(100);
+
+/// Waits until `ready` says so: spinning, then napping.
+pub fn spin_until(ready: impl Fn() -> bool) {
+    let start = Instant::now();
+    while !ready() {
+        if start.elapsed() < SPIN {
+            std::hint::spin_loop();
+        } else {
+            std::thread::park_timeout(NAP);
+        }
+    }
+}
+
+/// Counts a helper out when dropped (when it returns or panics).
+struct Done<'a>(&'a AtomicUsize);
+
+impl Drop for Done<'_> {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::Release);
     }
 }
 

@@ -11,13 +11,12 @@
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Mutex, PoisonError, RwLock};
-use std::time::{Duration, Instant};
 
 use troupe_geom::occmap::{FREE, OCCUPIED};
 use troupe_geom::{bounds, normalize, Grid, Hit, Lattice, OccMap, Pose, EMPTY};
 use troupe_msgs::{map, Color};
 
-use crate::crew::{Crew, Job};
+use crate::crew::{spin_until, Crew, Job};
 use crate::movers::{Body, Movers};
 use crate::world::{Drive, Kind, Localization, Sensor, World};
 
@@ -163,31 +162,6 @@ fn fan(s: &Sensor) -> (f64, f64) {
         (s.pose.yaw - s.fov / 2.0, s.fov / (s.samples - 1) as f64)
     } else {
         (s.pose.yaw, 0.0)
-    }
-}
-
-/// How long a helper thread spins waiting for a step's moves (a hundred
-/// robots move in a fifth of this), and how long it then sleeps between
-/// looks.
-const SPIN: Duration = Duration::from_millis(1);
-const NAP: Duration = Duration::from_micros(100);
-
-/// Waits (spinning, then napping) until `go` is set: false when `over`
-/// is set first.
-fn wait_for(go: &AtomicBool, over: &AtomicBool) -> bool {
-    let start = Instant::now();
-    loop {
-        if go.load(Ordering::Acquire) {
-            return true;
-        }
-        if over.load(Ordering::Acquire) {
-            return false;
-        }
-        if start.elapsed() < SPIN {
-            std::hint::spin_loop();
-        } else {
-            std::thread::park_timeout(NAP);
-        }
     }
 }
 
@@ -873,7 +847,9 @@ impl Sim {
         let read = || sim.read().unwrap_or_else(PoisonError::into_inner);
         let helper = || {
             plan(&read());
-            if wait_for(&sensing, &over) {
+            // The moves take a fifth of the spin at most for a hundred robots.
+            spin_until(|| sensing.load(Ordering::Acquire) || over.load(Ordering::Acquire));
+            if sensing.load(Ordering::Acquire) {
                 sense(&read());
             }
         };
