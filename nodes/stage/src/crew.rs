@@ -85,12 +85,11 @@ impl Crew {
         let starts: Vec<usize> = (0..=threads)
             .map(|t| owners.partition_point(|&o| o < t))
             .collect();
-        let owner = |u: usize| owners[u];
         let mut order: Vec<usize> = (0..jobs.len()).collect();
-        order.sort_by_key(|&k| (owner(unit[k]), std::cmp::Reverse(jobs[k].rays)));
+        order.sort_by_key(|&k| (owners[unit[k]], std::cmp::Reverse(jobs[k].rays)));
         let mut ranger_starts = vec![0; threads + 1];
         for &u in &unit {
-            ranger_starts[owner(u) + 1] += 1;
+            ranger_starts[owners[u] + 1] += 1;
         }
         for t in 0..threads {
             ranger_starts[t + 1] += ranger_starts[t];

@@ -830,10 +830,8 @@ impl Sim {
         let sensing = AtomicBool::new(false);
         let over = AtomicBool::new(false);
         let plan = |me: &Sim| {
-            while let Some(bi) = to_plan.take() {
-                if moves {
-                    me.plan(bi, dt, &mut lock(&kept[bi]));
-                }
+            while let Some(bi) = to_plan.take().filter(|_| moves) {
+                me.plan(bi, dt, &mut lock(&kept[bi]));
             }
         };
         let sense = |me: &Sim| {
@@ -847,7 +845,8 @@ impl Sim {
         let read = || sim.read().unwrap_or_else(PoisonError::into_inner);
         let helper = || {
             plan(&read());
-            // The moves take a fifth of the spin at most for a hundred robots.
+            // Spinning while the moves are carried out: a sleeping thread
+            // would wake after they end.
             spin_until(|| sensing.load(Ordering::Acquire) || over.load(Ordering::Acquire));
             if sensing.load(Ordering::Acquire) {
                 sense(&read());
