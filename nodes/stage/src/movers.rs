@@ -8,7 +8,7 @@
 //! as a box in its own frame; any other polygon edge by edge), and a
 //! robot's own body costs nothing because it is never tested.
 
-use troupe_geom::{bounds, Hit};
+use troupe_geom::{bounds, Hit, Pose};
 
 /// The polygons of every moving body, filed by tile.
 #[derive(Debug, Clone, Default)]
@@ -22,11 +22,13 @@ pub struct Movers {
 }
 
 /// A moving body: its polygons in world coordinates, and what rays and
-/// collisions look at first.
+/// collisions look at first (worked out whenever the polygons change).
 #[derive(Debug, Clone)]
 pub struct Body {
     /// The polygons.
-    pub polys: Vec<Vec<(f64, f64)>>,
+    polys: Vec<Vec<(f64, f64)>>,
+    /// Their box: x0, y0, x1, y1 (`None` when there are no points).
+    bounds: Option<[f64; 4]>,
     /// A circle around them (centre x, y, radius; negative when there are
     /// no points): what misses it misses them.
     circle: (f64, f64, f64),
@@ -39,6 +41,7 @@ impl Default for Body {
     fn default() -> Self {
         Body {
             polys: Vec::new(),
+            bounds: None,
             circle: (0.0, 0.0, -1.0),
             rect: None,
         }
@@ -46,13 +49,30 @@ impl Default for Body {
 }
 
 impl Body {
-    /// Works out the circle and the rectangle again, after `polys` changed.
-    pub fn update(&mut self) {
-        self.circle = circle_around(&self.polys);
+    /// Becomes `blocks` (polygons in a model's frame) placed at pose `at`,
+    /// reusing its buffers.
+    pub fn place(&mut self, blocks: &[Vec<(f64, f64)>], at: Pose) {
+        self.polys.resize_with(blocks.len(), Vec::new);
+        for (poly, b) in self.polys.iter_mut().zip(blocks) {
+            poly.clear();
+            poly.extend(b.iter().map(|&(x, y)| at.apply(x, y)));
+        }
+        self.bounds = bounds(self.polys.iter().flatten().copied());
+        self.circle = circle_around(&self.polys, self.bounds);
         self.rect = match &self.polys[..] {
             [one] => Rect::of(one),
             _ => None,
         };
+    }
+
+    /// The polygons, in world coordinates.
+    pub fn polys(&self) -> &[Vec<(f64, f64)>] {
+        &self.polys
+    }
+
+    /// The polygons' box: x0, y0, x1, y1 (`None` when there are no points).
+    pub fn bounds(&self) -> Option<[f64; 4]> {
+        self.bounds
     }
 
     /// The circle around the polygons: centre x, y and radius (negative
@@ -72,9 +92,8 @@ impl Movers {
         }
     }
 
-    /// Files model `m` (id `id`), whose body is `body` (brought up to date
-    /// by [`Body::update`]), under `tiles` (each once), replacing where it
-    /// was. The body is swapped in, not copied: `body` gets the last
+    /// Files model `m` (id `id`), whose body is `body`, under `tiles` (each
+    /// once), replacing where it was. The body is swapped in, not copied: `body` gets the last
     /// filing's buffers back for the next, so a body that moves every step
     /// allocates nothing, and whoever placed it worked out its circle.
     pub fn file<T>(&mut self, m: usize, id: u16, body: &mut Body, tiles: T)
@@ -104,9 +123,7 @@ impl Movers {
     /// Takes model `m` (id `id`) out of every tile.
     pub fn unfile(&mut self, m: usize, id: u16) {
         self.untile(m, id);
-        let body = &mut self.bodies[m];
-        body.polys.clear();
-        body.update();
+        self.bodies[m] = Body::default();
     }
 
     /// Takes model `m` (id `id`) out of every tile, keeping its shape.
@@ -263,10 +280,10 @@ impl Rect {
     }
 }
 
-/// A circle holding every point of `polys`: centre and radius (negative
-/// when there are no points).
-fn circle_around(polys: &[Vec<(f64, f64)>]) -> (f64, f64, f64) {
-    let Some([x0, y0, x1, y1]) = bounds(polys.iter().flatten().copied()) else {
+/// A circle holding every point of `polys`, whose box is `bounds`: centre
+/// and radius (negative when there are no points).
+fn circle_around(polys: &[Vec<(f64, f64)>], bounds: Option<[f64; 4]>) -> (f64, f64, f64) {
+    let Some([x0, y0, x1, y1]) = bounds else {
         return (0.0, 0.0, -1.0);
     };
     let (cx, cy) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
@@ -319,11 +336,8 @@ mod tests {
     use super::*;
 
     fn shape(polys: Vec<Vec<(f64, f64)>>) -> Body {
-        let mut b = Body {
-            polys,
-            ..Body::default()
-        };
-        b.update();
+        let mut b = Body::default();
+        b.place(&polys, Pose::default());
         b
     }
 

@@ -370,16 +370,10 @@ impl Sim {
         for m in 0..n {
             sim.place(m);
         }
-        // Threads pay off only when a step casts thousands of rays. No more
-        // than the cores: the helpers spin while the bases move, and one
-        // without a core of its own would slow the moves.
-        let rays: usize = sim.jobs().iter().map(|j| j.rays).sum();
+        // No more threads than cores: the helpers spin while the bases
+        // move, and one without a core of its own would slow the moves.
         let cores = std::thread::available_parallelism().map_or(1, usize::from);
-        if rays >= 2000 {
-            sim.set_threads(sim.world.threads.clamp(1, cores));
-        } else {
-            sim.set_threads(1);
-        }
+        sim.set_threads(sim.world.threads.clamp(1, cores));
         sim.sense();
         Ok(sim)
     }
@@ -400,10 +394,13 @@ impl Sim {
             .collect()
     }
 
-    /// Plans moves and casts rays on `threads` threads (no more than there
-    /// are rangers).
+    /// Plans moves and casts rays on `threads` threads: no more than there
+    /// are rangers, and one when a step casts fewer than a few thousand
+    /// rays (threads pay off only then).
     fn set_threads(&mut self, threads: usize) {
         let jobs = self.jobs();
+        let rays: usize = jobs.iter().map(|j| j.rays).sum();
+        let threads = if rays < 2000 { 1 } else { threads };
         self.crew = Crew::new(threads.min(jobs.len()).max(1), self.bases.len(), &jobs);
     }
 
@@ -415,10 +412,10 @@ impl Sim {
     /// The cells model `m`'s body covers at its current pose.
     fn body_cells(&self, m: usize) -> Vec<(usize, usize)> {
         let mut out = Vec::new();
-        for pts in self.placed(m, self.global(m)).body.polys {
+        for pts in self.placed(m, self.global(m)).body.polys() {
             self.statics
                 .lattice()
-                .polygon_cells(&pts, |i, j| out.push((i, j)));
+                .polygon_cells(pts, |i, j| out.push((i, j)));
         }
         out
     }
@@ -446,17 +443,12 @@ impl Sim {
 
     /// [`Sim::placed`] into `body`, reusing its buffers.
     fn place_into(&self, m: usize, at: Pose, body: &mut Placed) {
-        let blocks = &self.world.models[m].blocks;
         body.model = m;
-        let polys = &mut body.body.polys;
-        polys.resize_with(blocks.len(), Vec::new);
-        for (poly, b) in polys.iter_mut().zip(blocks) {
-            poly.clear();
-            poly.extend(b.iter().map(|&(x, y)| at.apply(x, y)));
-        }
-        body.cells = bounds(polys.iter().flatten().copied())
+        body.body.place(&self.world.models[m].blocks, at);
+        body.cells = body
+            .body
+            .bounds()
             .and_then(|b| self.statics.lattice().cells_of_box(b));
-        body.body.update();
     }
 
     /// Files a moving body under the tiles it touches (taking its polygons,
@@ -508,7 +500,7 @@ impl Sim {
     fn hits_statics(&self, root: usize, bodies: &[Placed]) -> bool {
         let blocks = |c: usize| self.blocks(root, c - 1);
         for body in bodies {
-            let (polys, Some((lo, hi))) = (&body.body.polys, body.cells) else {
+            let (polys, Some((lo, hi))) = (body.body.polys(), body.cells) else {
                 continue;
             };
             // Static cells, rasterised only where a tile holds any (reading
@@ -637,12 +629,10 @@ impl Sim {
             // right, from 0 to side on the left.
             let (start, step) = fan(s);
             let n = rd.ranges.len();
-            let first = |p: &dyn Fn(f64) -> bool| first_where(n, |k| p(start + step * k as f64));
-            let (r0, mid, l1) = (
-                first(&|a| a >= -side),
-                first(&|a| a >= 0.0),
-                first(&|a| a > side),
-            );
+            let at = |k: usize| start + step * k as f64;
+            let r0 = first_where(n, |k| at(k) >= -side);
+            let mid = first_where(n, |k| at(k) >= 0.0);
+            let l1 = first_where(n, |k| at(k) > side);
             right = right.min(nearest(&rd.ranges[r0..mid.max(r0)]));
             left = left.min(nearest(&rd.ranges[mid..l1.max(mid)]));
         }
@@ -798,7 +788,7 @@ impl Sim {
         }
     }
 
-    /// Updates every ranger's readings, on `world.threads` threads.
+    /// Updates every ranger's readings, on the crew's threads.
     pub fn sense(&mut self) {
         self.run(None);
     }
