@@ -3,6 +3,9 @@
 //! Each cell holds the id of what occupies it (`EMPTY` = nothing). Cells are
 //! grouped in `TILE`×`TILE` tiles whose occupied-cell counts let a ray jump
 //! over empty tiles: in open space a ray costs one step per tile, not per cell.
+//! A grid may also keep each cell's clearance (how far the nearest occupied
+//! cell is): a ray that need not visit every tile ([`Grid::cast_open`])
+//! leaps by it, as far as the open space reaches, in a few steps.
 //! A [`Lattice`] is the cells' geometry alone (which cells a point, polygon
 //! or segment covers), for rasterising without a grid's storage.
 
@@ -16,6 +19,9 @@ const TILE: usize = 16;
 /// enough to skip the open space around a sensor, small enough that a
 /// change to the grid is redrawn in a small window.
 const CLEAR: u8 = 64;
+
+/// Cells per side of the blocks whose least clearance rays leap by.
+const BLOCK: usize = 4;
 
 /// What a ray hit.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -48,6 +54,8 @@ pub struct Grid {
     /// Per cell, the Chebyshev distance in cells to the nearest occupied
     /// cell, at most [`CLEAR`]; 0 in an occupied cell. Empty unless kept.
     clear: Vec<u8>,
+    /// Per block of BLOCK × BLOCK cells, the least clearance of its cells.
+    clear_blocks: Vec<u8>,
     /// The box (i0, j0, i1, j1) of cells filled or emptied since `clear`
     /// was last brought up to date.
     stale: Option<[usize; 4]>,
@@ -217,6 +225,7 @@ impl Grid {
             tw,
             tiles: vec![0; tw * th],
             clear: Vec::new(),
+            clear_blocks: Vec::new(),
             stale: None,
         }
     }
@@ -339,6 +348,7 @@ impl Grid {
                 *d = of(c);
             }
             chamfer(&mut self.clear, w);
+            self.block_clearance([0, 0, w - 1, h - 1]);
             return;
         }
         let sw = src[2] - src[0] + 1;
@@ -350,6 +360,25 @@ impl Grid {
         for y in win[1]..=win[3] {
             let from = (y - src[1]) * sw + win[0] - src[0];
             self.clear[y * w + win[0]..][..n].copy_from_slice(&d[from..from + n]);
+        }
+        self.block_clearance(win);
+    }
+
+    /// Brings the blocks' clearance up to date over the cells `win`.
+    fn block_clearance(&mut self, [i0, j0, i1, j1]: [usize; 4]) {
+        let (w, h) = (self.lat.w, self.lat.h);
+        let bw = w.div_ceil(BLOCK);
+        self.clear_blocks.resize(bw * h.div_ceil(BLOCK), CLEAR);
+        for bj in j0 / BLOCK..=j1 / BLOCK {
+            for bi in i0 / BLOCK..=i1 / BLOCK {
+                let mut least = CLEAR;
+                for j in bj * BLOCK..((bj + 1) * BLOCK).min(h) {
+                    for i in bi * BLOCK..((bi + 1) * BLOCK).min(w) {
+                        least = least.min(self.clear[j * w + i]);
+                    }
+                }
+                self.clear_blocks[bj * bw + bi] = least;
+            }
         }
     }
 
@@ -417,6 +446,58 @@ impl Grid {
         self.tiles.len()
     }
 
+    /// [`Grid::cast_with`] with nothing kept outside the grid. On a grid
+    /// that keeps its clearance ([`Grid::keep_clearance`]) the ray leaps
+    /// over the open space the clearance shows and walks cells only next
+    /// to what is there.
+    pub fn cast_open(
+        &self,
+        x: f64,
+        y: f64,
+        d: (f64, f64),
+        range: (f64, f64),
+        mut accept: impl FnMut(u16) -> bool,
+    ) -> Option<Hit> {
+        if self.clear.is_empty() || self.stale.is_some() {
+            return self.cast_with(x, y, d, range, accept, |_| None);
+        }
+        let r = self.aim(x, y, d, range)?;
+        let bw = self.lat.w.div_ceil(BLOCK);
+        let (mut k, mut v_in) = (0, r.v_in0);
+        while k < r.n {
+            let c = r.col(k);
+            let v = row(v_in);
+            let (i, j) = if r.cu == 1 { (c, v) } else { (v, c) };
+            let open = self.clear_blocks[(j / BLOCK) * bw + i / BLOCK];
+            if open >= 2 {
+                // The next `open - 1` columns lie in the free square around
+                // this cell: the ray moves at most a row per column.
+                k += usize::from(open - 1);
+                if k >= r.n {
+                    return None;
+                }
+                v_in = r.v_out(k - 1);
+                continue;
+            }
+            let v_o = r.v_out(k);
+            let (a, b) = (
+                self.cells[c * r.cu + v * r.cv],
+                self.cells[c * r.cu + row(v_o) * r.cv],
+            );
+            if a | b != EMPTY {
+                if let Some((t, id)) = r.hit_in(k, (a, b), (v_in, v_o), &mut accept) {
+                    return Some(Hit {
+                        range: t * r.res,
+                        id,
+                    });
+                }
+            }
+            v_in = v_o;
+            k += 1;
+        }
+        None
+    }
+
     /// [`Grid::cast`] along the unit vector `(dx, dy)`, with things kept
     /// outside the grid: `in_tile(t)` is called once as the ray enters each
     /// tile `t` on its way and answers the nearest hit (range from the ray's
@@ -437,11 +518,99 @@ impl Grid {
         &self,
         x: f64,
         y: f64,
-        (dx, dy): (f64, f64),
+        d: (f64, f64),
         (from, max_range): (f64, f64),
         mut accept: impl FnMut(u16) -> bool,
         mut in_tile: impl FnMut(usize) -> Option<Hit>,
     ) -> Option<Hit> {
+        let r = self.aim(x, y, d, (from, max_range))?;
+        let inv_res = 1.0 / r.res;
+        let step = if r.forward { r.cu } else { r.cu.wrapping_neg() };
+        // The nearest hit `in_tile` reported, and its parameter.
+        let (mut best, mut best_t): (Option<Hit>, f64) = (None, f64::INFINITY);
+        let end = |best: Option<Hit>| best.filter(|h| h.range <= max_range);
+        let mut k = 0;
+        let mut v_in = r.v_in0;
+        let shift = TILE.trailing_zeros();
+        while k < r.n {
+            // The columns of this column of tiles, and the tiles they cross.
+            let c = r.col(k);
+            let left = if r.forward {
+                TILE - c % TILE
+            } else {
+                c % TILE + 1
+            };
+            let m = left.min(r.n - k);
+            let v_last = r.v_out(k + m - 1);
+            let tcol = (c >> shift) * r.tu;
+            let (ta, tb) = (
+                tcol + (row(v_in) >> shift) * r.tv,
+                tcol + (row(v_last) >> shift) * r.tv,
+            );
+            for t in [ta, tb].into_iter().take(if ta == tb { 1 } else { 2 }) {
+                if let Some(h) = in_tile(t) {
+                    if h.range * inv_res < best_t {
+                        best_t = h.range * inv_res;
+                        best = Some(h);
+                    }
+                }
+            }
+            if r.t_in(k) >= best_t {
+                return end(best);
+            }
+            if self.tiles[ta] | self.tiles[tb] != 0 {
+                // Walk the cells of these columns: two per column at most.
+                let mut kk = k;
+                while kk < k + m {
+                    let span = Columns {
+                        base: r.col(kk) * r.cu,
+                        step,
+                        cv: r.cv,
+                        v_in,
+                        v_raw: r.vb0 + kk as i64 * r.dvs,
+                        dvs: r.dvs,
+                        lo: r.lo,
+                        hi: r.hi,
+                    };
+                    let (j, a, b, v_i, v_o) = match span.scan(&self.cells, k + m - kk) {
+                        Ok(found) => found,
+                        Err(v_o) => {
+                            v_in = v_o;
+                            break;
+                        }
+                    };
+                    kk += j;
+                    if let Some((t, id)) = r.hit_in(kk, (a, b), (v_i, v_o), &mut accept) {
+                        if t >= best_t {
+                            return end(best);
+                        }
+                        return Some(Hit {
+                            range: t * r.res,
+                            id,
+                        });
+                    }
+                    v_in = v_o;
+                    kk += 1;
+                }
+            } else {
+                v_in = v_last;
+            }
+            k += m;
+        }
+        end(best)
+    }
+
+    /// A ray from (x, y) along the unit vector `(dx, dy)`, from `from` to
+    /// `max_range` metres, clipped to the grid and set up for walking it
+    /// column by column; `None` when no stretch of it lies in the grid.
+    #[inline(always)]
+    fn aim(
+        &self,
+        x: f64,
+        y: f64,
+        (dx, dy): (f64, f64),
+        (from, max_range): (f64, f64),
+    ) -> Option<Aim> {
         let res = self.lat.res;
         let (w, h) = (self.lat.w, self.lat.h);
         let inv_res = 1.0 / res;
@@ -491,111 +660,138 @@ impl Grid {
         // te + k·tc (or t1, the end of the ray).
         let tc = inv_du.abs();
         let te = ((if forward { first + 1 } else { first }) as f64 - gu) * inv_du;
-        let t_in = |k: usize| {
-            if k == 0 {
-                t0
-            } else {
-                te + (k - 1) as f64 * tc
-            }
-        };
         // Rows are read from v in fixed point (32 fractional bits): a step
         // is then integer adds and shifts, with no float conversions.
-        const ONE: f64 = (1u64 << 32) as f64;
         let top = ((nv as i64) << 32) - 1;
         let v_end = ((gv + dv * t1) * ONE) as i64;
         let up = dv >= 0.0;
-        // v where the ray leaves column k, clamped to the ray and the grid.
-        let vb0 = ((gv + dv * te) * ONE) as i64;
-        let dvs = (dv * tc * ONE) as i64;
         let (lo, hi) = if up {
             (0, v_end.min(top))
         } else {
             (v_end.max(0), top)
         };
-        let v_out = |k: usize| (vb0 + k as i64 * dvs).clamp(lo, hi);
-        let row = |v: i64| (v >> 32) as usize;
-        let col = |k: usize| if forward { first + k } else { first - k };
-        let step = if forward { cu } else { cu.wrapping_neg() };
-        // The nearest hit `in_tile` reported, and its parameter.
-        let (mut best, mut best_t): (Option<Hit>, f64) = (None, f64::INFINITY);
-        let end = |best: Option<Hit>| best.filter(|h| h.range <= max_range);
-        let mut k = 0;
-        let mut v_in = (((gv + dv * t0) * ONE) as i64).clamp(0, top);
-        let shift = TILE.trailing_zeros();
-        while k < n {
-            // The columns of this column of tiles, and the tiles they cross.
-            let c = col(k);
-            let left = if forward {
-                TILE - c % TILE
-            } else {
-                c % TILE + 1
-            };
-            let m = left.min(n - k);
-            let v_last = v_out(k + m - 1);
-            let tcol = (c >> shift) * tu;
-            let (ta, tb) = (
-                tcol + (row(v_in) >> shift) * tv,
-                tcol + (row(v_last) >> shift) * tv,
-            );
-            for t in [ta, tb].into_iter().take(if ta == tb { 1 } else { 2 }) {
-                if let Some(h) = in_tile(t) {
-                    if h.range * inv_res < best_t {
-                        best_t = h.range * inv_res;
-                        best = Some(h);
-                    }
-                }
-            }
-            if t_in(k) >= best_t {
-                return end(best);
-            }
-            if self.tiles[ta] | self.tiles[tb] != 0 {
-                // Walk the cells of these columns: two per column at most.
-                let mut kk = k;
-                while kk < k + m {
-                    let span = Columns {
-                        base: col(kk) * cu,
-                        step,
-                        cv,
-                        v_in,
-                        v_raw: vb0 + kk as i64 * dvs,
-                        dvs,
-                        lo,
-                        hi,
-                    };
-                    let (j, a, b, v_i, v_o) = match span.scan(&self.cells, k + m - kk) {
-                        Ok(found) => found,
-                        Err(v_o) => {
-                            v_in = v_o;
-                            break;
-                        }
-                    };
-                    kk += j;
-                    let (ja, jb) = (row(v_i), row(v_o));
-                    let t_o = (te + kk as f64 * tc).min(t1);
-                    let hit = if a != EMPTY && accept(a) {
-                        Some((t_in(kk), a))
-                    } else if jb != ja && b != EMPTY && accept(b) {
-                        // Where the ray crosses into row jb.
-                        let edge = if up { jb } else { jb + 1 } as f64;
-                        Some((((edge - gv) / dv).clamp(t_in(kk), t_o), b))
-                    } else {
-                        None
-                    };
-                    if let Some((t, id)) = hit {
-                        if t >= best_t {
-                            return end(best);
-                        }
-                        return Some(Hit { range: t * res, id });
-                    }
-                    v_in = v_o;
-                    kk += 1;
-                }
-            } else {
-                v_in = v_last;
-            }
-            k += m;
+        Some(Aim {
+            res,
+            gv,
+            dv,
+            up,
+            t0,
+            t1,
+            te,
+            tc,
+            first,
+            n,
+            forward,
+            cu,
+            cv,
+            tu,
+            tv,
+            vb0: ((gv + dv * te) * ONE) as i64,
+            dvs: (dv * tc * ONE) as i64,
+            lo,
+            hi,
+            v_in0: (((gv + dv * t0) * ONE) as i64).clamp(0, top),
+        })
+    }
+}
+
+/// 1 in the fixed point rays read rows in (32 fractional bits).
+const ONE: f64 = (1u64 << 32) as f64;
+
+/// The row holding fixed-point v.
+#[inline(always)]
+fn row(v: i64) -> usize {
+    (v >> 32) as usize
+}
+
+/// A ray set up for walking the grid column by column along its major
+/// axis u, reading rows of the minor axis v (see [`Grid::aim`]). Ray
+/// parameters t are in cells along the ray.
+struct Aim {
+    /// Metres per cell.
+    res: f64,
+    /// v at the ray's origin, and per unit of t.
+    gv: f64,
+    dv: f64,
+    /// Whether v grows along the ray.
+    up: bool,
+    /// Where the ray enters and leaves the grid.
+    t0: f64,
+    t1: f64,
+    /// Where the ray leaves its first column, and t per column.
+    te: f64,
+    tc: f64,
+    /// The first column, and how many the ray crosses.
+    first: usize,
+    n: usize,
+    /// Whether the ray walks towards higher columns.
+    forward: bool,
+    /// Index distance between neighbouring cells along u and along v, and
+    /// the same for tiles.
+    cu: usize,
+    cv: usize,
+    tu: usize,
+    tv: usize,
+    /// v (fixed point) where the ray leaves the first column before
+    /// clamping, and its change per column.
+    vb0: i64,
+    dvs: i64,
+    /// The clamp keeping v on the ray and in the grid.
+    lo: i64,
+    hi: i64,
+    /// v where the ray enters the first column.
+    v_in0: i64,
+}
+
+impl Aim {
+    /// Where the ray enters column k (counted from the first).
+    #[inline(always)]
+    fn t_in(&self, k: usize) -> f64 {
+        if k == 0 {
+            self.t0
+        } else {
+            self.te + (k - 1) as f64 * self.tc
         }
-        end(best)
+    }
+
+    /// v where the ray leaves column k, clamped to the ray and the grid.
+    #[inline(always)]
+    fn v_out(&self, k: usize) -> i64 {
+        (self.vb0 + k as i64 * self.dvs).clamp(self.lo, self.hi)
+    }
+
+    /// The grid column of column k.
+    #[inline(always)]
+    fn col(&self, k: usize) -> usize {
+        if self.forward {
+            self.first + k
+        } else {
+            self.first - k
+        }
+    }
+
+    /// What the ray meets in column k, whose cells where it enters and
+    /// leaves are `a` and `b` (rows of v `v_in` and `v_out`): t and the id,
+    /// when one of them holds what `accept`s.
+    #[inline(always)]
+    fn hit_in(
+        &self,
+        k: usize,
+        (a, b): (u16, u16),
+        (v_in, v_out): (i64, i64),
+        accept: &mut impl FnMut(u16) -> bool,
+    ) -> Option<(f64, u16)> {
+        let (ja, jb) = (row(v_in), row(v_out));
+        if a != EMPTY && accept(a) {
+            Some((self.t_in(k), a))
+        } else if jb != ja && b != EMPTY && accept(b) {
+            // Where the ray crosses into row jb.
+            let edge = if self.up { jb } else { jb + 1 } as f64;
+            let t_o = (self.te + k as f64 * self.tc).min(self.t1);
+            Some((((edge - self.gv) / self.dv).clamp(self.t_in(k), t_o), b))
+        } else {
+            None
+        }
     }
 }
 
@@ -946,6 +1142,49 @@ mod tests {
         assert_eq!(full, part);
         let none = g.cast_with(0.0, 0.0, (1.0, 0.0), (4.5, 10.0), |_| true, |_| None);
         assert_eq!(none, None, "the wall lies before the stretch looked at");
+    }
+
+    /// Rays that leap by the clearance find exactly what rays walking every
+    /// column find, as boxes come and go (and while the clearance is stale),
+    /// with one id the rays pass through.
+    #[test]
+    fn leaping_rays_find_what_walking_rays_find() {
+        let mut g = Grid::new(0.0, 0.0, 8.0, 6.0, 0.02);
+        let mut rnd = uniform(5);
+        g.keep_clearance();
+        let mut boxes: Vec<([(f64, f64); 3], u16)> = Vec::new();
+        let mut hits = 0;
+        for round in 0..8 {
+            for _ in 0..25 {
+                let (x, y, id) = (rnd() * 8.0, rnd() * 6.0, 1 + (rnd() * 3.0) as u16);
+                let b = [(x, y), (x + rnd() * 0.6, y), (x + 0.3, y + rnd() * 0.6)];
+                g.fill_polygon(&b, id);
+                boxes.push((b, id));
+            }
+            if round % 2 == 1 {
+                for (b, id) in boxes.drain(..15) {
+                    g.clear_polygon(&b, id);
+                }
+            }
+            if round != 5 {
+                g.refresh_clearance();
+            }
+            for _ in 0..3000 {
+                let (x, y) = (rnd() * 10.0 - 1.0, rnd() * 8.0 - 1.0);
+                let a = rnd() * std::f64::consts::TAU;
+                let d = (a.cos(), a.sin());
+                let range = (rnd() * 0.5, rnd() * 9.0);
+                let see = |id: u16| id != 3;
+                let walked = g.cast_with(x, y, d, range, see, |_| None);
+                assert_eq!(
+                    g.cast_open(x, y, d, range, see),
+                    walked,
+                    "round {round}: {x} {y} {a}"
+                );
+                hits += usize::from(walked.is_some());
+            }
+        }
+        assert!(hits > 8_000, "{hits}");
     }
 }
 

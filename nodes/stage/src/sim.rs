@@ -17,7 +17,7 @@ use troupe_geom::{bounds, normalize, Grid, Hit, Lattice, OccMap, Pose, EMPTY};
 use troupe_msgs::{map, Color};
 
 use crate::crew::{spin_until, Crew, Job};
-use crate::movers::{Body, Movers};
+use crate::movers::{Body, Fan, Movers, Sweep};
 use crate::world::{Drive, Kind, Localization, Sensor, World};
 
 /// What a position model was last told to do.
@@ -153,6 +153,8 @@ const FAN: usize = 16;
 struct Rays {
     first: (f64, f64),
     turn: (f64, f64),
+    /// The turn's angle.
+    step: f64,
 }
 
 /// A sensor's rays: the angle of the first relative to the sensor, and
@@ -343,6 +345,7 @@ impl Sim {
                         Rays {
                             first: unit(first),
                             turn: unit(step),
+                            step,
                         }
                     })
                     .collect()
@@ -907,6 +910,32 @@ impl Sim {
             .cast_with(x, y, (dx, dy), range, &accept, movers)
     }
 
+    /// [`Sim::cast`] when the moving bodies the ray may meet are known: the
+    /// nearest of them, and the static grid up to it.
+    fn cast_among(
+        &self,
+        x: f64,
+        y: f64,
+        d: (f64, f64),
+        (from, max_range): (f64, f64),
+        accept: impl Fn(u16) -> bool,
+        bodies: impl Iterator<Item = u16>,
+    ) -> Option<Hit> {
+        let mut best: Option<Hit> = None;
+        for k in bodies {
+            if let Some(h) = self.movers.hit(usize::from(k) - 1, k, (x, y), d) {
+                if h.range <= max_range && best.is_none_or(|b| h.range < b.range) {
+                    best = Some(h);
+                }
+            }
+        }
+        let reach = best.map_or(max_range, |b| b.range);
+        match self.statics.cast_open(x, y, d, (from, reach), &accept) {
+            Some(h) if best.is_none_or(|b| h.range < b.range) => Some(h),
+            _ => best,
+        }
+    }
+
     /// How far from (x, y) nothing `accept`ed lies, in any direction: the
     /// static grid's clearance there, less for a moving body within it.
     fn open_around(&self, x: f64, y: f64, accept: impl Fn(u16) -> bool) -> f64 {
@@ -947,12 +976,27 @@ impl Sim {
         let turn = unit(base.yaw);
         let accept = self.ranger_sees(r);
         let sensors = &self.world.models[r].sensors;
+        let mut sweep = Sweep::default();
         for ((s, rays), rd) in sensors.iter().zip(&self.fans[r]).zip(out.iter_mut()) {
             let (ox, oy) = turned(turn, (s.pose.x, s.pose.y));
             let (ox, oy) = (base.x + ox, base.y + oy);
-            // A fan of rays shares one look around its origin: none of its
-            // rays walks the open space there.
-            let from = if s.samples >= FAN {
+            // A fan of rays shares one look around its origin, so that none
+            // of its rays walks the open space there, and one look at the
+            // moving bodies within reach, so that each ray tests only those
+            // in its direction.
+            let fan = s.samples >= FAN;
+            let from = if fan {
+                sweep.start(
+                    &self.movers,
+                    &Fan {
+                        o: (ox, oy),
+                        first: turned(turn, rays.first),
+                        step: rays.step,
+                        n: s.samples,
+                        reach: s.range.1,
+                    },
+                    accept,
+                );
                 self.open_around(ox, oy, accept)
             } else {
                 0.0
@@ -964,7 +1008,11 @@ impl Sim {
                 if k > 0 {
                     d = turned(rays.turn, d);
                 }
-                let hit = self.cast(ox, oy, d, (from, s.range.1), accept);
+                let hit = if fan {
+                    self.cast_among(ox, oy, d, (from, s.range.1), accept, sweep.at(k))
+                } else {
+                    self.cast(ox, oy, d, (from, s.range.1), accept)
+                };
                 let (range, intensity) = match hit {
                     Some(h) => (
                         h.range.max(s.range.0),
