@@ -625,22 +625,29 @@ impl Grid {
         if du.is_nan() || du.abs() < 1e-12 {
             return None; // (0, 0) or NaN: no direction.
         }
-        // Clip the ray to the grid box; parameters are in cells along the ray.
-        // (|du| ≥ √½, so only the minor axis can run parallel to a side.)
         let inv_du = 1.0 / du;
         let (mut t0, mut t1) = (from.max(0.0) * inv_res, max_range * inv_res);
-        let (a, b) = (-gu * inv_du, (nu as f64 - gu) * inv_du);
-        t0 = t0.max(a.min(b));
-        t1 = t1.min(a.max(b));
-        if dv.abs() < 1e-12 {
-            if gv < 0.0 || gv >= nv as f64 {
-                return None;
-            }
-        } else {
-            let inv_dv = 1.0 / dv;
-            let (a, b) = (-gv * inv_dv, (nv as f64 - gv) * inv_dv);
+        // Clip the ray to the grid box, unless both ends lie in it (most
+        // rays); parameters are in cells along the ray. (|du| ≥ √½, so only
+        // the minor axis can run parallel to a side.)
+        let (ex, ey) = (gx + dx * t1, gy + dy * t1);
+        // (A margin far above rounding: clipping would change nothing.)
+        let within = |p: f64, n: usize| p >= 1e-6 && p <= n as f64 - 1e-6;
+        let inside = within(gx, w) && within(gy, h) && within(ex, w) && within(ey, h);
+        if !inside {
+            let (a, b) = (-gu * inv_du, (nu as f64 - gu) * inv_du);
             t0 = t0.max(a.min(b));
             t1 = t1.min(a.max(b));
+            if dv.abs() < 1e-12 {
+                if gv < 0.0 || gv >= nv as f64 {
+                    return None;
+                }
+            } else {
+                let inv_dv = 1.0 / dv;
+                let (a, b) = (-gv * inv_dv, (nv as f64 - gv) * inv_dv);
+                t0 = t0.max(a.min(b));
+                t1 = t1.min(a.max(b));
+            }
         }
         if t0 > t1 {
             return None;
