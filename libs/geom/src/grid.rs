@@ -461,41 +461,51 @@ impl Grid {
         if self.clear.is_empty() || self.stale.is_some() {
             return self.cast_with(x, y, d, range, accept, |_| None);
         }
-        let r = self.aim(x, y, d, range)?;
-        let bw = self.lat.w.div_ceil(BLOCK);
-        let (mut k, mut v_in) = (0, r.v_in0);
-        while k < r.n {
-            let c = r.col(k);
-            let v = row(v_in);
-            let (i, j) = if r.cu == 1 { (c, v) } else { (v, c) };
-            let open = self.clear_blocks[(j / BLOCK) * bw + i / BLOCK];
-            if open >= 2 {
-                // The next `open - 1` columns lie in the free square around
-                // this cell: the ray moves at most a row per column.
-                k += usize::from(open - 1);
-                if k >= r.n {
-                    return None;
-                }
-                v_in = r.v_out(k - 1);
-                continue;
+        let mut ray = Leap::new(self.aim(x, y, d, range)?);
+        loop {
+            if let Some(found) = self.leap(&mut ray, &mut accept) {
+                return found;
             }
-            let v_o = r.v_out(k);
-            let (a, b) = (
-                self.cells[c * r.cu + v * r.cv],
-                self.cells[c * r.cu + row(v_o) * r.cv],
-            );
-            if a | b != EMPTY {
-                if let Some((t, id)) = r.hit_in(k, (a, b), (v_in, v_o), &mut accept) {
-                    return Some(Hit {
-                        range: t * r.res,
-                        id,
-                    });
-                }
-            }
-            v_in = v_o;
-            k += 1;
         }
-        None
+    }
+
+    /// One step of a ray's walk on a grid that keeps its clearance: a leap
+    /// over the open space the clearance shows, or else one column's cells.
+    /// `Some` with what the ray found once it is done.
+    #[inline(always)]
+    fn leap(&self, ray: &mut Leap, accept: &mut impl FnMut(u16) -> bool) -> Option<Option<Hit>> {
+        let r = &ray.aim;
+        let c = r.col(ray.k);
+        let v = row(ray.v_in);
+        let (i, j) = if r.cu == 1 { (c, v) } else { (v, c) };
+        let bw = self.lat.w.div_ceil(BLOCK);
+        let open = self.clear_blocks[(j / BLOCK) * bw + i / BLOCK];
+        if open >= 2 {
+            // The next `open - 1` columns lie in the free square around
+            // this cell: the ray moves at most a row per column.
+            ray.k += usize::from(open - 1);
+            if ray.k >= r.n {
+                return Some(None);
+            }
+            ray.v_in = r.v_out(ray.k - 1);
+            return None;
+        }
+        let v_o = r.v_out(ray.k);
+        let (a, b) = (
+            self.cells[c * r.cu + v * r.cv],
+            self.cells[c * r.cu + row(v_o) * r.cv],
+        );
+        if a | b != EMPTY {
+            if let Some((t, id)) = r.hit_in(ray.k, (a, b), (ray.v_in, v_o), accept) {
+                return Some(Some(Hit {
+                    range: t * r.res,
+                    id,
+                }));
+            }
+        }
+        ray.v_in = v_o;
+        ray.k += 1;
+        (ray.k >= r.n).then_some(None)
     }
 
     /// [`Grid::cast`] along the unit vector `(dx, dy)`, with things kept
@@ -699,6 +709,24 @@ impl Grid {
             hi,
             v_in0: (((gv + dv * t0) * ONE) as i64).clamp(0, top),
         })
+    }
+}
+
+/// A ray walking a grid that keeps its clearance (see [`Grid::leap`]):
+/// the column it is at, and v where it enters it.
+struct Leap {
+    aim: Aim,
+    k: usize,
+    v_in: i64,
+}
+
+impl Leap {
+    fn new(aim: Aim) -> Leap {
+        Leap {
+            k: 0,
+            v_in: aim.v_in0,
+            aim,
+        }
     }
 }
 
