@@ -288,15 +288,17 @@ impl Sweep {
         // Rays all one way, or turning more than once round: every ray
         // tests every body within reach.
         let every = fan.step.is_nan() || fan.step <= 1e-9 || span > TAU + SLACK;
-        // A fan of at most half a turn lies on the left of its first ray.
-        let half_plane = span <= PI;
+        // A fan of at most half a turn lies on the left of its first ray
+        // (give or take rounding: a reach times the slack).
+        let half_plane = span <= PI + SLACK;
+        let below = -SLACK * fan.reach;
         let (ex, ey) = fan.first;
         for (m, &(cx, cy, r)) in movers.circles.iter().enumerate() {
             // The circle in the fan's frame: x along the first ray.
             let (dx, dy) = (cx - fan.o.0, cy - fan.o.1);
             let (x, y) = (dx * ex + dy * ey, dy * ex - dx * ey);
             let d2 = x * x + y * y;
-            if r < 0.0 || d2 > (fan.reach + r).powi(2) || (half_plane && y < -r) {
+            if r < 0.0 || d2 > (fan.reach + r).powi(2) || (half_plane && y + r < below) {
                 continue;
             }
             let Ok(id) = u16::try_from(m + 1) else {
@@ -660,7 +662,7 @@ mod tests {
                 );
             }
             let n = 2 + (rnd() * 200.0) as usize;
-            let width = [0.3, 1.0, 3.1, 4.7, std::f64::consts::TAU][round % 5];
+            let width = [0.3, 1.0, std::f64::consts::PI, 4.7, std::f64::consts::TAU][round % 5];
             let heading = rnd() * 20.0 - 10.0;
             let fan = Fan {
                 o: (rnd() * 2.0 - 1.0, rnd() * 2.0 - 1.0),
