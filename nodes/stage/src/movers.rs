@@ -331,7 +331,7 @@ impl Sweep {
             }
         }
         self.runs
-            .sort_unstable_by_key(|&(first, _, id)| (first, id));
+            .sort_unstable_by_key(|&(first, _, id)| (first << 16) | usize::from(id));
     }
 
     /// The ids of the bodies ray `k` may meet; call for rays 0, 1, 2, … in

@@ -828,10 +828,11 @@ impl Sim {
             }
         };
         let sense = |me: &Sim| {
+            let mut sweep = Sweep::default();
             while let Some(k) = to_sense.take() {
                 let mut slot = lock(&work[k]);
                 let (r, out) = &mut *slot;
-                me.sense_one(*r, out);
+                me.sense_one(*r, out, &mut sweep);
             }
         };
         let sim = RwLock::new(&mut *self);
@@ -968,7 +969,9 @@ impl Sim {
         }
     }
 
-    fn sense_one(&self, r: usize, out: &mut [Reading]) {
+    /// Ranger `r`'s readings into `out`; `sweep` is room for its fans' look
+    /// at the moving bodies, kept from ranger to ranger.
+    fn sense_one(&self, r: usize, out: &mut [Reading], sweep: &mut Sweep) {
         let (g, _) = self.world.global(&self.poses, r);
         let base = g.compose(&self.world.models[r].origin);
         // One sine and cosine per ranger: its sensors' poses and first rays
@@ -976,7 +979,6 @@ impl Sim {
         let turn = unit(base.yaw);
         let accept = self.ranger_sees(r);
         let sensors = &self.world.models[r].sensors;
-        let mut sweep = Sweep::default();
         for ((s, rays), rd) in sensors.iter().zip(&self.fans[r]).zip(out.iter_mut()) {
             let (ox, oy) = turned(turn, (s.pose.x, s.pose.y));
             let (ox, oy) = (base.x + ox, base.y + oy);
