@@ -317,6 +317,7 @@ impl Grid {
         if self.clear.is_empty() {
             let (w, h) = self.lat.size();
             self.clear = vec![CLEAR; w * h];
+            self.clear_blocks = vec![CLEAR; w.div_ceil(BLOCK) * h.div_ceil(BLOCK)];
             self.stale = Some([0, 0, w - 1, h - 1]);
         }
     }
@@ -368,7 +369,6 @@ impl Grid {
     fn block_clearance(&mut self, [i0, j0, i1, j1]: [usize; 4]) {
         let (w, h) = (self.lat.w, self.lat.h);
         let bw = w.div_ceil(BLOCK);
-        self.clear_blocks.resize(bw * h.div_ceil(BLOCK), CLEAR);
         for bj in j0 / BLOCK..=j1 / BLOCK {
             for bi in i0 / BLOCK..=i1 / BLOCK {
                 let mut least = CLEAR;
@@ -461,51 +461,41 @@ impl Grid {
         if self.clear.is_empty() || self.stale.is_some() {
             return self.cast_with(x, y, d, range, accept, |_| None);
         }
-        let mut ray = Leap::new(self.aim(x, y, d, range)?);
-        loop {
-            if let Some(found) = self.leap(&mut ray, &mut accept) {
-                return found;
-            }
-        }
-    }
-
-    /// One step of a ray's walk on a grid that keeps its clearance: a leap
-    /// over the open space the clearance shows, or else one column's cells.
-    /// `Some` with what the ray found once it is done.
-    #[inline(always)]
-    fn leap(&self, ray: &mut Leap, accept: &mut impl FnMut(u16) -> bool) -> Option<Option<Hit>> {
-        let r = &ray.aim;
-        let c = r.col(ray.k);
-        let v = row(ray.v_in);
-        let (i, j) = if r.cu == 1 { (c, v) } else { (v, c) };
+        let r = self.aim(x, y, d, range)?;
         let bw = self.lat.w.div_ceil(BLOCK);
-        let open = self.clear_blocks[(j / BLOCK) * bw + i / BLOCK];
-        if open >= 2 {
-            // The next `open - 1` columns lie in the free square around
-            // this cell: the ray moves at most a row per column.
-            ray.k += usize::from(open - 1);
-            if ray.k >= r.n {
-                return Some(None);
+        let (mut k, mut v_in) = (0, r.v_in0);
+        while k < r.n {
+            let c = r.col(k);
+            let v = row(v_in);
+            let (i, j) = if r.cu == 1 { (c, v) } else { (v, c) };
+            let open = self.clear_blocks[(j / BLOCK) * bw + i / BLOCK];
+            if open >= 2 {
+                // The next `open - 1` columns lie in the free square around
+                // this cell: the ray moves at most a row per column.
+                k += usize::from(open - 1);
+                if k >= r.n {
+                    return None;
+                }
+                v_in = r.v_out(k - 1);
+                continue;
             }
-            ray.v_in = r.v_out(ray.k - 1);
-            return None;
-        }
-        let v_o = r.v_out(ray.k);
-        let (a, b) = (
-            self.cells[c * r.cu + v * r.cv],
-            self.cells[c * r.cu + row(v_o) * r.cv],
-        );
-        if a | b != EMPTY {
-            if let Some((t, id)) = r.hit_in(ray.k, (a, b), (ray.v_in, v_o), accept) {
-                return Some(Some(Hit {
-                    range: t * r.res,
-                    id,
-                }));
+            let v_o = r.v_out(k);
+            let (a, b) = (
+                self.cells[c * r.cu + v * r.cv],
+                self.cells[c * r.cu + row(v_o) * r.cv],
+            );
+            if a | b != EMPTY {
+                if let Some((t, id)) = r.hit_in(k, (a, b), (v_in, v_o), &mut accept) {
+                    return Some(Hit {
+                        range: t * r.res,
+                        id,
+                    });
+                }
             }
+            v_in = v_o;
+            k += 1;
         }
-        ray.v_in = v_o;
-        ray.k += 1;
-        (ray.k >= r.n).then_some(None)
+        None
     }
 
     /// [`Grid::cast`] along the unit vector `(dx, dy)`, with things kept
@@ -709,24 +699,6 @@ impl Grid {
             hi,
             v_in0: (((gv + dv * t0) * ONE) as i64).clamp(0, top),
         })
-    }
-}
-
-/// A ray walking a grid that keeps its clearance (see [`Grid::leap`]):
-/// the column it is at, and v where it enters it.
-struct Leap {
-    aim: Aim,
-    k: usize,
-    v_in: i64,
-}
-
-impl Leap {
-    fn new(aim: Aim) -> Leap {
-        Leap {
-            k: 0,
-            v_in: aim.v_in0,
-            aim,
-        }
     }
 }
 

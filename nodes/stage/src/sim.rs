@@ -894,18 +894,12 @@ impl Sim {
         // A body spans a few tiles: test each once (the first few, at least).
         let mut tested = Seen::default();
         let movers = |t: usize| {
-            let mut best: Option<Hit> = None;
-            for &k in self.movers.in_tile(t) {
-                if !accept(k) || !tested.first(k) {
-                    continue;
-                }
-                if let Some(h) = self.movers.hit(usize::from(k) - 1, k, (x, y), (dx, dy)) {
-                    if best.is_none_or(|b| h.range < b.range) {
-                        best = Some(h);
-                    }
-                }
-            }
-            best
+            let ids = self.movers.in_tile(t).iter().copied();
+            self.nearest_body(
+                (x, y),
+                (dx, dy),
+                ids.filter(|&k| accept(k) && tested.first(k)),
+            )
         };
         self.statics
             .cast_with(x, y, (dx, dy), range, &accept, movers)
@@ -922,19 +916,34 @@ impl Sim {
         accept: impl Fn(u16) -> bool,
         bodies: impl Iterator<Item = u16>,
     ) -> Option<Hit> {
-        let mut best: Option<Hit> = None;
-        for k in bodies {
-            if let Some(h) = self.movers.hit(usize::from(k) - 1, k, (x, y), d) {
-                if h.range <= max_range && best.is_none_or(|b| h.range < b.range) {
-                    best = Some(h);
-                }
-            }
-        }
+        let best = self
+            .nearest_body((x, y), d, bodies)
+            .filter(|h| h.range <= max_range);
         let reach = best.map_or(max_range, |b| b.range);
         match self.statics.cast_open(x, y, d, (from, reach), &accept) {
             Some(h) if best.is_none_or(|b| h.range < b.range) => Some(h),
             _ => best,
         }
+    }
+
+    /// The first of the moving `bodies` met by the ray from `o` along the
+    /// unit vector `d` (the earliest of those met equally near).
+    #[inline(always)]
+    fn nearest_body(
+        &self,
+        o: (f64, f64),
+        d: (f64, f64),
+        bodies: impl Iterator<Item = u16>,
+    ) -> Option<Hit> {
+        let mut best: Option<Hit> = None;
+        for k in bodies {
+            if let Some(h) = self.movers.hit(usize::from(k) - 1, k, o, d) {
+                if best.is_none_or(|b| h.range < b.range) {
+                    best = Some(h);
+                }
+            }
+        }
+        best
     }
 
     /// How far from (x, y) nothing `accept`ed lies, in any direction: the
