@@ -25,9 +25,6 @@ pub struct Movers {
     tiles_of: Vec<Vec<usize>>,
     /// Model ids (index + 1) filed under each tile.
     in_tile: Vec<Vec<u16>>,
-    /// Each body's circle again, packed, for finding the bodies near a
-    /// point without reading the bodies (negative radius: not filed).
-    circles: Vec<(f64, f64, f64)>,
 }
 
 /// A moving body: its polygons in world coordinates, and what rays and
@@ -98,7 +95,6 @@ impl Movers {
             bodies: vec![Body::default(); models],
             tiles_of: vec![Vec::new(); models],
             in_tile: vec![Vec::new(); tiles],
-            circles: vec![(0.0, 0.0, -1.0); models],
         }
     }
 
@@ -123,7 +119,6 @@ impl Movers {
         }
         // (Most steps a body stays in its tiles: only its shape moved.)
         std::mem::swap(&mut self.bodies[m], body);
-        self.circles[m] = self.bodies[m].circle;
     }
 
     /// Model `m`'s filed polygons, in world coordinates (none when not filed).
@@ -135,7 +130,6 @@ impl Movers {
     pub fn unfile(&mut self, m: usize, id: u16) {
         self.untile(m, id);
         self.bodies[m] = Body::default();
-        self.circles[m] = self.bodies[m].circle;
     }
 
     /// Takes model `m` (id `id`) out of every tile, keeping its shape.
@@ -293,7 +287,7 @@ impl Sweep {
         let half_plane = span <= PI + SLACK;
         let below = -SLACK * fan.reach;
         let (ex, ey) = fan.first;
-        for (m, &(cx, cy, r)) in movers.circles.iter().enumerate() {
+        for (m, &(cx, cy, r)) in movers.bodies.iter().map(|b| &b.circle).enumerate() {
             // The circle in the fan's frame: x along the first ray.
             let (dx, dy) = (cx - fan.o.0, cy - fan.o.1);
             let (x, y) = (dx * ex + dy * ey, dy * ex - dx * ey);
@@ -679,7 +673,7 @@ mod tests {
                 let a = heading + k as f64 * fan.step;
                 let d = (a.cos(), a.sin());
                 for i in 0..40 {
-                    let (cx, cy, r) = m.circles[i];
+                    let (cx, cy, r) = m.bodies[i].circle;
                     let w = (cx - fan.o.0, cy - fan.o.1);
                     let along = w.0 * d.0 + w.1 * d.1;
                     let across = (w.0 * d.1 - w.1 * d.0).abs();
