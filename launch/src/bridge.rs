@@ -86,17 +86,27 @@ pub fn run(a: BridgeArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             .collect::<anyhow::Result<Vec<_>>>()?,
     };
     crate::cli::supervised()?;
-    let session = z.open(Mode::Client)?;
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
         .build()
         .context("starting the bridge's runtime")?;
-    let stop = async {
-        if let Err(e) = crate::supervisor::wait_signal().await {
-            tracing::error!("cannot wait for signals: {e}");
+    // Signals are caught before the session opens: with --reconnect the
+    // open waits for the router, and a container's PID 1 must still stop.
+    let mut signals = rt
+        .block_on(async { crate::supervisor::StopSignals::new() })
+        .context("catching SIGTERM and SIGINT")?;
+    let session = rt.block_on(async {
+        tokio::select! {
+            s = z.open_in_background(Mode::Client) => s.map(Some),
+            () = signals.recv() => Ok(None),
         }
+    })?;
+    let Some(session) = session else {
+        tracing::info!("stopped before the router answered");
+        return Ok(());
     };
+    let stop = async move { signals.recv().await };
     if let Some(server) = &a.import {
         rt.block_on(troupe_bridge::import::run(
             session, server, a.as_robot, stop,

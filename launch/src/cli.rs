@@ -99,6 +99,16 @@ their drivers. `troupe launch` starts one for the robots of its plan.")]
   rate: 10.000 Hz  min: 0.0998 s  max: 0.1003 s  std dev: 0.00012 s  window: 10")]
     Hz(HzArgs),
 
+    /// Exit 0 once the given devices are live (a container's health check).
+    #[command(after_help = "Examples:
+  troupe ready 6665:laser:0 6665:position2d:0     # exit 0 if both are live now, 1 if not
+  troupe ready laser:0 --wait 30                  # wait up to 30 s for it
+  troupe --connect tcp/router:7447 ready          # the router answers
+
+With no device it checks that the router answers. As a Docker health check,
+in exec form: [\"CMD\", \"/troupe\", \"--connect\", \"tcp/router:7447\", \"ready\", \"6665:laser:0\"].")]
+    Ready(ReadyArgs),
+
     /// Run a Zenoh router, for multi-host setups.
     #[command(after_help = "Examples:
   troupe router                                  # listens on tcp/[::]:7447
@@ -123,6 +133,28 @@ speed: it powers up at its default baud rate, ignores bytes sent at another,
 and carries each byte in the time the line would. Faults are injected on
 what it sends.")]
     Emulate(crate::emulate::EmulateArgs),
+
+    /// Build the Docker image: this binary, the libraries it loads, the sample worlds.
+    #[command(after_help = "Examples:
+  cargo build --release && target/release/troupe image      # troupe:latest
+  troupe image --tag troupe:dev --worlds my/worlds
+  troupe image --no-build && docker build -t troupe target/docker
+
+The image starts FROM scratch (no registry is needed): /troupe is the
+entrypoint, run as user 10000, with the worlds at /worlds.")]
+    Image(crate::docker::ImageArgs),
+
+    /// Write a Docker Compose file that runs a .cfg or plan as a fleet of containers.
+    #[command(after_help = "Examples:
+  troupe compose worlds/fleet.cfg --in-image /worlds -o docker-compose.yml
+  troupe compose robot.cfg -o robot/docker-compose.yml   # mounts robot.cfg's directory at /stack
+
+One service per host of the plan (the host field of the addresses a driver
+provides, \"robot1:6665:laser:0\"; a plan without hosts is one service, `stack`),
+each running `troupe launch FILE --host NAME`, its nodes still one process each;
+a router, and a Player bridge on 127.0.0.1 of this machine. Health checks
+(`troupe ready`), restart policies, reconnection and a short lease are set.")]
+    Compose(crate::docker::ComposeArgs),
 
     /// List the drivers this build can run.
     Drivers,
@@ -191,6 +223,19 @@ pub struct ListArgs {
     /// Keep running and print each device as it comes (`+`) and goes (`-`).
     #[arg(long)]
     pub watch: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct ReadyArgs {
+    /// Devices that must be live (`laser:0`, `6666:position2d:0`).
+    #[arg(value_name = "DEVICE")]
+    pub devices: Vec<DevAddr>,
+    /// Robot (port) for a device that names none.
+    #[arg(short = 'p', long = "robot", value_name = "PORT", default_value_t = troupe_msgs::DEFAULT_ROBOT)]
+    pub robot: u32,
+    /// Seconds to wait for them to come up (0: look once).
+    #[arg(long, value_name = "SECS", default_value_t = 0.0)]
+    pub wait: f64,
 }
 
 #[derive(Debug, Args)]

@@ -9,6 +9,7 @@ mod bridge;
 mod bridgebench;
 mod cfg;
 mod cli;
+mod docker;
 mod drivers;
 mod emulate;
 mod navbench;
@@ -51,11 +52,14 @@ fn run(cli: cli::Cli) -> anyhow::Result<()> {
         Command::List(a) => tools::list(a, z),
         Command::Echo(a) => tools::echo(a, z),
         Command::Hz(a) => tools::hz(a, z),
+        Command::Ready(a) => tools::ready(a, z),
         Command::Router(a) => tools::router(a, z),
         Command::Emulate(a) => emulate::run(a, z),
         Command::Drivers => tools::print_drivers(),
         Command::Interfaces => tools::print_interfaces(),
         Command::Bench(b) => bench::run(b, z),
         Command::Bridge(a) => bridge::run(a, z),
+        Command::Image(a) => docker::image(a),
+        Command::Compose(a) => docker::compose(a),
     }
 }

@@ -253,14 +253,28 @@ fn to_json(
 /// plugin shares one world between all its sections: the first `worldfile`
 /// wins (made relative to the cfg's directory), each `model` becomes an
 /// entry of the node's `models` option with the section's devices.
+///
+/// The one simulator runs on one host: the host the sections name (an
+/// address's host field), which must be the same wherever one is named.
+#[allow(clippy::too_many_arguments)]
 fn merge_stage(
     stage: &mut Option<NodeSpec>,
     options: &mut serde_json::Map<String, serde_json::Value>,
     provides: Vec<DeviceRef>,
+    host: Option<String>,
     source: &Path,
     at: String,
     option_pos: BTreeMap<String, String>,
+    report: &mut Report,
 ) {
+    if let (Some(h), Some(node)) = (&host, stage.as_ref()) {
+        if let Some(other) = node.host.as_ref().filter(|o| *o != h) {
+            report.errors.push(format!(
+                "{at}: this stage section runs on host `{h}`, an earlier one on `{other}`: \
+                 all stage sections are one simulator, on one host"
+            ));
+        }
+    }
     let node = stage.get_or_insert_with(|| NodeSpec {
         name: "stage".into(),
         driver: "stage".into(),
@@ -302,6 +316,9 @@ fn merge_stage(
     }
     node.option_pos.extend(option_pos);
     node.provides.extend(provides);
+    if node.host.is_none() {
+        node.host = host;
+    }
 }
 
 /// Translates a parsed cfg into a plan; `robot` is the default robot field
@@ -446,9 +463,11 @@ pub fn from_cfg(file: &CfgFile, source: &Path, robot: u32, report: &mut Report) 
                 &mut stage,
                 &mut options,
                 provides,
+                host,
                 source,
                 s.pos.to_string(),
                 option_pos,
+                report,
             );
             continue;
         }

@@ -233,6 +233,7 @@ async fn supervise(
     sim_time: bool,
 ) -> anyhow::Result<()> {
     let started = Instant::now();
+    let mut signals = StopSignals::new().context("catching SIGTERM and SIGINT")?;
     // The network: an embedded router unless told to join another.
     let embedded = z.connect.is_empty() && z.zenoh_config.is_none();
     let (session, child_net) = if embedded {
@@ -276,7 +277,13 @@ async fn supervise(
         child.extend(["--listen".into(), "tcp/127.0.0.1:0".into()]);
         (session, child)
     } else {
-        let session = z.open(Mode::Client)?;
+        let session = tokio::select! {
+            s = z.open_in_background(Mode::Client) => s?,
+            () = signals.recv() => {
+                tracing::info!("stopped before the router answered");
+                return Ok(());
+            }
+        };
         (session, z.to_child_args())
     };
     let live = Arc::new(Live::default());
@@ -407,7 +414,7 @@ async fn supervise(
         }
     };
     let signalled = tokio::select! {
-        r = wait_signal() => { r?; true }
+        () = signals.recv() => true,
         _ = all_done => false,
     };
     reporter.abort();
@@ -476,15 +483,35 @@ fn signal(s: &NodeState, sig: Signal) {
     }
 }
 
+/// SIGTERM and SIGINT, caught from the moment this is made: as a
+/// container's PID 1 a signal with no handler is ignored, not fatal.
+pub(crate) struct StopSignals {
+    term: tokio::signal::unix::Signal,
+    int: tokio::signal::unix::Signal,
+}
+
+impl StopSignals {
+    /// Installs the handlers (needs a Tokio runtime).
+    pub(crate) fn new() -> std::io::Result<StopSignals> {
+        use tokio::signal::unix::{signal, SignalKind};
+        Ok(StopSignals {
+            term: signal(SignalKind::terminate())?,
+            int: signal(SignalKind::interrupt())?,
+        })
+    }
+
+    /// The next SIGTERM or SIGINT (Ctrl-C), logged.
+    pub(crate) async fn recv(&mut self) {
+        tokio::select! {
+            _ = self.term.recv() => tracing::info!("SIGTERM"),
+            _ = self.int.recv() => tracing::info!("SIGINT"),
+        }
+    }
+}
+
 /// SIGTERM or SIGINT (Ctrl-C), logged.
 pub(crate) async fn wait_signal() -> anyhow::Result<()> {
-    use tokio::signal::unix::{signal, SignalKind};
-    let mut term = signal(SignalKind::terminate())?;
-    let mut int = signal(SignalKind::interrupt())?;
-    tokio::select! {
-        _ = term.recv() => tracing::info!("SIGTERM"),
-        _ = int.recv() => tracing::info!("SIGINT"),
-    }
+    StopSignals::new()?.recv().await;
     Ok(())
 }
 

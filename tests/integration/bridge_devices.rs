@@ -4,7 +4,7 @@
 //! clients with one stuck, and malformed input closing only its connection.
 
 use std::io::{Read, Write};
-use std::net::{SocketAddr, TcpStream};
+use std::net::SocketAddr;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{mpsc, Arc};
 use std::time::{Duration, Instant};
@@ -15,7 +15,7 @@ use troupe_msgs::*;
 use troupe_node::zenoh::{Session, Wait};
 use troupe_tests::{TestNet, DEADLINE};
 
-use crate::player::{Frame, DATA};
+use crate::player::{Frame, Player};
 
 const ROBOT: u32 = 6665;
 
@@ -401,61 +401,6 @@ fn bridge(
     (addr_rx.recv_timeout(DEADLINE).unwrap(), t, stop_tx)
 }
 
-/// A Player client in raw XDR.
-struct Player {
-    s: TcpStream,
-}
-
-impl Player {
-    fn connect(addr: SocketAddr) -> Player {
-        let mut s = TcpStream::connect(addr).unwrap();
-        s.set_read_timeout(Some(DEADLINE)).unwrap();
-        let mut banner = [0u8; 32];
-        s.read_exact(&mut banner).unwrap();
-        assert!(banner.starts_with(b"Player v.3"));
-        Player { s }
-    }
-
-    fn send(&mut self, interf: u32, index: u32, kind: u32, subtype: u32, body: &[u8]) {
-        let m = Frame::new([0, ROBOT, interf, index, kind, subtype], body);
-        self.s.write_all(&m.encode()).unwrap();
-    }
-
-    fn recv(&mut self) -> Frame {
-        Frame::read(&mut self.s)
-    }
-
-    /// The next message that is not DATA.
-    fn reply(&mut self) -> Frame {
-        loop {
-            let r = self.recv();
-            if r.kind() != DATA {
-                return r;
-            }
-        }
-    }
-
-    fn open(&mut self, d: Device) {
-        let mut b = Vec::new();
-        for v in [0u32, 0, u32::from(d.interface.code()), d.index, 1, 0, 0] {
-            b.extend_from_slice(&v.to_be_bytes());
-        }
-        self.send(1, 0, 3, 3, &b);
-        let r = self.reply();
-        assert_eq!((r.h[4], r.h[5]), (4, 3), "subscribing {d}: {r:?}");
-    }
-
-    fn request(&mut self, d: Device, subtype: u32, body: &[u8]) -> Frame {
-        self.send(u32::from(d.interface.code()), d.index, 3, subtype, body);
-        let r = self.reply();
-        assert_eq!(
-            (r.h[2], r.h[3], r.h[5]),
-            (u32::from(d.interface.code()), d.index, subtype)
-        );
-        r
-    }
-}
-
 fn be(words: &[u32]) -> Vec<u8> {
     words.iter().flat_map(|w| w.to_be_bytes()).collect()
 }
@@ -469,7 +414,7 @@ fn every_interface_s_data_commands_and_requests_cross_the_bridge() {
     let net = TestNet::new("bridge-ifaces");
     let devs = devices(&net);
     let (addr, thread, stop) = bridge(&net);
-    let mut c = Player::connect(addr);
+    let mut c = Player::connect(addr, ROBOT);
 
     // DEVLIST: every device, by interface code and index.
     c.send(1, 0, 3, 1, &[]);
@@ -601,9 +546,9 @@ fn dozens_of_clients_flow_while_one_is_stuck_and_bad_input_closes_only_its_conne
     let (addr, thread, stop) = bridge(&net);
     let laser = Device::new(ROBOT, Interface::Laser, 0);
 
-    let mut stuck = Player::connect(addr);
+    let mut stuck = Player::connect(addr, ROBOT);
     stuck.open(laser);
-    let mut clients: Vec<Player> = (0..30).map(|_| Player::connect(addr)).collect();
+    let mut clients: Vec<Player> = (0..30).map(|_| Player::connect(addr, ROBOT)).collect();
     for c in &mut clients {
         c.open(laser);
     }
@@ -620,14 +565,14 @@ fn dozens_of_clients_flow_while_one_is_stuck_and_bad_input_closes_only_its_conne
     }
 
     // A truncated command closes that connection, and only that one.
-    let mut bad = Player::connect(addr);
+    let mut bad = Player::connect(addr, ROBOT);
     bad.send(4, 0, 2, 1, &[0, 0, 0]);
     let mut rest = Vec::new();
     bad.s
         .read_to_end(&mut rest)
         .expect("the bridge closes the connection");
     // An absurd size closes the connection too.
-    let mut huge = Player::connect(addr);
+    let mut huge = Player::connect(addr, ROBOT);
     // A header announcing a 64 MiB body, and no body.
     let mut h = Frame::new([0, ROBOT, 1, 0, 3, 1], &[]).encode();
     h[36..40].copy_from_slice(&(64u32 << 20).to_be_bytes());

@@ -7,6 +7,7 @@
 
 mod bridge;
 mod bridge_devices;
+mod docker;
 mod hosts;
 mod import;
 mod launch;

@@ -1,7 +1,11 @@
 //! Player 3 messages on the wire, written for the tests independently of the
 //! bridge's own codec: the 40-byte XDR header and the body.
 
-use std::io::Read;
+use std::io::{Read, Write};
+use std::net::{SocketAddr, TcpStream};
+
+use troupe_msgs::Device;
+use troupe_tests::DEADLINE;
 
 /// `PLAYER_MSGTYPE_DATA`.
 pub const DATA: u32 = 1;
@@ -71,5 +75,67 @@ impl Frame {
             seq: word(8),
             body,
         }
+    }
+}
+
+/// A Player client in raw XDR.
+pub struct Player {
+    /// The connection, for tests that write raw bytes.
+    pub s: TcpStream,
+    robot: u32,
+}
+
+impl Player {
+    /// Connects to `addr` and reads the banner; messages name robot `robot`.
+    pub fn connect(addr: SocketAddr, robot: u32) -> Player {
+        let mut s = TcpStream::connect(addr).unwrap();
+        s.set_read_timeout(Some(DEADLINE)).unwrap();
+        let mut banner = [0u8; 32];
+        s.read_exact(&mut banner).unwrap();
+        assert!(banner.starts_with(b"Player v.3"));
+        Player { s, robot }
+    }
+
+    /// Sends one message to this robot.
+    pub fn send(&mut self, interf: u32, index: u32, kind: u32, subtype: u32, body: &[u8]) {
+        let m = Frame::new([0, self.robot, interf, index, kind, subtype], body);
+        self.s.write_all(&m.encode()).unwrap();
+    }
+
+    /// The next message.
+    pub fn recv(&mut self) -> Frame {
+        Frame::read(&mut self.s)
+    }
+
+    /// The next message that is not DATA.
+    pub fn reply(&mut self) -> Frame {
+        loop {
+            let r = self.recv();
+            if r.kind() != DATA {
+                return r;
+            }
+        }
+    }
+
+    /// Subscribes to `d` (PLAYER_PLAYER_REQ_DEV, access read/write).
+    pub fn open(&mut self, d: Device) {
+        let mut b = Vec::new();
+        for v in [0u32, 0, u32::from(d.interface.code()), d.index, 1, 0, 0] {
+            b.extend_from_slice(&v.to_be_bytes());
+        }
+        self.send(1, 0, 3, 3, &b);
+        let r = self.reply();
+        assert_eq!((r.h[4], r.h[5]), (4, 3), "subscribing {d}: {r:?}");
+    }
+
+    /// A request to `d`; its reply, checked to be for `d`.
+    pub fn request(&mut self, d: Device, subtype: u32, body: &[u8]) -> Frame {
+        self.send(u32::from(d.interface.code()), d.index, 3, subtype, body);
+        let r = self.reply();
+        assert_eq!(
+            (r.h[2], r.h[3], r.h[5]),
+            (u32::from(d.interface.code()), d.index, subtype)
+        );
+        r
     }
 }

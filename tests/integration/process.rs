@@ -137,3 +137,128 @@ fn bad_input_gets_clear_errors_not_panics() {
         assert!(!err.contains("panicked"), "{args:?}: {err}");
     }
 }
+
+/// A loopback port nothing listens on now (bound, then let go).
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("a free port")
+        .port()
+}
+
+#[test]
+fn with_reconnect_start_order_does_not_matter_and_ready_says_when_devices_are_live() {
+    let ns = troupe_tests::unique_namespace("reconnect");
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let net = strings(&["--connect", &endpoint, "--no-multicast", "--namespace", &ns]);
+    let ready = |devices: &[&str]| troupe_output(&with_net(&net, &[&["ready"], devices].concat()));
+
+    // No router yet: `ready` fails at once, saying so.
+    let (status, _, err) = ready(&["ranger:0"]);
+    assert!(!status.success());
+    assert!(err.contains("no Zenoh router answers"), "{err}");
+
+    // A launcher and a node that keep trying, started before the router.
+    let plan = std::env::temp_dir().join(format!("{ns}.toml"));
+    std::fs::write(
+        &plan,
+        "[[node]]\nname = \"laser\"\ndriver = \"rangertolaser\"\nrequires = [{ device = \"robot/6665/ranger/0\" }]\nprovides = [{ device = \"robot/6665/laser/0\" }]\n\n[launch]\nexternal = [\"robot/6665/ranger/0\"]\n",
+    )
+    .unwrap();
+    let mut launcher = Proc::troupe(
+        "launch",
+        &with_net(
+            &net,
+            &[
+                "--reconnect",
+                "launch",
+                plan.to_str().unwrap(),
+                "--no-bridge",
+            ],
+        ),
+    );
+    let mut dummy = Proc::troupe(
+        "dummy",
+        &with_net(
+            &net,
+            &[
+                "--reconnect",
+                "--listen",
+                "tcp/127.0.0.1:0",
+                "node",
+                "dummy",
+                "--provides",
+                "ranger:0",
+                "-o",
+                "rate=20",
+            ],
+        ),
+    );
+    let mut router = Proc::troupe(
+        "router",
+        &strings(&["router", "--listen", &endpoint, "--no-multicast"]),
+    );
+    router.first_line();
+    let (status, out, err) = troupe_output(&with_net(
+        &net,
+        &["ready", "ranger:0", "laser:0", "--wait", "20"],
+    ));
+    assert!(status.success(), "{out}{err}");
+    assert_eq!(out.trim(), "ready: all 2 devices live");
+    // A device nobody provides is named.
+    let (status, _, err) = ready(&["ranger:0", "6666:laser:3"]);
+    assert!(!status.success());
+    assert!(
+        err.contains("not live: 6666:laser:3 (1 of 2 devices live)"),
+        "{err}"
+    );
+    assert!(dummy.terminate().success(), "{}", dummy.stderr());
+    assert!(launcher.terminate().success(), "{}", launcher.stderr());
+    let _ = std::fs::remove_file(&plan);
+}
+
+#[test]
+fn a_launcher_waiting_for_its_router_stops_cleanly_on_sigterm() {
+    // As a container's PID 1 would be asked to, before any router is up.
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let mut launcher = Proc::troupe(
+        "launch",
+        &strings(&[
+            "--connect",
+            &endpoint,
+            "--no-multicast",
+            "--reconnect",
+            "launch",
+            concat!(env!("CARGO_MANIFEST_DIR"), "/../worlds/laser.cfg"),
+            "--no-bridge",
+        ]),
+    );
+    let mut bridge = Proc::troupe(
+        "bridge",
+        &strings(&[
+            "--connect",
+            &endpoint,
+            "--no-multicast",
+            "--reconnect",
+            "bridge",
+            "-p",
+            "6665=127.0.0.1:0",
+        ]),
+    );
+    // Both say they are waiting before the signal comes.
+    let waiting = |p: &mut Proc| {
+        let err = p.child.stderr.take().expect("stderr");
+        let mut lines = std::io::BufRead::lines(std::io::BufReader::new(err));
+        lines
+            .find(|l| {
+                l.as_ref()
+                    .is_ok_and(|l| l.contains("waiting until it answers"))
+            })
+            .expect("a line saying it waits for the router")
+            .ok();
+    };
+    waiting(&mut launcher);
+    waiting(&mut bridge);
+    assert!(launcher.terminate().success());
+    assert!(bridge.terminate().success());
+}

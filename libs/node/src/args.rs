@@ -60,7 +60,24 @@ pub struct ZenohArgs {
     /// Turn off multicast scouting: find others only through --connect.
     #[arg(long, global = true)]
     pub no_multicast: bool,
+
+    /// Keep trying the --connect endpoints until they answer, at start-up and
+    /// whenever a link drops (every 0.25 s, backing off to 1 s), instead of
+    /// failing when no router is up yet: for containers and fleets, where
+    /// start order is not guaranteed and a router may restart.
+    #[arg(long, global = true)]
+    pub reconnect: bool,
+
+    /// Seconds of silence after which a link's other end counts as gone and
+    /// its devices leave (Zenoh's lease; default 10). Keep-alives go out
+    /// four times per lease.
+    #[arg(long, value_name = "SECS", global = true)]
+    pub lease: Option<f64>,
 }
+
+/// How often `--reconnect` retries: Zenoh's `connect/retry`, in milliseconds.
+pub const RECONNECT_RETRY: &str =
+    r#"{"period_init_ms":250,"period_max_ms":1000,"period_increase_factor":2}"#;
 
 impl ZenohArgs {
     /// The Zenoh config these flags describe, in `default_mode` unless --mode says otherwise.
@@ -109,6 +126,29 @@ impl ZenohArgs {
         if let Some(ns) = &self.namespace {
             set(&mut c, "namespace", json_str(ns))?;
         }
+        if self.reconnect {
+            // Zenoh's client gives up at once by default (timeout 0, exit on
+            // failure); here every mode waits forever and retries quickly.
+            set(
+                &mut c,
+                "connect/timeout_ms",
+                r#"{"router":-1,"peer":-1,"client":-1}"#.into(),
+            )?;
+            set(&mut c, "connect/exit_on_failure", "false".into())?;
+            set(&mut c, "connect/retry", RECONNECT_RETRY.into())?;
+        }
+        if let Some(secs) = self.lease {
+            if !(secs.is_finite() && (0.1..=3600.0).contains(&secs)) {
+                return Err(bad(format!(
+                    "--lease {secs}: expected seconds between 0.1 and 3600"
+                )));
+            }
+            set(
+                &mut c,
+                "transport/link/tx/lease",
+                format!("{}", (secs * 1000.0).round() as u64),
+            )?;
+        }
         Ok(c)
     }
 
@@ -120,7 +160,39 @@ impl ZenohArgs {
     /// in use, a bad config).
     pub fn open(&self, default_mode: Mode) -> Result<Session> {
         let config = self.config(default_mode)?;
-        zenoh::open(config).wait().map_err(|e| {
+        self.opened(zenoh::open(config).wait())
+    }
+
+    /// [`ZenohArgs::open`] on a thread of its own, as a future: with
+    /// `--reconnect` a client's open blocks until its router answers, and a
+    /// caller can race this against a signal (the thread is left behind).
+    pub fn open_in_background(
+        &self,
+        default_mode: Mode,
+    ) -> impl std::future::Future<Output = Result<Session>> {
+        if self.reconnect && self.mode.unwrap_or(default_mode) == Mode::Client {
+            tracing::info!(
+                "joining the router at {} (--reconnect: waiting until it answers)",
+                self.connect.join(", ")
+            );
+        }
+        let (tx, rx) = tokio::sync::oneshot::channel();
+        let me = self.clone();
+        std::thread::spawn(move || {
+            let _ = tx.send(me.open(default_mode));
+        });
+        async move {
+            rx.await.unwrap_or_else(|_| {
+                Err(NodeError::config(
+                    "zenoh",
+                    "the thread opening the session died",
+                ))
+            })
+        }
+    }
+
+    fn opened(&self, r: zenoh::Result<Session>) -> Result<Session> {
+        r.map_err(|e| {
             // Zenoh's own words name a source file; say what to do instead.
             if e.to_string().contains("Unable to connect to any of") {
                 let endpoints = if self.connect.is_empty() {
@@ -149,6 +221,15 @@ impl ZenohArgs {
         }
         if self.no_multicast {
             v.push("--no-multicast".to_owned());
+        }
+        if let Some(m) = self.mode {
+            v.extend(["--mode".to_owned(), m.as_str().to_owned()]);
+        }
+        if self.reconnect {
+            v.push("--reconnect".to_owned());
+        }
+        if let Some(l) = self.lease {
+            v.extend(["--lease".to_owned(), l.to_string()]);
         }
         v
     }
@@ -221,6 +302,44 @@ mod tests {
             d.get_json("connect/endpoints").unwrap(),
             format!("[\"{DEFAULT_ROUTER}\"]")
         );
+    }
+
+    #[test]
+    fn reconnect_and_lease_reach_the_zenoh_config_and_the_children() {
+        let a = ZenohArgs {
+            connect: vec!["tcp/router:7447".into()],
+            reconnect: true,
+            lease: Some(3.0),
+            ..Default::default()
+        };
+        let c = a.config(Mode::Client).unwrap();
+        assert_eq!(c.get_json("connect/exit_on_failure").unwrap(), "false");
+        assert!(c
+            .get_json("connect/timeout_ms")
+            .unwrap()
+            .contains(r#""client":-1"#));
+        assert!(c
+            .get_json("connect/retry")
+            .unwrap()
+            .contains(r#""period_init_ms":250"#));
+        assert_eq!(c.get_json("transport/link/tx/lease").unwrap(), "3000");
+        let child = ZenohArgs {
+            mode: Some(Mode::Client),
+            ..a.clone()
+        }
+        .to_child_args();
+        assert!(child.contains(&"--reconnect".to_owned()), "{child:?}");
+        assert!(
+            child.windows(2).any(|w| w == ["--mode", "client"]),
+            "{child:?}"
+        );
+        assert!(child.windows(2).any(|w| w == ["--lease", "3"]), "{child:?}");
+        let bad = ZenohArgs {
+            lease: Some(0.0),
+            ..Default::default()
+        };
+        let e = bad.config(Mode::Peer).unwrap_err().to_string();
+        assert!(e.contains("--lease 0"), "{e}");
     }
 
     #[test]

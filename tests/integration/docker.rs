@@ -1,0 +1,628 @@
+//! The Docker fleet, judged from outside: the image `troupe image` builds and
+//! the repository's docker-compose.yml (a router, the simulator, three robot
+//! computers each running its navigation stack, the Player bridge). Each
+//! test brings up its own compose project (its own network, free host
+//! ports), tears it down whatever happens, and prints the containers' logs
+//! when it fails. Faults are made from outside with the Docker CLI.
+//!
+//! Where no Docker engine answers these tests say so and pass; under CI
+//! (`CI=true`) that is a failure. They print what they measure:
+//! `cargo test -p troupe-tests --test integration docker -- --nocapture`.
+
+use std::collections::BTreeMap;
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::{mpsc, Mutex, MutexGuard, OnceLock};
+use std::time::{Duration, Instant};
+
+use troupe_client::{Client, SimulationProxy};
+use troupe_msgs::codec::decode;
+use troupe_msgs::{keys, localize, Interface, Pose2d};
+use troupe_node::zenoh::sample::SampleKind;
+use troupe_node::zenoh::{Session, Wait};
+use troupe_node::{Mode, ZenohArgs};
+use troupe_tests::{token_events, DEADLINE};
+
+use crate::player::{Player, DATA};
+
+/// The image the tests build and run (`$TROUPE_IMAGE` in the compose file).
+const IMAGE: &str = "troupe:test";
+/// docker-compose.yml's `--lease`.
+const LEASE: Duration = Duration::from_secs(3);
+/// The robots of worlds/fleet.cfg.
+const ROBOTS: [u32; 3] = [6665, 6666, 6667];
+/// What each robot computer provides.
+const NAV: [&str; 6] = [
+    "laser:0",
+    "map:0",
+    "localize:0",
+    "position2d:1",
+    "position2d:2",
+    "planner:0",
+];
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// Every device of the fleet, as `6665:laser:0`.
+fn fleet_devices() -> Vec<String> {
+    let mut v = vec!["6665:simulation:0".to_owned()];
+    for r in ROBOTS {
+        for d in ["position2d:0", "ranger:0", "ranger:1"].iter().chain(&NAV) {
+            v.push(format!("{r}:{d}"));
+        }
+    }
+    v
+}
+
+fn nav_devices(robot: u32) -> Vec<String> {
+    NAV.iter().map(|d| format!("{robot}:{d}")).collect()
+}
+
+fn run(cmd: &mut Command) -> Output {
+    cmd.output()
+        .unwrap_or_else(|e| panic!("running {cmd:?}: {e}"))
+}
+
+fn ok(cmd: &mut Command) -> String {
+    let out = run(cmd);
+    assert!(
+        out.status.success(),
+        "{cmd:?}: {}\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).trim().to_owned()
+}
+
+/// The compose command (`docker compose` or `docker-compose`), once a
+/// Docker engine answers; `None` (skip) where none does, outside CI.
+fn engine() -> Option<Vec<String>> {
+    static ENGINE: OnceLock<Result<Vec<String>, String>> = OnceLock::new();
+    let found = ENGINE.get_or_init(|| {
+        let answers = Command::new("docker")
+            .args(["info", "--format", "{{.ServerVersion}}"])
+            .output()
+            .is_ok_and(|o| o.status.success());
+        if !answers {
+            return Err("no Docker engine answers (`docker info` failed)".into());
+        }
+        let works = |c: &[&str]| {
+            Command::new(c[0])
+                .args(&c[1..])
+                .arg("version")
+                .output()
+                .is_ok_and(|o| o.status.success())
+        };
+        if works(&["docker", "compose"]) {
+            Ok(vec!["docker".into(), "compose".into()])
+        } else if works(&["docker-compose"]) {
+            Ok(vec!["docker-compose".into()])
+        } else {
+            Err("Docker answers but has no Compose (`docker compose` or `docker-compose`)".into())
+        }
+    });
+    match found {
+        Ok(c) => Some(c.clone()),
+        Err(why) if std::env::var("CI").is_ok_and(|v| v == "true") => {
+            panic!("CI=true, and {why}: the Docker tests must run in CI")
+        }
+        Err(why) => {
+            eprintln!("skipping: {why}");
+            None
+        }
+    }
+}
+
+/// Builds the image once per test run, from this build's binary.
+fn image() {
+    static BUILT: OnceLock<()> = OnceLock::new();
+    BUILT.get_or_init(|| {
+        let context = std::env::temp_dir().join(troupe_tests::unique_namespace("image"));
+        let t = Instant::now();
+        let out = ok(Command::new(troupe_tests::troupe_bin())
+            .args(["image", "--tag", IMAGE, "--context"])
+            .arg(&context)
+            .arg("--worlds")
+            .arg(root().join("worlds")));
+        let _ = std::fs::remove_dir_all(&context);
+        eprintln!("docker: {out} in {:.1} s", t.elapsed().as_secs_f64());
+    });
+}
+
+/// One fleet at a time: each is seven containers and some twenty processes,
+/// on a two-core machine.
+static TURN: Mutex<()> = Mutex::new(());
+
+/// A compose project of the repository's docker-compose.yml.
+struct Fleet {
+    compose: Vec<String>,
+    project: String,
+    /// When `up -d` returned.
+    up: Instant,
+    _turn: MutexGuard<'static, ()>,
+}
+
+impl Fleet {
+    /// `docker compose up -d`, with free host ports; `None` where Docker is absent.
+    fn up(name: &str) -> Option<Fleet> {
+        let compose = engine()?;
+        let turn = TURN.lock().unwrap_or_else(|p| p.into_inner());
+        image();
+        let project = troupe_tests::unique_namespace(name).replace('_', "-");
+        let mut fleet = Fleet {
+            compose,
+            project,
+            up: Instant::now(),
+            _turn: turn,
+        };
+        let t = Instant::now();
+        fleet.ok(&["up", "-d"]);
+        fleet.up = Instant::now();
+        eprintln!(
+            "docker: `compose up -d` returned in {:.1} s",
+            t.elapsed().as_secs_f64()
+        );
+        Some(fleet)
+    }
+
+    fn cmd(&self, args: &[&str]) -> Command {
+        let mut c = Command::new(&self.compose[0]);
+        c.args(&self.compose[1..])
+            .arg("-p")
+            .arg(&self.project)
+            .arg("-f")
+            .arg(root().join("docker-compose.yml"))
+            .args(args)
+            .env("TROUPE_IMAGE", IMAGE)
+            .env("TROUPE_ROUTER_PORT", "");
+        for r in ROBOTS {
+            c.env(format!("TROUPE_PORT_{r}"), "");
+        }
+        c
+    }
+
+    fn ok(&self, args: &[&str]) -> String {
+        ok(&mut self.cmd(args))
+    }
+
+    /// The host address a service's port is published on.
+    fn published(&self, service: &str, port: u16) -> SocketAddr {
+        let out = self.ok(&["port", service, &port.to_string()]);
+        out.parse()
+            .unwrap_or_else(|_| panic!("`port {service} {port}` said {out:?}"))
+    }
+
+    /// A client session of the fleet's router, from this machine.
+    fn session(&self) -> Session {
+        ZenohArgs {
+            connect: vec![format!("tcp/{}", self.published("router", 7447))],
+            no_multicast: true,
+            ..Default::default()
+        }
+        .open(Mode::Client)
+        .expect("a session with the fleet's router")
+    }
+
+    fn container(&self, service: &str) -> String {
+        let id = self.ok(&["ps", "-q", service]);
+        assert!(!id.is_empty(), "no container for {service}");
+        id
+    }
+
+    /// Every container's service, start time and restart count.
+    fn starts(&self) -> BTreeMap<String, (String, u32)> {
+        let ids = self.ok(&["ps", "-q"]);
+        let mut out = BTreeMap::new();
+        for id in ids.lines() {
+            let line = ok(Command::new("docker").args([
+                "inspect",
+                "--format",
+                "{{index .Config.Labels \"com.docker.compose.service\"}} {{.State.StartedAt}} {{.RestartCount}}",
+                id,
+            ]));
+            let f: Vec<&str> = line.split_whitespace().collect();
+            assert_eq!(f.len(), 3, "{line}");
+            out.insert(f[0].to_owned(), (f[1].to_owned(), f[2].parse().unwrap()));
+        }
+        assert_eq!(out.len(), 6, "six services: {out:?}");
+        out
+    }
+
+    /// The network every service is on.
+    fn network(&self) -> String {
+        format!("{}_fleet", self.project)
+    }
+}
+
+impl Drop for Fleet {
+    fn drop(&mut self) {
+        if std::thread::panicking() {
+            let logs = run(&mut self.cmd(&["logs", "--no-color", "--tail", "60"]));
+            eprintln!(
+                "--- logs of {} ---\n{}",
+                self.project,
+                String::from_utf8_lossy(&logs.stdout)
+            );
+        }
+        let _ = run(&mut self.cmd(&["down", "-v", "-t", "5", "--remove-orphans"]));
+    }
+}
+
+/// Devices as they come and go, seen through one session.
+struct Tokens {
+    sub: troupe_node::zenoh::pubsub::Subscriber<
+        troupe_node::zenoh::handlers::FifoChannelHandler<troupe_node::zenoh::sample::Sample>,
+    >,
+    live: std::collections::BTreeSet<String>,
+}
+
+impl Tokens {
+    fn new(session: &Session) -> Tokens {
+        Tokens {
+            sub: token_events(session),
+            live: Default::default(),
+        }
+    }
+
+    /// Waits until every device of `devices` is live (`up`) or gone (`!up`);
+    /// the time it took.
+    fn until(&mut self, devices: &[String], up: bool, within: Duration) -> Duration {
+        let t = Instant::now();
+        let deadline = t + within;
+        loop {
+            if devices.iter().all(|d| self.live.contains(d) == up) {
+                return t.elapsed();
+            }
+            let s = self
+                .sub
+                .recv_deadline(deadline)
+                .expect("liveliness channel")
+                .unwrap_or_else(|| {
+                    let wrong: Vec<&String> = devices
+                        .iter()
+                        .filter(|d| self.live.contains(*d) != up)
+                        .collect();
+                    panic!(
+                        "within {within:?}, still {}: {wrong:?}",
+                        if up { "not live" } else { "live" }
+                    )
+                });
+            if let Ok((d, _)) = keys::parse_token(s.key_expr().as_str()) {
+                let d = d.to_string();
+                match s.kind() {
+                    SampleKind::Put => self.live.insert(d),
+                    SampleKind::Delete => self.live.remove(&d),
+                };
+            }
+        }
+    }
+}
+
+/// Arrival times of the samples of some devices, for their rates.
+struct Rates {
+    names: Vec<String>,
+    rx: mpsc::Receiver<(usize, Instant)>,
+    seen: Vec<Vec<Instant>>,
+    _subs: Vec<troupe_node::zenoh::pubsub::Subscriber<()>>,
+}
+
+impl Rates {
+    fn new(session: &Session, devices: &[&str]) -> Rates {
+        let (tx, rx) = mpsc::channel();
+        let subs = devices
+            .iter()
+            .enumerate()
+            .map(|(i, d)| {
+                let tx = tx.clone();
+                let key = keys::data(&d.parse::<troupe_msgs::DevAddr>().unwrap().device(6665));
+                session
+                    .declare_subscriber(key)
+                    .callback(move |_| {
+                        let _ = tx.send((i, Instant::now()));
+                    })
+                    .wait()
+                    .unwrap()
+            })
+            .collect();
+        Rates {
+            names: devices.iter().map(|d| (*d).to_owned()).collect(),
+            rx,
+            seen: vec![Vec::new(); devices.len()],
+            _subs: subs,
+        }
+    }
+
+    fn take(&mut self, (i, t): (usize, Instant)) {
+        self.seen[i].push(t);
+    }
+
+    /// Waits until every device has `n` samples.
+    fn until_each_has(&mut self, n: usize) {
+        let deadline = Instant::now() + DEADLINE;
+        while self.seen.iter().any(|s| s.len() < n) {
+            let left = deadline.saturating_duration_since(Instant::now());
+            let got = self.rx.recv_timeout(left).unwrap_or_else(|_| {
+                panic!(
+                    "fewer than {n} samples of {:?} within {DEADLINE:?}",
+                    self.names
+                )
+            });
+            self.take(got);
+        }
+    }
+
+    /// Each device's rate between `from` and `to`, Hz.
+    fn between(&mut self, from: Instant, to: Instant) -> Vec<f64> {
+        while let Ok(got) = self.rx.try_recv() {
+            self.take(got);
+        }
+        let secs = to.duration_since(from).as_secs_f64();
+        self.seen
+            .iter()
+            .map(|s| s.iter().filter(|t| **t >= from && **t <= to).count() as f64 / secs)
+            .collect()
+    }
+
+    /// Checks that no device's rate during `during` fell below 70% of its
+    /// rate over the `before` window; prints both.
+    fn held(&mut self, before: (Instant, Instant), during: (Instant, Instant), what: &str) {
+        let b = self.between(before.0, before.1);
+        let d = self.between(during.0, during.1);
+        for ((name, b), d) in self.names.iter().zip(&b).zip(&d) {
+            eprintln!("docker: {what}: {name} at {b:.1} Hz before, {d:.1} Hz during");
+            assert!(
+                *d >= 0.7 * b,
+                "{name} dropped from {b:.1} Hz to {d:.1} Hz {what}"
+            );
+        }
+    }
+}
+
+/// The fleet's sessions, and the devices live through them.
+fn all_live(fleet: &Fleet) -> (Session, Tokens) {
+    let session = fleet.session();
+    let mut tokens = Tokens::new(&session);
+    tokens.until(&fleet_devices(), true, Duration::from_secs(60));
+    (session, tokens)
+}
+
+/// r1's true pose, from the simulator.
+fn truth(session: &Session, model: &str) -> Pose2d {
+    let client = Client::with_session(session.clone(), 6665);
+    SimulationProxy::new(&client, 0)
+        .get_pose2d(model)
+        .expect("the simulator's true pose")
+}
+
+fn dist(a: Pose2d, b: Pose2d) -> f64 {
+    (a.x - b.x).hypot(a.y - b.y)
+}
+
+/// Only `changed` restarted between two snapshots (`None`: nothing did).
+fn only_restarted(
+    before: &BTreeMap<String, (String, u32)>,
+    after: &BTreeMap<String, (String, u32)>,
+    changed: Option<&str>,
+) {
+    for (service, was) in before {
+        let now = &after[service];
+        if Some(service.as_str()) == changed {
+            assert_ne!(was, now, "{service} was not restarted");
+        } else {
+            assert_eq!(was, now, "{service} restarted");
+        }
+    }
+}
+
+#[test]
+fn docker_fleet_comes_up_drives_a_robot_from_a_player_client_and_goes_down_cleanly() {
+    let Some(fleet) = Fleet::up("fleet-up") else {
+        return;
+    };
+    let (session, _tokens) = all_live(&fleet);
+    eprintln!(
+        "docker: all {} devices live {:.2} s after `up -d` returned",
+        fleet_devices().len(),
+        fleet.up.elapsed().as_secs_f64()
+    );
+
+    // A Player client on this machine gives robot 6666 a goal through the
+    // bridge's published port; the simulator says whether r1 gets there.
+    let mut player = Player::connect(fleet.published("bridge", 6666), 6666);
+    let planner = troupe_msgs::Device::new(6666, Interface::Planner, 0);
+    player.open(planner);
+    player.open(troupe_msgs::Device::new(6666, Interface::Position2d, 0));
+    let start = truth(&session, "r1");
+    let goal = Pose2d::new(start.x + 3.0, start.y, 0.0);
+    let body: Vec<u8> = [goal.x, goal.y, goal.yaw]
+        .iter()
+        .flat_map(|v| v.to_be_bytes())
+        .collect();
+    player.send(u32::from(Interface::Planner.code()), 0, 2, 1, &body);
+    let t = Instant::now();
+    let deadline = t + Duration::from_secs(90);
+    loop {
+        // Paced by r1's odometry, which the bridge sends as it comes.
+        let m = player.recv();
+        assert_eq!(m.kind(), DATA, "{m:?}");
+        let now = truth(&session, "r1");
+        if dist(now, goal) < 0.5 {
+            eprintln!(
+                "docker: r1 drove {:.1} m to its goal in {:.1} s",
+                dist(start, goal),
+                t.elapsed().as_secs_f64()
+            );
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "r1 is at {now:?}, not at the goal {goal:?}"
+        );
+    }
+    drop(player);
+    drop(session);
+
+    // `down` is stop then remove: stop, so the exit codes can be read.
+    let ids: Vec<String> = fleet.ok(&["ps", "-q"]).lines().map(str::to_owned).collect();
+    let t = Instant::now();
+    fleet.ok(&["stop", "-t", "10"]);
+    eprintln!(
+        "docker: `compose stop` (down's SIGTERM) took {:.2} s",
+        t.elapsed().as_secs_f64()
+    );
+    for id in &ids {
+        let state = ok(Command::new("docker").args([
+            "inspect",
+            "--format",
+            "{{.Name}} {{.State.ExitCode}} {{.State.OOMKilled}}",
+            id,
+        ]));
+        assert!(state.ends_with(" 0 false"), "not a clean exit: {state}");
+    }
+}
+
+#[test]
+fn docker_a_crashed_robot_computer_restarts_and_localizes_while_the_others_keep_their_rates() {
+    let Some(fleet) = Fleet::up("fleet-kill") else {
+        return;
+    };
+    let (session, mut tokens) = all_live(&fleet);
+    let before = fleet.starts();
+    let mut rates = Rates::new(
+        &session,
+        &["6665:laser:0", "6667:laser:0", "6665:position2d:0"],
+    );
+    rates.until_each_has(1);
+    let from = Instant::now();
+    rates.until_each_has(20);
+    let base = (from, Instant::now());
+
+    // A crash: the container's first process killed (`docker kill` counts as
+    // a stop by hand, which Docker's restart policies never undo).
+    let pid = ok(Command::new("docker").args([
+        "inspect",
+        "--format",
+        "{{.State.Pid}}",
+        &fleet.container("robot6666"),
+    ]));
+    let killed = Instant::now();
+    ok(Command::new("kill").args(["-KILL", &pid]));
+    let gone = tokens.until(&nav_devices(6666), false, DEADLINE);
+    let back = tokens.until(&nav_devices(6666), true, DEADLINE);
+    let back_at = Instant::now();
+    eprintln!(
+        "docker: kill robot6666 -> its devices gone in {:.2} s, back {:.2} s after the kill",
+        gone.as_secs_f64(),
+        (gone + back).as_secs_f64()
+    );
+    rates.held(base, (killed, back_at), "while robot6666 restarted");
+
+    // Localized again: amcl's estimate (the latest, asked for, since its
+    // first update may have come before this test listened; else the next)
+    // is where r1 truly is.
+    let key = keys::data(&troupe_msgs::Device::new(6666, Interface::Localize, 0));
+    let next = session.declare_subscriber(&key).wait().unwrap();
+    let latest = session
+        .get(&key)
+        .wait()
+        .unwrap()
+        .recv()
+        .ok()
+        .and_then(|r| r.result().ok().map(|s| s.payload().to_bytes().to_vec()));
+    let bytes = latest.unwrap_or_else(|| {
+        next.recv_deadline(Instant::now() + DEADLINE)
+            .unwrap()
+            .expect("an estimate from amcl 6666 after its restart")
+            .payload()
+            .to_bytes()
+            .to_vec()
+    });
+    let h = decode::<localize::Hypoths>(&bytes).unwrap().msg;
+    let r1 = truth(&session, "r1");
+    let off = dist(h.hypoths[0].mean, r1);
+    eprintln!("docker: restarted amcl 6666 is {off:.2} m off r1's true pose");
+    assert!(off < 0.5, "{:?} against {r1:?}", h.hypoths[0]);
+    only_restarted(&before, &fleet.starts(), Some("robot6666"));
+}
+
+#[test]
+fn docker_a_cut_off_robot_computer_leaves_within_the_lease_and_rejoins_without_restarts() {
+    let Some(fleet) = Fleet::up("fleet-cut") else {
+        return;
+    };
+    let (session, mut tokens) = all_live(&fleet);
+    let before = fleet.starts();
+    let mut rates = Rates::new(&session, &["6665:laser:0", "6667:laser:0"]);
+    rates.until_each_has(1);
+    let from = Instant::now();
+    rates.until_each_has(20);
+    let base = (from, Instant::now());
+
+    let robot = fleet.container("robot6666");
+    let cut = Instant::now();
+    ok(Command::new("docker").args(["network", "disconnect", &fleet.network(), &robot]));
+    // The link is surely cut once the command returns (maybe earlier).
+    let done = Instant::now();
+    tokens.until(&nav_devices(6666), false, DEADLINE);
+    let cut_for = done.elapsed();
+    eprintln!(
+        "docker: robot6666 cut off -> its devices left {:.2} s after `network disconnect` returned ({:.2} s after it began; lease {:.0} s)",
+        cut_for.as_secs_f64(),
+        cut.elapsed().as_secs_f64(),
+        LEASE.as_secs_f64()
+    );
+    assert!(
+        cut_for <= LEASE + Duration::from_secs(1),
+        "the devices stayed {cut_for:?}, over the lease and a second"
+    );
+    // The others go on meanwhile.
+    rates.until_each_has(rates.seen.iter().map(Vec::len).max().unwrap_or(0) + 10);
+    rates.held(base, (cut, Instant::now()), "while robot6666 was cut off");
+
+    let healed = Instant::now();
+    ok(Command::new("docker").args(["network", "connect", &fleet.network(), &robot]));
+    let back = tokens.until(&nav_devices(6666), true, DEADLINE);
+    eprintln!(
+        "docker: network healed -> robot6666's devices back in {:.2} s ({:.2} s after `network connect` returned)",
+        healed.elapsed().as_secs_f64(),
+        back.as_secs_f64()
+    );
+    only_restarted(&before, &fleet.starts(), None);
+}
+
+#[test]
+fn docker_a_restarted_router_is_rejoined_by_every_container() {
+    let Some(fleet) = Fleet::up("fleet-router") else {
+        return;
+    };
+    let (session, tokens) = all_live(&fleet);
+    let before = fleet.starts();
+    drop(tokens);
+    drop(session);
+    let t = Instant::now();
+    fleet.ok(&["restart", "-t", "10", "router"]);
+    let restarted = Instant::now();
+    // Its published port may have changed: ask again.
+    let (session, _tokens) = all_live(&fleet);
+    eprintln!(
+        "docker: router restarted ({:.2} s) -> every device back {:.2} s after it was up",
+        restarted.duration_since(t).as_secs_f64(),
+        restarted.elapsed().as_secs_f64()
+    );
+    let after = fleet.starts();
+    only_restarted(&before, &after, Some("router"));
+
+    // The bridge rejoined too: a Player client gets r0's odometry.
+    let mut player = Player::connect(fleet.published("bridge", 6665), 6665);
+    player.open(troupe_msgs::Device::new(6665, Interface::Position2d, 0));
+    let m = player.recv();
+    assert_eq!(
+        (m.kind(), m.h[2]),
+        (DATA, u32::from(Interface::Position2d.code())),
+        "{m:?}"
+    );
+    drop(session);
+}
