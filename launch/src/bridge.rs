@@ -26,6 +26,12 @@ pub struct BridgeArgs {
     #[arg(long, value_name = "ADDR", default_value = "127.0.0.1")]
     pub bind: IpAddr,
 
+    /// Accept Player clients only from this network or address (repeatable,
+    /// e.g. `--allow 10.1.0.0/16 --allow 10.2.0.7`); others are closed
+    /// before the banner. Default: anyone who reaches --bind.
+    #[arg(long, value_name = "CIDR", value_parser = troupe_bridge::parse_network)]
+    pub allow: Vec<troupe_bridge::IpNetwork>,
+
     /// Data messages a client's queue holds before dropping (Player's 1024).
     #[arg(long, value_name = "N", default_value_t = troupe_bridge::queue::DEFAULT_MAXLEN)]
     pub queue_len: usize,
@@ -37,7 +43,7 @@ pub struct BridgeArgs {
     #[arg(
         long,
         value_name = "HOST:PORT",
-        conflicts_with_all = ["ports", "bind", "queue_len"]
+        conflicts_with_all = ["ports", "bind", "queue_len", "allow"]
     )]
     pub import: Option<String>,
 
@@ -117,6 +123,7 @@ pub fn run(a: BridgeArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         let cfg = Config {
             ports,
             maxlen: a.queue_len.max(1),
+            allow: a.allow,
             ..Config::default()
         };
         let bridge = Bridge::bind(session, cfg).await?;

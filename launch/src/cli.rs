@@ -71,6 +71,7 @@ The node waits for every required device to be live, then announces its own.")]
   troupe bridge -p 6665 -p 6666          # two robots, two ports
   troupe bridge -p 6665=127.0.0.1:0      # any free port; the chosen one is printed
   troupe bridge --bind 0.0.0.0           # other hosts too (Player has no authentication)
+  troupe bridge --bind 0.0.0.0 --allow 10.1.0.0/16   # other hosts of that network only
   troupe bridge --import robot7:6665     # a running Player server's devices, on Troupe's keys
 
 Each port speaks Player 3 TCP/XDR: DEVLIST lists the live devices of that robot,

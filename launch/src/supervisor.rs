@@ -65,6 +65,10 @@ pub struct LaunchArgs {
     /// authentication: open other addresses only on a trusted network).
     #[arg(long, value_name = "ADDR", default_value = "127.0.0.1")]
     pub bridge_bind: std::net::IpAddr,
+    /// Accept Player clients only from this network or address (repeatable,
+    /// e.g. `--bridge-allow 10.1.0.0/16`); default: anyone who reaches it.
+    #[arg(long, value_name = "CIDR", value_parser = troupe_bridge::parse_network)]
+    pub bridge_allow: Vec<troupe_bridge::IpNetwork>,
     /// Let the bridge listen on free TCP ports instead of the robot numbers;
     /// it prints `troupe bridge: robot 6665 on ADDR:PORT` on stdout.
     #[arg(long)]
@@ -716,6 +720,7 @@ fn bridge_config(a: &LaunchArgs, states: &[Arc<NodeState>]) -> Option<troupe_bri
     Some(troupe_bridge::Config {
         ports,
         order: provided,
+        allow: a.bridge_allow.clone(),
         ..Default::default()
     })
 }

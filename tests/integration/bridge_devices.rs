@@ -531,6 +531,50 @@ fn every_interface_s_data_commands_and_requests_cross_the_bridge() {
 }
 
 #[test]
+fn opens_are_counted_per_client_and_commands_to_unopened_devices_are_ignored() {
+    let net = TestNet::new("bridge-opens");
+    let devs = devices(&net);
+    let (addr, thread, stop) = bridge(&net);
+    let pos = Device::new(ROBOT, Interface::Position2d, 0);
+    let vel = |vx: f64| {
+        let mut b = f64s(&[vx, 0.0, 0.0]);
+        b.extend(be(&[1]));
+        b
+    };
+    let mut c = Player::connect(addr, ROBOT);
+    // Not opened: Player drops it, and so does the bridge.
+    c.send(4, 0, 2, 1, &vel(0.1));
+    // Two proxies on one device: two opens.
+    c.open(pos);
+    c.open(pos);
+    c.send(4, 0, 2, 1, &vel(0.2));
+    let (key, payload) = devs.commands.recv_timeout(DEADLINE).expect("a command");
+    assert_eq!(key, keys::cmd(&pos, "vel"));
+    let v = decode::<position2d::CmdVel>(&payload).unwrap().msg;
+    assert_eq!(
+        v.vel.x, 0.2,
+        "the command to the unopened device went through"
+    );
+    // One proxy closes: the other still gets the device's data.
+    c.close(pos);
+    let deadline = Instant::now() + DEADLINE;
+    loop {
+        let r = c.recv();
+        if r.h[2] == 4 && r.h[4] == 1 {
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "no position2d data after one of two closes"
+        );
+    }
+    c.close(pos);
+    drop(c);
+    let _ = stop.send(());
+    thread.join().unwrap();
+}
+
+#[test]
 fn dozens_of_clients_flow_while_one_is_stuck_and_bad_input_closes_only_its_connection() {
     let net = TestNet::new("bridge-clients");
     let devs = devices(&net);
@@ -564,8 +608,10 @@ fn dozens_of_clients_flow_while_one_is_stuck_and_bad_input_closes_only_its_conne
         }
     }
 
-    // A truncated command closes that connection, and only that one.
+    // A truncated command (to a device it opened) closes that connection,
+    // and only that one.
     let mut bad = Player::connect(addr, ROBOT);
+    bad.open(Device::new(ROBOT, Interface::Position2d, 0));
     bad.send(4, 0, 2, 1, &[0, 0, 0]);
     let mut rest = Vec::new();
     bad.s

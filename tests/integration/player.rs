@@ -119,13 +119,32 @@ impl Player {
 
     /// Subscribes to `d` (PLAYER_PLAYER_REQ_DEV, access read/write).
     pub fn open(&mut self, d: Device) {
+        assert_eq!(self.dev(d, 1), 1, "opening {d}");
+    }
+
+    /// Closes `d` (PLAYER_PLAYER_REQ_DEV, access close).
+    pub fn close(&mut self, d: Device) {
+        assert_eq!(self.dev(d, 2), 2, "closing {d}");
+    }
+
+    /// PLAYER_PLAYER_REQ_DEV with `access`; the access granted.
+    fn dev(&mut self, d: Device, access: u32) -> u32 {
         let mut b = Vec::new();
-        for v in [0u32, 0, u32::from(d.interface.code()), d.index, 1, 0, 0] {
+        for v in [
+            0u32,
+            0,
+            u32::from(d.interface.code()),
+            d.index,
+            access,
+            0,
+            0,
+        ] {
             b.extend_from_slice(&v.to_be_bytes());
         }
         self.send(1, 0, 3, 3, &b);
         let r = self.reply();
-        assert_eq!((r.h[4], r.h[5]), (4, 3), "subscribing {d}: {r:?}");
+        assert_eq!((r.h[4], r.h[5]), (4, 3), "{d}: {r:?}");
+        u32::from_be_bytes(r.body[16..20].try_into().expect("an access field"))
     }
 
     /// A request to `d`; its reply, checked to be for `d`.

@@ -262,3 +262,66 @@ fn a_launcher_waiting_for_its_router_stops_cleanly_on_sigterm() {
     assert!(launcher.terminate().success());
     assert!(bridge.terminate().success());
 }
+
+/// `troupe bridge FLAGS…` on `net`; the process and the address it serves robot 6665 on.
+fn bridge_on(net: &TestNet, flags: &[&str]) -> (Proc, std::net::SocketAddr) {
+    let mut args = net.child_args();
+    args.extend(strings(&["bridge"]));
+    args.extend(strings(flags));
+    let mut p = Proc::troupe("bridge", &args);
+    let line = p.first_line();
+    let addr = line
+        .trim()
+        .strip_prefix("troupe bridge: robot 6665 on ")
+        .and_then(|a| a.parse().ok())
+        .unwrap_or_else(|| panic!("bridge said {line:?}"));
+    (p, addr)
+}
+
+/// Connects and reads what comes first: the 32-byte banner, or nothing.
+fn first_bytes(addr: std::net::SocketAddr) -> Vec<u8> {
+    use std::io::Read;
+    let s = std::net::TcpStream::connect(addr).expect("connecting to the bridge");
+    s.set_read_timeout(Some(troupe_tests::DEADLINE)).unwrap();
+    let mut got = Vec::new();
+    let _ = s.take(32).read_to_end(&mut got);
+    got
+}
+
+#[test]
+fn the_bridge_warns_when_open_beyond_loopback_and_refuses_clients_outside_its_allow_list() {
+    let net = TestNet::new("bridge-allow");
+    // Every interface, no list: anyone may connect, and the log says so.
+    let (mut open, addr) = bridge_on(&net, &["-p", "6665=0.0.0.0:0"]);
+    let local = std::net::SocketAddr::from(([127, 0, 0, 1], addr.port()));
+    assert!(first_bytes(local).starts_with(b"Player v.3"));
+    let err = open.stderr();
+    assert!(
+        err.contains("Player's protocol has no authentication"),
+        "{err}"
+    );
+
+    // A list without this machine: closed before the banner, counted.
+    let (mut closed, addr) = bridge_on(&net, &["-p", "6665=127.0.0.1:0", "--allow", "10.0.0.0/8"]);
+    assert!(first_bytes(addr).is_empty());
+    assert!(first_bytes(addr).is_empty());
+    let err = closed.stderr();
+    assert_eq!(
+        err.matches("refused a client from 127.0.0.1").count(),
+        1,
+        "{err}"
+    );
+    assert!(
+        err.contains("refused 2 connections from 1 addresses outside --allow"),
+        "{err}"
+    );
+
+    // A list with it: served.
+    let (_served, addr) = bridge_on(&net, &["-p", "6665=127.0.0.1:0", "--allow", "127.0.0.0/8"]);
+    assert!(first_bytes(addr).starts_with(b"Player v.3"));
+
+    // A malformed network is refused by name.
+    let (status, _, err) = troupe_output(&strings(&["bridge", "--allow", "10.0.0.0/40"]));
+    assert!(!status.success());
+    assert!(err.contains("`10.0.0.0/40` is not a network"), "{err}");
+}

@@ -24,4 +24,4 @@ mod server;
 pub mod wire;
 pub mod xdr;
 
-pub use server::{Bridge, BridgeError, Config, Port};
+pub use server::{parse_network, Bridge, BridgeError, Config, IpNetwork, Port};

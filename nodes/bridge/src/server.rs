@@ -4,11 +4,12 @@
 //! opened. Answers and data are written by the thread that has them.
 
 use std::collections::HashMap;
-use std::net::SocketAddr;
+use std::net::{IpAddr, SocketAddr};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
+pub use ipnetwork::IpNetwork;
 use tokio::io::AsyncReadExt;
 use tokio::net::tcp::{OwnedReadHalf, OwnedWriteHalf};
 use tokio::net::TcpListener;
@@ -70,6 +71,9 @@ pub struct Config {
     pub order: Vec<Device>,
     /// Data messages a client's queue holds before it drops (Player: 1024).
     pub maxlen: usize,
+    /// Networks clients may connect from; empty = any. Others are refused
+    /// before the banner.
+    pub allow: Vec<IpNetwork>,
 }
 
 impl Default for Config {
@@ -78,8 +82,28 @@ impl Default for Config {
             ports: Vec::new(),
             order: Vec::new(),
             maxlen: DEFAULT_MAXLEN,
+            allow: Vec::new(),
         }
     }
+}
+
+/// Reads `--allow`'s argument: a network (`10.1.0.0/16`, `fd00::/8`) or
+/// one address (`192.168.1.7`).
+///
+/// # Errors
+///
+/// A message naming the text and the expected form.
+pub fn parse_network(text: &str) -> Result<IpNetwork, String> {
+    text.trim().parse::<IpNetwork>().map_err(|e| {
+        format!("`{text}` is not a network like 10.1.0.0/16 or an address like 10.1.0.7 ({e})")
+    })
+}
+
+/// Whether a client at `ip` may connect (an IPv4 client of an IPv6
+/// socket is matched as IPv4).
+fn allowed(allow: &[IpNetwork], ip: IpAddr) -> bool {
+    let ip = ip.to_canonical();
+    allow.is_empty() || allow.iter().any(|n| n.contains(ip))
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -196,6 +220,11 @@ struct Shared {
     next_client: AtomicU64,
     /// Malformed samples dropped, for the logs.
     bad_samples: AtomicU64,
+    /// `--allow`: networks clients may connect from (empty: any).
+    allow: Vec<IpNetwork>,
+    /// Connections refused by `allow`, by address: the first from each is
+    /// logged, the rest counted.
+    refused: Mutex<HashMap<IpAddr, u64>>,
 }
 
 impl Shared {
@@ -269,6 +298,23 @@ impl Bridge {
                     source,
                 })?;
             let ip = p.listen.ip();
+            if !ip.is_loopback() {
+                if cfg.allow.is_empty() {
+                    tracing::warn!(
+                        "robot {}: Player clients can connect from any host that reaches {} (Player's protocol has no authentication: whoever connects drives the robot); --allow CIDR limits who may",
+                        p.robot,
+                        p.listen
+                    );
+                } else {
+                    let nets: Vec<String> = cfg.allow.iter().map(ToString::to_string).collect();
+                    tracing::info!(
+                        "robot {}: on {}, clients from {} only",
+                        p.robot,
+                        p.listen,
+                        nets.join(", ")
+                    );
+                }
+            }
             let host = if ip.is_unspecified() {
                 wire::host_of(std::net::Ipv4Addr::LOCALHOST.into())
             } else {
@@ -285,6 +331,8 @@ impl Bridge {
             maxlen: cfg.maxlen,
             next_client: AtomicU64::new(0),
             bad_samples: AtomicU64::new(0),
+            allow: cfg.allow,
+            refused: Mutex::new(HashMap::new()),
         });
         // Changes first, then the current list: no token is missed, and the
         // port opens only once DEVLIST would be complete.
@@ -381,6 +429,14 @@ impl Bridge {
         if bad > 0 {
             tracing::warn!("{bad} malformed device samples were dropped");
         }
+        let refused = lock(&self.shared.refused);
+        if !refused.is_empty() {
+            tracing::warn!(
+                "refused {} connections from {} addresses outside --allow",
+                refused.values().sum::<u64>(),
+                refused.len()
+            );
+        }
     }
 }
 
@@ -389,13 +445,26 @@ async fn accept_loop(shared: Arc<Shared>, robot: u32, host: u32, listener: TcpLi
     loop {
         tokio::select! {
             accepted = listener.accept() => match accepted {
+                Ok((stream, peer)) if !allowed(&shared.allow, peer.ip()) => {
+                    let mut refused = lock(&shared.refused);
+                    let n = refused.entry(peer.ip().to_canonical()).or_insert(0);
+                    *n += 1;
+                    if *n == 1 {
+                        tracing::warn!(
+                            "robot {robot}: refused a client from {}: not in --allow (more from it are counted, not logged)",
+                            peer.ip().to_canonical()
+                        );
+                    }
+                    // Closed before the banner: the peer learns nothing.
+                    drop(stream);
+                }
                 Ok((stream, peer)) => {
                     let id = shared.next_client.fetch_add(1, Ordering::Relaxed);
                     tracing::info!("robot {robot}: client {id} connected from {peer}");
                     let _ = stream.set_nodelay(true);
                     let (rd, wr) = stream.into_split();
                     let queue = Arc::new(ClientQueue::new(shared.maxlen, wr));
-                    let conn = Conn { shared: shared.clone(), robot, host, id, queue, subscribed: Vec::new() };
+                    let conn = Conn { shared: shared.clone(), robot, host, id, queue, subscribed: Vec::new(), ignored_commands: 0 };
                     clients.spawn(conn.serve(rd));
                 }
                 Err(e) => {
@@ -415,7 +484,11 @@ struct Conn {
     host: u32,
     id: u64,
     queue: Arc<ClientQueue>,
+    /// The devices this client opened, once per open (two proxies on one
+    /// device open it twice, and one close leaves the other's feed).
     subscribed: Vec<Device>,
+    /// Commands dropped because their device was not opened.
+    ignored_commands: u64,
 }
 
 /// A device request waiting for its turn: Player drivers answer in order.
@@ -470,6 +543,14 @@ impl Conn {
         requests.abort();
         for dev in std::mem::take(&mut self.subscribed) {
             self.unsubscribe(dev);
+        }
+        if self.ignored_commands > 1 {
+            tracing::info!(
+                "robot {}: client {} sent {} commands to devices it had not opened (ignored)",
+                self.robot,
+                self.id,
+                self.ignored_commands
+            );
         }
         let dropped = lock(&self.queue.out).queue.dropped_total();
         if dropped > 0 {
@@ -532,6 +613,18 @@ impl Conn {
                 self.id,
                 h.kind
             );
+            return Ok(());
+        }
+        if kind == wire::CMD && !self.subscribed.contains(&dev) {
+            // Player drops a command to a device the client has not opened.
+            self.ignored_commands += 1;
+            if self.ignored_commands == 1 {
+                tracing::info!(
+                    "robot {}: client {}: ignoring commands to {dev}, which it has not opened (as Player does)",
+                    self.robot,
+                    self.id
+                );
+            }
             return Ok(());
         }
         let subtype = u8::try_from(h.subtype).unwrap_or(0);
@@ -630,8 +723,12 @@ impl Conn {
                                 player::OPEN
                             }
                             player::CLOSE if self.subscribed.contains(&dev) => {
-                                self.subscribed.retain(|d| *d != dev);
-                                self.unsubscribe(dev);
+                                if let Some(i) = self.subscribed.iter().position(|d| *d == dev) {
+                                    self.subscribed.swap_remove(i);
+                                }
+                                if !self.subscribed.contains(&dev) {
+                                    self.unsubscribe(dev);
+                                }
                                 player::CLOSE
                             }
                             _ => player::ERROR,
@@ -692,11 +789,12 @@ impl Conn {
     }
 
     fn subscribe(&mut self, dev: Device) {
-        if self.subscribed.contains(&dev) {
-            // Player counts subscriptions per device, not per client: one feed.
+        let again = self.subscribed.contains(&dev);
+        self.subscribed.push(dev);
+        if again {
+            // Player counts a client's opens of a device; the feed is one.
             return;
         }
-        self.subscribed.push(dev);
         let mut feeds = lock(&self.shared.feeds);
         if let Some(feed) = feeds.get(&dev) {
             lock(&feed.clients).push((self.id, self.queue.clone()));
@@ -897,5 +995,33 @@ fn player_answer(p: &Pending, reply: Reply) -> (u8, Vec<u8>, Option<f64>) {
             tracing::debug!("{}: refused: {reason}", key());
             nack
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_allow_list_admits_its_networks_only() {
+        let allow: Vec<IpNetwork> = ["10.1.0.0/16", "192.168.7.9", "fd00::/8"]
+            .iter()
+            .map(|t| parse_network(t).expect("a network"))
+            .collect();
+        let ip = |t: &str| t.parse::<IpAddr>().expect("an address");
+        assert!(allowed(&allow, ip("10.1.200.3")));
+        assert!(allowed(&allow, ip("192.168.7.9")));
+        assert!(allowed(&allow, ip("fd12::1")));
+        // An IPv4 client of a dual-stack socket arrives mapped.
+        assert!(allowed(&allow, ip("::ffff:10.1.0.1")));
+        assert!(!allowed(&allow, ip("10.2.0.1")));
+        assert!(!allowed(&allow, ip("192.168.7.10")));
+        assert!(!allowed(&allow, ip("127.0.0.1")));
+        assert!(allowed(&[], ip("203.0.113.5")), "no list: anyone");
+        let e = parse_network("10.1.0.0/33").unwrap_err();
+        assert!(
+            e.contains("`10.1.0.0/33` is not a network like 10.1.0.0/16"),
+            "{e}"
+        );
     }
 }
