@@ -41,8 +41,10 @@
 //!   particles, heaviest first, at most 100) with its weight, mean and
 //!   covariance (Player's six terms); `position2d` publishes the best
 //!   hypothesis, and between updates the best hypothesis moved by the
-//!   odometry since (one sample per odometry sample). Nothing is published
-//!   before the first update.
+//!   odometry since (one sample per odometry sample). As Player's does,
+//!   `localize` also publishes the initial hypotheses at start-up and after
+//!   every `set_pose` (the particles as drawn), robot moving or not;
+//!   `position2d` waits for the first update.
 //! - `set_pose` restarts the filter around the given mean and covariance
 //!   (variances, Player's order); `particles` returns every particle with
 //!   the set's mean and spread; `position2d` `geom` answers a 1 cm robot.
@@ -150,6 +152,13 @@ const ODOM_HISTORY: usize = 64;
 
 /// Hypotheses published at most (Player's cluster limit).
 const MAX_HYPOTHS: usize = 100;
+
+/// The hypotheses before any update: the clusters of the particles as drawn.
+fn prior(filter: &Filter) -> Vec<pf::Cluster> {
+    let mut h = filter.clusters();
+    h.truncate(MAX_HYPOTHS);
+    h
+}
 
 /// `a` in the frame of `b` (Player's `coord_sub`).
 fn relative(a: &Pose, b: &Pose) -> Pose {
@@ -279,6 +288,7 @@ impl Localizer {
                 [0.0, 0.0, sd[2] * sd[2]],
             ],
         );
+        let hypoths = prior(&filter);
         Ok(Localizer {
             filter,
             model,
@@ -294,7 +304,7 @@ impl Localizer {
             moved: false,
             best: None,
             updated_at: None,
-            hypoths: Vec::new(),
+            hypoths,
             updates: 0,
         })
     }
@@ -317,6 +327,8 @@ impl Localizer {
             [cov[5], cov[4], cov[2]],
         ];
         self.filter.init(mean, &c);
+        self.hypoths = prior(&self.filter);
+        self.updated_at = None;
         self.odom_ref = None;
         self.due = false;
     }
@@ -524,7 +536,9 @@ impl Driver for Amcl {
         self.geom = Some(ctx.request(&self.laser, &laser_msg::GetGeom)?);
         ctx.subscribe(&self.odom)?;
         ctx.subscribe(&self.laser)?;
-        Ok(())
+        // Player's amcl says where it starts at once: a client that opens
+        // localize while the robot stands still gets the initial estimate.
+        self.publish_hypotheses(ctx)
     }
 
     fn on_event(&mut self, ctx: &mut Ctx, event: Event) -> Result<()> {
@@ -556,7 +570,7 @@ impl Driver for Amcl {
                     q.mean.yaw
                 );
                 r.reply(&common::Ack);
-                Ok(())
+                self.publish_hypotheses(ctx)
             }
             Event::Request(r) if r.is::<localize::GetParticles>() => {
                 let f = self.loc.filter();
@@ -854,6 +868,48 @@ mod tests {
         let want = b.compose(&relative(&Pose::new(0.7, 0.0, 0.0), &r));
         assert!((now.x - want.x).abs() < 1e-12 && (now.y - want.y).abs() < 1e-12);
         assert!(now.x - b.x > 0.5, "{now:?} is carried past {b:?}");
+    }
+
+    #[test]
+    fn the_initial_estimate_is_published_at_start_and_after_set_pose() {
+        use troupe_node::testing::Harness;
+        let mut h = Harness::<Amcl>::from_json(
+            r#"{"name":"amcl","provides":["localize:0","position2d:2"],
+                "requires":["odometry::position2d:0","laser:0","laser::map:0"],
+                "options":{"init_pose":[-6.0,-1.0,0.0],"init_pose_var":[0.2,0.2,0.17]}}"#,
+        )
+        .unwrap();
+        let dev = Device::new(6665, Interface::Localize, 0);
+        let first = h.published::<localize::Hypoths>(dev);
+        assert_eq!(first.len(), 1, "published at start, before any data");
+        let best = first[0].hypoths[0];
+        assert!(
+            (best.mean.x + 6.0).abs() < 0.05 && (best.mean.y + 1.0).abs() < 0.05,
+            "{best:?}"
+        );
+        assert!(best.cov[0] > 0.02 && best.cov[0] < 0.06, "{:?}", best.cov);
+        let p = h
+            .request(
+                dev,
+                &localize::SetPose {
+                    mean: Pose2d::new(2.0, 3.0, 0.5),
+                    cov: [0.01, 0.01, 0.01, 0.0, 0.0, 0.0],
+                },
+            )
+            .unwrap();
+        assert!(h.reply::<common::Ack>(p).is_some_and(|r| r.is_ok()));
+        let all = h.published::<localize::Hypoths>(dev);
+        assert_eq!(all.len(), 2, "published again after set_pose");
+        let moved = all[1].hypoths[0].mean;
+        assert!(
+            (moved.x - 2.0).abs() < 0.05 && (moved.y - 3.0).abs() < 0.05,
+            "{moved:?}"
+        );
+        assert!(
+            h.published::<position2d::Data>(Device::new(6665, Interface::Position2d, 2))
+                .is_empty(),
+            "the pose waits for the first update"
+        );
     }
 
     #[test]
