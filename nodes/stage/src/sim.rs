@@ -289,18 +289,35 @@ impl Sim {
         {
             statics.keep_clearance();
         }
+        // Controllers Troupe lacks: said once each, with how many models
+        // stay idle and the first of them.
+        let mut missing: std::collections::BTreeMap<&str, (usize, usize)> = Default::default();
+        for m in (0..n).filter(|&m| world.models[m].kind == Kind::Position) {
+            for c in &world.models[m].ctrl {
+                let name = c.split_whitespace().next().unwrap_or("");
+                if name != "wander" {
+                    missing.entry(name).or_insert((m, 0)).1 += 1;
+                }
+            }
+        }
+        for (name, (first, count)) in missing {
+            let (pos, model) = (&world.models[first].pos, &world.models[first].name);
+            if count == 1 {
+                tracing::warn!("{pos}: controller \"{name}\" is not built into Troupe; model `{model}` stays idle");
+            } else {
+                tracing::warn!("{pos}: controller \"{name}\" is not built into Troupe; {count} models stay idle (the first: `{model}`)");
+            }
+        }
         let bases = (0..n)
             .filter(|&m| world.models[m].kind == Kind::Position)
             .map(|m| {
                 let (g, _) = world.global(&poses, m);
                 let cfg = world.models[m].position.as_ref();
                 let origin = cfg.and_then(|c| c.localization_origin).unwrap_or(g);
-                let wander = world.models[m].ctrl.iter().any(|c| c.split_whitespace().next() == Some("wander"));
-                for c in &world.models[m].ctrl {
-                    if c.split_whitespace().next() != Some("wander") {
-                        tracing::warn!("{}: controller \"{c}\" is not built into Troupe; model `{}` stays idle", world.models[m].pos, world.models[m].name);
-                    }
-                }
+                let wander = world.models[m]
+                    .ctrl
+                    .iter()
+                    .any(|c| c.split_whitespace().next() == Some("wander"));
                 Base {
                     model: m,
                     cmd: None,

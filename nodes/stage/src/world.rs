@@ -5,7 +5,8 @@
 //! and bitmap bodies are stretched so their bounding box is exactly the
 //! model's `size`, centred on the model, as Stage's `CalcSize` does.
 
-use std::collections::HashMap;
+use std::cell::{Cell, RefCell};
+use std::collections::{BTreeMap, HashMap};
 use std::f64::consts::PI;
 use std::path::Path;
 
@@ -199,6 +200,22 @@ pub struct World {
 struct Reader {
     len: f64,
     ang: f64,
+    /// Warnings, each with how many models it concerns: a problem of a
+    /// `define` repeats for every model made from it, and is said once.
+    notes: RefCell<BTreeMap<String, usize>>,
+    /// Colours drawn for `color "random"`, for the next draw.
+    randoms: Cell<u64>,
+}
+
+/// One line per warning, with its count when it concerns several models.
+fn summarize(notes: &BTreeMap<String, usize>) -> Vec<String> {
+    notes
+        .iter()
+        .map(|(msg, &n)| match n {
+            1 => msg.clone(),
+            n => format!("{msg} ({n} models)"),
+        })
+        .collect()
 }
 
 fn short(p: &Prop, name: &str, want: usize, form: &str) -> WorldError {
@@ -212,6 +229,9 @@ fn short(p: &Prop, name: &str, want: usize, form: &str) -> WorldError {
 }
 
 impl Reader {
+    fn note(&self, msg: String) {
+        *self.notes.borrow_mut().entry(msg).or_insert(0) += 1;
+    }
     fn prop<'e>(&self, e: &'e Entity, name: &str) -> Option<&'e Prop> {
         e.props.get(name)
     }
@@ -272,11 +292,17 @@ impl Reader {
     }
     fn color(&self, e: &Entity, default: Color) -> Color {
         if let Some(name) = self.string(e, "color") {
+            if name == "random" {
+                // Stage draws one; here the n-th draw of a load is always the same.
+                let n = self.randoms.get();
+                self.randoms.set(n + 1);
+                return colors::random(n);
+            }
             return colors::lookup(&name).unwrap_or_else(|| {
-                tracing::warn!(
+                self.note(format!(
                     "{}: unknown colour \"{name}\"; using red, as Stage does",
                     e.props["color"].pos
-                );
+                ));
                 colors::RED
             });
         }
@@ -396,6 +422,8 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
             &[("degrees", PI / 180.0), ("radians", 1.0)],
             PI / 180.0,
         )?,
+        notes: RefCell::default(),
+        randoms: Cell::new(0),
     };
     let mut world = World {
         resolution: r.float(g, "resolution", 0.02).max(1e-4),
@@ -518,10 +546,10 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
                 Some("omni") => Drive::Omni,
                 Some("car") => Drive::Car,
                 Some(other) => {
-                    tracing::warn!(
+                    r.note(format!(
                         "{}: unknown drive \"{other}\" (diff, omni or car); using diff",
                         e.props["drive"].pos
-                    );
+                    ));
                     Drive::Diff
                 }
             };
@@ -529,10 +557,10 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
                 None | Some("gps") => Localization::Gps,
                 Some("odom") => Localization::Odom,
                 Some(other) => {
-                    tracing::warn!(
+                    r.note(format!(
                         "{}: unknown localization \"{other}\" (gps or odom); using gps",
                         e.props["localization"].pos
-                    );
+                    ));
                     Localization::Gps
                 }
             };
@@ -763,6 +791,9 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
         }
         world.models[m].blocks = blocks;
     }
+    for line in summarize(&r.notes.borrow()) {
+        tracing::warn!("{line}");
+    }
     Ok(world)
 }
 
@@ -817,6 +848,42 @@ mod tests {
         let r = load(&p);
         let _ = std::fs::remove_dir_all(&dir);
         r
+    }
+
+    #[test]
+    fn random_colours_differ_between_models_and_repeat_between_loads() {
+        let text = "define thing model ( color \"random\" size [1 1 1] )\n\
+                    thing ( name \"a\" pose [0 0 0 0] )\n\
+                    thing ( name \"b\" pose [2 0 0 0] )\n\
+                    thing ( name \"c\" pose [4 0 0 0] )\n";
+        let colours = |w: &World| -> Vec<Color> {
+            ["a", "b", "c"]
+                .iter()
+                .map(|n| w.models[w.names[*n]].color)
+                .collect()
+        };
+        let first = colours(&load_text("random1", text).unwrap());
+        assert_ne!(first[0], first[1]);
+        assert_ne!(first[1], first[2]);
+        assert!(first.iter().all(|c| c.a == 1.0 && c != &colors::RED));
+        assert_eq!(first, colours(&load_text("random2", text).unwrap()));
+    }
+
+    #[test]
+    fn a_warning_shared_by_many_models_is_one_line_with_a_count() {
+        let notes: BTreeMap<String, usize> = [
+            ("h.world:3:9: unknown colour \"x\"".to_owned(), 1000),
+            ("h.world:9:2: unknown drive \"y\"".to_owned(), 1),
+        ]
+        .into_iter()
+        .collect();
+        assert_eq!(
+            summarize(&notes),
+            [
+                "h.world:3:9: unknown colour \"x\" (1000 models)",
+                "h.world:9:2: unknown drive \"y\"",
+            ]
+        );
     }
 
     #[test]
