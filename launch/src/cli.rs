@@ -157,6 +157,19 @@ a router, and a Player bridge on 127.0.0.1 of this machine. Health checks
 (`troupe ready`), restart policies, reconnection and a short lease are set.")]
     Compose(crate::docker::ComposeArgs),
 
+    /// Make a fleet's certificates and each host's Zenoh config (TLS, mutual authentication).
+    #[command(after_help = "Example:
+  troupe fleet-keys keys --hosts sim,robot1,robot2     # router.json5, sim.json5, …
+  troupe --zenoh-config keys/router.json5 router       # listens on tls/[::]:7447 only
+  troupe --zenoh-config keys/robot1.json5 launch robot1.cfg
+
+One authority (ca.pem; its key ca-key.pem stays where it was made) signs a
+certificate per identity, its common name the identity's name. Each
+identity's .json5 holds its key and certificate and the authority's
+certificate: a host whose certificate another authority signed, or that has
+none, cannot join.")]
+    FleetKeys(crate::keys::KeysArgs),
+
     /// List the drivers this build can run.
     Drivers,
 

@@ -12,6 +12,7 @@ mod cli;
 mod docker;
 mod drivers;
 mod emulate;
+mod keys;
 mod navbench;
 mod plan;
 mod serialbench;
@@ -61,5 +62,6 @@ fn run(cli: cli::Cli) -> anyhow::Result<()> {
         Command::Bridge(a) => bridge::run(a, z),
         Command::Image(a) => docker::image(a),
         Command::Compose(a) => docker::compose(a),
+        Command::FleetKeys(a) => keys::fleet_keys(a),
     }
 }

@@ -325,3 +325,80 @@ fn the_bridge_warns_when_open_beyond_loopback_and_refuses_clients_outside_its_al
     assert!(!status.success());
     assert!(err.contains("`10.0.0.0/40` is not a network"), "{err}");
 }
+
+#[test]
+fn a_tls_fleet_admits_its_own_certificates_only_and_says_why_not() {
+    let dir = std::env::temp_dir().join(troupe_tests::unique_namespace("keys"));
+    let (ours, theirs) = (dir.join("ours"), dir.join("theirs"));
+    for (d, hosts) in [(&ours, "hosta,viewer"), (&theirs, "hosta")] {
+        let (status, _, err) = troupe_output(&strings(&[
+            "fleet-keys",
+            d.to_str().unwrap(),
+            "--hosts",
+            hosts,
+        ]));
+        assert!(status.success(), "{err}");
+    }
+    let cfg = |d: &std::path::Path, who: &str| d.join(format!("{who}.json5")).display().to_string();
+    // The router listens on TLS only, on a free port of this machine.
+    let mut router = Proc::troupe(
+        "router",
+        &strings(&[
+            "--zenoh-config",
+            &cfg(&ours, "router"),
+            "router",
+            "--listen",
+            "tls/127.0.0.1:0",
+        ]),
+    );
+    let endpoint = router.endpoint("troupe router listening on");
+    assert!(endpoint.starts_with("tls/127.0.0.1:"), "{endpoint}");
+    // Certificates name the router `router`, `localhost` and 127.0.0.1.
+    let at = endpoint.replace("127.0.0.1", "localhost");
+    let ns = troupe_tests::unique_namespace("tls");
+    let net = |who: Option<String>| {
+        let mut v = strings(&["--connect", &at, "--namespace", &ns]);
+        if let Some(c) = who {
+            v.extend(["--zenoh-config".to_owned(), c]);
+        }
+        v
+    };
+    let mut node = Proc::troupe(
+        "dummy",
+        &with_net(
+            &net(Some(cfg(&ours, "hosta"))),
+            &["node", "dummy", "--provides", "ranger:0", "-o", "rate=20"],
+        ),
+    );
+    let (status, out, err) = troupe_output(&with_net(
+        &net(Some(cfg(&ours, "viewer"))),
+        &["ready", "ranger:0", "--wait", "20"],
+    ));
+    assert!(status.success(), "{out}{err}");
+
+    // Another authority's certificate, none, or plain TCP: refused, and told why.
+    let (status, _, err) = troupe_output(&with_net(
+        &net(Some(cfg(&theirs, "hosta"))),
+        &["ready", "ranger:0"],
+    ));
+    assert!(!status.success());
+    assert!(err.contains("no Zenoh router accepted a TLS link"), "{err}");
+    assert!(err.contains("same `troupe fleet-keys` authority"), "{err}");
+    let (status, _, err) = troupe_output(&with_net(&net(None), &["ready", "ranger:0"]));
+    assert!(!status.success());
+    assert!(err.contains("this host has no certificate"), "{err}");
+    let plain = endpoint.replace("tls/", "tcp/");
+    let (status, _, err) = troupe_output(&strings(&["--connect", &plain, "ready"]));
+    assert!(!status.success());
+    assert!(err.contains("no Zenoh router answers"), "{err}");
+
+    // The key files are for their hosts only.
+    use std::os::unix::fs::PermissionsExt;
+    let mode = std::fs::metadata(cfg(&ours, "hosta"))
+        .unwrap()
+        .permissions()
+        .mode();
+    assert_eq!(mode & 0o077, 0, "{mode:o}");
+    assert!(node.terminate().success(), "{}", node.stderr());
+    let _ = std::fs::remove_dir_all(&dir);
+}

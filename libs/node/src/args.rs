@@ -92,11 +92,17 @@ impl ZenohArgs {
                 .map_err(|e| bad(format!("--zenoh-config {}: {e}", p.display())))?,
             None => Config::default(),
         };
-        let mode = self.mode.unwrap_or(default_mode);
         let set = |c: &mut Config, key: &str, json: String| {
             c.insert_json5(key, &json)
                 .map_err(|e| bad(format!("{key} = {json}: {e}")))
         };
+        // A file's mode stands unless --mode says otherwise.
+        let file_mode = c
+            .get_json("mode")
+            .ok()
+            .and_then(|m| serde_json::from_str::<String>(&m).ok())
+            .and_then(|m| Mode::from_str(&m, true).ok());
+        let mode = self.mode.or(file_mode).unwrap_or(default_mode);
         set(&mut c, "mode", json_str(mode.as_str()))?;
         let connect =
             if self.connect.is_empty() && self.zenoh_config.is_none() && mode != Mode::Router {
@@ -160,7 +166,8 @@ impl ZenohArgs {
     /// in use, a bad config).
     pub fn open(&self, default_mode: Mode) -> Result<Session> {
         let config = self.config(default_mode)?;
-        self.opened(zenoh::open(config).wait())
+        let refused = Refused::of(&config);
+        refused.explain(zenoh::open(config).wait())
     }
 
     /// [`ZenohArgs::open`] on a thread of its own, as a future: with
@@ -191,22 +198,6 @@ impl ZenohArgs {
         }
     }
 
-    fn opened(&self, r: zenoh::Result<Session>) -> Result<Session> {
-        r.map_err(|e| {
-            // Zenoh's own words name a source file; say what to do instead.
-            if e.to_string().contains("Unable to connect to any of") {
-                let endpoints = if self.connect.is_empty() {
-                    DEFAULT_ROUTER.to_owned()
-                } else {
-                    self.connect.join(", ")
-                };
-                NodeError::NoRouter { endpoints }
-            } else {
-                NodeError::zenoh("opening the session", e)
-            }
-        })
-    }
-
     /// The flags to hand a child process so it joins the same network.
     pub fn to_child_args(&self) -> Vec<String> {
         let mut v = Vec::new();
@@ -232,6 +223,60 @@ impl ZenohArgs {
             v.extend(["--lease".to_owned(), l.to_string()]);
         }
         v
+    }
+}
+
+/// What to say when a session cannot reach its router.
+struct Refused {
+    endpoints: String,
+    tls: bool,
+    certificates: bool,
+}
+
+impl Refused {
+    fn of(config: &Config) -> Refused {
+        let list: Vec<String> = config
+            .get_json("connect/endpoints")
+            .ok()
+            .and_then(|j| serde_json::from_str(&j).ok())
+            .unwrap_or_default();
+        let has = |k: &str| {
+            config
+                .get_json(&format!("transport/link/tls/{k}"))
+                .is_ok_and(|v| v != "null")
+        };
+        Refused {
+            tls: list.iter().any(|e| e.starts_with("tls/")),
+            certificates: has("connect_certificate") || has("connect_certificate_base64"),
+            endpoints: if list.is_empty() {
+                DEFAULT_ROUTER.to_owned()
+            } else {
+                list.join(", ")
+            },
+        }
+    }
+
+    /// Zenoh's own words name a source file; say what to do instead.
+    fn explain(self, r: zenoh::Result<Session>) -> Result<Session> {
+        r.map_err(|e| {
+            if !e.to_string().contains("Unable to connect to any of") {
+                return NodeError::zenoh("opening the session", e);
+            }
+            if self.tls {
+                NodeError::TlsRefused {
+                    endpoints: self.endpoints,
+                    hint: if self.certificates {
+                        ""
+                    } else {
+                        "; this host has no certificate: --zenoh-config HOST.json5 from `troupe fleet-keys`"
+                    },
+                }
+            } else {
+                NodeError::NoRouter {
+                    endpoints: self.endpoints,
+                }
+            }
+        })
     }
 }
 

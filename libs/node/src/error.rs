@@ -27,6 +27,19 @@ pub enum NodeError {
         /// The endpoints tried.
         endpoints: String,
     },
+    /// A TLS link could not be made: no router, or certificates that do not match.
+    #[error(
+        "no Zenoh router accepted a TLS link at {endpoints}: none runs there, or the \
+         certificates do not match (this host's config and the router's must come from the \
+         same `troupe fleet-keys` authority, and the name connected to must be the router's; \
+         Zenoh's warning above says which){hint}"
+    )]
+    TlsRefused {
+        /// The endpoints tried.
+        endpoints: String,
+        /// What else to check.
+        hint: &'static str,
+    },
     /// Zenoh refused an operation.
     #[error("zenoh: {what}")]
     Zenoh {
