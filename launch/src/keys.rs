@@ -23,15 +23,25 @@ use rcgen::{
 pub struct KeysArgs {
     /// Directory to write into (created; existing files of the same names are replaced).
     pub dir: PathBuf,
-    /// Identities to make, besides the router: a host that runs drivers
-    /// (`robot1`), repeatable or comma-separated.
+    /// Hosts that run drivers, each with the robots whose keys it serves
+    /// (`robot1:6665`, `sim:6665:6666`): it may publish, answer requests and
+    /// declare devices under `robot/<port>/**` of those robots only, and
+    /// ask them. Repeatable or comma-separated.
     #[arg(
         long = "hosts",
-        value_name = "NAME,…",
+        value_name = "NAME:PORT…",
         value_delimiter = ',',
         required = true
     )]
     pub hosts: Vec<String>,
+    /// Operators: may command and ask the robots named (`ops:6665`), or
+    /// every robot (`ops`), and see everything.
+    #[arg(long = "operators", value_name = "NAME[:PORT…]", value_delimiter = ',')]
+    pub operators: Vec<String>,
+    /// Viewers: may subscribe, list and read devices' latest data and maps,
+    /// and never command.
+    #[arg(long = "viewers", value_name = "NAME", value_delimiter = ',')]
+    pub viewers: Vec<String>,
     /// The router's name: the address every host connects to (tls/NAME:7447),
     /// and the name its certificate is checked against.
     #[arg(long, value_name = "NAME", default_value = "router")]
@@ -41,16 +51,70 @@ pub struct KeysArgs {
     pub days: u32,
 }
 
+/// An identity of the fleet and what it may do.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Member {
+    /// Its name: the certificate's common name.
+    pub name: String,
+    /// What it is.
+    pub kind: Kind,
+    /// The robots it serves or commands; empty = every robot (operators).
+    pub robots: Vec<u32>,
+}
+
+/// The kinds of identity.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kind {
+    /// Runs drivers for its robots.
+    Host,
+    /// Commands robots.
+    Operator,
+    /// Looks.
+    Viewer,
+}
+
+fn member(spec: &str, kind: Kind) -> anyhow::Result<Member> {
+    let mut parts = spec.trim().split(':');
+    let name = parts.next().unwrap_or("").to_owned();
+    check_name(&name)?;
+    let robots = parts
+        .map(|p| {
+            p.parse::<u32>()
+                .with_context(|| format!("`{spec}`: `{p}` is not a robot port (NAME:6665:6666)"))
+        })
+        .collect::<anyhow::Result<Vec<u32>>>()?;
+    match kind {
+        Kind::Host if robots.is_empty() => {
+            anyhow::bail!("host `{name}` serves no robot: name its robots' ports, e.g. {name}:6665")
+        }
+        Kind::Viewer if !robots.is_empty() => {
+            anyhow::bail!("viewer `{name}` needs no ports: a viewer sees every robot")
+        }
+        _ => {}
+    }
+    Ok(Member { name, kind, robots })
+}
+
 /// `troupe fleet-keys`.
 pub fn fleet_keys(a: KeysArgs) -> anyhow::Result<()> {
-    for h in a.hosts.iter().chain([&a.router]) {
-        check_name(h)?;
+    check_name(&a.router)?;
+    let mut members = Vec::new();
+    for (list, kind) in [
+        (&a.hosts, Kind::Host),
+        (&a.operators, Kind::Operator),
+        (&a.viewers, Kind::Viewer),
+    ] {
+        for spec in list {
+            members.push(member(spec, kind)?);
+        }
     }
-    if a.hosts.contains(&a.router) {
-        anyhow::bail!(
-            "`{}` is the router's name; give the hosts other names",
-            a.router
-        );
+    for (i, m) in members.iter().enumerate() {
+        if m.name == a.router || members[..i].iter().any(|o| o.name == m.name) {
+            anyhow::bail!(
+                "`{}` is named twice: every identity needs its own name",
+                m.name
+            );
+        }
     }
     std::fs::create_dir_all(&a.dir).with_context(|| format!("creating {}", a.dir.display()))?;
     let ca = Authority::new(a.days)?;
@@ -58,14 +122,15 @@ pub fn fleet_keys(a: KeysArgs) -> anyhow::Result<()> {
     write(&a.dir.join("ca-key.pem"), &ca.key.serialize_pem(), true)?;
     let router_cfg = ca
         .identity(&a.router, a.days)?
-        .config(&ca, Role::Router, &a.router);
+        .config(&ca, Role::Router(&members), &a.router);
     write(
         &a.dir.join(format!("{}.json5", a.router)),
         &router_cfg,
         true,
     )?;
-    for h in &a.hosts {
-        let cfg = ca.identity(h, a.days)?.config(&ca, Role::Host, &a.router);
+    let names: Vec<&str> = members.iter().map(|m| m.name.as_str()).collect();
+    for h in &names {
+        let cfg = ca.identity(h, a.days)?.config(&ca, Role::Member, &a.router);
         write(&a.dir.join(format!("{h}.json5")), &cfg, true)?;
     }
     let mut out = std::io::stdout().lock();
@@ -74,7 +139,7 @@ pub fn fleet_keys(a: KeysArgs) -> anyhow::Result<()> {
         "wrote {}: ca.pem (the fleet's authority; its key ca-key.pem stays here), {}.json5 for the router, and {} for the hosts",
         a.dir.display(),
         a.router,
-        a.hosts.iter().map(|h| format!("{h}.json5")).collect::<Vec<_>>().join(", ")
+        names.iter().map(|h| format!("{h}.json5")).collect::<Vec<_>>().join(", ")
     )?;
     writeln!(
         out,
@@ -113,13 +178,88 @@ fn write(p: &Path, text: &str, secret: bool) -> anyhow::Result<()> {
         .with_context(|| format!("writing {}", p.display()))
 }
 
-/// What an identity's config lets it do on the network.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Role {
-    /// Listens for the fleet.
-    Router,
-    /// Connects to the router.
-    Host,
+/// Whose config is written.
+#[derive(Debug, Clone, Copy)]
+pub enum Role<'a> {
+    /// The router: it listens for the fleet and enforces what each member may do.
+    Router(&'a [Member]),
+    /// A member: it connects to the router.
+    Member,
+}
+
+/// Zenoh's access control for the router: deny by default; every member
+/// may be sent what it asked for and may watch (subscribe, list, read the
+/// latest data and maps); hosts may publish, serve and declare devices
+/// under their robots' keys only, and ask them; operators may command and
+/// ask their robots. A rule's flow is seen from the router: ingress is
+/// what a member sends.
+pub fn access_control(members: &[Member]) -> serde_json::Value {
+    use serde_json::json;
+    let all = [
+        "put",
+        "delete",
+        "declare_subscriber",
+        "query",
+        "declare_queryable",
+        "reply",
+        "liveliness_token",
+        "declare_liveliness_subscriber",
+        "liveliness_query",
+    ];
+    let robots = |m: &Member, tail: &str| -> Vec<String> {
+        if m.robots.is_empty() {
+            vec![format!("robot/*/{tail}")]
+        } else {
+            m.robots
+                .iter()
+                .map(|r| format!("robot/{r}/{tail}"))
+                .collect()
+        }
+    };
+    let mut rules = vec![
+        json!({ "id": "deliver", "flows": ["egress"], "permission": "allow",
+                "messages": all, "key_exprs": ["robot/**", "sim/**"] }),
+        json!({ "id": "watch", "flows": ["ingress"], "permission": "allow",
+                "messages": ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"],
+                "key_exprs": ["robot/**", "sim/**"] }),
+        json!({ "id": "read", "flows": ["ingress"], "permission": "allow",
+                "messages": ["query"], "key_exprs": ["robot/*/*/*", "robot/*/map/*/req/**"] }),
+    ];
+    let mut subjects = Vec::new();
+    let mut policies = Vec::new();
+    for m in members {
+        subjects.push(json!({ "id": m.name, "cert_common_names": [m.name] }));
+        let mut own = vec!["deliver".to_owned(), "watch".to_owned(), "read".to_owned()];
+        match m.kind {
+            Kind::Host => {
+                let mut keys = robots(m, "**");
+                keys.push("sim/**".to_owned());
+                rules.push(json!({ "id": format!("serve-{}", m.name), "flows": ["ingress"],
+                    "permission": "allow",
+                    "messages": ["put", "delete", "declare_queryable", "reply", "liveliness_token", "query"],
+                    "key_exprs": keys }));
+                own.push(format!("serve-{}", m.name));
+            }
+            Kind::Operator => {
+                let mut keys = robots(m, "*/*/cmd/**");
+                keys.extend(robots(m, "*/*/req/**"));
+                rules.push(
+                    json!({ "id": format!("command-{}", m.name), "flows": ["ingress"],
+                    "permission": "allow", "messages": ["put", "query"], "key_exprs": keys }),
+                );
+                own.push(format!("command-{}", m.name));
+            }
+            Kind::Viewer => {}
+        }
+        policies.push(json!({ "rules": own, "subjects": [m.name] }));
+    }
+    json!({
+        "enabled": true,
+        "default_permission": "deny",
+        "rules": rules,
+        "subjects": subjects,
+        "policies": policies,
+    })
 }
 
 /// The fleet's certificate authority.
@@ -188,7 +328,7 @@ fn b64(pem: &str) -> String {
 impl Identity {
     /// This identity's Zenoh config: TLS only, both ends authenticated by
     /// the fleet's authority, no scouting.
-    pub fn config(&self, ca: &Authority, role: Role, router: &str) -> String {
+    pub fn config(&self, ca: &Authority, role: Role<'_>, router: &str) -> String {
         let (cert, key) = (b64(&self.cert.pem()), b64(&self.key.serialize_pem()));
         let mut tls = serde_json::json!({
             "root_ca_certificate_base64": b64(&ca.cert.pem()),
@@ -200,13 +340,14 @@ impl Identity {
             "scouting": { "multicast": { "enabled": false }, "gossip": { "enabled": false } },
         });
         match role {
-            Role::Router => {
+            Role::Router(members) => {
                 tls["listen_certificate_base64"] = cert.into();
                 tls["listen_private_key_base64"] = key.into();
                 c["mode"] = "router".into();
                 c["listen"] = serde_json::json!({ "endpoints": ["tls/[::]:7447"] });
+                c["access_control"] = access_control(members);
             }
-            Role::Host => {
+            Role::Member => {
                 tls["connect_certificate_base64"] = cert.into();
                 tls["connect_private_key_base64"] = key.into();
                 // A client of the router, listening nowhere: every link is
@@ -235,7 +376,7 @@ mod tests {
         let text = ca
             .identity("robot1", 30)
             .unwrap()
-            .config(&ca, Role::Host, "router");
+            .config(&ca, Role::Member, "router");
         let path = std::env::temp_dir().join(format!("troupe-keys-{}.json5", std::process::id()));
         std::fs::write(&path, &text).unwrap();
         let c = troupe_node::zenoh::Config::from_file(&path).unwrap();
@@ -249,6 +390,53 @@ mod tests {
             "true"
         );
         assert_eq!(c.get_json("scouting/multicast/enabled").unwrap(), "false");
+    }
+
+    #[test]
+    fn the_router_s_config_carries_an_access_policy_zenoh_accepts() {
+        let ca = Authority::new(30).unwrap();
+        let members = [
+            member("robot1:6665", Kind::Host).unwrap(),
+            member("ops", Kind::Operator).unwrap(),
+            member("eye", Kind::Viewer).unwrap(),
+        ];
+        let text = ca
+            .identity("router", 30)
+            .unwrap()
+            .config(&ca, Role::Router(&members), "router");
+        let path = std::env::temp_dir().join(format!("troupe-acl-{}.json5", std::process::id()));
+        std::fs::write(&path, &text).unwrap();
+        let c = troupe_node::zenoh::Config::from_file(&path).unwrap();
+        let _ = std::fs::remove_file(&path);
+        assert_eq!(
+            c.get_json("access_control/default_permission").unwrap(),
+            r#""deny""#
+        );
+        let acl = access_control(&members).to_string();
+        assert!(
+            acl.contains(r#""key_exprs":["robot/6665/**","sim/**"]"#),
+            "{acl}"
+        );
+        assert!(
+            acl.contains(r#""key_exprs":["robot/*/*/*/cmd/**","robot/*/*/*/req/**"]"#),
+            "{acl}"
+        );
+        assert!(
+            acl.contains(r#"{"rules":["deliver","watch","read"],"subjects":["eye"]}"#),
+            "{acl}"
+        );
+    }
+
+    #[test]
+    fn members_are_read_with_their_robots() {
+        assert_eq!(
+            member("sim:6665:6666", Kind::Host).unwrap().robots,
+            [6665, 6666]
+        );
+        let e = member("robot1", Kind::Host).unwrap_err().to_string();
+        assert!(e.contains("serves no robot"), "{e}");
+        let e = member("robot1:x", Kind::Host).unwrap_err().to_string();
+        assert!(e.contains("`x` is not a robot port"), "{e}");
     }
 
     #[test]

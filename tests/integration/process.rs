@@ -327,20 +327,33 @@ fn the_bridge_warns_when_open_beyond_loopback_and_refuses_clients_outside_its_al
 }
 
 #[test]
-fn a_tls_fleet_admits_its_own_certificates_only_and_says_why_not() {
+fn a_tls_fleet_admits_its_own_certificates_only_and_each_identity_does_only_what_it_may() {
+    use troupe_node::zenoh::Wait;
     let dir = std::env::temp_dir().join(troupe_tests::unique_namespace("keys"));
     let (ours, theirs) = (dir.join("ours"), dir.join("theirs"));
-    for (d, hosts) in [(&ours, "hosta,viewer"), (&theirs, "hosta")] {
-        let (status, _, err) = troupe_output(&strings(&[
-            "fleet-keys",
-            d.to_str().unwrap(),
-            "--hosts",
-            hosts,
-        ]));
+    for (d, who) in [
+        (
+            &ours,
+            &[
+                "--hosts",
+                "hosta:6665,hostb:6666",
+                "--operators",
+                "ops:6665",
+                "--viewers",
+                "eye",
+            ][..],
+        ),
+        (&theirs, &["--hosts", "hosta:6665"][..]),
+    ] {
+        let mut args = strings(&["fleet-keys", d.to_str().unwrap()]);
+        args.extend(strings(who));
+        let (status, _, err) = troupe_output(&args);
         assert!(status.success(), "{err}");
     }
     let cfg = |d: &std::path::Path, who: &str| d.join(format!("{who}.json5")).display().to_string();
-    // The router listens on TLS only, on a free port of this machine.
+    // The router listens on TLS only, on a free port of this machine. Its
+    // access rules name keys as they are: this test's isolation is its own
+    // router, not a namespace.
     let mut router = Proc::troupe(
         "router",
         &strings(&[
@@ -355,9 +368,8 @@ fn a_tls_fleet_admits_its_own_certificates_only_and_says_why_not() {
     assert!(endpoint.starts_with("tls/127.0.0.1:"), "{endpoint}");
     // Certificates name the router `router`, `localhost` and 127.0.0.1.
     let at = endpoint.replace("127.0.0.1", "localhost");
-    let ns = troupe_tests::unique_namespace("tls");
     let net = |who: Option<String>| {
-        let mut v = strings(&["--connect", &at, "--namespace", &ns]);
+        let mut v = strings(&["--connect", &at]);
         if let Some(c) = who {
             v.extend(["--zenoh-config".to_owned(), c]);
         }
@@ -370,11 +382,76 @@ fn a_tls_fleet_admits_its_own_certificates_only_and_says_why_not() {
             &["node", "dummy", "--provides", "ranger:0", "-o", "rate=20"],
         ),
     );
+    // A viewer lists and reads.
     let (status, out, err) = troupe_output(&with_net(
-        &net(Some(cfg(&ours, "viewer"))),
+        &net(Some(cfg(&ours, "eye"))),
         &["ready", "ranger:0", "--wait", "20"],
     ));
     assert!(status.success(), "{out}{err}");
+    let (status, out, err) = troupe_output(&with_net(
+        &net(Some(cfg(&ours, "eye"))),
+        &["echo", "ranger:0", "--count", "1"],
+    ));
+    assert!(
+        status.success() && out.contains("robot/6665/ranger/0"),
+        "{out}{err}"
+    );
+
+    // What each may send, seen by a subscriber: a message that passes
+    // arrives before one sent after it; a denied one never does. Each
+    // sender's put is followed by a round trip through the router, so the
+    // router has routed it before the next sender speaks.
+    let session = |who: &str| {
+        troupe_node::ZenohArgs {
+            connect: vec![at.clone()],
+            zenoh_config: Some(cfg(&ours, who).into()),
+            ..Default::default()
+        }
+        .open(troupe_node::Mode::Client)
+        .unwrap_or_else(|e| panic!("{who}: {e}"))
+    };
+    let (tap, eye, ops, hosta, hostb) = (
+        session("hosta"),
+        session("eye"),
+        session("ops"),
+        session("hosta"),
+        session("hostb"),
+    );
+    // A round trip through the router: what `s` sent before is routed.
+    let sync = |s: &troupe_node::zenoh::Session| {
+        let _ = s
+            .liveliness()
+            .get("robot/**")
+            .wait()
+            .unwrap()
+            .iter()
+            .count();
+    };
+    let first = |key: &str, tries: &[(&troupe_node::zenoh::Session, &str)]| -> String {
+        let sub = tap.declare_subscriber(key).wait().unwrap();
+        sync(&tap);
+        for (s, text) in tries {
+            s.put(key, *text).wait().unwrap();
+            sync(s);
+        }
+        let got = sub
+            .recv_deadline(std::time::Instant::now() + troupe_tests::DEADLINE)
+            .unwrap()
+            .expect("a message");
+        String::from_utf8_lossy(&got.payload().to_bytes()).into_owned()
+    };
+    // A viewer's command does not reach the robot; an operator's does.
+    let cmd = "robot/6665/position2d/0/cmd/vel";
+    assert_eq!(first(cmd, &[(&eye, "eye"), (&ops, "ops")]), "ops");
+    // A robot host publishes under its own robots' keys only.
+    let data = "robot/6666/laser/0";
+    assert_eq!(
+        first(data, &[(&hosta, "hosta"), (&hostb, "hostb")]),
+        "hostb"
+    );
+    // An operator granted robot 6665 cannot command 6666; that robot's host can.
+    let cmd6 = "robot/6666/position2d/0/cmd/vel";
+    assert_eq!(first(cmd6, &[(&ops, "ops"), (&hostb, "hostb")]), "hostb");
 
     // Another authority's certificate, none, or plain TCP: refused, and told why.
     let (status, _, err) = troupe_output(&with_net(
