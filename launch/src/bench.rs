@@ -30,13 +30,35 @@ pub struct LatencyArgs {
     /// Untimed round trips first.
     #[arg(long, default_value_t = 500)]
     pub warmup: usize,
+    /// Also run over TLS with mutual authentication and the router's access
+    /// control, as `troupe fleet-keys` sets them up, and print both.
+    #[arg(long)]
+    pub secure: bool,
 }
+
+/// The bench's keys under `prefix`: ping, pong, req, ready.
+fn bench_keys(prefix: &str) -> [String; 4] {
+    ["ping", "pong", "req", "ready"].map(|k| format!("{prefix}/{k}"))
+}
+
+/// A robot port no stack uses, whose keys the secure bench runs under.
+const SECURE_ROBOT: u32 = 65_000;
 
 /// Runs a `troupe bench` subcommand.
 pub fn run(cmd: BenchCmd, z: &ZenohArgs) -> anyhow::Result<()> {
     match cmd {
-        BenchCmd::Latency(a) => latency(&a),
-        BenchCmd::Pong => pong(z),
+        BenchCmd::Latency(a) => {
+            latency(&a, None)?;
+            if a.secure {
+                let dir =
+                    std::env::temp_dir().join(format!("troupe-bench-keys-{}", std::process::id()));
+                let r = latency(&a, Some(&dir));
+                let _ = std::fs::remove_dir_all(&dir);
+                r?;
+            }
+            Ok(())
+        }
+        BenchCmd::Pong { prefix } => pong(z, &prefix),
         BenchCmd::Launch(a) => launch_bench(&a),
         BenchCmd::Stage(a) => stage_bench(&a),
         BenchCmd::Bridge(a) => crate::bridgebench::run(&a),
@@ -67,36 +89,58 @@ pub(crate) fn us(d: Duration) -> String {
     format!("{:.0} µs", d.as_secs_f64() * 1e6)
 }
 
-fn latency(a: &LatencyArgs) -> anyhow::Result<()> {
+/// Plain TCP with a namespace, or (`keys`: a directory for them) TLS with
+/// mutual authentication and access control, the pong a host of robot
+/// `SECURE_ROBOT` whose keys the bench uses.
+fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()> {
     let ns = format!("bench-{}", std::process::id());
-    let zr = ZenohArgs {
-        listen: vec!["tcp/127.0.0.1:0".into()],
-        no_multicast: true,
-        namespace: Some(ns.clone()),
-        ..Default::default()
+    let (zr, prefix, pong_net) = match keys {
+        None => (
+            ZenohArgs {
+                listen: vec!["tcp/127.0.0.1:0".into()],
+                no_multicast: true,
+                namespace: Some(ns.clone()),
+                ..Default::default()
+            },
+            keys::BENCH_PING.trim_end_matches("/ping").to_owned(),
+            vec![
+                "--no-multicast".to_owned(),
+                "--namespace".to_owned(),
+                ns.clone(),
+            ],
+        ),
+        Some(dir) => {
+            let (router, pong) = crate::keys::bench_configs(dir, SECURE_ROBOT)?;
+            (
+                ZenohArgs {
+                    listen: vec!["tls/127.0.0.1:0".into()],
+                    zenoh_config: Some(router),
+                    ..Default::default()
+                },
+                format!("robot/{SECURE_ROBOT}/bench"),
+                vec!["--zenoh-config".to_owned(), pong.display().to_string()],
+            )
+        }
     };
+    let [ping_key, pong_key, req_key, ready_key] = bench_keys(&prefix);
     let session = zr.open(Mode::Router)?;
     let locator = troupe_node::locators(&session)
         .into_iter()
         .next()
         .context("the bench router has no locator")?;
+    // Certificates name `localhost`, not the address.
+    let locator = locator.replace("tls/127.0.0.1", "tls/localhost");
 
     let ready = session
         .liveliness()
-        .declare_subscriber(keys::BENCH_READY)
+        .declare_subscriber(&ready_key)
         .history(true)
         .wait()
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     let mut child = Command::new(std::env::current_exe()?)
-        .args([
-            "bench",
-            "pong",
-            "--connect",
-            &locator,
-            "--no-multicast",
-            "--namespace",
-            &ns,
-        ])
+        .args(["--connect", &locator])
+        .args(&pong_net)
+        .args(["bench", "pong", "--prefix", &prefix])
         .stdin(Stdio::piped())
         .spawn()
         .context("starting `troupe bench pong`")?;
@@ -107,11 +151,11 @@ fn latency(a: &LatencyArgs) -> anyhow::Result<()> {
             .context("`troupe bench pong` did not come up within 20 s")?;
 
         let replies = session
-            .declare_subscriber(keys::BENCH_PONG)
+            .declare_subscriber(&pong_key)
             .wait()
             .map_err(|e| anyhow::anyhow!("{e}"))?;
         let publisher = session
-            .declare_publisher(keys::BENCH_PING)
+            .declare_publisher(&ping_key)
             .express(true)
             .wait()
             .map_err(|e| anyhow::anyhow!("{e}"))?;
@@ -147,7 +191,7 @@ fn latency(a: &LatencyArgs) -> anyhow::Result<()> {
             let payload = codec::encode(&msg, i as f64);
             let t0 = Instant::now();
             let rx = session
-                .get(keys::BENCH_REQ)
+                .get(&req_key)
                 .payload(payload)
                 .timeout(Duration::from_secs(5))
                 .wait()
@@ -164,7 +208,12 @@ fn latency(a: &LatencyArgs) -> anyhow::Result<()> {
         pubsub.sort();
         getreply.sort();
         let mut out = std::io::stdout().lock();
-        writeln!(out, "troupe bench latency: {size}-byte laser/scan@1 payload, {} samples (+{} warm-up), two processes, Zenoh over tcp/127.0.0.1", a.samples, a.warmup)?;
+        let over = if keys.is_some() {
+            "tls/127.0.0.1, mutual authentication and access control"
+        } else {
+            "tcp/127.0.0.1"
+        };
+        writeln!(out, "troupe bench latency: {size}-byte laser/scan@1 payload, {} samples (+{} warm-up), two processes, Zenoh over {over}", a.samples, a.warmup)?;
         let row = |out: &mut std::io::StdoutLock, name: &str, v: &[Duration], half: bool| {
             let f = |d: Duration| if half { d / 2 } else { d };
             writeln!(
@@ -209,15 +258,16 @@ impl WaitOrKill for std::process::Child {
 }
 
 /// The echo side: decodes each ping as a node would, re-encodes it and sends it back.
-fn pong(z: &ZenohArgs) -> anyhow::Result<()> {
+fn pong(z: &ZenohArgs, prefix: &str) -> anyhow::Result<()> {
+    let [ping_key, pong_key, req_key, ready_key] = bench_keys(prefix);
     let session = z.open(Mode::Peer)?;
     let back = session
-        .declare_publisher(keys::BENCH_PONG)
+        .declare_publisher(pong_key)
         .express(true)
         .wait()
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     let _sub = session
-        .declare_subscriber(keys::BENCH_PING)
+        .declare_subscriber(ping_key)
         .callback(
             move |s| match codec::decode::<laser::Scan>(&s.payload().to_bytes()) {
                 Ok(m) => {
@@ -231,7 +281,7 @@ fn pong(z: &ZenohArgs) -> anyhow::Result<()> {
         .wait()
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     let _q = session
-        .declare_queryable(keys::BENCH_REQ)
+        .declare_queryable(req_key)
         .callback(|q| {
             let bytes = q
                 .payload()
@@ -251,7 +301,7 @@ fn pong(z: &ZenohArgs) -> anyhow::Result<()> {
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     let _token = session
         .liveliness()
-        .declare_token(keys::BENCH_READY)
+        .declare_token(ready_key)
         .wait()
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     // Runs until the parent closes our stdin (or dies).

@@ -316,7 +316,11 @@ pub enum BenchCmd {
     Serial(crate::serialbench::SerialBenchArgs),
     /// The echo side of `bench latency` (started by it).
     #[command(hide = true)]
-    Pong,
+    Pong {
+        /// Where its keys live (`bench`, or a robot's keys under access control).
+        #[arg(long, default_value = "bench")]
+        prefix: String,
+    },
 }
 
 /// `troupe node`: builds the section from flags and runs the driver.

@@ -151,6 +151,28 @@ pub fn fleet_keys(a: KeysArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// For `troupe bench latency --secure`: an authority, a router config and
+/// the config of `pong`, a host of `robot`; their paths.
+pub fn bench_configs(dir: &Path, robot: u32) -> anyhow::Result<(PathBuf, PathBuf)> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let ca = Authority::new(1)?;
+    let members = [Member {
+        name: "pong".into(),
+        kind: Kind::Host,
+        robots: vec![robot],
+    }];
+    let (router, pong) = (dir.join("router.json5"), dir.join("pong.json5"));
+    let cfg = ca
+        .identity("router", 1)?
+        .config(&ca, Role::Router(&members), "localhost");
+    write(&router, &cfg, true)?;
+    let cfg = ca
+        .identity("pong", 1)?
+        .config(&ca, Role::Member, "localhost");
+    write(&pong, &cfg, true)?;
+    Ok((router, pong))
+}
+
 /// A name that can be a certificate's common name and a DNS name.
 fn check_name(n: &str) -> anyhow::Result<()> {
     let ok = !n.is_empty()
