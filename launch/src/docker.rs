@@ -314,6 +314,12 @@ pub struct ComposeArgs {
     /// read-only at /stack.
     #[arg(long, value_name = "DIR")]
     pub in_image: Option<String>,
+    /// Run the fleet secured with the configs `troupe fleet-keys DIR` wrote
+    /// (mounted read-only at /keys; readable by the image's user 10000): one
+    /// per host, `router.json5`, and `bridge.json5` (an operator) for the
+    /// bridge and the health checks' router probe.
+    #[arg(long, value_name = "DIR")]
+    pub secure: Option<PathBuf>,
     /// Zenoh's lease in the fleet, in seconds: how long a cut-off host's
     /// devices stay listed.
     #[arg(long, value_name = "SECS", default_value_t = 3.0)]
@@ -378,13 +384,25 @@ pub fn render(a: &ComposeArgs) -> anyhow::Result<String> {
     if let Some(o) = a.output.as_ref().and_then(|o| o.file_name()) {
         shown.extend(["-o".into(), o.to_string_lossy().into_owned()]);
     }
+    let keys = match &a.secure {
+        None => None,
+        Some(d) => {
+            let rel = relative_to(d, base)?;
+            shown.extend(["--secure".into(), rel.trim_start_matches("./").to_owned()]);
+            Some((d.clone(), rel))
+        }
+    };
     let fleet = Fleet {
         plan: &plan,
         source,
         image: a.image.clone(),
         lease: a.lease,
         command: format!("troupe compose {}", shown.join(" ")),
+        keys: keys.as_ref().map(|(_, rel)| rel.clone()),
     };
+    if let Some((dir, _)) = &keys {
+        fleet.check_keys(dir)?;
+    }
     fleet.to_yaml()
 }
 
@@ -459,6 +477,9 @@ pub struct Fleet<'a> {
     pub lease: f64,
     /// The command that wrote it, for the header.
     pub command: String,
+    /// `--secure`: the directory of the identities' configs, as the compose
+    /// file names it.
+    pub keys: Option<String>,
 }
 
 /// A service of the fleet: the router, one per host, the bridge.
@@ -510,17 +531,66 @@ impl Fleet<'_> {
         Ok(hosts)
     }
 
-    fn net(&self) -> Vec<String> {
-        let mut v = strings(&[
-            "--connect",
-            "tcp/router:7447",
-            "--mode",
-            "client",
-            "--no-multicast",
-            "--reconnect",
+    /// How `who` joins the fleet: as a client of the router by name, or
+    /// (secured) with its own config, which says the same over TLS.
+    fn net(&self, who: &str) -> Vec<String> {
+        let mut v = match &self.keys {
+            None => strings(&[
+                "--connect",
+                "tcp/router:7447",
+                "--mode",
+                "client",
+                "--no-multicast",
+            ]),
+            Some(_) => vec!["--zenoh-config".to_owned(), format!("/keys/{who}.json5")],
+        };
+        v.extend([
+            "--reconnect".to_owned(),
+            "--lease".to_owned(),
+            self.lease.to_string(),
         ]);
-        v.extend(["--lease".to_owned(), self.lease.to_string()]);
         v
+    }
+
+    /// A health check's way to the router, as `who`.
+    fn probe(&self, who: &str) -> Vec<String> {
+        match &self.keys {
+            None => strings(&["--connect", "tcp/router:7447", "--no-multicast"]),
+            Some(_) => vec!["--zenoh-config".to_owned(), format!("/keys/{who}.json5")],
+        }
+    }
+
+    /// `--secure DIR`: every identity the fleet needs has its config there.
+    fn check_keys(&self, dir: &Path) -> anyhow::Result<()> {
+        let hosts = self.hosts()?;
+        let mut need = vec!["router".to_owned(), "bridge".to_owned()];
+        need.extend(hosts.iter().map(|(h, _)| h.clone()));
+        let missing: Vec<&String> = need
+            .iter()
+            .filter(|n| !dir.join(format!("{n}.json5")).is_file())
+            .collect();
+        if missing.is_empty() {
+            return Ok(());
+        }
+        let specs: Vec<String> = hosts
+            .iter()
+            .map(|(h, devices)| {
+                let mut robots: Vec<u32> = devices.iter().map(|d| d.robot).collect();
+                robots.dedup();
+                robots.sort_unstable();
+                robots.dedup();
+                let ports: Vec<String> = robots.iter().map(ToString::to_string).collect();
+                format!("{h}:{}", ports.join(":"))
+            })
+            .collect();
+        anyhow::bail!(
+            "--secure {}: no config for {}; make them with `troupe fleet-keys {} --hosts {} --operators bridge` (and `chown -R {UID} {}`: the image runs as user {UID})",
+            dir.display(),
+            missing.iter().map(|m| format!("{m}.json5")).collect::<Vec<_>>().join(", "),
+            dir.display(),
+            specs.join(","),
+            dir.display()
+        )
     }
 
     fn services(&self) -> anyhow::Result<Vec<Service>> {
@@ -528,12 +598,30 @@ impl Fleet<'_> {
         let mut out = vec![Service {
             name: "router".into(),
             command: {
-                let mut v = strings(&["router", "--listen", "tcp/0.0.0.0:7447", "--no-multicast"]);
+                let mut v = match &self.keys {
+                    None => strings(&["router", "--listen", "tcp/0.0.0.0:7447", "--no-multicast"]),
+                    Some(_) => strings(&[
+                        "--zenoh-config",
+                        "/keys/router.json5",
+                        "router",
+                        "--listen",
+                        "tls/0.0.0.0:7447",
+                    ]),
+                };
                 v.extend(["--lease".to_owned(), self.lease.to_string()]);
                 v
             },
             ports: vec![("TROUPE_ROUTER_PORT".into(), 7447)],
-            health: strings(&["--connect", "tcp/127.0.0.1:7447", "--no-multicast", "ready"]),
+            health: match &self.keys {
+                None => strings(&["--connect", "tcp/127.0.0.1:7447", "--no-multicast", "ready"]),
+                Some(_) => strings(&[
+                    "--zenoh-config",
+                    "/keys/bridge.json5",
+                    "--connect",
+                    "tls/localhost:7447",
+                    "ready",
+                ]),
+            },
             depends: Vec::new(),
             comment: "The Zenoh router every container connects to (and `troupe list` on this machine, at 127.0.0.1:7447).".into(),
         }];
@@ -545,13 +633,14 @@ impl Fleet<'_> {
         let mut robots = BTreeSet::new();
         for (host, devices) in &hosts {
             robots.extend(devices.iter().map(|d| d.robot));
-            let mut command = self.net();
+            let mut command = self.net(host);
             command.extend(["launch".to_owned(), path.clone()]);
             if split {
                 command.extend(["--host".to_owned(), host.clone()]);
             }
             command.push("--no-bridge".into());
-            let mut health = strings(&["--connect", "tcp/router:7447", "--no-multicast", "ready"]);
+            let mut health = self.probe(host);
+            health.push("ready".into());
             health.extend(
                 devices
                     .iter()
@@ -578,7 +667,7 @@ impl Fleet<'_> {
             .filter_map(|r| u16::try_from(r).ok())
             .collect();
         if !robots.is_empty() {
-            let mut command = self.net();
+            let mut command = self.net("bridge");
             command.push("bridge".into());
             for r in &robots {
                 command.extend(["-p".to_owned(), r.to_string()]);
@@ -588,7 +677,11 @@ impl Fleet<'_> {
                 name: "bridge".into(),
                 command,
                 ports: robots.iter().map(|r| (format!("TROUPE_PORT_{r}"), *r)).collect(),
-                health: strings(&["--connect", "tcp/router:7447", "--no-multicast", "ready"]),
+                health: {
+                    let mut v = self.probe("bridge");
+                    v.push("ready".into());
+                    v
+                },
                 depends: hosts.iter().map(|(h, _)| h.clone()).collect(),
                 comment: "Player TCP for libplayerc, libplayerc++ and playerv: every robot port, on this machine's 127.0.0.1 only (Player has no authentication).".into(),
             });
@@ -627,13 +720,19 @@ impl Fleet<'_> {
             let _ = writeln!(s, "    image: ${{TROUPE_IMAGE:-{}}}", self.image);
             let _ = writeln!(s, "    hostname: {}", svc.name);
             let _ = writeln!(s, "    command: {}", yaml_list(&svc.command));
+            let mut volumes = Vec::new();
             if let Source::Mounted { host_dir, .. } = &self.source {
                 if svc.name != "router" && svc.name != "bridge" {
-                    let _ = writeln!(
-                        s,
-                        "    volumes:\n      - {}",
-                        yaml_str(&format!("{host_dir}:/stack:ro"))
-                    );
+                    volumes.push(format!("{host_dir}:/stack:ro"));
+                }
+            }
+            if let Some(k) = &self.keys {
+                volumes.push(format!("{k}:/keys:ro"));
+            }
+            if !volumes.is_empty() {
+                s.push_str("    volumes:\n");
+                for v in &volumes {
+                    let _ = writeln!(s, "      - {}", yaml_str(v));
                 }
             }
             if !svc.ports.is_empty() {
@@ -746,6 +845,7 @@ mod tests {
             output: Some(file.clone()),
             image: "troupe:latest".into(),
             in_image: Some("/worlds".into()),
+            secure: None,
             lease: 3.0,
         };
         let want = render(&args).unwrap();
@@ -781,6 +881,7 @@ mod tests {
             output: Some(root.join("docker-compose.yml")),
             image: "troupe:latest".into(),
             in_image: None,
+            secure: None,
             lease: 3.0,
         };
         let y = render(&args).unwrap();

@@ -140,6 +140,10 @@ static TURN: Mutex<()> = Mutex::new(());
 struct Fleet {
     compose: Vec<String>,
     project: String,
+    /// The compose file.
+    file: PathBuf,
+    /// `--secure`: the viewer's config this machine joins with.
+    viewer: Option<PathBuf>,
     /// When `up -d` returned.
     up: Instant,
     _turn: MutexGuard<'static, ()>,
@@ -148,6 +152,11 @@ struct Fleet {
 impl Fleet {
     /// `docker compose up -d`, with free host ports; `None` where Docker is absent.
     fn up(name: &str) -> Option<Fleet> {
+        Fleet::up_with(name, root().join("docker-compose.yml"), None)
+    }
+
+    /// `up` of another compose file; `viewer`: the config to join it with.
+    fn up_with(name: &str, file: PathBuf, viewer: Option<PathBuf>) -> Option<Fleet> {
         let compose = engine()?;
         let turn = TURN.lock().unwrap_or_else(|p| p.into_inner());
         image();
@@ -155,6 +164,8 @@ impl Fleet {
         let mut fleet = Fleet {
             compose,
             project,
+            file,
+            viewer,
             up: Instant::now(),
             _turn: turn,
         };
@@ -174,7 +185,7 @@ impl Fleet {
             .arg("-p")
             .arg(&self.project)
             .arg("-f")
-            .arg(root().join("docker-compose.yml"))
+            .arg(&self.file)
             .args(args)
             .env("TROUPE_IMAGE", IMAGE)
             .env("TROUPE_ROUTER_PORT", "");
@@ -197,10 +208,19 @@ impl Fleet {
 
     /// A client session of the fleet's router, from this machine.
     fn session(&self) -> Session {
-        ZenohArgs {
-            connect: vec![format!("tcp/{}", self.published("router", 7447))],
-            no_multicast: true,
-            ..Default::default()
+        let at = self.published("router", 7447);
+        match &self.viewer {
+            None => ZenohArgs {
+                connect: vec![format!("tcp/{at}")],
+                no_multicast: true,
+                ..Default::default()
+            },
+            // The router's certificate names localhost, not the address.
+            Some(cfg) => ZenohArgs {
+                connect: vec![format!("tls/localhost:{}", at.port())],
+                zenoh_config: Some(cfg.clone()),
+                ..Default::default()
+            },
         }
         .open(Mode::Client)
         .expect("a session with the fleet's router")
@@ -625,4 +645,69 @@ fn docker_a_restarted_router_is_rejoined_by_every_container() {
         "{m:?}"
     );
     drop(session);
+}
+
+#[test]
+fn docker_a_secured_fleet_serves_its_viewer_and_player_clients_and_refuses_plain_tcp() {
+    if engine().is_none() {
+        return;
+    }
+    // The fleet's keys, readable by the image's user, and its compose file.
+    let dir = std::env::temp_dir().join(troupe_tests::unique_namespace("secure-fleet"));
+    let keys = dir.join("keys");
+    ok(Command::new(troupe_tests::troupe_bin())
+        .arg("fleet-keys")
+        .arg(&keys)
+        .args([
+            "--hosts",
+            "sim:6665:6666:6667,robot6665:6665,robot6666:6666,robot6667:6667",
+            "--operators",
+            "bridge",
+            "--viewers",
+            "eye",
+        ]));
+    for e in std::fs::read_dir(&keys).unwrap() {
+        std::os::unix::fs::chown(e.unwrap().path(), Some(10000), Some(10000)).unwrap();
+    }
+    std::os::unix::fs::chown(&keys, Some(10000), Some(10000)).unwrap();
+    let file = dir.join("docker-compose.yml");
+    ok(Command::new(troupe_tests::troupe_bin())
+        .arg("compose")
+        .arg(root().join("worlds/fleet.cfg"))
+        .args(["--in-image", "/worlds", "--secure"])
+        .arg(&keys)
+        .arg("-o")
+        .arg(&file));
+    let Some(fleet) = Fleet::up_with("fleet-secure", file, Some(keys.join("eye.json5"))) else {
+        return;
+    };
+    // The viewer, from this machine, sees every device.
+    let (_session, _tokens) = all_live(&fleet);
+    eprintln!(
+        "docker: secured, all {} devices live {:.2} s after `up -d` returned",
+        fleet_devices().len(),
+        fleet.up.elapsed().as_secs_f64()
+    );
+    // Player clients reach the robots through the bridge, which joins as an operator.
+    let mut player = Player::connect(fleet.published("bridge", 6666), 6666);
+    player.open(troupe_msgs::Device::new(6666, Interface::Position2d, 0));
+    let m = player.recv();
+    assert_eq!(m.kind(), DATA, "{m:?}");
+    // Plain TCP, or TLS without a certificate, does not get in.
+    let port = fleet.published("router", 7447).port();
+    for (endpoint, cfg) in [
+        (format!("tcp/127.0.0.1:{port}"), None),
+        (format!("tls/localhost:{port}"), None::<PathBuf>),
+    ] {
+        let r = ZenohArgs {
+            connect: vec![endpoint.clone()],
+            zenoh_config: cfg,
+            no_multicast: true,
+            ..Default::default()
+        }
+        .open(Mode::Client);
+        assert!(r.is_err(), "{endpoint} joined the secured fleet");
+    }
+    drop(fleet);
+    let _ = std::fs::remove_dir_all(&dir);
 }
