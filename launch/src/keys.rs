@@ -308,8 +308,14 @@ impl Authority {
         let key = KeyPair::generate().context("making the authority's key")?;
         let mut p = CertificateParams::new(Vec::<String>::new())?;
         p.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
+        // Named by its key: two fleets' authorities never share a name, so
+        // a certificate's issuer says which one signed it.
+        let id: String = key.public_key_raw()[1..9]
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect();
         p.distinguished_name
-            .push(DnType::CommonName, "Troupe fleet authority");
+            .push(DnType::CommonName, format!("Troupe fleet authority {id}"));
         p.key_usages = vec![
             KeyUsagePurpose::KeyCertSign,
             KeyUsagePurpose::CrlSign,
@@ -323,6 +329,21 @@ impl Authority {
     /// A certificate for `name` (its common name and DNS name; also valid
     /// for localhost and 127.0.0.1, for a fleet on one machine).
     pub fn identity(&self, name: &str, days: u32) -> anyhow::Result<Identity> {
+        let now = time::OffsetDateTime::now_utc();
+        self.identity_between(
+            name,
+            now - time::Duration::days(1),
+            now + time::Duration::days(i64::from(days)),
+        )
+    }
+
+    /// A certificate for `name` valid from `from` to `to`.
+    pub fn identity_between(
+        &self,
+        name: &str,
+        from: time::OffsetDateTime,
+        to: time::OffsetDateTime,
+    ) -> anyhow::Result<Identity> {
         let key = KeyPair::generate().with_context(|| format!("making {name}'s key"))?;
         let mut p = CertificateParams::new(vec![
             name.to_owned(),
@@ -335,7 +356,8 @@ impl Authority {
             ExtendedKeyUsagePurpose::ClientAuth,
         ];
         p.key_usages = vec![KeyUsagePurpose::DigitalSignature];
-        validity(&mut p, days);
+        p.not_before = from;
+        p.not_after = to;
         let cert = p
             .signed_by(&key, &self.cert, &self.key)
             .with_context(|| format!("signing {name}'s certificate"))?;
@@ -447,6 +469,61 @@ mod tests {
             acl.contains(r#"{"rules":["deliver","watch","read"],"subjects":["eye"]}"#),
             "{acl}"
         );
+    }
+
+    /// A config whose certificate is out of date, or from another
+    /// authority, is refused before any link is tried, naming the file.
+    #[test]
+    fn bad_certificates_are_named_with_their_file() {
+        let (ca, other) = (Authority::new(30).unwrap(), Authority::new(30).unwrap());
+        let now = time::OffsetDateTime::now_utc();
+        let expired = ca
+            .identity_between(
+                "old",
+                now - time::Duration::days(60),
+                now - time::Duration::days(30),
+            )
+            .unwrap()
+            .config(&ca, Role::Member, "router");
+        let foreign = other
+            .identity("stray", 30)
+            .unwrap()
+            .config(&ca, Role::Member, "router");
+        let good = ca
+            .identity("good", 30)
+            .unwrap()
+            .config(&ca, Role::Member, "router");
+        for (name, text, want) in [
+            (
+                "expired",
+                expired,
+                Some("this host's certificate (CN=old) expired on"),
+            ),
+            (
+                "foreign",
+                foreign,
+                Some("not by this config's authority `CN=Troupe fleet authority "),
+            ),
+            ("good", good, None),
+        ] {
+            let path =
+                std::env::temp_dir().join(format!("troupe-{name}-{}.json5", std::process::id()));
+            std::fs::write(&path, text).unwrap();
+            let r = troupe_node::ZenohArgs {
+                zenoh_config: Some(path.clone()),
+                ..Default::default()
+            }
+            .config(troupe_node::Mode::Client);
+            let _ = std::fs::remove_file(&path);
+            match want {
+                None => assert!(r.is_ok(), "{name}: {:?}", r.err()),
+                Some(w) => {
+                    let e = r.err().map(|e| e.to_string()).unwrap_or_default();
+                    assert!(e.contains(w), "{name}: {e}");
+                    assert!(e.contains(&path.display().to_string()), "{name}: {e}");
+                }
+            }
+        }
     }
 
     #[test]

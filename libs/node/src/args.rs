@@ -88,8 +88,13 @@ impl ZenohArgs {
     pub fn config(&self, default_mode: Mode) -> Result<Config> {
         let bad = |what: String| NodeError::config("zenoh", what);
         let mut c = match &self.zenoh_config {
-            Some(p) => Config::from_file(p)
-                .map_err(|e| bad(format!("--zenoh-config {}: {e}", p.display())))?,
+            Some(p) => {
+                let c = Config::from_file(p)
+                    .map_err(|e| bad(format!("--zenoh-config {}: {e}", p.display())))?;
+                check_certificates(&c)
+                    .map_err(|e| bad(format!("--zenoh-config {}: {e}", p.display())))?;
+                c
+            }
             None => Config::default(),
         };
         let set = |c: &mut Config, key: &str, json: String| {
@@ -224,6 +229,78 @@ impl ZenohArgs {
         }
         v
     }
+}
+
+/// What is wrong with the certificates a Zenoh config names: a file that is
+/// not there, a certificate out of its validity, one not issued by the
+/// authority beside it. Zenoh itself would only fail to make a link.
+fn check_certificates(c: &Config) -> std::result::Result<(), String> {
+    use base64::Engine as _;
+    let field = |k: &str| -> Option<String> {
+        let v = c.get_json(&format!("transport/link/tls/{k}")).ok()?;
+        serde_json::from_str::<String>(&v).ok()
+    };
+    // A certificate, by its field (a path, or the PEM text in base64).
+    let pem = |name: &str| -> std::result::Result<Option<Vec<u8>>, String> {
+        if let Some(path) = field(name) {
+            return std::fs::read(&path)
+                .map(Some)
+                .map_err(|e| format!("{name} `{path}`: {e}"));
+        }
+        match field(&format!("{name}_base64")) {
+            None => Ok(None),
+            Some(b) => base64::engine::general_purpose::STANDARD
+                .decode(b.trim())
+                .map(Some)
+                .map_err(|e| format!("{name}_base64 is not base64: {e}")),
+        }
+    };
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| i64::try_from(d.as_secs()).unwrap_or(i64::MAX));
+    // Subject, issuer, and what is wrong with its dates, if anything.
+    let read = |name: &str,
+                bytes: &[u8]|
+     -> std::result::Result<(String, String, Option<String>), String> {
+        let (_, p) = x509_parser::pem::parse_x509_pem(bytes)
+            .map_err(|e| format!("{name} is not a PEM certificate: {e}"))?;
+        let cert = p
+            .parse_x509()
+            .map_err(|e| format!("{name} is not an X.509 certificate: {e}"))?;
+        let v = cert.validity();
+        let dates = if v.not_after.timestamp() < now {
+            Some(format!("expired on {}", v.not_after))
+        } else if v.not_before.timestamp() > now {
+            Some(format!("is not valid before {}", v.not_before))
+        } else {
+            None
+        };
+        Ok((cert.subject().to_string(), cert.issuer().to_string(), dates))
+    };
+    let ca = match pem("root_ca_certificate")? {
+        Some(b) => Some(read("root_ca_certificate", &b)?),
+        None => None,
+    };
+    if let Some((subject, _, Some(dates))) = &ca {
+        return Err(format!("the authority's certificate ({subject}) {dates}"));
+    }
+    for name in ["connect_certificate", "listen_certificate"] {
+        let Some(bytes) = pem(name)? else { continue };
+        let (subject, issuer, dates) = read(name, &bytes)?;
+        if let Some(dates) = dates {
+            return Err(format!(
+                "this host's certificate ({subject}) {dates}: make new ones with `troupe fleet-keys`"
+            ));
+        }
+        if let Some((ca_subject, _, _)) = &ca {
+            if issuer != *ca_subject {
+                return Err(format!(
+                    "this host's certificate ({subject}) was issued by `{issuer}`, not by this config's authority `{ca_subject}`: both must come from the same `troupe fleet-keys`"
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// What to say when a session cannot reach its router.
