@@ -102,14 +102,8 @@ pub fn run(a: BridgeArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     let mut signals = rt
         .block_on(async { crate::supervisor::StopSignals::new() })
         .context("catching SIGTERM and SIGINT")?;
-    let session = rt.block_on(async {
-        tokio::select! {
-            s = z.open_in_background(Mode::Client) => s.map(Some),
-            () = signals.recv() => Ok(None),
-        }
-    })?;
-    let Some(session) = session else {
-        tracing::info!("stopped before the router answered");
+    let Some(session) = rt.block_on(signals.unless_stopped(z.open_in_background(Mode::Client)))?
+    else {
         return Ok(());
     };
     let stop = async move { signals.recv().await };

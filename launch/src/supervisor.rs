@@ -281,12 +281,11 @@ async fn supervise(
         child.extend(["--listen".into(), "tcp/127.0.0.1:0".into()]);
         (session, child)
     } else {
-        let session = tokio::select! {
-            s = z.open_in_background(Mode::Client) => s?,
-            () = signals.recv() => {
-                tracing::info!("stopped before the router answered");
-                return Ok(());
-            }
+        let Some(session) = signals
+            .unless_stopped(z.open_in_background(Mode::Client))
+            .await?
+        else {
+            return Ok(());
         };
         (session, z.to_child_args())
     };
@@ -509,6 +508,21 @@ impl StopSignals {
         tokio::select! {
             _ = self.term.recv() => tracing::info!("SIGTERM"),
             _ = self.int.recv() => tracing::info!("SIGINT"),
+        }
+    }
+
+    /// The session `open` makes, or `None` when a signal comes first (with
+    /// `--reconnect` an open waits for its router, and PID 1 must still stop).
+    pub(crate) async fn unless_stopped(
+        &mut self,
+        open: impl std::future::Future<Output = troupe_node::Result<troupe_node::zenoh::Session>>,
+    ) -> troupe_node::Result<Option<troupe_node::zenoh::Session>> {
+        tokio::select! {
+            s = open => s.map(Some),
+            () = self.recv() => {
+                tracing::info!("stopped before the router answered");
+                Ok(None)
+            }
         }
     }
 }

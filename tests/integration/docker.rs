@@ -409,6 +409,17 @@ fn all_live(fleet: &Fleet) -> (Session, Tokens) {
     (session, tokens)
 }
 
+/// [`all_live`] just after `up`, printing how long the devices took.
+fn live_after_up(fleet: &Fleet, what: &str) -> (Session, Tokens) {
+    let live = all_live(fleet);
+    eprintln!(
+        "docker: {what}all {} devices live {:.2} s after `up -d` returned",
+        fleet_devices().len(),
+        fleet.up.elapsed().as_secs_f64()
+    );
+    live
+}
+
 /// r1's true pose, from the simulator.
 fn truth(session: &Session, model: &str) -> Pose2d {
     let client = Client::with_session(session.clone(), 6665);
@@ -442,12 +453,7 @@ fn docker_fleet_comes_up_drives_a_robot_from_a_player_client_and_goes_down_clean
     let Some(fleet) = Fleet::up("fleet-up") else {
         return;
     };
-    let (session, _tokens) = all_live(&fleet);
-    eprintln!(
-        "docker: all {} devices live {:.2} s after `up -d` returned",
-        fleet_devices().len(),
-        fleet.up.elapsed().as_secs_f64()
-    );
+    let (session, _tokens) = live_after_up(&fleet, "");
 
     // A Player client on this machine gives robot 6666 a goal through the
     // bridge's published port; the simulator says whether r1 gets there.
@@ -682,12 +688,7 @@ fn docker_a_secured_fleet_serves_its_viewer_and_player_clients_and_refuses_plain
         return;
     };
     // The viewer, from this machine, sees every device.
-    let (_session, _tokens) = all_live(&fleet);
-    eprintln!(
-        "docker: secured, all {} devices live {:.2} s after `up -d` returned",
-        fleet_devices().len(),
-        fleet.up.elapsed().as_secs_f64()
-    );
+    let (_session, _tokens) = live_after_up(&fleet, "secured, ");
     // Player clients reach the robots through the bridge, which joins as an operator.
     let mut player = Player::connect(fleet.published("bridge", 6666), 6666);
     player.open(troupe_msgs::Device::new(6666, Interface::Position2d, 0));

@@ -76,7 +76,7 @@ pub struct ZenohArgs {
 }
 
 /// How often `--reconnect` retries: Zenoh's `connect/retry`, in milliseconds.
-pub const RECONNECT_RETRY: &str =
+const RECONNECT_RETRY: &str =
     r#"{"period_init_ms":250,"period_max_ms":1000,"period_increase_factor":2}"#;
 
 impl ZenohArgs {
@@ -172,6 +172,13 @@ impl ZenohArgs {
     pub fn open(&self, default_mode: Mode) -> Result<Session> {
         let config = self.config(default_mode)?;
         let refused = Refused::of(&config);
+        if self.reconnect && config.get_json("mode").is_ok_and(|m| m == r#""client""#) {
+            // A client's open now blocks until its router answers.
+            tracing::info!(
+                "joining the router at {} (--reconnect: waiting until it answers)",
+                refused.endpoints
+            );
+        }
         refused.explain(zenoh::open(config).wait())
     }
 
@@ -182,12 +189,6 @@ impl ZenohArgs {
         &self,
         default_mode: Mode,
     ) -> impl std::future::Future<Output = Result<Session>> {
-        if self.reconnect && self.mode.unwrap_or(default_mode) == Mode::Client {
-            tracing::info!(
-                "joining the router at {} (--reconnect: waiting until it answers)",
-                self.connect.join(", ")
-            );
-        }
         let (tx, rx) = tokio::sync::oneshot::channel();
         let me = self.clone();
         std::thread::spawn(move || {
