@@ -4,8 +4,13 @@
 //! that runs robots' drivers, an operator, a viewer) gets a key and a
 //! certificate whose common name is its name, and a Zenoh config that
 //! holds them (base64, so the one file works wherever it is mounted):
-//! TLS only, mutual authentication, scouting off. Zenoh does the rest;
-//! Troupe adds no security mechanism of its own.
+//! TLS only, mutual authentication, scouting off. Each member also has a
+//! user name and password (Zenoh's usrpwd authentication), which the
+//! router checks against the `passwords` file beside its config: Zenoh's
+//! TLS has no revocation list, so deleting a member's line there (and
+//! restarting the router) is how a lost host is shut out without
+//! re-keying the fleet. Zenoh does the rest; Troupe adds no security
+//! mechanism of its own.
 
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
@@ -49,6 +54,19 @@ pub struct KeysArgs {
     /// Days the certificates are valid.
     #[arg(long, value_name = "N", default_value_t = 365)]
     pub days: u32,
+    /// The fleet's Zenoh namespace: every member's config joins it (as
+    /// `--namespace` would) and the router's rules name keys under it.
+    #[arg(long, value_name = "NS")]
+    pub namespace: Option<String>,
+}
+
+/// Where the fleet meets: the router's name and the fleet's namespace.
+#[derive(Debug, Clone, Copy)]
+pub struct Fleet<'a> {
+    /// The router's name, which members connect to (tls/NAME:7447).
+    pub router: &'a str,
+    /// The namespace every key lives under, if any.
+    pub namespace: Option<&'a str>,
 }
 
 /// An identity of the fleet and what it may do.
@@ -98,6 +116,19 @@ fn member(spec: &str, kind: Kind) -> anyhow::Result<Member> {
 /// `troupe fleet-keys`.
 pub fn fleet_keys(a: KeysArgs) -> anyhow::Result<()> {
     check_name(&a.router)?;
+    if let Some(ns) = &a.namespace {
+        // Zenoh's own check: a namespace is a key expression without wildcards.
+        troupe_node::ZenohArgs {
+            namespace: Some(ns.clone()),
+            ..Default::default()
+        }
+        .config(troupe_node::Mode::Client)
+        .map_err(|e| anyhow::anyhow!("--namespace {ns}: {e}"))?;
+    }
+    let fleet = Fleet {
+        router: &a.router,
+        namespace: a.namespace.as_deref(),
+    };
     let mut members = Vec::new();
     for (list, kind) in [
         (&a.hosts, Kind::Host),
@@ -122,21 +153,27 @@ pub fn fleet_keys(a: KeysArgs) -> anyhow::Result<()> {
     write(&a.dir.join("ca-key.pem"), &ca.key.serialize_pem(), true)?;
     let router_cfg = ca
         .identity(&a.router, a.days)?
-        .config(&ca, Role::Router(&members), &a.router);
+        .config(&ca, Role::Router(&members), fleet);
     write(
         &a.dir.join(format!("{}.json5", a.router)),
         &router_cfg,
         true,
     )?;
     let names: Vec<&str> = members.iter().map(|m| m.name.as_str()).collect();
+    let mut dictionary = String::new();
     for h in &names {
-        let cfg = ca.identity(h, a.days)?.config(&ca, Role::Member, &a.router);
+        let password = password()?;
+        let cfg = ca
+            .identity(h, a.days)?
+            .config(&ca, Role::Member(&password), fleet);
         write(&a.dir.join(format!("{h}.json5")), &cfg, true)?;
+        dictionary.push_str(&format!("{h}:{password}\n"));
     }
+    write(&a.dir.join(PASSWORDS), &dictionary, true)?;
     let mut out = std::io::stdout().lock();
     writeln!(
         out,
-        "wrote {}: ca.pem (the fleet's authority; its key ca-key.pem stays here), {}.json5 for the router, and {} for the hosts",
+        "wrote {}: ca.pem (the fleet's authority; its key ca-key.pem stays here), {}.json5 and {PASSWORDS} for the router, and {} for the hosts",
         a.dir.display(),
         a.router,
         names.iter().map(|h| format!("{h}.json5")).collect::<Vec<_>>().join(", ")
@@ -162,15 +199,35 @@ pub fn bench_configs(dir: &Path, robot: u32) -> anyhow::Result<(PathBuf, PathBuf
         robots: vec![robot],
     }];
     let (router, pong) = (dir.join("router.json5"), dir.join("pong.json5"));
+    let fleet = Fleet {
+        router: "localhost",
+        namespace: None,
+    };
     let cfg = ca
         .identity("router", 1)?
-        .config(&ca, Role::Router(&members), "localhost");
+        .config(&ca, Role::Router(&members), fleet);
     write(&router, &cfg, true)?;
+    let password = password()?;
     let cfg = ca
         .identity("pong", 1)?
-        .config(&ca, Role::Member, "localhost");
+        .config(&ca, Role::Member(&password), fleet);
     write(&pong, &cfg, true)?;
+    write(&dir.join(PASSWORDS), &format!("pong:{password}\n"), true)?;
     Ok((router, pong))
+}
+
+/// The router's user/password dictionary, beside its config (whose
+/// relative paths Troupe takes from the config's directory).
+pub const PASSWORDS: &str = "passwords";
+
+/// A fresh password: 128 random bits, in hex.
+fn password() -> anyhow::Result<String> {
+    use std::io::Read as _;
+    let mut bytes = [0u8; 16];
+    std::fs::File::open("/dev/urandom")
+        .and_then(|mut f| f.read_exact(&mut bytes))
+        .context("reading /dev/urandom for a password")?;
+    Ok(bytes.iter().map(|b| format!("{b:02x}")).collect())
 }
 
 /// A name that can be a certificate's common name and a DNS name.
@@ -203,10 +260,11 @@ fn write(p: &Path, text: &str, secret: bool) -> anyhow::Result<()> {
 /// Whose config is written.
 #[derive(Debug, Clone, Copy)]
 pub enum Role<'a> {
-    /// The router: it listens for the fleet and enforces what each member may do.
+    /// The router: it listens for the fleet, checks each member's password
+    /// and enforces what each member may do.
     Router(&'a [Member]),
-    /// A member: it connects to the router.
-    Member,
+    /// A member, with its password: it connects to the router.
+    Member(&'a str),
 }
 
 /// Zenoh's access control for the router: deny by default; every member
@@ -214,8 +272,8 @@ pub enum Role<'a> {
 /// latest data and maps); hosts may publish, serve and declare devices
 /// under their robots' keys only, and ask them; operators may command and
 /// ask their robots. A rule's flow is seen from the router: ingress is
-/// what a member sends.
-pub fn access_control(members: &[Member]) -> serde_json::Value {
+/// what a member sends. Keys are as they travel: under `namespace`.
+pub fn access_control(members: &[Member], namespace: Option<&str>) -> serde_json::Value {
     use serde_json::json;
     let all = [
         "put",
@@ -228,34 +286,44 @@ pub fn access_control(members: &[Member]) -> serde_json::Value {
         "declare_liveliness_subscriber",
         "liveliness_query",
     ];
+    let ns = |key: &str| match namespace {
+        Some(ns) => format!("{ns}/{key}"),
+        None => key.to_owned(),
+    };
     let robots = |m: &Member, tail: &str| -> Vec<String> {
         if m.robots.is_empty() {
-            vec![format!("robot/*/{tail}")]
+            vec![ns(&format!("robot/*/{tail}"))]
         } else {
             m.robots
                 .iter()
-                .map(|r| format!("robot/{r}/{tail}"))
+                .map(|r| ns(&format!("robot/{r}/{tail}")))
                 .collect()
         }
     };
+    let (everything, reads) = (
+        [ns("robot/**"), ns("sim/**")],
+        [ns("robot/*/*/*"), ns("robot/*/map/*/req/**")],
+    );
     let mut rules = vec![
         json!({ "id": "deliver", "flows": ["egress"], "permission": "allow",
-                "messages": all, "key_exprs": ["robot/**", "sim/**"] }),
+                "messages": all, "key_exprs": everything }),
         json!({ "id": "watch", "flows": ["ingress"], "permission": "allow",
                 "messages": ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"],
-                "key_exprs": ["robot/**", "sim/**"] }),
+                "key_exprs": everything }),
         json!({ "id": "read", "flows": ["ingress"], "permission": "allow",
-                "messages": ["query"], "key_exprs": ["robot/*/*/*", "robot/*/map/*/req/**"] }),
+                "messages": ["query"], "key_exprs": reads }),
     ];
     let mut subjects = Vec::new();
     let mut policies = Vec::new();
     for m in members {
-        subjects.push(json!({ "id": m.name, "cert_common_names": [m.name] }));
+        // Both must match: the certificate's name and the user's.
+        subjects
+            .push(json!({ "id": m.name, "cert_common_names": [m.name], "usernames": [m.name] }));
         let mut own = vec!["deliver".to_owned(), "watch".to_owned(), "read".to_owned()];
         match m.kind {
             Kind::Host => {
                 let mut keys = robots(m, "**");
-                keys.push("sim/**".to_owned());
+                keys.push(ns("sim/**"));
                 rules.push(json!({ "id": format!("serve-{}", m.name), "flows": ["ingress"],
                     "permission": "allow",
                     "messages": ["put", "delete", "declare_queryable", "reply", "liveliness_token", "query"],
@@ -292,6 +360,7 @@ pub struct Authority {
 
 /// A key and the certificate the authority gave it.
 pub struct Identity {
+    name: String,
     cert: rcgen::Certificate,
     key: KeyPair,
 }
@@ -361,7 +430,11 @@ impl Authority {
         let cert = p
             .signed_by(&key, &self.cert, &self.key)
             .with_context(|| format!("signing {name}'s certificate"))?;
-        Ok(Identity { cert, key })
+        Ok(Identity {
+            name: name.to_owned(),
+            cert,
+            key,
+        })
     }
 }
 
@@ -371,8 +444,8 @@ fn b64(pem: &str) -> String {
 
 impl Identity {
     /// This identity's Zenoh config: TLS only, both ends authenticated by
-    /// the fleet's authority, no scouting.
-    pub fn config(&self, ca: &Authority, role: Role<'_>, router: &str) -> String {
+    /// the fleet's authority, members by their password too, no scouting.
+    pub fn config(&self, ca: &Authority, role: Role<'_>, fleet: Fleet<'_>) -> String {
         let (cert, key) = (b64(&self.cert.pem()), b64(&self.key.serialize_pem()));
         let mut tls = serde_json::json!({
             "root_ca_certificate_base64": b64(&ca.cert.pem()),
@@ -383,25 +456,33 @@ impl Identity {
         let mut c = serde_json::json!({
             "scouting": { "multicast": { "enabled": false }, "gossip": { "enabled": false } },
         });
+        let usrpwd;
         match role {
             Role::Router(members) => {
                 tls["listen_certificate_base64"] = cert.into();
                 tls["listen_private_key_base64"] = key.into();
                 c["mode"] = "router".into();
                 c["listen"] = serde_json::json!({ "endpoints": ["tls/[::]:7447"] });
-                c["access_control"] = access_control(members);
+                c["access_control"] = access_control(members, fleet.namespace);
+                usrpwd = serde_json::json!({ "dictionary_file": PASSWORDS });
             }
-            Role::Member => {
+            Role::Member(password) => {
                 tls["connect_certificate_base64"] = cert.into();
                 tls["connect_private_key_base64"] = key.into();
                 // A client of the router, listening nowhere: every link is
                 // the authenticated one to the router.
                 c["mode"] = "client".into();
-                c["connect"] = serde_json::json!({ "endpoints": [format!("tls/{router}:7447")] });
+                c["connect"] =
+                    serde_json::json!({ "endpoints": [format!("tls/{}:7447", fleet.router)] });
+                if let Some(ns) = fleet.namespace {
+                    c["namespace"] = ns.into();
+                }
                 c["listen"] = serde_json::json!({ "endpoints": [] });
+                usrpwd = serde_json::json!({ "user": self.name, "password": password });
             }
         }
-        c["transport"] = serde_json::json!({ "link": { "tls": tls } });
+        c["transport"] =
+            serde_json::json!({ "link": { "tls": tls }, "auth": { "usrpwd": usrpwd } });
         let body = serde_json::to_string_pretty(&c).unwrap_or_default();
         format!(
             "// Written by `troupe fleet-keys`: this host's Zenoh config, with its\n\
@@ -414,13 +495,18 @@ impl Identity {
 mod tests {
     use super::*;
 
+    const FLEET: Fleet<'static> = Fleet {
+        router: "router",
+        namespace: None,
+    };
+
     #[test]
     fn a_host_config_is_a_zenoh_config_with_tls_only() {
         let ca = Authority::new(30).unwrap();
         let text = ca
             .identity("robot1", 30)
             .unwrap()
-            .config(&ca, Role::Member, "router");
+            .config(&ca, Role::Member("secret"), FLEET);
         let path = std::env::temp_dir().join(format!("troupe-keys-{}.json5", std::process::id()));
         std::fs::write(&path, &text).unwrap();
         let c = troupe_node::zenoh::Config::from_file(&path).unwrap();
@@ -447,7 +533,7 @@ mod tests {
         let text = ca
             .identity("router", 30)
             .unwrap()
-            .config(&ca, Role::Router(&members), "router");
+            .config(&ca, Role::Router(&members), FLEET);
         let path = std::env::temp_dir().join(format!("troupe-acl-{}.json5", std::process::id()));
         std::fs::write(&path, &text).unwrap();
         let c = troupe_node::zenoh::Config::from_file(&path).unwrap();
@@ -456,7 +542,7 @@ mod tests {
             c.get_json("access_control/default_permission").unwrap(),
             r#""deny""#
         );
-        let acl = access_control(&members).to_string();
+        let acl = access_control(&members, None).to_string();
         assert!(
             acl.contains(r#""key_exprs":["robot/6665/**","sim/**"]"#),
             "{acl}"
@@ -467,6 +553,11 @@ mod tests {
         );
         assert!(
             acl.contains(r#"{"rules":["deliver","watch","read"],"subjects":["eye"]}"#),
+            "{acl}"
+        );
+        let acl = access_control(&members, Some("lab")).to_string();
+        assert!(
+            acl.contains(r#""key_exprs":["lab/robot/6665/**","lab/sim/**"]"#),
             "{acl}"
         );
     }
@@ -484,15 +575,16 @@ mod tests {
                 now - time::Duration::days(30),
             )
             .unwrap()
-            .config(&ca, Role::Member, "router");
-        let foreign = other
-            .identity("stray", 30)
-            .unwrap()
-            .config(&ca, Role::Member, "router");
+            .config(&ca, Role::Member("secret"), FLEET);
+        let foreign =
+            other
+                .identity("stray", 30)
+                .unwrap()
+                .config(&ca, Role::Member("secret"), FLEET);
         let good = ca
             .identity("good", 30)
             .unwrap()
-            .config(&ca, Role::Member, "router");
+            .config(&ca, Role::Member("secret"), FLEET);
         for (name, text, want) in [
             (
                 "expired",

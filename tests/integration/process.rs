@@ -331,10 +331,13 @@ fn a_tls_fleet_admits_its_own_certificates_only_and_each_identity_does_only_what
     use troupe_node::zenoh::Wait;
     let dir = std::env::temp_dir().join(troupe_tests::unique_namespace("keys"));
     let (ours, theirs) = (dir.join("ours"), dir.join("theirs"));
+    let ns = troupe_tests::unique_namespace("tls");
     for (d, who) in [
         (
             &ours,
             &[
+                "--namespace",
+                &ns,
                 "--hosts",
                 "hosta:6665,hostb:6666",
                 "--operators",
@@ -351,9 +354,9 @@ fn a_tls_fleet_admits_its_own_certificates_only_and_each_identity_does_only_what
         assert!(status.success(), "{err}");
     }
     let cfg = |d: &std::path::Path, who: &str| d.join(format!("{who}.json5")).display().to_string();
-    // The router listens on TLS only, on a free port of this machine. Its
-    // access rules name keys as they are: this test's isolation is its own
-    // router, not a namespace.
+    // The router listens on TLS only, on a free port of this machine. Our
+    // members' configs join the fleet's namespace, and the router's access
+    // rules name keys under it.
     let mut router = Proc::troupe(
         "router",
         &strings(&[
@@ -469,9 +472,72 @@ fn a_tls_fleet_admits_its_own_certificates_only_and_each_identity_does_only_what
     assert!(!status.success());
     assert!(err.contains("no Zenoh router answers"), "{err}");
 
+    // A wrong password is refused; so is a member struck from the router's
+    // `passwords` (how a lost host is shut out: Zenoh's TLS has no
+    // revocation list), while the others still get in.
+    let dictionary = std::fs::read_to_string(ours.join("passwords")).unwrap();
+    let password = |who: &str| {
+        dictionary
+            .lines()
+            .find_map(|l| l.strip_prefix(&format!("{who}:")))
+            .unwrap_or_else(|| panic!("{who} not in {dictionary}"))
+            .to_owned()
+    };
+    let wrong = dir.join("wrong.json5");
+    let text = std::fs::read_to_string(cfg(&ours, "hosta")).unwrap();
+    assert!(text.contains(&password("hosta")));
+    std::fs::write(&wrong, text.replace(&password("hosta"), "0123456789abcdef")).unwrap();
+    let (status, _, err) = troupe_output(&with_net(
+        &net(Some(wrong.display().to_string())),
+        &["ready"],
+    ));
+    assert!(!status.success());
+    assert!(
+        err.contains("user and password must be in the router's `passwords`"),
+        "{err}"
+    );
+    let struck = dir.join("struck");
+    std::fs::create_dir_all(&struck).unwrap();
+    std::fs::copy(cfg(&ours, "router"), cfg(&struck, "router")).unwrap();
+    let kept: String = dictionary
+        .lines()
+        .filter(|l| !l.starts_with("hostb:"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    std::fs::write(struck.join("passwords"), kept).unwrap();
+    let mut router2 = Proc::troupe(
+        "router2",
+        &strings(&[
+            "--zenoh-config",
+            &cfg(&struck, "router"),
+            "router",
+            "--listen",
+            "tls/127.0.0.1:0",
+        ]),
+    );
+    let at2 = router2
+        .endpoint("troupe router listening on")
+        .replace("127.0.0.1", "localhost");
+    for (who, admitted) in [("hosta", true), ("hostb", false)] {
+        let (status, out, err) = troupe_output(&strings(&[
+            "--connect",
+            &at2,
+            "--zenoh-config",
+            &cfg(&ours, who),
+            "ready",
+        ]));
+        assert_eq!(status.success(), admitted, "{who}: {out}{err}");
+    }
+    assert!(router2.terminate().success(), "{}", router2.stderr());
+
     // The key files are for their hosts only.
     use std::os::unix::fs::PermissionsExt;
     let mode = std::fs::metadata(cfg(&ours, "hosta"))
+        .unwrap()
+        .permissions()
+        .mode();
+    assert_eq!(mode & 0o077, 0, "{mode:o}");
+    let mode = std::fs::metadata(ours.join("passwords"))
         .unwrap()
         .permissions()
         .mode();

@@ -89,7 +89,9 @@ impl ZenohArgs {
         let bad = |what: String| NodeError::config("zenoh", what);
         let mut c = match &self.zenoh_config {
             Some(p) => {
-                let c = Config::from_file(p)
+                let mut c = Config::from_file(p)
+                    .map_err(|e| bad(format!("--zenoh-config {}: {e}", p.display())))?;
+                beside(&mut c, p)
                     .map_err(|e| bad(format!("--zenoh-config {}: {e}", p.display())))?;
                 check_certificates(&c)
                     .map_err(|e| bad(format!("--zenoh-config {}: {e}", p.display())))?;
@@ -230,6 +232,46 @@ impl ZenohArgs {
         }
         v
     }
+}
+
+/// The settings of a Zenoh config that name files.
+const FILE_KEYS: [&str; 9] = [
+    "transport/auth/usrpwd/dictionary_file",
+    "transport/auth/pubkey/public_key_file",
+    "transport/auth/pubkey/private_key_file",
+    "transport/auth/pubkey/known_keys_file",
+    "transport/link/tls/root_ca_certificate",
+    "transport/link/tls/listen_private_key",
+    "transport/link/tls/listen_certificate",
+    "transport/link/tls/connect_private_key",
+    "transport/link/tls/connect_certificate",
+];
+
+/// Takes the relative file names in a config from the config's own
+/// directory (Zenoh takes them from the working directory, which differs
+/// between a shell, a supervisor's child and a container), and checks
+/// that each can be read: Zenoh's own error would not name the file.
+fn beside(c: &mut Config, file: &std::path::Path) -> std::result::Result<(), String> {
+    let dir = file.parent().unwrap_or(std::path::Path::new(""));
+    for key in FILE_KEYS {
+        let Some(name) = c
+            .get_json(key)
+            .ok()
+            .and_then(|v| serde_json::from_str::<String>(&v).ok())
+        else {
+            continue;
+        };
+        let full = dir.join(&name);
+        if let Err(e) = std::fs::File::open(&full) {
+            return Err(format!("{key} `{}`: {e}", full.display()));
+        }
+        if full.as_os_str() != name.as_str() {
+            let full = full.display().to_string();
+            c.insert_json5(key, &json_str(&full))
+                .map_err(|e| format!("{key} = {full}: {e}"))?;
+        }
+    }
+    Ok(())
 }
 
 /// What is wrong with the certificates a Zenoh config names: a file that is
@@ -499,5 +541,31 @@ mod tests {
         };
         let e = a.config(Mode::Peer).unwrap_err().to_string();
         assert!(e.contains("/nonexistent/z.json5"), "{e}");
+    }
+
+    #[test]
+    fn a_config_s_files_are_taken_from_its_directory_and_a_missing_one_is_named() {
+        let dir = std::env::temp_dir().join(format!("troupe-beside-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let cfg = dir.join("router.json5");
+        std::fs::write(
+            &cfg,
+            r#"{ transport: { auth: { usrpwd: { dictionary_file: "passwords" } } } }"#,
+        )
+        .unwrap();
+        let args = ZenohArgs {
+            zenoh_config: Some(cfg.clone()),
+            ..Default::default()
+        };
+        let e = args.config(Mode::Router).unwrap_err().to_string();
+        let want = dir.join("passwords").display().to_string();
+        assert!(e.contains(&format!("dictionary_file `{want}`")), "{e}");
+        std::fs::write(dir.join("passwords"), "a:b\n").unwrap();
+        let c = args.config(Mode::Router).unwrap();
+        assert_eq!(
+            c.get_json("transport/auth/usrpwd/dictionary_file").unwrap(),
+            json_str(&want)
+        );
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -29,10 +29,11 @@ pub enum NodeError {
     },
     /// A TLS link could not be made: no router, or certificates that do not match.
     #[error(
-        "no Zenoh router accepted a TLS link at {endpoints}: none runs there, or the \
-         certificates do not match (this host's config and the router's must come from the \
-         same `troupe fleet-keys` authority, and the name connected to must be the router's; \
-         Zenoh's warning above says which){hint}"
+        "no Zenoh router accepted a TLS link at {endpoints}: none runs there, or it refused \
+         this host (this host's config and the router's must come from the same `troupe \
+         fleet-keys` authority, the name connected to must be the router's, and this host's \
+         user and password must be in the router's `passwords`; Zenoh's warning above says \
+         which: a close \"in response to an OpenSyn\" is the password){hint}"
     )]
     TlsRefused {
         /// The endpoints tried.
