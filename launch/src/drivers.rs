@@ -45,6 +45,10 @@ pub fn all() -> Vec<Entry> {
         entry::<troupe_sicklms200::SickLms200>("the SICK LMS200 laser over a serial line"),
         entry::<troupe_p2os::P2os>("Pioneer robots (P2OS/ARCOS) over a serial line"),
         entry::<troupe_erratic::Erratic>("the Videre Erratic robot over a serial line"),
+        entry::<troupe_log::WriteLog>("writes its required devices' data to a Player text log"),
+        entry::<troupe_log::ReadLog>(
+            "replays a Player text log as live devices, and is its stack's clock",
+        ),
         entry::<troupe_stage::Stage>(
             "the 2D multi-robot simulator: a Stage world's robots and sensors",
         ),

@@ -31,6 +31,15 @@ macro_rules! any {
             };
             Ok(Stamped { stamp, msg })
         }
+
+        impl AnyMsg {
+            /// The payload of this message stamped `stamp`, as [`crate::encode`] makes it.
+            pub fn encode(&self, stamp: f64) -> Vec<u8> {
+                match self {
+                    $( AnyMsg::$variant(m) => crate::codec::encode(m, stamp), )*
+                }
+            }
+        }
     };
 }
 
@@ -70,6 +79,9 @@ any! {
     IrData(ir::Data), IrGeom(ir::Geom), IrGetGeom(ir::GetGeom),
     AioData(aio::Data), AioCmd(aio::Cmd),
     DioData(dio::Data), DioCmd(dio::Cmd),
+    LogSetWriteState(log::SetWriteState), LogSetReadState(log::SetReadState),
+    LogState(log::State), LogGetState(log::GetState), LogRewind(log::Rewind),
+    LogSetFilename(log::SetFilename),
 }
 
 #[cfg(test)]

@@ -10,6 +10,7 @@ pub mod gripper;
 pub mod ir;
 pub mod laser;
 pub mod localize;
+pub mod log;
 pub mod map;
 pub mod planner;
 pub mod position2d;

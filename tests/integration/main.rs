@@ -11,6 +11,7 @@ mod docker;
 mod hosts;
 mod import;
 mod launch;
+mod logs;
 mod nav;
 mod player;
 mod process;

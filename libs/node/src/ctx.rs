@@ -182,6 +182,18 @@ impl Ctx {
         self.bus.publish(dev, codec::encode(msg, stamp))
     }
 
+    /// Publishes an already encoded sample (its schema tag and stamp
+    /// included, as [`troupe_msgs::encode`] makes them) as data of the
+    /// provided device `dev`: for drivers that replay what was recorded.
+    ///
+    /// # Errors
+    ///
+    /// As [`Ctx::publish`].
+    pub fn publish_encoded(&mut self, dev: &Device, payload: Vec<u8>) -> Result<()> {
+        self.check_provided(dev)?;
+        self.bus.publish(dev, payload)
+    }
+
     /// Ok if `dev` is in the section's `provides`.
     fn check_provided(&self, dev: &Device) -> Result<()> {
         if self.provided.contains(dev) {

@@ -30,5 +30,5 @@ pub use ctx::{Ctx, Waker, REQUEST_TIMEOUT};
 pub use driver::{Driver, Event, Reply, Request, RequestError, RequestId, Responder, Sample, Unit};
 pub use error::{BoxError, NodeError, Result};
 pub use runtime::{ask, check, run, spawn, wait_live, NodeConfig, NodeHandle, Stop, Unused};
-pub use section::{NoOptions, Section, Slot};
+pub use section::{NoOptions, Section, Slot, Switch};
 pub use zenoh;

@@ -322,6 +322,26 @@ mod tests {
     }
 }
 
+/// A cfg on/off value: `1`, `0`, `yes`, `true`…
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(untagged)]
+pub enum Switch {
+    /// `yes`/`no`, `true`/`false`.
+    Bool(bool),
+    /// `1`/`0`.
+    Num(f64),
+}
+
+impl Switch {
+    /// On: `yes`, `true` or a number other than 0.
+    pub fn on(self) -> bool {
+        match self {
+            Switch::Bool(b) => b,
+            Switch::Num(n) => n != 0.0,
+        }
+    }
+}
+
 /// Options of a driver that takes none: every option given is reported unused.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
 pub struct NoOptions {}

@@ -19,9 +19,9 @@ use std::io::Write;
 
 use troupe_msgs::codec::{decode, encode, Command, Message, Request};
 use troupe_msgs::{
-    aio, bumper, common, dio, fiducial, gripper, ir, laser, localize, map, planner, position2d,
-    ptz, ranger, simulation, sonar, AnyMsg, Color, DecodeError, Interface, Pose2d, Pose3d, Size2d,
-    Size3d,
+    aio, bumper, common, dio, fiducial, gripper, ir, laser, localize, log, map, planner,
+    position2d, ptz, ranger, simulation, sonar, AnyMsg, Color, DecodeError, Interface, Pose2d,
+    Pose3d, Size2d, Size3d,
 };
 
 use crate::wire::{CMD, REQ};
@@ -486,6 +486,21 @@ fn translate(
         }
         (I::Position2d, REQ, 5) => request(&position2d::SetOdom { pose: r_pose2d(r)? }, t, empty),
         (I::Position2d, REQ, 6) => request(&position2d::ResetOdom, t, empty),
+
+        // log
+        (I::Log, REQ, 1) => request(&log::SetWriteState { state: r.flag()? }, t, empty),
+        (I::Log, REQ, 2) => request(&log::SetReadState { state: r.flag()? }, t, empty),
+        (I::Log, REQ, 3) => request(&log::GetState, t, |s, w| {
+            w.u32(u32::from(s.kind)).flag(s.state);
+        }),
+        (I::Log, REQ, 4) => request(&log::Rewind, t, empty),
+        (I::Log, REQ, 5) => request(
+            &log::SetFilename {
+                filename: r.string()?,
+            },
+            t,
+            empty,
+        ),
 
         // laser
         (I::Laser, REQ, 1) => request(&laser::GetGeom, t, laser_geom),

@@ -31,7 +31,7 @@ use troupe_msgs::{
     common, fiducial, gripper, laser, position2d, ranger, simulation, sonar, DevAddr, Device,
     Interface, Pose3d, Size3d,
 };
-use troupe_node::{Ctx, Driver, Event, NodeError, Result, Section};
+use troupe_node::{Ctx, Driver, Event, NodeError, Result, Section, Switch};
 
 use crate::sim::{Command, Sim};
 use crate::world::{self, Kind};
@@ -70,16 +70,6 @@ pub struct Options {
     pub step_when_told: Option<Switch>,
     /// Write a PNG of the world here when the node stops.
     pub snapshot: Option<PathBuf>,
-}
-
-/// A cfg on/off value: `1`, `0`, `yes`, `true`…
-#[derive(Debug, Clone, Copy, Deserialize)]
-#[serde(untagged)]
-pub enum Switch {
-    /// `yes`/`no`, `true`/`false`.
-    Bool(bool),
-    /// `1`/`0`.
-    Num(f64),
 }
 
 /// What a provided device is served from.
@@ -273,8 +263,7 @@ impl Driver for Stage {
             // As fast as possible, in small batches so commands and requests interleave.
             (Duration::from_micros(1), 10)
         };
-        let told = matches!(o.step_when_told, Some(Switch::Bool(true)))
-            || matches!(o.step_when_told, Some(Switch::Num(n)) if n != 0.0);
+        let told = o.step_when_told.is_some_and(Switch::on);
         Ok(Stage {
             quit_time: o.quit_time.unwrap_or(sim.world.quit_time),
             sim,

@@ -1,0 +1,537 @@
+//! Player's text logs: a log a real Player 3.1 wrote (../shared/compat)
+//! replayed through `readlog` and the bridge to a Player client; Stage's own
+//! simple world recorded by `writelog` and read back with a reader written
+//! here from Player's format description; a damaged log replays what it can.
+
+use std::io::Read as _;
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use troupe_msgs::{keys, laser, Device, Interface};
+use troupe_node::zenoh::Wait;
+use troupe_tests::{Proc, DEADLINE};
+
+use crate::player::{Player, DATA, RESP_ACK};
+
+fn compat(rel: &str) -> Option<PathBuf> {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared/compat")
+        .join(rel);
+    if p.exists() {
+        Some(p)
+    } else {
+        eprintln!("skipping: {} is absent", p.display());
+        None
+    }
+}
+
+/// One message line, read as Player's `readlog.cc` reads it: whitespace
+/// separated, `time host robot interface index type subtype`, then the payload.
+struct Logged {
+    time: f64,
+    robot: u32,
+    interface: String,
+    index: u32,
+    kind: u32,
+    subtype: u32,
+    payload: Vec<f64>,
+}
+
+/// Reads a log with Player's format description; checks each header
+/// field's printed form (`%014.3f %u %u %s %02u %03u %03u`).
+fn read_log(text: &str) -> Vec<Logged> {
+    let mut out = Vec::new();
+    for (n, line) in text.lines().enumerate() {
+        if line.starts_with("##") {
+            continue;
+        }
+        let t: Vec<&str> = line.split_whitespace().collect();
+        assert!(t.len() >= 7, "line {}: {line}", n + 1);
+        assert!(
+            t[0].len() == 14 && t[0].as_bytes()[10] == b'.',
+            "line {}: time `{}` is not %014.3f",
+            n + 1,
+            t[0]
+        );
+        assert!(
+            t[4].len() == 2 && t[5].len() == 3 && t[6].len() == 3,
+            "line {}: {line}",
+            n + 1
+        );
+        out.push(Logged {
+            time: t[0].parse().unwrap(),
+            robot: t[2].parse().unwrap(),
+            interface: t[3].to_owned(),
+            index: t[4].parse().unwrap(),
+            kind: t[5].parse().unwrap(),
+            subtype: t[6].parse().unwrap(),
+            payload: t[7..]
+                .iter()
+                .map(|f| {
+                    f.parse()
+                        .unwrap_or_else(|_| panic!("line {}: `{f}`", n + 1))
+                })
+                .collect(),
+        });
+    }
+    out
+}
+
+/// A laser scan's ranges from a `laser 001 001` payload
+/// (`id min max res range count`, then `range intensity` pairs).
+fn logged_ranges(l: &Logged) -> Vec<f64> {
+    let count = l.payload[5] as usize;
+    assert_eq!(l.payload.len(), 6 + 2 * count, "a scan's fields");
+    (0..count).map(|i| l.payload[6 + 2 * i]).collect()
+}
+
+/// The launcher's router endpoint and its bridge's address for robot 6665.
+fn ports(launcher: &mut Proc) -> (String, SocketAddr) {
+    let lines = launcher.lines();
+    let (mut router, mut player) = (None, None);
+    let deadline = Instant::now() + DEADLINE;
+    while router.is_none() || player.is_none() {
+        let left = deadline.saturating_duration_since(Instant::now());
+        let line = lines.recv_timeout(left).expect("the launcher's port lines");
+        if let Some(rest) = line.strip_prefix("troupe launch: router listening on ") {
+            router = rest.split_whitespace().next().map(str::to_owned);
+        } else if let Some(rest) = line.strip_prefix("troupe bridge: robot 6665 on ") {
+            player = rest.trim().parse().ok();
+        }
+    }
+    (router.unwrap(), player.unwrap())
+}
+
+fn f64s(body: &[u8]) -> impl Iterator<Item = f64> + '_ {
+    body.chunks_exact(8)
+        .map(|c| f64::from_be_bytes(c.try_into().unwrap()))
+}
+
+fn u32_at(body: &[u8], at: usize) -> u32 {
+    u32::from_be_bytes(body[at..at + 4].try_into().unwrap())
+}
+
+#[test]
+fn a_real_player_log_replays_through_readlog_and_the_bridge_to_a_player_client() {
+    let Some(cfg) = compat("player-log/readlog_sim.cfg") else {
+        return;
+    };
+    let text = std::fs::read_to_string(cfg.with_file_name("simple-r0.log")).unwrap();
+    let logged = read_log(&text);
+    let ns = troupe_tests::unique_namespace("readlog");
+    let mut launcher = troupe_tests::launch(&ns, &cfg, &[]);
+    let (_, addr) = ports(&mut launcher);
+    let mut player = Player::connect(addr, 6665);
+    let (pos, las, log) = (
+        Device::new(6665, Interface::Position2d, 0),
+        Device::new(6665, Interface::Laser, 0),
+        Device::new(6665, Interface::Log, 0),
+    );
+
+    // The geometry comes from the log's first lines: pose -0.04 0 0, 0.44 x 0.38.
+    let g = player.request(pos, 1, &[]);
+    assert_eq!(g.kind(), RESP_ACK, "{g:?}");
+    let v: Vec<f64> = f64s(&g.body).collect();
+    assert_eq!((v[0], v[5]), (-0.04, 0.0), "pose {v:?}");
+    assert_eq!((v[6], v[7]), (0.38, 0.44), "size (width, length) {v:?}");
+
+    // Data: each pose and scan is one the log holds, at its logged time.
+    player.open(pos);
+    player.open(las);
+    let (mut poses, mut scans) = (0, 0);
+    let mut last = 0.0;
+    while poses < 5 || scans < 5 {
+        let m = player.recv();
+        if m.kind() != DATA {
+            continue;
+        }
+        let at = |iface: &str| {
+            logged
+                .iter()
+                .find(|l| {
+                    l.interface == iface && l.kind == 1 && (l.time - m.timestamp).abs() < 5e-4
+                })
+                .unwrap_or_else(|| panic!("no {iface} line at t={} in the log", m.timestamp))
+        };
+        if m.h[2] == u32::from(Interface::Position2d.code()) {
+            let v: Vec<f64> = f64s(&m.body).take(3).collect();
+            assert_eq!(v, at("position2d").payload[..3], "t={}", m.timestamp);
+            poses += 1;
+        } else if m.h[2] == u32::from(Interface::Laser.code()) {
+            let count = u32_at(&m.body, 16) as usize;
+            let ranges: Vec<f64> = (0..count)
+                .map(|i| {
+                    f64::from(f32::from_be_bytes(
+                        m.body[24 + 4 * i..28 + 4 * i].try_into().unwrap(),
+                    ))
+                })
+                .collect();
+            let want = logged_ranges(at("laser"));
+            assert_eq!(ranges.len(), want.len());
+            for (got, want) in ranges.iter().zip(&want) {
+                assert!(
+                    (got - want).abs() < 1e-6,
+                    "t={}: {got} vs {want}",
+                    m.timestamp
+                );
+            }
+            scans += 1;
+        }
+        last = m.timestamp;
+    }
+
+    // The log device: playing; paused; rewound and played from the start.
+    let state = |p: &mut Player| {
+        let r = p.request(log, 3, &[]);
+        (u32_at(&r.body, 0), u32_at(&r.body, 4))
+    };
+    assert_eq!(state(&mut player), (1, 1), "a read log, playing");
+    let r = player.request(log, 2, &0u32.to_be_bytes());
+    assert_eq!(r.kind(), RESP_ACK);
+    assert_eq!(state(&mut player), (1, 0), "paused");
+    assert_eq!(player.request(log, 4, &[]).kind(), RESP_ACK, "rewind");
+    assert_eq!(player.request(log, 2, &1u32.to_be_bytes()).kind(), RESP_ACK);
+    // What was queued before the pause may still come; then the start again.
+    let deadline = Instant::now() + DEADLINE;
+    loop {
+        assert!(Instant::now() < deadline, "no data from the log's start");
+        let m = player.recv();
+        if m.kind() == DATA && m.timestamp < last && m.timestamp < 1.0 {
+            break;
+        }
+    }
+    assert!(launcher.terminate().success(), "{}", launcher.stderr());
+}
+
+#[test]
+fn writelog_records_stage_s_simple_world_in_player_s_format() {
+    let Some(world) = compat("stage/simple.world") else {
+        return;
+    };
+    let dir = std::env::temp_dir().join(troupe_tests::unique_namespace("writelog"));
+    std::fs::create_dir_all(&dir).unwrap();
+    let log = dir.join("r0.log");
+    // ../shared/compat/player-log/writelog_sim.cfg, its file names absolute.
+    let cfg = dir.join("writelog.cfg");
+    std::fs::write(
+        &cfg,
+        format!(
+            "driver ( name \"stage\" provides [\"simulation:0\"] plugin \"stageplugin\" worldfile \"{}\" usegui 0 )\n\
+             driver ( name \"stage\" provides [\"position2d:0\" \"ranger:0\" \"ranger:1\"] model \"r0\" )\n\
+             driver ( name \"rangertolaser\" provides [\"laser:0\"] requires [\"ranger:1\"] )\n\
+             driver ( name \"writelog\" provides [\"log:0\"] requires [\"position2d:0\" \"laser:0\" \"ranger:0\" \"ranger:1\"] filename \"{}\" alwayson 1 )\n",
+            world.display(),
+            log.display()
+        ),
+    )
+    .unwrap();
+    let ns = troupe_tests::unique_namespace("writelog");
+    let mut launcher = troupe_tests::launch(&ns, &cfg, &["--speedup", "4"]);
+    let (router, _) = ports(&mut launcher);
+    let session = troupe_tests::client_at(&router, &ns);
+    troupe_tests::wait_live(&session, &["6665:log:0"]);
+    // What the laser published, stamp by stamp, while writelog logged it.
+    let sub = session
+        .declare_subscriber(keys::data(&Device::new(6665, Interface::Laser, 0)))
+        .wait()
+        .unwrap();
+    let mut seen = Vec::new();
+    while seen.len() < 20 {
+        let s = sub
+            .recv_deadline(Instant::now() + DEADLINE)
+            .unwrap()
+            .expect("laser scans");
+        let scan = troupe_msgs::decode::<laser::Scan>(&s.payload().to_bytes()).unwrap();
+        seen.push(scan);
+    }
+    drop(sub);
+    assert!(launcher.terminate().success(), "{}", launcher.stderr());
+
+    let mut text = String::new();
+    std::fs::File::open(&log)
+        .unwrap()
+        .read_to_string(&mut text)
+        .unwrap();
+    assert!(
+        text.starts_with("## Player version 3.1.1-dev \n## File version 0.3.0 \n## Format: \n"),
+        "{}",
+        &text[..200.min(text.len())]
+    );
+    let lines = read_log(&text);
+    // Geometries first, in `requires` order, then data.
+    let first_data = lines.iter().position(|l| l.kind == 1).unwrap();
+    let geoms: Vec<(String, u32, u32)> = lines[..first_data]
+        .iter()
+        .map(|l| (l.interface.clone(), l.index, l.subtype))
+        .collect();
+    assert_eq!(
+        geoms,
+        [
+            ("position2d".into(), 0, 1),
+            ("laser".into(), 0, 1),
+            ("ranger".into(), 0, 1),
+            ("ranger".into(), 0, 5),
+            ("ranger".into(), 1, 1),
+            ("ranger".into(), 1, 5),
+        ]
+        .map(|(i, n, s): (String, u32, u32)| (i, n, s))
+    );
+    assert!(lines[first_data..]
+        .iter()
+        .all(|l| l.kind == 1 && l.robot == 6665));
+    // The laser's geometry line: pose x y yaw, length, width (5 fields).
+    assert_eq!(lines[1].payload.len(), 5);
+    // Each scan seen is logged at its stamp, range for range (%.3f).
+    for scan in &seen {
+        let Some(l) = lines
+            .iter()
+            .find(|l| l.interface == "laser" && l.kind == 1 && (l.time - scan.stamp).abs() < 5e-4)
+        else {
+            panic!("no laser line at t={}", scan.stamp);
+        };
+        let ranges = logged_ranges(l);
+        assert_eq!(ranges.len(), scan.msg.ranges.len());
+        for (logged, sent) in ranges.iter().zip(&scan.msg.ranges) {
+            assert!(
+                (logged - f64::from(*sent)).abs() <= 5.1e-4,
+                "{logged} vs {sent}"
+            );
+        }
+        assert_eq!(
+            l.payload[1],
+            (f64::from(scan.msg.min_angle) * 1e4).round() / 1e4
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_damaged_log_says_where_and_replays_the_rest() {
+    let dir = std::env::temp_dir().join(troupe_tests::unique_namespace("badlog"));
+    std::fs::create_dir_all(&dir).unwrap();
+    let log = dir.join("bad.log");
+    let mut text = String::from("## Player version 3.1.1-dev \n## File version 0.3.0 \n");
+    for i in 0..30 {
+        let t = 0.1 * f64::from(i + 1);
+        match i {
+            // A garbled field, a line cut short, and a truncated last line.
+            5 => text.push_str("0000000000.600 16777343 6665 position2d 00 001 001 +00.100 zz\n"),
+            9 | 12 => text.push_str("0000000001.000 16777343 6665 position2d\n"),
+            _ => text.push_str(&format!(
+                "{t:014.3} 16777343 6665 position2d 00 001 001 {:+07.3} +00.000 +0.000 +00.000 +00.000 +00.000 0\n",
+                f64::from(i)
+            )),
+        }
+    }
+    text.push_str("0000000003.100 16777343 6665 position2d 00 001");
+    std::fs::write(&log, text).unwrap();
+    let cfg = dir.join("readlog.cfg");
+    std::fs::write(
+        &cfg,
+        format!(
+            "driver ( name \"readlog\" filename \"{}\" provides [\"log:0\" \"position2d:0\"] speed 20 autorewind 1 )\n",
+            log.display()
+        ),
+    )
+    .unwrap();
+    let ns = troupe_tests::unique_namespace("badlog");
+    let mut launcher = troupe_tests::launch(&ns, &cfg, &[]);
+    let (router, _) = ports(&mut launcher);
+    let session = troupe_tests::client_at(&router, &ns);
+    let sub = session
+        .declare_subscriber(keys::data(&Device::new(6665, Interface::Position2d, 0)))
+        .wait()
+        .unwrap();
+    troupe_tests::wait_live(&session, &["6665:position2d:0"]);
+    // The last good line (x = 29) arrives: the rest replayed past the damage.
+    loop {
+        let s = sub
+            .recv_deadline(Instant::now() + DEADLINE)
+            .unwrap()
+            .expect("the log's poses");
+        let d =
+            troupe_msgs::decode::<troupe_msgs::position2d::Data>(&s.payload().to_bytes()).unwrap();
+        if d.msg.pose.x == 29.0 {
+            break;
+        }
+    }
+    assert!(launcher.terminate().success());
+    let err = launcher.stderr();
+    let name = log.display().to_string();
+    assert!(
+        err.contains(&format!(
+            "{name}:8: position2d payload field 2 `zz` is not a number"
+        )),
+        "{err}"
+    );
+    assert!(
+        err.contains(&format!("{name}:12: incomplete line: 4 fields")),
+        "{err}"
+    );
+    assert!(
+        err.contains("2 lines skipped for: incomplete line: 4 fields"),
+        "{err}"
+    );
+    assert!(
+        err.contains(&format!("{name}:33: incomplete line: 6 fields")),
+        "{err}"
+    );
+    assert!(!err.contains("panicked"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        let dest = to.join(e.file_name());
+        if e.file_type().unwrap().is_dir() {
+            copy_dir(&e.path(), &dest);
+        } else {
+            std::fs::copy(e.path(), &dest).unwrap();
+        }
+    }
+}
+
+/// `troupe launch CFG` in namespace `ns`, run from `dir` (writelog's file
+/// names are taken from where it runs).
+fn launch_in(dir: &Path, ns: &str, cfg: &str, extra: &[&str]) -> Proc {
+    let mut cmd = std::process::Command::new(troupe_tests::troupe_bin());
+    cmd.current_dir(dir).args([
+        "--namespace",
+        ns,
+        "launch",
+        cfg,
+        "--listen",
+        "tcp/127.0.0.1:0",
+        "--bridge-any-port",
+    ]);
+    cmd.args(extra);
+    Proc::start(cfg, &mut cmd)
+}
+
+/// Where r0 truly is, from its logged odometry (gps: exact, from r0's
+/// start at -6, -6, 45° in wander.world).
+fn truth(odom: &[f64]) -> (f64, f64) {
+    let (s, c) = std::f64::consts::FRAC_PI_4.sin_cos();
+    (
+        -6.0 + odom[0] * c - odom[1] * s,
+        -6.0 + odom[0] * s + odom[1] * c,
+    )
+}
+
+/// Mean distance from each estimate after `after` s to the truth at its stamp.
+fn mean_error(estimates: &[(f64, f64, f64)], logged: &[Logged], after: f64) -> (f64, usize) {
+    let errors: Vec<f64> = estimates
+        .iter()
+        .filter(|e| e.0 >= after)
+        .filter_map(|&(t, x, y)| {
+            let odom = logged.iter().find(|l| {
+                l.interface == "position2d" && l.kind == 1 && (l.time - t).abs() < 5e-4
+            })?;
+            let (tx, ty) = truth(&odom.payload);
+            Some((x - tx).hypot(y - ty))
+        })
+        .collect();
+    (
+        errors.iter().sum::<f64>() / errors.len().max(1) as f64,
+        errors.len(),
+    )
+}
+
+/// README's "drive, record, localize offline": worlds/record.cfg records r0
+/// wandering (odometry, laser, the live amcl's estimates) with writelog;
+/// worlds/replay.cfg replays the log into amcl with no simulator running,
+/// and amcl localizes as it did live.
+#[test]
+fn a_recorded_run_localizes_offline_as_it_did_live() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let dir = std::env::temp_dir().join(troupe_tests::unique_namespace("offline"));
+    copy_dir(&root.join("worlds"), &dir.join("worlds"));
+
+    // Drive and record 16 simulated seconds, at four times real time.
+    let ns = troupe_tests::unique_namespace("record");
+    let mut rec = launch_in(&dir, &ns, "worlds/record.cfg", &["--speedup", "4"]);
+    let (router, _) = ports(&mut rec);
+    let session = troupe_tests::client_at(&router, &ns);
+    let odom = session
+        .declare_subscriber(keys::data(&Device::new(6665, Interface::Position2d, 0)))
+        .wait()
+        .unwrap();
+    troupe_tests::wait_live(&session, &["6665:log:0"]);
+    loop {
+        let s = odom
+            .recv_deadline(Instant::now() + DEADLINE)
+            .unwrap()
+            .expect("r0's odometry");
+        let d =
+            troupe_msgs::decode::<troupe_msgs::position2d::Data>(&s.payload().to_bytes()).unwrap();
+        if d.stamp >= 16.0 {
+            break;
+        }
+    }
+    drop(odom);
+    assert!(rec.terminate().success(), "{}", rec.stderr());
+    let logged = read_log(&std::fs::read_to_string(dir.join("r0.log")).unwrap());
+    let live: Vec<(f64, f64, f64)> = logged
+        .iter()
+        .filter(|l| l.interface == "localize" && l.kind == 1 && l.payload[2] >= 1.0)
+        .map(|l| (l.time, l.payload[3], l.payload[4]))
+        .collect();
+    let end = logged
+        .iter()
+        .filter(|l| l.interface == "position2d" && l.kind == 1)
+        .map(|l| l.time)
+        .fold(0.0, f64::max);
+    let moved = logged
+        .iter()
+        .filter(|l| l.interface == "position2d" && l.kind == 1)
+        .map(|l| l.payload[0].hypot(l.payload[1]))
+        .fold(0.0, f64::max);
+    assert!(moved > 1.0, "r0 wandered only {moved} m");
+
+    // Replay into amcl, with no simulator: its estimates until the log's end.
+    let ns = troupe_tests::unique_namespace("replay");
+    let mut rep = launch_in(&dir, &ns, "worlds/replay.cfg", &[]);
+    let (router, _) = ports(&mut rep);
+    let session = troupe_tests::client_at(&router, &ns);
+    let est = session
+        .declare_subscriber(keys::data(&Device::new(6665, Interface::Localize, 0)))
+        .wait()
+        .unwrap();
+    let mut offline = Vec::new();
+    loop {
+        let s = est
+            .recv_deadline(Instant::now() + DEADLINE)
+            .unwrap()
+            .expect("amcl's offline estimates");
+        let h =
+            troupe_msgs::decode::<troupe_msgs::localize::Hypoths>(&s.payload().to_bytes()).unwrap();
+        if let Some(best) = h.msg.hypoths.first() {
+            offline.push((h.stamp, best.mean.x, best.mean.y));
+        }
+        if h.stamp >= end - 1.5 {
+            break;
+        }
+    }
+    assert!(rep.terminate().success(), "{}", rep.stderr());
+    let (live_err, n_live) = mean_error(&live, &logged, 5.0);
+    let (offline_err, n_offline) = mean_error(&offline, &logged, 5.0);
+    eprintln!(
+        "logs: amcl mean error after 5 s: live {live_err:.3} m ({n_live} estimates), offline from the log {offline_err:.3} m ({n_offline})"
+    );
+    assert!(
+        n_live >= 5 && n_offline >= 5,
+        "{n_live} live, {n_offline} offline"
+    );
+    assert!(
+        live_err < 0.2 && offline_err < 0.2,
+        "live {live_err}, offline {offline_err}"
+    );
+    assert!(
+        (offline_err - live_err).abs() < 0.02,
+        "offline {offline_err:.3} m against live {live_err:.3} m"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
