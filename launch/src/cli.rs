@@ -170,6 +170,32 @@ certificate: a host whose certificate another authority signed, or that has
 none, cannot join.")]
     FleetKeys(crate::keys::KeysArgs),
 
+    /// Record devices' samples (default: all of them, and the clock) to an MCAP file.
+    #[command(after_help = "Examples:
+  troupe record -o run.mcap                       # every device and sim/clock, until Ctrl-C
+  troupe record 'robot/6665/**' -o r0.mcap --duration 60
+  troupe record -o fleet.mcap --split-size 500 --compress zstd   # fleet_0.mcap, fleet_1.mcap, …
+
+Each sample is kept byte for byte (schema tag, stamp, body) on an MCAP
+channel named by its key; devices' comings and goings too. A recorder
+that falls behind drops, counts and says so, and exits non-zero.")]
+    Record(crate::mcaplog::RecordArgs),
+
+    /// Publish a recording back onto its keys, at any speed.
+    #[command(after_help = "Examples:
+  troupe play run.mcap                            # as recorded, sim/clock included
+  troupe play run.mcap --rate 10 --start 5 --end 65
+  troupe play run.mcap --remap 6665=7000 --loop
+  troupe --namespace replay play run.mcap         # beside a live fleet
+
+The devices the recording saw live are declared live while it plays, so a
+stack's `requires` (amcl on laser:0) are met by the replay.")]
+    Play(crate::mcaplog::PlayArgs),
+
+    /// Look into a recording: `info`, or `export` it as JSON lines or a Player log.
+    #[command(subcommand)]
+    Log(crate::mcaplog::LogCmd),
+
     /// List the drivers this build can run.
     Drivers,
 

@@ -13,6 +13,7 @@ mod docker;
 mod drivers;
 mod emulate;
 mod keys;
+mod mcaplog;
 mod navbench;
 mod plan;
 mod serialbench;
@@ -55,6 +56,9 @@ fn run(cli: cli::Cli) -> anyhow::Result<()> {
         Command::Hz(a) => tools::hz(a, z),
         Command::Ready(a) => tools::ready(a, z),
         Command::Router(a) => tools::router(a, z),
+        Command::Record(a) => mcaplog::record(a, z),
+        Command::Play(a) => mcaplog::play(a, z),
+        Command::Log(c) => mcaplog::log(c),
         Command::Emulate(a) => emulate::run(a, z),
         Command::Drivers => tools::print_drivers(),
         Command::Interfaces => tools::print_interfaces(),

@@ -535,3 +535,133 @@ fn a_recorded_run_localizes_offline_as_it_did_live() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `troupe record` of a launched Stage run, `troupe log info` on it, and
+/// `troupe play --rate 10` into another namespace with no simulator: every
+/// recorded sample arrives, in order, byte for byte, in a tenth of the time.
+#[test]
+fn a_recorded_stage_run_plays_back_in_order_ten_times_faster() {
+    let dir = std::env::temp_dir().join(troupe_tests::unique_namespace("mcap"));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("run.mcap");
+    let cfg = Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/simple.cfg");
+    let ns = troupe_tests::unique_namespace("record");
+    let mut launcher = troupe_tests::launch(&ns, &cfg, &[]);
+    let (router, _) = ports(&mut launcher);
+    let session = troupe_tests::client_at(&router, &ns);
+    troupe_tests::wait_live(&session, &["6665:laser:0", "6665:position2d:0"]);
+    let net = ["--connect", &router, "--namespace", &ns, "--no-multicast"];
+    let (status, out, err) = troupe_tests::troupe_output(&troupe_tests::strings(
+        &[
+            &net[..],
+            &["record", "-o", file.to_str().unwrap(), "--duration", "3"],
+        ]
+        .concat(),
+    ));
+    assert!(status.success(), "{out}{err}");
+    assert!(out.contains("0 dropped"), "{out}");
+    assert!(launcher.terminate().success());
+
+    let (status, info, err) = troupe_tests::troupe_output(&troupe_tests::strings(&[
+        "log",
+        "info",
+        file.to_str().unwrap(),
+    ]));
+    assert!(status.success(), "{err}");
+    for want in [
+        "robot/6665/laser/0",
+        "laser/scan@1",
+        "sim/clock",
+        "liveliness",
+    ] {
+        assert!(info.contains(want), "{want} not in\n{info}");
+    }
+    let duration: f64 = info
+        .lines()
+        .find_map(|l| l.strip_prefix("duration:"))
+        .and_then(|d| d.trim().trim_end_matches(" s").parse().ok())
+        .unwrap_or_else(|| panic!("no duration in\n{info}"));
+    assert!(duration > 2.0, "{info}");
+    // What the file holds, in order, from its JSON export.
+    let (status, json, _) = troupe_tests::troupe_output(&troupe_tests::strings(&[
+        "log",
+        "export",
+        file.to_str().unwrap(),
+    ]));
+    assert!(status.success());
+    let recorded: Vec<(String, f64)> = json
+        .lines()
+        .map(|l| {
+            let v: serde_json::Value = serde_json::from_str(l).unwrap();
+            (
+                v["key"].as_str().unwrap().to_owned(),
+                v["stamp"].as_f64().unwrap(),
+            )
+        })
+        .collect();
+    assert!(recorded.len() > 100, "{} messages", recorded.len());
+
+    // Played into another namespace, on a router of its own.
+    let mut router = Proc::troupe(
+        "router",
+        &troupe_tests::strings(&["router", "--listen", "tcp/127.0.0.1:0"]),
+    );
+    let at = router.endpoint("troupe router listening on");
+    let ns = troupe_tests::unique_namespace("play");
+    let session = troupe_tests::client_at(&at, &ns);
+    let (tx, rx) = std::sync::mpsc::channel();
+    let _subs: Vec<_> = ["robot/**", "sim/clock"]
+        .iter()
+        .map(|k| {
+            let tx = tx.clone();
+            session
+                .declare_subscriber(*k)
+                .callback(move |s| {
+                    let payload = s.payload().to_bytes().into_owned();
+                    let _ = tx.send((s.key_expr().as_str().to_owned(), payload));
+                })
+                .wait()
+                .unwrap()
+        })
+        .collect();
+    let (status, out, err) = troupe_tests::troupe_output(&troupe_tests::strings(&[
+        "--connect",
+        &at,
+        "--namespace",
+        &ns,
+        "--no-multicast",
+        "play",
+        file.to_str().unwrap(),
+        "--rate",
+        "10",
+    ]));
+    assert!(status.success(), "{out}{err}");
+    let took: f64 = out
+        .split(" in ")
+        .nth(1)
+        .and_then(|r| r.split(" s").next())
+        .and_then(|t| t.parse().ok())
+        .unwrap_or_else(|| panic!("no time in {out}"));
+    eprintln!("logs: {duration:.2} s recorded, played at --rate 10 in {took:.3} s: {out}");
+    assert!(
+        took > duration / 10.0 * 0.8 && took < duration / 10.0 + 0.5,
+        "{duration} s played in {took} s"
+    );
+    let mut got = Vec::new();
+    while got.len() < recorded.len() {
+        let (key, payload) = rx
+            .recv_timeout(DEADLINE)
+            .unwrap_or_else(|_| panic!("{} of {} messages arrived", got.len(), recorded.len()));
+        let (_, stamp, _) = troupe_msgs::codec::split(&payload).unwrap();
+        got.push((key, stamp));
+    }
+    // Stamps to the microsecond: serde_json reads floats to within an ulp.
+    let us = |v: &[(String, f64)]| -> Vec<(String, i64)> {
+        v.iter()
+            .map(|(k, t)| (k.clone(), (t * 1e6).round() as i64))
+            .collect()
+    };
+    assert_eq!(us(&got), us(&recorded), "every message, in order");
+    assert!(router.terminate().success());
+    let _ = std::fs::remove_dir_all(&dir);
+}

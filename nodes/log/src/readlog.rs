@@ -69,7 +69,9 @@ const BATCH: usize = 2000;
 /// The readlog driver.
 pub struct ReadLog {
     path: PathBuf,
-    file: std::io::BufReader<std::fs::File>,
+    /// Opened at setup, as Player's readlog opened it (a plan may name a
+    /// log that a writelog has yet to write).
+    file: Option<std::io::BufReader<std::fs::File>>,
     line_no: u64,
     log: Option<Device>,
     devices: Vec<Device>,
@@ -100,8 +102,6 @@ impl Driver for ReadLog {
         let path = o
             .filename
             .ok_or_else(|| bad("must specify a log file to read from (`filename`)".into()))?;
-        let file = std::fs::File::open(&path)
-            .map_err(|e| bad(format!("unable to open {}: {e}", path.display())))?;
         let speed = o.speed.unwrap_or(1.0);
         if !(speed.is_finite() && speed > 0.0) {
             return Err(bad(format!("speed {speed}: expected a factor above 0")));
@@ -117,7 +117,7 @@ impl Driver for ReadLog {
         }
         Ok(ReadLog {
             path,
-            file: std::io::BufReader::new(file),
+            file: None,
             line_no: 0,
             log,
             devices,
@@ -135,6 +135,13 @@ impl Driver for ReadLog {
     }
 
     fn setup(&mut self, ctx: &mut Ctx) -> Result<()> {
+        let file = std::fs::File::open(&self.path).map_err(|e| {
+            NodeError::config(
+                Self::NAME,
+                format!("unable to open {}: {e}", self.path.display()),
+            )
+        })?;
+        self.file = Some(std::io::BufReader::new(file));
         ctx.set_time(0.0)?;
         // The answers at the front are known before any client asks.
         self.read_next(ctx)?;
@@ -194,7 +201,10 @@ impl ReadLog {
 
     fn rewind(&mut self, ctx: &mut Ctx) -> Result<()> {
         self.summarize();
-        if let Err(e) = self.file.seek(std::io::SeekFrom::Start(0)) {
+        let Some(file) = self.file.as_mut() else {
+            return Ok(());
+        };
+        if let Err(e) = file.seek(std::io::SeekFrom::Start(0)) {
             tracing::warn!("while rewinding {}: {e}; going on", self.path.display());
             return Ok(());
         }
@@ -263,7 +273,10 @@ impl ReadLog {
         let mut buf = Vec::new();
         loop {
             buf.clear();
-            match self.file.read_until(b'\n', &mut buf) {
+            let Some(file) = self.file.as_mut() else {
+                return Ok(());
+            };
+            match file.read_until(b'\n', &mut buf) {
                 Ok(0) => return Ok(()),
                 Ok(_) => {}
                 Err(e) => {

@@ -1,0 +1,723 @@
+//! `troupe record`, `troupe play` and `troupe log`: a fleet's samples in MCAP,
+//! the container rosbag2 and Foxglove read.
+//!
+//! One MCAP channel per key and schema tag (a ranger's ranges and
+//! intensities share a key); the message bytes are the sample's payload
+//! exactly as it travelled (schema tag, stamp, postcard body). A message's
+//! `log_time` is when the recorder received it (ns since the Unix epoch),
+//! its `publish_time` the sample's own stamp (ns; simulation time under a
+//! simulator). Devices' liveliness goes on channels of encoding
+//! `troupe/liveliness` (one byte: 1 = came, 0 = went), so a replay can say
+//! which drivers provided what, and declares those devices live again.
+
+use std::collections::{BTreeMap, HashMap};
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant, SystemTime};
+
+use anyhow::Context;
+use clap::{Args, Subcommand, ValueEnum};
+use troupe_msgs::{codec, decode_any, keys};
+use troupe_node::zenoh::{sample::SampleKind, Wait};
+use troupe_node::{Mode, ZenohArgs};
+
+/// The message encoding of recorded samples.
+pub const ENCODING: &str = "troupe/postcard";
+/// The message encoding of liveliness events.
+pub const LIVELINESS: &str = "troupe/liveliness";
+
+/// Flags of `troupe record`.
+#[derive(Debug, Args)]
+pub struct RecordArgs {
+    /// Key expressions to record (default: every device's data, `robot/*/*/*`,
+    /// and the simulation clock, `sim/clock`).
+    pub keys: Vec<String>,
+    /// The file to write (with splitting: NAME_0.mcap, NAME_1.mcap, …).
+    #[arg(short = 'o', long, value_name = "FILE", default_value = "troupe.mcap")]
+    pub output: PathBuf,
+    /// Stop after this many seconds (default: at Ctrl-C or SIGTERM).
+    #[arg(long, value_name = "SECS")]
+    pub duration: Option<f64>,
+    /// Start a new file after this many megabytes.
+    #[arg(long, value_name = "MB")]
+    pub split_size: Option<f64>,
+    /// Start a new file after this many seconds.
+    #[arg(long, value_name = "SECS")]
+    pub split_duration: Option<f64>,
+    /// Compress chunks.
+    #[arg(long, value_enum, default_value_t = Compress::None)]
+    pub compress: Compress,
+    /// Samples waiting for the disk before the recorder drops (and counts) new ones.
+    #[arg(long, value_name = "N", default_value_t = 100_000)]
+    pub queue: usize,
+}
+
+/// Chunk compression.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Compress {
+    /// None: the fastest to write.
+    None,
+    /// zstd, as rosbag2 and Foxglove write.
+    Zstd,
+}
+
+/// Flags of `troupe play`.
+#[derive(Debug, Args)]
+pub struct PlayArgs {
+    /// An MCAP file written by `troupe record`.
+    pub file: PathBuf,
+    /// Speed: 2 plays twice as fast as recorded; 0 as fast as the network takes it.
+    #[arg(long, value_name = "X", default_value_t = 1.0)]
+    pub rate: f64,
+    /// Skip the first SECS of the recording.
+    #[arg(long, value_name = "SECS", default_value_t = 0.0)]
+    pub start: f64,
+    /// Stop SECS into the recording.
+    #[arg(long, value_name = "SECS")]
+    pub end: Option<f64>,
+    /// Start again at the end, until Ctrl-C.
+    #[arg(long = "loop")]
+    pub repeat: bool,
+    /// Publish robot FROM's keys as robot TO's (repeatable), e.g. `6665=7000`.
+    #[arg(long, value_name = "FROM=TO")]
+    pub remap: Vec<String>,
+}
+
+/// `troupe log …`.
+#[derive(Debug, Subcommand)]
+pub enum LogCmd {
+    /// What a recording holds: duration, devices, messages and rates, size.
+    Info {
+        /// An MCAP file written by `troupe record`.
+        file: PathBuf,
+    },
+    /// A recording as JSON lines or as a Player text log.
+    Export {
+        /// An MCAP file written by `troupe record`.
+        file: PathBuf,
+        /// `json`: one object per message; `player`: Player's text log format.
+        #[arg(long, value_enum, default_value_t = Format::Json)]
+        format: Format,
+    },
+}
+
+/// Export formats.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Format {
+    /// One JSON object per line: time, key, stamp, the decoded message.
+    Json,
+    /// Player's text log (what readlog reads).
+    Player,
+}
+
+fn now_ns() -> u64 {
+    SystemTime::now()
+        .duration_since(SystemTime::UNIX_EPOCH)
+        .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
+}
+
+fn secs_ns(s: f64) -> u64 {
+    if s.is_finite() && s > 0.0 {
+        (s * 1e9) as u64
+    } else {
+        0
+    }
+}
+
+/// What the recorder hears: a sample or a liveliness event.
+enum Heard {
+    Sample {
+        key: String,
+        payload: Vec<u8>,
+        at: u64,
+    },
+    Token {
+        key: String,
+        came: bool,
+        at: u64,
+    },
+}
+
+/// The files of one recording and what is in them so far.
+struct Files {
+    base: PathBuf,
+    split: bool,
+    compress: Compress,
+    index: usize,
+    writer: Option<mcap::Writer<std::io::BufWriter<std::fs::File>>>,
+    path: PathBuf,
+    opened_at: u64,
+    bytes: u64,
+    channels: HashMap<(String, String), u16>,
+    sequence: HashMap<u16, u32>,
+    written: Vec<PathBuf>,
+}
+
+impl Files {
+    fn open(&mut self, at: u64) -> anyhow::Result<()> {
+        self.path = if self.split {
+            let stem = self
+                .base
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "troupe".into());
+            self.base
+                .with_file_name(format!("{stem}_{}.mcap", self.index))
+        } else {
+            self.base.clone()
+        };
+        self.index += 1;
+        let f = std::fs::File::create(&self.path)
+            .with_context(|| format!("creating {}", self.path.display()))?;
+        let w = mcap::WriteOptions::new()
+            .profile("troupe")
+            .compression(match self.compress {
+                Compress::None => None,
+                Compress::Zstd => Some(mcap::Compression::Zstd),
+            })
+            .create(std::io::BufWriter::new(f))
+            .with_context(|| format!("writing {}", self.path.display()))?;
+        self.writer = Some(w);
+        self.opened_at = at;
+        self.bytes = 0;
+        self.channels.clear();
+        self.sequence.clear();
+        self.written.push(self.path.clone());
+        Ok(())
+    }
+
+    fn close(&mut self) -> anyhow::Result<()> {
+        if let Some(mut w) = self.writer.take() {
+            w.finish()
+                .with_context(|| format!("finishing {}", self.path.display()))?;
+        }
+        Ok(())
+    }
+
+    /// Writes one message on the channel of `key` and `schema`.
+    fn write(
+        &mut self,
+        key: &str,
+        schema: &str,
+        encoding: &str,
+        data: &[u8],
+        log_time: u64,
+        publish_time: u64,
+    ) -> anyhow::Result<()> {
+        let path = self.path.display().to_string();
+        let Some(w) = self.writer.as_mut() else {
+            return Ok(());
+        };
+        let id = match self.channels.get(&(key.to_owned(), schema.to_owned())) {
+            Some(&id) => id,
+            None => {
+                let schema_id = w
+                    .add_schema(schema, encoding, &[])
+                    .with_context(|| format!("writing {path}"))?;
+                let id = w
+                    .add_channel(schema_id, key, encoding, &BTreeMap::new())
+                    .with_context(|| format!("writing {path}"))?;
+                self.channels
+                    .insert((key.to_owned(), schema.to_owned()), id);
+                id
+            }
+        };
+        let seq = self.sequence.entry(id).or_default();
+        *seq = seq.wrapping_add(1);
+        w.write_to_known_channel(
+            &mcap::records::MessageHeader {
+                channel_id: id,
+                sequence: *seq,
+                log_time,
+                publish_time,
+            },
+            data,
+        )
+        .with_context(|| format!("writing {path}"))?;
+        self.bytes += data.len() as u64 + 31;
+        Ok(())
+    }
+}
+
+/// `troupe record`.
+pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
+    let exprs = if a.keys.is_empty() {
+        vec!["robot/*/*/*".to_owned(), "sim/clock".to_owned()]
+    } else {
+        a.keys.clone()
+    };
+    let session = z.open(Mode::Client)?;
+    let (tx, rx) = std::sync::mpsc::sync_channel::<Heard>(a.queue.max(1));
+    let dropped = Arc::new(AtomicU64::new(0));
+    let mut subs = Vec::new();
+    for e in &exprs {
+        let (tx, dropped) = (tx.clone(), dropped.clone());
+        let sub = session
+            .declare_subscriber(e.as_str())
+            .callback(move |s| {
+                let h = Heard::Sample {
+                    key: s.key_expr().as_str().to_owned(),
+                    payload: s.payload().to_bytes().into_owned(),
+                    at: now_ns(),
+                };
+                if tx.try_send(h).is_err() {
+                    dropped.fetch_add(1, Ordering::Relaxed);
+                }
+            })
+            .wait()
+            .map_err(|e| anyhow::anyhow!("subscribing to {e}"))?;
+        subs.push(sub);
+    }
+    let tokens = {
+        let (tx, dropped) = (tx.clone(), dropped.clone());
+        session
+            .liveliness()
+            .declare_subscriber("robot/**")
+            .history(true)
+            .callback(move |s| {
+                let h = Heard::Token {
+                    key: s.key_expr().as_str().to_owned(),
+                    came: s.kind() == SampleKind::Put,
+                    at: now_ns(),
+                };
+                if tx.try_send(h).is_err() {
+                    dropped.fetch_add(1, Ordering::Relaxed);
+                }
+            })
+            .wait()
+            .map_err(|e| anyhow::anyhow!("watching liveliness: {e}"))?
+    };
+    drop(tx);
+    eprintln!(
+        "troupe record: {} to {}{} (Ctrl-C stops)",
+        exprs.join(" "),
+        a.output.display(),
+        if a.split_size.is_some() || a.split_duration.is_some() {
+            " (split)"
+        } else {
+            ""
+        }
+    );
+
+    let mut files = Files {
+        base: a.output.clone(),
+        split: a.split_size.is_some() || a.split_duration.is_some(),
+        compress: a.compress,
+        index: 0,
+        writer: None,
+        path: PathBuf::new(),
+        opened_at: 0,
+        bytes: 0,
+        channels: HashMap::new(),
+        sequence: HashMap::new(),
+        written: Vec::new(),
+    };
+    files.open(now_ns())?;
+    let split_bytes = a.split_size.map(|mb| (mb * 1e6) as u64);
+    let split_ns = a.split_duration.map(secs_ns);
+    let writer = std::thread::spawn(move || -> anyhow::Result<(Files, u64, u64)> {
+        let (mut count, mut bytes) = (0u64, 0u64);
+        let mut failed: Option<anyhow::Error> = None;
+        for h in rx {
+            if failed.is_some() {
+                continue;
+            }
+            let at = match &h {
+                Heard::Sample { at, .. } | Heard::Token { at, .. } => *at,
+            };
+            if split_bytes.is_some_and(|b| files.bytes >= b)
+                || split_ns.is_some_and(|d| at.saturating_sub(files.opened_at) >= d)
+            {
+                if let Err(e) = files.close().and_then(|()| files.open(at)) {
+                    failed = Some(e);
+                    continue;
+                }
+            }
+            let r = match &h {
+                Heard::Sample { key, payload, at } => {
+                    let (schema, stamp) = match codec::split(payload) {
+                        Ok((tag, stamp, _)) => (tag.to_owned(), secs_ns(stamp)),
+                        Err(_) => ("?".to_owned(), 0),
+                    };
+                    bytes += payload.len() as u64;
+                    files.write(key, &schema, ENCODING, payload, *at, stamp)
+                }
+                Heard::Token { key, came, at } => {
+                    files.write(key, "liveliness", LIVELINESS, &[u8::from(*came)], *at, *at)
+                }
+            };
+            match r {
+                Ok(()) => count += 1,
+                Err(e) => {
+                    // Said at once; what was written before stays readable.
+                    eprintln!("troupe record: {e:#}; recording stopped after {count} messages");
+                    let _ = files.close();
+                    failed = Some(e);
+                }
+            }
+        }
+        if let Some(e) = failed {
+            return Err(e);
+        }
+        files.close()?;
+        Ok((files, count, bytes))
+    });
+
+    // Until a signal or the duration; the drop count is said as it grows.
+    let (stop_tx, stop_rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = crate::tools::wait_for_signal();
+        let _ = stop_tx.send(());
+    });
+    let started = Instant::now();
+    let deadline = a
+        .duration
+        .map(|d| started + Duration::from_secs_f64(d.max(0.0)));
+    let mut said = 0;
+    loop {
+        let tick = Duration::from_secs(1);
+        let wait = deadline.map_or(tick, |d| {
+            d.saturating_duration_since(Instant::now()).min(tick)
+        });
+        match stop_rx.recv_timeout(wait) {
+            Ok(()) | Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => break,
+            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
+        }
+        let n = dropped.load(Ordering::Relaxed);
+        if n > said {
+            tracing::warn!(
+                "the recorder is behind: {} samples dropped so far (--queue {} full)",
+                n,
+                a.queue
+            );
+            said = n;
+        }
+        if deadline.is_some_and(|d| Instant::now() >= d) {
+            break;
+        }
+    }
+    drop(subs);
+    drop(tokens);
+    drop(session);
+    let (files, count, bytes) = writer
+        .join()
+        .map_err(|_| anyhow::anyhow!("the recorder's writer thread panicked"))??;
+    let secs = started.elapsed().as_secs_f64();
+    let dropped = dropped.load(Ordering::Relaxed);
+    let mut out = std::io::stdout().lock();
+    writeln!(
+        out,
+        "recorded {count} messages ({:.1} MB of samples) in {secs:.1} s to {}; {dropped} dropped",
+        bytes as f64 / 1e6,
+        files
+            .written
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    )?;
+    if dropped > 0 {
+        anyhow::bail!("{dropped} samples were dropped: the disk did not keep up (a larger --queue, or --compress none, may)");
+    }
+    Ok(())
+}
+
+/// A whole recording, read into memory (play and export go through it all).
+fn read_all(path: &Path) -> anyhow::Result<Vec<u8>> {
+    std::fs::read(path).with_context(|| format!("reading {}", path.display()))
+}
+
+/// A recording's summary, read from its end without reading its messages.
+fn summary(path: &Path) -> anyhow::Result<(u64, Option<mcap::Summary>)> {
+    use mcap::sans_io::summary_reader::{SummaryReadEvent, SummaryReader, SummaryReaderOptions};
+    use std::io::{Read as _, Seek as _};
+    let mut f = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
+    let size = f.metadata()?.len();
+    let mut r =
+        SummaryReader::new_with_options(SummaryReaderOptions::default().with_file_size(size));
+    while let Some(event) = r.next_event() {
+        match event {
+            Ok(SummaryReadEvent::ReadRequest(n)) => {
+                let read = f.read(r.insert(n))?;
+                r.notify_read(read);
+            }
+            Ok(SummaryReadEvent::SeekRequest(to)) => {
+                let pos = f.seek(to)?;
+                r.notify_seeked(pos);
+            }
+            Err(_) => return Ok((size, None)),
+        }
+    }
+    Ok((size, r.finish()))
+}
+
+/// `FROM=TO` robot remappings.
+fn remaps(list: &[String]) -> anyhow::Result<Vec<(String, String)>> {
+    list.iter()
+        .map(|r| {
+            let (from, to) = r
+                .split_once('=')
+                .with_context(|| format!("--remap {r}: expected FROM=TO, e.g. 6665=7000"))?;
+            let from: u32 = from
+                .parse()
+                .with_context(|| format!("--remap {r}: `{from}` is not a robot port"))?;
+            let to: u32 = to
+                .parse()
+                .with_context(|| format!("--remap {r}: `{to}` is not a robot port"))?;
+            Ok((format!("robot/{from}/"), format!("robot/{to}/")))
+        })
+        .collect()
+}
+
+fn remap(key: &str, remaps: &[(String, String)]) -> String {
+    for (from, to) in remaps {
+        if let Some(rest) = key.strip_prefix(from.as_str()) {
+            return format!("{to}{rest}");
+        }
+    }
+    key.to_owned()
+}
+
+/// `troupe play`.
+pub fn play(a: PlayArgs, z: &ZenohArgs) -> anyhow::Result<()> {
+    if !(a.rate.is_finite() && a.rate >= 0.0) {
+        anyhow::bail!(
+            "--rate {}: expected 0 (as fast as possible) or more",
+            a.rate
+        );
+    }
+    let remaps = remaps(&a.remap)?;
+    let buf = read_all(&a.file)?;
+    let name = a.file.display().to_string();
+    let session = z.open(Mode::Client)?;
+    // The devices the recording saw live are live again while it plays.
+    let mut live = Vec::new();
+    let mut publishers = HashMap::new();
+    let mut first: Option<u64> = None;
+    for m in mcap::MessageStream::new(&buf).with_context(|| format!("reading {name}"))? {
+        let Ok(m) = m else { break };
+        first = Some(first.map_or(m.log_time, |f: u64| f.min(m.log_time)));
+        if m.channel.message_encoding == LIVELINESS && m.data.first() == Some(&1) {
+            let key = remap(&m.channel.topic, &remaps);
+            if !live.contains(&key) {
+                live.push(key);
+            }
+        }
+    }
+    let first = first.with_context(|| format!("{name} holds no message"))?;
+    let tokens: Vec<_> = live
+        .iter()
+        .filter_map(|k| session.liveliness().declare_token(k.as_str()).wait().ok())
+        .collect();
+    let (from, to) = (
+        first + secs_ns(a.start),
+        a.end.map_or(u64::MAX, |e| first + secs_ns(e)),
+    );
+    let (stop_tx, stop_rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = crate::tools::wait_for_signal();
+        let _ = stop_tx.send(());
+    });
+    let started = Instant::now();
+    let (mut count, mut bytes) = (0u64, 0u64);
+    'passes: loop {
+        let pass = Instant::now();
+        for m in mcap::MessageStream::new(&buf).with_context(|| format!("reading {name}"))? {
+            let m = match m {
+                Ok(m) => m,
+                Err(e) => {
+                    eprintln!("troupe play: {name}: {e}; the rest of the file is unreadable");
+                    break;
+                }
+            };
+            if m.channel.message_encoding != ENCODING || m.log_time < from || m.log_time > to {
+                continue;
+            }
+            if a.rate > 0.0 {
+                let due = pass + Duration::from_secs_f64((m.log_time - from) as f64 / 1e9 / a.rate);
+                let now = Instant::now();
+                if due > now && stop_rx.recv_timeout(due - now).is_ok() {
+                    break 'passes;
+                }
+            } else if stop_rx.try_recv().is_ok() {
+                break 'passes;
+            }
+            let key = remap(&m.channel.topic, &remaps);
+            if !publishers.contains_key(&key) {
+                // Blocking, not dropping, when a subscriber lags: a
+                // replay delivers every message, at worst late.
+                let p = session
+                    .declare_publisher(key.clone())
+                    .congestion_control(troupe_node::zenoh::qos::CongestionControl::Block)
+                    .wait()
+                    .map_err(|e| anyhow::anyhow!("publishing on {key}: {e}"))?;
+                publishers.insert(key.clone(), p);
+            }
+            if let Some(p) = publishers.get(&key) {
+                p.put(m.data.to_vec())
+                    .wait()
+                    .map_err(|e| anyhow::anyhow!("publishing on {key}: {e}"))?;
+            }
+            count += 1;
+            bytes += m.data.len() as u64;
+        }
+        if !a.repeat || stop_rx.try_recv().is_ok() {
+            break;
+        }
+    }
+    drop(tokens);
+    let secs = started.elapsed().as_secs_f64().max(1e-9);
+    writeln!(
+        std::io::stdout().lock(),
+        "played {count} messages ({:.1} MB) in {secs:.2} s: {:.0} messages/s, {:.1} MB/s",
+        bytes as f64 / 1e6,
+        count as f64 / secs,
+        bytes as f64 / 1e6 / secs
+    )?;
+    Ok(())
+}
+
+/// `troupe log`.
+pub fn log(cmd: LogCmd) -> anyhow::Result<()> {
+    match cmd {
+        LogCmd::Info { file } => info(&file),
+        LogCmd::Export { file, format } => export(&file, format),
+    }
+}
+
+fn info(path: &Path) -> anyhow::Result<()> {
+    let name = path.display().to_string();
+    let mut out = std::io::stdout().lock();
+    // The summary at the end says it all without reading the messages.
+    let (size, summary) = summary(path)?;
+    let (counts, channels, start, end, total) = match summary
+        .as_ref()
+        .and_then(|s| s.stats.as_ref().map(|st| (s, st)))
+    {
+        Some((s, st)) => {
+            let channels: BTreeMap<u16, (String, String, String)> = s
+                .channels
+                .iter()
+                .map(|(id, c)| {
+                    let schema = c
+                        .schema
+                        .as_ref()
+                        .map(|s| s.name.clone())
+                        .unwrap_or_default();
+                    (*id, (c.topic.clone(), schema, c.message_encoding.clone()))
+                })
+                .collect();
+            (
+                st.channel_message_counts.clone(),
+                channels,
+                st.message_start_time,
+                st.message_end_time,
+                st.message_count,
+            )
+        }
+        None => {
+            writeln!(
+                out,
+                "{name}: no summary (a recording that did not finish): reading every message"
+            )?;
+            let buf = read_all(path)?;
+            let mut counts = BTreeMap::new();
+            let mut channels = BTreeMap::new();
+            let (mut start, mut end, mut total) = (u64::MAX, 0, 0);
+            for m in mcap::MessageStream::new(&buf).with_context(|| format!("reading {name}"))? {
+                let Ok(m) = m else { break };
+                *counts.entry(m.channel.id).or_insert(0u64) += 1;
+                let schema = m
+                    .channel
+                    .schema
+                    .as_ref()
+                    .map(|s| s.name.clone())
+                    .unwrap_or_default();
+                channels.entry(m.channel.id).or_insert((
+                    m.channel.topic.clone(),
+                    schema,
+                    m.channel.message_encoding.clone(),
+                ));
+                start = start.min(m.log_time);
+                end = end.max(m.log_time);
+                total += 1;
+            }
+            (counts, channels, start.min(end), end, total)
+        }
+    };
+    let secs = end.saturating_sub(start) as f64 / 1e9;
+    writeln!(out, "file:      {name}")?;
+    writeln!(out, "size:      {:.1} MB", size as f64 / 1e6)?;
+    writeln!(out, "duration:  {secs:.3} s")?;
+    writeln!(out, "messages:  {total}")?;
+    let mut topics: Vec<(&String, &String, &String, u64)> = channels
+        .iter()
+        .map(|(id, (t, s, e))| (t, s, e, counts.get(id).copied().unwrap_or(0)))
+        .collect();
+    topics.sort();
+    writeln!(out, "channels:  {}", topics.len())?;
+    for (topic, schema, encoding, n) in topics {
+        if encoding == LIVELINESS {
+            writeln!(out, "  {topic:<48} liveliness, {n} events")?;
+        } else {
+            let hz = if secs > 0.0 { n as f64 / secs } else { 0.0 };
+            writeln!(out, "  {topic:<48} {schema:<24} {n:>8} msgs  {hz:>8.1} Hz")?;
+        }
+    }
+    Ok(())
+}
+
+fn export(path: &Path, format: Format) -> anyhow::Result<()> {
+    let buf = read_all(path)?;
+    let name = path.display().to_string();
+    let mut out = std::io::BufWriter::new(std::io::stdout().lock());
+    if format == Format::Player {
+        out.write_all(troupe_log::text::header().as_bytes())?;
+    }
+    let mut skipped = 0u64;
+    for m in mcap::MessageStream::new(&buf).with_context(|| format!("reading {name}"))? {
+        let m = match m {
+            Ok(m) => m,
+            Err(e) => {
+                eprintln!("troupe log export: {name}: {e}; the rest of the file is unreadable");
+                break;
+            }
+        };
+        if m.channel.message_encoding != ENCODING {
+            continue;
+        }
+        let Ok(s) = decode_any(&m.data) else {
+            skipped += 1;
+            continue;
+        };
+        match format {
+            Format::Json => {
+                let line = serde_json::json!({
+                    "time": m.log_time as f64 / 1e9,
+                    "key": m.channel.topic,
+                    "stamp": s.stamp,
+                    "msg": s.msg,
+                });
+                writeln!(out, "{line}")?;
+            }
+            Format::Player => {
+                let line = keys::parse_data(&m.channel.topic).ok().and_then(|d| {
+                    troupe_log::text::line(s.stamp, d.robot, d.interface, d.index, &s.msg)
+                });
+                match line {
+                    Some(l) => out.write_all(l.as_bytes())?,
+                    None => skipped += 1,
+                }
+            }
+        }
+    }
+    out.flush()?;
+    if skipped > 0 {
+        eprintln!(
+            "troupe log export: {skipped} messages have no {format:?} form and were left out"
+        );
+    }
+    Ok(())
+}
