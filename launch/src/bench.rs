@@ -64,6 +64,7 @@ pub fn run(cmd: BenchCmd, z: &ZenohArgs) -> anyhow::Result<()> {
         BenchCmd::Bridge(a) => crate::bridgebench::run(&a),
         BenchCmd::Nav(a) => crate::navbench::nav_bench(&a),
         BenchCmd::Serial(a) => crate::serialbench::run(&a),
+        BenchCmd::Record(a) => crate::mcaplog::bench(&a),
     }
 }
 
@@ -544,7 +545,7 @@ define bench_irs ranger (
 define bench_small position ( size [0.2 0.2 0.1] drive "diff" ctrl "wander" bench_irs( ) )
 "#;
 
-fn bench_world(
+pub(crate) fn bench_world(
     name: &str,
     bitmaps: &std::path::Path,
     threads: usize,

@@ -340,6 +340,10 @@ pub enum BenchCmd {
     #[command(after_help = "Example:
   cargo run --release -- bench serial --seconds 5")]
     Serial(crate::serialbench::SerialBenchArgs),
+    /// Recording the 100-Pioneer world flat out (loss, CPU, bytes/s), playing it back, `log info` on a large file.
+    #[command(after_help = "Example:
+  cargo run --release -- bench record --seconds 20")]
+    Record(crate::mcaplog::RecordBenchArgs),
     /// The echo side of `bench latency` (started by it).
     #[command(hide = true)]
     Pong {

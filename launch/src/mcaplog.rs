@@ -80,6 +80,10 @@ pub struct PlayArgs {
     /// Start again at the end, until Ctrl-C.
     #[arg(long = "loop")]
     pub repeat: bool,
+    /// Play only the keys this key expression matches (repeatable), e.g.
+    /// `robot/6665/laser/0` or `robot/*/position2d/*`; default: all.
+    #[arg(long, value_name = "KEYEXPR")]
+    pub only: Vec<String>,
     /// Publish robot FROM's keys as robot TO's (repeatable), e.g. `6665=7000`.
     #[arg(long, value_name = "FROM=TO")]
     pub remap: Vec<String>,
@@ -290,7 +294,10 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             .map_err(|e| anyhow::anyhow!("watching liveliness: {e}"))?
     };
     drop(tx);
-    eprintln!(
+    // On stdout, once every subscription is in place: a script (or a test)
+    // may start what it records when this line appears.
+    writeln!(
+        std::io::stdout().lock(),
         "troupe record: {} to {}{} (Ctrl-C stops)",
         exprs.join(" "),
         a.output.display(),
@@ -299,7 +306,7 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         } else {
             ""
         }
-    );
+    )?;
 
     let mut files = Files {
         base: a.output.clone(),
@@ -489,6 +496,19 @@ pub fn play(a: PlayArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         );
     }
     let remaps = remaps(&a.remap)?;
+    let only = a
+        .only
+        .iter()
+        .map(|k| {
+            troupe_node::zenoh::key_expr::OwnedKeyExpr::try_from(k.as_str())
+                .map_err(|e| anyhow::anyhow!("--only {k}: {e}"))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let wanted = |topic: &str| {
+        only.is_empty()
+            || troupe_node::zenoh::key_expr::keyexpr::new(topic)
+                .is_ok_and(|t| only.iter().any(|o| o.intersects(t)))
+    };
     let buf = read_all(&a.file)?;
     let name = a.file.display().to_string();
     let session = z.open(Mode::Client)?;
@@ -499,7 +519,15 @@ pub fn play(a: PlayArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     for m in mcap::MessageStream::new(&buf).with_context(|| format!("reading {name}"))? {
         let Ok(m) = m else { break };
         first = Some(first.map_or(m.log_time, |f: u64| f.min(m.log_time)));
-        if m.channel.message_encoding == LIVELINESS && m.data.first() == Some(&1) {
+        if m.channel.message_encoding == LIVELINESS
+            && m.data.first() == Some(&1)
+            && wanted(
+                m.channel
+                    .topic
+                    .rsplit_once("/driver/")
+                    .map_or("", |(d, _)| d),
+            )
+        {
             let key = remap(&m.channel.topic, &remaps);
             if !live.contains(&key) {
                 live.push(key);
@@ -532,7 +560,11 @@ pub fn play(a: PlayArgs, z: &ZenohArgs) -> anyhow::Result<()> {
                     break;
                 }
             };
-            if m.channel.message_encoding != ENCODING || m.log_time < from || m.log_time > to {
+            if m.channel.message_encoding != ENCODING
+                || m.log_time < from
+                || m.log_time > to
+                || !wanted(&m.channel.topic)
+            {
                 continue;
             }
             if a.rate > 0.0 {
@@ -720,4 +752,267 @@ fn export(path: &Path, format: Format) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// Flags of `troupe bench record`.
+#[derive(Debug, Args)]
+pub struct RecordBenchArgs {
+    /// Wall seconds to record the 100-Pioneer world.
+    #[arg(long, default_value_t = 20.0)]
+    pub seconds: f64,
+    /// Size of the file `log info` is timed on, MB.
+    #[arg(long, value_name = "MB", default_value_t = 1000)]
+    pub info_mb: u64,
+    /// Where Stage's sample bitmaps are (cave.png).
+    #[arg(long, value_name = "DIR")]
+    pub bitmaps: Option<PathBuf>,
+}
+
+/// This process's CPU time so far, seconds (user + system).
+fn cpu_seconds() -> f64 {
+    let ticks = std::fs::read_to_string("/proc/self/stat")
+        .ok()
+        .and_then(|s| {
+            // Fields after the command name, which ends with ')'.
+            let rest = s.rsplit_once(')')?.1.to_owned();
+            let f: Vec<&str> = rest.split_whitespace().collect();
+            Some(f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?)
+        })
+        .unwrap_or(0.0);
+    ticks / 100.0
+}
+
+/// `troupe bench record`: the 100-Pioneer world (100 lasers, 100 sonar
+/// rings, 100 odometries every 100 simulated ms) run flat out and recorded
+/// whole; what was lost, the recorder's CPU and bytes per second; the file
+/// played back as fast as a subscriber takes it; `log info` on a large file.
+pub fn bench(a: &RecordBenchArgs) -> anyhow::Result<()> {
+    use std::io::BufRead as _;
+    let bitmaps = a
+        .bitmaps
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("../shared/compat/stage/bitmaps"));
+    let bitmaps = bitmaps
+        .canonicalize()
+        .ok()
+        .filter(|b| b.join("cave.png").exists())
+        .with_context(|| {
+            format!(
+                "no Stage bitmaps at {} (cave.png); pass --bitmaps DIR",
+                bitmaps.display()
+            )
+        })?;
+    let dir = std::env::temp_dir().join(format!("troupe-bench-record-{}", std::process::id()));
+    std::fs::create_dir_all(&dir)?;
+    let (mut world, _) = crate::bench::bench_world("pioneers100", &bitmaps, 1)?;
+    world.push_str("speedup -1\n");
+    std::fs::write(dir.join("p100.world"), world)?;
+    let mut cfg = String::from(
+        "driver ( name \"stage\" provides [\"simulation:0\"] worldfile \"p100.world\" )\n",
+    );
+    for i in 0..100 {
+        let port = 6665 + i;
+        cfg.push_str(&format!(
+            "driver ( name \"stage\" provides [\"{port}:position2d:0\" \"{port}:ranger:0\" \"{port}:ranger:1\"] model \"p{i}\" )\n"
+        ));
+    }
+    std::fs::write(dir.join("p100.cfg"), cfg)?;
+
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "troupe bench record: 100 Pioneers (16 sonars, 180-beam laser, odometry) flat out, recorded for {} s", a.seconds)?;
+    let mut launcher = std::process::Command::new(std::env::current_exe()?)
+        .args(["--no-multicast", "launch"])
+        .arg(dir.join("p100.cfg"))
+        .args(["--no-bridge", "--listen", "tcp/127.0.0.1:0"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()?;
+    let stdout = launcher.stdout.take().context("the launcher's stdout")?;
+    let mut router = None;
+    for line in std::io::BufReader::new(stdout)
+        .lines()
+        .map_while(Result::ok)
+    {
+        if let Some(rest) = line.strip_prefix("troupe launch: router listening on ") {
+            router = rest.split_whitespace().next().map(str::to_owned);
+            break;
+        }
+    }
+    let router = router.context("the launcher printed no router")?;
+    let z = ZenohArgs {
+        connect: vec![router],
+        no_multicast: true,
+        ..Default::default()
+    };
+    let result = (|| -> anyhow::Result<()> {
+        // Every device live first.
+        let session = z.open(Mode::Client)?;
+        let deadline = Instant::now() + Duration::from_secs(120);
+        loop {
+            let live = session
+                .liveliness()
+                .get("robot/**")
+                .wait()
+                .map_err(|e| anyhow::anyhow!("{e}"))?
+                .iter()
+                .count();
+            if live >= 300 {
+                break;
+            }
+            anyhow::ensure!(
+                Instant::now() < deadline,
+                "only {live} of 300 devices came up"
+            );
+            std::thread::sleep(Duration::from_millis(200));
+        }
+        let file = dir.join("p100.mcap");
+        let (cpu0, t0) = (cpu_seconds(), Instant::now());
+        record(
+            RecordArgs {
+                keys: Vec::new(),
+                output: file.clone(),
+                duration: Some(a.seconds),
+                split_size: None,
+                split_duration: None,
+                compress: Compress::None,
+                queue: 100_000,
+            },
+            &z,
+        )?;
+        let (cpu, wall) = (cpu_seconds() - cpu0, t0.elapsed().as_secs_f64());
+
+        // What was lost: each device publishes once per step, so between its
+        // first and last stamp it owes one message per 100 ms.
+        let buf = read_all(&file)?;
+        let mut stamps: HashMap<String, (f64, f64, u64)> = HashMap::new();
+        let (mut count, mut bytes) = (0u64, 0u64);
+        for m in mcap::MessageStream::new(&buf)? {
+            let m = m?;
+            if m.channel.message_encoding != ENCODING {
+                continue;
+            }
+            count += 1;
+            bytes += m.data.len() as u64;
+            let t = m.publish_time as f64 / 1e9;
+            let key = format!(
+                "{}#{}",
+                m.channel.topic,
+                m.channel.schema.as_ref().map_or("", |s| s.name.as_str())
+            );
+            let e = stamps.entry(key).or_insert((t, t, 0));
+            e.0 = e.0.min(t);
+            e.1 = e.1.max(t);
+            e.2 += 1;
+        }
+        let owed: u64 = stamps
+            .values()
+            .map(|(first, last, _)| ((last - first) / 0.1).round() as u64 + 1)
+            .sum();
+        let sim = stamps
+            .get("sim/clock#sim/clock@1")
+            .map_or(0.0, |(f, l, _)| l - f);
+        writeln!(
+            out,
+            "  record: {count} messages, {:.1} MB in {wall:.1} s ({:.0} messages/s, {:.1} MB/s); the world ran {:.1}x real time; lost {} of {owed}; recorder CPU {cpu:.1} s = {:.0}% of one core",
+            bytes as f64 / 1e6,
+            count as f64 / wall,
+            bytes as f64 / 1e6 / wall,
+            sim / wall,
+            owed.saturating_sub(count),
+            100.0 * cpu / wall
+        )?;
+        drop(session);
+
+        // Played back as fast as a subscriber takes it.
+        let sink = ZenohArgs {
+            namespace: Some("benchplay".into()),
+            ..z.clone()
+        }
+        .open(Mode::Client)?;
+        let got = Arc::new(AtomicU64::new(0));
+        let counter = got.clone();
+        let _sub = sink
+            .declare_subscriber("**")
+            .callback(move |_| {
+                counter.fetch_add(1, Ordering::Relaxed);
+            })
+            .wait()
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        let player = std::process::Command::new(std::env::current_exe()?)
+            .args(z.to_child_args())
+            .args(["--namespace", "benchplay", "play"])
+            .arg(&file)
+            .args(["--rate", "0"])
+            .output()?;
+        let played = String::from_utf8_lossy(&player.stdout);
+        writeln!(
+            out,
+            "  play --rate 0, into a subscriber: {} ({} received)",
+            played.trim(),
+            got.load(Ordering::Relaxed)
+        )?;
+        drop(sink);
+
+        // `log info` on a large file, made of this recording over and over.
+        let big = dir.join("big.mcap");
+        {
+            let mut files = Files {
+                base: big.clone(),
+                split: false,
+                compress: Compress::None,
+                index: 0,
+                writer: None,
+                path: PathBuf::new(),
+                opened_at: 0,
+                bytes: 0,
+                channels: HashMap::new(),
+                sequence: HashMap::new(),
+                written: Vec::new(),
+            };
+            files.open(0)?;
+            let mut shift = 0u64;
+            while files.bytes < a.info_mb * 1_000_000 {
+                for m in mcap::MessageStream::new(&buf)? {
+                    let m = m?;
+                    let schema = m.channel.schema.as_ref().map_or("?", |s| s.name.as_str());
+                    files.write(
+                        &m.channel.topic,
+                        schema,
+                        &m.channel.message_encoding,
+                        &m.data,
+                        m.log_time + shift,
+                        m.publish_time,
+                    )?;
+                }
+                shift += secs_ns(wall);
+            }
+            files.close()?;
+        }
+        let size = std::fs::metadata(&big)?.len();
+        let t = Instant::now();
+        let info = std::process::Command::new(std::env::current_exe()?)
+            .args(["log", "info"])
+            .arg(&big)
+            .output()?;
+        let took = t.elapsed().as_secs_f64();
+        anyhow::ensure!(
+            info.status.success(),
+            "log info failed: {}",
+            String::from_utf8_lossy(&info.stderr)
+        );
+        writeln!(
+            out,
+            "  log info on a {:.0} MB file: {:.3} s (the summary only; target under 1 s)",
+            size as f64 / 1e6,
+            took
+        )?;
+        Ok(())
+    })();
+    let _ = nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(i32::try_from(launcher.id()).unwrap_or(0)),
+        nix::sys::signal::Signal::SIGTERM,
+    );
+    let _ = launcher.wait();
+    let _ = std::fs::remove_dir_all(&dir);
+    result
 }

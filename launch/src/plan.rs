@@ -681,6 +681,21 @@ pub fn check(plan: &mut Plan, report: &mut Report) {
 ///
 /// Every problem found, each with its place.
 pub fn load(path: &Path, robot: u32) -> Result<(Plan, Vec<String>), PlanError> {
+    load_with(path, robot, &[])
+}
+
+/// [`load`], with `external` devices (`laser:0`, `6665:laser:0`) added to
+/// the plan's `[launch] external`: provided by something outside the plan
+/// (another host, `troupe play`).
+///
+/// # Errors
+///
+/// As [`load`], and a device that does not parse.
+pub fn load_with(
+    path: &Path,
+    robot: u32,
+    external: &[String],
+) -> Result<(Plan, Vec<String>), PlanError> {
     let mut report = Report::default();
     let is_toml = path.extension().is_some_and(|e| e == "toml");
     let plan = if is_toml {
@@ -692,6 +707,13 @@ pub fn load(path: &Path, robot: u32) -> Result<(Plan, Vec<String>), PlanError> {
         let file = cfg::parse_file(path).map_err(|e| PlanError(vec![e.to_string()]))?;
         from_cfg(&file, path, robot, &mut report)
     };
+    let mut plan = plan;
+    for e in external {
+        match e.parse::<troupe_msgs::DevAddr>() {
+            Ok(a) => plan.launch.external.push(keys::data(&a.device(robot))),
+            Err(err) => report.errors.push(format!("--external {e}: {err}")),
+        }
+    }
     checked(plan, report)
 }
 

@@ -46,6 +46,15 @@ pub struct LaunchArgs {
     /// Start only the nodes placed on this host; the rest run elsewhere.
     #[arg(long, value_name = "NAME")]
     pub host: Option<String>,
+    /// A device provided from outside this launch (repeatable), e.g. `laser:0`
+    /// played back by `troupe play`: nodes that require it wait for it.
+    #[arg(long, value_name = "ADDR")]
+    pub external: Vec<String>,
+    /// Every node follows `sim/clock` published from outside this launch
+    /// (`troupe play` of a recording, a simulator on another host), as they
+    /// do when the plan has a simulator.
+    #[arg(long)]
+    pub sim_time: bool,
     /// Print the plan and exit.
     #[arg(long)]
     pub dry_run: bool,
@@ -102,7 +111,7 @@ pub fn print_plan(a: PlanArgs) -> anyhow::Result<()> {
 
 /// `troupe launch`.
 pub fn launch(a: LaunchArgs, z: &ZenohArgs) -> anyhow::Result<()> {
-    let (mut plan, warnings) = plan::load(&a.file, a.robot)?;
+    let (mut plan, warnings) = plan::load_with(&a.file, a.robot, &a.external)?;
     for w in &warnings {
         tracing::warn!("{w}");
     }
@@ -115,11 +124,12 @@ pub fn launch(a: LaunchArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             .write_all(plan::to_toml(&plan).as_bytes())?;
         return Ok(());
     }
-    // Under a simulator, every other node follows its clock.
-    let sim_time = plan
-        .nodes
-        .iter()
-        .any(|n| crate::drivers::find(&n.driver).is_some_and(|e| e.clock_source));
+    // Under a simulator (or a replay), every other node follows its clock.
+    let sim_time = a.sim_time
+        || plan
+            .nodes
+            .iter()
+            .any(|n| crate::drivers::find(&n.driver).is_some_and(|e| e.clock_source));
     let nodes: Vec<NodeSpec> = match &a.host {
         None => plan.nodes.clone(),
         Some(h) => {

@@ -665,3 +665,146 @@ fn a_recorded_stage_run_plays_back_in_order_ten_times_faster() {
     assert!(router.terminate().success());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The MCAP way to the same end: `troupe record` while worlds/record.cfg
+/// runs, then worlds/localize.cfg (amcl, with r0's odometry and laser
+/// `--external`) fed by `troupe play`, no simulator: amcl localizes as the
+/// live amcl did.
+#[test]
+fn a_recorded_mcap_plays_into_amcl_which_localizes_as_it_did_live() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let dir = std::env::temp_dir().join(troupe_tests::unique_namespace("mcap-amcl"));
+    copy_dir(&root.join("worlds"), &dir.join("worlds"));
+    let file = dir.join("r0.mcap");
+    let file = file.to_str().unwrap();
+
+    // The recorder listens before the stack starts, so the recording
+    // begins where r0 does (the offline amcl starts from r0's start pose).
+    let mut router = Proc::troupe(
+        "router",
+        &troupe_tests::strings(&["router", "--listen", "tcp/127.0.0.1:0"]),
+    );
+    let at = router.endpoint("troupe router listening on");
+    let ns = troupe_tests::unique_namespace("record");
+    let net = |router: &str, ns: &str| -> Vec<String> {
+        troupe_tests::strings(&["--connect", router, "--namespace", ns, "--no-multicast"])
+    };
+    let mut args = net(&at, &ns);
+    args.extend(troupe_tests::strings(&[
+        "record",
+        "-o",
+        file,
+        "--duration",
+        "6",
+    ]));
+    let mut recorder = Proc::troupe("record", &args);
+    let first = recorder.first_line();
+    assert!(first.starts_with("troupe record: "), "{first}");
+    let mut cmd = std::process::Command::new(troupe_tests::troupe_bin());
+    cmd.current_dir(&dir).args(net(&at, &ns)).args([
+        "launch",
+        "worlds/record.cfg",
+        "--bridge-any-port",
+        "--speedup",
+        "4",
+    ]);
+    let mut rec = Proc::start("record.cfg", &mut cmd);
+    assert!(recorder.wait().success(), "{}", recorder.stderr());
+    assert!(rec.terminate().success(), "{}", rec.stderr());
+    assert!(router.terminate().success());
+
+    // The recording, as JSON lines: the truth (gps odometry) and the live estimates.
+    let (status, json, _) =
+        troupe_tests::troupe_output(&troupe_tests::strings(&["log", "export", file]));
+    assert!(status.success());
+    let (mut odom, mut live) = (Vec::new(), Vec::new());
+    for l in json.lines() {
+        let v: serde_json::Value = serde_json::from_str(l).unwrap();
+        let stamp = v["stamp"].as_f64().unwrap();
+        if let Some(p) = v["msg"]["Position2dData"]["pose"].as_object() {
+            odom.push(Logged {
+                time: stamp,
+                robot: 6665,
+                interface: "position2d".into(),
+                index: 0,
+                kind: 1,
+                subtype: 1,
+                payload: vec![p["x"].as_f64().unwrap(), p["y"].as_f64().unwrap()],
+            });
+        }
+        if let Some(h) = v["msg"]["LocalizeHypoths"]["hypoths"][0]["mean"].as_object() {
+            live.push((stamp, h["x"].as_f64().unwrap(), h["y"].as_f64().unwrap()));
+        }
+    }
+    let end = odom.iter().map(|o| o.time).fold(0.0, f64::max);
+
+    // amcl alone, fed by the replay.
+    let ns = troupe_tests::unique_namespace("localize");
+    let mut loc = launch_in(
+        &dir,
+        &ns,
+        "worlds/localize.cfg",
+        &[
+            "--external",
+            "position2d:0",
+            "--external",
+            "laser:0",
+            "--sim-time",
+        ],
+    );
+    // Its router only: its nodes wait for the replay, and so does its bridge.
+    let router = loc.endpoint("troupe launch: router listening on");
+    let session = troupe_tests::client_at(&router, &ns);
+    let est = session
+        .declare_subscriber(keys::data(&Device::new(6665, Interface::Localize, 0)))
+        .wait()
+        .unwrap();
+    let mut args = net(&router, &ns);
+    args.extend(troupe_tests::strings(&[
+        "play",
+        file,
+        "--only",
+        "robot/6665/position2d/0",
+        "--only",
+        "robot/6665/laser/0",
+        "--only",
+        "sim/clock",
+    ]));
+    let mut play = Proc::troupe("play", &args);
+    let mut offline = Vec::new();
+    loop {
+        let s = est
+            .recv_deadline(Instant::now() + DEADLINE)
+            .unwrap()
+            .expect("amcl's estimates from the replay");
+        let h =
+            troupe_msgs::decode::<troupe_msgs::localize::Hypoths>(&s.payload().to_bytes()).unwrap();
+        if let Some(best) = h.msg.hypoths.first() {
+            offline.push((h.stamp, best.mean.x, best.mean.y));
+        }
+        if h.stamp >= end - 1.5 {
+            break;
+        }
+    }
+    assert!(play.wait().success(), "{}", play.stderr());
+    assert!(loc.terminate().success(), "{}", loc.stderr());
+    let after = live.first().map_or(0.0, |l| l.0) + 5.0;
+    let (live_err, n_live) = mean_error(&live, &odom, after);
+    let (offline_err, n_offline) = mean_error(&offline, &odom, after);
+    eprintln!(
+        "logs: amcl mean error from the MCAP replay {offline_err:.3} m ({n_offline} estimates), live {live_err:.3} m ({n_live})"
+    );
+    assert!(
+        n_live >= 5 && n_offline >= 5,
+        "{n_live} live, {n_offline} offline"
+    );
+    assert!(
+        live_err < 0.2 && offline_err < 0.2,
+        "live {live_err}, offline {offline_err}"
+    );
+    assert!(
+        (offline_err - live_err).abs() < 0.02,
+        "offline {offline_err:.3} m against live {live_err:.3} m"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
