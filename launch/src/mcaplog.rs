@@ -911,6 +911,14 @@ pub fn bench(a: &RecordBenchArgs) -> anyhow::Result<()> {
         let sim = stamps
             .get("sim/clock#sim/clock@1")
             .map_or(0.0, |(f, l, _)| l - f);
+        // Where the losses are, by message kind.
+        let mut by_kind: BTreeMap<&str, (u64, u64)> = BTreeMap::new();
+        for (key, (first, last, n)) in &stamps {
+            let kind = key.rsplit_once('#').map_or("?", |(_, k)| k);
+            let e = by_kind.entry(kind).or_default();
+            e.0 += ((last - first) / 0.1).round() as u64 + 1;
+            e.1 += n;
+        }
         writeln!(
             out,
             "  record: {count} messages, {:.1} MB in {wall:.1} s ({:.0} messages/s, {:.1} MB/s); the world ran {:.1}x real time; lost {} of {owed}; recorder CPU {cpu:.1} s = {:.0}% of one core",
@@ -921,6 +929,9 @@ pub fn bench(a: &RecordBenchArgs) -> anyhow::Result<()> {
             owed.saturating_sub(count),
             100.0 * cpu / wall
         )?;
+        for (kind, (owed, got)) in &by_kind {
+            writeln!(out, "    {kind:<24} {got:>8} of {owed:>8}")?;
+        }
         drop(session);
 
         // Played back as fast as a subscriber takes it.

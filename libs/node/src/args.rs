@@ -139,6 +139,23 @@ impl ZenohArgs {
         if let Some(ns) = &self.namespace {
             set(&mut c, "namespace", json_str(ns))?;
         }
+        // A simulator step is one burst of every device's sample (2.7 MB for
+        // 100 Pioneers): Zenoh's default data queue (2 batches, 1 ms before
+        // dropping) loses 12% of it on the way to a recorder, 16 batches and
+        // 10 ms lose 1.3% (ARCHITECTURE.md, "Logs"). A config file that sets
+        // other values keeps them.
+        for (key, zenoh_default, ours) in [
+            ("transport/link/tx/queue/size/data", "2", "16"),
+            (
+                "transport/link/tx/queue/congestion_control/drop/wait_before_drop",
+                "1000",
+                "10000",
+            ),
+        ] {
+            if c.get_json(key).is_ok_and(|v| v == zenoh_default) {
+                set(&mut c, key, ours.into())?;
+            }
+        }
         if self.reconnect {
             // Zenoh's client gives up at once by default (timeout 0, exit on
             // failure); here every mode waits forever and retries quickly.
