@@ -160,6 +160,23 @@ struct Files {
 }
 
 impl Files {
+    /// Nothing open yet: [`Files::open`] starts the first file.
+    fn new(base: PathBuf, split: bool, compress: Compress) -> Files {
+        Files {
+            base,
+            split,
+            compress,
+            index: 0,
+            writer: None,
+            path: PathBuf::new(),
+            opened_at: 0,
+            bytes: 0,
+            channels: HashMap::new(),
+            sequence: HashMap::new(),
+            written: Vec::new(),
+        }
+    }
+
     fn open(&mut self, at: u64) -> anyhow::Result<()> {
         self.path = if self.split {
             let stem = self
@@ -308,19 +325,11 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         }
     )?;
 
-    let mut files = Files {
-        base: a.output.clone(),
-        split: a.split_size.is_some() || a.split_duration.is_some(),
-        compress: a.compress,
-        index: 0,
-        writer: None,
-        path: PathBuf::new(),
-        opened_at: 0,
-        bytes: 0,
-        channels: HashMap::new(),
-        sequence: HashMap::new(),
-        written: Vec::new(),
-    };
+    let mut files = Files::new(
+        a.output.clone(),
+        a.split_size.is_some() || a.split_duration.is_some(),
+        a.compress,
+    );
     files.open(now_ns())?;
     let split_bytes = a.split_size.map(|mb| (mb * 1e6) as u64);
     let split_ns = a.split_duration.map(secs_ns);
@@ -967,19 +976,7 @@ pub fn bench(a: &RecordBenchArgs) -> anyhow::Result<()> {
         // `log info` on a large file, made of this recording over and over.
         let big = dir.join("big.mcap");
         {
-            let mut files = Files {
-                base: big.clone(),
-                split: false,
-                compress: Compress::None,
-                index: 0,
-                writer: None,
-                path: PathBuf::new(),
-                opened_at: 0,
-                bytes: 0,
-                channels: HashMap::new(),
-                sequence: HashMap::new(),
-                written: Vec::new(),
-            };
+            let mut files = Files::new(big.clone(), false, Compress::None);
             files.open(0)?;
             let mut shift = 0u64;
             while files.bytes < a.info_mb * 1_000_000 {

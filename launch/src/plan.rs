@@ -1090,8 +1090,15 @@ mod samples {
         for e in std::fs::read_dir(&dir).unwrap().flatten() {
             let p = e.path();
             if p.extension().is_some_and(|x| x == "cfg") {
-                let (plan, warnings) =
-                    super::load(&p, 6665).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+                // With the `--external` devices its own usage comment gives.
+                let text = std::fs::read_to_string(&p).unwrap();
+                let external: Vec<String> = text
+                    .split("--external ")
+                    .skip(1)
+                    .filter_map(|rest| rest.split_whitespace().next().map(str::to_owned))
+                    .collect();
+                let (plan, warnings) = super::load_with(&p, 6665, &external)
+                    .unwrap_or_else(|e| panic!("{}: {e}", p.display()));
                 assert!(warnings.is_empty(), "{}: {warnings:?}", p.display());
                 assert!(!plan.nodes.is_empty());
                 n += 1;

@@ -282,6 +282,20 @@ fn writelog_records_stage_s_simple_world_in_player_s_format() {
         .all(|l| l.kind == 1 && l.robot == 6665));
     // The laser's geometry line: pose x y yaw, length, width (5 fields).
     assert_eq!(lines[1].payload.len(), 5);
+    // Stage's answers, as a real Player + Stage logged them from the same
+    // world: every geometry and configuration line equal, time aside.
+    if let Some(real) = compat("player-log/simple-r0.log") {
+        let answers = |text: &str| -> Vec<String> {
+            text.lines()
+                .filter(|l| l.split_whitespace().nth(5) == Some("004"))
+                .map(|l| l.split_once(' ').map_or("", |(_, rest)| rest).to_owned())
+                .collect()
+        };
+        assert_eq!(
+            answers(&text),
+            answers(&std::fs::read_to_string(real).unwrap())
+        );
+    }
     // Each scan seen is logged at its stamp, range for range (%.3f).
     for scan in &seen {
         let Some(l) = lines
@@ -421,6 +435,30 @@ fn truth(odom: &[f64]) -> (f64, f64) {
     )
 }
 
+/// amcl's best estimates (stamp, x, y) until one 1.5 s short of `end`.
+fn estimates_until(
+    est: &troupe_node::zenoh::pubsub::Subscriber<
+        troupe_node::zenoh::handlers::FifoChannelHandler<troupe_node::zenoh::sample::Sample>,
+    >,
+    end: f64,
+) -> Vec<(f64, f64, f64)> {
+    let mut out = Vec::new();
+    loop {
+        let s = est
+            .recv_deadline(Instant::now() + DEADLINE)
+            .unwrap()
+            .expect("amcl's estimates");
+        let h =
+            troupe_msgs::decode::<troupe_msgs::localize::Hypoths>(&s.payload().to_bytes()).unwrap();
+        if let Some(best) = h.msg.hypoths.first() {
+            out.push((h.stamp, best.mean.x, best.mean.y));
+        }
+        if h.stamp >= end - 1.5 {
+            return out;
+        }
+    }
+}
+
 /// Mean distance from each estimate after `after` s to the truth at its stamp.
 fn mean_error(estimates: &[(f64, f64, f64)], logged: &[Logged], after: f64) -> (f64, usize) {
     let errors: Vec<f64> = estimates
@@ -500,21 +538,7 @@ fn a_recorded_run_localizes_offline_as_it_did_live() {
         .declare_subscriber(keys::data(&Device::new(6665, Interface::Localize, 0)))
         .wait()
         .unwrap();
-    let mut offline = Vec::new();
-    loop {
-        let s = est
-            .recv_deadline(Instant::now() + DEADLINE)
-            .unwrap()
-            .expect("amcl's offline estimates");
-        let h =
-            troupe_msgs::decode::<troupe_msgs::localize::Hypoths>(&s.payload().to_bytes()).unwrap();
-        if let Some(best) = h.msg.hypoths.first() {
-            offline.push((h.stamp, best.mean.x, best.mean.y));
-        }
-        if h.stamp >= end - 1.5 {
-            break;
-        }
-    }
+    let offline = estimates_until(&est, end);
     assert!(rep.terminate().success(), "{}", rep.stderr());
     let (live_err, n_live) = mean_error(&live, &logged, 5.0);
     let (offline_err, n_offline) = mean_error(&offline, &logged, 5.0);
@@ -771,21 +795,7 @@ fn a_recorded_mcap_plays_into_amcl_which_localizes_as_it_did_live() {
         "sim/clock",
     ]));
     let mut play = Proc::troupe("play", &args);
-    let mut offline = Vec::new();
-    loop {
-        let s = est
-            .recv_deadline(Instant::now() + DEADLINE)
-            .unwrap()
-            .expect("amcl's estimates from the replay");
-        let h =
-            troupe_msgs::decode::<troupe_msgs::localize::Hypoths>(&s.payload().to_bytes()).unwrap();
-        if let Some(best) = h.msg.hypoths.first() {
-            offline.push((h.stamp, best.mean.x, best.mean.y));
-        }
-        if h.stamp >= end - 1.5 {
-            break;
-        }
-    }
+    let offline = estimates_until(&est, end);
     assert!(play.wait().success(), "{}", play.stderr());
     assert!(loc.terminate().success(), "{}", loc.stderr());
     let after = live.first().map_or(0.0, |l| l.0) + 5.0;

@@ -55,6 +55,18 @@ pub fn line(time: f64, robot: u32, iface: Interface, index: u32, msg: &AnyMsg) -
     ))
 }
 
+/// A count (`%04d` when `padded`, else `%u`), then each value `%.3f`.
+fn values<T: Into<f64> + Copy>(s: &mut String, padded: bool, v: &[T]) {
+    let _ = if padded {
+        write!(s, "{:04} ", v.len())
+    } else {
+        write!(s, "{} ", v.len())
+    };
+    for x in v {
+        let _ = write!(s, "{:.3} ", (*x).into());
+    }
+}
+
 fn pose2d_line(s: &mut String, p: &Pose2d) {
     let _ = write!(s, "{:+07.3} {:+07.3} {:+04.3} ", p.x, p.y, p.yaw);
 }
@@ -133,17 +145,11 @@ fn payload(msg: &AnyMsg) -> Option<(u8, u8, String)> {
             (RESP_ACK, 1)
         }
         AnyMsg::RangerRanges(r) => {
-            let _ = write!(s, "{:04} ", r.ranges.len());
-            for v in &r.ranges {
-                let _ = write!(s, "{v:.3} ");
-            }
+            values(&mut s, true, &r.ranges);
             (DATA, 1)
         }
         AnyMsg::RangerIntensities(r) => {
-            let _ = write!(s, "{:04} ", r.intensities.len());
-            for v in &r.intensities {
-                let _ = write!(s, "{v:.3} ");
-            }
+            values(&mut s, true, &r.intensities);
             (DATA, 3)
         }
         AnyMsg::RangerGeom(g) => {
@@ -194,10 +200,7 @@ fn payload(msg: &AnyMsg) -> Option<(u8, u8, String)> {
             (RESP_ACK, 1)
         }
         AnyMsg::SonarRanges(r) => {
-            let _ = write!(s, "{} ", r.ranges.len());
-            for v in &r.ranges {
-                let _ = write!(s, "{v:.3} ");
-            }
+            values(&mut s, false, &r.ranges);
             (DATA, 1)
         }
         AnyMsg::SonarGeom(g) => {
@@ -264,10 +267,7 @@ fn payload(msg: &AnyMsg) -> Option<(u8, u8, String)> {
             (DATA, 1)
         }
         AnyMsg::AioData(d) => {
-            let _ = write!(s, "{:04} ", d.voltages.len());
-            for v in &d.voltages {
-                let _ = write!(s, "{v:.3} ");
-            }
+            values(&mut s, true, &d.voltages);
             (DATA, 1)
         }
         AnyMsg::DioData(d) => {

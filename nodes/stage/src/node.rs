@@ -489,7 +489,17 @@ impl Stage {
                 ..size3(m.size)
             },
             element_poses: m.sensors.iter().map(|s| pose3(s.pose, s.z)).collect(),
-            element_sizes: m.sensors.iter().map(|s| size3(s.size)).collect(),
+            // Stage's plugin gives an element's x as its width and y as its
+            // length (the body's the other way round): clients see that.
+            element_sizes: m
+                .sensors
+                .iter()
+                .map(|s| Size3d {
+                    width: s.size[0],
+                    length: s.size[1],
+                    height: s.size[2],
+                })
+                .collect(),
         }
     }
 
