@@ -439,7 +439,10 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
     let mut raw_blocks: Vec<Vec<Vec<(f64, f64)>>> = Vec::new();
     let mut has_default_block: Vec<bool> = Vec::new();
     let mut boundaries: Vec<bool> = Vec::new();
-    let mut counts: HashMap<(Option<usize>, String), usize> = HashMap::new();
+    // Stage's world makes its ground, a top-level `model`, before the
+    // file's: unnamed top-level models count from `model:1`.
+    let mut counts: HashMap<(Option<usize>, String), usize> =
+        HashMap::from([((None, "model".to_owned()), 1)]);
     let dir = path.parent().unwrap_or(Path::new("."));
     for (ei, e) in wf.entities.iter().enumerate().skip(1) {
         let parent_model = e.parent.and_then(|p| model_of.get(&p).copied());
@@ -884,6 +887,32 @@ mod tests {
                 "h.world:9:2: unknown drive \"y\"",
             ]
         );
+    }
+
+    /// As Stage names them: everything.world's three pucks, after the
+    /// named floor plan, are `model:2`..`model:4` (Stage's ground is
+    /// `model` number 0); children count among their siblings.
+    #[test]
+    fn unnamed_models_are_named_as_stage_names_them() {
+        let w = load_text(
+            "names",
+            "define puck model ( size [0.08 0.08 0.1] )\n\
+             model ( name \"hospital\" size [4 4 0.6] )\n\
+             puck( pose [1 0 0 0] ) puck( pose [2 0 0 0] ) puck( pose [3 0 0 0] )\n\
+             position ( name \"r0\" pose [0 1 0 0] ranger( ) ranger( ) )\n",
+        )
+        .unwrap();
+        for n in [
+            "model:2",
+            "model:3",
+            "model:4",
+            "r0.ranger:0",
+            "r0.ranger:1",
+        ] {
+            assert!(w.names.contains_key(n), "{n} not in {:?}", w.names.keys());
+        }
+        // As in Stage, a named model also answers to the name it was born with.
+        assert_eq!(w.names.get("model:1"), w.names.get("hospital"));
     }
 
     #[test]
