@@ -19,19 +19,8 @@ fn an_imported_player_server_streams_and_obeys_on_troupe_keys() {
     let cfg = Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/simple.cfg");
     let mut launcher = troupe_tests::launch(&ns, &cfg, &["--speedup", "2"]);
     // Its router, then its Player port, from its stdout.
-    let lines = launcher.lines();
-    let (mut router, mut player) = (None, None);
-    let deadline = Instant::now() + DEADLINE;
-    while router.is_none() || player.is_none() {
-        let left = deadline.saturating_duration_since(Instant::now());
-        let line = lines.recv_timeout(left).expect("the launcher's port lines");
-        if let Some(rest) = line.strip_prefix("troupe launch: router listening on ") {
-            router = rest.split_whitespace().next().map(str::to_owned);
-        } else if let Some(rest) = line.strip_prefix("troupe bridge: robot 6665 on ") {
-            player = Some(rest.trim().to_owned());
-        }
-    }
-    let (router, player) = (router.unwrap(), player.unwrap());
+    let (router, player) = troupe_tests::launch_ports(&mut launcher);
+    let player = player.to_string();
     let mut import = Proc::troupe(
         "import",
         &[

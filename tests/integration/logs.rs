@@ -4,7 +4,6 @@
 //! here from Player's format description; a damaged log replays what it can.
 
 use std::io::Read as _;
-use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -86,23 +85,6 @@ fn logged_ranges(l: &Logged) -> Vec<f64> {
     (0..count).map(|i| l.payload[6 + 2 * i]).collect()
 }
 
-/// The launcher's router endpoint and its bridge's address for robot 6665.
-fn ports(launcher: &mut Proc) -> (String, SocketAddr) {
-    let lines = launcher.lines();
-    let (mut router, mut player) = (None, None);
-    let deadline = Instant::now() + DEADLINE;
-    while router.is_none() || player.is_none() {
-        let left = deadline.saturating_duration_since(Instant::now());
-        let line = lines.recv_timeout(left).expect("the launcher's port lines");
-        if let Some(rest) = line.strip_prefix("troupe launch: router listening on ") {
-            router = rest.split_whitespace().next().map(str::to_owned);
-        } else if let Some(rest) = line.strip_prefix("troupe bridge: robot 6665 on ") {
-            player = rest.trim().parse().ok();
-        }
-    }
-    (router.unwrap(), player.unwrap())
-}
-
 fn f64s(body: &[u8]) -> impl Iterator<Item = f64> + '_ {
     body.chunks_exact(8)
         .map(|c| f64::from_be_bytes(c.try_into().unwrap()))
@@ -121,7 +103,7 @@ fn a_real_player_log_replays_through_readlog_and_the_bridge_to_a_player_client()
     let logged = read_log(&text);
     let ns = troupe_tests::unique_namespace("readlog");
     let mut launcher = troupe_tests::launch(&ns, &cfg, &[]);
-    let (_, addr) = ports(&mut launcher);
+    let (_, addr) = troupe_tests::launch_ports(&mut launcher);
     let mut player = Player::connect(addr, 6665);
     let (pos, las, log) = (
         Device::new(6665, Interface::Position2d, 0),
@@ -228,7 +210,7 @@ fn writelog_records_stage_s_simple_world_in_player_s_format() {
     .unwrap();
     let ns = troupe_tests::unique_namespace("writelog");
     let mut launcher = troupe_tests::launch(&ns, &cfg, &["--speedup", "4"]);
-    let (router, _) = ports(&mut launcher);
+    let (router, _) = troupe_tests::launch_ports(&mut launcher);
     let session = troupe_tests::client_at(&router, &ns);
     troupe_tests::wait_live(&session, &["6665:log:0"]);
     // What the laser published, stamp by stamp, while writelog logged it.
@@ -351,7 +333,7 @@ fn a_damaged_log_says_where_and_replays_the_rest() {
     .unwrap();
     let ns = troupe_tests::unique_namespace("badlog");
     let mut launcher = troupe_tests::launch(&ns, &cfg, &[]);
-    let (router, _) = ports(&mut launcher);
+    let (router, _) = troupe_tests::launch_ports(&mut launcher);
     let session = troupe_tests::client_at(&router, &ns);
     let sub = session
         .declare_subscriber(keys::data(&Device::new(6665, Interface::Position2d, 0)))
@@ -491,7 +473,7 @@ fn a_recorded_run_localizes_offline_as_it_did_live() {
     // Drive and record 16 simulated seconds, at four times real time.
     let ns = troupe_tests::unique_namespace("record");
     let mut rec = launch_in(&dir, &ns, "worlds/record.cfg", &["--speedup", "4"]);
-    let (router, _) = ports(&mut rec);
+    let (router, _) = troupe_tests::launch_ports(&mut rec);
     let session = troupe_tests::client_at(&router, &ns);
     let odom = session
         .declare_subscriber(keys::data(&Device::new(6665, Interface::Position2d, 0)))
@@ -532,7 +514,7 @@ fn a_recorded_run_localizes_offline_as_it_did_live() {
     // Replay into amcl, with no simulator: its estimates until the log's end.
     let ns = troupe_tests::unique_namespace("replay");
     let mut rep = launch_in(&dir, &ns, "worlds/replay.cfg", &[]);
-    let (router, _) = ports(&mut rep);
+    let (router, _) = troupe_tests::launch_ports(&mut rep);
     let session = troupe_tests::client_at(&router, &ns);
     let est = session
         .declare_subscriber(keys::data(&Device::new(6665, Interface::Localize, 0)))
@@ -571,7 +553,7 @@ fn a_recorded_stage_run_plays_back_in_order_ten_times_faster() {
     let cfg = Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/simple.cfg");
     let ns = troupe_tests::unique_namespace("record");
     let mut launcher = troupe_tests::launch(&ns, &cfg, &[]);
-    let (router, _) = ports(&mut launcher);
+    let (router, _) = troupe_tests::launch_ports(&mut launcher);
     let session = troupe_tests::client_at(&router, &ns);
     troupe_tests::wait_live(&session, &["6665:laser:0", "6665:position2d:0"]);
     let net = ["--connect", &router, "--namespace", &ns, "--no-multicast"];

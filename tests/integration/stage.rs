@@ -65,3 +65,57 @@ fn simple_cfg_serves_r0_and_the_laser_sees_the_wall_approach() {
     pp.set_speed(0.0, 0.0).unwrap();
     assert!(launcher.terminate().success(), "{}", launcher.stderr());
 }
+
+/// Stage's simulation requests in 3D, through the bridge with Player's
+/// XDR: GET_POSE3D gives x, y, z, yaw and the simulation time in
+/// microseconds; SET_POSE3D moves a model; a heading is wrapped as Stage
+/// wraps it (7.0 reads back 7 - 2π).
+#[test]
+fn simulation_pose3d_requests_answer_as_stage_s_and_headings_wrap() {
+    use crate::player::{Player, RESP_ACK};
+    let cfg = Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/simple.cfg");
+    let ns = troupe_tests::unique_namespace("pose3d");
+    let mut launcher = troupe_tests::launch(&ns, &cfg, &[]);
+    let (_, addr) = troupe_tests::launch_ports(&mut launcher);
+    let mut player = Player::connect(addr, 6665);
+    let sim = troupe_msgs::Device::new(6665, troupe_msgs::Interface::Simulation, 0);
+    // name (count, then XDR bytes of "r0\0"), a pose3d and a simtime.
+    let body = |pose: [f64; 6]| {
+        let mut b = Vec::new();
+        b.extend_from_slice(&3u32.to_be_bytes());
+        b.extend_from_slice(&3u32.to_be_bytes());
+        b.extend_from_slice(b"r0\0\0");
+        for v in pose {
+            b.extend_from_slice(&v.to_be_bytes());
+        }
+        b.extend_from_slice(&0f64.to_be_bytes());
+        b
+    };
+    let r = player.request(sim, 4, &body([1.0, 2.0, 0.0, 0.0, 0.0, 7.0]));
+    assert_eq!(r.kind(), RESP_ACK, "SET_POSE3D: {r:?}");
+    // Once r0's odometry says the simulation has run a while.
+    let pos = troupe_msgs::Device::new(6665, troupe_msgs::Interface::Position2d, 0);
+    player.open(pos);
+    let ran = loop {
+        let m = player.recv();
+        if m.kind() == crate::player::DATA && m.timestamp >= 0.2 {
+            break m.timestamp;
+        }
+    };
+    let r = player.request(sim, 3, &body([0.0; 6]));
+    assert_eq!(r.kind(), RESP_ACK, "GET_POSE3D: {r:?}");
+    // After the name (12 bytes): x y z roll pitch yaw, then simtime.
+    let f = |i: usize| f64::from_be_bytes(r.body[12 + 8 * i..20 + 8 * i].try_into().unwrap());
+    assert_eq!((f(0), f(1), f(2)), (1.0, 2.0, 0.0));
+    assert!(
+        (f(5) - (7.0 - std::f64::consts::TAU)).abs() < 1e-9,
+        "yaw {}",
+        f(5)
+    );
+    assert!(
+        f(6) >= (ran * 1e6).round() && f(6).fract() == 0.0,
+        "simtime {} µs after data at {ran} s",
+        f(6)
+    );
+    assert!(launcher.terminate().success(), "{}", launcher.stderr());
+}

@@ -160,6 +160,27 @@ pub fn launch(ns: &str, cfg: &std::path::Path, extra: &[&str]) -> Proc {
     Proc::troupe("launch", &args)
 }
 
+/// The router endpoint and the bridge's address for robot 6665 that a
+/// [`launch`]ed launcher prints, in whichever order.
+pub fn launch_ports(launcher: &mut Proc) -> (String, std::net::SocketAddr) {
+    let lines = launcher.lines();
+    let (mut router, mut player) = (None, None);
+    let deadline = Instant::now() + DEADLINE;
+    while router.is_none() || player.is_none() {
+        let left = deadline.saturating_duration_since(Instant::now());
+        let line = lines.recv_timeout(left).expect("the launcher's port lines");
+        if let Some(rest) = line.strip_prefix("troupe launch: router listening on ") {
+            router = rest.split_whitespace().next().map(str::to_owned);
+        } else if let Some(rest) = line.strip_prefix("troupe bridge: robot 6665 on ") {
+            player = rest.trim().parse().ok();
+        }
+    }
+    (
+        router.unwrap_or_default(),
+        player.expect("a bridge address"),
+    )
+}
+
 /// A child process that is killed when dropped, so a failing test leaves no orphan.
 pub struct Proc {
     /// The child.

@@ -3,7 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::iface::common::Ack;
-use crate::{message, Color, Pose2d};
+use crate::{message, Color, Pose2d, Pose3d};
 
 /// Asks for the pose of model `name`.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -32,6 +32,36 @@ pub struct SetPose2d {
     pub pose: Pose2d,
 }
 message!(SetPose2d, "simulation/set_pose2d@1", req "set_pose2d" -> Ack);
+
+/// Asks for the 3D pose of model `name` (`PLAYER_SIMULATION_REQ_GET_POSE3D`).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct GetPose3d {
+    /// Model name as in the world file.
+    pub name: String,
+}
+message!(GetPose3d, "simulation/get_pose3d@1", req "get_pose3d" -> Pose3dOf);
+
+/// A model's pose in 3D, and the simulation time it was read at.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Pose3dOf {
+    /// Model name.
+    pub name: String,
+    /// Pose (Stage: roll and pitch 0).
+    pub pose: Pose3d,
+    /// Simulation time, microseconds (as Stage's plugin answers).
+    pub simtime: f64,
+}
+message!(Pose3dOf, "simulation/pose3d@1");
+
+/// Moves model `name` to `pose` (x, y, z and yaw; Stage ignores roll and pitch).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct SetPose3d {
+    /// Model name.
+    pub name: String,
+    /// New pose.
+    pub pose: Pose3d,
+}
+message!(SetPose3d, "simulation/set_pose3d@1", req "set_pose3d" -> Ack);
 
 /// A property value.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -613,6 +613,24 @@ fn translate(
             };
             request(&q, t, empty)
         }
+        (I::Simulation, REQ, 3) => {
+            let name = r.string()?;
+            let _pose = r_pose3d(r)?; // the client's buffer, as for GET_POSE2D
+            let _simtime = r.f64()?;
+            request(&simulation::GetPose3d { name }, t, |p, w| {
+                w.string(&p.name);
+                w_pose3d(w, &p.pose);
+                w.f64(p.simtime);
+            })
+        }
+        (I::Simulation, REQ, 4) => {
+            let q = simulation::SetPose3d {
+                name: r.string()?,
+                pose: r_pose3d(r)?,
+            };
+            let _simtime = r.f64()?;
+            request(&q, t, empty)
+        }
         (I::Simulation, REQ, 5) => {
             let name = r.string()?;
             let prop = r.string()?;

@@ -804,6 +804,30 @@ impl Stage {
                 }
                 None => r.nack(format!("no model named `{}`", q.name)),
             }
+        } else if r.is::<simulation::GetPose3d>() {
+            let q = r.decode::<simulation::GetPose3d>()?;
+            match find(&self.sim, &q.name) {
+                Some(m) => r.reply(&simulation::Pose3dOf {
+                    pose: pose3(self.sim.poses[m], self.sim.world.models[m].z),
+                    name: q.name,
+                    simtime: (self.sim.time * 1e6).round(),
+                }),
+                None => r.nack(format!("no model named `{}`", q.name)),
+            }
+        } else if r.is::<simulation::SetPose3d>() {
+            let q = r.decode::<simulation::SetPose3d>()?;
+            match find(&self.sim, &q.name) {
+                Some(m) => {
+                    // Roll and pitch are not Stage's.
+                    self.sim.world.models[m].z = q.pose.z;
+                    let p = q.pose;
+                    self.sim
+                        .set_pose(m, troupe_geom::Pose::new(p.x, p.y, p.yaw));
+                    self.keep_poses_ready(ctx)?;
+                    r.reply(&common::Ack);
+                }
+                None => r.nack(format!("no model named `{}`", q.name)),
+            }
         } else if r.is::<simulation::GetProperty>() {
             let q = r.decode::<simulation::GetProperty>()?;
             match (find(&self.sim, &q.name), q.prop.as_str()) {

@@ -598,6 +598,11 @@ impl Sim {
 
     /// Moves model `m` (and what it carries) to `pose`, relative to its parent.
     pub fn set_pose(&mut self, m: usize, pose: Pose) {
+        // As Stage's SetPose: the heading wrapped into (-π, π].
+        let pose = Pose {
+            yaw: normalize(pose.yaw),
+            ..pose
+        };
         self.poses[m] = pose;
         for k in self.trees[m].clone() {
             self.place(k);
