@@ -75,6 +75,7 @@ any! {
     GripperStop(gripper::Stop), GripperGeom(gripper::Geom), GripperGetGeom(gripper::GetGeom),
     PtzData(ptz::Data), PtzCmd(ptz::Cmd),
     FiducialData(fiducial::Data), FiducialGeom(fiducial::Geom), FiducialGetGeom(fiducial::GetGeom),
+    FiducialId(fiducial::Id), FiducialGetId(fiducial::GetId), FiducialSetId(fiducial::SetId),
     PowerData(power::Data),
     BumperData(bumper::Data), BumperGeom(bumper::Geom), BumperGetGeom(bumper::GetGeom),
     IrData(ir::Data), IrGeom(ir::Geom), IrGetGeom(ir::GetGeom),

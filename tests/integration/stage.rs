@@ -119,3 +119,31 @@ fn simulation_pose3d_requests_answer_as_stage_s_and_headings_wrap() {
     );
     assert!(launcher.terminate().success(), "{}", launcher.stderr());
 }
+
+/// Stage's fiducial ID requests on everything.cfg's robot1, through the
+/// bridge: GET_ID gives the finder's model's `fiducial_return`, SET_ID
+/// changes it and answers with the new ID.
+#[test]
+fn fiducial_ids_are_read_and_set_as_stage_does() {
+    use crate::player::{Player, RESP_ACK};
+    let cfg =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/compat/stage/everything.cfg");
+    if !cfg.exists() {
+        eprintln!("skipping: ../shared/compat is absent");
+        return;
+    }
+    let ns = troupe_tests::unique_namespace("fidid");
+    let mut launcher = troupe_tests::launch(&ns, &cfg, &[]);
+    let (_, addr) = troupe_tests::launch_ports(&mut launcher);
+    let mut player = Player::connect(addr, 6665);
+    let fid = troupe_msgs::Device::new(6665, troupe_msgs::Interface::Fiducial, 0);
+    let id = |r: &crate::player::Frame| u32::from_be_bytes(r.body[..4].try_into().unwrap());
+    let r = player.request(fid, 7, &[]);
+    assert_eq!(r.kind(), RESP_ACK, "GET_ID: {r:?}");
+    let before = id(&r);
+    let r = player.request(fid, 8, &42u32.to_be_bytes());
+    assert_eq!((r.kind(), id(&r)), (RESP_ACK, 42), "SET_ID: {r:?}");
+    let r = player.request(fid, 7, &[]);
+    assert_eq!(id(&r), 42, "GET_ID after SET_ID (was {before})");
+    assert!(launcher.terminate().success(), "{}", launcher.stderr());
+}

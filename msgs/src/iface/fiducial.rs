@@ -39,3 +39,25 @@ message!(Geom, "fiducial/geom@1");
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct GetGeom;
 message!(GetGeom, "fiducial/get_geom@1", req "geom" -> Geom);
+
+/// A fiducial ID (`player_fiducial_id_t`): what other fiducial finders
+/// read off this device's model.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Id {
+    /// The ID.
+    pub id: u32,
+}
+message!(Id, "fiducial/id@1");
+
+/// Asks for the [`Id`] (`PLAYER_FIDUCIAL_REQ_GET_ID`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct GetId;
+message!(GetId, "fiducial/get_id@1", req "get_id" -> Id);
+
+/// Sets the ID; the answer is the ID in force (`PLAYER_FIDUCIAL_REQ_SET_ID`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SetId {
+    /// The new ID.
+    pub id: u32,
+}
+message!(SetId, "fiducial/set_id@1", req "set_id" -> Id);

@@ -666,6 +666,12 @@ fn translate(
             w_bbox3d(w, &g.size);
             w_bbox2d(w, &g.fiducial_size);
         }),
+        (I::Fiducial, REQ, 7) => request(&fiducial::GetId, t, |i, w| {
+            w.u32(i.id);
+        }),
+        (I::Fiducial, REQ, 8) => request(&fiducial::SetId { id: r.u32()? }, t, |i, w| {
+            w.u32(i.id);
+        }),
 
         // bumper, ir, aio, dio, ptz
         (I::Bumper, REQ, 1) => request(&bumper::GetGeom, t, bumper_geom),

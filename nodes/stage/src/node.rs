@@ -670,6 +670,14 @@ impl Stage {
                             length: 0.0,
                         },
                     });
+                } else if r.is::<fiducial::GetId>() {
+                    // The finder's own model's fiducial_return, as Stage answers.
+                    let id = self.sim.world.models[model].fiducial_return;
+                    r.reply(&fiducial::Id { id: id as u32 });
+                } else if r.is::<fiducial::SetId>() {
+                    let id = r.decode::<fiducial::SetId>()?.id;
+                    self.sim.world.models[model].fiducial_return = id as i32;
+                    r.reply(&fiducial::Id { id });
                 } else {
                     let n = r.name.clone();
                     r.nack(format!("stage fiducial does not handle `{n}`"));
