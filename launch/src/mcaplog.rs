@@ -440,9 +440,83 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// A whole recording, read into memory (play and export go through it all).
-fn read_all(path: &Path) -> anyhow::Result<Vec<u8>> {
-    std::fs::read(path).with_context(|| format!("reading {}", path.display()))
+/// One message of a recording, as [`each_message`] hands it over.
+struct Msg<'a> {
+    topic: &'a str,
+    encoding: &'a str,
+    schema: &'a str,
+    log_time: u64,
+    publish_time: u64,
+    data: &'a [u8],
+}
+
+/// Calls `each` on every message of a recording in file order, reading the
+/// file a piece at a time (a large recording is never all in memory);
+/// `each` returns false to stop. A damaged or cut file stops at the damage,
+/// said once with how far the file was read; what came before has been
+/// handed over.
+fn each_message(
+    path: &Path,
+    mut each: impl FnMut(&Msg<'_>) -> anyhow::Result<bool>,
+) -> anyhow::Result<()> {
+    use mcap::records::Record;
+    use mcap::sans_io::{LinearReadEvent, LinearReader};
+    use std::io::Read as _;
+    let name = path.display().to_string();
+    let mut f = std::fs::File::open(path).with_context(|| format!("opening {name}"))?;
+    let mut r = LinearReader::new();
+    let mut schemas: HashMap<u16, String> = HashMap::new();
+    let mut channels: HashMap<u16, (String, String, u16)> = HashMap::new();
+    let mut read_so_far = 0u64;
+    while let Some(event) = r.next_event() {
+        let record = match event {
+            Ok(LinearReadEvent::ReadRequest(n)) => {
+                let read = f
+                    .read(r.insert(n))
+                    .with_context(|| format!("reading {name}"))?;
+                read_so_far += read as u64;
+                r.notify_read(read);
+                continue;
+            }
+            Ok(LinearReadEvent::Record { data, opcode }) => mcap::parse_record(opcode, data),
+            Err(e) => Err(e),
+        };
+        let record = match record {
+            Ok(rec) => rec,
+            Err(e) => {
+                tracing::warn!(
+                    "{name}: {e} (within its first {read_so_far} bytes); the rest is unreadable"
+                );
+                return Ok(());
+            }
+        };
+        match record {
+            Record::Schema { header, .. } => {
+                schemas.insert(header.id, header.name);
+            }
+            Record::Channel(c) => {
+                channels.insert(c.id, (c.topic, c.message_encoding, c.schema_id));
+            }
+            Record::Message { header, data } => {
+                let Some((topic, encoding, schema)) = channels.get(&header.channel_id) else {
+                    continue;
+                };
+                let m = Msg {
+                    topic,
+                    encoding,
+                    schema: schemas.get(schema).map_or("", String::as_str),
+                    log_time: header.log_time,
+                    publish_time: header.publish_time,
+                    data: &data,
+                };
+                if !each(&m)? {
+                    return Ok(());
+                }
+            }
+            _ => {}
+        }
+    }
+    Ok(())
 }
 
 /// A recording's summary, read from its end without reading its messages.
@@ -518,31 +592,23 @@ pub fn play(a: PlayArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             || troupe_node::zenoh::key_expr::keyexpr::new(topic)
                 .is_ok_and(|t| only.iter().any(|o| o.intersects(t)))
     };
-    let buf = read_all(&a.file)?;
     let name = a.file.display().to_string();
     let session = z.open(Mode::Client)?;
     // The devices the recording saw live are live again while it plays.
     let mut live = Vec::new();
     let mut publishers = HashMap::new();
     let mut first: Option<u64> = None;
-    for m in mcap::MessageStream::new(&buf).with_context(|| format!("reading {name}"))? {
-        let Ok(m) = m else { break };
+    each_message(&a.file, |m| {
         first = Some(first.map_or(m.log_time, |f: u64| f.min(m.log_time)));
-        if m.channel.message_encoding == LIVELINESS
-            && m.data.first() == Some(&1)
-            && wanted(
-                m.channel
-                    .topic
-                    .rsplit_once("/driver/")
-                    .map_or("", |(d, _)| d),
-            )
-        {
-            let key = remap(&m.channel.topic, &remaps);
+        let device = m.topic.rsplit_once("/driver/").map_or("", |(d, _)| d);
+        if m.encoding == LIVELINESS && m.data.first() == Some(&1) && wanted(device) {
+            let key = remap(m.topic, &remaps);
             if !live.contains(&key) {
                 live.push(key);
             }
         }
-    }
+        Ok(true)
+    })?;
     let first = first.with_context(|| format!("{name} holds no message"))?;
     let tokens: Vec<_> = live
         .iter()
@@ -559,33 +625,24 @@ pub fn play(a: PlayArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     });
     let started = Instant::now();
     let (mut count, mut bytes) = (0u64, 0u64);
-    'passes: loop {
+    let mut stopped = false;
+    while !stopped {
         let pass = Instant::now();
-        for m in mcap::MessageStream::new(&buf).with_context(|| format!("reading {name}"))? {
-            let m = match m {
-                Ok(m) => m,
-                Err(e) => {
-                    eprintln!("troupe play: {name}: {e}; the rest of the file is unreadable");
-                    break;
-                }
-            };
-            if m.channel.message_encoding != ENCODING
-                || m.log_time < from
-                || m.log_time > to
-                || !wanted(&m.channel.topic)
-            {
-                continue;
+        each_message(&a.file, |m| {
+            if m.encoding != ENCODING || m.log_time < from || m.log_time > to || !wanted(m.topic) {
+                return Ok(true);
             }
-            if a.rate > 0.0 {
+            let wait = if a.rate > 0.0 {
                 let due = pass + Duration::from_secs_f64((m.log_time - from) as f64 / 1e9 / a.rate);
-                let now = Instant::now();
-                if due > now && stop_rx.recv_timeout(due - now).is_ok() {
-                    break 'passes;
-                }
-            } else if stop_rx.try_recv().is_ok() {
-                break 'passes;
+                due.saturating_duration_since(Instant::now())
+            } else {
+                Duration::ZERO
+            };
+            if stop_rx.recv_timeout(wait).is_ok() {
+                stopped = true;
+                return Ok(false);
             }
-            let key = remap(&m.channel.topic, &remaps);
+            let key = remap(m.topic, &remaps);
             if !publishers.contains_key(&key) {
                 // Blocking, not dropping, when a subscriber lags: a
                 // replay delivers every message, at worst late.
@@ -603,8 +660,9 @@ pub fn play(a: PlayArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             }
             count += 1;
             bytes += m.data.len() as u64;
-        }
-        if !a.repeat || stop_rx.try_recv().is_ok() {
+            Ok(true)
+        })?;
+        if !a.repeat {
             break;
         }
     }
@@ -663,28 +721,29 @@ fn info(path: &Path) -> anyhow::Result<()> {
                 out,
                 "{name}: no summary (a recording that did not finish): reading every message"
             )?;
-            let buf = read_all(path)?;
+            // Channels named by key and schema, numbered as they come.
+            let mut ids: HashMap<(String, String), u16> = HashMap::new();
             let mut counts = BTreeMap::new();
             let mut channels = BTreeMap::new();
             let (mut start, mut end, mut total) = (u64::MAX, 0, 0);
-            for m in mcap::MessageStream::new(&buf).with_context(|| format!("reading {name}"))? {
-                let Ok(m) = m else { break };
-                *counts.entry(m.channel.id).or_insert(0u64) += 1;
-                let schema = m
-                    .channel
-                    .schema
-                    .as_ref()
-                    .map(|s| s.name.clone())
-                    .unwrap_or_default();
-                channels.entry(m.channel.id).or_insert((
-                    m.channel.topic.clone(),
-                    schema,
-                    m.channel.message_encoding.clone(),
-                ));
+            each_message(path, |m| {
+                let next = u16::try_from(ids.len()).unwrap_or(u16::MAX);
+                let id = *ids
+                    .entry((m.topic.to_owned(), m.schema.to_owned()))
+                    .or_insert(next);
+                *counts.entry(id).or_insert(0u64) += 1;
+                channels.entry(id).or_insert_with(|| {
+                    (
+                        m.topic.to_owned(),
+                        m.schema.to_owned(),
+                        m.encoding.to_owned(),
+                    )
+                });
                 start = start.min(m.log_time);
                 end = end.max(m.log_time);
                 total += 1;
-            }
+                Ok(true)
+            })?;
             (counts, channels, start.min(end), end, total)
         }
     };
@@ -711,40 +770,31 @@ fn info(path: &Path) -> anyhow::Result<()> {
 }
 
 fn export(path: &Path, format: Format) -> anyhow::Result<()> {
-    let buf = read_all(path)?;
-    let name = path.display().to_string();
     let mut out = std::io::BufWriter::new(std::io::stdout().lock());
     if format == Format::Player {
         out.write_all(troupe_log::text::header().as_bytes())?;
     }
     let mut skipped = 0u64;
-    for m in mcap::MessageStream::new(&buf).with_context(|| format!("reading {name}"))? {
-        let m = match m {
-            Ok(m) => m,
-            Err(e) => {
-                eprintln!("troupe log export: {name}: {e}; the rest of the file is unreadable");
-                break;
-            }
-        };
-        if m.channel.message_encoding != ENCODING {
-            continue;
+    each_message(path, |m| {
+        if m.encoding != ENCODING {
+            return Ok(true);
         }
-        let Ok(s) = decode_any(&m.data) else {
+        let Ok(s) = decode_any(m.data) else {
             skipped += 1;
-            continue;
+            return Ok(true);
         };
         match format {
             Format::Json => {
                 let line = serde_json::json!({
                     "time": m.log_time as f64 / 1e9,
-                    "key": m.channel.topic,
+                    "key": m.topic,
                     "stamp": s.stamp,
                     "msg": s.msg,
                 });
                 writeln!(out, "{line}")?;
             }
             Format::Player => {
-                let line = keys::parse_data(&m.channel.topic).ok().and_then(|d| {
+                let line = keys::parse_data(m.topic).ok().and_then(|d| {
                     troupe_log::text::line(s.stamp, d.robot, d.interface, d.index, &s.msg)
                 });
                 match line {
@@ -753,7 +803,8 @@ fn export(path: &Path, format: Format) -> anyhow::Result<()> {
                 }
             }
         }
-    }
+        Ok(true)
+    })?;
     out.flush()?;
     if skipped > 0 {
         eprintln!(
@@ -892,27 +943,23 @@ pub fn bench(a: &RecordBenchArgs) -> anyhow::Result<()> {
 
         // What was lost: each device publishes once per step, so between its
         // first and last stamp it owes one message per 100 ms.
-        let buf = read_all(&file)?;
         let mut stamps: HashMap<String, (f64, f64, u64)> = HashMap::new();
         let (mut count, mut bytes) = (0u64, 0u64);
-        for m in mcap::MessageStream::new(&buf)? {
-            let m = m?;
-            if m.channel.message_encoding != ENCODING {
-                continue;
+        each_message(&file, |m| {
+            if m.encoding != ENCODING {
+                return Ok(true);
             }
             count += 1;
             bytes += m.data.len() as u64;
             let t = m.publish_time as f64 / 1e9;
-            let key = format!(
-                "{}#{}",
-                m.channel.topic,
-                m.channel.schema.as_ref().map_or("", |s| s.name.as_str())
-            );
-            let e = stamps.entry(key).or_insert((t, t, 0));
+            let e = stamps
+                .entry(format!("{}#{}", m.topic, m.schema))
+                .or_insert((t, t, 0));
             e.0 = e.0.min(t);
             e.1 = e.1.max(t);
             e.2 += 1;
-        }
+            Ok(true)
+        })?;
         let owed: u64 = stamps
             .values()
             .map(|(first, last, _)| ((last - first) / 0.1).round() as u64 + 1)
@@ -980,18 +1027,17 @@ pub fn bench(a: &RecordBenchArgs) -> anyhow::Result<()> {
             files.open(0)?;
             let mut shift = 0u64;
             while files.bytes < a.info_mb * 1_000_000 {
-                for m in mcap::MessageStream::new(&buf)? {
-                    let m = m?;
-                    let schema = m.channel.schema.as_ref().map_or("?", |s| s.name.as_str());
+                each_message(&file, |m| {
                     files.write(
-                        &m.channel.topic,
-                        schema,
-                        &m.channel.message_encoding,
-                        &m.data,
+                        m.topic,
+                        m.schema,
+                        m.encoding,
+                        m.data,
                         m.log_time + shift,
                         m.publish_time,
                     )?;
-                }
+                    Ok(true)
+                })?;
                 shift += secs_ns(wall);
             }
             files.close()?;

@@ -669,6 +669,33 @@ fn a_recorded_stage_run_plays_back_in_order_ten_times_faster() {
     };
     assert_eq!(us(&got), us(&recorded), "every message, in order");
     assert!(router.terminate().success());
+
+    // Cut short, as by a crash: no summary; what is readable is read, and
+    // where the damage is is said, naming the file.
+    let bytes = std::fs::read(&file).unwrap();
+    let cut = dir.join("cut.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).unwrap();
+    let (status, info, err) = troupe_tests::troupe_output(&troupe_tests::strings(&[
+        "log",
+        "info",
+        cut.to_str().unwrap(),
+    ]));
+    assert!(status.success(), "{info}{err}");
+    assert!(info.contains("no summary"), "{info}");
+    assert!(
+        err.contains(&format!("{}: ", cut.display())) && err.contains("the rest is unreadable"),
+        "{err}"
+    );
+    let n: usize = info
+        .lines()
+        .find_map(|l| l.strip_prefix("messages:"))
+        .and_then(|n| n.trim().parse().ok())
+        .unwrap_or(0);
+    assert!(
+        n > 0 && n < recorded.len(),
+        "{n} of {} read from the cut file",
+        recorded.len()
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 
