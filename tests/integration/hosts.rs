@@ -74,13 +74,19 @@ impl Drop for Hosts {
 
 /// Waits for a line containing all of `words`.
 fn expect_line(rx: &Receiver<String>, words: &[&str], deadline: Duration) -> String {
+    wait_line(rx, words, deadline)
+        .unwrap_or_else(|| panic!("no line with {words:?} within {deadline:?}"))
+}
+
+/// A line containing all of `words`, if one comes within `deadline`.
+fn wait_line(rx: &Receiver<String>, words: &[&str], deadline: Duration) -> Option<String> {
     let end = Instant::now() + deadline;
     loop {
         let left = end.saturating_duration_since(Instant::now());
         match rx.recv_timeout(left) {
-            Ok(l) if words.iter().all(|w| l.contains(w)) => return l,
+            Ok(l) if words.iter().all(|w| l.contains(w)) => return Some(l),
             Ok(_) => {}
-            Err(_) => panic!("no line with {words:?} within {deadline:?}"),
+            Err(_) => return None,
         }
     }
 }
@@ -176,8 +182,20 @@ fn a_plan_split_across_two_hosts_runs_and_heals_after_a_cut_link() {
     );
 
     // Host B's node needs host A's device: both come up, seen from A.
-    expect_line(&events, &["+", "ranger:0", "dummy"], LINK_DEADLINE);
-    expect_line(&events, &["+", "laser:0", "rangertolaser"], LINK_DEADLINE);
+    for words in [
+        ["+", "ranger:0", "dummy"],
+        ["+", "laser:0", "rangertolaser"],
+    ] {
+        if wait_line(&events, &words, LINK_DEADLINE).is_none() {
+            // What each host said, for the one who reads the failure.
+            panic!(
+                "no line with {words:?} within {LINK_DEADLINE:?}\n--- launch a ---\n{}\n--- launch b ---\n{}\n--- router b ---\n{}",
+                la.stderr(),
+                lb.stderr(),
+                rb.stderr()
+            );
+        }
+    }
 
     // The whole fleet from either host; data from B reaches a client on A.
     for (ns, e) in [(&hosts.a, &ea), (&hosts.b, &eb)] {
