@@ -517,6 +517,20 @@ impl Fields<'_, '_> {
         })
     }
 
+    /// A body's planar pose and footprint: x y yaw length width.
+    fn planar_body(&mut self) -> Result<(Pose3d, Size3d), LineError> {
+        let pose = self.planar()?;
+        let (length, width) = (self.f64()?, self.f64()?);
+        Ok((
+            pose,
+            Size3d {
+                width,
+                length,
+                height: 0.0,
+            },
+        ))
+    }
+
     fn beams(&mut self, scan: &mut laser::Scan) -> Result<(), LineError> {
         let n = self.count(2)?;
         scan.ranges.reserve(n);
@@ -566,21 +580,8 @@ pub fn message(line: &Line<'_>) -> Result<AnyMsg, LineError> {
             AnyMsg::LaserScanPose(laser::ScanPose { scan, pose })
         }
         (I::Laser, RESP_ACK, 1) => {
-            let (x, y, yaw) = (f.f64()?, f.f64()?, f.f64()?);
-            let (length, width) = (f.f64()?, f.f64()?);
-            AnyMsg::LaserGeom(laser::Geom {
-                pose: Pose3d {
-                    x,
-                    y,
-                    yaw,
-                    ..Pose3d::default()
-                },
-                size: Size3d {
-                    width,
-                    length,
-                    height: 0.0,
-                },
-            })
+            let (pose, size) = f.planar_body()?;
+            AnyMsg::LaserGeom(laser::Geom { pose, size })
         }
         (I::Ranger, DATA, 1) => {
             let n = f.count(1)?;
@@ -621,21 +622,8 @@ pub fn message(line: &Line<'_>) -> Result<AnyMsg, LineError> {
             stall: f.f64()? != 0.0,
         }),
         (I::Position2d, RESP_ACK, 1) => {
-            let (x, y, yaw) = (f.f64()?, f.f64()?, f.f64()?);
-            let (length, width) = (f.f64()?, f.f64()?);
-            AnyMsg::Position2dGeom(position2d::Geom {
-                pose: Pose3d {
-                    x,
-                    y,
-                    yaw,
-                    ..Pose3d::default()
-                },
-                size: Size3d {
-                    width,
-                    length,
-                    height: 0.0,
-                },
-            })
+            let (pose, size) = f.planar_body()?;
+            AnyMsg::Position2dGeom(position2d::Geom { pose, size })
         }
         (I::Sonar, DATA, 1) => {
             let n = f.count(1)?;
