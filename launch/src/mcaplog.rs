@@ -154,7 +154,8 @@ struct Files {
     path: PathBuf,
     opened_at: u64,
     bytes: u64,
-    channels: HashMap<(String, String), u16>,
+    /// Channel ids by key, then by schema tag (a key has one or two).
+    channels: HashMap<String, Vec<(String, u16)>>,
     sequence: HashMap<u16, u32>,
     written: Vec<PathBuf>,
 }
@@ -217,7 +218,8 @@ impl Files {
         Ok(())
     }
 
-    /// Writes one message on the channel of `key` and `schema`.
+    /// Writes one message on the channel of `key` and `schema` (allocating
+    /// only for a channel's first message: this runs for every sample).
     fn write(
         &mut self,
         key: &str,
@@ -227,25 +229,37 @@ impl Files {
         log_time: u64,
         publish_time: u64,
     ) -> anyhow::Result<()> {
-        let path = self.path.display().to_string();
-        let Some(w) = self.writer.as_mut() else {
+        let Files {
+            writer,
+            path,
+            channels,
+            sequence,
+            bytes,
+            ..
+        } = self;
+        let Some(w) = writer.as_mut() else {
             return Ok(());
         };
-        let id = match self.channels.get(&(key.to_owned(), schema.to_owned())) {
-            Some(&id) => id,
+        let writing = || format!("writing {}", path.display());
+        let known = channels
+            .get(key)
+            .and_then(|v| v.iter().find(|(s, _)| s == schema))
+            .map(|&(_, id)| id);
+        let id = match known {
+            Some(id) => id,
             None => {
-                let schema_id = w
-                    .add_schema(schema, encoding, &[])
-                    .with_context(|| format!("writing {path}"))?;
+                let schema_id = w.add_schema(schema, encoding, &[]).with_context(writing)?;
                 let id = w
                     .add_channel(schema_id, key, encoding, &BTreeMap::new())
-                    .with_context(|| format!("writing {path}"))?;
-                self.channels
-                    .insert((key.to_owned(), schema.to_owned()), id);
+                    .with_context(writing)?;
+                channels
+                    .entry(key.to_owned())
+                    .or_default()
+                    .push((schema.to_owned(), id));
                 id
             }
         };
-        let seq = self.sequence.entry(id).or_default();
+        let seq = sequence.entry(id).or_default();
         *seq = seq.wrapping_add(1);
         w.write_to_known_channel(
             &mcap::records::MessageHeader {
@@ -256,8 +270,9 @@ impl Files {
             },
             data,
         )
-        .with_context(|| format!("writing {path}"))?;
-        self.bytes += data.len() as u64 + 31;
+        .with_context(writing)?;
+        // The message record's own header is 31 bytes.
+        *bytes += data.len() as u64 + 31;
         Ok(())
     }
 }
@@ -288,7 +303,7 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
                 }
             })
             .wait()
-            .map_err(|e| anyhow::anyhow!("subscribing to {e}"))?;
+            .map_err(|err| anyhow::anyhow!("subscribing to {e}: {err}"))?;
         subs.push(sub);
     }
     let tokens = {
@@ -311,6 +326,7 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             .map_err(|e| anyhow::anyhow!("watching liveliness: {e}"))?
     };
     drop(tx);
+    let split = a.split_size.is_some() || a.split_duration.is_some();
     // On stdout, once every subscription is in place: a script (or a test)
     // may start what it records when this line appears.
     writeln!(
@@ -318,18 +334,10 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         "troupe record: {} to {}{} (Ctrl-C stops)",
         exprs.join(" "),
         a.output.display(),
-        if a.split_size.is_some() || a.split_duration.is_some() {
-            " (split)"
-        } else {
-            ""
-        }
+        if split { " (split)" } else { "" }
     )?;
 
-    let mut files = Files::new(
-        a.output.clone(),
-        a.split_size.is_some() || a.split_duration.is_some(),
-        a.compress,
-    );
+    let mut files = Files::new(a.output.clone(), split, a.compress);
     files.open(now_ns())?;
     let split_bytes = a.split_size.map(|mb| (mb * 1e6) as u64);
     let split_ns = a.split_duration.map(secs_ns);
@@ -353,12 +361,10 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             }
             let r = match &h {
                 Heard::Sample { key, payload, at } => {
-                    let (schema, stamp) = match codec::split(payload) {
-                        Ok((tag, stamp, _)) => (tag.to_owned(), secs_ns(stamp)),
-                        Err(_) => ("?".to_owned(), 0),
-                    };
+                    let (schema, stamp) = codec::split(payload)
+                        .map_or(("?", 0), |(tag, stamp, _)| (tag, secs_ns(stamp)));
                     bytes += payload.len() as u64;
-                    files.write(key, &schema, ENCODING, payload, *at, stamp)
+                    files.write(key, schema, ENCODING, payload, *at, stamp)
                 }
                 Heard::Token { key, came, at } => {
                     files.write(key, "liveliness", LIVELINESS, &[u8::from(*came)], *at, *at)
@@ -382,11 +388,7 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     });
 
     // Until a signal or the duration; the drop count is said as it grows.
-    let (stop_tx, stop_rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        let _ = crate::tools::wait_for_signal();
-        let _ = stop_tx.send(());
-    });
+    let stop_rx = stop_signal();
     let started = Instant::now();
     let deadline = a
         .duration
@@ -438,6 +440,16 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         anyhow::bail!("{dropped} samples were dropped: the disk did not keep up (a larger --queue, or --compress none, may)");
     }
     Ok(())
+}
+
+/// Receives once on SIGINT or SIGTERM.
+fn stop_signal() -> std::sync::mpsc::Receiver<()> {
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = crate::tools::wait_for_signal();
+        let _ = tx.send(());
+    });
+    rx
 }
 
 /// One message of a recording, as [`each_message`] hands it over.
@@ -618,11 +630,7 @@ pub fn play(a: PlayArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         first + secs_ns(a.start),
         a.end.map_or(u64::MAX, |e| first + secs_ns(e)),
     );
-    let (stop_tx, stop_rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        let _ = crate::tools::wait_for_signal();
-        let _ = stop_tx.send(());
-    });
+    let stop_rx = stop_signal();
     let started = Instant::now();
     let (mut count, mut bytes) = (0u64, 0u64);
     let mut stopped = false;
@@ -828,20 +836,6 @@ pub struct RecordBenchArgs {
     pub bitmaps: Option<PathBuf>,
 }
 
-/// This process's CPU time so far, seconds (user + system).
-fn cpu_seconds() -> f64 {
-    let ticks = std::fs::read_to_string("/proc/self/stat")
-        .ok()
-        .and_then(|s| {
-            // Fields after the command name, which ends with ')'.
-            let rest = s.rsplit_once(')')?.1.to_owned();
-            let f: Vec<&str> = rest.split_whitespace().collect();
-            Some(f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?)
-        })
-        .unwrap_or(0.0);
-    ticks / 100.0
-}
-
 /// `troupe bench record`: the 100-Pioneer world (100 lasers, 100 sonar
 /// rings, 100 odometries every 100 simulated ms) run flat out and recorded
 /// whole; what was lost, the recorder's CPU and bytes per second; the file
@@ -906,27 +900,22 @@ pub fn bench(a: &RecordBenchArgs) -> anyhow::Result<()> {
     };
     let result = (|| -> anyhow::Result<()> {
         // Every device live first.
-        let session = z.open(Mode::Client)?;
-        let deadline = Instant::now() + Duration::from_secs(120);
-        loop {
-            let live = session
-                .liveliness()
-                .get("robot/**")
-                .wait()
-                .map_err(|e| anyhow::anyhow!("{e}"))?
-                .iter()
-                .count();
-            if live >= 300 {
-                break;
-            }
-            anyhow::ensure!(
-                Instant::now() < deadline,
-                "only {live} of 300 devices came up"
-            );
-            std::thread::sleep(Duration::from_millis(200));
-        }
+        let devices = (0..100u32)
+            .flat_map(|i| {
+                ["position2d:0", "ranger:0", "ranger:1"].map(|d| format!("{}:{d}", 6665 + i))
+            })
+            .map(|d| d.parse::<troupe_msgs::DevAddr>())
+            .collect::<Result<Vec<_>, _>>()?;
+        crate::tools::ready(
+            crate::cli::ReadyArgs {
+                devices,
+                robot: 6665,
+                wait: 120.0,
+            },
+            &z,
+        )?;
         let file = dir.join("p100.mcap");
-        let (cpu0, t0) = (cpu_seconds(), Instant::now());
+        let (cpu0, t0) = (crate::navbench::cpu_time(), Instant::now());
         record(
             RecordArgs {
                 keys: Vec::new(),
@@ -939,7 +928,12 @@ pub fn bench(a: &RecordBenchArgs) -> anyhow::Result<()> {
             },
             &z,
         )?;
-        let (cpu, wall) = (cpu_seconds() - cpu0, t0.elapsed().as_secs_f64());
+        let (cpu, wall) = (
+            crate::navbench::cpu_time()
+                .saturating_sub(cpu0)
+                .as_secs_f64(),
+            t0.elapsed().as_secs_f64(),
+        );
 
         // What was lost: each device publishes once per step, so between its
         // first and last stamp it owes one message per 100 ms.
@@ -988,7 +982,6 @@ pub fn bench(a: &RecordBenchArgs) -> anyhow::Result<()> {
         for (kind, (owed, got)) in &by_kind {
             writeln!(out, "    {kind:<24} {got:>8} of {owed:>8}")?;
         }
-        drop(session);
 
         // Played back as fast as a subscriber takes it.
         let sink = ZenohArgs {

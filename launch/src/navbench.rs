@@ -70,7 +70,7 @@ fn nearest_clear(m: &OccMap, dist: &[f32], x: f64, y: f64, clear: f32) -> (f64, 
 /// CPU time of the whole process so far (every thread): the particle
 /// filter weighs large particle sets on both cores, and its target is CPU
 /// time, not wall time.
-fn cpu_time() -> Duration {
+pub(crate) fn cpu_time() -> Duration {
     use nix::time::{clock_gettime, ClockId};
     clock_gettime(ClockId::CLOCK_PROCESS_CPUTIME_ID).map_or(Duration::ZERO, Duration::from)
 }

@@ -7,7 +7,7 @@ use std::io::Read as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use troupe_msgs::{keys, laser, Device, Interface};
+use troupe_msgs::{keys, laser, localize, position2d, Device, Interface};
 use troupe_node::zenoh::Wait;
 use troupe_tests::{Proc, DEADLINE};
 
@@ -83,6 +83,27 @@ fn logged_ranges(l: &Logged) -> Vec<f64> {
     let count = l.payload[5] as usize;
     assert_eq!(l.payload.len(), 6 + 2 * count, "a scan's fields");
     (0..count).map(|i| l.payload[6 + 2 * i]).collect()
+}
+
+type Sub = troupe_node::zenoh::pubsub::Subscriber<
+    troupe_node::zenoh::handlers::FifoChannelHandler<troupe_node::zenoh::sample::Sample>,
+>;
+
+/// Robot 6665's `iface`:0 data, subscribed.
+fn data_of(session: &troupe_node::zenoh::Session, iface: Interface) -> Sub {
+    session
+        .declare_subscriber(keys::data(&Device::new(6665, iface, 0)))
+        .wait()
+        .unwrap()
+}
+
+/// The next sample on `sub`, an `M`, within the deadline.
+fn next<M: troupe_msgs::Message>(sub: &Sub, what: &str) -> troupe_msgs::Stamped<M> {
+    let s = sub
+        .recv_deadline(Instant::now() + DEADLINE)
+        .unwrap()
+        .unwrap_or_else(|| panic!("no more {what}"));
+    troupe_msgs::decode::<M>(&s.payload().to_bytes()).unwrap()
 }
 
 fn f64s(body: &[u8]) -> impl Iterator<Item = f64> + '_ {
@@ -214,19 +235,10 @@ fn writelog_records_stage_s_simple_world_in_player_s_format() {
     let session = troupe_tests::client_at(&router, &ns);
     troupe_tests::wait_live(&session, &["6665:log:0"]);
     // What the laser published, stamp by stamp, while writelog logged it.
-    let sub = session
-        .declare_subscriber(keys::data(&Device::new(6665, Interface::Laser, 0)))
-        .wait()
-        .unwrap();
-    let mut seen = Vec::new();
-    while seen.len() < 20 {
-        let s = sub
-            .recv_deadline(Instant::now() + DEADLINE)
-            .unwrap()
-            .expect("laser scans");
-        let scan = troupe_msgs::decode::<laser::Scan>(&s.payload().to_bytes()).unwrap();
-        seen.push(scan);
-    }
+    let sub = data_of(&session, Interface::Laser);
+    let seen: Vec<_> = (0..20)
+        .map(|_| next::<laser::Scan>(&sub, "laser scans"))
+        .collect();
     drop(sub);
     assert!(launcher.terminate().success(), "{}", launcher.stderr());
 
@@ -335,23 +347,10 @@ fn a_damaged_log_says_where_and_replays_the_rest() {
     let mut launcher = troupe_tests::launch(&ns, &cfg, &[]);
     let (router, _) = troupe_tests::launch_ports(&mut launcher);
     let session = troupe_tests::client_at(&router, &ns);
-    let sub = session
-        .declare_subscriber(keys::data(&Device::new(6665, Interface::Position2d, 0)))
-        .wait()
-        .unwrap();
+    let sub = data_of(&session, Interface::Position2d);
     troupe_tests::wait_live(&session, &["6665:position2d:0"]);
     // The last good line (x = 29) arrives: the rest replayed past the damage.
-    loop {
-        let s = sub
-            .recv_deadline(Instant::now() + DEADLINE)
-            .unwrap()
-            .expect("the log's poses");
-        let d =
-            troupe_msgs::decode::<troupe_msgs::position2d::Data>(&s.payload().to_bytes()).unwrap();
-        if d.msg.pose.x == 29.0 {
-            break;
-        }
-    }
+    while next::<position2d::Data>(&sub, "the log's poses").msg.pose.x != 29.0 {}
     assert!(launcher.terminate().success());
     let err = launcher.stderr();
     let name = log.display().to_string();
@@ -418,20 +417,10 @@ fn truth(odom: &[f64]) -> (f64, f64) {
 }
 
 /// amcl's best estimates (stamp, x, y) until one 1.5 s short of `end`.
-fn estimates_until(
-    est: &troupe_node::zenoh::pubsub::Subscriber<
-        troupe_node::zenoh::handlers::FifoChannelHandler<troupe_node::zenoh::sample::Sample>,
-    >,
-    end: f64,
-) -> Vec<(f64, f64, f64)> {
+fn estimates_until(est: &Sub, end: f64) -> Vec<(f64, f64, f64)> {
     let mut out = Vec::new();
     loop {
-        let s = est
-            .recv_deadline(Instant::now() + DEADLINE)
-            .unwrap()
-            .expect("amcl's estimates");
-        let h =
-            troupe_msgs::decode::<troupe_msgs::localize::Hypoths>(&s.payload().to_bytes()).unwrap();
+        let h = next::<localize::Hypoths>(est, "amcl's estimates");
         if let Some(best) = h.msg.hypoths.first() {
             out.push((h.stamp, best.mean.x, best.mean.y));
         }
@@ -475,22 +464,9 @@ fn a_recorded_run_localizes_offline_as_it_did_live() {
     let mut rec = launch_in(&dir, &ns, "worlds/record.cfg", &["--speedup", "4"]);
     let (router, _) = troupe_tests::launch_ports(&mut rec);
     let session = troupe_tests::client_at(&router, &ns);
-    let odom = session
-        .declare_subscriber(keys::data(&Device::new(6665, Interface::Position2d, 0)))
-        .wait()
-        .unwrap();
+    let odom = data_of(&session, Interface::Position2d);
     troupe_tests::wait_live(&session, &["6665:log:0"]);
-    loop {
-        let s = odom
-            .recv_deadline(Instant::now() + DEADLINE)
-            .unwrap()
-            .expect("r0's odometry");
-        let d =
-            troupe_msgs::decode::<troupe_msgs::position2d::Data>(&s.payload().to_bytes()).unwrap();
-        if d.stamp >= 16.0 {
-            break;
-        }
-    }
+    while next::<position2d::Data>(&odom, "r0's odometry").stamp < 16.0 {}
     drop(odom);
     assert!(rec.terminate().success(), "{}", rec.stderr());
     let logged = read_log(&std::fs::read_to_string(dir.join("r0.log")).unwrap());
@@ -516,10 +492,7 @@ fn a_recorded_run_localizes_offline_as_it_did_live() {
     let mut rep = launch_in(&dir, &ns, "worlds/replay.cfg", &[]);
     let (router, _) = troupe_tests::launch_ports(&mut rep);
     let session = troupe_tests::client_at(&router, &ns);
-    let est = session
-        .declare_subscriber(keys::data(&Device::new(6665, Interface::Localize, 0)))
-        .wait()
-        .unwrap();
+    let est = data_of(&session, Interface::Localize);
     let offline = estimates_until(&est, end);
     assert!(rep.terminate().success(), "{}", rep.stderr());
     let (live_err, n_live) = mean_error(&live, &logged, 5.0);
@@ -788,10 +761,7 @@ fn a_recorded_mcap_plays_into_amcl_which_localizes_as_it_did_live() {
     // Its router only: its nodes wait for the replay, and so does its bridge.
     let router = loc.endpoint("troupe launch: router listening on");
     let session = troupe_tests::client_at(&router, &ns);
-    let est = session
-        .declare_subscriber(keys::data(&Device::new(6665, Interface::Localize, 0)))
-        .wait()
-        .unwrap();
+    let est = data_of(&session, Interface::Localize);
     let mut args = net(&router, &ns);
     args.extend(troupe_tests::strings(&[
         "play",

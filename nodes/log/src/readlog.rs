@@ -87,7 +87,10 @@ pub struct ReadLog {
     /// summed up at the end of the first pass.
     problems: BTreeMap<String, (u64, u64)>,
     summarized: bool,
-    unmatched: BTreeMap<String, u64>,
+    /// Lines of devices not provided, by device.
+    unmatched: BTreeMap<Device, u64>,
+    /// The line being read (kept: one buffer for the whole log).
+    buf: Vec<u8>,
     published: u64,
 }
 
@@ -130,6 +133,7 @@ impl Driver for ReadLog {
             problems: BTreeMap::new(),
             summarized: false,
             unmatched: BTreeMap::new(),
+            buf: Vec::new(),
             published: 0,
         })
     }
@@ -270,13 +274,20 @@ impl ReadLog {
     /// Reads lines until a data line for a provided device (kept in
     /// `next`) or the end; answers logged on the way answer requests.
     fn read_next(&mut self, ctx: &mut Ctx) -> Result<()> {
-        let mut buf = Vec::new();
+        let mut buf = std::mem::take(&mut self.buf);
+        let found = self.read_into(ctx, &mut buf);
+        self.buf = buf;
+        found
+    }
+
+    /// [`ReadLog::read_next`], reading each line into `buf`.
+    fn read_into(&mut self, ctx: &mut Ctx, buf: &mut Vec<u8>) -> Result<()> {
         loop {
             buf.clear();
             let Some(file) = self.file.as_mut() else {
                 return Ok(());
             };
-            match file.read_until(b'\n', &mut buf) {
+            match file.read_until(b'\n', buf) {
                 Ok(0) => return Ok(()),
                 Ok(_) => {}
                 Err(e) => {
@@ -285,7 +296,7 @@ impl ReadLog {
                 }
             }
             self.line_no += 1;
-            let text = String::from_utf8_lossy(&buf);
+            let text = String::from_utf8_lossy(buf);
             let line = match text::parse(&text) {
                 Ok(Some(l)) => l,
                 Ok(None) => continue,
@@ -297,8 +308,8 @@ impl ReadLog {
             let Some(dev) = self.devices.iter().copied().find(|d| {
                 d.robot == line.robot && d.interface == line.interface && d.index == line.index
             }) else {
-                let what = format!("{}:{}:{}", line.robot, line.interface.name(), line.index);
-                let n = self.unmatched.entry(what.clone()).or_default();
+                let what = Device::new(line.robot, line.interface, line.index);
+                let n = self.unmatched.entry(what).or_default();
                 if *n == 0 {
                     tracing::info!(
                         "{}: {what} is not among the provided devices; its lines are skipped",
@@ -347,6 +358,12 @@ impl ReadLog {
                     self.path.display()
                 );
             }
+        }
+        for (dev, n) in &self.unmatched {
+            tracing::info!(
+                "{}: {n} lines of {dev} skipped (not provided)",
+                self.path.display()
+            );
         }
     }
 }

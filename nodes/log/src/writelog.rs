@@ -88,7 +88,7 @@ pub struct WriteLog {
     particle_requests: HashMap<RequestId, Device>,
     /// Lines written; kinds of message skipped, with counts.
     lines: u64,
-    skipped: BTreeMap<String, u64>,
+    skipped: BTreeMap<Device, BTreeMap<String, u64>>,
 }
 
 fn timestamp() -> String {
@@ -169,7 +169,12 @@ impl Driver for WriteLog {
             Event::Reply(r) => {
                 if let Some(dev) = self.particle_requests.remove(&r.id) {
                     match answer(&r, dev) {
-                        Ok(m) => self.write_msg(dev, m.stamp, &m.msg)?,
+                        Ok(m) => self.write_msg(
+                            dev,
+                            <localize::Particles as troupe_msgs::Message>::SCHEMA,
+                            m.stamp,
+                            &m.msg,
+                        )?,
                         Err(e) => tracing::warn!("unable to get {dev}'s particles ({e})"),
                     }
                     return Ok(());
@@ -303,10 +308,12 @@ impl WriteLog {
             let _ = f.flush();
             tracing::info!("closed {} after {} lines", self.path.display(), self.lines);
         }
-        for (kind, n) in std::mem::take(&mut self.skipped) {
-            tracing::info!(
-                "skipped {n} message(s) of {kind}: Player's log format has no layout for them"
-            );
+        for (dev, counts) in std::mem::take(&mut self.skipped) {
+            for (schema, n) in counts {
+                tracing::info!(
+                    "skipped {n} message(s) of {schema} from {dev}: Player's log format has no layout for them"
+                );
+            }
         }
     }
 
@@ -328,17 +335,21 @@ impl WriteLog {
             let id = ctx.request(&dev, &localize::GetParticles)?;
             self.particle_requests.insert(id, dev);
         }
-        self.write_msg(dev, m.stamp, &m.msg)
+        self.write_msg(dev, &s.schema(), m.stamp, &m.msg)
     }
 
-    fn write_msg(&mut self, dev: Device, stamp: f64, msg: &AnyMsg) -> Result<()> {
+    /// Writes `msg` (of schema tag `schema`) from `dev`, or holds it until
+    /// the geometries are in, or counts it when the format has no layout.
+    fn write_msg(&mut self, dev: Device, schema: &str, stamp: f64, msg: &AnyMsg) -> Result<()> {
         let Some(line) = text::line(stamp, dev.robot, dev.interface, dev.index, msg) else {
-            let kind = format!("{} from {dev}", schema_name(msg));
-            let n = self.skipped.entry(kind.clone()).or_default();
-            if *n == 0 {
-                tracing::warn!("not logging {kind}: Player's log format has no layout for it (said once; counted)");
+            let counts = self.skipped.entry(dev).or_default();
+            match counts.get_mut(schema) {
+                Some(n) => *n += 1,
+                None => {
+                    tracing::warn!("not logging {schema} from {dev}: Player's log format has no layout for it (said once; counted)");
+                    counts.insert(schema.to_owned(), 1);
+                }
             }
-            *n += 1;
             return Ok(());
         };
         if self.asked.is_empty() {
@@ -367,13 +378,6 @@ impl WriteLog {
         self.lines += 1;
         Ok(())
     }
-}
-
-fn schema_name(msg: &AnyMsg) -> String {
-    let payload = msg.encode(0.0);
-    troupe_msgs::codec::schema_of(&payload)
-        .unwrap_or("?")
-        .to_owned()
 }
 
 /// A reply's message, or why there is none.
