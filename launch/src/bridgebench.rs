@@ -120,8 +120,12 @@ fn connect(addr: SocketAddr) -> anyhow::Result<TcpStream> {
 }
 
 fn open(s: &mut TcpStream, interf: Interface) -> anyhow::Result<()> {
+    open_at(s, interf, 0)
+}
+
+fn open_at(s: &mut TcpStream, interf: Interface, index: u32) -> anyhow::Result<()> {
     let mut body = Writer::new();
-    for v in [0, 0, u32::from(interf.code()), 0, player::OPEN] {
+    for v in [0, 0, u32::from(interf.code()), index, player::OPEN] {
         body.u32(v);
     }
     // An empty driver name.
@@ -233,6 +237,92 @@ fn read_at_10hz(addr: SocketAddr, phase: Duration, seconds: f64) -> anyhow::Resu
     Ok(r)
 }
 
+/// What a `Read()` loop saw: libplayerc's `playerc_client_read` in PULL
+/// mode, as fast as rounds come, with position2d, both rangers and the
+/// laser subscribed.
+#[derive(Default)]
+struct Pulls {
+    /// Reads, from the first that carried every device on.
+    reads: usize,
+    /// Of those, the reads that carried every device.
+    whole: usize,
+    /// Of those, the reads whose position2d was a newer step than the last's.
+    newer: usize,
+    /// Reads before the first whole one.
+    filling: usize,
+    /// Each read's round trip, sorted.
+    times: Vec<Duration>,
+    /// Wall-clock seconds the counted reads took.
+    seconds: f64,
+}
+
+const PULLED: [(Interface, u32); 4] = [
+    (Interface::Position2d, 0),
+    (Interface::Ranger, 0),
+    (Interface::Ranger, 1),
+    (Interface::Laser, 0),
+];
+
+fn read_loop(addr: SocketAddr, seconds: f64) -> anyhow::Result<Pulls> {
+    let mut s = connect(addr)?;
+    for (i, k) in PULLED {
+        open_at(&mut s, i, k)?;
+    }
+    let wanted: Vec<(u32, u32)> = PULLED
+        .iter()
+        .map(|&(i, k)| (u32::from(i.code()), k))
+        .collect();
+    let req = wire::message(header(player_req(player::DATA)), &[]);
+    let position = u32::from(Interface::Position2d.code());
+    let mut p = Pulls::default();
+    let mut last = f64::NEG_INFINITY;
+    let mut start = None;
+    let mut got = Vec::new();
+    while start.is_none_or(|t: Instant| t.elapsed().as_secs_f64() < seconds) {
+        anyhow::ensure!(
+            start.is_some() || p.filling < 1000,
+            "no read carried all four devices (the world's r0 needs a position and two rangers)"
+        );
+        let t0 = Instant::now();
+        s.write_all(&req)?;
+        got.clear();
+        let mut stamp = None;
+        loop {
+            let (h, _) = next(&mut s)?;
+            match u8::try_from(h.kind) {
+                Ok(wire::DATA) => {
+                    got.push((h.interf, h.index));
+                    if h.interf == position {
+                        stamp = Some(h.timestamp);
+                    }
+                }
+                Ok(wire::SYNCH) => break,
+                _ => {}
+            }
+        }
+        let whole = wanted.iter().all(|w| got.contains(w));
+        if start.is_none() && !whole {
+            p.filling += 1;
+            continue;
+        }
+        if start.is_none() {
+            start = Some(Instant::now());
+            last = stamp.unwrap_or(last);
+            continue;
+        }
+        p.times.push(t0.elapsed());
+        p.reads += 1;
+        p.whole += usize::from(whole);
+        if let Some(t) = stamp.filter(|&t| t > last) {
+            p.newer += 1;
+            last = t;
+        }
+    }
+    p.seconds = start.map_or(0.0, |t| t.elapsed().as_secs_f64());
+    p.times.sort();
+    Ok(p)
+}
+
 /// A 500x500 cave-like map as a PNG, for runs without `--map`.
 fn synthetic_map() -> anyhow::Result<PathBuf> {
     let img = image::GrayImage::from_fn(500, 500, |x, y| {
@@ -306,22 +396,31 @@ pub fn run(a: &BridgeBenchArgs) -> anyhow::Result<()> {
     let stage = spawn::<troupe_stage::Stage>(
         &at,
         &serde_json::json!({
-            "name": "stage", "provides": ["simulation:0", "position2d:0"],
+            "name": "stage",
+            "provides": ["simulation:0", "position2d:0", "ranger:0", "ranger:1"],
             "options": {"worldfile": world, "model": "r0", "speedup": -1, "update_rate": 100},
+        }),
+    )?;
+    // r0's laser, as simple.cfg makes it, in a driver of its own.
+    let laser = spawn::<troupe_rangertolaser::RangerToLaser>(
+        &at,
+        &serde_json::json!({
+            "name": "rangertolaser", "requires": ["ranger:1"], "provides": ["laser:0"],
         }),
     )?;
     // The drivers announce their devices from their own threads: the
     // bridge lists only devices that are live.
-    let live = [Interface::Map, Interface::Position2d, Interface::Simulation]
+    let live = [(Interface::Map, 0), (Interface::Simulation, 0)]
         .into_iter()
-        .try_for_each(|i| {
-            let dev = Device::new(ROBOT, i, 0);
+        .chain(PULLED)
+        .try_for_each(|(i, k)| {
+            let dev = Device::new(ROBOT, i, k);
             troupe_node::wait_live(&router, &dev, Duration::from_secs(30))
         });
     let result = live
         .map_err(anyhow::Error::from)
         .and_then(|()| measure(a, &router));
-    for (node, stop) in [mapfile, stage] {
+    for (node, stop) in [mapfile, stage, laser] {
         stop.stop();
         let _ = node.join();
     }
@@ -395,6 +494,9 @@ fn measure(a: &BridgeBenchArgs, router: &troupe_node::zenoh::Session) -> anyhow:
         fetches.push(t0.elapsed());
     }
     fetches.sort();
+
+    // A program's `Read()` loop: every read one moment of the simulation.
+    let pulls = read_loop(addr, a.seconds)?;
 
     // Many clients at once, and one that opened the device and never reads.
     let mut stuck = connect(addr)?;
@@ -489,6 +591,22 @@ fn measure(a: &BridgeBenchArgs, router: &troupe_node::zenoh::Session) -> anyhow:
         "",
         us(p50s.first().copied().unwrap_or_default()),
         us(p50s.last().copied().unwrap_or_default()),
+    )?;
+    row(
+        &mut out,
+        "Read() loop, 4 devices: REQ DATA to SYNCH",
+        &pulls.times,
+        "paced by the simulation step (10 ms here)",
+    )?;
+    let pct = |n: usize| 100.0 * n as f64 / pulls.reads.max(1) as f64;
+    writeln!(
+        out,
+        "  {:<48} {:.0} reads/s; {:.1}% carried all four devices, {:.1}% a newer step than the read before (target 100%); {} reads before the first whole one",
+        "",
+        pulls.reads as f64 / pulls.seconds.max(1e-9),
+        pct(pulls.whole),
+        pct(pulls.newer),
+        pulls.filling,
     )?;
     row(
         &mut out,

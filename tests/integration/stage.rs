@@ -147,3 +147,83 @@ fn fiducial_ids_are_read_and_set_as_stage_does() {
     assert_eq!(id(&r), 42, "GET_ID after SET_ID (was {before})");
     assert!(launcher.terminate().success(), "{}", launcher.stderr());
 }
+
+/// PULL mode as Player's Stage serves it (issue 32, item 1): a read (REQ
+/// DATA … SYNCH) is one moment of the simulation. Once every subscribed
+/// device has published, each read carries every one of them — Stage's
+/// position2d and two rangers, and the laser rangertolaser derives in its
+/// own process — and reads are paced by the simulation: each brings a
+/// newer step than the last.
+#[test]
+fn a_pull_read_carries_every_subscribed_device_at_one_step() {
+    use crate::player::{Player, DATA, RESP_ACK, SYNCH};
+    use troupe_msgs::{Device, Interface};
+    let cfg = Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/simple.cfg");
+    let ns = troupe_tests::unique_namespace("pull");
+    let mut launcher = troupe_tests::launch(&ns, &cfg, &[]);
+    let (_, addr) = troupe_tests::launch_ports(&mut launcher);
+    let mut player = Player::connect(addr, 6665);
+    // PLAYER_PLAYER_REQ_DATAMODE, PLAYER_DATAMODE_PULL.
+    player.send(1, 0, 3, 5, &2u32.to_be_bytes());
+    assert_eq!(player.reply().kind(), RESP_ACK);
+    let devices = [
+        Device::new(6665, Interface::Position2d, 0),
+        Device::new(6665, Interface::Ranger, 0),
+        Device::new(6665, Interface::Ranger, 1),
+        Device::new(6665, Interface::Laser, 0),
+    ];
+    let code = |d: &Device| (u32::from(d.interface.code()), d.index);
+    for d in devices {
+        player.open(d);
+    }
+    // One libplayerc Read(): the devices it brought, and position2d's stamp.
+    let mut read = || {
+        player.send(1, 0, 3, 4, &[]);
+        let mut got = Vec::new();
+        let mut stamp = None;
+        loop {
+            let m = player.recv();
+            match m.kind() {
+                SYNCH => return (got, stamp),
+                DATA => {
+                    got.push((m.h[2], m.h[3]));
+                    if m.h[2] == 4 {
+                        stamp = Some(m.timestamp);
+                    }
+                }
+                _ => {}
+            }
+        }
+    };
+    let carries_all = |got: &[(u32, u32)]| devices.iter().all(|d| got.contains(&code(d)));
+    // The first reads may come before the laser's first scan.
+    let mut first = 0;
+    let mut last = loop {
+        let (got, stamp) = read();
+        first += 1;
+        assert!(first <= 20, "no read carried all four devices: {got:?}");
+        if carries_all(&got) {
+            break stamp.expect("position2d data");
+        }
+    };
+    let t = Instant::now();
+    let n = 30;
+    for i in 0..n {
+        let (got, stamp) = read();
+        assert!(
+            carries_all(&got),
+            "read {i} after the first whole one brought {got:?}"
+        );
+        let stamp = stamp.expect("position2d data");
+        assert!(
+            stamp > last,
+            "read {i} at {stamp} s did not bring a newer step than {last} s"
+        );
+        last = stamp;
+    }
+    eprintln!(
+        "pull: {n} reads of four devices each in {:.2} s after {first} to fill",
+        t.elapsed().as_secs_f64()
+    );
+    assert!(launcher.terminate().success(), "{}", launcher.stderr());
+}

@@ -5,6 +5,13 @@
 //!   to the front, then everything queued, then `SYNCH` — only if some data
 //!   was delivered, otherwise the round stays open until data comes.
 //!   A response queued outside a round flushes everything ahead of it.
+//! - One round is one moment: Player's Stage published every device in one
+//!   server update, so a round carried them all. Here devices publish from
+//!   their own processes, so before its `SYNCH` a round waits (at most
+//!   [`ROUND_WAIT`]) for a step newer than the last round's, then for all
+//!   data due at the newest stamp by the pace of its own stamps (a ranger's
+//!   ranges and intensities each). Data that misses the wait is not waited
+//!   for again until it comes.
 //! - Replace rules (first match wins, -1 = any): ACCEPT, REPLACE the older
 //!   message of the same device/type/subtype, or IGNORE. Default: accept.
 //! - Bounded: DATA and CMD beyond `maxlen` are dropped and counted; in PULL
@@ -13,11 +20,19 @@
 
 use std::collections::VecDeque;
 use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 use crate::wire::{self, Header, PLAYER_CODE, RESP_ACK, RESP_NACK};
 
 /// Player's `PLAYER_MSGQUEUE_DEFAULT_MAXLEN`.
 pub const DEFAULT_MAXLEN: usize = 1024;
+
+/// The longest a PULL round waits for a device's sample that is due. The
+/// samples of one simulation step reach the bridge within a few
+/// milliseconds of each other (Stage's, then those drivers derive from
+/// them, such as rangertolaser's laser); the margin is for a loaded
+/// machine. A device that stops publishing costs one round this wait.
+pub const ROUND_WAIT: Duration = Duration::from_millis(100);
 
 /// An encoded message with the header fields the queue looks at.
 #[derive(Debug, Clone)]
@@ -32,6 +47,8 @@ pub struct Out {
     pub kind: u8,
     /// Subtype.
     pub subtype: u8,
+    /// The header's timestamp (a data sample's stamp).
+    pub stamp: f64,
 }
 
 impl Out {
@@ -43,6 +60,7 @@ impl Out {
             index: h.index,
             kind: u8::try_from(h.kind).unwrap_or(u8::MAX),
             subtype: u8::try_from(h.subtype).unwrap_or(u8::MAX),
+            stamp: h.timestamp,
         }
     }
 
@@ -102,6 +120,31 @@ impl Rule {
     }
 }
 
+/// The pace of one kind of a device's data (its interface, index and
+/// subtype: a ranger's ranges and intensities are two), from the stamps of
+/// its samples: what a PULL round waits for.
+#[derive(Debug, Clone, Copy)]
+struct Pace {
+    /// Interface code, index and subtype.
+    sig: (u32, u32, u8),
+    /// Its newest sample's stamp.
+    newest: f64,
+    /// The step between its last two stamps (0 until it has two).
+    period: f64,
+    /// It missed a round's wait: not waited for until it publishes again.
+    lagging: bool,
+}
+
+impl Pace {
+    /// Whether its sample for `t` should be on its way: its next stamp,
+    /// by its pace, is at most `t`. One far behind `t` (stopped, or on
+    /// another clock) is not waited for.
+    fn due(&self, t: f64) -> bool {
+        let p = self.period;
+        !self.lagging && p > 0.0 && self.newest + p <= t + 0.05 * p && t - self.newest < 3.0 * p
+    }
+}
+
 /// One client's queue.
 #[derive(Debug)]
 pub struct Queue {
@@ -111,6 +154,14 @@ pub struct Queue {
     pull: bool,
     data_requested: bool,
     data_delivered: bool,
+    /// The pace of each kind of data that came, in arrival order.
+    paces: Vec<Pace>,
+    /// The newest stamp the last PULL round carried.
+    round_stamp: f64,
+    /// This round delivered data newer than `round_stamp`: a new step.
+    fresh: bool,
+    /// Until when a round waits for a new step or for due data.
+    waiting: Option<Instant>,
     dropped: u32,
     dropped_total: u64,
 }
@@ -126,6 +177,10 @@ impl Queue {
             pull: false,
             data_requested: false,
             data_delivered: false,
+            paces: Vec::new(),
+            round_stamp: f64::NEG_INFINITY,
+            fresh: false,
+            waiting: None,
             dropped: 0,
             dropped_total: 0,
         }
@@ -148,6 +203,17 @@ impl Queue {
         }
     }
 
+    /// The client closed a device: its pace no longer holds rounds back.
+    pub fn forget(&mut self, interf: u32, index: u32) {
+        self.paces.retain(|p| (p.sig.0, p.sig.1) != (interf, index));
+    }
+
+    /// When a PULL round waiting for due devices gives up on them: the
+    /// queue's owner calls [`Queue::pop`] again then.
+    pub fn deadline(&self) -> Option<Instant> {
+        self.waiting
+    }
+
     /// Messages dropped because the queue was full, since the queue was made.
     pub fn dropped_total(&self) -> u64 {
         self.dropped_total
@@ -165,6 +231,9 @@ impl Queue {
 
     /// Queues a message under the replace rules and the length limit.
     pub fn push(&mut self, m: Out) {
+        if m.kind == wire::DATA {
+            self.paced(&m);
+        }
         let op = self
             .rules
             .iter()
@@ -189,15 +258,74 @@ impl Queue {
         self.items.push_back(m);
     }
 
+    /// Notes a data sample's stamp in its pace (dropped or not: it came,
+    /// so the round need not wait for it).
+    fn paced(&mut self, m: &Out) {
+        let sig = (m.interf, m.index, m.subtype);
+        match self.paces.iter_mut().find(|p| p.sig == sig) {
+            Some(p) => {
+                if m.stamp > p.newest {
+                    p.period = m.stamp - p.newest;
+                    p.newest = m.stamp;
+                }
+                p.lagging = false;
+            }
+            None => self.paces.push(Pace {
+                sig,
+                newest: m.stamp,
+                period: 0.0,
+                lagging: false,
+            }),
+        }
+    }
+
+    /// Whether data `m` belongs to a step after the last round's: newer
+    /// than it carried, or of a kind whose stamps have not advanced (not
+    /// paced, so nothing to wait for).
+    fn new_step(&self, m: &Out) -> bool {
+        m.stamp > self.round_stamp
+            || self
+                .paces
+                .iter()
+                .find(|p| p.sig == (m.interf, m.index, m.subtype))
+                .is_none_or(|p| p.period <= 0.0)
+    }
+
+    /// Whether a round that has delivered data must still wait at `now`:
+    /// for a new step, when what it delivered was only late parts of the
+    /// last round's; then for all data due at the newest stamp. The wait
+    /// is bounded; data still due when it runs out is marked lagging.
+    fn must_wait(&mut self, now: Instant) -> bool {
+        let t = self.paces.iter().map(|p| p.newest).fold(f64::MIN, f64::max);
+        let due = self.paces.iter().any(|p| p.due(t));
+        let until = *self.waiting.get_or_insert(now + ROUND_WAIT);
+        if self.fresh && !due {
+            self.round_stamp = t;
+            return false;
+        }
+        if now < until {
+            return true;
+        }
+        if self.fresh {
+            for p in self.paces.iter_mut().filter(|p| p.due(t)) {
+                p.lagging = true;
+            }
+        }
+        self.round_stamp = self.round_stamp.max(t);
+        false
+    }
+
     /// A client's `REQ DATA`: its ACK goes first, and a round opens.
     pub fn request_data(&mut self, ack: Out) {
         self.items.push_front(ack);
         self.data_requested = true;
         self.data_delivered = false;
+        self.fresh = false;
+        self.waiting = None;
     }
 
-    /// The next message to send, if one may go now.
-    pub fn pop(&mut self) -> Option<Out> {
+    /// The next message to send at `now`, if one may go.
+    pub fn pop(&mut self, now: Instant) -> Option<Out> {
         // Between rounds a PULL client still gets answers (and what is
         // queued ahead of them) at once; the scan only runs then.
         let may_go = !self.pull || self.data_requested || self.items.iter().any(Out::is_response);
@@ -205,11 +333,17 @@ impl Queue {
             let m = self.items.pop_front()?;
             if self.data_requested && m.kind == wire::DATA {
                 self.data_delivered = true;
+                if !self.fresh && self.new_step(&m) {
+                    // Its wait starts now.
+                    self.fresh = true;
+                    self.waiting = None;
+                }
             }
             return Some(m);
         }
-        if self.pull && self.data_requested && self.data_delivered {
+        if self.pull && self.data_requested && self.data_delivered && !self.must_wait(now) {
             self.data_requested = false;
+            self.waiting = None;
             self.data_delivered = false;
             let h = Header {
                 interf: u32::from(PLAYER_CODE),
@@ -256,9 +390,36 @@ mod tests {
     }
 
     fn drain(q: &mut Queue) -> Vec<(u8, u32)> {
-        std::iter::from_fn(|| q.pop())
+        std::iter::from_fn(|| q.pop(Instant::now()))
             .map(|m| (m.kind, m.interf))
             .collect()
+    }
+
+    fn data(interf: u32, stamp: f64) -> Out {
+        Out::new(
+            Header {
+                interf,
+                kind: u32::from(D),
+                subtype: 1,
+                timestamp: stamp,
+                ..Header::default()
+            },
+            &[],
+        )
+    }
+
+    /// A PULL queue that has seen position2d (4) and laser (6) data at
+    /// 0.0 and 0.1 s, with no round open.
+    fn paced_pull() -> Queue {
+        let mut q = Queue::new(64);
+        q.set_pull(true);
+        for t in [0.0, 0.1] {
+            q.push(data(4, t));
+            q.push(data(6, t));
+        }
+        q.request_data(msg(A, 1, 4));
+        drain(&mut q);
+        q
     }
 
     const D: u8 = wire::DATA;
@@ -279,7 +440,10 @@ mod tests {
         let mut q = Queue::new(8);
         q.set_pull(true);
         q.push(msg(D, 4, 1));
-        assert!(q.pop().is_none(), "data waits for a request in PULL mode");
+        assert!(
+            q.pop(Instant::now()).is_none(),
+            "data waits for a request in PULL mode"
+        );
         q.request_data(msg(A, 1, 4));
         assert_eq!(drain(&mut q), [(A, 1), (D, 4), (S, 1)]);
         // An empty round: the ACK goes, no SYNCH until data arrives.
@@ -341,9 +505,102 @@ mod tests {
         drain(&mut q);
         q.push(msg(D, 4, 1));
         q.request_data(msg(A, 1, 4));
-        let out: Vec<Out> = std::iter::from_fn(|| q.pop()).collect();
+        let out: Vec<Out> = std::iter::from_fn(|| q.pop(Instant::now())).collect();
         let synch = out.last().unwrap();
         assert_eq!(synch.subtype, wire::player::SYNCH_OVERFLOW);
         assert_eq!(&synch.bytes[40..], &3u32.to_be_bytes());
+    }
+
+    #[test]
+    fn a_pull_round_waits_for_every_device_due_at_its_newest_stamp() {
+        let mut q = paced_pull();
+        q.request_data(msg(A, 1, 4));
+        q.push(data(4, 0.2));
+        // The laser's sample for 0.2 is due: no SYNCH yet.
+        assert_eq!(drain(&mut q), [(A, 1), (D, 4)]);
+        assert!(q.deadline().is_some());
+        q.push(data(6, 0.2));
+        assert_eq!(drain(&mut q), [(D, 6), (S, 1)]);
+        assert!(q.deadline().is_none());
+    }
+
+    #[test]
+    fn a_device_that_misses_the_wait_is_not_waited_for_until_it_publishes() {
+        let mut q = paced_pull();
+        q.request_data(msg(A, 1, 4));
+        q.push(data(4, 0.2));
+        drain(&mut q);
+        let until = q.deadline().expect("waiting for the laser");
+        assert_eq!(q.pop(until).map(|m| m.kind), Some(S), "the wait is bounded");
+        // The laser is lagging now: the next round does not wait for it.
+        q.request_data(msg(A, 1, 4));
+        q.push(data(4, 0.3));
+        assert_eq!(drain(&mut q), [(A, 1), (D, 4), (S, 1)]);
+        // It publishes again: waited for again.
+        q.request_data(msg(A, 1, 4));
+        q.push(data(6, 0.3));
+        q.push(data(4, 0.4));
+        q.push(data(6, 0.4));
+        q.push(data(4, 0.5));
+        assert_eq!(drain(&mut q), [(A, 1), (D, 6), (D, 4), (D, 6), (D, 4)]);
+        q.push(data(6, 0.5));
+        assert_eq!(drain(&mut q), [(D, 6), (S, 1)]);
+    }
+
+    #[test]
+    fn a_slower_device_is_waited_for_only_at_its_own_pace_and_a_closed_one_never() {
+        let mut q = Queue::new(64);
+        q.set_pull(true);
+        // Position2d every 0.1 s, a ranger (5) every 0.5 s.
+        for t in [0.0, 0.5] {
+            q.push(data(5, t));
+        }
+        for t in [0.4, 0.5] {
+            q.push(data(4, t));
+        }
+        q.request_data(msg(A, 1, 4));
+        drain(&mut q);
+        for t in [0.6, 0.7, 0.8, 0.9] {
+            q.request_data(msg(A, 1, 4));
+            q.push(data(4, t));
+            assert_eq!(drain(&mut q), [(A, 1), (D, 4), (S, 1)], "at {t}");
+        }
+        q.request_data(msg(A, 1, 4));
+        q.push(data(4, 1.0));
+        assert_eq!(drain(&mut q), [(A, 1), (D, 4)], "the ranger is due at 1.0");
+        q.forget(5, 0);
+        assert_eq!(
+            drain(&mut q),
+            [(S, 1)],
+            "a closed device holds nothing back"
+        );
+    }
+
+    #[test]
+    fn a_late_part_of_the_last_step_does_not_make_a_round_of_its_own() {
+        let mut q = paced_pull();
+        q.request_data(msg(A, 1, 4));
+        q.push(data(4, 0.2));
+        drain(&mut q);
+        let until = q.deadline().expect("waiting for the laser");
+        assert_eq!(q.pop(until).map(|m| m.kind), Some(S));
+        // The laser's scan for 0.2 comes after that round: the next round
+        // carries it, then waits for the step after.
+        q.request_data(msg(A, 1, 4));
+        q.push(data(6, 0.2));
+        assert_eq!(
+            drain(&mut q),
+            [(A, 1), (D, 6)],
+            "no round of a late scan alone"
+        );
+        q.push(data(4, 0.3));
+        q.push(data(6, 0.3));
+        assert_eq!(drain(&mut q), [(D, 4), (D, 6), (S, 1)]);
+        // A round of late data only ends when its wait runs out.
+        q.request_data(msg(A, 1, 4));
+        q.push(data(6, 0.3));
+        drain(&mut q);
+        let until = q.deadline().expect("waiting for a new step");
+        assert_eq!(q.pop(until).map(|m| m.kind), Some(S));
     }
 }

@@ -7,7 +7,7 @@ use std::collections::HashMap;
 use std::net::{IpAddr, SocketAddr};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
-use std::time::{Duration, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 pub use ipnetwork::IpNetwork;
 use tokio::io::AsyncReadExt;
@@ -156,7 +156,8 @@ impl ClientQueue {
     fn with<R>(&self, f: impl FnOnce(&mut Queue) -> R) -> R {
         let mut out = lock(&self.out);
         let r = f(&mut out.queue);
-        if !out.flush(&self.wire) {
+        // The writer task also keeps a PULL round's deadline.
+        if !out.flush(&self.wire) || out.queue.deadline().is_some() {
             self.bell.notify_one();
         }
         r
@@ -172,7 +173,7 @@ impl Outbox {
                 self.unsent.clear();
                 self.sent = 0;
                 while self.unsent.len() < 1 << 20 {
-                    match self.queue.pop() {
+                    match self.queue.pop(Instant::now()) {
                         Some(m) => self.unsent.extend_from_slice(&m.bytes),
                         None => break,
                     }
@@ -832,15 +833,19 @@ impl Conn {
     }
 
     fn unsubscribe(&self, dev: Device) {
-        let mut feeds = lock(&self.shared.feeds);
-        let empty = feeds.get(&dev).is_some_and(|f| {
-            let mut c = lock(&f.clients);
-            c.retain(|(id, _)| *id != self.id);
-            c.is_empty()
-        });
-        if empty {
-            feeds.remove(&dev);
+        {
+            let mut feeds = lock(&self.shared.feeds);
+            let empty = feeds.get(&dev).is_some_and(|f| {
+                let mut c = lock(&f.clients);
+                c.retain(|(id, _)| *id != self.id);
+                c.is_empty()
+            });
+            if empty {
+                feeds.remove(&dev);
+            }
         }
+        self.queue
+            .with(|q| q.forget(u32::from(dev.interface.code()), dev.index));
     }
 }
 
@@ -879,14 +884,25 @@ fn data_message(dev: Device, host: u32, payload: &[u8]) -> Option<Out> {
     Some(Out::new(h, &body))
 }
 
-/// Finishes what a full socket could not take when it was queued.
+/// Finishes what a full socket could not take when it was queued, and
+/// ends a PULL round whose wait for due devices runs out.
 async fn write_loop(q: Arc<ClientQueue>) {
     loop {
-        let done = lock(&q.out).flush(&q.wire);
-        if done {
+        let (done, deadline) = {
+            let mut out = lock(&q.out);
+            (out.flush(&q.wire), out.queue.deadline())
+        };
+        if !done {
+            if q.wire.writable().await.is_err() {
+                return;
+            }
+        } else if let Some(at) = deadline {
+            tokio::select! {
+                () = q.bell.notified() => {}
+                () = tokio::time::sleep_until(at.into()) => {}
+            }
+        } else {
             q.bell.notified().await;
-        } else if q.wire.writable().await.is_err() {
-            return;
         }
     }
 }

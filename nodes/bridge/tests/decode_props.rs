@@ -56,14 +56,14 @@ proptest! {
                     q.add_rule(Rule { interf: -1, index: -1, kind: 1, subtype: -1, replace: Replace::Replace });
                 },
             }
-            while let Some(m) = q.pop() {
+            while let Some(m) = q.pop(std::time::Instant::now()) {
                 if m.kind == wire::RESP_ACK { responses_out += 1; }
             }
             prop_assert!(q.len() <= 8 + responses_in - responses_out);
         }
         // Whatever stays queued, no response was dropped.
         q.set_pull(false);
-        while let Some(m) = q.pop() {
+        while let Some(m) = q.pop(std::time::Instant::now()) {
             if m.kind == wire::RESP_ACK { responses_out += 1; }
         }
         prop_assert_eq!(responses_in, responses_out);
