@@ -513,7 +513,11 @@ pub struct StageBenchArgs {
     pub bitmaps: Option<std::path::PathBuf>,
 }
 
-/// A Pioneer with 16 sonars and a 180-beam SICK, wandering (our own definitions).
+/// A Pioneer with 16 sonars and a 180-beam SICK, wandering (our own
+/// definitions). Stage is 2.5D: the sonars sit inside the top of the base,
+/// as in Stage's pioneer.inc, and so does the SICK here (Stage's sits on
+/// top), so that both see the other robots' bases and the wander
+/// controller, which steers by the laser, keeps a crowd moving.
 const PIONEER: &str = r#"
 define bench_sonar sensor ( size [0.01 0.05 0.01] range [0 5.0] fov 15 samples 1 )
 define bench_sonars ranger (
@@ -529,7 +533,7 @@ define bench_sonars ranger (
 define bench_sick ranger ( sensor( range [0 8.0] fov 180 samples 180 ) size [0.156 0.155 0.19] )
 define bench_pioneer position (
   size [0.44 0.38 0.22] origin [-0.04 0 0 0] drive "diff" ctrl "wander"
-  bench_sonars( ) bench_sick( pose [0 0 0 0] )
+  bench_sonars( pose [0 0 -0.03 0] ) bench_sick( pose [0 0 -0.1 0] )
 )
 "#;
 
@@ -542,7 +546,7 @@ define bench_irs ranger (
   bench_ir( pose [-0.1 0 0 180] ) bench_ir( pose [-0.087 -0.05 0 -150] ) bench_ir( pose [-0.05 -0.087 0 -120] )
   bench_ir( pose [0 -0.1 0 -90] ) bench_ir( pose [0.05 -0.087 0 -60] ) bench_ir( pose [0.087 -0.05 0 -30] )
 )
-define bench_small position ( size [0.2 0.2 0.1] drive "diff" ctrl "wander" bench_irs( ) )
+define bench_small position ( size [0.2 0.2 0.1] drive "diff" ctrl "wander" bench_irs( pose [0 0 -0.05 0] ) )
 "#;
 
 pub(crate) fn bench_world(

@@ -29,7 +29,8 @@ pub struct Blob {
     pub range: f32,
 }
 
-/// The blobs seen, sorted left to right as Player documents.
+/// The blobs seen, in the order the driver finds them (Stage: from the
+/// right edge of the image leftwards).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Data {
     /// Image width, pixels.

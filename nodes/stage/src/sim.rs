@@ -93,6 +93,9 @@ pub struct Sim {
     /// Gripper state of each gripper model (`None` for other models).
     pub grippers: Vec<Option<GripperState>>,
     roots: Vec<usize>,
+    /// Each model's body from its base to its top, above the floor: Stage
+    /// is 2.5D, and a sensor sees only what spans the height of its rays.
+    heights: Vec<(f64, f64)>,
     /// The threads that plan moves and cast rays, and the models with
     /// range sensors among them.
     crew: Crew,
@@ -195,6 +198,13 @@ fn nearest(ranges: &[f64]) -> f64 {
     rest.iter()
         .chain(&least)
         .fold(f64::INFINITY, |a, &b| a.min(b))
+}
+
+/// Model `m`'s body from its base to its top, above the floor (where its
+/// parents' poses and stacking put it).
+fn height(world: &World, poses: &[Pose], m: usize) -> (f64, f64) {
+    let (_, z) = world.global(poses, m);
+    (z, z + world.models[m].size[2])
 }
 
 /// Locks `m`, through a panic elsewhere.
@@ -351,6 +361,7 @@ impl Sim {
             .map(|m| (m.kind == Kind::Gripper).then(GripperState::default))
             .collect();
         let trees: Vec<Vec<usize>> = (0..n).map(|m| world.subtree(m)).collect();
+        let heights = (0..n).map(|m| height(&world, &poses, m)).collect();
         let fans = world
             .models
             .iter()
@@ -382,6 +393,7 @@ impl Sim {
             trees,
             crew: Crew::default(),
             roots,
+            heights,
             movable,
             cells: vec![Vec::new(); n],
             movers: Movers::new(n, statics.tile_count()),
@@ -605,6 +617,8 @@ impl Sim {
         };
         self.poses[m] = pose;
         for k in self.trees[m].clone() {
+            // Its height too: a 3D pose may have lifted it.
+            self.heights[k] = height(&self.world, &self.poses, k);
             self.place(k);
         }
         if let Some(b) = self.bases.iter_mut().find(|b| b.model == m) {
@@ -990,27 +1004,36 @@ impl Sim {
         open.max(0.0)
     }
 
-    /// What ranger `r`'s rays stop at: anything with a ranger return that
-    /// is not part of its own robot.
-    fn ranger_sees(&self, r: usize) -> impl Fn(u16) -> bool + Copy + '_ {
+    /// Whether model `m`'s body spans height `z` (Stage's ray z test).
+    fn spans(&self, m: usize, z: f64) -> bool {
+        let (lo, hi) = self.heights[m];
+        lo <= z && z <= hi
+    }
+
+    /// What ranger `r`'s rays at height `z` stop at: anything with a ranger
+    /// return at that height that is not part of its own robot.
+    fn ranger_sees(&self, r: usize, z: f64) -> impl Fn(u16) -> bool + Copy + '_ {
         let root = self.roots[r];
         move |c: u16| {
             let other = usize::from(c) - 1;
-            self.roots[other] != root && self.world.models[other].ranger_return >= 0.0
+            self.roots[other] != root
+                && self.world.models[other].ranger_return >= 0.0
+                && self.spans(other, z)
         }
     }
 
     /// Ranger `r`'s readings into `out`; `sweep` is room for its fans' look
     /// at the moving bodies, kept from ranger to ranger.
     fn sense_one(&self, r: usize, out: &mut [Reading], sweep: &mut Sweep) {
-        let (g, _) = self.world.global(&self.poses, r);
+        let (g, gz) = self.world.global(&self.poses, r);
         let base = g.compose(&self.world.models[r].origin);
         // One sine and cosine per ranger: its sensors' poses and first rays
         // are turned by it.
         let turn = unit(base.yaw);
-        let accept = self.ranger_sees(r);
         let sensors = &self.world.models[r].sensors;
         for ((s, rays), rd) in sensors.iter().zip(&self.fans[r]).zip(out.iter_mut()) {
+            // As Stage: rays leave from the middle of the sensor's height.
+            let accept = self.ranger_sees(r, gz + s.z + s.size[2] / 2.0);
             let (ox, oy) = turned(turn, (s.pose.x, s.pose.y));
             let (ox, oy) = (base.x + ox, base.y + oy);
             // A fan of rays shares one look around its origin, so that none
@@ -1153,82 +1176,87 @@ impl Sim {
         }
     }
 
-    /// What blobfinder `m` sees now: colour blobs, left to right.
+    /// What blobfinder `m` sees now, as Stage's blobfinder and its Player
+    /// plugin report it.
+    ///
+    /// # Behavior
+    ///
+    /// One ray per image column, from the right edge of the view leftwards,
+    /// at every height (Stage does not test heights here) and stopped by
+    /// anything outside the finder's robot. Runs of columns of one colour
+    /// make a blob, which counts if its colour is tracked (any colour when
+    /// none is given); as in Stage's loop, the column after a run is not
+    /// looked at. A blob is drawn as a 0.6 m tall robot at its columns'
+    /// mean range; rows are `fov / height` radians each. Player's plugin
+    /// then takes the centre and area from the box's width and height less
+    /// one each, and reports an empty image (0 x 0) when there is no blob.
     pub fn blobs(&self, m: usize) -> troupe_msgs::blobfinder::Data {
         use troupe_msgs::blobfinder::{Blob, Data};
         let Some(cfg) = &self.world.models[m].blobfinder else {
             return Data::default();
         };
         let (w, h) = cfg.image;
+        let n = w as usize;
         let eye = self.global(m).compose(&self.world.models[m].origin);
         let root = self.roots[m];
-        // One ray per image column, leftmost column first.
-        let mut cols: Vec<Option<(usize, usize, f64)>> = Vec::with_capacity(w as usize);
-        for c in 0..w {
-            let a =
-                eye.yaw + cfg.pan + cfg.fov / 2.0 - cfg.fov * (f64::from(c) + 0.5) / f64::from(w);
-            let accept = |id: u16| {
-                let o = usize::from(id) - 1;
-                self.roots[o] != root && self.world.models[o].blob_return
-            };
-            let seen = self
-                .cast(eye.x, eye.y, unit(a), (0.0, cfg.range), accept)
-                .and_then(|hit| {
-                    let o = usize::from(hit.id) - 1;
-                    let col = self.colors[o];
-                    cfg.colors
-                        .iter()
-                        .position(|c| {
-                            (c.r - col.r).abs() < 1e-3
-                                && (c.g - col.g).abs() < 1e-3
-                                && (c.b - col.b).abs() < 1e-3
-                        })
-                        .map(|k| (k, o, hit.range))
-                });
-            cols.push(seen);
-        }
-        let vfov = cfg.fov * f64::from(h) / f64::from(w);
+        let accept = |id: u16| self.roots[usize::from(id) - 1] != root;
+        let step = cfg.fov / n.saturating_sub(1).max(1) as f64;
+        let samples: Vec<Option<(Color, f64)>> = (0..n)
+            .map(|s| {
+                let a = eye.yaw + cfg.pan - cfg.fov / 2.0 + s as f64 * step;
+                self.cast(eye.x, eye.y, unit(a), (0.0, cfg.range), accept)
+                    .map(|hit| (self.colors[usize::from(hit.id) - 1], hit.range))
+            })
+            .collect();
+        let same = |a: Color, b: Color| {
+            (a.r - b.r).abs() < 1e-5 && (a.g - b.g).abs() < 1e-5 && (a.b - b.b).abs() < 1e-5
+        };
+        let rads_per_row = cfg.fov / f64::from(h);
+        let half = i64::from(h / 2);
         let mut blobs = Vec::new();
-        let mut c = 0usize;
-        while c < cols.len() {
-            let Some((k, o, r0)) = cols[c] else {
-                c += 1;
+        let mut s = 0;
+        while s < n {
+            let Some((col, _)) = samples[s] else {
+                s += 1;
                 continue;
             };
-            let start = c;
-            let mut range = r0;
-            while c + 1 < cols.len()
-                && matches!(cols[c + 1], Some((k2, o2, _)) if k2 == k && o2 == o)
-            {
-                c += 1;
-                range = range.min(cols[c].map_or(range, |x| x.2));
+            let right = s;
+            while s < n && samples[s].is_some_and(|(c, _)| same(c, col)) {
+                s += 1;
             }
-            let px = ((self.world.models[o].size[2] / range.max(1e-3))
-                / (2.0 * (vfov / 2.0).tan())
-                * f64::from(h))
-            .min(f64::from(h));
-            let top = ((f64::from(h) - px) / 2.0).max(0.0) as u32;
-            let bottom = (((f64::from(h) + px) / 2.0) as u32).min(h.saturating_sub(1));
-            let col = cfg.colors[k];
-            let rgb = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u32;
-            let (left, right) = (start as u32, c as u32);
+            let left = s - 1;
+            s += 1;
+            if !cfg.colors.is_empty() && !cfg.colors.iter().any(|&c| same(c, col)) {
+                continue;
+            }
+            let run = &samples[right..=left];
+            let range = run.iter().flatten().map(|x| x.1).sum::<f64>() / run.len() as f64;
+            // Truncated as C's (int) cast truncates.
+            let rows = ((0.3f64).atan2(range) / rads_per_row) as i64;
+            let top = (half - rows).max(0);
+            let bottom = (half + rows).min(i64::from(h));
+            // Image columns run the other way: the right edge is column 0.
+            let (bl, br) = ((n - 1 - left) as i64, (n - 1 - right) as i64);
+            let (dx, dy) = (br - bl, top - bottom);
+            let byte = |v: f32| u32::from((v.clamp(0.0, 1.0) * 255.0) as u8);
+            let u = |v: i64| u32::try_from(v).unwrap_or(0);
             blobs.push(Blob {
                 id: blobs.len() as u32,
-                color: (rgb(col.r) << 16) | (rgb(col.g) << 8) | rgb(col.b),
-                area: (right - left + 1) * (bottom - top + 1),
-                x: (left + right) / 2,
-                y: (top + bottom) / 2,
-                left,
-                right,
-                top,
-                bottom,
+                color: (byte(col.r) << 16) | (byte(col.g) << 8) | byte(col.b),
+                area: u((dx * dy).abs()),
+                x: u(bl + dx / 2),
+                y: u(bottom + dy / 2),
+                left: u(bl),
+                right: u(br),
+                top: u(top),
+                bottom: u(bottom),
                 range: range as f32,
             });
-            c += 1;
         }
+        let (width, height) = if blobs.is_empty() { (0, 0) } else { (w, h) };
         Data {
-            width: w,
-            height: h,
+            width,
+            height,
             blobs,
         }
     }
@@ -1239,7 +1267,8 @@ impl Sim {
         let Some(cfg) = &self.world.models[m].fiducial else {
             return Data::default();
         };
-        let eye = self.global(m).compose(&self.world.models[m].origin);
+        let (g, z) = self.world.global(&self.poses, m);
+        let eye = g.compose(&self.world.models[m].origin);
         let root = self.roots[m];
         let mut items = Vec::new();
         for (k, target) in self.world.models.iter().enumerate() {
@@ -1252,10 +1281,21 @@ impl Sim {
             if range < cfg.range_min || range > cfg.range_max || bearing.abs() > cfg.fov / 2.0 {
                 continue;
             }
-            // Seen only if the first thing along the line of sight is the target.
-            let accept = |id: u16| self.roots[usize::from(id) - 1] != root;
-            let first = self.cast(eye.x, eye.y, unit(eye.yaw + bearing), (0.0, range), accept);
-            if first.is_some_and(|h| self.roots[usize::from(h.id) - 1] != self.roots[k]) {
+            // Seen only if the first thing the ray at the finder's height
+            // meets is the target itself, as Stage traces it (out to the
+            // finder's range): one below or above that height is not seen.
+            let accept = |id: u16| {
+                let o = usize::from(id) - 1;
+                self.roots[o] != root && self.spans(o, z)
+            };
+            let first = self.cast(
+                eye.x,
+                eye.y,
+                unit(eye.yaw + bearing),
+                (0.0, cfg.range_max),
+                accept,
+            );
+            if first.is_none_or(|h| usize::from(h.id) - 1 != k) {
                 continue;
             }
             let pose = troupe_msgs::Pose3d::planar(rel.x, rel.y, rel.yaw);
@@ -1461,9 +1501,9 @@ mod tests {
             }
             steps(&mut s, 3);
             for &r in &rangers {
-                let (g, _) = s.world.global(&s.poses, r);
-                let accept = s.ranger_sees(r);
+                let (g, z) = s.world.global(&s.poses, r);
                 let sensor = &s.world.models[r].sensors[0];
+                let accept = s.ranger_sees(r, z + sensor.z + sensor.size[2] / 2.0);
                 let o = g.compose(&s.world.models[r].origin).compose(&sensor.pose);
                 skipped += s.open_around(o.x, o.y, accept);
                 for (k, &got) in s.readings[r][0].ranges.iter().enumerate() {
@@ -1648,12 +1688,49 @@ mod tests {
         assert_eq!(s.readings[r][1].ranges[0], 5.0);
     }
 
+    /// Stage is 2.5D: a ray at a sensor's height passes over what is
+    /// lower and under what is higher; a fiducial finder sees only what its
+    /// ray at its own height meets first.
+    #[test]
+    fn sensors_see_only_what_spans_their_height() {
+        let mut s = sim(
+            "heights",
+            &format!(
+                "{ROOM}position ( name \"a\" pose [0 0 0 0] size [0.4 0.4 0.2]\n\
+                   ranger ( sensor ( range [0 8] ) )\n\
+                   fiducial ( range_max 8 ) )\n\
+                 model ( name \"low\" pose [1 0 0 0] size [0.2 0.2 0.1] fiducial_return 3 )\n\
+                 model ( name \"shelf\" pose [2 0 0.5 0] size [0.2 0.2 0.3] fiducial_return 4 )\n\
+                 model ( name \"tall\" pose [3 0 0 0] size [0.2 0.2 1] fiducial_return 5 )\n"
+            ),
+        );
+        s.step();
+        let r = s.world.names["a.ranger:0"];
+        // The ray leaves at 0.2 m + half the sensor's height: over `low`,
+        // under `shelf` (0.5 to 0.8 m), onto `tall`'s face at 2.9 m.
+        assert!(
+            (s.readings[r][0].ranges[0] - 2.9).abs() < 0.03,
+            "{}",
+            s.readings[r][0].ranges[0]
+        );
+        let f = s.world.names["a.fiducial:0"];
+        let ids: Vec<i32> = s.fiducials(f).fiducials.iter().map(|i| i.id).collect();
+        assert_eq!(ids, [5], "only the model at the finder's height");
+        // Lifted to the finder's height, `low` hides `tall` behind it.
+        let low = s.world.names["low"];
+        s.world.models[low].z = 0.15;
+        s.set_pose(low, Pose::new(1.0, 0.0, 0.0));
+        let ids: Vec<i32> = s.fiducials(f).fiducials.iter().map(|i| i.id).collect();
+        assert_eq!(ids, [3]);
+    }
+
     #[test]
     fn robots_see_each_other_but_not_themselves() {
         let mut s = sim(
             "robots",
+            // a's ranger sits on top of it (0.2 m up): b is taller.
             "position ( name \"a\" pose [0 0 0 0] size [0.4 0.4 0.2] ranger ( sensor ( range [0 8] ) ) )\n\
-             position ( name \"b\" pose [2 0 0 0] size [0.4 0.4 0.2] )\n",
+             position ( name \"b\" pose [2 0 0 0] size [0.4 0.4 0.5] )\n",
         );
         s.step();
         let r = s.world.names["a.ranger:0"];
@@ -1671,7 +1748,7 @@ mod tests {
     }
 
     #[test]
-    fn blobs_come_left_to_right_with_their_colours() {
+    fn blobs_come_right_to_left_with_their_colours() {
         let s = sim(
             "blobs",
             "position ( name \"r\" size [0.4 0.4 0.2] blobfinder ( colors_count 2 colors [\"red\" \"green\"] image [80 60] range 8 fov 60 ) )\n\
@@ -1683,10 +1760,16 @@ mod tests {
         let d = s.blobs(bf);
         assert_eq!((d.width, d.height), (80, 60));
         let colors: Vec<u32> = d.blobs.iter().map(|b| b.color).collect();
-        // Left of the image is the robot's left (+y): red first, blue untracked.
-        assert_eq!(colors, vec![0xFF0000, 0x00FF00]);
-        assert!(d.blobs[0].right < d.blobs[1].left);
+        // Left of the image is the robot's left (+y); Stage's scan starts
+        // at the right: green first, blue untracked.
+        assert_eq!(colors, vec![0x00FF00, 0xFF0000]);
+        assert!(d.blobs[1].right < d.blobs[0].left);
         assert!((d.blobs[0].range - 2.99).abs() < 0.2, "{:?}", d.blobs[0]);
+        // Nothing in view: Player's plugin reports an empty image.
+        let r = s.world.names["r"];
+        let mut s = s;
+        s.set_pose(r, Pose::new(0.0, 0.0, std::f64::consts::PI));
+        assert_eq!(s.blobs(bf), troupe_msgs::blobfinder::Data::default());
     }
 
     #[test]
@@ -1835,6 +1918,31 @@ mod compat {
         assert!(map.cells[n - 160..].iter().all(|&c| c == OCCUPIED));
     }
 
+    /// The issue's case (32, items 4 and 6): r0's SICK sits on top of its
+    /// Pioneer, so its rays pass over r1's body (0.22 m tall) and meet
+    /// r1's SICK — four beams in Stage, with that model's default
+    /// `ranger_return` 1 as their intensity; the cave's walls return 0.5.
+    #[test]
+    fn r0_s_laser_meets_r1_s_laser_above_its_body_as_in_stage() {
+        let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../../shared/compat/stage/simple_noctrl.world");
+        if !p.exists() {
+            eprintln!("skipping: ../shared/compat is absent");
+            return;
+        }
+        let s = Sim::new(crate::world::load(&p).unwrap()).unwrap();
+        let r = &s.readings[s.world.names["r0.ranger:1"]][0];
+        let on_r1: Vec<usize> = (0..r.ranges.len())
+            .filter(|&k| r.intensities[k] == 1.0)
+            .collect();
+        assert_eq!(on_r1, [43, 44, 45, 46]);
+        assert!(on_r1.iter().all(|&k| (r.ranges[k] - 2.93).abs() < 0.06));
+        assert!(r
+            .intensities
+            .iter()
+            .all(|&i| i == 1.0 || i == 0.5 || i == 0.0));
+    }
+
     #[test]
     fn robot1_of_everything_world_sees_what_player_saw() {
         let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -1846,13 +1954,56 @@ mod compat {
         let s = Sim::new(crate::world::load(&p).unwrap()).unwrap();
         let bf = s.world.names["robot1.blobfinder:0"];
         let d = s.blobs(bf);
-        // The Player transcript (cpp-blob-fiducial-gripper) shows an 80x60 image with 5 blobs.
-        assert_eq!((d.width, d.height, d.blobs.len()), (80, 60, 5));
-        assert!(
-            d.blobs.windows(2).all(|w| w[0].right < w[1].left),
-            "left to right"
-        );
+        // The Player transcript (cpp-blob-fiducial-gripper): an 80x60
+        // image, five blobs right to left: colour, rows, columns, range.
+        // Stage draws bodies into its grid, so an edge may cover one
+        // column more there than the exact bodies here do.
+        assert_eq!((d.width, d.height), (80, 60));
+        let want = [
+            (0x00ff00, 30, 26, 34, 60, 60, 3.5375),
+            (0xff0000, 30, 26, 34, 36, 42, 4.2550),
+            (0xff00ff, 30, 26, 34, 31, 34, 3.6563),
+            (0xffff00, 30, 25, 35, 20, 29, 3.1833),
+            (0x00ffff, 30, 23, 37, 5, 18, 2.3987),
+        ];
+        assert_eq!(d.blobs.len(), want.len(), "{:?}", d.blobs);
+        for (b, (color, y, top, bottom, left, right, range)) in d.blobs.iter().zip(want) {
+            assert_eq!(
+                (b.color, b.y, b.top, b.bottom),
+                (color, y, top, bottom),
+                "{b:?}"
+            );
+            assert!(
+                b.left.abs_diff(left) <= 1 && b.right.abs_diff(right) <= 1,
+                "{b:?}"
+            );
+            assert_eq!(b.area, (b.right - b.left) * (bottom - top), "{b:?}");
+            assert!((f64::from(b.range) - range).abs() < 0.03, "{b:?}");
+        }
         let f = s.fiducials(s.world.names["robot1.fiducial:0"]);
-        assert!(!f.fiducials.is_empty());
+        // Real Stage's five (the transcript): the robots at the finder's
+        // height, not the pucks below it.
+        let mut seen: Vec<(i32, i64, i64)> = f
+            .fiducials
+            .iter()
+            .map(|i| {
+                (
+                    i.id,
+                    (i.pose.x * 1e4).round() as i64,
+                    (i.pose.y * 1e4).round() as i64,
+                )
+            })
+            .collect();
+        seen.sort_unstable();
+        assert_eq!(
+            seen,
+            [
+                (17, 23953, 9013),
+                (17, 32910, 5825),
+                (17, 38255, 4101),
+                (17, 44285, 283),
+                (18, 30882, -5798)
+            ]
+        );
     }
 }
