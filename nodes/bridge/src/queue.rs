@@ -7,8 +7,9 @@
 //!   A response queued outside a round flushes everything ahead of it.
 //! - One round is one moment: Player's Stage published every device in one
 //!   server update, so a round carried them all. Here devices publish from
-//!   their own processes, so before its `SYNCH` a round waits (at most
-//!   [`ROUND_WAIT`]) for a step newer than the last round's, then for all
+//!   their own processes, so before its `SYNCH` a round waits for a step
+//!   newer than the last round's (data of the last step that came late
+//!   goes out with it), then, at most [`ROUND_WAIT`], for all
 //!   data due at the newest stamp by the pace of its own stamps (a ranger's
 //!   ranges and intensities each). Data that misses the wait is not waited
 //!   for again until it comes.
@@ -292,26 +293,26 @@ impl Queue {
     }
 
     /// Whether a round that has delivered data must still wait at `now`:
-    /// for a new step, when what it delivered was only late parts of the
-    /// last round's; then for all data due at the newest stamp. The wait
-    /// is bounded; data still due when it runs out is marked lagging.
+    /// for a new step, as long as it takes, when what it delivered was
+    /// only late parts of the last round's (as a Player round with no data
+    /// stays open); then, at most [`ROUND_WAIT`], for all data due at the
+    /// newest stamp. Data still due when that runs out is marked lagging.
     fn must_wait(&mut self, now: Instant) -> bool {
-        let t = self.paces.iter().map(|p| p.newest).fold(f64::MIN, f64::max);
-        let due = self.paces.iter().any(|p| p.due(t));
-        let until = *self.waiting.get_or_insert(now + ROUND_WAIT);
-        if self.fresh && !due {
-            self.round_stamp = t;
-            return false;
-        }
-        if now < until {
+        if !self.fresh {
             return true;
         }
-        if self.fresh {
+        let t = self.paces.iter().map(|p| p.newest).fold(f64::MIN, f64::max);
+        let due = self.paces.iter().any(|p| p.due(t));
+        if due {
+            let until = *self.waiting.get_or_insert(now + ROUND_WAIT);
+            if now < until {
+                return true;
+            }
             for p in self.paces.iter_mut().filter(|p| p.due(t)) {
                 p.lagging = true;
             }
         }
-        self.round_stamp = self.round_stamp.max(t);
+        self.round_stamp = t;
         false
     }
 
@@ -596,11 +597,13 @@ mod tests {
         q.push(data(4, 0.3));
         q.push(data(6, 0.3));
         assert_eq!(drain(&mut q), [(D, 4), (D, 6), (S, 1)]);
-        // A round of late data only ends when its wait runs out.
+        // A round of late data waits for the next step, however long.
         q.request_data(msg(A, 1, 4));
         q.push(data(6, 0.3));
-        drain(&mut q);
-        let until = q.deadline().expect("waiting for a new step");
-        assert_eq!(q.pop(until).map(|m| m.kind), Some(S));
+        assert_eq!(drain(&mut q), [(A, 1), (D, 6)]);
+        assert_eq!(q.deadline(), None);
+        q.push(data(4, 0.4));
+        q.push(data(6, 0.4));
+        assert_eq!(drain(&mut q), [(D, 4), (D, 6), (S, 1)]);
     }
 }

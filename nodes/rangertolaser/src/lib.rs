@@ -17,8 +17,9 @@
 //!   Until that answer arrives, range samples are dropped (Player would
 //!   publish them with zeroed angles); if the ranger refuses, scans go out with
 //!   zeroed angles as Player's did, and a warning says why.
-//! - Each range sample becomes a [`laser::Scan`], with the latest intensities
-//!   when their count matches.
+//! - As Player's, every ranger message makes a [`laser::Scan`] (numbered 0):
+//!   the ranges with the latest intensities when their count matches, then,
+//!   when the step's intensities come, the same ranges with them.
 //! - Laser requests map to ranger requests: `geom` → ranger `geom`,
 //!   `get_config` → the cached configuration, `set_config` → ranger
 //!   `set_config`, `power` → ranger `power`. The laser request is answered
@@ -36,7 +37,8 @@ pub struct RangerToLaser {
     config: ConfigState,
     config_request: Option<RequestId>,
     intensities: Vec<f64>,
-    scans: u32,
+    /// The ranges of the last scan published.
+    ranges: Vec<f64>,
     /// Laser requests waiting for the ranger's answer.
     pending: HashMap<RequestId, Pending>,
 }
@@ -88,7 +90,7 @@ impl Driver for RangerToLaser {
             config: ConfigState::Waiting,
             config_request: None,
             intensities: Vec::new(),
-            scans: 0,
+            ranges: Vec::new(),
             pending: HashMap::new(),
         })
     }
@@ -106,8 +108,17 @@ impl Driver for RangerToLaser {
                 self.publish(ctx, &d.msg.ranges, d.stamp)
             }
             Event::Data(s) if s.is::<ranger::Intensities>() => {
-                self.intensities = s.decode::<ranger::Intensities>()?.msg.intensities;
-                Ok(())
+                // As Player's: every ranger message makes a scan, so the
+                // step's intensities go out with its ranges.
+                let d = s.decode::<ranger::Intensities>()?;
+                self.intensities = d.msg.intensities;
+                if self.ranges.is_empty() {
+                    return Ok(());
+                }
+                let ranges = std::mem::take(&mut self.ranges);
+                let r = self.publish(ctx, &ranges, d.stamp);
+                self.ranges = ranges;
+                r
             }
             Event::Data(s) => Err(s.unexpected()),
             Event::Request(r) if r.is::<laser::GetGeom>() => {
@@ -215,9 +226,11 @@ impl RangerToLaser {
             max_range: c.max_range,
             ranges: ranges.iter().map(|&r| r as f32).collect(),
             intensity,
-            id: self.scans,
+            // Player's rangertolaser numbers no scan.
+            id: 0,
         };
-        self.scans = self.scans.wrapping_add(1);
+        self.ranges.clear();
+        self.ranges.extend_from_slice(ranges);
         ctx.publish_at(&self.output, &scan, stamp)
     }
 }
@@ -302,6 +315,35 @@ mod tests {
         );
         assert_eq!(s.ranges, vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]);
         assert_eq!(s.intensity, vec![255, 2, 0, 0, 0, 0, 1]);
+    }
+
+    /// Player's rangertolaser makes a scan of every ranger message: Stage's
+    /// ranges with the last intensities, then the same ranges with the
+    /// step's intensities, each scan numbered 0.
+    #[test]
+    fn the_step_s_intensities_make_a_second_scan_of_its_ranges() {
+        let mut h = harness();
+        let id = h.requests_sent()[0].id;
+        h.answer(id, &config()).unwrap();
+        h.input(
+            RANGER,
+            &ranger::Ranges {
+                ranges: vec![3.0; 7],
+            },
+        )
+        .unwrap();
+        h.input(
+            RANGER,
+            &ranger::Intensities {
+                intensities: vec![1.0; 7],
+            },
+        )
+        .unwrap();
+        let scans = h.published::<laser::Scan>(LASER);
+        assert_eq!(scans.len(), 2);
+        assert_eq!((scans[0].intensity.len(), scans[0].id), (0, 0));
+        assert_eq!(scans[1].ranges, vec![3.0; 7]);
+        assert_eq!((scans[1].intensity.clone(), scans[1].id), (vec![1; 7], 0));
     }
 
     #[test]
