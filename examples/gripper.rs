@@ -1,8 +1,10 @@
 //! `gripper`: fetch a box.
 //!
-//! A gripper reports two break beams between its paddles and how many
-//! things it holds. Open the paddles, creep forward until something breaks a
-//! beam, close on it, and back up, dragging it along.
+//! A gripper reports whether its paddles are open, closed or moving, and two
+//! break beams between them. Open the paddles, creep forward until something
+//! breaks a beam, close on it, and back up, dragging it along. (Stage's
+//! gripper never counts what it stores: closed paddles with a beam still
+//! broken are what holding something looks like.)
 //!
 //! ```sh
 //! troupe launch worlds/gripper.cfg &
@@ -57,13 +59,19 @@ fn main() -> anyhow::Result<()> {
         base.y()
     );
 
-    // 2. Close and wait until the gripper says it holds something.
+    // 2. Close, and wait until the paddles stop on it.
     gripper.close()?;
-    while gripper.state() != State::Closed || gripper.stored() == 0 {
+    let mut moving = false;
+    while gripper.state() != State::Closed || gripper.beams() == 0 {
         robot.read()?;
+        moving |= gripper.state() == State::Moving;
         give_up("closing")?;
     }
-    println!("holding {} object(s)", gripper.stored());
+    println!(
+        "holding it: closed{}, beams {:#04x}",
+        if moving { " after moving" } else { "" },
+        gripper.beams()
+    );
 
     // 3. Back up, dragging it along.
     let (x0, y0) = (base.x(), base.y());
@@ -74,11 +82,11 @@ fn main() -> anyhow::Result<()> {
     }
     base.set_speed(0.0, 0.0)?;
     println!(
-        "dragged it {:.2} m back to ({:.2}, {:.2}); still holding {}",
+        "dragged it {:.2} m back to ({:.2}, {:.2}); beams {:#04x}",
         (base.x() - x0).hypot(base.y() - y0),
         base.x(),
         base.y(),
-        gripper.stored()
+        gripper.beams()
     );
     Ok(())
 }

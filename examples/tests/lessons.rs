@@ -459,12 +459,18 @@ fn gripper_drags_the_box_back() {
     let mut ex = stack.example("gripper", &["--back", "1.5", "--for", "60"]);
     let out = stack.follow(&mut ex, Duration::from_secs(40), || {});
     let after = sim.get_pose2d("box").unwrap();
-    assert!(out.contains("holding 1 object"), "{out}");
+    assert!(out.contains("holding it: closed after moving"), "{out}");
     assert!(
         before.x - after.x > 1.3 && (after.y - before.y).abs() < 0.1,
         "the box went from {before:?} to {after:?}\n{out}"
     );
     stack.client.read().unwrap();
-    assert_eq!(gripper.stored(), 1, "{out}");
+    // As Stage's: closed on the box, which breaks both beams; nothing
+    // counted as stored.
+    assert_eq!(
+        (gripper.state(), gripper.beams(), gripper.stored()),
+        (troupe_msgs::gripper::State::Closed, 0x0c, 0),
+        "{out}"
+    );
     stack.stop("gripper");
 }

@@ -227,3 +227,69 @@ fn a_pull_read_carries_every_subscribed_device_at_one_step() {
     );
     assert!(launcher.terminate().success(), "{}", launcher.stderr());
 }
+
+/// Stage's gripper through the bridge (issue 32, item 8), on everything.cfg's
+/// robot1: after CLOSE the paddles report MOVING while they travel, a
+/// twentieth of the way each 100 ms of simulated time, then CLOSED; the
+/// beams are Stage's plugin's bits (0x04, 0x08) and nothing is ever
+/// counted as stored.
+#[test]
+fn the_gripper_moves_its_paddles_in_stage_s_time() {
+    use crate::player::{Player, DATA};
+    let cfg =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/compat/stage/everything.cfg");
+    if !cfg.exists() {
+        eprintln!("skipping: ../shared/compat is absent");
+        return;
+    }
+    let ns = troupe_tests::unique_namespace("gripper");
+    let mut launcher = troupe_tests::launch(&ns, &cfg, &[]);
+    let (_, addr) = troupe_tests::launch_ports(&mut launcher);
+    let mut player = Player::connect(addr, 6665);
+    let gripper = troupe_msgs::Device::new(6665, troupe_msgs::Interface::Gripper, 0);
+    player.open(gripper);
+    // state, beams, stored: three XDR words.
+    let next = |player: &mut Player| loop {
+        let m = player.recv();
+        if m.kind() == DATA && m.h[2] == 3 {
+            let w = |i: usize| u32::from_be_bytes(m.body[4 * i..4 * i + 4].try_into().unwrap());
+            return (m.timestamp, w(0), w(1), w(2));
+        }
+    };
+    let (_, state, _, _) = next(&mut player);
+    assert_eq!(state, 1, "open at the start");
+    // PLAYER_GRIPPER_CMD_CLOSE.
+    player.send(3, 0, 2, 2, &[]);
+    let mut seen = Vec::new();
+    let closed = loop {
+        let d = next(&mut player);
+        assert_eq!(d.3, 0, "stored, as Stage's plugin: {d:?}");
+        assert_eq!(d.2 & !0x0c, 0, "beams are 0x04 and 0x08: {d:?}");
+        seen.push(d);
+        if d.1 == 2 {
+            break d;
+        }
+        assert!(
+            seen.len() < 400,
+            "never closed: {:?}",
+            &seen[seen.len() - 3..]
+        );
+    };
+    let moving: Vec<f64> = seen.iter().filter(|d| d.1 == 3).map(|d| d.0).collect();
+    let first = moving
+        .first()
+        .copied()
+        .expect("MOVING while the paddles travel");
+    let travel = closed.0 - first;
+    eprintln!(
+        "gripper: MOVING for {travel:.1} simulated s, then CLOSED, beams {:#04x}",
+        closed.2
+    );
+    // Twenty updates, 100 ms each, with nothing between the paddles; fewer
+    // when they close on something.
+    assert!(travel > 0.3 && travel < 2.25, "MOVING for {travel} s");
+    if closed.2 == 0 {
+        assert!(travel > 1.75, "closed on nothing in {travel} s");
+    }
+    assert!(launcher.terminate().success(), "{}", launcher.stderr());
+}

@@ -33,7 +33,7 @@ use troupe_msgs::{
 };
 use troupe_node::{Ctx, Driver, Event, NodeError, Result, Section, Switch};
 
-use crate::sim::{Command, Sim};
+use crate::sim::{Command, Paddles, Sim};
 use crate::world::{self, Kind};
 
 /// One cfg section's model and the devices it provides.
@@ -440,18 +440,18 @@ impl Stage {
                 Source::Fiducial { model } => ctx.publish(&dev, &self.sim.fiducials(model))?,
                 Source::Gripper { model } => {
                     let st = self.sim.grippers[model].clone().unwrap_or_default();
-                    let state = if st.closed {
-                        gripper::State::Closed
-                    } else {
-                        gripper::State::Open
+                    let state = match st.paddles {
+                        Paddles::Open => gripper::State::Open,
+                        Paddles::Closed => gripper::State::Closed,
+                        Paddles::Opening | Paddles::Closing => gripper::State::Moving,
                     };
-                    let stored = u8::from(st.held.is_some());
+                    // Stage's Player plugin never counts what is stored.
                     ctx.publish(
                         &dev,
                         &gripper::Data {
                             state,
                             beams: st.beams,
-                            stored,
+                            stored: 0,
                         },
                     )?;
                 }

@@ -54,16 +54,74 @@ pub struct Base {
     pub wander_turn: f64,
 }
 
-/// A gripper's state.
-#[derive(Debug, Clone, Default, PartialEq)]
+/// Where a gripper's paddles are going, as Stage's gripper keeps them.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum Paddles {
+    /// Fully open.
+    #[default]
+    Open,
+    /// Closed as far as they go (on what they hold, if anything).
+    Closed,
+    /// On their way open.
+    Opening,
+    /// On their way closed.
+    Closing,
+}
+
+/// A gripper's state: Stage's gripper model with its default paddles (0.66
+/// of the gripper's length, 0.1 of its width each).
+///
+/// # Behavior
+///
+/// Every 100 ms of simulated time (Stage's update interval) the paddles
+/// move a twentieth of their travel towards the last command. Two break
+/// beams cross the gap between them (3/4 and 1/4 of the paddles' length
+/// from their tips) and two contact rays run along their inner faces, at
+/// the gripper's height; they meet models with `gripper_return`. Closing
+/// paddles that touch something take it: it moves to the gripper's centre
+/// and goes with it, and the paddles close no further than its width
+/// lets them. Opening lets go of it where it is.
+#[derive(Debug, Clone, PartialEq)]
 pub struct GripperState {
-    /// Paddles closed.
-    pub closed: bool,
+    /// The paddles.
+    pub paddles: Paddles,
+    /// How far closed: 0 open, 1 closed.
+    pub position: f64,
+    /// Where closing stops: 1, or less on a held object.
+    close_limit: f64,
+    /// The last command, kept as Stage keeps it: close (`true`) or open.
+    command: Option<bool>,
     /// The model it holds, and that model's pose in the gripper's frame.
     pub held: Option<(usize, Pose)>,
-    /// Break beams: bit 0 the inner beam, bit 1 the outer beam.
+    /// Break beams as Stage's Player plugin reports them: 0x04 the inner
+    /// beam, 0x08 the outer one.
     pub beams: u32,
+    /// Simulated seconds since the paddles last moved.
+    since: f64,
 }
+
+impl Default for GripperState {
+    fn default() -> Self {
+        GripperState {
+            paddles: Paddles::Open,
+            position: 0.0,
+            close_limit: 1.0,
+            command: None,
+            held: None,
+            beams: 0,
+            since: 0.0,
+        }
+    }
+}
+
+/// Stage's gripper: paddles' share of the gripper's length and width,
+/// where the beams cross them (from the paddles' base), and how far the
+/// paddles move per update.
+const PADDLE_X: f64 = 0.66;
+const PADDLE_Y: f64 = 0.1;
+const BEAM_INSET: [f64; 2] = [0.75 * PADDLE_X, 0.25 * PADDLE_X];
+const PADDLE_STEP: f64 = 0.05;
+const GRIPPER_INTERVAL: f64 = 0.1;
 
 /// One sensor's latest readings.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -894,7 +952,7 @@ impl Sim {
                     for (bi, slot) in kept.iter().enumerate() {
                         me.apply(bi, dt, &mut lock(slot));
                     }
-                    me.carry();
+                    me.carry(dt);
                 }
                 me.statics.refresh_clearance();
                 for slot in &work {
@@ -1082,59 +1140,101 @@ impl Sim {
         }
     }
 
-    /// Objects a gripper could take: their centre between the paddles, in
-    /// front of the gripper's body, within its width. Returns (model, local x).
-    fn graspable(&self, g: usize) -> Vec<(usize, f64)> {
-        let eye = self.global(g);
-        let size = self.world.models[g].size;
-        let root = self.roots[g];
-        (0..self.world.models.len())
-            .filter(|&k| {
-                self.world.models[k].gripper_return
-                    && self.roots[k] != root
-                    && self.world.models[k].parent.is_none()
-            })
-            .filter_map(|k| {
-                let rel = eye.inverse().compose(&self.global(k));
-                (rel.x >= 0.0 && rel.x <= size[0] && rel.y.abs() <= size[1] / 2.0)
-                    .then_some((k, rel.x))
-            })
-            .collect()
+    /// Gives gripper `g` Stage's command: close (`true`) or open. The
+    /// paddles move at its next updates.
+    pub fn grip(&mut self, g: usize, close: bool) {
+        if let Some(st) = &mut self.grippers[g] {
+            st.command = Some(close);
+        }
     }
 
-    /// Opens (false) or closes (true) gripper `g`: closing takes the nearest
-    /// graspable object, opening drops what it holds where it is.
-    pub fn grip(&mut self, g: usize, close: bool) {
-        let Some(state) = self.grippers[g].clone() else {
+    /// The first model with `gripper_return`, other than gripper `g`, on
+    /// the ray from `(x, y)` (in `g`'s frame) along `yaw` for `len` metres,
+    /// at the gripper's height.
+    fn gripper_ray(&self, g: usize, (x, y, yaw): (f64, f64, f64), len: f64) -> Option<usize> {
+        if len <= 0.0 {
+            return None;
+        }
+        let (at, z) = self.world.global(&self.poses, g);
+        let o = at.compose(&self.world.models[g].origin).apply(x, y);
+        let accept = |id: u16| {
+            let k = usize::from(id) - 1;
+            k != g && self.world.models[k].gripper_return && self.spans(k, z)
+        };
+        let d = unit(at.yaw + yaw);
+        self.cast(o.0, o.1, d, (0.0, len), accept)
+            .map(|h| usize::from(h.id) - 1)
+    }
+
+    /// One update of gripper `g`, as Stage's gripper model makes it.
+    fn update_gripper(&mut self, g: usize) {
+        let Some(mut st) = self.grippers[g].clone() else {
             return;
         };
-        let mut state = state;
-        if close && !state.closed {
-            let mut can = self.graspable(g);
-            can.sort_by(|a, b| a.1.total_cmp(&b.1));
-            if let Some(&(k, _)) = can.first() {
-                let rel = self.global(g).inverse().compose(&self.global(k));
-                state.held = Some((k, rel));
-                // Carried: it moves with the robot and is part of it for sensors and collisions.
-                self.roots[k] = self.roots[g];
-                if !self.movable[k] {
-                    for t in self.trees[k].clone() {
-                        self.unplace(t);
-                        self.movable[t] = true;
-                        self.place(t);
+        match st.command {
+            Some(true) if st.paddles != Paddles::Closed => st.paddles = Paddles::Closing,
+            Some(false) if st.paddles != Paddles::Open => st.paddles = Paddles::Opening,
+            _ => {}
+        }
+        match st.paddles {
+            Paddles::Opening => {
+                st.position -= PADDLE_STEP;
+                if st.position < 0.0 {
+                    st.position = 0.0;
+                    st.paddles = Paddles::Open;
+                }
+                if st.position == 0.0 || st.position < st.close_limit {
+                    if let Some((k, _)) = st.held.take() {
+                        // Let go where it is (Stage puts it at the
+                        // gripper's pose: it is there already).
+                        for t in self.trees[k].clone() {
+                            self.roots[t] = self.world.root(t);
+                        }
                     }
+                    st.close_limit = 1.0;
                 }
             }
+            Paddles::Closing => {
+                st.position += PADDLE_STEP;
+                if st.position > st.close_limit {
+                    st.position = st.close_limit;
+                    st.paddles = Paddles::Closed;
+                }
+            }
+            Paddles::Open | Paddles::Closed => {}
         }
-        if !close {
-            if let Some((k, _)) = state.held.take() {
+        let [sx, sy, _] = self.world.models[g].size;
+        // The paddles' inner faces, from the centre line.
+        let face = (1.0 - st.position) * (sy / 2.0 - sy * PADDLE_Y);
+        let gap = (1.0 - st.position) * (sy - 2.0 * sy * PADDLE_Y);
+        st.beams = 0;
+        for (bit, inset) in [0x04, 0x08].into_iter().zip(BEAM_INSET) {
+            let x = sx * (1.0 - inset) - sx / 2.0;
+            if self
+                .gripper_ray(g, (x, face, -std::f64::consts::FRAC_PI_2), gap)
+                .is_some()
+            {
+                st.beams |= bit;
+            }
+        }
+        let base = sx * (1.0 - PADDLE_X) - sx / 2.0;
+        let touched = [face, -face]
+            .into_iter()
+            .find_map(|y| self.gripper_ray(g, (base, y, 0.0), PADDLE_X * sx));
+        if let (Some(k), Paddles::Closing, None) = (touched, st.paddles, st.held) {
+            // Taken: to the gripper's centre, and along with it from now on.
+            st.held = Some((k, Pose::default()));
+            st.close_limit = (1.0 - self.world.models[k].size[1] / (sy - PADDLE_Y / 2.0)).max(0.0);
+            self.roots[k] = self.roots[g];
+            if !self.movable[k] {
                 for t in self.trees[k].clone() {
-                    self.roots[t] = self.world.root(t);
+                    self.unplace(t);
+                    self.movable[t] = true;
+                    self.place(t);
                 }
             }
         }
-        state.closed = close;
-        self.grippers[g] = Some(state);
+        self.grippers[g] = Some(st);
     }
 
     /// Takes model `m`'s body out: its cells from the static grid, or its
@@ -1152,26 +1252,22 @@ impl Sim {
         self.cells[m].clear();
     }
 
-    /// Moves held objects with their grippers and updates the break beams.
-    fn carry(&mut self) {
+    /// Updates the grippers every 100 ms of simulated time, and moves
+    /// what they hold with them.
+    fn carry(&mut self, dt: f64) {
         for g in 0..self.grippers.len() {
-            let Some(state) = self.grippers[g].clone() else {
+            let Some(st) = &mut self.grippers[g] else {
                 continue;
             };
-            if let Some((k, rel)) = state.held {
+            st.since += dt;
+            // (Less a hair: steps of 0.1 s add up to a little less.)
+            if st.since >= GRIPPER_INTERVAL - 1e-9 {
+                st.since -= GRIPPER_INTERVAL;
+                self.update_gripper(g);
+            }
+            if let Some((k, rel)) = self.grippers[g].as_ref().and_then(|s| s.held) {
                 let to = self.global(g).compose(&rel);
                 self.set_pose(k, to);
-            }
-            let half = self.world.models[g].size[0] / 2.0;
-            let beams = match state.held {
-                Some(_) => 0b11,
-                None => self
-                    .graspable(g)
-                    .iter()
-                    .fold(0, |b, &(_, x)| b | if x < half { 1 } else { 2 }),
-            };
-            if let Some(st) = &mut self.grippers[g] {
-                st.beams = beams;
             }
         }
     }
@@ -1793,34 +1889,58 @@ mod tests {
 
     #[test]
     fn a_gripper_picks_up_carries_and_drops_a_box() {
+        // The gripper hangs in front of r, 0.05 m up (its base is 0.2 m
+        // tall): the box between its paddles spans that height.
         let mut s = sim(
             "gripper",
-            "position ( name \"r\" size [0.4 0.4 0.2] acceleration_bounds [-9 9 -9 9 -9 9 -900 900] gripper ( pose [0.3 0 0 0] size [0.2 0.3 0.1] ) )\n\
-             model ( name \"box\" pose [0.5 0 0 0] size [0.1 0.1 0.1] gripper_return 1 obstacle_return 1 )\n",
+            "position ( name \"r\" size [0.4 0.4 0.2] acceleration_bounds [-9 9 -9 9 -9 9 -900 900] gripper ( pose [0.3 0 -0.15 0] size [0.2 0.3 0.1] ) )\n\
+             model ( name \"box\" pose [0.38 0 0 0] size [0.1 0.1 0.1] gripper_return 1 obstacle_return 1 )\n",
         );
         let g = s.world.names["r.gripper:0"];
         let bx = s.world.names["box"];
+        let st = |s: &Sim| s.grippers[g].clone().unwrap();
         s.step();
-        assert_eq!(
-            s.grippers[g].as_ref().unwrap().beams,
-            0b10,
-            "the box breaks the outer beam"
-        );
+        assert_eq!(st(&s).beams, 0x08, "the box breaks the outer beam");
+        assert_eq!(st(&s).paddles, Paddles::Open);
+        // The paddles move a twentieth a step, until they touch the box
+        // (0.1 m wide, between paddles 0.24 m apart) and close on it.
         s.grip(g, true);
+        let mut moving = 0;
+        while st(&s).paddles != Paddles::Closed {
+            s.step();
+            moving += 1;
+            assert!(moving < 30, "{:?}", st(&s));
+        }
+        assert_eq!(moving, 13, "12 steps closing, the 13th stops on the box");
+        assert!((st(&s).position - 0.6).abs() < 1e-9, "{:?}", st(&s));
+        assert_eq!(st(&s).held.map(|h| h.0), Some(bx));
+        assert_ne!(
+            st(&s).beams & 0x04,
+            0,
+            "held at the centre, across the inner beam"
+        );
+        assert!((s.global(bx).x - 0.3).abs() < 1e-9, "taken to the centre");
         s.bases[0].cmd = Some(Command::Vel(Pose::new(0.5, 0.0, 0.0)));
         for _ in 0..10 {
             s.step();
         }
         assert!(!s.bases[0].stall, "a held box is part of the robot");
         let p = s.global(bx);
-        assert!((p.x - 1.0).abs() < 0.02, "carried 0.5 m: {p:?}");
+        assert!((p.x - 0.8).abs() < 0.02, "carried 0.5 m: {p:?}");
+        // Opening lets go at once (the paddles leave the box).
         s.grip(g, false);
         s.bases[0].cmd = Some(Command::Vel(Pose::new(-0.5, 0.0, 0.0)));
-        for _ in 0..10 {
+        s.step();
+        assert_eq!((st(&s).paddles, st(&s).held), (Paddles::Opening, None));
+        for _ in 0..13 {
             s.step();
         }
-        assert!((s.global(bx).x - 1.0).abs() < 0.02, "dropped where it was");
-        assert_eq!(s.grippers[g].as_ref().unwrap().held, None);
+        assert!((s.global(bx).x - 0.8).abs() < 0.06, "dropped where it was");
+        assert_eq!(
+            st(&s).paddles,
+            Paddles::Open,
+            "open 1.4 s after the command"
+        );
     }
 
     #[test]

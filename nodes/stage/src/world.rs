@@ -739,6 +739,12 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
         }
         if default_block {
             blocks.push(rect(-0.5, -0.5, 0.5, 0.5));
+        } else if kind == Kind::Gripper && blocks.is_empty() && r.int(e, "noblocks", 0) == 0 {
+            // Stage's gripper body: a block at the back and two paddles
+            // (0.66 of its length, 0.1 of its width each), drawn open.
+            blocks.push(rect(0.0, 0.0, 0.34, 1.0));
+            blocks.push(rect(0.34, 0.0, 1.0, 0.1));
+            blocks.push(rect(0.34, 0.9, 1.0, 1.0));
         }
         let boundary = r.int(e, "boundary", 0) != 0;
         world.models.push(ModelDef {
