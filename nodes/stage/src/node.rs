@@ -34,7 +34,7 @@ use troupe_msgs::{
 use troupe_node::{Ctx, Driver, Event, NodeError, Result, Section, Switch};
 
 use crate::sim::{Command, Paddles, Sim};
-use crate::world::{self, Kind};
+use crate::world::{self, Kind, Localization};
 
 /// One cfg section's model and the devices it provides.
 #[derive(Debug, Clone, Deserialize)]
@@ -68,6 +68,11 @@ pub struct Options {
     pub quit_time: Option<f64>,
     /// Step only on `simulation` `step` requests (deterministic tests).
     pub step_when_told: Option<Switch>,
+    /// Do what Stage's Player plugin did where it ignores the interface:
+    /// drive with the motors off, keep odometry a set/reset would change
+    /// under `localization "gps"`, and take a car command's angle as a
+    /// turn rate. Off: do what the interface says.
+    pub stage_quirks: Option<Switch>,
     /// Write a PNG of the world here when the node stops.
     pub snapshot: Option<PathBuf>,
 }
@@ -99,6 +104,8 @@ pub struct Stage {
     /// The simulation devices, model names and models whose pose was asked
     /// for: their answers are kept ready, renewed whenever the model may move.
     watched: Vec<(Device, String, usize)>,
+    /// `stage_quirks`: Stage's plugin's ways where it ignores the interface.
+    quirks: bool,
 }
 
 /// Models already serving a device of each interface. A laser or sonar may
@@ -273,6 +280,7 @@ impl Driver for Stage {
             steps_per_tick,
             snapshot: o.snapshot.clone(),
             watched: Vec::new(),
+            quirks: o.stage_quirks.is_some_and(Switch::on),
         })
     }
 
@@ -312,7 +320,12 @@ impl Driver for Stage {
                     Command::GoTo(c.decode::<position2d::CmdPos>()?.msg.pos.into())
                 } else if c.is::<position2d::CmdCar>() {
                     let v = c.decode::<position2d::CmdCar>()?.msg;
-                    Command::Car(v.velocity, v.angle)
+                    if self.quirks {
+                        // Stage's plugin: the angle as a turn rate.
+                        Command::Vel(Pose::new(v.velocity, 0.0, v.angle))
+                    } else {
+                        Command::Car(v.velocity, v.angle)
+                    }
                 } else {
                     return Err(c.unexpected());
                 });
@@ -590,7 +603,22 @@ impl Stage {
                 if r.is::<position2d::GetGeom>() {
                     r.reply(&self.position_geom(m));
                 } else if r.is::<position2d::MotorPower>() {
-                    self.sim.bases[base].enabled = r.decode::<position2d::MotorPower>()?.state;
+                    let on = r.decode::<position2d::MotorPower>()?.state;
+                    if self.quirks {
+                        tracing::warn!("Stage ignores motor power state ({})", u8::from(on));
+                    } else {
+                        self.sim.bases[base].enabled = on;
+                    }
+                    r.reply(&common::Ack);
+                } else if self.quirks
+                    && (r.is::<position2d::SetOdom>() || r.is::<position2d::ResetOdom>())
+                    && self.sim.world.models[m]
+                        .position
+                        .as_ref()
+                        .is_some_and(|c| c.localization == Localization::Gps)
+                {
+                    // Stage's plugin sets the estimate, which its next
+                    // update overwrites with the true pose.
                     r.reply(&common::Ack);
                 } else if r.is::<position2d::SetOdom>() || r.is::<position2d::ResetOdom>() {
                     let pose: Pose = if r.is::<position2d::SetOdom>() {
@@ -1209,6 +1237,54 @@ mod tests {
         // Other models are asked for, and kept, separately.
         assert_eq!(pose_of(&mut h, "wall").x, 4.0);
         assert_eq!(h.driver().watched.len(), 2);
+    }
+
+    /// `stage_quirks 1` restores what Stage's plugin did where it ignores
+    /// the interface; without it the interface is obeyed.
+    #[test]
+    fn stage_quirks_drive_with_motors_off_keep_gps_odometry_and_turn_cars() {
+        let run = |quirks: u8| {
+            let w = world_file(&format!("quirks{quirks}"), WORLD);
+            let mut h = Harness::<Stage>::from_json(&format!(
+                r#"{{"name":"stage","provides":["position2d:0"],"options":{{"worldfile":"{}","model":"r0","stage_quirks":{quirks}}}}}"#,
+                w.display()
+            ))
+            .unwrap();
+            let pos = dev(Interface::Position2d, 0);
+            h.request(pos, &position2d::MotorPower { state: false })
+                .unwrap();
+            h.request(
+                pos,
+                &position2d::SetOdom {
+                    pose: troupe_msgs::Pose2d::new(5.0, 5.0, 0.0),
+                },
+            )
+            .unwrap();
+            h.command(
+                pos,
+                &position2d::CmdCar {
+                    velocity: 1.0,
+                    angle: 0.5,
+                },
+            )
+            .unwrap();
+            for _ in 0..5 {
+                h.tick().unwrap();
+            }
+            h.published::<position2d::Data>(pos).pop().unwrap()
+        };
+        // Stage's ways: it drives, turning at 0.5 rad/s, and the odometry
+        // is the true pose whatever was set.
+        let stage = run(1);
+        assert!(stage.pose.x > 0.3 && stage.pose.x < 1.0, "{stage:?}");
+        assert!((stage.vel.yaw - 0.5).abs() < 1e-9, "{stage:?}");
+        // The interface's: motors off, so it stays where the odometry was set.
+        let own = run(0);
+        assert_eq!(
+            (own.pose.x, own.pose.y, own.vel.x),
+            (5.0, 5.0, 0.0),
+            "{own:?}"
+        );
     }
 
     #[test]
