@@ -22,12 +22,16 @@ struct Args {
     /// Characters per line of the drawing.
     #[arg(long, default_value_t = 64)]
     columns: u32,
+    /// Which map device (map.cfg: 0 the bitmap, 1 its obstacles grown by
+    /// mapcspace, 2 rescaled by mapscale).
+    #[arg(long, default_value_t = 0)]
+    index: u32,
 }
 
 fn main() -> anyhow::Result<()> {
     let args = Args::parse();
     let robot = Client::connect(&args.common.zenoh, args.common.robot)?;
-    let mut map = MapProxy::new(&robot, 0);
+    let mut map = MapProxy::new(&robot, args.index);
     map.request_map()?;
     let (w, h) = (map.width(), map.height());
     let o = map.origin();

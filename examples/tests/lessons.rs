@@ -257,7 +257,7 @@ fn laser_prints_the_scan_geometry_and_ranges() {
 
 #[test]
 fn map_draws_the_office_floor_plan() {
-    let stack = Stack::launch("map.cfg", None, &["6665:map:0"]);
+    let stack = Stack::launch("map.cfg", None, &["6665:map:0", "6665:map:1", "6665:map:2"]);
     let mut ex = stack.example("map", &["--columns", "64"]);
     let out = stack.follow(&mut ex, Duration::from_secs(20), || {});
     assert!(
@@ -277,7 +277,41 @@ fn map_draws_the_office_floor_plan() {
             .all(|l| l.starts_with('X') && l.ends_with('X')),
         "{out}"
     );
-    // "N free cells, M occupied"
+    let (free, occupied) = counts_of(&out);
+    assert!(free > 80_000.0 && occupied > 4_000.0, "{out}");
+    assert_eq!(
+        free + occupied,
+        320.0 * 320.0,
+        "every cell is free or occupied: {out}"
+    );
+    // map:1, mapcspace's: the same grid, walls grown by 0.25 m (5 cells a
+    // side: a thin wall gets 10 cells thicker), so far more occupied.
+    let mut ex = stack.example("map", &["--index", "1"]);
+    let grown = stack.follow(&mut ex, Duration::from_secs(20), || {});
+    assert!(
+        grown.starts_with("map: 320 x 320 cells of 0.050 m"),
+        "{grown}"
+    );
+    let (free1, occupied1) = counts_of(&grown);
+    assert_eq!(free1 + occupied1, free + occupied, "{grown}");
+    assert!(
+        occupied1 > 2.0 * occupied,
+        "{occupied} then {occupied1}: {grown}"
+    );
+    // map:2, mapscale's: 10 cm cells over the same 16 m, the same corner.
+    let mut ex = stack.example("map", &["--index", "2"]);
+    let coarse = stack.follow(&mut ex, Duration::from_secs(20), || {});
+    assert!(
+        coarse.starts_with(
+            "map: 160 x 160 cells of 0.100 m (16.0 m x 16.0 m), cell (0,0) at (-8.00, -8.00)"
+        ),
+        "{coarse}"
+    );
+    stack.stop("map");
+}
+
+/// The example's closing line: "N free cells, M occupied".
+fn counts_of(out: &str) -> (f64, f64) {
     let counts: Vec<f64> = out
         .lines()
         .last()
@@ -285,16 +319,10 @@ fn map_draws_the_office_floor_plan() {
         .split_whitespace()
         .filter_map(|w| w.parse().ok())
         .collect();
-    let &[free, occupied] = counts.as_slice() else {
-        panic!("no cell counts: {out}");
-    };
-    assert!(free > 80_000.0 && occupied > 4_000.0, "{out}");
-    assert_eq!(
-        free + occupied,
-        320.0 * 320.0,
-        "every cell is free or occupied: {out}"
-    );
-    stack.stop("map");
+    match counts.as_slice() {
+        &[free, occupied] => (free, occupied),
+        _ => panic!("no cell counts: {out}"),
+    }
 }
 
 #[test]

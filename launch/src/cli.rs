@@ -196,8 +196,13 @@ stack's `requires` (amcl on laser:0) are met by the replay.")]
     #[command(subcommand)]
     Log(crate::mcaplog::LogCmd),
 
-    /// List the drivers this build can run.
-    Drivers,
+    /// List the drivers this build can run (`--all`: and the Player drivers
+    /// sample files name that it cannot, with what to use instead).
+    Drivers {
+        /// Also the Player drivers Troupe does not have.
+        #[arg(long)]
+        all: bool,
+    },
 
     /// List Player's interfaces and their codes.
     Interfaces,

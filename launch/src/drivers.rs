@@ -36,6 +36,10 @@ pub fn all() -> Vec<Entry> {
         entry::<troupe_rangertolaser::RangerToLaser>("republishes a ranger as a laser"),
         entry::<troupe_amcl::Amcl>("adaptive Monte Carlo localization on a map (odometry + laser)"),
         entry::<troupe_mapfile::MapFile>("serves an occupancy map read from an image"),
+        entry::<troupe_mapfile::MapScale>("a map device's map at another resolution"),
+        entry::<troupe_mapfile::MapCspace>(
+            "a map device's map with obstacles grown by the robot's radius",
+        ),
         entry::<troupe_vfh::Vfh>(
             "VFH+ obstacle avoidance: velocity and goto commands past obstacles",
         ),
@@ -65,13 +69,72 @@ pub fn names() -> String {
     all().iter().map(|e| e.name).collect::<Vec<_>>().join(", ")
 }
 
+/// Player drivers that Player's and Stage's sample files name and Troupe
+/// does not have: the name, what the driver is in Player, and what to use
+/// instead where Troupe has something.
+pub const MISSING: &[(&str, &str, &str)] = &[
+    (
+        "p2os_position",
+        "Player 1's name for a Pioneer's base",
+        "use `p2os`, which provides position2d and the rest of the robot",
+    ),
+    (
+        "passthrough",
+        "relays a device of another Player server",
+        "`troupe bridge --import HOST:PORT` serves a Player server's devices on Troupe's keys",
+    ),
+    (
+        "nd",
+        "Nearness Diagram local navigation",
+        "`vfh` takes the same goals and velocity commands",
+    ),
+    (
+        "urglaser",
+        "the Hokuyo URG laser over a serial line (SCIP)",
+        "",
+    ),
+    (
+        "rflex",
+        "RWI and iRobot robots on the rFLEX controller (B21r, ATRV, Magellan)",
+        "",
+    ),
+    ("wbr914", "White Box Robotics' 914 PC-Bot", ""),
+    (
+        "cameracompress",
+        "compresses a camera's images to JPEG",
+        "Troupe has no camera interface yet",
+    ),
+    ("ptu46", "the Directed Perception PTU-46 pan-tilt unit", ""),
+    ("linuxwifi", "Linux wireless link statistics", ""),
+    ("festival", "speech through the Festival synthesizer", ""),
+    ("bumper_safe", "stops a base whose bumpers are pressed", ""),
+];
+
+/// Why a cfg naming driver `name` cannot run, and what to do instead;
+/// `sections` follows the name (" (2 sections: lines 8, 17)", or "").
+pub fn unavailable(name: &str, sections: &str) -> String {
+    match MISSING.iter().find(|m| m.0 == name) {
+        Some((_, about, instead)) => {
+            let instead = if instead.is_empty() {
+                String::new()
+            } else {
+                format!("; {instead}")
+            };
+            format!(
+                "driver `{name}`{sections} is not available in Troupe (Player's: {about}){instead}"
+            )
+        }
+        None => format!(
+            "driver `{name}`{sections} is not available in Troupe; available: {}",
+            names()
+        ),
+    }
+}
+
 /// Runs driver `name` in this process until SIGINT/SIGTERM.
 pub fn run(name: &str, section: Section, z: &ZenohArgs, cfg: &NodeConfig) -> anyhow::Result<()> {
     let Some(e) = find(name) else {
-        anyhow::bail!(
-            "driver `{name}` is not available in Troupe; available: {}",
-            names()
-        );
+        anyhow::bail!("{}", unavailable(name, ""));
     };
     (e.run)(section, z, cfg)?;
     Ok(())

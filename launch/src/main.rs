@@ -60,7 +60,7 @@ fn run(cli: cli::Cli) -> anyhow::Result<()> {
         Command::Play(a) => mcaplog::play(a, z),
         Command::Log(c) => mcaplog::log(c),
         Command::Emulate(a) => emulate::run(a, z),
-        Command::Drivers => tools::print_drivers(),
+        Command::Drivers { all } => tools::print_drivers(all),
         Command::Interfaces => tools::print_interfaces(),
         Command::Bench(b) => bench::run(b, z),
         Command::Bridge(a) => bridge::run(a, z),

@@ -511,9 +511,9 @@ pub fn from_cfg(file: &CfgFile, source: &Path, robot: u32, report: &mut Report) 
             ),
         };
         report.errors.push(format!(
-            "{}: driver `{driver}` is not available in Troupe{also}; available: {}",
+            "{}: {}",
             places[0],
-            drivers::names()
+            drivers::unavailable(&driver, &also)
         ));
     }
     plan
@@ -536,11 +536,9 @@ pub fn check(plan: &mut Plan, report: &mut Report) {
             .clone()
             .unwrap_or_else(|| format!("node `{}`", n.name));
         let Some(entry) = drivers::find(&n.driver) else {
-            report.errors.push(format!(
-                "{at}: driver `{}` is not available in Troupe; available: {}",
-                n.driver,
-                drivers::names()
-            ));
+            report
+                .errors
+                .push(format!("{at}: {}", drivers::unavailable(&n.driver, "")));
             continue;
         };
         match n.section() {
@@ -894,6 +892,14 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(e.contains("t.cfg:1:9: driver `foo` is not available in Troupe; available: dummy, rangertolaser"), "{e}");
+        // A Player driver Troupe lacks says what it is and what to use.
+        let e = plan_of("driver( name \"p2os_position\" provides [\"position2d:0\"] )\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("driver `p2os_position` is not available in Troupe (Player's: Player 1's name for a Pioneer's base); use `p2os`"),
+            "{e}"
+        );
         let e = plan_of(
             "driver( name \"rangertolaser\" requires [\"ranger:3\"] provides [\"laser:1\"] )\n\
              driver( name \"dummy\" provides [\"ranger:0\"] )\n",

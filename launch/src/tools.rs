@@ -448,10 +448,20 @@ pub fn wait_for_signal() -> anyhow::Result<()> {
 }
 
 /// `troupe drivers`.
-pub fn print_drivers() -> anyhow::Result<()> {
+pub fn print_drivers(all: bool) -> anyhow::Result<()> {
     let mut out = std::io::stdout().lock();
     for e in drivers::all() {
         writeln!(out, "{:<16} {}", e.name, e.about)?;
+    }
+    if all {
+        for (name, about, instead) in drivers::MISSING {
+            let instead = if instead.is_empty() {
+                String::new()
+            } else {
+                format!("; {instead}")
+            };
+            writeln!(out, "{name:<16} not available (Player's: {about}){instead}")?;
+        }
     }
     Ok(())
 }

@@ -27,6 +27,10 @@
 //!   `ReadFilename`); a file that cannot be read or decoded stops the node
 //!   before it provides anything, with the file and the reason.
 
+pub mod filter;
+
+pub use filter::{MapCspace, MapScale};
+
 use std::io::Read as _;
 use std::path::{Path, PathBuf};
 
