@@ -203,3 +203,64 @@ fn drive_to_goal(cfg: &Path) {
     assert!((last.x - GOAL.0).hypot(last.y - GOAL.1) < 0.1, "{wps:?}");
     assert!(launcher.terminate().success(), "{}", launcher.stderr());
 }
+
+/// Player's amcl sonar model (issue 30, item 4b): r0 of Stage's own
+/// simple.world wanders the cave with nothing but its 16 sonars; amcl,
+/// weighing poses by them against cave.png, keeps within 0.3 m of where
+/// the simulator says r0 is.
+#[test]
+fn amcl_localizes_a_sonar_only_robot_in_the_cave() {
+    let stage = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/compat/stage");
+    if !stage.exists() {
+        eprintln!("skipping: ../shared/compat is absent");
+        return;
+    }
+    let stage = stage.canonicalize().unwrap();
+    let text = format!(
+        "driver ( name \"stage\" provides [\"simulation:0\"] worldfile \"{w}\" )\n\
+         driver ( name \"stage\" provides [\"position2d:0\" \"sonar:0\"] model \"r0\" )\n\
+         driver ( name \"mapfile\" provides [\"map:0\"] filename \"{m}\" resolution 0.032 )\n\
+         driver ( name \"amcl\" provides [\"position2d:2\"]\n\
+           requires [\"odometry:::position2d:0\" \"sonar:0\" \"sonar:::map:0\"]\n\
+           init_pose [-6.946 -6.947 45] init_pose_var [0.2 0.2 10] )\n",
+        w = stage.join("simple.world").display(),
+        m = stage.join("bitmaps/cave.png").display(),
+    );
+    let dir = std::env::temp_dir().join(troupe_tests::unique_namespace("sonar-amcl"));
+    std::fs::create_dir_all(&dir).unwrap();
+    let cfg = dir.join("amcl_sonar.cfg");
+    std::fs::write(&cfg, text).unwrap();
+    let ns = troupe_tests::unique_namespace("sonar-amcl");
+    let mut launcher = troupe_tests::launch(&ns, &cfg, &["--no-bridge", "--speedup", "4"]);
+    let endpoint = launcher.endpoint("troupe launch: router listening on");
+    let session = troupe_tests::client_at(&endpoint, &ns);
+    troupe_tests::wait_live(&session, &["6665:simulation:0", "6665:position2d:2"]);
+    let client = Client::with_session(session, 6665);
+    let sim = SimulationProxy::new(&client, 0);
+    let amcl = Position2dProxy::new(&client, 2).unwrap();
+    let deadline = Instant::now() + std::time::Duration::from_secs(120);
+    let (mut worst, mut checks, mut next) = (0.0f64, 0, 20.0);
+    let start = sim.get_pose2d("r0").unwrap();
+    let mut travelled = 0.0;
+    let mut last = start;
+    while checks < 10 {
+        assert!(Instant::now() < deadline, "{checks} checks in time");
+        client.read().unwrap();
+        let t = client.data_time();
+        if t < next || amcl.x() == 0.0 {
+            continue;
+        }
+        next = t + 2.0;
+        let truth = sim.get_pose2d("r0").unwrap();
+        travelled += (truth.x - last.x).hypot(truth.y - last.y);
+        last = truth;
+        let err = (amcl.x() - truth.x).hypot(amcl.y() - truth.y);
+        worst = worst.max(err);
+        checks += 1;
+    }
+    eprintln!("sonar amcl: worst {worst:.2} m over {checks} checks, r0 wandered {travelled:.1} m");
+    assert!(travelled > 3.0, "r0 wandered only {travelled} m");
+    assert!(worst < 0.3, "amcl strayed {worst} m from r0");
+    assert!(launcher.terminate().success(), "{}", launcher.stderr());
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -413,6 +413,30 @@ impl Model {
     }
 }
 
+/// Player's sonar model (amcl's `models/sonar.c`): each reading within
+/// 2 m weighs the pose by `0.2 + 0.8 · N(observed − expected; σ² 0.04)`,
+/// the expected range traced from the transducer's pose in the map out to
+/// 8 m, both ranges rounded to the centimetre as Player's table rounds them.
+pub fn sonar_likelihood(map: &DistanceMap, p: &Pose, sonars: &[Pose], ranges: &[f64]) -> f64 {
+    const RANGE_MAX: f64 = 2.0;
+    const COV: f64 = 0.20 * 0.20;
+    const BAD: f64 = 0.20;
+    const TRACE: f64 = 8.0;
+    let cm = |r: f64| (r / 0.01 + 0.5).floor().min(TRACE / 0.01 - 1.0) * 0.01;
+    let norm = 1.0 / (2.0 * std::f64::consts::PI * COV).sqrt();
+    let mut w = 1.0;
+    for (s, &obs) in sonars.iter().zip(ranges) {
+        if !(0.0..=RANGE_MAX).contains(&obs) {
+            continue;
+        }
+        let at = p.compose(s);
+        let expected = map.range(at.x, at.y, at.yaw, TRACE);
+        let z = cm(obs) - cm(expected);
+        w *= BAD + (1.0 - BAD) * norm * (-(z * z) / (2.0 * COV)).exp();
+    }
+    w
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
