@@ -38,7 +38,8 @@ use std::time::{Duration, Instant};
 
 use serde::Deserialize;
 use troupe_msgs::{
-    bumper, common, ir, laser, localize, log, position2d, ranger, sonar, AnyMsg, Device, Interface,
+    bumper, common, fiducial, ir, laser, localize, log, position2d, ranger, sonar, AnyMsg, Device,
+    Interface,
 };
 use troupe_node::{Ctx, Driver, Event, NodeError, Result, Section, Switch, Unit};
 
@@ -379,6 +380,7 @@ fn answer(ctx: &mut Ctx, dev: &Device, msg: &AnyMsg) -> Result<bool> {
         AnyMsg::SonarGeom(g) => ctx.answer_always::<sonar::GetGeom>(dev, g),
         AnyMsg::IrGeom(g) => ctx.answer_always::<ir::GetGeom>(dev, g),
         AnyMsg::BumperGeom(g) => ctx.answer_always::<bumper::GetGeom>(dev, g),
+        AnyMsg::FiducialGeom(g) => ctx.answer_always::<fiducial::GetGeom>(dev, g),
         AnyMsg::LocalizeParticles(p) => ctx.answer_always::<localize::GetParticles>(dev, p),
         _ => return Ok(false),
     }?;

@@ -16,8 +16,8 @@
 use std::fmt::Write as _;
 
 use troupe_msgs::{
-    aio, bumper, dio, ir, laser, localize, position2d, power, ptz, ranger, sonar, AnyMsg,
-    Interface, Pose2d, Pose3d, Size3d,
+    aio, blobfinder, bumper, dio, fiducial, ir, laser, localize, position2d, power, ptz, ranger,
+    sonar, AnyMsg, Interface, Pose2d, Pose3d, Size2d, Size3d,
 };
 
 /// Player's `PLAYER_MSGTYPE_DATA`.
@@ -307,6 +307,51 @@ fn payload(msg: &AnyMsg) -> Option<(u8, u8, String)> {
             }
             (RESP_ACK, 1)
         }
+        AnyMsg::FiducialData(d) => {
+            let _ = write!(s, "{}", d.fiducials.len());
+            for f in &d.fiducials {
+                let _ = write!(s, " {}", f.id);
+                for p in [&f.pose, &f.upose] {
+                    let _ = write!(
+                        s,
+                        " {:+07.3} {:+07.3} {:+07.3} {:+07.3} {:+07.3} {:+07.3}",
+                        p.x, p.y, p.z, p.roll, p.pitch, p.yaw
+                    );
+                }
+            }
+            (DATA, 1)
+        }
+        AnyMsg::FiducialGeom(g) => {
+            // Player's format strings meet without a space between pitch and yaw.
+            let (p, z) = (&g.pose, &g.size);
+            let _ = write!(
+                s,
+                "{:+7.3} {:+7.3} {:+7.3} {:+7.3} {:+7.3}{:+7.3} {:+7.3} {:+7.3} {:+7.3} {:+7.3} {:+7.3}",
+                p.x,
+                p.y,
+                p.z,
+                p.roll,
+                p.pitch,
+                p.yaw,
+                z.length,
+                z.width,
+                z.height,
+                g.fiducial_size.length,
+                g.fiducial_size.width
+            );
+            (RESP_ACK, 1)
+        }
+        AnyMsg::BlobfinderData(d) => {
+            let _ = write!(s, "{} {} {}", d.width, d.height, d.blobs.len());
+            for b in &d.blobs {
+                let _ = write!(
+                    s,
+                    " {} {} {} {} {} {} {} {} {} {:.6}",
+                    b.id, b.color, b.area, b.x, b.y, b.left, b.right, b.top, b.bottom, b.range
+                );
+            }
+            (DATA, 1)
+        }
         _ => return None,
     };
     Some((kind, subtype, s))
@@ -432,6 +477,43 @@ pub fn parse(text: &str) -> Result<Option<Line<'_>>, LineError> {
         subtype: num(all[6], "subtype", "a message subtype (0-255)")?,
         fields: all[7..].to_vec(),
     }))
+}
+
+/// The first `n` numbers of a line's payload whose fields may run together
+/// (`+0.000+1.500`, as Player's fiducial geometry prints two of them).
+fn signed_numbers(line: &Line<'_>, n: usize) -> Result<Vec<f64>, LineError> {
+    let interface = line.interface.name();
+    let mut out = Vec::with_capacity(n);
+    for text in &line.fields {
+        let b = text.as_bytes();
+        let mut start = 0;
+        for k in 1..=b.len() {
+            let next_sign =
+                k < b.len() && (b[k] == b'+' || b[k] == b'-') && !matches!(b[k - 1], b'e' | b'E');
+            if k == b.len() || next_sign {
+                let part = &text[start..k];
+                let v = part
+                    .parse::<f64>()
+                    .ok()
+                    .filter(|v| v.is_finite())
+                    .ok_or_else(|| LineError::Number {
+                        interface,
+                        n: out.len() + 1,
+                        text: part.to_owned(),
+                    })?;
+                out.push(v);
+                start = k;
+            }
+        }
+    }
+    if out.len() < n {
+        return Err(LineError::Truncated {
+            interface,
+            got: out.len(),
+            want: n,
+        });
+    }
+    Ok(out)
 }
 
 /// Reads payload fields in order.
@@ -715,6 +797,73 @@ pub fn message(line: &Line<'_>) -> Result<AnyMsg, LineError> {
                 bits,
             })
         }
+        (I::Fiducial, DATA, 1) => {
+            let n = f.count(13)?;
+            let mut fiducials = Vec::with_capacity(n);
+            for _ in 0..n {
+                let id = f.f64()? as i32;
+                let mut pose = || -> Result<Pose3d, LineError> {
+                    Ok(Pose3d {
+                        x: f.f64()?,
+                        y: f.f64()?,
+                        z: f.f64()?,
+                        roll: f.f64()?,
+                        pitch: f.f64()?,
+                        yaw: f.f64()?,
+                    })
+                };
+                let (pose, upose) = (pose()?, pose()?);
+                fiducials.push(fiducial::Item { id, pose, upose });
+            }
+            AnyMsg::FiducialData(fiducial::Data { fiducials })
+        }
+        (I::Fiducial, RESP_ACK, 1) => {
+            let v = signed_numbers(line, 11)?;
+            AnyMsg::FiducialGeom(fiducial::Geom {
+                pose: Pose3d {
+                    x: v[0],
+                    y: v[1],
+                    z: v[2],
+                    roll: v[3],
+                    pitch: v[4],
+                    yaw: v[5],
+                },
+                size: Size3d {
+                    length: v[6],
+                    width: v[7],
+                    height: v[8],
+                },
+                fiducial_size: Size2d {
+                    length: v[9],
+                    width: v[10],
+                },
+            })
+        }
+        (I::Blobfinder, DATA, 1) => {
+            let (width, height) = (f.f64()? as u32, f.f64()? as u32);
+            let n = f.count(10)?;
+            let mut blobs = Vec::with_capacity(n);
+            for _ in 0..n {
+                let mut u = || f.f64().map(|v| v as u32);
+                blobs.push(blobfinder::Blob {
+                    id: u()?,
+                    color: u()?,
+                    area: u()?,
+                    x: u()?,
+                    y: u()?,
+                    left: u()?,
+                    right: u()?,
+                    top: u()?,
+                    bottom: u()?,
+                    range: f.f32()?,
+                });
+            }
+            AnyMsg::BlobfinderData(blobfinder::Data {
+                width,
+                height,
+                blobs,
+            })
+        }
         (I::Ir, DATA, 1) => {
             let n = f.count(1)?;
             let ranges = (0..n).map(|_| f.f32()).collect::<Result<_, _>>()?;
@@ -863,6 +1012,41 @@ mod tests {
             AnyMsg::BumperData(bumper::Data {
                 bumpers: vec![true, false],
             }),
+            AnyMsg::FiducialData(fiducial::Data {
+                fiducials: vec![fiducial::Item {
+                    id: 17,
+                    pose: Pose3d::planar(3.088, -0.58, 2.934),
+                    upose: Pose3d::default(),
+                }],
+            }),
+            AnyMsg::FiducialGeom(fiducial::Geom {
+                pose: Pose3d::planar(0.1, 0.0, -1.5),
+                size: Size3d {
+                    length: 0.2,
+                    width: 0.25,
+                    height: 0.1,
+                },
+                fiducial_size: Size2d {
+                    length: 0.05,
+                    width: 0.5,
+                },
+            }),
+            AnyMsg::BlobfinderData(blobfinder::Data {
+                width: 80,
+                height: 60,
+                blobs: vec![blobfinder::Blob {
+                    id: 0,
+                    color: 0xff0000,
+                    area: 48,
+                    x: 39,
+                    y: 30,
+                    left: 36,
+                    right: 42,
+                    top: 26,
+                    bottom: 34,
+                    range: 4.25,
+                }],
+            }),
             AnyMsg::LaserScanPose(laser::ScanPose {
                 scan: laser::Scan {
                     min_angle: -1.5,
@@ -895,8 +1079,63 @@ mod tests {
             AnyMsg::DioData(_) => I::Dio,
             AnyMsg::IrData(_) => I::Ir,
             AnyMsg::BumperData(_) => I::Bumper,
+            AnyMsg::FiducialData(_) | AnyMsg::FiducialGeom(_) => I::Fiducial,
+            AnyMsg::BlobfinderData(_) => I::Blobfinder,
             _ => I::Laser,
         }
+    }
+
+    /// Player's own printf layouts, character for character.
+    #[test]
+    fn fiducial_and_blobfinder_lines_are_player_s() {
+        let f = AnyMsg::FiducialData(fiducial::Data {
+            fiducials: vec![fiducial::Item {
+                id: 17,
+                pose: Pose3d::planar(3.0881, -0.5797, 2.9341),
+                upose: Pose3d::default(),
+            }],
+        });
+        assert_eq!(
+            line(6.1, 6665, Interface::Fiducial, 0, &f).unwrap(),
+            "0000000006.100 16777343 6665 fiducial 00 001 001 1 17 +03.088 -00.580 +00.000 +00.000 +00.000 +02.934 +00.000 +00.000 +00.000 +00.000 +00.000 +00.000\n"
+        );
+        // `%+7.3f %+7.3f …%+7.3f%+7.3f …`: pitch and yaw run together
+        // when both fill their seven places; the reader splits them.
+        let g = AnyMsg::FiducialGeom(fiducial::Geom {
+            pose: Pose3d {
+                pitch: 10.0,
+                yaw: -12.0,
+                ..Pose3d::default()
+            },
+            ..Default::default()
+        });
+        let text = line(0.0, 6665, Interface::Fiducial, 0, &g).unwrap();
+        assert!(
+            text.ends_with(
+                "004 001  +0.000  +0.000  +0.000  +0.000 +10.000-12.000  +0.000  +0.000  +0.000  +0.000  +0.000\n"
+            ),
+            "{text}"
+        );
+        assert_eq!(message(&parse(&text).unwrap().unwrap()).unwrap(), g);
+        let b = AnyMsg::BlobfinderData(blobfinder::Data {
+            width: 80,
+            height: 60,
+            blobs: vec![blobfinder::Blob {
+                color: 0xff00,
+                x: 60,
+                y: 30,
+                left: 60,
+                right: 60,
+                top: 26,
+                bottom: 34,
+                range: 3.5375,
+                ..Default::default()
+            }],
+        });
+        assert_eq!(
+            line(6.1, 6665, Interface::Blobfinder, 0, &b).unwrap(),
+            "0000000006.100 16777343 6665 blobfinder 00 001 001 80 60 1 0 65280 0 60 30 60 60 26 34 3.537500\n"
+        );
     }
 
     #[test]

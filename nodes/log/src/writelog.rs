@@ -38,8 +38,8 @@ use std::path::PathBuf;
 
 use serde::Deserialize;
 use troupe_msgs::{
-    bumper, decode_any, ir, laser, localize, log, position2d, ranger, sonar, AnyMsg, Device,
-    Interface, Stamped,
+    bumper, decode_any, fiducial, ir, laser, localize, log, position2d, ranger, sonar, AnyMsg,
+    Device, Interface, Stamped,
 };
 use troupe_node::{Ctx, Driver, Event, NodeError, RequestId, Result, Sample, Section, Switch};
 
@@ -297,6 +297,7 @@ impl WriteLog {
                 Interface::Sonar => ask(ctx.request(&d, &sonar::GetGeom))?,
                 Interface::Bumper => ask(ctx.request(&d, &bumper::GetGeom))?,
                 Interface::Ir => ask(ctx.request(&d, &ir::GetGeom))?,
+                Interface::Fiducial => ask(ctx.request(&d, &fiducial::GetGeom))?,
                 _ => {}
             }
         }
