@@ -109,7 +109,12 @@ pub fn run(a: BridgeArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     let stop = async move { signals.recv().await };
     if let Some(server) = &a.import {
         rt.block_on(troupe_bridge::import::run(
-            session, server, a.as_robot, stop,
+            session,
+            server,
+            &troupe_bridge::import::Select::All {
+                as_robot: a.as_robot,
+            },
+            stop,
         ))?;
         return Ok(());
     }

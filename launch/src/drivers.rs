@@ -56,6 +56,14 @@ pub fn all() -> Vec<Entry> {
         entry::<troupe_stage::Stage>(
             "the 2D multi-robot simulator: a Stage world's robots and sensors",
         ),
+        Entry {
+            name: "passthrough",
+            about: "devices of a running Player server, served as this robot's own",
+            units: &[],
+            clock_source: false,
+            check: crate::passthrough::check,
+            run: crate::passthrough::run,
+        },
     ]
 }
 
@@ -77,11 +85,6 @@ pub const MISSING: &[(&str, &str, &str)] = &[
         "p2os_position",
         "Player 1's name for a Pioneer's base",
         "use `p2os`, which provides position2d and the rest of the robot",
-    ),
-    (
-        "passthrough",
-        "relays a device of another Player server",
-        "`troupe bridge --import HOST:PORT` serves a Player server's devices on Troupe's keys",
     ),
     (
         "nd",

@@ -15,6 +15,7 @@ mod emulate;
 mod keys;
 mod mcaplog;
 mod navbench;
+mod passthrough;
 mod plan;
 mod serialbench;
 mod supervisor;

@@ -471,6 +471,35 @@ pub fn from_cfg(file: &CfgFile, source: &Path, robot: u32, report: &mut Report) 
             );
             continue;
         }
+        // Player's passthrough: a `requires` address with a host is a device
+        // of that Player server, for the driver to reach, not one to wire.
+        let mut requires = requires;
+        if driver == "passthrough" {
+            let texts = s
+                .fields
+                .iter()
+                .find(|f| f.name == "requires")
+                .and_then(|f| f.value.strings())
+                .unwrap_or_default();
+            let mut remote = Vec::new();
+            let mut kept = Vec::new();
+            for (text, r) in texts.iter().zip(requires) {
+                match text.trim().parse::<DevAddr>() {
+                    Ok(a) if a.host.is_some() => remote.push(serde_json::Value::from(format!(
+                        "{}:{}:{}:{}",
+                        a.host.unwrap_or_default(),
+                        a.robot.unwrap_or(robot),
+                        a.interface.name(),
+                        a.index
+                    ))),
+                    _ => kept.push(r),
+                }
+            }
+            requires = kept;
+            if !remote.is_empty() {
+                options.insert("remote".into(), serde_json::Value::Array(remote));
+            }
+        }
         let n = count.entry(driver.clone()).or_insert(0);
         *n += 1;
         plan.nodes.push(NodeSpec {

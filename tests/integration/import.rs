@@ -148,3 +148,118 @@ fn importing_something_that_is_not_player_says_so() {
     assert!(err.contains("is not a Player server"), "{err}");
     assert!(err.contains(&addr), "{err}");
 }
+
+/// Player's `passthrough` as a .cfg driver (issue 30, item 1): a second
+/// stack serves robot A's position2d, reached through A's Player bridge,
+/// as its own. Data flows, a velocity command moves A's robot, and when A
+/// goes away the device leaves, back once A is.
+#[test]
+fn a_passthrough_device_follows_its_player_server_away_and_back() {
+    use troupe_client::{Client, Position2dProxy, SimulationProxy};
+    use troupe_node::zenoh::sample::SampleKind;
+    // A's robot number is its Player port: a free one, so A can come back on it.
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let ns_a = troupe_tests::unique_namespace("pass-a");
+    let cfg_a = Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/simple.cfg");
+    let start_a = || {
+        let mut a = Proc::troupe(
+            "remote stack",
+            &troupe_tests::strings(&[
+                "--namespace",
+                &ns_a,
+                "launch",
+                cfg_a.to_str().unwrap(),
+                "--listen",
+                "tcp/127.0.0.1:0",
+                "-p",
+                &port.to_string(),
+            ]),
+        );
+        // The router's line, then the bridge's once every device is live.
+        let lines = a.lines();
+        let deadline = Instant::now() + DEADLINE;
+        let mut router = None;
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            let line = lines
+                .recv_timeout(left)
+                .expect("A's router and bridge lines");
+            if let Some(rest) = line.strip_prefix("troupe launch: router listening on ") {
+                router = rest.split_whitespace().next().map(str::to_owned);
+            }
+            if line.starts_with(&format!("troupe bridge: robot {port} on")) {
+                break;
+            }
+        }
+        (a, router.expect("A's router line"))
+    };
+    let (mut a, router_a) = start_a();
+
+    let dir = std::env::temp_dir().join(troupe_tests::unique_namespace("pass-cfg"));
+    std::fs::create_dir_all(&dir).unwrap();
+    let cfg_b = dir.join("passthrough.cfg");
+    std::fs::write(
+        &cfg_b,
+        format!(
+            "driver ( name \"passthrough\" requires [\":127.0.0.1:{port}:position2d:0\"] provides [\"position2d:0\"] )\n"
+        ),
+    )
+    .unwrap();
+    let ns_b = troupe_tests::unique_namespace("pass-b");
+    let mut b = troupe_tests::launch(&ns_b, &cfg_b, &["--no-bridge"]);
+    let router_b = b.endpoint("troupe launch: router listening on");
+    let session_b = troupe_tests::client_at(&router_b, &ns_b);
+    troupe_tests::wait_live(&session_b, &["6665:position2d:0"]);
+    let tokens = troupe_tests::token_events(&session_b);
+
+    // Data flows, and a command through B moves A's robot.
+    let client = Client::with_session(session_b.clone(), 6665);
+    let pp = Position2dProxy::new(&client, 0).unwrap();
+    let deadline = Instant::now() + DEADLINE;
+    while client.data_time() <= 0.0 {
+        assert!(Instant::now() < deadline, "no position2d data through B");
+        client.read().unwrap();
+    }
+    let sim_a = SimulationProxy::new(
+        &Client::with_session(troupe_tests::client_at(&router_a, &ns_a), port.into()),
+        0,
+    );
+    let before = sim_a.get_pose2d("r0").unwrap();
+    pp.set_speed(0.3, 0.0).unwrap();
+    let deadline = Instant::now() + DEADLINE;
+    loop {
+        client.read().unwrap();
+        let now = sim_a.get_pose2d("r0").unwrap();
+        if (now.x - before.x).hypot(now.y - before.y) > 0.2 {
+            break;
+        }
+        assert!(Instant::now() < deadline, "r0 of A never moved: {now:?}");
+    }
+    pp.set_speed(0.0, 0.0).unwrap();
+
+    // A goes: B's device leaves. A comes back: it returns.
+    assert!(a.terminate().success(), "{}", a.stderr());
+    let gone = |kind: SampleKind| {
+        let deadline = Instant::now() + DEADLINE;
+        loop {
+            let s = tokens
+                .recv_deadline(deadline)
+                .expect("liveliness")
+                .unwrap_or_else(|| panic!("no {kind:?} of B's position2d:0"));
+            let dev = troupe_msgs::keys::parse_token(s.key_expr().as_str()).map(|(d, _)| d);
+            if s.kind() == kind && dev.is_ok_and(|d| d.to_string() == "6665:position2d:0") {
+                return;
+            }
+        }
+    };
+    gone(SampleKind::Delete);
+    let (mut a, _) = start_a();
+    gone(SampleKind::Put);
+    assert!(a.terminate().success(), "{}", a.stderr());
+    assert!(b.terminate().success(), "{}", b.stderr());
+    let _ = std::fs::remove_dir_all(&dir);
+}

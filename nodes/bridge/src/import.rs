@@ -201,10 +201,35 @@ fn r_addr(r: &mut Reader) -> Result<(u32, u32, u32, u32), XdrError> {
     Ok((r.u32()?, r.u32()?, r.u32()?, r.u32()?))
 }
 
-/// Imports the devices of the Player server at `server` (HOST:PORT) onto
-/// `session` until `shutdown` completes or the server goes. `as_robot`
-/// publishes them under another robot number than the server's own (two
-/// servers on port 6665 of two hosts).
+/// Which of a server's devices an import takes, and the device each becomes.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Select {
+    /// Every device, under the server's robot number or `as_robot` (two
+    /// servers on port 6665 of two hosts).
+    All {
+        /// The robot to publish them under.
+        as_robot: Option<u32>,
+    },
+    /// Only these of the server's devices (interface and index), each as
+    /// the given device: Player's `passthrough`.
+    Only(Vec<((Interface, u32), Device)>),
+}
+
+impl Select {
+    /// The device the server's `iface`:`index` of robot `robot` becomes.
+    fn local(&self, robot: u32, iface: Interface, index: u32) -> Option<Device> {
+        match self {
+            Select::All { as_robot } => Some(Device::new(as_robot.unwrap_or(robot), iface, index)),
+            Select::Only(pairs) => pairs
+                .iter()
+                .find(|(r, _)| *r == (iface, index))
+                .map(|&(_, d)| d),
+        }
+    }
+}
+
+/// Imports the devices `select` names of the Player server at `server`
+/// (HOST:PORT) onto `session` until `shutdown` completes or the server goes.
 ///
 /// # Errors
 ///
@@ -213,7 +238,7 @@ fn r_addr(r: &mut Reader) -> Result<(u32, u32, u32, u32), XdrError> {
 pub async fn run(
     session: Session,
     server: &str,
-    as_robot: Option<u32>,
+    select: &Select,
     shutdown: impl std::future::Future<Output = ()>,
 ) -> Result<(), ImportError> {
     let stream = TcpStream::connect(server)
@@ -267,7 +292,9 @@ pub async fn run(
             );
             continue;
         };
-        let dev = Device::new(as_robot.unwrap_or(a.1), iface, a.3);
+        let Some(dev) = select.local(a.1, iface, a.3) else {
+            continue;
+        };
         let mut w = Writer::new();
         w_addr(&mut w, a);
         w.bytes(&[]);
@@ -313,6 +340,15 @@ pub async fn run(
         tracing::info!("importing {dev} ({driver})");
         tokens.push(token);
         devices.push(Imported { addr: a, dev });
+    }
+    if let Select::Only(pairs) = select {
+        for ((iface, index), dev) in pairs {
+            if !devices.iter().any(|d| d.dev == *dev) {
+                return Err(
+                    conn.protocol(format!("has no {iface}:{index} to pass through as {dev}"))
+                );
+            }
+        }
     }
     if devices.is_empty() {
         return Err(conn.protocol("serves no device Troupe can import"));

@@ -1,0 +1,295 @@
+//! Player's `passthrough` as a .cfg driver: devices of a running Player
+//! server served as this robot's own, through the bridge's import.
+//!
+//! ```text
+//! driver ( name "passthrough" requires [":192.168.1.15:6665:dio:0"] provides ["dio:0"] )
+//! driver ( name "passthrough" provides ["laser:0"]
+//!          remote_host "localhost" remote_port 6665 remote_index 0 access "r" )
+//! ```
+//!
+//! | | |
+//! |---|---|
+//! | provides | the devices served here, any interface |
+//! | requires | each one's remote device, `:HOST:PORT:INTERFACE:INDEX` (Player 3's form), in `provides` order |
+//! | options | `remote_host`, `remote_port` (override the host and port of every `requires`); without `requires`, Player 2's `remote_host` (localhost), `remote_port` (6665) and `remote_index` (0) name one remote device of the provided interface; `access` (`r`, `w`, `a`: read, as every client of Troupe's bridge, anyway) |
+//!
+//! # Behavior
+//!
+//! - The server's devices are taken as a libplayerc client takes them
+//!   (banner, DEVLIST, DRIVERINFO, subscribe) and served under the provided
+//!   addresses: data in, commands and requests out, the server's answers
+//!   back (see `troupe_bridge::import`). One connection per server.
+//! - A server that cannot be reached, or goes away, leaves its devices not
+//!   live (their liveliness tokens withdrawn); the driver tries again every
+//!   second and they are live again once it is back. The first failure is
+//!   logged, repeats are counted and said when the server returns.
+//! - Player 3's local form (`requires ["dio:0"]`, a device of this
+//!   server) is a device of this stack already; it is refused with that
+//!   said.
+
+use std::time::Duration;
+
+use serde::Deserialize;
+use troupe_bridge::import::{self, Select};
+use troupe_msgs::{Device, Interface};
+use troupe_node::{Mode, NodeConfig, NodeError, Result, Section, Unused, ZenohArgs};
+
+/// Options, by Player's names; `remote` is what the plan makes of
+/// `requires` addresses that name a host.
+#[derive(Debug, Default, Deserialize)]
+#[serde(default)]
+pub struct Options {
+    /// `HOST:PORT:INTERFACE:INDEX` of each provided device, in order.
+    pub remote: Vec<String>,
+    /// Overrides every remote device's host (Player 2: the only one's).
+    pub remote_host: Option<String>,
+    /// Overrides every remote device's port (Player 2: the only one's).
+    pub remote_port: Option<u32>,
+    /// Player 2: the remote device's index.
+    pub remote_index: Option<u32>,
+    /// Player 2: `r`, `w` or `a`.
+    pub access: Option<String>,
+}
+
+const NAME: &str = "passthrough";
+
+/// Each remote server (`HOST:PORT`) and what to take from it.
+type Servers = Vec<(String, Vec<((Interface, u32), Device)>)>;
+
+fn bad(why: impl Into<String>) -> NodeError {
+    NodeError::config(NAME, why)
+}
+
+/// `HOST:PORT:INTERFACE:INDEX`, split from the right (a host may hold colons).
+fn parse_remote(text: &str) -> Result<(String, u32, Interface, u32)> {
+    let mut parts = text.rsplitn(4, ':');
+    let (index, iface, port, host) = (parts.next(), parts.next(), parts.next(), parts.next());
+    let what = || {
+        bad(format!(
+            "`{text}` is not a remote device like :192.168.1.15:6665:laser:0"
+        ))
+    };
+    let (Some(index), Some(iface), Some(port), Some(host)) = (index, iface, port, host) else {
+        return Err(what());
+    };
+    let host = host.trim_start_matches(':');
+    let iface = Interface::from_name(iface)
+        .ok_or_else(|| bad(format!("`{text}`: no interface `{iface}`")))?;
+    match (port.parse(), index.parse(), host.is_empty()) {
+        (Ok(port), Ok(index), false) => Ok((host.to_owned(), port, iface, index)),
+        _ => Err(what()),
+    }
+}
+
+/// The servers and devices a section asks for.
+fn servers(section: &Section) -> Result<(Servers, Vec<String>)> {
+    let (o, unused) = section.options::<Options>()?;
+    let provided: Vec<Device> = section.provided().iter().map(|s| s.device).collect();
+    if provided.is_empty() {
+        return Err(bad("`provides` names no device"));
+    }
+    if let Some(a) = o.access.as_deref().filter(|a| !["r", "w", "a"].contains(a)) {
+        return Err(bad(format!("access \"{a}\" is not r, w or a")));
+    }
+    if !section.required().is_empty() {
+        return Err(bad(
+            "a `requires` device without a host is a device of this stack already: \
+             require it directly, or name its Player server (:HOST:PORT:laser:0)",
+        ));
+    }
+    let mut wanted = Vec::new();
+    if o.remote.is_empty() {
+        // Player 2's form: one device, named by options.
+        let [local] = provided.as_slice() else {
+            return Err(bad(
+                "without `requires`, remote_host/remote_port/remote_index name one device: provide one",
+            ));
+        };
+        let host = o.remote_host.clone().unwrap_or_else(|| "localhost".into());
+        let port = o.remote_port.unwrap_or(troupe_msgs::DEFAULT_ROBOT);
+        wanted.push((
+            host,
+            port,
+            local.interface,
+            o.remote_index.unwrap_or(0),
+            *local,
+        ));
+    } else {
+        if o.remote.len() != provided.len() {
+            return Err(bad(format!(
+                "Mismatched number of entries in provides and requires ({} and {})",
+                provided.len(),
+                o.remote.len()
+            )));
+        }
+        for (text, local) in o.remote.iter().zip(&provided) {
+            let (host, port, iface, index) = parse_remote(text)?;
+            if iface != local.interface {
+                return Err(bad(format!(
+                    "`{text}` is a {iface}, passed through as {local}: the interfaces must match"
+                )));
+            }
+            let host = o.remote_host.clone().unwrap_or(host);
+            let port = o.remote_port.unwrap_or(port);
+            wanted.push((host, port, iface, index, *local));
+        }
+    }
+    let mut out: Servers = Vec::new();
+    for (host, port, iface, index, local) in wanted {
+        let server = format!("{host}:{port}");
+        match out.iter_mut().find(|(s, _)| *s == server) {
+            Some((_, pairs)) => pairs.push(((iface, index), local)),
+            None => out.push((server, vec![((iface, index), local)])),
+        }
+    }
+    Ok((out, unused))
+}
+
+/// Checks a passthrough section.
+///
+/// # Errors
+///
+/// A section [`servers`] refuses.
+pub fn check(section: &Section) -> Result<Unused> {
+    let (_, options) = servers(section)?;
+    Ok(Unused {
+        options,
+        requires: Vec::new(),
+    })
+}
+
+/// Runs a passthrough section until SIGTERM/SIGINT.
+///
+/// # Errors
+///
+/// The section is refused, or the runtime or session cannot start.
+pub fn run(section: Section, z: &ZenohArgs, _: &NodeConfig) -> Result<()> {
+    let (servers, unused) = servers(&section)?;
+    for o in unused {
+        tracing::warn!("option `{o}` is not used by driver `{NAME}`");
+    }
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()
+        .map_err(|e| NodeError::Driver(format!("starting the runtime: {e}").into()))?;
+    let mut signals = rt
+        .block_on(async { crate::supervisor::StopSignals::new() })
+        .map_err(|e| NodeError::Driver(format!("catching SIGTERM and SIGINT: {e}").into()))?;
+    let opened = rt.block_on(signals.unless_stopped(z.open_in_background(Mode::Client)));
+    let Some(session) = opened.map_err(|e| NodeError::Driver(e.to_string().into()))? else {
+        return Ok(());
+    };
+    let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
+    rt.block_on(async move {
+        let mut tasks = Vec::new();
+        for (server, pairs) in servers {
+            let (session, mut stop) = (session.clone(), stop_rx.clone());
+            tasks.push(tokio::spawn(async move {
+                serve(session, server, Select::Only(pairs), &mut stop).await;
+            }));
+        }
+        signals.recv().await;
+        let _ = stop_tx.send(true);
+        for t in tasks {
+            let _ = t.await;
+        }
+    });
+    Ok(())
+}
+
+/// Imports from `server` until `stop`, connecting again a second after
+/// every failure.
+async fn serve(
+    session: troupe_node::zenoh::Session,
+    server: String,
+    select: Select,
+    stop: &mut tokio::sync::watch::Receiver<bool>,
+) {
+    let mut failures = 0u64;
+    while !*stop.borrow() {
+        let mut until = stop.clone();
+        let stopped = async move {
+            let _ = until.wait_for(|s| *s).await;
+        };
+        match import::run(session.clone(), &server, &select, stopped).await {
+            Ok(()) => {
+                if *stop.borrow() {
+                    return;
+                }
+                failures += 1;
+                tracing::warn!("{server} closed the connection; connecting again");
+            }
+            Err(e) => {
+                failures += 1;
+                if failures == 1 {
+                    tracing::warn!("{e}; trying again every second");
+                } else {
+                    tracing::debug!("{e} (attempt {failures})");
+                }
+            }
+        }
+        tokio::select! {
+            _ = stop.wait_for(|s| *s) => return,
+            () = tokio::time::sleep(Duration::from_secs(1)) => {}
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn section(json: &str) -> Section {
+        Section::from_json(json).unwrap()
+    }
+
+    #[test]
+    fn both_of_player_s_forms_name_their_servers() {
+        let s = section(
+            r#"{"name":"passthrough","provides":["dio:0","laser:3"],"options":{"remote":["192.168.1.15:6665:dio:0","192.168.1.15:6665:laser:1"]}}"#,
+        );
+        let (got, _) = servers(&s).unwrap();
+        assert_eq!(got.len(), 1);
+        assert_eq!(got[0].0, "192.168.1.15:6665");
+        assert_eq!(
+            got[0].1,
+            [
+                ((Interface::Dio, 0), Device::new(6665, Interface::Dio, 0)),
+                (
+                    (Interface::Laser, 1),
+                    Device::new(6665, Interface::Laser, 3)
+                ),
+            ]
+        );
+        let s = section(
+            r#"{"name":"passthrough","provides":["laser:0"],"options":{"remote_port":7000,"remote_index":2,"access":"r"}}"#,
+        );
+        let (got, _) = servers(&s).unwrap();
+        assert_eq!(got[0].0, "localhost:7000");
+        assert_eq!(got[0].1[0].0, (Interface::Laser, 2));
+    }
+
+    #[test]
+    fn bad_sections_say_why() {
+        let e = |json: &str| servers(&section(json)).unwrap_err().to_string();
+        assert!(e(r#"{"name":"passthrough","provides":["dio:0","dio:1"],"options":{"remote":["h:6665:dio:0"]}}"#)
+            .contains("Mismatched number of entries in provides and requires (2 and 1)"));
+        assert!(e(
+            r#"{"name":"passthrough","provides":["dio:0"],"options":{"remote":["h:6665:laser:0"]}}"#
+        )
+        .contains("the interfaces must match"));
+        assert!(e(
+            r#"{"name":"passthrough","provides":["dio:0"],"options":{"remote":["h:x:dio:0"]}}"#
+        )
+        .contains("is not a remote device like"));
+        assert!(
+            e(r#"{"name":"passthrough","provides":["dio:0"],"requires":["dio:3"]}"#)
+                .contains("a device of this stack already")
+        );
+        assert!(
+            e(r#"{"name":"passthrough","provides":["dio:0"],"options":{"access":"x"}}"#)
+                .contains("access \"x\" is not r, w or a")
+        );
+    }
+}
