@@ -22,7 +22,8 @@
 //! - A server that cannot be reached, or goes away, leaves its devices not
 //!   live (their liveliness tokens withdrawn); the driver tries again every
 //!   second and they are live again once it is back. The first failure is
-//!   logged, repeats are counted and said when the server returns.
+//!   a warning, the attempts after it are debug lines with their count, and
+//!   every connection made is logged with the server's banner.
 //! - Player 3's local form (`requires ["dio:0"]`, a device of this
 //!   server) is a device of this stack already; it is refused with that
 //!   said.
