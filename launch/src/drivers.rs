@@ -58,7 +58,7 @@ pub fn all() -> Vec<Entry> {
         ),
         Entry {
             name: "passthrough",
-            about: "devices of a running Player server, served as this robot's own",
+            about: "devices of a Player server, or of another robot, served as this robot's own",
             units: &[],
             clock_source: false,
             check: crate::passthrough::check,

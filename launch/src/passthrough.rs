@@ -10,7 +10,7 @@
 //! | | |
 //! |---|---|
 //! | provides | the devices served here, any interface |
-//! | requires | each one's remote device, `:HOST:PORT:INTERFACE:INDEX` (Player 3's form), in `provides` order |
+//! | requires | each one's remote device, `:HOST:PORT:INTERFACE:INDEX` (Player 3's form), in `provides` order; or a device of this stack (`6666:laser:0`, Player 3's local form) |
 //! | options | `remote_host`, `remote_port` (override the host and port of every `requires`); without `requires`, Player 2's `remote_host` (localhost), `remote_port` (6665) and `remote_index` (0) name one remote device of the provided interface; `access` (`r`, `w`, `a`: read, as every client of Troupe's bridge, anyway) |
 //!
 //! # Behavior
@@ -24,15 +24,18 @@
 //!   second and they are live again once it is back. The first failure is
 //!   a warning, the attempts after it are debug lines with their count, and
 //!   every connection made is logged with the server's banner.
-//! - Player 3's local form (`requires ["dio:0"]`, a device of this
-//!   server) is a device of this stack already; it is refused with that
-//!   said.
+//! - Player 3's local form (`requires ["6666:laser:0"]`, a device on
+//!   this stack's network) relays without a Player hop: data, commands and
+//!   requests (answers as they come) pass, and the provided device is live
+//!   exactly while the required one is.
 
 use std::time::Duration;
 
 use serde::Deserialize;
 use troupe_bridge::import::{self, Select};
 use troupe_msgs::{Device, Interface};
+use troupe_node::zenoh::sample::SampleKind;
+use troupe_node::zenoh::Wait;
 use troupe_node::{Mode, NodeConfig, NodeError, Result, Section, Unused, ZenohArgs};
 
 /// Options, by Player's names; `remote` is what the plan makes of
@@ -56,6 +59,15 @@ const NAME: &str = "passthrough";
 
 /// Each remote server (`HOST:PORT`) and what to take from it.
 type Servers = Vec<(String, Vec<((Interface, u32), Device)>)>;
+
+/// What a section passes through.
+#[derive(Debug)]
+enum Plan {
+    /// Devices of Player servers.
+    Remote(Servers),
+    /// Devices of this stack's network: (interface and index, from, as).
+    Local(Vec<((Interface, u32), Device, Device)>),
+}
 
 fn bad(why: impl Into<String>) -> NodeError {
     NodeError::config(NAME, why)
@@ -83,7 +95,7 @@ fn parse_remote(text: &str) -> Result<(String, u32, Interface, u32)> {
 }
 
 /// The servers and devices a section asks for.
-fn servers(section: &Section) -> Result<(Servers, Vec<String>)> {
+fn servers(section: &Section) -> Result<(Plan, Vec<String>)> {
     let (o, unused) = section.options::<Options>()?;
     let provided: Vec<Device> = section.provided().iter().map(|s| s.device).collect();
     if provided.is_empty() {
@@ -92,11 +104,25 @@ fn servers(section: &Section) -> Result<(Servers, Vec<String>)> {
     if let Some(a) = o.access.as_deref().filter(|a| !["r", "w", "a"].contains(a)) {
         return Err(bad(format!("access \"{a}\" is not r, w or a")));
     }
-    if !section.required().is_empty() {
-        return Err(bad(
-            "a `requires` device without a host is a device of this stack already: \
-             require it directly, or name its Player server (:HOST:PORT:laser:0)",
-        ));
+    let required: Vec<Device> = section.required().iter().map(|s| s.device).collect();
+    if !required.is_empty() {
+        if !o.remote.is_empty() || required.len() != provided.len() {
+            return Err(bad(format!(
+                "Mismatched number of entries in provides and requires ({} and {})",
+                provided.len(),
+                required.len() + o.remote.len()
+            )));
+        }
+        let mut pairs = Vec::new();
+        for (from, to) in required.iter().zip(&provided) {
+            if from.interface != to.interface {
+                return Err(bad(format!(
+                    "{from} passed through as {to}: the interfaces must match"
+                )));
+            }
+            pairs.push(((from.interface, from.index), *from, *to));
+        }
+        return Ok((Plan::Local(pairs), unused));
     }
     let mut wanted = Vec::new();
     if o.remote.is_empty() {
@@ -143,7 +169,7 @@ fn servers(section: &Section) -> Result<(Servers, Vec<String>)> {
             None => out.push((server, vec![((iface, index), local)])),
         }
     }
-    Ok((out, unused))
+    Ok((Plan::Remote(out), unused))
 }
 
 /// Checks a passthrough section.
@@ -184,11 +210,25 @@ pub fn run(section: Section, z: &ZenohArgs, _: &NodeConfig) -> Result<()> {
     let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
     rt.block_on(async move {
         let mut tasks = Vec::new();
-        for (server, pairs) in servers {
-            let (session, mut stop) = (session.clone(), stop_rx.clone());
-            tasks.push(tokio::spawn(async move {
-                serve(session, server, Select::Only(pairs), &mut stop).await;
-            }));
+        match servers {
+            Plan::Remote(servers) => {
+                for (server, pairs) in servers {
+                    let (session, mut stop) = (session.clone(), stop_rx.clone());
+                    tasks.push(tokio::spawn(async move {
+                        serve(session, server, Select::Only(pairs), &mut stop).await;
+                    }));
+                }
+            }
+            Plan::Local(pairs) => {
+                for (_, from, to) in pairs {
+                    let (session, stop) = (session.clone(), stop_rx.clone());
+                    tasks.push(tokio::spawn(async move {
+                        if let Err(e) = relay(session, from, to, stop).await {
+                            tracing::error!("passing {from} through as {to}: {e}");
+                        }
+                    }));
+                }
+            }
         }
         signals.recv().await;
         let _ = stop_tx.send(true);
@@ -197,6 +237,103 @@ pub fn run(section: Section, z: &ZenohArgs, _: &NodeConfig) -> Result<()> {
         }
     });
     Ok(())
+}
+
+/// Serves `from`, a device on this network, as `to` until `stop`: data
+/// and commands relayed as they come, requests asked of `from` and its
+/// answers returned, `to` live while `from` is.
+async fn relay(
+    session: troupe_node::zenoh::Session,
+    from: Device,
+    to: Device,
+    mut stop: tokio::sync::watch::Receiver<bool>,
+) -> std::result::Result<(), troupe_node::zenoh::Error> {
+    use troupe_msgs::keys;
+    let rt = tokio::runtime::Handle::current();
+    let (s, key) = (session.clone(), keys::data(&to));
+    let _data = session
+        .declare_subscriber(keys::data(&from))
+        .callback(move |x| {
+            let _ = s.put(&key, x.payload().clone()).wait();
+        })
+        .await?;
+    let s = session.clone();
+    let _commands = session
+        .declare_subscriber(keys::cmd_any(&to))
+        .callback(move |x| {
+            let name = x.key_expr().as_str().rsplit('/').next().unwrap_or_default();
+            let _ = s.put(keys::cmd(&from, name), x.payload().clone()).wait();
+        })
+        .await?;
+    let s = session.clone();
+    let _requests = session
+        .declare_queryable(keys::req_any(&to))
+        .callback(move |q| {
+            let s = s.clone();
+            // Asked off Zenoh's thread: the answer may take a while.
+            rt.spawn(async move {
+                let name = q.key_expr().as_str().rsplit('/').next().unwrap_or_default();
+                let key = keys::req(&from, name);
+                let mut ask = troupe_node::ask(&s, &key, troupe_node::REQUEST_TIMEOUT);
+                if let Some(p) = q.payload() {
+                    ask = ask.payload(p.clone());
+                }
+                let answer = match ask.await {
+                    Ok(replies) => replies.recv_async().await.ok(),
+                    Err(_) => None,
+                };
+                let _ = match answer.map(|r| r.into_result()) {
+                    Some(Ok(sample)) => {
+                        q.reply(q.key_expr().clone(), sample.payload().clone())
+                            .await
+                    }
+                    Some(Err(e)) => q.reply_err(e.payload().clone()).await,
+                    None => {
+                        let nack = troupe_msgs::codec::encode(
+                            &troupe_msgs::common::Nack {
+                                reason: format!("{from} did not answer `{name}`"),
+                            },
+                            0.0,
+                        );
+                        q.reply_err(nack).await
+                    }
+                };
+            });
+        })
+        .await?;
+    // `to` is live while `from` is.
+    let lives = session
+        .liveliness()
+        .declare_subscriber(keys::token_any(&from))
+        .history(true)
+        .await?;
+    let mut drivers = std::collections::BTreeSet::new();
+    let mut token = None;
+    loop {
+        let got = tokio::select! {
+            _ = stop.wait_for(|s| *s) => None,
+            got = lives.recv_async() => got.ok(),
+        };
+        let Some(sample) = got else { return Ok(()) };
+        let who = sample.key_expr().as_str().to_owned();
+        match sample.kind() {
+            SampleKind::Put => drivers.insert(who),
+            SampleKind::Delete => drivers.remove(&who),
+        };
+        if drivers.is_empty() {
+            if token.take().is_some() {
+                tracing::warn!("{from} is gone: {to} is not live");
+            }
+        } else if token.is_none() {
+            token = Some(
+                session
+                    .liveliness()
+                    .declare_token(keys::token(&to, NAME))
+                    .await?,
+            );
+            tracing::info!("passing {from} through as {to}");
+        }
+    }
 }
 
 /// Imports from `server` until `stop`, connecting again a second after
@@ -250,7 +387,9 @@ mod tests {
         let s = section(
             r#"{"name":"passthrough","provides":["dio:0","laser:3"],"options":{"remote":["192.168.1.15:6665:dio:0","192.168.1.15:6665:laser:1"]}}"#,
         );
-        let (got, _) = servers(&s).unwrap();
+        let (Plan::Remote(got), _) = servers(&s).unwrap() else {
+            panic!("the remote form")
+        };
         assert_eq!(got.len(), 1);
         assert_eq!(got[0].0, "192.168.1.15:6665");
         assert_eq!(
@@ -266,7 +405,9 @@ mod tests {
         let s = section(
             r#"{"name":"passthrough","provides":["laser:0"],"options":{"remote_port":7000,"remote_index":2,"access":"r"}}"#,
         );
-        let (got, _) = servers(&s).unwrap();
+        let (Plan::Remote(got), _) = servers(&s).unwrap() else {
+            panic!("Player 2's form")
+        };
         assert_eq!(got[0].0, "localhost:7000");
         assert_eq!(got[0].1[0].0, (Interface::Laser, 2));
     }

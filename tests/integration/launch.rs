@@ -189,3 +189,84 @@ fn plan_and_dry_run_print_the_plan_and_bad_cfgs_say_where() {
         "{err}"
     );
 }
+
+/// Player 3's local passthrough (issue 30, item 1): robot 6665's laser and
+/// base served again as robot 7000's. Scans and geometry come through, a
+/// velocity command moves 6665's base, and when the laser's driver dies
+/// 7000's laser leaves and comes back with it.
+#[test]
+fn a_local_passthrough_relays_and_follows_its_device() {
+    use troupe_client::{Client, LaserProxy, Position2dProxy};
+    let world = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/simple.world");
+    let base = format!(
+        "driver ( name \"stage\" provides [\"simulation:0\"] worldfile \"{}\" )\n\
+         driver ( name \"stage\" provides [\"position2d:0\"] model \"r0\" )\n",
+        world.canonicalize().unwrap().display()
+    );
+    let cfg = temp_cfg(
+        "passthrough",
+        &format!(
+            "{STACK}{base}driver ( name \"passthrough\" requires [\"laser:0\" \"position2d:0\"] provides [\"7000:laser:0\" \"7000:position2d:0\"] )\n"
+        ),
+    );
+    let (mut launcher, endpoint, ns) = launch(&cfg, &["--no-bridge"]);
+    let session = client_at(&endpoint, &ns);
+    troupe_tests::wait_live(&session, &["7000:laser:0", "7000:position2d:0"]);
+    let tokens = token_events(&session);
+    let robot = Client::with_session(session.clone(), 7000);
+    let lp = LaserProxy::new(&robot, 0).unwrap();
+    let deadline = Instant::now() + DEADLINE;
+    while lp.count() == 0 {
+        assert!(Instant::now() < deadline, "no scans through 7000:laser:0");
+        robot.read().unwrap();
+    }
+    // A request goes to rangertolaser, which asks the dummy ranger; the
+    // dummy's refusal comes back all the way.
+    let e = lp.request_geom().unwrap_err().to_string();
+    assert!(e.contains("the dummy driver refuses every request"), "{e}");
+    // A command through 7000 drives r0, robot 6665's base.
+    let pp = Position2dProxy::new(&robot, 0).unwrap();
+    let deadline = Instant::now() + DEADLINE;
+    while pp.data().is_none() {
+        assert!(
+            Instant::now() < deadline,
+            "no odometry through 7000:position2d:0"
+        );
+        robot.read().unwrap();
+    }
+    let (x0, y0) = (pp.x(), pp.y());
+    pp.set_speed(0.3, 0.0).unwrap();
+    let deadline = Instant::now() + DEADLINE;
+    while (pp.x() - x0).hypot(pp.y() - y0) < 0.1 {
+        assert!(Instant::now() < deadline, "r0 never moved");
+        robot.read().unwrap();
+    }
+    pp.set_speed(0.0, 0.0).unwrap();
+
+    // rangertolaser dies: 7000:laser:0 leaves, then comes back with it.
+    let victims = children(launcher.child.id(), "rangertolaser");
+    assert_eq!(victims.len(), 1);
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(victims[0] as i32),
+        nix::sys::signal::Signal::SIGKILL,
+    )
+    .unwrap();
+    // (The subscriber saw it live first: its history.)
+    let mut left = false;
+    let deadline = Instant::now() + DEADLINE;
+    loop {
+        let s = tokens
+            .recv_deadline(deadline)
+            .unwrap()
+            .unwrap_or_else(|| panic!("7000:laser:0 did not go away and come back (gone: {left})"));
+        if !s.key_expr().as_str().starts_with("robot/7000/laser/0/") {
+            continue;
+        }
+        match s.kind() {
+            SampleKind::Delete => left = true,
+            SampleKind::Put if left => break,
+            SampleKind::Put => {}
+        }
+    }
+    assert!(launcher.terminate().success(), "{}", launcher.stderr());
+}
