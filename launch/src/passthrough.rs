@@ -426,9 +426,14 @@ mod tests {
         )
         .contains("is not a remote device like"));
         assert!(
-            e(r#"{"name":"passthrough","provides":["dio:0"],"requires":["dio:3"]}"#)
-                .contains("a device of this stack already")
+            e(r#"{"name":"passthrough","provides":["dio:0"],"requires":["laser:3"]}"#)
+                .contains("dio:0: the interfaces must match")
         );
+        let s = section(r#"{"name":"passthrough","provides":["dio:0"],"requires":["6666:dio:3"]}"#);
+        let (Plan::Local(pairs), _) = servers(&s).unwrap() else {
+            panic!("the local form")
+        };
+        assert_eq!(pairs[0].1, Device::new(6666, Interface::Dio, 3));
         assert!(
             e(r#"{"name":"passthrough","provides":["dio:0"],"options":{"access":"x"}}"#)
                 .contains("access \"x\" is not r, w or a")
