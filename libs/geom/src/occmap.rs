@@ -59,6 +59,17 @@ impl OccMap {
         OccMap { info, cells }
     }
 
+    /// A map of `info`'s size from `tile`, cells it does not cover unknown.
+    ///
+    /// # Errors
+    ///
+    /// As [`OccMap::put_tile`].
+    pub fn from_tile(info: map::Info, tile: &map::Data) -> Result<Self, String> {
+        let mut m = OccMap::filled(info, UNKNOWN);
+        m.put_tile(tile)?;
+        Ok(m)
+    }
+
     /// Cells along x and y.
     pub fn size(&self) -> (usize, usize) {
         (self.info.width as usize, self.info.height as usize)

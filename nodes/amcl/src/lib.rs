@@ -61,10 +61,10 @@ use serde::Deserialize;
 use troupe_geom::occmap::OccMap;
 use troupe_geom::Pose;
 use troupe_msgs::{
-    common, laser as laser_msg, localize, map, position2d, sonar, Device, Interface, Pose2d,
-    Pose3d, Size3d,
+    common, laser as laser_msg, localize, position2d, sonar, Device, Interface, Pose2d, Pose3d,
+    Size3d,
 };
-use troupe_node::{Ctx, Driver, Event, NodeError, RequestId, Result, Section, Unit};
+use troupe_node::{Ctx, Driver, Event, MapFetch, NodeError, RequestId, Result, Section, Unit};
 
 use crate::laser::{Beams, DistanceMap, Model};
 use crate::pf::Filter;
@@ -518,12 +518,6 @@ impl Sensor {
     }
 }
 
-enum Setup {
-    MapInfo(RequestId),
-    MapData(RequestId, map::Info),
-    Ready,
-}
-
 /// The amcl driver.
 pub struct Amcl {
     localize: Option<Device>,
@@ -532,7 +526,8 @@ pub struct Amcl {
     sensor: Sensor,
     map: Device,
     loc: Localizer,
-    setup: Setup,
+    /// The map, while it is being fetched.
+    fetch: Option<MapFetch>,
     geom: Option<RequestId>,
 }
 
@@ -594,13 +589,13 @@ impl Driver for Amcl {
             sensor,
             map,
             loc,
-            setup: Setup::Ready,
+            fetch: None,
             geom: None,
         })
     }
 
     fn setup(&mut self, ctx: &mut Ctx) -> Result<()> {
-        self.setup = Setup::MapInfo(ctx.request(&self.map, &map::GetInfo)?);
+        self.fetch = Some(MapFetch::start(ctx, self.map)?);
         self.geom = Some(match self.sensor {
             Sensor::Laser(d) => ctx.request(&d, &laser_msg::GetGeom)?,
             Sensor::Sonar(d) => ctx.request(&d, &sonar::GetGeom)?,
@@ -725,37 +720,21 @@ impl Amcl {
             }
             return Ok(());
         }
-        match self.setup {
-            Setup::MapInfo(id) if id == r.id => {
-                let info = r.decode::<map::Info>().map_err(|e| {
-                    NodeError::config(Self::NAME, format!("map {} gave no info: {e}", self.map))
-                })?;
-                let q = map::GetData {
-                    col: 0,
-                    row: 0,
-                    width: info.width,
-                    height: info.height,
-                };
-                self.setup = Setup::MapData(ctx.request(&self.map, &q)?, info);
-            }
-            Setup::MapData(id, info) if id == r.id => {
-                let data = r.decode::<map::Data>().map_err(|e| {
-                    NodeError::config(Self::NAME, format!("map {} gave no data: {e}", self.map))
-                })?;
-                let mut m = OccMap::filled(info, 0);
-                m.put_tile(&data)
-                    .map_err(|e| NodeError::config(Self::NAME, format!("map {}: {e}", self.map)))?;
-                self.loc.set_map(&m);
-                tracing::info!(
-                    "map {}: {} x {} cells at {} m",
-                    self.map,
-                    info.width,
-                    info.height,
-                    info.resolution
-                );
-                self.setup = Setup::Ready;
-            }
-            _ => {}
+        let Some(fetch) = &mut self.fetch else {
+            return Ok(());
+        };
+        if let Some((info, cells)) = fetch.on_reply(ctx, &r, Self::NAME)? {
+            let dev = fetch.device();
+            let m = OccMap::from_tile(info, &cells)
+                .map_err(|e| NodeError::config(Self::NAME, format!("map {dev}: {e}")))?;
+            self.loc.set_map(&m);
+            tracing::info!(
+                "map {dev}: {} x {} cells at {} m",
+                info.width,
+                info.height,
+                info.resolution
+            );
+            self.fetch = None;
         }
         Ok(())
     }
@@ -814,6 +793,7 @@ mod tests {
     use super::*;
     use troupe_geom::normalize;
     use troupe_geom::occmap::{FREE, OCCUPIED};
+    use troupe_msgs::map;
 
     /// A 10 m × 10 m room at 0.05 m with walls and two pillars (so that
     /// the room is not symmetric).

@@ -32,7 +32,7 @@
 use serde::Deserialize;
 use troupe_geom::occmap::{OccMap, FREE, OCCUPIED, UNKNOWN};
 use troupe_msgs::{map, Device, Interface};
-use troupe_node::{Ctx, Driver, Event, NodeError, Request, RequestId, Result, Section, Unit};
+use troupe_node::{Ctx, Driver, Event, MapFetch, NodeError, Request, Result, Section, Unit};
 
 /// One map filter's transform.
 pub trait Transform: Sized + Send + 'static {
@@ -63,8 +63,9 @@ pub struct MapFilter<T> {
 }
 
 enum State {
-    Info(RequestId),
-    Data(RequestId, map::Info),
+    /// Before setup.
+    Idle,
+    Fetching(MapFetch),
     Ready(OccMap),
 }
 
@@ -83,14 +84,13 @@ impl<T: Transform> Driver for MapFilter<T> {
             transform: T::new(o)?,
             input: section.required_one(Interface::Map, None)?,
             output: section.provided_one(Interface::Map, None)?,
-            // Replaced at setup, when the first request goes out.
-            state: State::Ready(OccMap::filled(map::Info::default(), UNKNOWN)),
+            state: State::Idle,
             waiting: Vec::new(),
         })
     }
 
     fn setup(&mut self, ctx: &mut Ctx) -> Result<()> {
-        self.state = State::Info(ctx.request(&self.input, &map::GetInfo)?);
+        self.state = State::Fetching(MapFetch::start(ctx, self.input)?);
         Ok(())
     }
 
@@ -115,50 +115,30 @@ impl<T: Transform> Driver for MapFilter<T> {
 
 impl<T: Transform> MapFilter<T> {
     fn on_reply(&mut self, ctx: &mut Ctx, r: troupe_node::Reply) -> Result<()> {
-        let fail = |what: &str, e: NodeError| {
-            NodeError::config(T::NAME, format!("map {} {what}: {e}", self.input))
+        let State::Fetching(fetch) = &mut self.state else {
+            return Ok(());
         };
-        match self.state {
-            State::Info(id) if id == r.id => {
-                let info = r
-                    .decode::<map::Info>()
-                    .map_err(|e| fail("gave no info", e))?;
-                let q = map::GetData {
-                    col: 0,
-                    row: 0,
-                    width: info.width,
-                    height: info.height,
-                };
-                self.state = State::Data(ctx.request(&self.input, &q)?, info);
-            }
-            State::Data(id, info) if id == r.id => {
-                let tile = r
-                    .decode::<map::Data>()
-                    .map_err(|e| fail("gave no cells", e))?;
-                let mut source = OccMap::filled(info, UNKNOWN);
-                source
-                    .put_tile(&tile)
-                    .map_err(|e| NodeError::config(T::NAME, e))?;
-                let out = self.transform.apply(&source);
-                tracing::info!(
-                    "{}: {} x {} map at {:.3} m/cell from {}'s {} x {} at {:.3}",
-                    self.output,
-                    out.info.width,
-                    out.info.height,
-                    out.info.resolution,
-                    self.input,
-                    info.width,
-                    info.height,
-                    info.resolution
-                );
-                ctx.answer_always::<map::GetInfo>(&self.output, &out.info)?;
-                for q in std::mem::take(&mut self.waiting) {
-                    crate::serve(&out, &self.output, q)?;
-                }
-                self.state = State::Ready(out);
-            }
-            _ => {}
+        let Some((info, cells)) = fetch.on_reply(ctx, &r, T::NAME)? else {
+            return Ok(());
+        };
+        let source = OccMap::from_tile(info, &cells).map_err(|e| NodeError::config(T::NAME, e))?;
+        let out = self.transform.apply(&source);
+        tracing::info!(
+            "{}: {} x {} map at {:.3} m/cell from {}'s {} x {} at {:.3}",
+            self.output,
+            out.info.width,
+            out.info.height,
+            out.info.resolution,
+            self.input,
+            info.width,
+            info.height,
+            info.resolution
+        );
+        ctx.answer_always::<map::GetInfo>(&self.output, &out.info)?;
+        for q in std::mem::take(&mut self.waiting) {
+            crate::serve(&out, &self.output, q)?;
         }
+        self.state = State::Ready(out);
         Ok(())
     }
 }

@@ -50,8 +50,8 @@ pub mod plan;
 use serde::Deserialize;
 use troupe_geom::occmap::OccMap;
 use troupe_geom::{normalize, Pose};
-use troupe_msgs::{common, map, planner, position2d, Device, Interface, Pose2d};
-use troupe_node::{Ctx, Driver, Event, NodeError, RequestId, Result, Section, Unit};
+use troupe_msgs::{common, planner, position2d, Device, Interface, Pose2d};
+use troupe_node::{Ctx, Driver, Event, MapFetch, NodeError, RequestId, Result, Section, Unit};
 
 use crate::plan::{Params, Planner};
 
@@ -116,8 +116,7 @@ fn dist(a: (f64, f64), b: (f64, f64)) -> f64 {
 /// How far setup has come.
 enum Setup {
     Waiting {
-        info: Option<RequestId>,
-        data: Option<(RequestId, map::Info)>,
+        fetch: MapFetch,
         geom: Option<RequestId>,
         map: Option<OccMap>,
         radius: Option<f64>,
@@ -212,8 +211,7 @@ impl Driver for Wavefront {
 
     fn setup(&mut self, ctx: &mut Ctx) -> Result<()> {
         self.setup = Setup::Waiting {
-            info: Some(ctx.request(&self.map_dev, &map::GetInfo)?),
-            data: None,
+            fetch: MapFetch::start(ctx, self.map_dev)?,
             geom: Some(ctx.request(&self.output, &position2d::GetGeom)?),
             map: None,
             radius: None,
@@ -295,8 +293,7 @@ impl Driver for Wavefront {
 impl Wavefront {
     fn on_reply(&mut self, ctx: &mut Ctx, r: troupe_node::Reply) -> Result<()> {
         let Setup::Waiting {
-            info,
-            data,
+            fetch,
             geom,
             map,
             radius,
@@ -304,38 +301,18 @@ impl Wavefront {
         else {
             return Ok(());
         };
-        let fail =
-            |what: &str, e: NodeError| NodeError::config("wavefront", format!("{what}: {e}"));
-        if *info == Some(r.id) {
-            *info = None;
-            let i = r
-                .decode::<map::Info>()
-                .map_err(|e| fail(&format!("map {} gave no info", self.map_dev), e))?;
-            let q = map::GetData {
-                col: 0,
-                row: 0,
-                width: i.width,
-                height: i.height,
-            };
-            *data = Some((ctx.request(&self.map_dev, &q)?, i));
-        } else if let Some((_, i)) = data.take_if(|(id, _)| *id == r.id) {
-            let tile = r
-                .decode::<map::Data>()
-                .map_err(|e| fail(&format!("map {} gave no data", self.map_dev), e))?;
-            let mut m = OccMap::filled(i, 0);
-            m.put_tile(&tile)
-                .map_err(|e| NodeError::config("wavefront", e))?;
+        if let Some((info, cells)) = fetch.on_reply(ctx, &r, "wavefront")? {
+            let m =
+                OccMap::from_tile(info, &cells).map_err(|e| NodeError::config("wavefront", e))?;
             *map = Some(m);
         } else if *geom == Some(r.id) {
             *geom = None;
             let g = r.decode::<position2d::Geom>().map_err(|e| {
-                fail(
-                    &format!(
-                        "{} gave no geometry (the robot's size is needed)",
-                        self.output
-                    ),
-                    e,
-                )
+                let why = format!(
+                    "{} gave no geometry (the robot's size is needed): {e}",
+                    self.output
+                );
+                NodeError::config("wavefront", why)
             })?;
             *radius = Some(g.size.width / 2.0);
         }
