@@ -374,9 +374,10 @@ pub fn from_cfg(file: &CfgFile, source: &Path, robot: u32, report: &mut Report) 
             ));
             continue;
         };
-        let mut refs = |field: &str| -> Option<(Vec<DeviceRef>, Option<String>)> {
+        // Each address of a field as the plan names it, and as the cfg wrote it.
+        let mut refs = |field: &str| -> Option<Vec<(DeviceRef, DevAddr)>> {
             let Some(f) = s.field(field) else {
-                return Some((Vec::new(), None));
+                return Some(Vec::new());
             };
             let Some(list) = f.value.strings() else {
                 report.errors.push(format!(
@@ -386,7 +387,6 @@ pub fn from_cfg(file: &CfgFile, source: &Path, robot: u32, report: &mut Report) 
                 return None;
             };
             let mut out = Vec::new();
-            let mut host = None;
             for text in list {
                 let text = text.trim();
                 let parsed = text.parse::<DevAddr>().or_else(|e| {
@@ -402,27 +402,27 @@ pub fn from_cfg(file: &CfgFile, source: &Path, robot: u32, report: &mut Report) 
                     fixed.parse::<DevAddr>()
                 });
                 match parsed {
-                    Ok(a) => {
-                        if a.host.is_some() {
-                            host = a.host.clone();
-                        }
-                        out.push(DeviceRef {
+                    Ok(a) => out.push((
+                        DeviceRef {
                             device: keys::data(&a.device(robot)),
                             role: a.key.clone(),
-                        });
-                    }
+                        },
+                        a,
+                    )),
                     Err(e) => {
                         report.errors.push(format!("{}: {field}: {e}", f.pos));
                         return None;
                     }
                 }
             }
-            Some((out, host))
+            Some(out)
         };
-        let (Some((provides, host)), Some((requires, _))) = (refs("provides"), refs("requires"))
-        else {
+        let (Some(provides), Some(requires)) = (refs("provides"), refs("requires")) else {
             continue;
         };
+        // The host that runs the node: the last one its provides name.
+        let host = provides.iter().rev().find_map(|(_, a)| a.host.clone());
+        let provides: Vec<DeviceRef> = provides.into_iter().map(|(r, _)| r).collect();
         let Some(entry) = drivers::find(driver) else {
             unknown
                 .entry(driver.clone())
@@ -473,33 +473,21 @@ pub fn from_cfg(file: &CfgFile, source: &Path, robot: u32, report: &mut Report) 
         }
         // Player's passthrough: a `requires` address with a host is a device
         // of that Player server, for the driver to reach, not one to wire.
-        let mut requires = requires;
-        if driver == "passthrough" {
-            let texts = s
-                .fields
-                .iter()
-                .find(|f| f.name == "requires")
-                .and_then(|f| f.value.strings())
-                .unwrap_or_default();
-            let mut remote = Vec::new();
-            let mut kept = Vec::new();
-            for (text, r) in texts.iter().zip(requires) {
-                match text.trim().parse::<DevAddr>() {
-                    Ok(a) if a.host.is_some() => remote.push(serde_json::Value::from(format!(
-                        "{}:{}:{}:{}",
-                        a.host.unwrap_or_default(),
-                        a.robot.unwrap_or(robot),
-                        a.interface.name(),
-                        a.index
-                    ))),
-                    _ => kept.push(r),
-                }
-            }
-            requires = kept;
-            if !remote.is_empty() {
-                options.insert("remote".into(), serde_json::Value::Array(remote));
-            }
+        let (remote, requires): (Vec<_>, Vec<_>) = requires
+            .into_iter()
+            .partition(|(_, a)| driver == "passthrough" && a.host.is_some());
+        if !remote.is_empty() {
+            let remote = remote
+                .into_iter()
+                .map(|(_, a)| {
+                    let host = a.host.unwrap_or_default();
+                    let port = a.robot.unwrap_or(robot);
+                    format!("{host}:{port}:{}:{}", a.interface.name(), a.index).into()
+                })
+                .collect();
+            options.insert("remote".into(), serde_json::Value::Array(remote));
         }
+        let requires: Vec<DeviceRef> = requires.into_iter().map(|(r, _)| r).collect();
         let n = count.entry(driver.clone()).or_insert(0);
         *n += 1;
         plan.nodes.push(NodeSpec {

@@ -37,7 +37,7 @@ pub struct RangerToLaser {
     config: ConfigState,
     config_request: Option<RequestId>,
     intensities: Vec<f64>,
-    /// The ranges of the last scan published.
+    /// The latest ranges (once the configuration is known).
     ranges: Vec<f64>,
     /// Laser requests waiting for the ranger's answer.
     pending: HashMap<RequestId, Pending>,
@@ -105,20 +105,15 @@ impl Driver for RangerToLaser {
         match event {
             Event::Data(s) if s.is::<ranger::Ranges>() => {
                 let d = s.decode::<ranger::Ranges>()?;
-                self.publish(ctx, &d.msg.ranges, d.stamp)
+                self.ranges = d.msg.ranges;
+                self.publish(ctx, d.stamp)
             }
+            // As Player's: every ranger message makes a scan, so the step's
+            // intensities go out with its ranges.
             Event::Data(s) if s.is::<ranger::Intensities>() => {
-                // As Player's: every ranger message makes a scan, so the
-                // step's intensities go out with its ranges.
                 let d = s.decode::<ranger::Intensities>()?;
                 self.intensities = d.msg.intensities;
-                if self.ranges.is_empty() {
-                    return Ok(());
-                }
-                let ranges = std::mem::take(&mut self.ranges);
-                let r = self.publish(ctx, &ranges, d.stamp);
-                self.ranges = ranges;
-                r
+                self.publish(ctx, d.stamp)
             }
             Event::Data(s) => Err(s.unexpected()),
             Event::Request(r) if r.is::<laser::GetGeom>() => {
@@ -204,13 +199,21 @@ impl Driver for RangerToLaser {
 }
 
 impl RangerToLaser {
-    /// Publishes a scan of `ranges`, stamped as the ranger's data was.
-    fn publish(&mut self, ctx: &mut Ctx, ranges: &[f64], stamp: f64) -> Result<()> {
+    /// Publishes a scan of the latest ranges, stamped as the ranger message that made it.
+    fn publish(&mut self, ctx: &mut Ctx, stamp: f64) -> Result<()> {
         let c = match &self.config {
             ConfigState::Known(c) => *c,
             ConfigState::Refused => laser::Config::default(),
-            ConfigState::Waiting => return Ok(()),
+            // Ranges from before the configuration make no scan, later either.
+            ConfigState::Waiting => {
+                self.ranges.clear();
+                return Ok(());
+            }
         };
+        if self.ranges.is_empty() {
+            return Ok(());
+        }
+        let ranges = &self.ranges;
         let intensity = if self.intensities.len() == ranges.len() {
             self.intensities
                 .iter()
@@ -229,8 +232,6 @@ impl RangerToLaser {
             // Player's rangertolaser numbers no scan.
             id: 0,
         };
-        self.ranges.clear();
-        self.ranges.extend_from_slice(ranges);
         ctx.publish_at(&self.output, &scan, stamp)
     }
 }

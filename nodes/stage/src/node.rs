@@ -610,26 +610,24 @@ impl Stage {
                         self.sim.bases[base].enabled = on;
                     }
                     r.reply(&common::Ack);
-                } else if self.quirks
-                    && (r.is::<position2d::SetOdom>() || r.is::<position2d::ResetOdom>())
-                    && self.sim.world.models[m]
+                } else if r.is::<position2d::SetOdom>() || r.is::<position2d::ResetOdom>() {
+                    let gps = self.sim.world.models[m]
                         .position
                         .as_ref()
-                        .is_some_and(|c| c.localization == Localization::Gps)
-                {
+                        .is_some_and(|c| c.localization == Localization::Gps);
                     // Stage's plugin sets the estimate, which its next
-                    // update overwrites with the true pose.
-                    r.reply(&common::Ack);
-                } else if r.is::<position2d::SetOdom>() || r.is::<position2d::ResetOdom>() {
-                    let pose: Pose = if r.is::<position2d::SetOdom>() {
-                        r.decode::<position2d::SetOdom>()?.pose.into()
-                    } else {
-                        Pose::default()
-                    };
-                    let g = self.sim.global(m);
-                    let b = &mut self.sim.bases[base];
-                    b.odom = pose;
-                    b.origin = g.compose(&pose.inverse());
+                    // update overwrites with the true pose under gps.
+                    if !(self.quirks && gps) {
+                        let pose: Pose = if r.is::<position2d::SetOdom>() {
+                            r.decode::<position2d::SetOdom>()?.pose.into()
+                        } else {
+                            Pose::default()
+                        };
+                        let g = self.sim.global(m);
+                        let b = &mut self.sim.bases[base];
+                        b.odom = pose;
+                        b.origin = g.compose(&pose.inverse());
+                    }
                     r.reply(&common::Ack);
                 } else if r.is::<position2d::VelocityMode>() || r.is::<position2d::PositionMode>() {
                     r.reply(&common::Ack);
