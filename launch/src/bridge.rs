@@ -6,7 +6,7 @@ use std::net::{IpAddr, SocketAddr};
 use anyhow::Context;
 use clap::Args;
 use troupe_bridge::{Bridge, Config, Port};
-use troupe_node::{Mode, ZenohArgs};
+use troupe_node::ZenohArgs;
 
 /// Flags of `troupe bridge`.
 #[derive(Debug, Args)]
@@ -92,18 +92,7 @@ pub fn run(a: BridgeArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             .collect::<anyhow::Result<Vec<_>>>()?,
     };
     crate::cli::supervised()?;
-    let rt = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .context("starting the bridge's runtime")?;
-    // Signals are caught before the session opens: with --reconnect the
-    // open waits for the router, and a container's PID 1 must still stop.
-    let mut signals = rt
-        .block_on(async { crate::supervisor::StopSignals::new() })
-        .context("catching SIGTERM and SIGINT")?;
-    let Some(session) = rt.block_on(signals.unless_stopped(z.open_in_background(Mode::Client)))?
-    else {
+    let Some((rt, mut signals, session)) = crate::supervisor::client_runtime(z, 2)? else {
         return Ok(());
     };
     let stop = async move { signals.recv().await };

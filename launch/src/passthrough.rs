@@ -36,7 +36,7 @@ use troupe_bridge::import::{self, Select};
 use troupe_msgs::{Device, Interface};
 use troupe_node::zenoh::sample::SampleKind;
 use troupe_node::zenoh::Wait;
-use troupe_node::{Mode, NodeConfig, NodeError, Result, Section, Unused, ZenohArgs};
+use troupe_node::{NodeConfig, NodeError, Result, Section, Unused, ZenohArgs};
 
 /// Options, by Player's names; `remote` is what the plan makes of
 /// `requires` addresses that name a host.
@@ -62,7 +62,7 @@ type Servers = Vec<(String, Vec<((Interface, u32), Device)>)>;
 
 /// What a section passes through.
 #[derive(Debug)]
-enum Plan {
+enum Route {
     /// Devices of Player servers.
     Remote(Servers),
     /// Devices of this stack's network: (interface and index, from, as).
@@ -94,8 +94,8 @@ fn parse_remote(text: &str) -> Result<(String, u32, Interface, u32)> {
     }
 }
 
-/// The servers and devices a section asks for.
-fn servers(section: &Section) -> Result<(Plan, Vec<String>)> {
+/// What a section passes through, and the options it gives that are not used.
+fn routes(section: &Section) -> Result<(Route, Vec<String>)> {
     let (o, unused) = section.options::<Options>()?;
     let provided: Vec<Device> = section.provided().iter().map(|s| s.device).collect();
     if provided.is_empty() {
@@ -122,7 +122,7 @@ fn servers(section: &Section) -> Result<(Plan, Vec<String>)> {
             }
             pairs.push(((from.interface, from.index), *from, *to));
         }
-        return Ok((Plan::Local(pairs), unused));
+        return Ok((Route::Local(pairs), unused));
     }
     let mut wanted = Vec::new();
     if o.remote.is_empty() {
@@ -169,16 +169,16 @@ fn servers(section: &Section) -> Result<(Plan, Vec<String>)> {
             None => out.push((server, vec![((iface, index), local)])),
         }
     }
-    Ok((Plan::Remote(out), unused))
+    Ok((Route::Remote(out), unused))
 }
 
 /// Checks a passthrough section.
 ///
 /// # Errors
 ///
-/// A section [`servers`] refuses.
+/// A section [`routes`] refuses.
 pub fn check(section: &Section) -> Result<Unused> {
-    let (_, options) = servers(section)?;
+    let (_, options) = routes(section)?;
     Ok(Unused {
         options,
         requires: Vec::new(),
@@ -191,27 +191,19 @@ pub fn check(section: &Section) -> Result<Unused> {
 ///
 /// The section is refused, or the runtime or session cannot start.
 pub fn run(section: Section, z: &ZenohArgs, _: &NodeConfig) -> Result<()> {
-    let (servers, unused) = servers(&section)?;
+    let (route, unused) = routes(&section)?;
     for o in unused {
         tracing::warn!("option `{o}` is not used by driver `{NAME}`");
     }
-    let rt = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(1)
-        .enable_all()
-        .build()
-        .map_err(|e| NodeError::Driver(format!("starting the runtime: {e}").into()))?;
-    let mut signals = rt
-        .block_on(async { crate::supervisor::StopSignals::new() })
-        .map_err(|e| NodeError::Driver(format!("catching SIGTERM and SIGINT: {e}").into()))?;
-    let opened = rt.block_on(signals.unless_stopped(z.open_in_background(Mode::Client)));
-    let Some(session) = opened.map_err(|e| NodeError::Driver(e.to_string().into()))? else {
+    let started = crate::supervisor::client_runtime(z, 1);
+    let Some((rt, mut signals, session)) = started.map_err(|e| NodeError::Driver(e.into()))? else {
         return Ok(());
     };
     let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
     rt.block_on(async move {
         let mut tasks = Vec::new();
-        match servers {
-            Plan::Remote(servers) => {
+        match route {
+            Route::Remote(servers) => {
                 for (server, pairs) in servers {
                     let (session, mut stop) = (session.clone(), stop_rx.clone());
                     tasks.push(tokio::spawn(async move {
@@ -219,7 +211,7 @@ pub fn run(section: Section, z: &ZenohArgs, _: &NodeConfig) -> Result<()> {
                     }));
                 }
             }
-            Plan::Local(pairs) => {
+            Route::Local(pairs) => {
                 for (_, from, to) in pairs {
                     let (session, stop) = (session.clone(), stop_rx.clone());
                     tasks.push(tokio::spawn(async move {
@@ -387,7 +379,7 @@ mod tests {
         let s = section(
             r#"{"name":"passthrough","provides":["dio:0","laser:3"],"options":{"remote":["192.168.1.15:6665:dio:0","192.168.1.15:6665:laser:1"]}}"#,
         );
-        let (Plan::Remote(got), _) = servers(&s).unwrap() else {
+        let (Route::Remote(got), _) = routes(&s).unwrap() else {
             panic!("the remote form")
         };
         assert_eq!(got.len(), 1);
@@ -405,7 +397,7 @@ mod tests {
         let s = section(
             r#"{"name":"passthrough","provides":["laser:0"],"options":{"remote_port":7000,"remote_index":2,"access":"r"}}"#,
         );
-        let (Plan::Remote(got), _) = servers(&s).unwrap() else {
+        let (Route::Remote(got), _) = routes(&s).unwrap() else {
             panic!("Player 2's form")
         };
         assert_eq!(got[0].0, "localhost:7000");
@@ -414,7 +406,7 @@ mod tests {
 
     #[test]
     fn bad_sections_say_why() {
-        let e = |json: &str| servers(&section(json)).unwrap_err().to_string();
+        let e = |json: &str| routes(&section(json)).unwrap_err().to_string();
         assert!(e(r#"{"name":"passthrough","provides":["dio:0","dio:1"],"options":{"remote":["h:6665:dio:0"]}}"#)
             .contains("Mismatched number of entries in provides and requires (2 and 1)"));
         assert!(e(
@@ -430,7 +422,7 @@ mod tests {
                 .contains("dio:0: the interfaces must match")
         );
         let s = section(r#"{"name":"passthrough","provides":["dio:0"],"requires":["6666:dio:3"]}"#);
-        let (Plan::Local(pairs), _) = servers(&s).unwrap() else {
+        let (Route::Local(pairs), _) = routes(&s).unwrap() else {
             panic!("the local form")
         };
         assert_eq!(pairs[0].1, Device::new(6666, Interface::Dio, 3));

@@ -537,6 +537,33 @@ impl StopSignals {
     }
 }
 
+/// How a long-running client (the bridge, a passthrough) starts: a
+/// runtime of `threads` workers, SIGTERM and SIGINT caught before the
+/// session opens (with `--reconnect` the open waits for its router, and a
+/// container's PID 1 must still stop), then the client session; `None`
+/// when a signal came first.
+pub(crate) fn client_runtime(
+    z: &ZenohArgs,
+    threads: usize,
+) -> anyhow::Result<
+    Option<(
+        tokio::runtime::Runtime,
+        StopSignals,
+        troupe_node::zenoh::Session,
+    )>,
+> {
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(threads)
+        .enable_all()
+        .build()
+        .context("starting the runtime")?;
+    let mut signals = rt
+        .block_on(async { StopSignals::new() })
+        .context("catching SIGTERM and SIGINT")?;
+    let session = rt.block_on(signals.unless_stopped(z.open_in_background(Mode::Client)))?;
+    Ok(session.map(|s| (rt, signals, s)))
+}
+
 /// SIGTERM or SIGINT (Ctrl-C), logged.
 pub(crate) async fn wait_signal() -> anyhow::Result<()> {
     StopSignals::new()?.recv().await;
