@@ -431,6 +431,35 @@ fn estimates_until(est: &Sub, end: f64) -> Vec<(f64, f64, f64)> {
 }
 
 /// Mean distance from each estimate after `after` s to the truth at its stamp.
+/// amcl run offline on a log (`offline`) is as close to the logged truth
+/// as amcl was live: both within 0.2 m on average after `after` s, within
+/// 2 cm of each other, at least 5 estimates each.
+fn offline_as_good_as_live(
+    what: &str,
+    live: &[(f64, f64, f64)],
+    offline: &[(f64, f64, f64)],
+    truth: &[Logged],
+    after: f64,
+) {
+    let (live_err, n_live) = mean_error(live, truth, after);
+    let (offline_err, n_offline) = mean_error(offline, truth, after);
+    eprintln!(
+        "logs: amcl mean error from {what} {offline_err:.3} m ({n_offline} estimates), live {live_err:.3} m ({n_live})"
+    );
+    assert!(
+        n_live >= 5 && n_offline >= 5,
+        "{n_live} live, {n_offline} offline"
+    );
+    assert!(
+        live_err < 0.2 && offline_err < 0.2,
+        "live {live_err}, offline {offline_err}"
+    );
+    assert!(
+        (offline_err - live_err).abs() < 0.02,
+        "offline {offline_err:.3} m against live {live_err:.3} m"
+    );
+}
+
 fn mean_error(estimates: &[(f64, f64, f64)], logged: &[Logged], after: f64) -> (f64, usize) {
     let errors: Vec<f64> = estimates
         .iter()
@@ -495,23 +524,7 @@ fn a_recorded_run_localizes_offline_as_it_did_live() {
     let est = data_of(&session, Interface::Localize);
     let offline = estimates_until(&est, end);
     assert!(rep.terminate().success(), "{}", rep.stderr());
-    let (live_err, n_live) = mean_error(&live, &logged, 5.0);
-    let (offline_err, n_offline) = mean_error(&offline, &logged, 5.0);
-    eprintln!(
-        "logs: amcl mean error after 5 s: live {live_err:.3} m ({n_live} estimates), offline from the log {offline_err:.3} m ({n_offline})"
-    );
-    assert!(
-        n_live >= 5 && n_offline >= 5,
-        "{n_live} live, {n_offline} offline"
-    );
-    assert!(
-        live_err < 0.2 && offline_err < 0.2,
-        "live {live_err}, offline {offline_err}"
-    );
-    assert!(
-        (offline_err - live_err).abs() < 0.02,
-        "offline {offline_err:.3} m against live {live_err:.3} m"
-    );
+    offline_as_good_as_live("the Player log", &live, &offline, &logged, 5.0);
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -778,22 +791,6 @@ fn a_recorded_mcap_plays_into_amcl_which_localizes_as_it_did_live() {
     assert!(play.wait().success(), "{}", play.stderr());
     assert!(loc.terminate().success(), "{}", loc.stderr());
     let after = live.first().map_or(0.0, |l| l.0) + 5.0;
-    let (live_err, n_live) = mean_error(&live, &odom, after);
-    let (offline_err, n_offline) = mean_error(&offline, &odom, after);
-    eprintln!(
-        "logs: amcl mean error from the MCAP replay {offline_err:.3} m ({n_offline} estimates), live {live_err:.3} m ({n_live})"
-    );
-    assert!(
-        n_live >= 5 && n_offline >= 5,
-        "{n_live} live, {n_offline} offline"
-    );
-    assert!(
-        live_err < 0.2 && offline_err < 0.2,
-        "live {live_err}, offline {offline_err}"
-    );
-    assert!(
-        (offline_err - live_err).abs() < 0.02,
-        "offline {offline_err:.3} m against live {live_err:.3} m"
-    );
+    offline_as_good_as_live("the MCAP replay", &live, &offline, &odom, after);
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -154,12 +154,12 @@ pub struct Queue {
     maxlen: usize,
     pull: bool,
     data_requested: bool,
-    data_delivered: bool,
     /// The pace of each kind of data that came, in arrival order.
     paces: Vec<Pace>,
     /// The newest stamp the last PULL round carried.
     round_stamp: f64,
-    /// This round delivered data newer than `round_stamp`: a new step.
+    /// This round delivered data of a new step (see [`Queue::new_step`]):
+    /// it may end.
     fresh: bool,
     /// Until when a round waits for a new step or for due data.
     waiting: Option<Instant>,
@@ -177,7 +177,6 @@ impl Queue {
             maxlen,
             pull: false,
             data_requested: false,
-            data_delivered: false,
             paces: Vec::new(),
             round_stamp: f64::NEG_INFINITY,
             fresh: false,
@@ -232,7 +231,8 @@ impl Queue {
 
     /// Queues a message under the replace rules and the length limit.
     pub fn push(&mut self, m: Out) {
-        if m.kind == wire::DATA {
+        // Paces matter to PULL rounds only.
+        if self.pull && m.kind == wire::DATA {
             self.paced(&m);
         }
         let op = self
@@ -292,10 +292,9 @@ impl Queue {
                 .is_none_or(|p| p.period <= 0.0)
     }
 
-    /// Whether a round that has delivered data must still wait at `now`:
-    /// for a new step, as long as it takes, when what it delivered was
-    /// only late parts of the last round's (as a Player round with no data
-    /// stays open); then, at most [`ROUND_WAIT`], for all data due at the
+    /// Whether a round must still wait at `now`: for a new step, as long as
+    /// it takes, while it has delivered no data or only late parts of the
+    /// last round's (as a Player round with no data stays open); then, at most [`ROUND_WAIT`], for all data due at the
     /// newest stamp. Data still due when that runs out is marked lagging.
     fn must_wait(&mut self, now: Instant) -> bool {
         if !self.fresh {
@@ -320,7 +319,6 @@ impl Queue {
     pub fn request_data(&mut self, ack: Out) {
         self.items.push_front(ack);
         self.data_requested = true;
-        self.data_delivered = false;
         self.fresh = false;
         self.waiting = None;
     }
@@ -332,20 +330,17 @@ impl Queue {
         let may_go = !self.pull || self.data_requested || self.items.iter().any(Out::is_response);
         if !self.items.is_empty() && may_go {
             let m = self.items.pop_front()?;
-            if self.data_requested && m.kind == wire::DATA {
-                self.data_delivered = true;
-                if !self.fresh && self.new_step(&m) {
-                    // Its wait starts now.
-                    self.fresh = true;
-                    self.waiting = None;
-                }
+            if self.data_requested && m.kind == wire::DATA && !self.fresh && self.new_step(&m) {
+                // Its wait starts now.
+                self.fresh = true;
+                self.waiting = None;
             }
             return Some(m);
         }
-        if self.pull && self.data_requested && self.data_delivered && !self.must_wait(now) {
+        // SYNCH once a new step went out (see `must_wait`).
+        if self.pull && self.data_requested && !self.must_wait(now) {
             self.data_requested = false;
             self.waiting = None;
-            self.data_delivered = false;
             let h = Header {
                 interf: u32::from(PLAYER_CODE),
                 kind: u32::from(wire::SYNCH),
