@@ -113,20 +113,23 @@ pub const MISSING: &[(&str, &str, &str)] = &[
     ("bumper_safe", "stops a base whose bumpers are pressed", ""),
 ];
 
+/// What a driver in [`MISSING`] is: "(Player's: …); what to use instead".
+pub fn missing_about(about: &str, instead: &str) -> String {
+    if instead.is_empty() {
+        format!("(Player's: {about})")
+    } else {
+        format!("(Player's: {about}); {instead}")
+    }
+}
+
 /// Why a cfg naming driver `name` cannot run, and what to do instead;
 /// `sections` follows the name (" (2 sections: lines 8, 17)", or "").
 pub fn unavailable(name: &str, sections: &str) -> String {
     match MISSING.iter().find(|m| m.0 == name) {
-        Some((_, about, instead)) => {
-            let instead = if instead.is_empty() {
-                String::new()
-            } else {
-                format!("; {instead}")
-            };
-            format!(
-                "driver `{name}`{sections} is not available in Troupe (Player's: {about}){instead}"
-            )
-        }
+        Some((_, about, instead)) => format!(
+            "driver `{name}`{sections} is not available in Troupe {}",
+            missing_about(about, instead)
+        ),
         None => format!(
             "driver `{name}`{sections} is not available in Troupe; available: {}",
             names()

@@ -455,12 +455,8 @@ pub fn print_drivers(all: bool) -> anyhow::Result<()> {
     }
     if all {
         for (name, about, instead) in drivers::MISSING {
-            let instead = if instead.is_empty() {
-                String::new()
-            } else {
-                format!("; {instead}")
-            };
-            writeln!(out, "{name:<16} not available (Player's: {about}){instead}")?;
+            let what = drivers::missing_about(about, instead);
+            writeln!(out, "{name:<16} not available {what}")?;
         }
     }
     Ok(())
