@@ -511,6 +511,10 @@ pub struct StageBenchArgs {
     /// Where Stage's sample bitmaps are (cave.png, hospital_section.png).
     #[arg(long, value_name = "DIR")]
     pub bitmaps: Option<std::path::PathBuf>,
+    /// Measure ranges as Stage does, on its raster of the walls (what
+    /// `stage_quirks 1` turns on), instead of against the exact walls.
+    #[arg(long)]
+    pub stage_ranges: bool,
 }
 
 /// A Pioneer with 16 sonars and a 180-beam SICK, wandering (our own
@@ -633,6 +637,7 @@ pub fn stage_bench(a: &StageBenchArgs) -> anyhow::Result<()> {
         let t_load = Instant::now();
         let world = troupe_stage::world::load(&path)?;
         let mut sim = troupe_stage::sim::Sim::new(world).map_err(|e| anyhow::anyhow!(e))?;
+        sim.stage_ranges(a.stage_ranges);
         let load = t_load.elapsed();
         let _ = std::fs::remove_dir_all(&dir);
         let steps = (a.seconds / sim.world.interval_sim).round() as u64;
@@ -659,8 +664,10 @@ pub fn stage_bench(a: &StageBenchArgs) -> anyhow::Result<()> {
     }
     writeln!(
         std::io::stdout().lock(),
-        "troupe bench stage: {} simulated s per world, {} thread(s), every sensor every step, wander controllers",
-        a.seconds, a.threads
+        "troupe bench stage: {} simulated s per world, {} thread(s), every sensor every step, wander controllers, ranges {}",
+        a.seconds,
+        a.threads,
+        if a.stage_ranges { "on Stage's raster" } else { "against the exact walls" }
     )?;
     for name in ["simple", "pioneers100", "hospital1000"] {
         let status = Command::new(std::env::current_exe()?)
@@ -676,6 +683,7 @@ pub fn stage_bench(a: &StageBenchArgs) -> anyhow::Result<()> {
                 "--bitmaps",
             ])
             .arg(&bitmaps)
+            .args(a.stage_ranges.then_some("--stage-ranges"))
             .status()?;
         if !status.success() {
             anyhow::bail!("bench world `{name}` failed: {status}");

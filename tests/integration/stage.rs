@@ -293,3 +293,83 @@ fn the_gripper_moves_its_paddles_in_stage_s_time() {
     }
     assert!(launcher.terminate().success(), "{}", launcher.stderr());
 }
+
+/// Issue 32, item 5: with `stage_quirks 1`, r0's laser in Stage's
+/// simple_noctrl world reads through the bridge as real Stage's did (the
+/// first laser:0 scan of the c-pull-position-laser transcript): every beam
+/// that meets the cave or nothing, to 0.1 mm (the beams on r1's laser are
+/// a moving body's, measured exactly: within 6 cm).
+#[test]
+fn with_stage_quirks_the_laser_reads_as_real_stage_s() {
+    use crate::player::{Player, DATA};
+    use troupe_msgs::{Device, Interface};
+    let compat = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/compat");
+    let transcript = compat.join("player-tcp/c-pull-position-laser/messages.jsonl");
+    let world = compat.join("stage/simple_noctrl.world");
+    if !transcript.exists() || !world.exists() {
+        eprintln!("skipping: ../shared/compat is absent");
+        return;
+    }
+    let text = std::fs::read_to_string(&transcript).unwrap();
+    let line = text
+        .lines()
+        .find(|l| {
+            l.contains(r#""dir":"s2c""#)
+                && l.contains(r#""interf":6,"#)
+                && l.contains(r#""type":1,"#)
+        })
+        .unwrap();
+    let list = line.split(r#""ranges":["#).nth(1).unwrap();
+    let stage: Vec<f32> = list[..list.find(']').unwrap()]
+        .split(',')
+        .map(|v| v.trim().parse().unwrap())
+        .collect();
+    // The transcript's cfg, with the world's path spelled out and Stage's ways on.
+    let dir = std::env::temp_dir().join(format!("troupe-quirks-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let cfg = dir.join("simple_noctrl_quirks.cfg");
+    std::fs::write(
+        &cfg,
+        format!(
+            "driver ( name \"stage\" provides [ \"simulation:0\" ] plugin \"stageplugin\" \
+             worldfile \"{}\" usegui 0 stage_quirks 1 )\n\
+             driver ( name \"stage\" provides [ \"position2d:0\" \"ranger:0\" \"ranger:1\" ] model \"r0\" )\n\
+             driver ( name \"rangertolaser\" provides [ \"laser:0\" ] requires [ \"ranger:1\" ] )\n",
+            world.display()
+        ),
+    )
+    .unwrap();
+    let ns = troupe_tests::unique_namespace("quirks");
+    let mut launcher = troupe_tests::launch(&ns, &cfg, &[]);
+    let (_, addr) = troupe_tests::launch_ports(&mut launcher);
+    let mut player = Player::connect(addr, 6665);
+    player.open(Device::new(6665, Interface::Laser, 0));
+    // PLAYER_LASER_DATA_SCAN: min, max, resolution, max range, then the
+    // ranges and the intensities (each a count and an XDR array).
+    let scan = loop {
+        let m = player.recv();
+        if m.kind() == DATA && m.h[2] == 6 && m.h[5] == 1 {
+            break m.body;
+        }
+    };
+    let word = |i: usize| u32::from_be_bytes(scan[i * 4..i * 4 + 4].try_into().unwrap());
+    let n = word(4) as usize;
+    assert_eq!(n, 180);
+    let ours: Vec<f32> = (0..n).map(|k| f32::from_bits(word(6 + k))).collect();
+    // (uint8 intensities: an XDR opaque, a byte each.)
+    let intensity = &scan[(6 + n + 2) * 4..][..n];
+    let on_r1: Vec<usize> = (0..n).filter(|&k| intensity[k] == 1).collect();
+    assert_eq!(on_r1, [43, 44, 45, 46]);
+    for k in 0..n {
+        let off = (ours[k] - stage[k]).abs();
+        let bound = if on_r1.contains(&k) { 0.06 } else { 1e-4 };
+        assert!(
+            off < bound,
+            "beam {k}: {} m, real Stage {} m",
+            ours[k],
+            stage[k]
+        );
+    }
+    assert!(launcher.terminate().success(), "{}", launcher.stderr());
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -6,6 +6,8 @@
 //! - [`Grid::fill_polygon`]: rasterises convex or concave polygons;
 //! - [`Grid::cast`]: the first occupied cell along a ray (a grid walk);
 //! - [`bitmap`]: loads an image and turns dark pixels into obstacle rectangles;
+//! - [`raster`]: Stage's own raster of block outlines and its ray walk, so
+//!   simulated ranges read as Stage's;
 //! - [`OccMap`]: a Player map (-1 free, 0 unknown, +1 occupied) with world↔cell
 //!   conversions and tiles.
 //!
@@ -18,6 +20,7 @@ mod grid;
 pub mod occmap;
 mod odometry;
 mod pose;
+pub mod raster;
 
 pub use drive::{Body, DiffDrive};
 pub use grid::{Grid, Hit, Lattice, EMPTY};

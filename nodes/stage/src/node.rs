@@ -71,7 +71,9 @@ pub struct Options {
     /// Do what Stage's Player plugin did where it ignores the interface:
     /// drive with the motors off, keep odometry a set/reset would change
     /// under `localization "gps"`, and take a car command's angle as a
-    /// turn rate. Off: do what the interface says.
+    /// turn rate; and measure ranges as Stage does, on its raster of the
+    /// walls (slower to sense). Off: do what the interface says, and
+    /// measure ranges against the exact walls.
     pub stage_quirks: Option<Switch>,
     /// Write a PNG of the world here when the node stops.
     pub snapshot: Option<PathBuf>,
@@ -179,7 +181,9 @@ impl Driver for Stage {
             cfg_err("`worldfile` is required (e.g. worldfile \"simple.world\")".into())
         })?;
         let w = world::load(&path).map_err(|e| cfg_err(e.to_string()))?;
-        let sim = Sim::new(w).map_err(cfg_err)?;
+        let mut sim = Sim::new(w).map_err(cfg_err)?;
+        let quirks = o.stage_quirks.is_some_and(Switch::on);
+        sim.stage_ranges(quirks);
         // Which model serves which device.
         let mut maps = o.models.clone();
         let mapped: HashSet<Device> = maps
@@ -280,7 +284,7 @@ impl Driver for Stage {
             steps_per_tick,
             snapshot: o.snapshot.clone(),
             watched: Vec::new(),
-            quirks: o.stage_quirks.is_some_and(Switch::on),
+            quirks,
         })
     }
 

@@ -13,6 +13,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Mutex, PoisonError, RwLock};
 
 use troupe_geom::occmap::{FREE, OCCUPIED};
+use troupe_geom::raster::{self, Raster};
 use troupe_geom::{bounds, normalize, Grid, Hit, Lattice, OccMap, Pose, EMPTY};
 use troupe_msgs::{map, Color};
 
@@ -163,6 +164,18 @@ pub struct Sim {
     /// The cells each static model occupies now.
     cells: Vec<Vec<(usize, usize)>>,
     statics: Grid,
+    /// The bodies as Stage draws them for its rays (the static ones by
+    /// id, the moving ones counted in the regions they touch), when rays
+    /// read as Stage's rather than against the exact bodies
+    /// ([`Sim::stage_ranges`]).
+    raster: Option<Raster>,
+    /// The raster cells each static model is drawn in now.
+    drawn: Vec<Vec<(i32, i32)>>,
+    /// The raster regions each moving model's outline touches now, with
+    /// its cells there.
+    touches: Vec<Vec<(usize, i32)>>,
+    /// Room for a moving model's regions while it is filed.
+    touched: Vec<(usize, i32)>,
     /// Moving bodies, for sensors and collisions.
     movers: Movers,
     /// Each model's sensors' rays.
@@ -454,6 +467,10 @@ impl Sim {
             heights,
             movable,
             cells: vec![Vec::new(); n],
+            raster: None,
+            drawn: vec![Vec::new(); n],
+            touches: vec![Vec::new(); n],
+            touched: Vec::new(),
             movers: Movers::new(n, statics.tile_count()),
             statics,
         };
@@ -521,7 +538,48 @@ impl Sim {
         } else {
             let cells = self.body_cells(m);
             self.occupy(m, cells);
+            self.draw(m);
         }
+    }
+
+    /// Draws static model `m`'s body into the raster as Stage draws it.
+    fn draw(&mut self, m: usize) {
+        let Some(ppm) = self.raster.as_ref().map(Raster::ppm) else {
+            return;
+        };
+        let mut drawn = std::mem::take(&mut self.drawn[m]);
+        drawn.clear();
+        for pts in self.placed(m, self.global(m)).body.polys() {
+            raster::outline(ppm, pts, |x, y| drawn.push((x, y)));
+        }
+        if let Some(r) = &mut self.raster {
+            for &(x, y) in &drawn {
+                r.set(x, y, id(m));
+            }
+        }
+        self.drawn[m] = drawn;
+    }
+
+    /// Rays read as Stage's (`true`: Stage's raster of block outlines and
+    /// its ray walk; see [`troupe_geom::raster`]) or against the exact
+    /// bodies (`false`, the default: the bench worlds run up to 2.5 times
+    /// faster).
+    /// Ranges to moving bodies are exact either way.
+    pub fn stage_ranges(&mut self, on: bool) {
+        if on == self.raster.is_some() {
+            return;
+        }
+        let lat = self.statics.lattice();
+        let ((x0, y0), (w, h)) = (lat.origin(), lat.size());
+        let res = lat.resolution();
+        self.raster =
+            on.then(|| Raster::new(x0, y0, x0 + w as f64 * res, y0 + h as f64 * res, res));
+        for m in 0..self.world.models.len() {
+            self.drawn[m].clear();
+            self.touches[m].clear();
+            self.place(m);
+        }
+        self.sense();
     }
 
     /// Model `m`'s body at global pose `at`.
@@ -544,12 +602,33 @@ impl Sim {
     /// Files a moving body under the tiles it touches (taking its polygons,
     /// and leaving it buffers to reuse).
     fn file(&mut self, body: &mut Placed) {
+        let m = body.model;
+        // (Most steps a body's outline stays in the same regions.)
+        let mut now = std::mem::take(&mut self.touched);
+        if let Some(r) = &self.raster {
+            r.regions_of(body.body.polys(), &mut now);
+        }
+        if now != self.touches[m] {
+            self.count_touches(m, -1);
+            std::mem::swap(&mut now, &mut self.touches[m]);
+            self.count_touches(m, 1);
+        }
+        self.touched = now;
         let tiles = body
             .cells
             .into_iter()
             .flat_map(|(lo, hi)| self.statics.tiles_of_box(lo, hi));
-        let m = body.model;
         self.movers.file(m, id(m), &mut body.body, tiles);
+    }
+
+    /// Adds (`sign` 1) or takes away (−1) moving model `m`'s outline in
+    /// the raster's regions.
+    fn count_touches(&mut self, m: usize, sign: i32) {
+        if let Some(raster) = &mut self.raster {
+            for &(r, n) in &self.touches[m] {
+                raster.count_movers(r, sign * n);
+            }
+        }
     }
 
     /// Moves static model `m`'s body in the grid from its old cells to `cells`.
@@ -955,6 +1034,9 @@ impl Sim {
                     me.carry(dt);
                 }
                 me.statics.refresh_clearance();
+                if let Some(r) = &mut me.raster {
+                    r.refresh();
+                }
                 for slot in &work {
                     let mut slot = lock(slot);
                     slot.1 = std::mem::take(&mut me.readings[slot.0]);
@@ -1018,6 +1100,26 @@ impl Sim {
             Some(h) if best.is_none_or(|b| h.range < b.range) => Some(h),
             _ => best,
         }
+    }
+
+    /// The first moving body whose id `accept`s along the ray from (x, y)
+    /// along the unit vector `d`, within `reach`: the static grid's tiles
+    /// name the bodies to test.
+    fn cast_movers(
+        &self,
+        x: f64,
+        y: f64,
+        d: (f64, f64),
+        reach: f64,
+        accept: impl Fn(u16) -> bool,
+    ) -> Option<Hit> {
+        let mut tested = Seen::default();
+        let movers = |t: usize| {
+            let ids = self.movers.in_tile(t).iter().copied();
+            self.nearest_body((x, y), d, ids.filter(|&k| accept(k) && tested.first(k)))
+        };
+        self.statics
+            .cast_with(x, y, d, (0.0, reach), |_| false, movers)
     }
 
     /// The first of the moving `bodies` met by the ray from `o` along the
@@ -1094,10 +1196,10 @@ impl Sim {
             let accept = self.ranger_sees(r, gz + s.z + s.size[2] / 2.0);
             let (ox, oy) = turned(turn, (s.pose.x, s.pose.y));
             let (ox, oy) = (base.x + ox, base.y + oy);
-            // A fan of rays shares one look around its origin, so that none
-            // of its rays walks the open space there, and one look at the
-            // moving bodies within reach, so that each ray tests only those
-            // in its direction.
+            // A fan of rays shares one look at the moving bodies within
+            // reach, so that each ray tests only those in its direction,
+            // and (against the exact bodies) one look around its origin,
+            // so that none of its rays walks the open space there.
             let fan = s.samples >= FAN;
             let from = if fan {
                 sweep.start(
@@ -1111,7 +1213,10 @@ impl Sim {
                     },
                     accept,
                 );
-                self.open_around(ox, oy, accept)
+                match self.raster {
+                    Some(_) => 0.0,
+                    None => self.open_around(ox, oy, accept),
+                }
             } else {
                 0.0
             };
@@ -1122,10 +1227,24 @@ impl Sim {
                 if k > 0 {
                     d = turned(rays.turn, d);
                 }
-                let hit = if fan {
-                    self.cast_among(ox, oy, d, (from, s.range.1), accept, sweep.at(k))
-                } else {
-                    self.cast(ox, oy, d, (from, s.range.1), accept)
+                let hit = match (&self.raster, fan) {
+                    // Static bodies as Stage sees them; moving bodies
+                    // exactly, up to the wall.
+                    (Some(r), _) => {
+                        let wall = r.cast(ox, oy, d, s.range.1, accept);
+                        let reach = wall.map_or(s.range.1, |h| h.range);
+                        let body = if fan {
+                            self.nearest_body((ox, oy), d, sweep.at(k))
+                                .filter(|h| h.range <= reach)
+                        } else {
+                            self.cast_movers(ox, oy, d, reach, accept)
+                        };
+                        body.or(wall)
+                    }
+                    (None, true) => {
+                        self.cast_among(ox, oy, d, (from, s.range.1), accept, sweep.at(k))
+                    }
+                    (None, false) => self.cast(ox, oy, d, (from, s.range.1), accept),
                 };
                 let (range, intensity) = match hit {
                     Some(h) => (
@@ -1242,8 +1361,18 @@ impl Sim {
     fn unplace(&mut self, m: usize) {
         if self.movable[m] {
             self.movers.unfile(m, id(m));
+            self.count_touches(m, -1);
+            self.touches[m].clear();
             return;
         }
+        if let Some(r) = &mut self.raster {
+            for &(x, y) in &self.drawn[m] {
+                if r.get(x, y) == id(m) {
+                    r.set(x, y, EMPTY);
+                }
+            }
+        }
+        self.drawn[m].clear();
         for &(i, j) in &self.cells[m] {
             if self.statics.get(i, j) == id(m) {
                 self.statics.set(i, j, EMPTY);
@@ -1725,6 +1854,40 @@ mod tests {
         );
     }
 
+    /// With Stage's ranges, the raster follows the robots as they move:
+    /// readings after some steps equal those of a raster drawn afresh at
+    /// the same poses.
+    #[test]
+    fn stage_ranges_follow_moving_robots() {
+        let mut text = String::from(
+            "resolution 0.02\n\
+             model ( name \"n\" size [8 0.1 1] pose [0 3.95 0 0] )\n\
+             model ( name \"s\" size [8 0.1 1] pose [0 -3.95 0 0] )\n\
+             model ( name \"e\" size [0.1 8 1] pose [3.95 0 0 0] )\n\
+             model ( name \"w\" size [0.1 8 1] pose [-3.95 0 0 10] )\n",
+        );
+        for k in 0..6 {
+            let (x, y) = (-2.5 + f64::from(k), -1.0 + 0.4 * f64::from(k % 3));
+            text += &format!(
+                "position ( name \"r{k}\" pose [{x} {y} 0 {}] size [0.4 0.3 0.2] ctrl \"wander\" \
+                 ranger ( sensor ( samples 90 fov 180 range [0 6] ) size [0.1 0.1 0.1] ) )\n",
+                30 * k
+            );
+        }
+        let mut s = sim("follow", &text);
+        s.stage_ranges(true);
+        let start: Vec<Pose> = s.bases.iter().map(|b| s.global(b.model)).collect();
+        steps(&mut s, 40);
+        let moved: Vec<Vec<Reading>> = s.readings.clone();
+        s.stage_ranges(false);
+        s.stage_ranges(true);
+        assert_eq!(s.readings, moved);
+        for (b, p) in s.bases.iter().zip(start) {
+            let now = s.global(b.model);
+            assert!((now.x - p.x).hypot(now.y - p.y) > 0.1, "{now:?} from {p:?}");
+        }
+    }
+
     #[test]
     fn nearest_and_first_where_cover_every_length() {
         assert_eq!(nearest(&[]), f64::INFINITY);
@@ -2061,6 +2224,64 @@ mod compat {
             .intensities
             .iter()
             .all(|&i| i == 1.0 || i == 0.5 || i == 0.0));
+    }
+
+    /// Issue 32, item 5: r0's first scan in simple_noctrl.world, as real
+    /// Stage measured it (the laser:0 data of the c-pull-position-laser
+    /// transcript), beam for beam. Stage's ranges come from its raster of
+    /// the cave's outline and its staircase walk; with `stage_ranges` on,
+    /// every beam that meets a wall or nothing reads the same to 1e-4 m.
+    /// Against the exact walls (the default) they differ by centimetres.
+    #[test]
+    fn stage_ranges_match_real_stage_beam_for_beam() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/compat");
+        let world = dir.join("stage/simple_noctrl.world");
+        let transcript = dir.join("player-tcp/c-pull-position-laser/messages.jsonl");
+        if !world.exists() || !transcript.exists() {
+            eprintln!("skipping: ../shared/compat is absent");
+            return;
+        }
+        // The first laser DATA message's ranges.
+        let text = std::fs::read_to_string(&transcript).unwrap();
+        let line = text
+            .lines()
+            .find(|l| {
+                l.contains(r#""dir":"s2c""#)
+                    && l.contains(r#""interf":6,"#)
+                    && l.contains(r#""type":1,"#)
+            })
+            .unwrap();
+        let list = line.split(r#""ranges":["#).nth(1).unwrap();
+        let stage: Vec<f64> = list[..list.find(']').unwrap()]
+            .split(',')
+            .map(|v| v.trim().parse().unwrap())
+            .collect();
+        assert_eq!(stage.len(), 180);
+        let mut sim = Sim::new(crate::world::load(&world).unwrap()).unwrap();
+        let laser = sim.world.names["r0.ranger:1"];
+        let exact = sim.readings[laser][0].clone();
+        sim.stage_ranges(true);
+        let ours = &sim.readings[laser][0];
+        // Beams on r1's laser (a moving body, measured exactly either way)
+        // read intensity 1; the cave returns 0.5, nothing 0.
+        let walls: Vec<usize> = (0..180).filter(|&k| ours.intensities[k] != 1.0).collect();
+        assert_eq!(walls.len(), 176);
+        let off = |r: &Reading| {
+            walls
+                .iter()
+                .map(|&k| (r.ranges[k] - stage[k]).abs())
+                .fold(0.0, f64::max)
+        };
+        assert!(off(ours) < 1e-4, "worst beam {} m off Stage's", off(ours));
+        // The exact walls: up to a few cells (over the cosine) off.
+        assert!(
+            (0.02..0.2).contains(&off(&exact)),
+            "exact walls {} m off",
+            off(&exact)
+        );
+        // And back.
+        sim.stage_ranges(false);
+        assert_eq!(sim.readings[laser][0].ranges, exact.ranges);
     }
 
     #[test]
