@@ -170,6 +170,21 @@ certificate: a host whose certificate another authority signed, or that has
 none, cannot join.")]
     FleetKeys(crate::keys::KeysArgs),
 
+    /// Watch the running world in a browser: walls, robots, their sensors, the live devices.
+    #[command(after_help = "Examples:
+  troupe launch worlds/simple.cfg &
+  troupe view                                 # then open http://127.0.0.1:8080/
+  troupe view --port 0                        # any free port; the address is printed
+  troupe --connect tcp/sim-host:7447 view     # a fleet's world, from another host
+
+The page (embedded in this binary; nothing is fetched from elsewhere) draws
+every simulator's world as Stage's window did: static bodies, robots at their
+true poses, laser, ranger and sonar readings, the simulation time and its
+speed against real time; and lists the live devices as `troupe list` does.
+Drag to pan, scroll to zoom, pick a robot to follow. URL parameters fix the
+view: ?x=-4&y=-4&scale=60 (metres, pixels per metre).")]
+    View(crate::view::ViewArgs),
+
     /// Record devices' samples (default: all of them, and the clock) to an MCAP file.
     #[command(after_help = "Examples:
   troupe record -o run.mcap                       # every device and sim/clock, until Ctrl-C

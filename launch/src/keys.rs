@@ -302,7 +302,11 @@ pub fn access_control(members: &[Member], namespace: Option<&str>) -> serde_json
     };
     let (everything, reads) = (
         [ns("robot/**"), ns("sim/**")],
-        [ns("robot/*/*/*"), ns("robot/*/map/*/req/**")],
+        [
+            ns("robot/*/*/*"),
+            ns("robot/*/map/*/req/**"),
+            ns("robot/*/simulation/*/req/world"),
+        ],
     );
     let mut rules = vec![
         json!({ "id": "deliver", "flows": ["egress"], "permission": "allow",

@@ -20,6 +20,7 @@ mod plan;
 mod serialbench;
 mod supervisor;
 mod tools;
+mod view;
 
 use std::io::Write;
 use std::process::ExitCode;
@@ -58,6 +59,7 @@ fn run(cli: cli::Cli) -> anyhow::Result<()> {
         Command::Ready(a) => tools::ready(a, z),
         Command::Router(a) => tools::router(a, z),
         Command::Record(a) => mcaplog::record(a, z),
+        Command::View(a) => view::run(a, z),
         Command::Play(a) => mcaplog::play(a, z),
         Command::Log(c) => mcaplog::log(c),
         Command::Emulate(a) => emulate::run(a, z),

@@ -70,6 +70,8 @@ any! {
     SimulationProperty(simulation::Property), SimulationSetProperty(simulation::SetProperty),
     SimulationStep(simulation::Step), SimulationGetPose3d(simulation::GetPose3d),
     SimulationPose3d(simulation::Pose3dOf), SimulationSetPose3d(simulation::SetPose3d),
+    SimulationGetWorld(simulation::GetWorld), SimulationWorld(simulation::World),
+    SimulationPoses(simulation::Poses),
     BlobfinderData(blobfinder::Data),
     GripperData(gripper::Data), GripperOpen(gripper::Open), GripperClose(gripper::Close),
     GripperStop(gripper::Stop), GripperGeom(gripper::Geom), GripperGetGeom(gripper::GetGeom),

@@ -62,6 +62,12 @@ pub fn token_any(dev: &Device) -> String {
     format!("{}/driver/*", data(dev))
 }
 
+/// Selector for the data of every device of `interface`, on every robot:
+/// `robot/*/laser/*`.
+pub fn data_of(interface: Interface) -> String {
+    format!("{ROOT}/*/{interface}/*")
+}
+
 /// Liveliness selector for every device token, or those of one robot.
 pub fn tokens(robot: Option<u32>) -> String {
     match robot {

@@ -18,3 +18,4 @@ mod process;
 mod serial;
 mod sessions;
 mod stage;
+mod view;

@@ -455,6 +455,29 @@ fn a_tls_fleet_admits_its_own_certificates_only_and_each_identity_does_only_what
     // An operator granted robot 6665 cannot command 6666; that robot's host can.
     let cmd6 = "robot/6666/position2d/0/cmd/vel";
     assert_eq!(first(cmd6, &[(&ops, "ops"), (&hostb, "hostb")]), "hostb");
+    // A viewer may ask a simulator for its world (`troupe view`), not
+    // move its models: the router drops the second query, which so gets
+    // no answer before its timeout.
+    let _sim = hosta
+        .declare_queryable("robot/6665/simulation/0/req/*")
+        .callback(|q| {
+            let key = q.key_expr().clone();
+            let _ = q.reply(key, "answer").wait();
+        })
+        .wait()
+        .unwrap();
+    sync(&hosta);
+    let answers = |key: &str| {
+        eye.get(key)
+            .timeout(std::time::Duration::from_secs(2))
+            .wait()
+            .unwrap()
+            .iter()
+            .filter(|r| r.result().is_ok())
+            .count()
+    };
+    assert_eq!(answers("robot/6665/simulation/0/req/world"), 1);
+    assert_eq!(answers("robot/6665/simulation/0/req/set_pose2d"), 0);
 
     // Another authority's certificate, none, or plain TCP: refused, and told why.
     let (status, _, err) = troupe_output(&with_net(

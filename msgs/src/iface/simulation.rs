@@ -124,3 +124,77 @@ pub struct Step {
     pub steps: u32,
 }
 message!(Step, "simulation/step@1", req "step" -> Ack);
+
+/// Asks for the whole world as a viewer draws it: every model's body and
+/// colour, and which model serves which device (a Troupe extension, for
+/// `troupe view`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct GetWorld;
+message!(GetWorld, "simulation/get_world@1", req "world" -> World);
+
+/// The simulated world, for viewers.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct World {
+    /// Every model, in the world file's order (a model's id is its place here).
+    pub models: Vec<Model>,
+    /// The devices the simulator serves, each with its model.
+    pub devices: Vec<DeviceModel>,
+    /// Metres per cell of the simulator's grid.
+    pub resolution: f64,
+}
+message!(World, "simulation/world@1");
+
+/// One model of a [`World`].
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Model {
+    /// Its name (`r0`, `r0.ranger:1`).
+    pub name: String,
+    /// Its parent's id, for a model mounted on another.
+    pub parent: Option<u32>,
+    /// Its colour.
+    pub color: Color,
+    /// Its body: polygons in its own frame, metres.
+    pub polys: Vec<Vec<[f32; 2]>>,
+    /// Whether it moves (a robot and what it carries); the others stand still.
+    pub moves: bool,
+    /// Where it stands now (x, y, yaw; world frame).
+    pub pose: [f32; 3],
+}
+
+/// A device the simulator serves, and where its readings come from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DeviceModel {
+    /// The device.
+    pub device: crate::Device,
+    /// The model serving it.
+    pub model: u32,
+    /// For range sensors: each sensor's pose in the model's frame (x, y,
+    /// yaw), its field of view and its longest range, in the order of the
+    /// device's readings.
+    pub sensors: Vec<Sensor>,
+}
+
+/// One range sensor of a [`DeviceModel`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Sensor {
+    /// Pose in the model's frame (x, y, yaw).
+    pub pose: [f32; 3],
+    /// Field of view, radians.
+    pub fov: f32,
+    /// Longest range, metres.
+    pub range: f32,
+    /// Readings it makes.
+    pub samples: u32,
+}
+
+/// The poses of every model that moves, in the world frame, published on
+/// the simulation device as the simulation runs (a Troupe extension, for
+/// viewers; at most about 30 times a second of wall time).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Poses {
+    /// Simulation time, seconds.
+    pub time: f64,
+    /// Model id (its place in [`World::models`]) and pose (x, y, yaw).
+    pub poses: Vec<(u32, [f32; 3])>,
+}
+message!(Poses, "simulation/poses@1");

@@ -108,7 +108,13 @@ pub struct Stage {
     watched: Vec<(Device, String, usize)>,
     /// `stage_quirks`: Stage's plugin's ways where it ignores the interface.
     quirks: bool,
+    /// When the models' poses last went out (viewers get them at most
+    /// [`POSES_HZ`] times a wall second).
+    poses_sent: std::cell::Cell<Option<std::time::Instant>>,
 }
+
+/// How often a running simulation publishes its models' poses for viewers.
+const POSES_HZ: f64 = 30.0;
 
 /// Models already serving a device of each interface. A laser or sonar may
 /// be the same sensor as a ranger device: each interface has its own set.
@@ -285,6 +291,7 @@ impl Driver for Stage {
             snapshot: o.snapshot.clone(),
             watched: Vec::new(),
             quirks,
+            poses_sent: Default::default(),
         })
     }
 
@@ -401,7 +408,8 @@ impl Stage {
     fn publish(&self, ctx: &mut Ctx) -> Result<()> {
         for &(dev, src) in &self.devices {
             match src {
-                Source::Simulation | Source::Map { .. } => {}
+                Source::Simulation => self.publish_poses(ctx, &dev)?,
+                Source::Map { .. } => {}
                 Source::Position { base } => {
                     let b = &self.sim.bases[base];
                     ctx.publish(
@@ -773,20 +781,110 @@ impl Stage {
         let list: Vec<String> = self
             .devices
             .iter()
-            .filter(|(_, src)| match *src {
-                Source::Position { base } => tree.contains(&self.sim.bases[base].model),
-                Source::Ranger { model }
-                | Source::Laser { model }
-                | Source::Sonar { model }
-                | Source::Blobfinder { model }
-                | Source::Fiducial { model }
-                | Source::Gripper { model }
-                | Source::Map { model } => tree.contains(&model),
-                Source::Simulation => false,
-            })
+            .filter(|(_, src)| self.model_of(*src).is_some_and(|k| tree.contains(&k)))
             .map(|(d, _)| d.to_string())
             .collect();
         list.join(" ")
+    }
+
+    /// The model a device is served from (none for the simulation itself).
+    fn model_of(&self, src: Source) -> Option<usize> {
+        match src {
+            Source::Position { base } => Some(self.sim.bases[base].model),
+            Source::Ranger { model }
+            | Source::Laser { model }
+            | Source::Sonar { model }
+            | Source::Blobfinder { model }
+            | Source::Fiducial { model }
+            | Source::Gripper { model }
+            | Source::Map { model } => Some(model),
+            Source::Simulation => None,
+        }
+    }
+
+    /// The world as a viewer draws it (`simulation` `world` request).
+    fn world_view(&self) -> simulation::World {
+        let w = &self.sim.world;
+        let f = |v: f64| v as f32;
+        let pose = |p: Pose| [f(p.x), f(p.y), f(p.yaw)];
+        let models = (0..w.models.len())
+            .map(|m| {
+                let d = &w.models[m];
+                simulation::Model {
+                    name: d.name.clone(),
+                    parent: d.parent.map(|p| p as u32),
+                    color: self.sim.colors[m],
+                    polys: d
+                        .blocks
+                        .iter()
+                        .map(|b| b.iter().map(|&(x, y)| [f(x), f(y)]).collect())
+                        .collect(),
+                    moves: self.sim.moves(m),
+                    pose: pose(self.sim.global(m)),
+                }
+            })
+            .collect();
+        let devices = self
+            .devices
+            .iter()
+            .filter_map(|&(device, src)| {
+                let m = self.model_of(src)?;
+                let sensors = match src {
+                    Source::Ranger { .. } | Source::Laser { .. } | Source::Sonar { .. } => w.models
+                        [m]
+                        .sensors
+                        .iter()
+                        .map(|s| simulation::Sensor {
+                            pose: pose(s.pose),
+                            fov: f(s.fov),
+                            range: f(s.range.1),
+                            samples: s.samples as u32,
+                        })
+                        .collect(),
+                    _ => Vec::new(),
+                };
+                Some(simulation::DeviceModel {
+                    device,
+                    model: m as u32,
+                    sensors,
+                })
+            })
+            .collect();
+        simulation::World {
+            models,
+            devices,
+            resolution: w.resolution,
+        }
+    }
+
+    /// The poses of every model that moves, on the simulation device: every
+    /// step when stepped on request, at most [`POSES_HZ`] a wall second
+    /// when running.
+    fn publish_poses(&self, ctx: &mut Ctx, dev: &Device) -> Result<()> {
+        let now = std::time::Instant::now();
+        let due = self.period.is_none()
+            || self
+                .poses_sent
+                .get()
+                .is_none_or(|t| now.duration_since(t).as_secs_f64() >= 1.0 / POSES_HZ);
+        if !due {
+            return Ok(());
+        }
+        self.poses_sent.set(Some(now));
+        let poses = (0..self.sim.world.models.len())
+            .filter(|&m| self.sim.moves(m))
+            .map(|m| {
+                let p = self.sim.global(m);
+                (m as u32, [p.x as f32, p.y as f32, p.yaw as f32])
+            })
+            .collect();
+        ctx.publish(
+            dev,
+            &simulation::Poses {
+                time: self.sim.time,
+                poses,
+            },
+        )
     }
 
     /// The answer to a `GetPose2d` of model `m`, asked for as `name`.
@@ -808,7 +906,9 @@ impl Stage {
 
     fn simulation(&mut self, ctx: &mut Ctx, r: troupe_node::Request) -> Result<()> {
         let find = |sim: &Sim, name: &str| sim.world.names.get(name).copied();
-        if r.is::<simulation::GetPose2d>() {
+        if r.is::<simulation::GetWorld>() {
+            r.reply(&self.world_view());
+        } else if r.is::<simulation::GetPose2d>() {
             let q = r.decode::<simulation::GetPose2d>()?;
             match find(&self.sim, &q.name) {
                 Some(m) => {

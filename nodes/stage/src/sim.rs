@@ -560,6 +560,11 @@ impl Sim {
         self.drawn[m] = drawn;
     }
 
+    /// Whether model `m` moves (a robot, or what it carries).
+    pub fn moves(&self, m: usize) -> bool {
+        self.movable[m]
+    }
+
     /// Rays read as Stage's (`true`: Stage's raster of block outlines and
     /// its ray walk; see [`troupe_geom::raster`]) or against the exact
     /// bodies (`false`, the default: the bench worlds run up to 2.5 times

@@ -1,0 +1,221 @@
+//! `troupe view` against a launched stack: its JSON says what the
+//! simulator and `troupe list` say, its stream carries the robots' poses and
+//! readings, and a real browser (Debian's chromium, headless) draws the
+//! world where the simulator has it.
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
+use std::path::Path;
+use std::time::Instant;
+
+use serde_json::Value;
+use troupe_tests::{strings, Proc, DEADLINE};
+
+/// A wall 0.2 m thick across x = 2 m, a red robot at the origin facing +x
+/// with a 90-beam, 180° ranger (blue), and no controller: it stays put.
+const WORLD: &str = r#"
+resolution 0.02
+model ( name "wall" pose [2 0 0 0] size [0.2 4 1] color "black" )
+position
+(
+  name "r0" pose [0 0 0 0] size [0.4 0.4 0.3] color "red"
+  ranger ( sensor ( samples 90 fov 180 range [0 5] ) size [0.1 0.1 0.1] color "blue" )
+)
+"#;
+
+const CFG: &str = r#"
+driver ( name "stage" provides [ "simulation:0" ] plugin "stageplugin" worldfile "view.world" )
+driver ( name "stage" provides [ "position2d:0" "ranger:0" ] model "r0" )
+"#;
+
+/// GET `path` from `base` (`http://127.0.0.1:PORT/`): the status line's
+/// code and the body.
+fn get(base: &str, path: &str) -> (u32, String) {
+    let host = base.trim_start_matches("http://").trim_end_matches('/');
+    let mut s = TcpStream::connect(host).unwrap();
+    s.set_read_timeout(Some(DEADLINE)).unwrap();
+    write!(s, "GET {path} HTTP/1.0\r\nHost: {host}\r\n\r\n").unwrap();
+    let mut all = String::new();
+    s.read_to_string(&mut all).unwrap();
+    let (head, body) = all.split_once("\r\n\r\n").unwrap();
+    let code = head.split_whitespace().nth(1).unwrap().parse().unwrap();
+    (code, body.to_owned())
+}
+
+fn json(base: &str, path: &str) -> Value {
+    let (code, body) = get(base, path);
+    assert_eq!(code, 200, "{path}: {body}");
+    serde_json::from_str(&body).unwrap()
+}
+
+/// The first frame of the stream that `done` accepts.
+fn frame_where(base: &str, done: impl Fn(&Value) -> bool) -> Value {
+    let host = base.trim_start_matches("http://").trim_end_matches('/');
+    let mut s = TcpStream::connect(host).unwrap();
+    s.set_read_timeout(Some(DEADLINE)).unwrap();
+    write!(s, "GET /api/stream HTTP/1.1\r\nHost: {host}\r\n\r\n").unwrap();
+    let deadline = Instant::now() + DEADLINE;
+    let mut last = Value::Null;
+    for line in BufReader::new(s).lines() {
+        assert!(
+            Instant::now() < deadline,
+            "no frame as wanted; the last: {last}"
+        );
+        let line = line.unwrap();
+        if let Some(data) = line.strip_prefix("data:") {
+            last = serde_json::from_str(data.trim()).unwrap();
+            if done(&last) {
+                return last;
+            }
+        }
+    }
+    panic!("the stream ended; the last frame: {last}");
+}
+
+#[test]
+fn the_view_draws_the_world_where_the_simulator_has_it() {
+    let dir = std::env::temp_dir().join(format!("troupe-view-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("view.world"), WORLD).unwrap();
+    std::fs::write(dir.join("view.cfg"), CFG).unwrap();
+    let ns = troupe_tests::unique_namespace("view");
+    let mut launcher = troupe_tests::launch(&ns, &dir.join("view.cfg"), &[]);
+    let (router, _) = troupe_tests::launch_ports(&mut launcher);
+    let net = |rest: &[&str]| {
+        let mut a = strings(&["--namespace", &ns, "--connect", &router]);
+        a.extend(strings(rest));
+        a
+    };
+    let mut view = Proc::troupe("view", &net(&["view", "--port", "0"]));
+    let line = view.first_line();
+    let base = line
+        .trim()
+        .strip_prefix("troupe view: ")
+        .expect("the view's address")
+        .to_owned();
+
+    // The stream: r0 where the world file puts it, its ranger's middle
+    // beams on the wall's face, 1.9 m ahead.
+    let f = frame_where(&base, |f| {
+        f["devices"] == 3
+            && f["scans"]["6665:ranger:0"].is_object()
+            && f["poses"]["6665:simulation:0"].is_object()
+    });
+    let world = json(&base, "/api/world");
+    let w = &world["worlds"][0];
+    assert_eq!(w["simulation"], "6665:simulation:0");
+    let id = |name: &str| {
+        w["models"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .position(|m| m["name"] == name)
+            .unwrap_or_else(|| panic!("no {name} in {w}"))
+    };
+    let (r0, wall) = (id("r0"), id("wall"));
+    assert_eq!(w["models"][r0]["color"], "#ff0000");
+    assert_eq!(w["models"][r0]["moves"], true);
+    assert_eq!(w["models"][wall]["moves"], false);
+    assert_eq!(
+        w["models"][wall]["pose"],
+        serde_json::json!([2.0, 0.0, 0.0])
+    );
+    let pose = &f["poses"]["6665:simulation:0"][r0.to_string()];
+    assert_eq!(pose, &serde_json::json!([0.0, 0.0, 0.0]), "{f}");
+    let ranges = f["scans"]["6665:ranger:0"]["ranges"].as_array().unwrap();
+    assert_eq!(ranges.len(), 90);
+    for k in [44, 45] {
+        let r = ranges[k].as_f64().unwrap();
+        assert!((r - 1.9).abs() < 0.03, "beam {k}: {r} m");
+    }
+    let ranger = w["devices"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|d| d["device"] == "6665:ranger:0")
+        .unwrap();
+    assert_eq!(ranger["sensors"][0]["samples"], 90);
+
+    // The device list is `troupe list`'s.
+    let (ok, out, err) = troupe_tests::troupe_output(&net(&["list", "--json", "--wait", "2"]));
+    assert!(ok.success(), "{err}");
+    let listed: Vec<Value> = out
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let key = |v: &Value| format!("{} {} {}", v["robot"], v["device"], v["driver"]);
+    let mut want: Vec<String> = listed.iter().map(key).collect();
+    let mut got: Vec<String> = json(&base, "/api/devices")
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(key)
+        .collect();
+    want.sort();
+    got.sort();
+    assert_eq!(got, want);
+    assert_eq!(got.len(), 3);
+
+    // The page, in a real browser, at 50 pixels a metre around the origin.
+    let (code, html) = get(&base, "/");
+    assert_eq!(code, 200);
+    assert!(html.contains("view.js"));
+    match chromium() {
+        Some(browser) => screenshot_shows_the_world(&browser, &base, &dir),
+        None => eprintln!("skipping the browser check: no chromium (.ci/run installs it)"),
+    }
+
+    assert!(view.terminate().success(), "{}", view.stderr());
+    assert!(launcher.terminate().success(), "{}", launcher.stderr());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Debian's chromium, if installed; under CI=true it must be.
+fn chromium() -> Option<std::path::PathBuf> {
+    let found = ["/usr/bin/chromium", "/usr/bin/chromium-browser"]
+        .iter()
+        .map(Path::new)
+        .find(|p| p.exists())
+        .map(Path::to_path_buf);
+    if found.is_none() && std::env::var("CI").is_ok_and(|v| v == "true") {
+        panic!("CI=true but chromium is not installed");
+    }
+    found
+}
+
+fn screenshot_shows_the_world(browser: &Path, base: &str, dir: &Path) {
+    let shot = dir.join("view.png");
+    // The canvas is the window less the 261-pixel side panel: 639 × 600,
+    // its centre (319.5, 300) the world's origin.
+    let status = std::process::Command::new(browser)
+        .args([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--hide-scrollbars",
+        ])
+        .arg(format!(
+            "--user-data-dir={}",
+            dir.join("chromium").display()
+        ))
+        .arg("--window-size=900,600")
+        .arg(format!("--screenshot={}", shot.display()))
+        .arg(format!("{base}?x=0&y=0&scale=50"))
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .status()
+        .unwrap();
+    assert!(status.success(), "chromium: {status}");
+    let img = image::open(&shot).unwrap().to_rgb8();
+    assert_eq!(img.dimensions(), (900, 600));
+    let px = |x: f64, y: f64| {
+        let (sx, sy) = (319.5 + x * 50.0, 300.0 - y * 50.0);
+        img.get_pixel(sx as u32, sy as u32).0
+    };
+    // r0's body behind its ranger (no rays there): red.
+    assert_eq!(px(-0.15, 0.0), [255, 0, 0], "r0's body");
+    // Inside the wall, beyond the rays' ends: black.
+    assert_eq!(px(2.0, 1.0), [0, 0, 0], "the wall");
+    // Open floor behind the robot: white.
+    assert_eq!(px(-3.0, 3.0), [255, 255, 255], "the floor");
+}
