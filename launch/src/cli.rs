@@ -181,8 +181,13 @@ The page (embedded in this binary; nothing is fetched from elsewhere) draws
 every simulator's world as Stage's window did: static bodies, robots at their
 true poses, laser, ranger and sonar readings, the simulation time and its
 speed against real time; and lists the live devices as `troupe list` does.
-Drag to pan, scroll to zoom, pick a robot to follow. URL parameters fix the
-view: ?x=-4&y=-4&scale=60 (metres, pixels per metre).")]
+With a localizer and a planner running it draws amcl's particles and
+hypotheses and the planner's goal and path; a click (dragged for the
+heading) gives the planner a goal or sets amcl's pose, and the arrow keys
+drive a chosen position2d. Drag to pan, scroll to zoom, pick a robot to
+follow. URL parameters fix the view: ?x=-4&y=-4&scale=60 (metres, pixels
+per metre); ?still draws one moment and opens no stream (for screenshots:
+chromium --headless --screenshot URL?still).")]
     View(crate::view::ViewArgs),
 
     /// Record devices' samples (default: all of them, and the clock) to an MCAP file.

@@ -306,6 +306,8 @@ pub fn access_control(members: &[Member], namespace: Option<&str>) -> serde_json
             ns("robot/*/*/*"),
             ns("robot/*/map/*/req/**"),
             ns("robot/*/simulation/*/req/world"),
+            ns("robot/*/planner/*/req/waypoints"),
+            ns("robot/*/localize/*/req/particles"),
         ],
     );
     let mut rules = vec![

@@ -27,7 +27,10 @@ use axum::routing::get;
 use axum::Router;
 use serde_json::{json, Value};
 use tokio::sync::watch;
-use troupe_msgs::{codec, keys, laser, ranger, simulation, sonar, Device, Interface};
+use troupe_msgs::{
+    codec, keys, laser, localize, planner, position2d, ranger, simulation, sonar, Command as _,
+    Device, Interface, Pose2d, Request as _,
+};
 use troupe_node::zenoh::sample::SampleKind;
 use troupe_node::ZenohArgs;
 
@@ -46,8 +49,16 @@ pub struct ViewArgs {
     pub fps: f64,
 }
 
-/// How long a simulator has to answer for its world.
+/// How long a simulator has to answer for its world (and a driver a request).
 const WORLD_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// How often localizers are asked for their particles, and how many of
+/// them a frame carries at most.
+const PARTICLES_EVERY: Duration = Duration::from_millis(500);
+const PARTICLES_SHOWN: usize = 400;
+
+/// What the page's handlers share: the newest samples and the session.
+type App = (Arc<Shared>, troupe_node::zenoh::Session);
 
 /// The page and its script, served as they are.
 const INDEX_HTML: &str = include_str!("view/index.html");
@@ -64,6 +75,9 @@ struct Latest {
     poses: BTreeMap<Device, simulation::Poses>,
     /// Each range device's newest readings.
     scans: BTreeMap<Device, Value>,
+    /// Each localizer's newest hypotheses and particles, each planner's
+    /// newest state and path.
+    nav: BTreeMap<Device, Value>,
     /// Simulated seconds against wall seconds, over the last second or so.
     pace: Pace,
 }
@@ -182,12 +196,15 @@ impl Shared {
             .collect();
         let scans: serde_json::Map<String, Value> =
             l.scans.iter().map(|(d, s)| (addr(d), s.clone())).collect();
+        let nav: serde_json::Map<String, Value> =
+            l.nav.iter().map(|(d, s)| (addr(d), s.clone())).collect();
         json!({
             "time": time,
             "speed": l.pace.speed,
             "devices": l.devices.len(),
             "poses": poses,
             "scans": scans,
+            "nav": nav,
         })
     }
 }
@@ -212,6 +229,130 @@ fn ranges(v: impl IntoIterator<Item = f64>) -> Vec<f64> {
     v.into_iter()
         .map(|r| (r * 1000.0).round() / 1000.0)
         .collect()
+}
+
+fn pose(p: &Pose2d) -> Value {
+    json!([round(p.x as f32), round(p.y as f32), round(p.yaw as f32)])
+}
+
+/// Keeps a navigation sample: a localizer's hypotheses, a planner's state.
+/// Returns the planner whose path changed (its waypoints are to be asked).
+fn take_nav(shared: &Shared, dev: Device, payload: &[u8]) -> Option<Device> {
+    let mut l = shared.latest();
+    let mut ask = None;
+    match dev.interface {
+        Interface::Localize => {
+            let h = codec::decode::<localize::Hypoths>(payload).ok()?.msg;
+            let entry = l.nav.entry(dev).or_insert_with(|| json!({}));
+            entry["kind"] = json!("localize");
+            entry["hypoths"] = h
+                .hypoths
+                .iter()
+                .map(|h| json!({ "mean": pose(&h.mean), "cov": h.cov, "weight": h.weight }))
+                .collect();
+        }
+        Interface::Planner => {
+            let st = codec::decode::<planner::State>(payload).ok()?.msg;
+            let entry = l.nav.entry(dev).or_insert_with(|| json!({}));
+            // A new goal or a new count of waypoints: a new path.
+            let path = json!([st.valid, pose(&st.goal), st.waypoints_count]);
+            if entry["path_of"] != path {
+                entry["path_of"] = path;
+                ask = Some(dev);
+            }
+            entry["kind"] = json!("planner");
+            entry["valid"] = json!(st.valid);
+            entry["done"] = json!(st.done);
+            entry["pose"] = pose(&st.pose);
+            entry["goal"] = pose(&st.goal);
+            entry["waypoint_idx"] = json!(st.waypoint_idx);
+        }
+        _ => return None,
+    }
+    drop(l);
+    shared.touch();
+    ask
+}
+
+/// Asks `dev` (a planner) for its waypoints, or (a localizer) for its
+/// particles, and keeps them with its state.
+async fn ask_nav(session: troupe_node::zenoh::Session, shared: Arc<Shared>, dev: Device) {
+    let (key, payload) = match dev.interface {
+        Interface::Planner => (
+            keys::req(&dev, planner::GetWaypoints::NAME),
+            codec::encode(&planner::GetWaypoints, 0.0),
+        ),
+        _ => (
+            keys::req(&dev, localize::GetParticles::NAME),
+            codec::encode(&localize::GetParticles, 0.0),
+        ),
+    };
+    let Ok(replies) = troupe_node::ask(&session, &key, WORLD_TIMEOUT)
+        .payload(payload)
+        .await
+    else {
+        return;
+    };
+    let Ok(Ok(sample)) = replies.recv_async().await.map(|r| r.into_result()) else {
+        return;
+    };
+    let bytes = sample.payload().to_bytes();
+    let (field, value) = match dev.interface {
+        Interface::Planner => match codec::decode::<planner::Waypoints>(&bytes) {
+            Ok(w) => ("waypoints", w.msg.waypoints.iter().map(pose).collect()),
+            Err(_) => return,
+        },
+        _ => match codec::decode::<localize::Particles>(&bytes) {
+            Ok(p) => {
+                // A few hundred show the cloud as well as thousands do.
+                let every = p.msg.particles.len().div_ceil(PARTICLES_SHOWN).max(1);
+                let shown = p.msg.particles.iter().step_by(every);
+                ("particles", shown.map(|q| pose(&q.pose)).collect())
+            }
+            Err(_) => return,
+        },
+    };
+    let mut l = shared.latest();
+    let entry = l.nav.entry(dev).or_insert_with(|| json!({}));
+    entry[field] = value;
+    entry["kind"] = json!(if dev.interface == Interface::Planner {
+        "planner"
+    } else {
+        "localize"
+    });
+    drop(l);
+    shared.touch();
+}
+
+/// The interfaces whose data the page draws.
+const DRAWN: [Interface; 6] = [
+    Interface::Simulation,
+    Interface::Laser,
+    Interface::Ranger,
+    Interface::Sonar,
+    Interface::Localize,
+    Interface::Planner,
+];
+
+/// Takes the newest samples `dev`'s driver keeps (a device that publishes
+/// only on change, such as a localizer at rest, is drawn at once).
+async fn fetch_latest(session: troupe_node::zenoh::Session, shared: Arc<Shared>, dev: Device) {
+    let Ok(replies) = troupe_node::ask(&session, &keys::data(&dev), WORLD_TIMEOUT).await else {
+        return;
+    };
+    while let Ok(reply) = replies.recv_async().await {
+        if let Ok(sample) = reply.into_result() {
+            let bytes = sample.payload().to_bytes();
+            match dev.interface {
+                Interface::Localize | Interface::Planner => {
+                    if let Some(planner) = take_nav(&shared, dev, &bytes) {
+                        tokio::spawn(ask_nav(session.clone(), shared.clone(), planner));
+                    }
+                }
+                _ => take(&shared, dev, &bytes),
+            }
+        }
+    }
 }
 
 /// Takes one sample of a device the page draws.
@@ -305,6 +446,9 @@ pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
                         if dev.interface == Interface::Simulation {
                             handle.spawn(fetch_world(sess.clone(), s.clone(), dev));
                         }
+                        if DRAWN.contains(&dev.interface) {
+                            handle.spawn(fetch_latest(sess.clone(), s.clone(), dev));
+                        }
                     }
                     SampleKind::Delete => {
                         l.devices.remove(&dev);
@@ -319,6 +463,44 @@ pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             .await
             .map_err(|e| anyhow::anyhow!("watching devices: {e}"))?;
         let mut subs = Vec::new();
+        for i in [Interface::Localize, Interface::Planner] {
+            let (s, sess) = (shared.clone(), session.clone());
+            let handle = tokio::runtime::Handle::current();
+            subs.push(
+                session
+                    .declare_subscriber(keys::data_of(i))
+                    .callback(move |sample| {
+                        let Ok(dev) = keys::parse_data(sample.key_expr().as_str()) else {
+                            return;
+                        };
+                        if let Some(planner) = take_nav(&s, dev, &sample.payload().to_bytes()) {
+                            handle.spawn(ask_nav(sess.clone(), s.clone(), planner));
+                        }
+                    })
+                    .await
+                    .map_err(|e| anyhow::anyhow!("subscribing to {i} data: {e}"))?,
+            );
+        }
+        // Localizers' particles, twice a second.
+        {
+            let (s, sess) = (shared.clone(), session.clone());
+            tokio::spawn(async move {
+                let mut every = tokio::time::interval(PARTICLES_EVERY);
+                loop {
+                    every.tick().await;
+                    let localizers: Vec<Device> = s
+                        .latest()
+                        .devices
+                        .keys()
+                        .copied()
+                        .filter(|d| d.interface == Interface::Localize)
+                        .collect();
+                    for d in localizers {
+                        ask_nav(sess.clone(), s.clone(), d).await;
+                    }
+                }
+            });
+        }
         for i in [
             Interface::Simulation,
             Interface::Laser,
@@ -349,18 +531,19 @@ pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             )
             .route(
                 "/api/world",
-                get(|State(s): State<Arc<Shared>>| async move { Json(s.worlds()) }),
+                get(|State((s, _)): State<App>| async move { Json(s.worlds()) }),
             )
             .route(
                 "/api/devices",
-                get(|State(s): State<Arc<Shared>>| async move { Json(s.devices()) }),
+                get(|State((s, _)): State<App>| async move { Json(s.devices()) }),
             )
             .route(
                 "/api/frame",
-                get(|State(s): State<Arc<Shared>>| async move { Json(s.frame()) }),
+                get(|State((s, _)): State<App>| async move { Json(s.frame()) }),
             )
             .route("/api/stream", get(stream))
-            .with_state(shared.clone());
+            .route("/api/command", axum::routing::post(command))
+            .with_state((shared.clone(), session.clone()));
         let listener = tokio::net::TcpListener::bind(SocketAddr::new(a.bind, a.port))
             .await
             .with_context(|| format!("serving the view on {}:{}", a.bind, a.port))?;
@@ -394,7 +577,7 @@ fn page(body: &'static str, kind: &'static str) -> Response {
 /// A page's stream of frames: the next frame is made only once the page
 /// took the last one, something changed, and 1/fps has passed.
 async fn stream(
-    State(s): State<Arc<Shared>>,
+    State((s, _)): State<App>,
 ) -> Sse<impl futures::Stream<Item = Result<Event, Infallible>>> {
     let rx = s.changed.subscribe();
     let period = Duration::from_secs_f64(1.0 / s.fps);
@@ -412,4 +595,89 @@ async fn stream(
         },
     );
     Sse::new(frames).keep_alive(KeepAlive::default())
+}
+
+/// What the page asks of a device: a planner's goal, a localizer's pose
+/// (rviz's "2D Goal" and "2D Pose Estimate"), a base's speeds (teleop).
+#[derive(Debug, serde::Deserialize)]
+struct Order {
+    /// `6665:planner:0`.
+    device: String,
+    goal: Option<[f64; 3]>,
+    pose: Option<[f64; 3]>,
+    vel: Option<[f64; 3]>,
+}
+
+/// `POST /api/command`: sends the page's order. 200 once sent (a command)
+/// or acknowledged (a request); 400 for an order that makes no sense, 502
+/// with the reason when the driver refused or did not answer.
+async fn command(State((_, session)): State<App>, Json(o): Json<Order>) -> Response {
+    use axum::http::StatusCode;
+    let bad = |why: String| (StatusCode::BAD_REQUEST, why).into_response();
+    let dev: Device = match o.device.parse::<troupe_msgs::DevAddr>() {
+        Ok(a) => a.device(troupe_msgs::DEFAULT_ROBOT),
+        Err(e) => return bad(format!("`{}`: {e}", o.device)),
+    };
+    let p = |v: [f64; 3]| Pose2d::new(v[0], v[1], v[2]);
+    let stamp = troupe_node::Clock::wall().now();
+    let (key, payload, ask) = match (dev.interface, o.goal, o.pose, o.vel) {
+        (Interface::Planner, Some(g), None, None) => (
+            keys::cmd(&dev, planner::Goal::NAME),
+            codec::encode(&planner::Goal { goal: p(g) }, stamp),
+            false,
+        ),
+        (Interface::Localize, None, Some(m), None) => (
+            keys::req(&dev, localize::SetPose::NAME),
+            codec::encode(
+                &localize::SetPose {
+                    mean: p(m),
+                    // As playerv sets it: half a metre and 10° of doubt.
+                    cov: [0.25, 0.25, 10f64.to_radians().powi(2), 0.0, 0.0, 0.0],
+                },
+                stamp,
+            ),
+            true,
+        ),
+        (Interface::Position2d, None, None, Some(v)) => (
+            keys::cmd(&dev, position2d::CmdVel::NAME),
+            codec::encode(
+                &position2d::CmdVel {
+                    vel: p(v),
+                    state: true,
+                },
+                stamp,
+            ),
+            false,
+        ),
+        _ => {
+            return bad(format!(
+                "{dev}: a planner takes a goal, a localizer a pose, a position2d a vel"
+            ))
+        }
+    };
+    let gone = |why: String| (StatusCode::BAD_GATEWAY, why).into_response();
+    if !ask {
+        return match session.put(&key, payload).await {
+            Ok(()) => (StatusCode::OK, "sent").into_response(),
+            Err(e) => gone(format!("sending {key}: {e}")),
+        };
+    }
+    let replies = match troupe_node::ask(&session, &key, WORLD_TIMEOUT)
+        .payload(payload)
+        .await
+    {
+        Ok(r) => r,
+        Err(e) => return gone(format!("asking {key}: {e}")),
+    };
+    match replies.recv_async().await.map(|r| r.into_result()) {
+        Ok(Ok(_)) => (StatusCode::OK, "acknowledged").into_response(),
+        Ok(Err(e)) => gone(format!(
+            "{dev} refused: {}",
+            codec::decode::<troupe_msgs::common::Nack>(&e.payload().to_bytes())
+                .map_or_else(|_| "no reason given".to_owned(), |n| n.msg.reason)
+        )),
+        Err(_) => gone(format!(
+            "{dev} did not answer (no such device, or this identity may not ask it)"
+        )),
+    }
 }

@@ -48,6 +48,27 @@ fn json(base: &str, path: &str) -> Value {
     serde_json::from_str(&body).unwrap()
 }
 
+/// POSTs `body` to the view's /api/command: the status code and the text.
+fn post(base: &str, body: &Value) -> (u32, String) {
+    let host = base.trim_start_matches("http://").trim_end_matches('/');
+    let mut s = TcpStream::connect(host).unwrap();
+    s.set_read_timeout(Some(DEADLINE)).unwrap();
+    let body = body.to_string();
+    write!(
+        s,
+        "POST /api/command HTTP/1.0\r\nHost: {host}\r\nContent-Type: application/json\r\nContent-Length: {}\r\n\r\n{body}",
+        body.len()
+    )
+    .unwrap();
+    let mut all = String::new();
+    s.read_to_string(&mut all).unwrap();
+    let (head, text) = all.split_once("\r\n\r\n").unwrap();
+    (
+        head.split_whitespace().nth(1).unwrap().parse().unwrap(),
+        text.to_owned(),
+    )
+}
+
 /// The first frame of the stream that `done` accepts.
 fn frame_where(base: &str, done: impl Fn(&Value) -> bool) -> Value {
     let host = base.trim_start_matches("http://").trim_end_matches('/');
@@ -165,6 +186,37 @@ fn the_view_draws_the_world_where_the_simulator_has_it() {
         None => eprintln!("skipping the browser check: no chromium (.ci/run installs it)"),
     }
 
+    // Teleop: r0 drives forward, then stops.
+    assert_eq!(
+        post(
+            &base,
+            &serde_json::json!({"device": "6665:position2d:0", "vel": [0.3, 0.0, 0.0]})
+        )
+        .0,
+        200
+    );
+    let key = r0.to_string();
+    frame_where(&base, |f| {
+        f["poses"]["6665:simulation:0"][&key][0]
+            .as_f64()
+            .is_some_and(|x| x > 0.1)
+    });
+    assert_eq!(
+        post(
+            &base,
+            &serde_json::json!({"device": "6665:position2d:0", "vel": [0.0, 0.0, 0.0]})
+        )
+        .0,
+        200
+    );
+    // Orders that make no sense are refused and say why.
+    let (code, why) = post(
+        &base,
+        &serde_json::json!({"device": "6665:ranger:0", "goal": [1.0, 0.0, 0.0]}),
+    );
+    assert_eq!(code, 400);
+    assert!(why.contains("a planner takes a goal"), "{why}");
+
     assert!(view.terminate().success(), "{}", view.stderr());
     assert!(launcher.terminate().success(), "{}", launcher.stderr());
     let _ = std::fs::remove_dir_all(&dir);
@@ -200,7 +252,9 @@ fn screenshot_shows_the_world(browser: &Path, base: &str, dir: &Path) {
         ))
         .arg("--window-size=900,600")
         .arg(format!("--screenshot={}", shot.display()))
-        .arg(format!("{base}?x=0&y=0&scale=50"))
+        // (`still`: this moment, no stream; the budget lets it load.)
+        .arg("--virtual-time-budget=5000")
+        .arg(format!("{base}?still&x=0&y=0&scale=50"))
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())
         .status()
@@ -218,4 +272,93 @@ fn screenshot_shows_the_world(browser: &Path, base: &str, dir: &Path) {
     assert_eq!(px(2.0, 1.0), [0, 0, 0], "the wall");
     // Open floor behind the robot: white.
     assert_eq!(px(-3.0, 3.0), [255, 255, 255], "the floor");
+}
+
+/// The navigation stack of worlds/nav.cfg under the view: amcl's estimate
+/// and the planner's state reach the page; a goal the page gives
+/// (rviz's "2D Goal") takes r0 there, a pose it sets ("2D Pose Estimate")
+/// moves amcl's estimate.
+#[test]
+fn the_view_gives_goals_and_sets_poses() {
+    let cfg = Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/nav.cfg");
+    let ns = troupe_tests::unique_namespace("viewnav");
+    let mut launcher = troupe_tests::launch(&ns, &cfg, &["--speedup", "4"]);
+    let (router, _) = troupe_tests::launch_ports(&mut launcher);
+    let mut view = Proc::troupe(
+        "view",
+        &strings(&[
+            "--namespace",
+            &ns,
+            "--connect",
+            &router,
+            "view",
+            "--port",
+            "0",
+        ]),
+    );
+    let line = view.first_line();
+    let base = line
+        .trim()
+        .strip_prefix("troupe view: ")
+        .expect("the view's address")
+        .to_owned();
+    let f = frame_where(&base, |f| {
+        f["nav"]["6665:localize:0"]["hypoths"].is_array()
+            && f["nav"]["6665:planner:0"]["kind"] == "planner"
+    });
+    let world = json(&base, "/api/world");
+    let r0 = world["worlds"][0]["models"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .position(|m| m["name"] == "r0")
+        .unwrap()
+        .to_string();
+    let at = |f: &Value| {
+        let p = &f["poses"]["6665:simulation:0"][&r0];
+        (
+            p[0].as_f64().unwrap_or(f64::NAN),
+            p[1].as_f64().unwrap_or(f64::NAN),
+        )
+    };
+    let start = at(&f);
+    assert!(
+        (start.0 + 6.0).hypot(start.1 + 6.0) < 0.1,
+        "r0 starts at {start:?}"
+    );
+
+    // A goal in the room's east end: the planner takes it and r0 gets there.
+    let goal = (4.0, -6.0);
+    let (code, text) = post(
+        &base,
+        &serde_json::json!({"device": "6665:planner:0", "goal": [goal.0, goal.1, 0.0]}),
+    );
+    assert_eq!(code, 200, "{text}");
+    let f = frame_where(&base, |f| {
+        let (x, y) = at(f);
+        (x - goal.0).hypot(y - goal.1) < 0.5
+    });
+    assert_eq!(
+        f["nav"]["6665:planner:0"]["goal"],
+        serde_json::json!([4.0, -6.0, 0.0])
+    );
+
+    // A pose a metre off the truth: amcl's estimate goes there.
+    let (x, y) = at(&f);
+    let set = (x, y + 1.0);
+    let (code, text) = post(
+        &base,
+        &serde_json::json!({"device": "6665:localize:0", "pose": [set.0, set.1, 0.0]}),
+    );
+    assert_eq!(code, 200, "{text}");
+    frame_where(&base, |f| {
+        f["nav"]["6665:localize:0"]["hypoths"][0]["mean"]
+            .as_array()
+            .is_some_and(|m| {
+                (m[0].as_f64().unwrap() - set.0).hypot(m[1].as_f64().unwrap() - set.1) < 0.25
+            })
+    });
+
+    assert!(view.terminate().success(), "{}", view.stderr());
+    assert!(launcher.terminate().success(), "{}", launcher.stderr());
 }

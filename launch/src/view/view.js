@@ -6,10 +6,14 @@ const ctx = canvas.getContext("2d");
 const statusLine = document.getElementById("status");
 const followSelect = document.getElementById("follow");
 const deviceTable = document.getElementById("devices");
+const plannerSelect = document.getElementById("planner");
+const localizerSelect = document.getElementById("localizer");
+const teleopSelect = document.getElementById("teleop");
 
 let worlds = [];          // from /api/world
 let frame = null;         // the newest frame
 let deviceCount = -1;     // devices listed, to refresh the table when it changes
+let notice = null;        // a refused order, shown for a few seconds
 const params = new URLSearchParams(location.search);
 const view = { x: 0, y: 0, scale: 40, fixed: params.has("scale") };
 if (view.fixed) {
@@ -111,6 +115,68 @@ function drawScan(w, d) {
   ctx.stroke();
 }
 
+// An estimate's covariance as its two-sigma ellipse.
+function drawEllipse(h) {
+  const [xx, yy, xy] = [h.cov[0], h.cov[1], h.cov[3]];
+  const mid = (xx + yy) / 2, dev = Math.sqrt(((xx - yy) / 2) ** 2 + xy * xy);
+  const [l1, l2] = [Math.max(mid + dev, 0), Math.max(mid - dev, 0)];
+  const turn = 0.5 * Math.atan2(2 * xy, xx - yy);
+  const [sx, sy] = toScreen(h.mean[0], h.mean[1]);
+  ctx.beginPath();
+  ctx.ellipse(sx, sy, Math.max(2 * Math.sqrt(l1) * view.scale, 2), Math.max(2 * Math.sqrt(l2) * view.scale, 2), -turn, 0, 2 * Math.PI);
+  ctx.stroke();
+  arrow(h.mean, 0.4);
+}
+
+// A pose as an arrow `len` metres long.
+function arrow(p, len) {
+  const [x0, y0] = toScreen(p[0], p[1]);
+  const [x1, y1] = toScreen(p[0] + len * Math.cos(p[2]), p[1] + len * Math.sin(p[2]));
+  ctx.beginPath();
+  ctx.moveTo(x0, y0);
+  ctx.lineTo(x1, y1);
+  const a = Math.atan2(y1 - y0, x1 - x0);
+  ctx.lineTo(x1 - 8 * Math.cos(a - 0.4), y1 - 8 * Math.sin(a - 0.4));
+  ctx.moveTo(x1, y1);
+  ctx.lineTo(x1 - 8 * Math.cos(a + 0.4), y1 - 8 * Math.sin(a + 0.4));
+  ctx.stroke();
+}
+
+// Localizers' particles and hypotheses, planners' goals and paths.
+function drawNav() {
+  if (!frame || !frame.nav) return;
+  for (const n of Object.values(frame.nav)) {
+    ctx.lineWidth = 2;
+    if (n.kind === "localize") {
+      ctx.fillStyle = "rgba(200,0,200,0.5)";
+      for (const p of n.particles || []) {
+        const [sx, sy] = toScreen(p[0], p[1]);
+        ctx.fillRect(sx - 1, sy - 1, 2, 2);
+      }
+      ctx.strokeStyle = "#c000c0";
+      for (const h of n.hypoths || []) drawEllipse(h);
+    } else if (n.kind === "planner" && n.valid) {
+      ctx.strokeStyle = "#e07000";
+      const path = [n.pose, ...(n.waypoints || []).slice(Math.max(n.waypoint_idx, 0))];
+      ctx.beginPath();
+      path.forEach((p, k) => {
+        const [sx, sy] = toScreen(p[0], p[1]);
+        if (k === 0) ctx.moveTo(sx, sy); else ctx.lineTo(sx, sy);
+      });
+      ctx.stroke();
+      const [gx, gy] = toScreen(n.goal[0], n.goal[1]);
+      ctx.beginPath();
+      ctx.arc(gx, gy, 6, 0, 2 * Math.PI);
+      ctx.stroke();
+      arrow(n.goal, 0.5);
+    }
+  }
+  if (aim) {
+    ctx.strokeStyle = tool() === "goal" ? "#e07000" : "#c000c0";
+    arrow(aim.pose, 0.6);
+  }
+}
+
 // The canvas as large as the page lays it out.
 function size() {
   const r = canvas.getBoundingClientRect();
@@ -135,6 +201,9 @@ function draw() {
     w.models.forEach((m, id) => { if (!m.moves) drawModel(w, id); });
     w.models.forEach((m, id) => { if (m.moves) drawModel(w, id); });
     for (const d of w.devices) drawScan(w, d);
+  }
+  drawNav();
+  for (const w of worlds) {
     ctx.fillStyle = "#000";
     ctx.font = "12px system-ui, sans-serif";
     w.models.forEach((m, id) => {
@@ -150,6 +219,7 @@ function draw() {
   if (frame && frame.speed !== null) parts.push(`${frame.speed.toFixed(1)}× real time`);
   if (frame) parts.push(`${frame.devices} devices`);
   if (!worlds.length) parts.push("no simulator yet");
+  if (notice && Date.now() < notice.until) parts.push(notice.text);
   statusLine.textContent = parts.join(" · ") || "waiting for data…";
 }
 
@@ -174,9 +244,20 @@ async function loadWorlds() {
     names.map(n => `<option${n === follow ? " selected" : ""}>${n}</option>`).join("");
 }
 
+// The devices of one interface as a select's options, keeping the choice.
+function offer(select, list, iface, none) {
+  const keep = select.value;
+  const names = list.filter(d => d.device.startsWith(iface + ":")).map(d => `${d.robot}:${d.device}`);
+  select.innerHTML = (none ? '<option value="">(nothing)</option>' : "") +
+    names.map(n => `<option${n === keep ? " selected" : ""}>${n}</option>`).join("");
+}
+
 async function loadDevices() {
   const list = await getJson("/api/devices");
   deviceCount = list.length;
+  offer(plannerSelect, list, "planner", false);
+  offer(localizerSelect, list, "localize", false);
+  offer(teleopSelect, list, "position2d", true);
   deviceTable.innerHTML = list.map(d =>
     `<tr><td class="robot">${d.robot}</td><td>${d.device}</td><td>${d.driver}</td></tr>`).join("");
 }
@@ -191,10 +272,54 @@ function onFrame(f) {
 
 followSelect.addEventListener("change", () => { follow = followSelect.value; redraw(); });
 
+function tool() {
+  return document.querySelector('input[name="tool"]:checked').value;
+}
+
+// The world point under a mouse event.
+function toWorld(e) {
+  const r = canvas.getBoundingClientRect();
+  return [view.x + (e.clientX - r.left - canvas.width / 2) / view.scale,
+          view.y - (e.clientY - r.top - canvas.height / 2) / view.scale];
+}
+
+async function order(body) {
+  const r = await fetch("/api/command", { method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify(body) });
+  const text = await r.text();
+  if (!r.ok) notice = { text: `${body.device}: ${text}`, until: Date.now() + 5000 };
+  return r.ok;
+}
+
+// A goal or a pose: pressed where it is, dragged the way it faces.
+let aim = null;
 let drag = null;
-canvas.addEventListener("mousedown", e => { drag = [e.clientX, e.clientY]; canvas.classList.add("dragging"); });
-window.addEventListener("mouseup", () => { drag = null; canvas.classList.remove("dragging"); });
+canvas.addEventListener("mousedown", e => {
+  if (tool() === "pan") {
+    drag = [e.clientX, e.clientY];
+    canvas.classList.add("dragging");
+  } else {
+    const at = toWorld(e);
+    aim = { from: at, pose: [at[0], at[1], 0] };
+  }
+});
+window.addEventListener("mouseup", e => {
+  drag = null;
+  canvas.classList.remove("dragging");
+  if (!aim) return;
+  const p = aim.pose;
+  aim = null;
+  if (tool() === "goal" && plannerSelect.value) order({ device: plannerSelect.value, goal: p });
+  if (tool() === "pose" && localizerSelect.value) order({ device: localizerSelect.value, pose: p });
+  redraw();
+});
 window.addEventListener("mousemove", e => {
+  if (aim) {
+    const at = toWorld(e);
+    const [dx, dy] = [at[0] - aim.from[0], at[1] - aim.from[1]];
+    if (Math.hypot(dx, dy) > 0.05) aim.pose[2] = Math.atan2(dy, dx);
+    redraw();
+    return;
+  }
   if (!drag) return;
   view.x -= (e.clientX - drag[0]) / view.scale;
   view.y += (e.clientY - drag[1]) / view.scale;
@@ -215,6 +340,30 @@ canvas.addEventListener("wheel", e => {
 }, { passive: false });
 window.addEventListener("resize", redraw);
 
+// Teleop: the keys held give speeds, sent ten times a second while held
+// and a stop once all are let go.
+const held = new Set();
+const KEYS = { ArrowUp: "f", w: "f", ArrowDown: "b", s: "b", ArrowLeft: "l", a: "l", ArrowRight: "r", d: "r" };
+function speeds() {
+  const v = (held.has("f") ? 0.4 : 0) - (held.has("b") ? 0.4 : 0);
+  const w = (held.has("l") ? 0.8 : 0) - (held.has("r") ? 0.8 : 0);
+  return [v, 0, w];
+}
+window.addEventListener("keydown", e => {
+  const k = KEYS[e.key];
+  if (!k || !teleopSelect.value || e.target.tagName === "SELECT") return;
+  e.preventDefault();
+  held.add(k);
+});
+window.addEventListener("keyup", e => {
+  const k = KEYS[e.key];
+  if (!k || !held.delete(k) || !teleopSelect.value) return;
+  if (!held.size) order({ device: teleopSelect.value, vel: [0, 0, 0] });
+});
+setInterval(() => {
+  if (held.size && teleopSelect.value) order({ device: teleopSelect.value, vel: speeds() });
+}, 100);
+
 (async () => {
   try {
     await loadWorlds();
@@ -226,7 +375,8 @@ window.addEventListener("resize", redraw);
   size();
   if (!view.fixed) fit();
   draw();
-  document.body.dataset.ready = "1";
+  // ?still: this moment only (for a screenshot), no stream.
+  if (params.has("still")) return;
   const events = new EventSource("/api/stream");
   events.onmessage = m => onFrame(JSON.parse(m.data));
   events.onerror = () => { statusLine.textContent = "reconnecting to the view server…"; };
