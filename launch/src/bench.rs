@@ -65,6 +65,7 @@ pub fn run(cmd: BenchCmd, z: &ZenohArgs) -> anyhow::Result<()> {
         BenchCmd::Nav(a) => crate::navbench::nav_bench(&a),
         BenchCmd::Serial(a) => crate::serialbench::run(&a),
         BenchCmd::Record(a) => crate::mcaplog::bench(&a),
+        BenchCmd::View(a) => crate::viewbench::run(&a),
     }
 }
 

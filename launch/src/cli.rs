@@ -369,6 +369,10 @@ pub enum BenchCmd {
     #[command(after_help = "Example:
   cargo run --release -- bench record --seconds 20")]
     Record(crate::mcaplog::RecordBenchArgs),
+    /// `troupe view` under load: 100 Pioneers in real time, headless browsers on its page: their frame rates, the server's CPU, the robots' data rates.
+    #[command(after_help = "Example:
+  cargo run --release -- bench view --browsers 0,1,20 --bitmaps ../shared/compat/stage/bitmaps")]
+    View(crate::viewbench::ViewBenchArgs),
     /// The echo side of `bench latency` (started by it).
     #[command(hide = true)]
     Pong {

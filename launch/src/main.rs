@@ -21,6 +21,7 @@ mod serialbench;
 mod supervisor;
 mod tools;
 mod view;
+mod viewbench;
 
 use std::io::Write;
 use std::process::ExitCode;

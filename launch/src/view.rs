@@ -57,6 +57,9 @@ const WORLD_TIMEOUT: Duration = Duration::from_secs(5);
 const PARTICLES_EVERY: Duration = Duration::from_millis(500);
 const PARTICLES_SHOWN: usize = 400;
 
+/// How long a page's report of its frame rate counts (pages report every 2 s).
+const REPORTS_KEPT: Duration = Duration::from_secs(5);
+
 /// What the page's handlers share: the newest samples and the session.
 type App = (Arc<Shared>, troupe_node::zenoh::Session);
 
@@ -80,6 +83,9 @@ struct Latest {
     nav: BTreeMap<Device, Value>,
     /// Simulated seconds against wall seconds, over the last second or so.
     pace: Pace,
+    /// The frame rates pages opened with `?report` say they draw at, and
+    /// when they said it.
+    pages: BTreeMap<String, (Instant, [f64; 2])>,
 }
 
 /// The simulation's speed against real time.
@@ -158,6 +164,17 @@ impl Shared {
             })
             .collect();
         json!({ "worlds": worlds })
+    }
+
+    /// The frame rates pages reported in the last [`REPORTS_KEPT`], with
+    /// the milliseconds a frame took them to draw.
+    fn reports(&self) -> BTreeMap<String, [f64; 2]> {
+        let l = self.latest();
+        l.pages
+            .iter()
+            .filter(|(_, (at, _))| at.elapsed() < REPORTS_KEPT)
+            .map(|(page, &(_, fps))| (page.clone(), fps))
+            .collect()
     }
 
     /// The live devices, as `troupe list --json` prints them.
@@ -543,6 +560,18 @@ pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             )
             .route("/api/stream", get(stream))
             .route("/api/command", axum::routing::post(command))
+            .route(
+                "/api/report",
+                axum::routing::post(
+                    |State((s, _)): State<App>, Json(r): Json<Report>| async move {
+                        s.latest()
+                            .pages
+                            .insert(r.page, (Instant::now(), [r.fps, r.ms]));
+                        "noted"
+                    },
+                )
+                .get(|State((s, _)): State<App>| async move { Json(s.reports()) }),
+            )
             .with_state((shared.clone(), session.clone()));
         let listener = tokio::net::TcpListener::bind(SocketAddr::new(a.bind, a.port))
             .await
@@ -590,11 +619,25 @@ async fn stream(
             // Ends with the view (its sender dropped).
             rx.changed().await.ok()?;
             rx.mark_unchanged();
+            // (The period runs from when a frame is begun: making it is
+            // part of the frame's time.)
+            let begun = tokio::time::Instant::now();
             let event = Event::default().data(s.frame().to_string());
-            Some((Ok(event), (s, rx, Some(tokio::time::Instant::now()))))
+            Some((Ok(event), (s, rx, Some(begun))))
         },
     );
     Sse::new(frames).keep_alive(KeepAlive::default())
+}
+
+/// A page's word on how fast it draws (pages opened with `?report`, as
+/// `troupe bench view` opens them).
+#[derive(Debug, serde::Deserialize)]
+struct Report {
+    page: String,
+    /// Frames drawn a second.
+    fps: f64,
+    /// Milliseconds a frame took to draw, on average.
+    ms: f64,
 }
 
 /// What the page asks of a device: a planner's goal, a localizer's pose

@@ -186,7 +186,15 @@ function size() {
   }
 }
 
+let drawn = 0, drawing_ms = 0;   // frames drawn and the time it took, for ?report
 function draw() {
+  const t0 = performance.now();
+  paint();
+  drawn++;
+  drawing_ms += performance.now() - t0;
+}
+
+function paint() {
   size();
   if (follow) {
     for (const w of worlds) {
@@ -375,6 +383,18 @@ setInterval(() => {
   size();
   if (!view.fixed) fit();
   draw();
+  // ?report: say how many frames a second this page draws, every 2 s.
+  if (params.has("report")) {
+    const page = Math.random().toString(36).slice(2);
+    let [then, before, spent] = [performance.now(), drawn, drawing_ms];
+    setInterval(() => {
+      const now = performance.now();
+      const fps = (drawn - before) * 1000 / (now - then);
+      const ms = (drawing_ms - spent) / Math.max(drawn - before, 1);
+      [then, before, spent] = [now, drawn, drawing_ms];
+      fetch("/api/report", { method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify({ page, fps, ms }) });
+    }, 2000);
+  }
   // ?still: this moment only (for a screenshot), no stream.
   if (params.has("still")) return;
   const events = new EventSource("/api/stream");
