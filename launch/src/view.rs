@@ -28,8 +28,8 @@ use axum::Router;
 use serde_json::{json, Value};
 use tokio::sync::watch;
 use troupe_msgs::{
-    codec, keys, laser, localize, planner, position2d, ranger, simulation, sonar, Command as _,
-    Device, Interface, Pose2d, Request as _,
+    codec, keys, laser, localize, map, planner, position2d, ranger, simulation, sonar,
+    Command as _, Device, Interface, Pose2d, Request as _,
 };
 use troupe_node::zenoh::sample::SampleKind;
 use troupe_node::ZenohArgs;
@@ -74,6 +74,8 @@ struct Latest {
     devices: BTreeMap<Device, String>,
     /// Each simulator's world, by its simulation device.
     worlds: BTreeMap<Device, simulation::World>,
+    /// Each map device's grid and its picture (PNG).
+    maps: BTreeMap<Device, (map::Info, Arc<Vec<u8>>)>,
     /// Each simulator's newest poses.
     poses: BTreeMap<Device, simulation::Poses>,
     /// Each range device's newest readings.
@@ -163,7 +165,20 @@ impl Shared {
                 json!({ "simulation": addr(sim), "resolution": w.resolution, "models": models, "devices": devices })
             })
             .collect();
-        json!({ "worlds": worlds })
+        let maps: Vec<Value> = l
+            .maps
+            .iter()
+            .map(|(d, (info, _))| {
+                json!({
+                    "device": addr(d),
+                    "width": info.width,
+                    "height": info.height,
+                    "resolution": info.resolution,
+                    "origin": pose(&info.origin),
+                })
+            })
+            .collect();
+        json!({ "worlds": worlds, "maps": maps })
     }
 
     /// The frame rates pages reported in the last [`REPORTS_KEPT`], with
@@ -219,6 +234,7 @@ impl Shared {
             "time": time,
             "speed": l.pace.speed,
             "devices": l.devices.len(),
+            "maps": l.maps.len(),
             "poses": poses,
             "scans": scans,
             "nav": nav,
@@ -433,6 +449,79 @@ async fn fetch_world(session: troupe_node::zenoh::Session, shared: Arc<Shared>, 
     }
 }
 
+/// Asks map device `dev` for its info and every cell, and keeps its
+/// picture: free cells white, unknown grey, occupied black, north up.
+async fn fetch_map(session: troupe_node::zenoh::Session, shared: Arc<Shared>, dev: Device) {
+    async fn ask<R: troupe_msgs::Request>(
+        session: &troupe_node::zenoh::Session,
+        dev: Device,
+        req: &R,
+    ) -> Result<R::Reply, String> {
+        let key = keys::req(&dev, R::NAME);
+        let replies = troupe_node::ask(session, &key, WORLD_TIMEOUT)
+            .payload(codec::encode(req, 0.0))
+            .await
+            .map_err(|e| e.to_string())?;
+        let reply = replies
+            .recv_async()
+            .await
+            .map_err(|_| "no answer".to_owned())?
+            .into_result()
+            .map_err(|_| "refused".to_owned())?;
+        codec::decode::<R::Reply>(&reply.payload().to_bytes())
+            .map(|s| s.msg)
+            .map_err(|e| e.to_string())
+    }
+    let picture = async {
+        let info = ask(&session, dev, &map::GetInfo).await?;
+        let whole = map::GetData {
+            col: 0,
+            row: 0,
+            width: info.width,
+            height: info.height,
+        };
+        let tile = ask(&session, dev, &whole).await?;
+        let grid = troupe_geom::OccMap::from_tile(info, &tile)?;
+        let (w, h) = grid.size();
+        let img = image::GrayImage::from_fn(w as u32, h as u32, |x, y| {
+            let v = grid.get(i64::from(x), h as i64 - 1 - i64::from(y));
+            image::Luma([match v {
+                Some(c) if c < 0 => 255,
+                Some(0) | None => 200,
+                Some(_) => 0,
+            }])
+        });
+        let mut png = Vec::new();
+        img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+            .map_err(|e| e.to_string())?;
+        Ok::<_, String>((info, png))
+    };
+    match picture.await {
+        Ok((info, png)) => {
+            tracing::info!("{dev}: a map of {}x{} cells", info.width, info.height);
+            shared.latest().maps.insert(dev, (info, Arc::new(png)));
+            shared.touch();
+        }
+        Err(e) => tracing::warn!("{dev}: cannot draw its map: {e}"),
+    }
+}
+
+/// `GET /api/map/6665:map:0`: a map device's picture.
+async fn map_picture(
+    State((s, _)): State<App>,
+    axum::extract::Path(dev): axum::extract::Path<String>,
+) -> Response {
+    let found = dev
+        .parse::<troupe_msgs::DevAddr>()
+        .ok()
+        .map(|a| a.device(troupe_msgs::DEFAULT_ROBOT))
+        .and_then(|d| s.latest().maps.get(&d).map(|(_, png)| png.clone()));
+    match found {
+        Some(png) => ([(header::CONTENT_TYPE, "image/png")], png.as_ref().clone()).into_response(),
+        None => (axum::http::StatusCode::NOT_FOUND, format!("no map `{dev}`")).into_response(),
+    }
+}
+
 /// `troupe view`.
 pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     crate::cli::supervised()?;
@@ -463,6 +552,9 @@ pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
                         if dev.interface == Interface::Simulation {
                             handle.spawn(fetch_world(sess.clone(), s.clone(), dev));
                         }
+                        if dev.interface == Interface::Map {
+                            handle.spawn(fetch_map(sess.clone(), s.clone(), dev));
+                        }
                         if DRAWN.contains(&dev.interface) {
                             handle.spawn(fetch_latest(sess.clone(), s.clone(), dev));
                         }
@@ -470,6 +562,7 @@ pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
                     SampleKind::Delete => {
                         l.devices.remove(&dev);
                         l.worlds.remove(&dev);
+                        l.maps.remove(&dev);
                         l.poses.remove(&dev);
                         l.scans.remove(&dev);
                     }
@@ -559,6 +652,7 @@ pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
                 get(|State((s, _)): State<App>| async move { Json(s.frame()) }),
             )
             .route("/api/stream", get(stream))
+            .route("/api/map/{device}", get(map_picture))
             .route("/api/command", axum::routing::post(command))
             .route(
                 "/api/report",

@@ -362,3 +362,81 @@ fn the_view_gives_goals_and_sets_poses() {
     assert!(view.terminate().success(), "{}", view.stderr());
     assert!(launcher.terminate().success(), "{}", launcher.stderr());
 }
+
+/// Without a simulator, the view draws the map devices (worlds/map.cfg:
+/// mapfile and its two filters): each one's picture is its grid, free
+/// cells white and occupied black, north up.
+#[test]
+fn the_view_draws_map_devices() {
+    use troupe_client::{Client, MapProxy};
+    let cfg = Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/map.cfg");
+    let ns = troupe_tests::unique_namespace("viewmap");
+    let mut launcher = troupe_tests::launch(&ns, &cfg, &[]);
+    let (router, _) = troupe_tests::launch_ports(&mut launcher);
+    let mut view = Proc::troupe(
+        "view",
+        &strings(&[
+            "--namespace",
+            &ns,
+            "--connect",
+            &router,
+            "view",
+            "--port",
+            "0",
+        ]),
+    );
+    let line = view.first_line();
+    let base = line
+        .trim()
+        .strip_prefix("troupe view: ")
+        .expect("the view's address")
+        .to_owned();
+    frame_where(&base, |f| f["maps"] == 3);
+    let world = json(&base, "/api/world");
+    let maps = world["maps"].as_array().unwrap();
+    let names: Vec<&str> = maps.iter().map(|m| m["device"].as_str().unwrap()).collect();
+    assert_eq!(names, ["6665:map:0", "6665:map:1", "6665:map:2"]);
+
+    // map:0's picture against its cells, as a Player client reads them.
+    let client = Client::with_session(troupe_tests::client_at(&router, &ns), 6665);
+    let mut map = MapProxy::new(&client, 0);
+    map.request_map().unwrap();
+    let (w, h) = (map.width(), map.height());
+    assert_eq!(
+        (maps[0]["width"].as_u64(), maps[0]["height"].as_u64()),
+        (Some(w.into()), Some(h.into()))
+    );
+    let host = base.trim_start_matches("http://").trim_end_matches('/');
+    let mut s = TcpStream::connect(host).unwrap();
+    s.set_read_timeout(Some(DEADLINE)).unwrap();
+    write!(
+        s,
+        "GET /api/map/6665:map:0 HTTP/1.0\r\nHost: {host}\r\n\r\n"
+    )
+    .unwrap();
+    let mut all = Vec::new();
+    s.read_to_end(&mut all).unwrap();
+    let at = all.windows(4).position(|b| b == b"\r\n\r\n").unwrap() + 4;
+    assert!(String::from_utf8_lossy(&all[..at]).contains("image/png"));
+    let img = image::load_from_memory(&all[at..]).unwrap().to_luma8();
+    assert_eq!(img.dimensions(), (w, h));
+    let (mut free, mut occupied) = (0, 0);
+    for j in 0..h {
+        for i in 0..w {
+            let want = match map.cell(i, j) {
+                Some(c) if c < 0 => 255,
+                Some(0) | None => 200,
+                Some(_) => 0,
+            };
+            assert_eq!(img.get_pixel(i, h - 1 - j).0[0], want, "cell ({i}, {j})");
+            free += usize::from(want == 255);
+            occupied += usize::from(want == 0);
+        }
+    }
+    assert!(free > 0 && occupied > 0, "{free} free, {occupied} occupied");
+    let (code, _) = get(&base, "/api/map/6665:map:9");
+    assert_eq!(code, 404);
+
+    assert!(view.terminate().success(), "{}", view.stderr());
+    assert!(launcher.terminate().success(), "{}", launcher.stderr());
+}

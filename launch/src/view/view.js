@@ -11,6 +11,7 @@ const localizerSelect = document.getElementById("localizer");
 const teleopSelect = document.getElementById("teleop");
 
 let worlds = [];          // from /api/world
+let maps = [];            // map devices, from /api/world, each with its picture
 let frame = null;         // the newest frame
 let deviceCount = -1;     // devices listed, to refresh the table when it changes
 let notice = null;        // a refused order, shown for a few seconds
@@ -43,6 +44,10 @@ function poseOf(world, id) {
 
 function fit() {
   let lo = [Infinity, Infinity], hi = [-Infinity, -Infinity];
+  for (const m of maps) {
+    lo = [Math.min(lo[0], m.origin[0]), Math.min(lo[1], m.origin[1])];
+    hi = [Math.max(hi[0], m.origin[0] + m.width * m.resolution), Math.max(hi[1], m.origin[1] + m.height * m.resolution)];
+  }
   for (const w of worlds) {
     w.models.forEach((m, id) => {
       const p = poseOf(w, id);
@@ -204,6 +209,14 @@ function paint() {
   }
   ctx.fillStyle = "#fff";
   ctx.fillRect(0, 0, canvas.width, canvas.height);
+  // Map devices' grids under everything (north up; their origin is the
+  // corner of cell (0, 0)).
+  ctx.imageSmoothingEnabled = false;
+  for (const m of maps) {
+    if (!m.image.complete) continue;
+    const [sx, sy] = toScreen(m.origin[0], m.origin[1] + m.height * m.resolution);
+    ctx.drawImage(m.image, sx, sy, m.width * m.resolution * view.scale, m.height * m.resolution * view.scale);
+  }
   for (const w of worlds) {
     // The still world first, then what moves, each over its parent.
     w.models.forEach((m, id) => { if (!m.moves) drawModel(w, id); });
@@ -226,7 +239,7 @@ function paint() {
   if (frame && frame.time !== null) parts.push(`${frame.time.toFixed(1)} s simulated`);
   if (frame && frame.speed !== null) parts.push(`${frame.speed.toFixed(1)}× real time`);
   if (frame) parts.push(`${frame.devices} devices`);
-  if (!worlds.length) parts.push("no simulator yet");
+  if (!worlds.length && !maps.length) parts.push("no simulator or map yet");
   if (notice && Date.now() < notice.until) parts.push(notice.text);
   statusLine.textContent = parts.join(" · ") || "waiting for data…";
 }
@@ -245,7 +258,16 @@ async function getJson(path) {
 }
 
 async function loadWorlds() {
-  worlds = (await getJson("/api/world")).worlds;
+  const all = await getJson("/api/world");
+  worlds = all.worlds;
+  const pictures = await Promise.all(all.maps.map(m => new Promise(done => {
+    const image = new Image();
+    image.onload = image.onerror = () => done({ ...m, image });
+    image.src = `/api/map/${m.device}`;
+  })));
+  // Each robot's first map (a stack's filters serve others from it).
+  const robot = m => m.device.split(":")[0];
+  maps = pictures.filter((m, k) => pictures.findIndex(o => robot(o) === robot(m)) === k);
   const names = [];
   for (const w of worlds) for (const m of w.models) if (m.moves && m.parent === null) names.push(m.name);
   followSelect.innerHTML = '<option value="">(nothing)</option>' +
@@ -273,7 +295,7 @@ async function loadDevices() {
 function onFrame(f) {
   frame = f;
   const known = new Set(worlds.map(w => w.simulation));
-  if (Object.keys(f.poses).some(s => !known.has(s))) loadWorlds().then(redraw, () => {});
+  if (Object.keys(f.poses).some(s => !known.has(s)) || f.maps !== maps.length) loadWorlds().then(redraw, () => {});
   if (f.devices !== deviceCount) loadDevices().catch(() => {});
   redraw();
 }
