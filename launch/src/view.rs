@@ -28,7 +28,7 @@ use axum::Router;
 use serde_json::{json, Value};
 use tokio::sync::watch;
 use troupe_msgs::{
-    codec, keys, laser, localize, map, planner, position2d, ranger, simulation, sonar,
+    codec, keys, laser, localize, map, planner, position2d, power, ranger, simulation, sonar,
     Command as _, Device, Interface, Pose2d, Request as _,
 };
 use troupe_node::zenoh::sample::SampleKind;
@@ -78,8 +78,9 @@ struct Latest {
     maps: BTreeMap<Device, (map::Info, Arc<Vec<u8>>)>,
     /// Each simulator's newest poses.
     poses: BTreeMap<Device, simulation::Poses>,
-    /// Each range device's newest readings.
-    scans: BTreeMap<Device, Value>,
+    /// The newest readings of each device the page shows: ranges,
+    /// odometry, power.
+    readings: BTreeMap<Device, Value>,
     /// Each localizer's newest hypotheses and particles, each planner's
     /// newest state and path.
     nav: BTreeMap<Device, Value>,
@@ -226,8 +227,11 @@ impl Shared {
                 (addr(sim), Value::Object(list))
             })
             .collect();
-        let scans: serde_json::Map<String, Value> =
-            l.scans.iter().map(|(d, s)| (addr(d), s.clone())).collect();
+        let readings: serde_json::Map<String, Value> = l
+            .readings
+            .iter()
+            .map(|(d, s)| (addr(d), s.clone()))
+            .collect();
         let nav: serde_json::Map<String, Value> =
             l.nav.iter().map(|(d, s)| (addr(d), s.clone())).collect();
         json!({
@@ -236,7 +240,7 @@ impl Shared {
             "devices": l.devices.len(),
             "maps": l.maps.len(),
             "poses": poses,
-            "scans": scans,
+            "readings": readings,
             "nav": nav,
         })
     }
@@ -358,7 +362,9 @@ async fn ask_nav(session: troupe_node::zenoh::Session, shared: Arc<Shared>, dev:
 }
 
 /// The interfaces whose data the page draws.
-const DRAWN: [Interface; 6] = [
+const DRAWN: [Interface; 8] = [
+    Interface::Position2d,
+    Interface::Power,
     Interface::Simulation,
     Interface::Laser,
     Interface::Ranger,
@@ -410,6 +416,14 @@ fn take(shared: &Shared, dev: Device, payload: &[u8]) {
         Interface::Ranger => codec::decode::<ranger::Ranges>(payload)
             .ok()
             .map(|r| json!({ "kind": "ranger", "ranges": ranges(r.msg.ranges) })),
+        Interface::Position2d => codec::decode::<position2d::Data>(payload).ok().map(|d| {
+            let d = d.msg;
+            json!({ "kind": "position2d", "pose": pose(&d.pose), "vel": pose(&d.vel), "stall": d.stall })
+        }),
+        Interface::Power => codec::decode::<power::Data>(payload).ok().map(|d| {
+            let d = d.msg;
+            json!({ "kind": "power", "valid": d.valid, "volts": d.volts, "percent": d.percent, "charging": d.charging })
+        }),
         Interface::Sonar => codec::decode::<sonar::Ranges>(payload).ok().map(|r| {
             json!({ "kind": "ranger", "ranges": ranges(r.msg.ranges.iter().map(|&v| f64::from(v))) })
         }),
@@ -417,7 +431,7 @@ fn take(shared: &Shared, dev: Device, payload: &[u8]) {
     };
     // (A ranger's intensities share its key: they are not drawn.)
     if let Some(scan) = scan {
-        shared.latest().scans.insert(dev, scan);
+        shared.latest().readings.insert(dev, scan);
         shared.touch();
     }
 }
@@ -564,7 +578,7 @@ pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
                         l.worlds.remove(&dev);
                         l.maps.remove(&dev);
                         l.poses.remove(&dev);
-                        l.scans.remove(&dev);
+                        l.readings.remove(&dev);
                     }
                 }
                 drop(l);
@@ -616,6 +630,8 @@ pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             Interface::Laser,
             Interface::Ranger,
             Interface::Sonar,
+            Interface::Position2d,
+            Interface::Power,
         ] {
             let s = shared.clone();
             subs.push(

@@ -119,7 +119,7 @@ fn the_view_draws_the_world_where_the_simulator_has_it() {
     // beams on the wall's face, 1.9 m ahead.
     let f = frame_where(&base, |f| {
         f["devices"] == 3
-            && f["scans"]["6665:ranger:0"].is_object()
+            && f["readings"]["6665:ranger:0"].is_object()
             && f["poses"]["6665:simulation:0"].is_object()
     });
     let world = json(&base, "/api/world");
@@ -143,12 +143,13 @@ fn the_view_draws_the_world_where_the_simulator_has_it() {
     );
     let pose = &f["poses"]["6665:simulation:0"][r0.to_string()];
     assert_eq!(pose, &serde_json::json!([0.0, 0.0, 0.0]), "{f}");
-    let ranges = f["scans"]["6665:ranger:0"]["ranges"].as_array().unwrap();
+    let ranges = f["readings"]["6665:ranger:0"]["ranges"].as_array().unwrap();
     assert_eq!(ranges.len(), 90);
     for k in [44, 45] {
         let r = ranges[k].as_f64().unwrap();
         assert!((r - 1.9).abs() < 0.03, "beam {k}: {r} m");
     }
+    assert_eq!(f["readings"]["6665:position2d:0"]["kind"], "position2d");
     let ranger = w["devices"]
         .as_array()
         .unwrap()
@@ -254,7 +255,7 @@ fn screenshot_shows_the_world(browser: &Path, base: &str, dir: &Path) {
         .arg(format!("--screenshot={}", shot.display()))
         // (`still`: this moment, no stream; the budget lets it load.)
         .arg("--virtual-time-budget=5000")
-        .arg(format!("{base}?still&x=0&y=0&scale=50"))
+        .arg(format!("{base}?still&x=0&y=0&scale=50&device=6665:ranger:0"))
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())
         .status()
@@ -272,6 +273,16 @@ fn screenshot_shows_the_world(browser: &Path, base: &str, dir: &Path) {
     assert_eq!(px(2.0, 1.0), [0, 0, 0], "the wall");
     // Open floor behind the robot: white.
     assert_eq!(px(-3.0, 3.0), [255, 255, 255], "the floor");
+    // The ranger's panel (as playerv's): its ranges plotted in blue, in
+    // the side panel.
+    let plotted = (640..900)
+        .flat_map(|x| (0..600).map(move |y| (x, y)))
+        .filter(|&(x, y)| {
+            let [r, g, b] = img.get_pixel(x, y).0;
+            b > 150 && r < 60 && g < 120
+        })
+        .count();
+    assert!(plotted > 50, "{plotted} plot pixels in the side panel");
 }
 
 /// The navigation stack of worlds/nav.cfg under the view: amcl's estimate

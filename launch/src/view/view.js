@@ -9,6 +9,7 @@ const deviceTable = document.getElementById("devices");
 const plannerSelect = document.getElementById("planner");
 const localizerSelect = document.getElementById("localizer");
 const teleopSelect = document.getElementById("teleop");
+const panel = document.getElementById("panel");
 
 let worlds = [];          // from /api/world
 let maps = [];            // map devices, from /api/world, each with its picture
@@ -23,6 +24,7 @@ if (view.fixed) {
   view.scale = parseFloat(params.get("scale"));
 }
 let follow = params.get("follow") || "";
+let chosen = params.get("device") || "";   // the device whose panel is open ("6665:laser:0")
 
 // The world frame to the canvas: x right, y up, `scale` pixels per metre.
 function toScreen(x, y) {
@@ -86,7 +88,7 @@ function drawModel(w, id) {
 // Rays of one range device: a laser's fan, or a ranger's sensors (a fan each,
 // or one ray each when the device reports one reading per sensor).
 function drawScan(w, d) {
-  const scan = frame && frame.scans[d.device];
+  const scan = frame && frame.readings[d.device];
   if (!scan || !d.sensors.length) return;
   const base = poseOf(w, d.model);
   const rays = [];
@@ -288,8 +290,10 @@ async function loadDevices() {
   offer(plannerSelect, list, "planner", false);
   offer(localizerSelect, list, "localize", false);
   offer(teleopSelect, list, "position2d", true);
-  deviceTable.innerHTML = list.map(d =>
-    `<tr><td class="robot">${d.robot}</td><td>${d.device}</td><td>${d.driver}</td></tr>`).join("");
+  deviceTable.innerHTML = list.map(d => {
+    const key = `${d.robot}:${d.device}`;
+    return `<tr data-key="${key}"${key === chosen ? ' class="chosen"' : ""}><td class="robot">${d.robot}</td><td>${d.device}</td><td>${d.driver}</td></tr>`;
+  }).join("");
 }
 
 function onFrame(f) {
@@ -297,7 +301,63 @@ function onFrame(f) {
   const known = new Set(worlds.map(w => w.simulation));
   if (Object.keys(f.poses).some(s => !known.has(s)) || f.maps !== maps.length) loadWorlds().then(redraw, () => {});
   if (f.devices !== deviceCount) loadDevices().catch(() => {});
+  showPanel();
   redraw();
+}
+
+deviceTable.addEventListener("click", e => {
+  const row = e.target.closest("tr");
+  if (!row) return;
+  chosen = chosen === row.dataset.key ? "" : row.dataset.key;
+  for (const r of deviceTable.rows) r.classList.toggle("chosen", r.dataset.key === chosen);
+  showPanel();
+});
+
+const fmt = (v, d = 3) => (typeof v === "number" ? v.toFixed(d) : "–");
+
+// The chosen device, as playerv shows it: a range plot, odometry and
+// speeds, a power level, a map's picture, an estimate, a plan.
+function showPanel() {
+  if (!chosen) { panel.innerHTML = ""; return; }
+  const iface = chosen.split(":")[1];
+  const r = frame && frame.readings[chosen];
+  const n = frame && frame.nav && frame.nav[chosen];
+  if (iface === "map") {
+    if (!panel.querySelector("img")) panel.innerHTML = `<img src="/api/map/${chosen}" alt="${chosen}">`;
+    return;
+  }
+  if (r && (r.kind === "laser" || r.kind === "ranger")) {
+    let plot = panel.querySelector("canvas");
+    if (!plot) { panel.innerHTML = '<canvas width="236" height="120"></canvas><div></div>'; plot = panel.querySelector("canvas"); }
+    const g = plot.getContext("2d");
+    const top = Math.max(...r.ranges, 0.001);
+    g.clearRect(0, 0, plot.width, plot.height);
+    g.strokeStyle = "#0040c0";
+    g.beginPath();
+    r.ranges.forEach((v, k) => {
+      const x = r.ranges.length > 1 ? k * (plot.width - 1) / (r.ranges.length - 1) : plot.width / 2;
+      const y = plot.height - 1 - v / top * (plot.height - 10);
+      if (k === 0) g.moveTo(x, y); else g.lineTo(x, y);
+    });
+    g.stroke();
+    panel.querySelector("div").textContent = `${r.ranges.length} ranges, ${fmt(Math.min(...r.ranges), 2)}–${fmt(top, 2)} m`;
+    return;
+  }
+  let text = `no reading of ${chosen} yet`;
+  if (r && r.kind === "position2d") {
+    text = `pose ${fmt(r.pose[0])} ${fmt(r.pose[1])} m, ${fmt(r.pose[2] * 180 / Math.PI, 1)}°<br>` +
+      `speed ${fmt(r.vel[0])} m/s, ${fmt(r.vel[2] * 180 / Math.PI, 1)}°/s${r.stall ? "<br><b>stalled</b>" : ""}`;
+  } else if (r && r.kind === "power") {
+    text = [r.valid & 8 ? `${fmt(r.percent, 1)} %` : "", r.valid & 1 ? `${fmt(r.volts, 2)} V` : "", r.charging ? "charging" : ""]
+      .filter(Boolean).join(", ") || "no level given";
+  } else if (n && n.kind === "localize") {
+    text = (n.hypoths || []).map(h => `${fmt(h.mean[0])} ${fmt(h.mean[1])} m, ${fmt(h.mean[2] * 180 / Math.PI, 1)}° (weight ${fmt(h.weight, 2)})`).join("<br>") || "no hypothesis";
+  } else if (n && n.kind === "planner") {
+    text = `goal ${fmt(n.goal[0])} ${fmt(n.goal[1])} m; ${n.valid ? `${(n.waypoints || []).length} waypoints, at ${n.waypoint_idx}` : "no path"}${n.done ? ", done" : ""}`;
+  } else if (!["laser", "ranger", "sonar", "position2d", "power", "localize", "planner", "map"].includes(iface)) {
+    text = `the view has no panel for ${iface} yet`;
+  }
+  panel.innerHTML = `<div>${text}</div>`;
 }
 
 followSelect.addEventListener("change", () => { follow = followSelect.value; redraw(); });
@@ -405,6 +465,7 @@ setInterval(() => {
   size();
   if (!view.fixed) fit();
   draw();
+  showPanel();
   // ?report: say how many frames a second this page draws, every 2 s.
   if (params.has("report")) {
     const page = Math.random().toString(36).slice(2);
