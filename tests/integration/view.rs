@@ -345,6 +345,14 @@ fn the_view_gives_goals_and_sets_poses() {
         &serde_json::json!({"device": "6665:planner:0", "goal": [goal.0, goal.1, 0.0]}),
     );
     assert_eq!(code, 200, "{text}");
+    // The page with the path on it: the README's picture.
+    frame_where(&base, |f| {
+        let p = &f["nav"]["6665:planner:0"];
+        p["valid"] == true && p["waypoints"].as_array().is_some_and(|w| w.len() > 1)
+    });
+    if let Some(browser) = chromium() {
+        readme_picture(&browser, &base);
+    }
     let f = frame_where(&base, |f| {
         let (x, y) = at(f);
         (x - goal.0).hypot(y - goal.1) < 0.5
@@ -450,4 +458,44 @@ fn the_view_draws_map_devices() {
 
     assert!(view.terminate().success(), "{}", view.stderr());
     assert!(launcher.terminate().success(), "{}", launcher.stderr());
+}
+
+/// The README's picture of the view (docs/view.png): worlds/nav.cfg with a
+/// goal given. Checked here for what it must show: amcl's estimate
+/// (magenta) and the planner's path (orange) over the office. With
+/// `TROUPE_BLESS=1` the picture is written to docs/view.png.
+fn readme_picture(browser: &Path, base: &str) {
+    let dir = std::env::temp_dir().join(troupe_tests::unique_namespace("viewshot"));
+    std::fs::create_dir_all(&dir).unwrap();
+    let shot = dir.join("view.png");
+    let status = std::process::Command::new(browser)
+        .args([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--hide-scrollbars",
+        ])
+        .arg(format!(
+            "--user-data-dir={}",
+            dir.join("chromium").display()
+        ))
+        .arg("--window-size=1000,650")
+        .arg(format!("--screenshot={}", shot.display()))
+        .arg("--virtual-time-budget=5000")
+        .arg(format!("{base}?still&device=6665:laser:0"))
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .status()
+        .unwrap();
+    assert!(status.success(), "chromium: {status}");
+    let img = image::open(&shot).unwrap().to_rgb8();
+    let count = |want: [u8; 3]| img.pixels().filter(|p| p.0 == want).count();
+    assert!(count([0xe0, 0x70, 0x00]) > 20, "no planner path drawn");
+    assert!(count([0xc0, 0x00, 0xc0]) > 20, "no amcl estimate drawn");
+    if std::env::var_os("TROUPE_BLESS").is_some() {
+        let to = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/view.png");
+        std::fs::copy(&shot, &to).unwrap();
+        eprintln!("wrote {}", to.display());
+    }
+    let _ = std::fs::remove_dir_all(&dir);
 }
