@@ -34,12 +34,40 @@ fn get(base: &str, path: &str) -> (u32, String) {
     let host = base.trim_start_matches("http://").trim_end_matches('/');
     let mut s = TcpStream::connect(host).unwrap();
     s.set_read_timeout(Some(DEADLINE)).unwrap();
-    write!(s, "GET {path} HTTP/1.0\r\nHost: {host}\r\n\r\n").unwrap();
-    let mut all = String::new();
-    s.read_to_string(&mut all).unwrap();
-    let (head, body) = all.split_once("\r\n\r\n").unwrap();
-    let code = head.split_whitespace().nth(1).unwrap().parse().unwrap();
-    (code, body.to_owned())
+    write!(
+        s,
+        "GET {path} HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap();
+    // The head, then as many bytes as it says (a server may keep the
+    // connection open), or to the end.
+    let mut r = BufReader::new(s);
+    let mut head = Vec::new();
+    loop {
+        let mut line = String::new();
+        r.read_line(&mut line).unwrap();
+        if line.trim().is_empty() {
+            break;
+        }
+        head.push(line);
+    }
+    let code = head[0].split_whitespace().nth(1).unwrap().parse().unwrap();
+    let length = head.iter().find_map(|h| {
+        let (k, v) = h.split_once(':')?;
+        k.eq_ignore_ascii_case("content-length")
+            .then(|| v.trim().parse::<usize>().ok())?
+    });
+    let mut body = Vec::new();
+    match length {
+        Some(n) => {
+            body.resize(n, 0);
+            r.read_exact(&mut body).unwrap();
+        }
+        None => {
+            r.read_to_end(&mut body).unwrap();
+        }
+    }
+    (code, String::from_utf8(body).unwrap())
 }
 
 fn json(base: &str, path: &str) -> Value {
@@ -286,9 +314,11 @@ fn screenshot_shows_the_world(browser: &Path, base: &str, dir: &Path) {
 }
 
 /// The navigation stack of worlds/nav.cfg under the view: amcl's estimate
-/// and the planner's state reach the page; a goal the page gives
-/// (rviz's "2D Goal") takes r0 there, a pose it sets ("2D Pose Estimate")
-/// moves amcl's estimate.
+/// and the planner's state reach the page; in a real browser (driven over
+/// the DevTools protocol, mouse events as a person's) a goal pressed and
+/// dragged on the map (rviz's "2D Goal") takes r0 there, and a pose set
+/// the same way ("2D Pose Estimate") moves amcl's estimate. Without
+/// chromium (outside CI) the same orders go through the page's HTTP API.
 #[test]
 fn the_view_gives_goals_and_sets_poses() {
     let cfg = Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/nav.cfg");
@@ -314,7 +344,10 @@ fn the_view_gives_goals_and_sets_poses() {
         .expect("the view's address")
         .to_owned();
     let f = frame_where(&base, |f| {
-        f["nav"]["6665:localize:0"]["hypoths"].is_array()
+        f["poses"]["6665:simulation:0"]
+            .as_object()
+            .is_some_and(|p| !p.is_empty())
+            && f["nav"]["6665:localize:0"]["hypoths"].is_array()
             && f["nav"]["6665:planner:0"]["kind"] == "planner"
     });
     let world = json(&base, "/api/world");
@@ -340,11 +373,21 @@ fn the_view_gives_goals_and_sets_poses() {
 
     // A goal in the room's east end: the planner takes it and r0 gets there.
     let goal = (4.0, -6.0);
-    let (code, text) = post(
-        &base,
-        &serde_json::json!({"device": "6665:planner:0", "goal": [goal.0, goal.1, 0.0]}),
-    );
-    assert_eq!(code, 200, "{text}");
+    // In a real browser: pick "give a goal", press on the goal, drag east.
+    let browser = chromium().map(|b| Page::open(&b, &format!("{base}?x=0&y=0&scale=30")));
+    match &browser {
+        Some(page) => {
+            page.click_element("input[value=goal]");
+            page.drag(page.at(goal), page.at((goal.0 + 1.0, goal.1)));
+        }
+        None => {
+            let (code, text) = post(
+                &base,
+                &serde_json::json!({"device": "6665:planner:0", "goal": [goal.0, goal.1, 0.0]}),
+            );
+            assert_eq!(code, 200, "{text}");
+        }
+    }
     // The page with the path on it: the README's picture.
     frame_where(&base, |f| {
         let p = &f["nav"]["6665:planner:0"];
@@ -357,19 +400,30 @@ fn the_view_gives_goals_and_sets_poses() {
         let (x, y) = at(f);
         (x - goal.0).hypot(y - goal.1) < 0.5
     });
-    assert_eq!(
-        f["nav"]["6665:planner:0"]["goal"],
-        serde_json::json!([4.0, -6.0, 0.0])
+    // Where it was pressed, to the pixel (1/30 m), facing the drag.
+    let g: Vec<f64> = serde_json::from_value(f["nav"]["6665:planner:0"]["goal"].clone()).unwrap();
+    assert!(
+        (g[0] - goal.0).abs() < 0.05 && (g[1] - goal.1).abs() < 0.05 && g[2].abs() < 0.05,
+        "goal {g:?}"
     );
 
     // A pose a metre off the truth: amcl's estimate goes there.
     let (x, y) = at(&f);
     let set = (x, y + 1.0);
-    let (code, text) = post(
-        &base,
-        &serde_json::json!({"device": "6665:localize:0", "pose": [set.0, set.1, 0.0]}),
-    );
-    assert_eq!(code, 200, "{text}");
+    // "set the pose": press where r0 is said to be, drag east.
+    match &browser {
+        Some(page) => {
+            page.click_element("input[value=pose]");
+            page.drag(page.at(set), page.at((set.0 + 1.0, set.1)));
+        }
+        None => {
+            let (code, text) = post(
+                &base,
+                &serde_json::json!({"device": "6665:localize:0", "pose": [set.0, set.1, 0.0]}),
+            );
+            assert_eq!(code, 200, "{text}");
+        }
+    }
     frame_where(&base, |f| {
         f["nav"]["6665:localize:0"]["hypoths"][0]["mean"]
             .as_array()
@@ -378,6 +432,7 @@ fn the_view_gives_goals_and_sets_poses() {
             })
     });
 
+    drop(browser);
     assert!(view.terminate().success(), "{}", view.stderr());
     assert!(launcher.terminate().success(), "{}", launcher.stderr());
 }
@@ -458,6 +513,183 @@ fn the_view_draws_map_devices() {
 
     assert!(view.terminate().success(), "{}", view.stderr());
     assert!(launcher.terminate().success(), "{}", launcher.stderr());
+}
+
+/// A page of headless Chromium, driven over the DevTools protocol: mouse
+/// presses, drags and clicks as a person's, at page coordinates.
+struct Page {
+    browser: std::process::Child,
+    ws: std::cell::RefCell<tungstenite::WebSocket<tungstenite::stream::MaybeTlsStream<TcpStream>>>,
+    next: std::cell::Cell<u64>,
+    /// The view's fixed centre and scale, and the canvas's size.
+    view: (f64, f64, f64),
+    canvas: (f64, f64),
+    _dir: tempdir::Dir,
+}
+
+mod tempdir {
+    /// A directory removed when dropped.
+    pub struct Dir(pub std::path::PathBuf);
+    impl Drop for Dir {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+}
+
+impl Page {
+    /// Opens `url` (with ?x=&y=&scale= fixing the view) in a 1000 × 650
+    /// window and waits until the page has drawn.
+    fn open(browser: &Path, url: &str) -> Page {
+        let dir = tempdir::Dir(std::env::temp_dir().join(troupe_tests::unique_namespace("cdp")));
+        let mut child = std::process::Command::new(browser)
+            .args([
+                "--headless",
+                "--no-sandbox",
+                "--disable-gpu",
+                "--hide-scrollbars",
+            ])
+            .arg("--remote-debugging-port=0")
+            .arg(format!("--user-data-dir={}", dir.0.display()))
+            .arg("--window-size=1000,650")
+            .arg(url)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        // "DevTools listening on ws://127.0.0.1:PORT/devtools/browser/…"
+        let err = child.stderr.take().unwrap();
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            for line in BufReader::new(err).lines().map_while(Result::ok) {
+                if let Some(at) = line.strip_prefix("DevTools listening on ") {
+                    let _ = tx.send(at.to_owned());
+                }
+            }
+        });
+        let browser_ws = rx
+            .recv_timeout(DEADLINE)
+            .expect("chromium's DevTools address");
+        let host = browser_ws
+            .trim_start_matches("ws://")
+            .split('/')
+            .next()
+            .unwrap()
+            .to_owned();
+        let list: Value =
+            serde_json::from_str(&get(&format!("http://{host}/"), "/json/list").1).unwrap();
+        let page = list
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|t| t["type"] == "page")
+            .expect("a page target");
+        let (ws, _) = tungstenite::connect(page["webSocketDebuggerUrl"].as_str().unwrap()).unwrap();
+        let q: std::collections::HashMap<String, f64> = url
+            .split_once('?')
+            .map(|(_, q)| q)
+            .unwrap_or("")
+            .split('&')
+            .filter_map(|kv| kv.split_once('='))
+            .filter_map(|(k, v)| Some((k.to_owned(), v.parse().ok()?)))
+            .collect();
+        let mut p = Page {
+            browser: child,
+            ws: std::cell::RefCell::new(ws),
+            next: std::cell::Cell::new(1),
+            view: (q["x"], q["y"], q["scale"]),
+            canvas: (0.0, 0.0),
+            _dir: dir,
+        };
+        let deadline = Instant::now() + DEADLINE;
+        while p.eval("document.body.dataset.ready || ''") != "1" {
+            assert!(Instant::now() < deadline, "the page never drew");
+        }
+        let size = p.eval("JSON.stringify([document.getElementById('world').width, document.getElementById('world').height])");
+        let size: Vec<f64> = serde_json::from_str(&size).unwrap();
+        p.canvas = (size[0], size[1]);
+        p
+    }
+
+    /// Sends one DevTools command and returns its result.
+    fn call(&self, method: &str, params: Value) -> Value {
+        let id = self.next.get();
+        self.next.set(id + 1);
+        let mut ws = self.ws.borrow_mut();
+        ws.send(tungstenite::Message::Text(
+            serde_json::json!({ "id": id, "method": method, "params": params })
+                .to_string()
+                .into(),
+        ))
+        .unwrap();
+        loop {
+            if let tungstenite::Message::Text(t) = ws.read().unwrap() {
+                let v: Value = serde_json::from_str(&t).unwrap();
+                if v["id"] == id {
+                    assert!(v["error"].is_null(), "{method}: {v}");
+                    return v["result"].clone();
+                }
+            }
+        }
+    }
+
+    /// The value of a JavaScript expression, as a string.
+    fn eval(&self, js: &str) -> String {
+        let r = self.call(
+            "Runtime.evaluate",
+            serde_json::json!({ "expression": js, "returnByValue": true }),
+        );
+        match &r["result"]["value"] {
+            Value::String(s) => s.clone(),
+            v => v.to_string(),
+        }
+    }
+
+    /// The page point of world point `p` (the canvas is at the page's corner).
+    fn at(&self, p: (f64, f64)) -> (f64, f64) {
+        let (x, y, scale) = self.view;
+        (
+            self.canvas.0 / 2.0 + (p.0 - x) * scale,
+            self.canvas.1 / 2.0 - (p.1 - y) * scale,
+        )
+    }
+
+    fn mouse(&self, kind: &str, (x, y): (f64, f64)) {
+        self.call(
+            "Input.dispatchMouseEvent",
+            serde_json::json!({ "type": kind, "x": x, "y": y, "button": "left", "buttons": 1, "clickCount": 1 }),
+        );
+    }
+
+    /// Presses at `from`, moves to `to` and lets go there.
+    fn drag(&self, from: (f64, f64), to: (f64, f64)) {
+        self.mouse("mousePressed", from);
+        self.mouse("mouseMoved", to);
+        self.mouse("mouseReleased", to);
+    }
+
+    /// Clicks the middle of the element `selector` names.
+    fn click_element(&self, selector: &str) {
+        let r = self.eval(&format!(
+            "JSON.stringify((r => [r.x + r.width / 2, r.y + r.height / 2])(document.querySelector('{selector}').getBoundingClientRect()))"
+        ));
+        let r: Vec<f64> = serde_json::from_str(&r).unwrap();
+        self.mouse("mousePressed", (r[0], r[1]));
+        self.mouse("mouseReleased", (r[0], r[1]));
+        assert_eq!(
+            self.eval(&format!(
+                "String(document.querySelector('{selector}').checked)"
+            )),
+            "true"
+        );
+    }
+}
+
+impl Drop for Page {
+    fn drop(&mut self) {
+        let _ = self.browser.kill();
+        let _ = self.browser.wait();
+    }
 }
 
 /// The README's picture of the view (docs/view.png): worlds/nav.cfg with a

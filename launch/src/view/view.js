@@ -466,6 +466,7 @@ setInterval(() => {
   if (!view.fixed) fit();
   draw();
   showPanel();
+  document.body.dataset.ready = "1";
   // ?report: say how many frames a second this page draws, every 2 s.
   if (params.has("report")) {
     const page = Math.random().toString(36).slice(2);
