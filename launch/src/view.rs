@@ -86,6 +86,12 @@ struct Latest {
     nav: BTreeMap<Device, Value>,
     /// Simulated seconds against wall seconds, over the last second or so.
     pace: Pace,
+    /// Each device's updates (samples with a stamp of their own: a
+    /// ranger's ranges and intensities are one update) so far, the last
+    /// stamp, and the count at the last reckoning.
+    updates: BTreeMap<Device, (f64, u64, u64)>,
+    /// Each device's updates a wall second, reckoned every second.
+    rates: BTreeMap<Device, f64>,
     /// The frame rates pages opened with `?report` say they draw at, and
     /// when they said it.
     pages: BTreeMap<String, (Instant, [f64; 2])>,
@@ -234,8 +240,14 @@ impl Shared {
             .collect();
         let nav: serde_json::Map<String, Value> =
             l.nav.iter().map(|(d, s)| (addr(d), s.clone())).collect();
+        let rates: serde_json::Map<String, Value> = l
+            .rates
+            .iter()
+            .map(|(d, r)| (addr(d), json!((r * 10.0).round() / 10.0)))
+            .collect();
         json!({
             "time": time,
+            "rates": rates,
             "speed": l.pace.speed,
             "devices": l.devices.len(),
             "maps": l.maps.len(),
@@ -577,6 +589,7 @@ pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
                         l.devices.remove(&dev);
                         l.worlds.remove(&dev);
                         l.maps.remove(&dev);
+                        l.updates.remove(&dev);
                         l.poses.remove(&dev);
                         l.readings.remove(&dev);
                     }
@@ -604,6 +617,56 @@ pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
                     .await
                     .map_err(|e| anyhow::anyhow!("subscribing to {i} data: {e}"))?,
             );
+        }
+        // Every device's updates, counted; their rates reckoned each second.
+        {
+            let s = shared.clone();
+            subs.push(
+                session
+                    .declare_subscriber(keys::data_all())
+                    .callback(move |sample| {
+                        let Ok(dev) = keys::parse_data(sample.key_expr().as_str()) else {
+                            return;
+                        };
+                        let bytes = sample.payload().to_bytes();
+                        let Ok((_, stamp, _)) = codec::split(&bytes) else {
+                            return;
+                        };
+                        let mut l = s.latest();
+                        let u = l.updates.entry(dev).or_insert((f64::NAN, 0, 0));
+                        if u.0 != stamp {
+                            (u.0, u.1) = (stamp, u.1 + 1);
+                        }
+                    })
+                    .await
+                    .map_err(|e| anyhow::anyhow!("counting the devices' samples: {e}"))?,
+            );
+            let s = shared.clone();
+            tokio::spawn(async move {
+                let mut every = tokio::time::interval(Duration::from_secs(1));
+                let mut then = Instant::now();
+                loop {
+                    every.tick().await;
+                    let wall = then.elapsed().as_secs_f64().max(1e-3);
+                    then = Instant::now();
+                    let mut l = s.latest();
+                    let Latest {
+                        updates,
+                        rates,
+                        devices,
+                        ..
+                    } = &mut *l;
+                    rates.clear();
+                    for (d, u) in updates.iter_mut() {
+                        if devices.contains_key(d) {
+                            rates.insert(*d, (u.1 - u.2) as f64 / wall);
+                        }
+                        u.2 = u.1;
+                    }
+                    drop(l);
+                    s.touch();
+                }
+            });
         }
         // Localizers' particles, twice a second.
         {

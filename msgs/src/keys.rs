@@ -62,6 +62,11 @@ pub fn token_any(dev: &Device) -> String {
     format!("{}/driver/*", data(dev))
 }
 
+/// Selector for the data of every device: `robot/*/*/*`.
+pub fn data_all() -> String {
+    format!("{ROOT}/*/*/*")
+}
+
 /// Selector for the data of every device of `interface`, on every robot:
 /// `robot/*/laser/*`.
 pub fn data_of(interface: Interface) -> String {

@@ -178,6 +178,15 @@ fn the_view_draws_the_world_where_the_simulator_has_it() {
         assert!((r - 1.9).abs() < 0.03, "beam {k}: {r} m");
     }
     assert_eq!(f["readings"]["6665:position2d:0"]["kind"], "position2d");
+    // Each device's rate, as `troupe hz` would count it: the ranger updates
+    // at Stage's 10 Hz (the world runs in real time).
+    // (The first reckoning may cover part of a second: the rate is waited
+    // for, and the stream's deadline fails the test if it never comes.)
+    frame_where(&base, |f| {
+        f["rates"]["6665:ranger:0"]
+            .as_f64()
+            .is_some_and(|r| (8.0..12.0).contains(&r))
+    });
     let ranger = w["devices"]
         .as_array()
         .unwrap()

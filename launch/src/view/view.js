@@ -292,7 +292,7 @@ async function loadDevices() {
   offer(teleopSelect, list, "position2d", true);
   deviceTable.innerHTML = list.map(d => {
     const key = `${d.robot}:${d.device}`;
-    return `<tr data-key="${key}"${key === chosen ? ' class="chosen"' : ""}><td class="robot">${d.robot}</td><td>${d.device}</td><td>${d.driver}</td></tr>`;
+    return `<tr data-key="${key}"${key === chosen ? ' class="chosen"' : ""}><td class="robot">${d.robot}</td><td>${d.device}</td><td>${d.driver}</td><td class="rate"></td></tr>`;
   }).join("");
 }
 
@@ -301,6 +301,11 @@ function onFrame(f) {
   const known = new Set(worlds.map(w => w.simulation));
   if (Object.keys(f.poses).some(s => !known.has(s)) || f.maps !== maps.length) loadWorlds().then(redraw, () => {});
   if (f.devices !== deviceCount) loadDevices().catch(() => {});
+  // Each device's updates a second, as `troupe hz` counts them.
+  for (const row of deviceTable.rows) {
+    const r = f.rates && f.rates[row.dataset.key];
+    row.cells[3].textContent = r === undefined ? "" : `${r.toFixed(r < 10 ? 1 : 0)} Hz`;
+  }
   showPanel();
   redraw();
 }
