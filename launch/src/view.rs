@@ -9,7 +9,9 @@
 //! it draws: the models' poses (`simulation` data) and the range readings.
 //! Each page gets a stream of frames (server-sent events), one at a time,
 //! made when the page can take it and at most `--fps` a second: a slow or
-//! stuck page holds no queue and slows no one else.
+//! stuck page holds no queue and slows no one else. A page says what part
+//! of the world it shows, and its frames carry only what lies there (and
+//! the range devices whose rays may reach into it).
 
 use std::collections::BTreeMap;
 use std::convert::Infallible;
@@ -52,6 +54,10 @@ pub struct ViewArgs {
 /// How long a simulator has to answer for its world (and a driver a request).
 const WORLD_TIMEOUT: Duration = Duration::from_secs(5);
 
+/// How far outside a page's box a model's pose is still sent (a body
+/// reaching into the box is drawn whole).
+const POSE_MARGIN: f64 = 1.0;
+
 /// How often localizers are asked for their particles, and how many of
 /// them a frame carries at most.
 const PARTICLES_EVERY: Duration = Duration::from_millis(500);
@@ -92,6 +98,9 @@ struct Latest {
     updates: BTreeMap<Device, (f64, u64, u64)>,
     /// Each device's updates a wall second, reckoned every second.
     rates: BTreeMap<Device, f64>,
+    /// What each page shows of the world ([x0, y0, x1, y1], metres): its
+    /// frames carry only what lies there.
+    boxes: BTreeMap<String, [f64; 4]>,
     /// The frame rates pages opened with `?report` say they draw at, and
     /// when they said it.
     pages: BTreeMap<String, (Instant, [f64; 2])>,
@@ -214,8 +223,41 @@ impl Shared {
 
     /// One frame: the time, the speed, every moving model's pose and every
     /// range device's readings.
-    fn frame(&self) -> Value {
+    fn frame(&self, page: Option<&str>) -> Value {
         let l = self.latest();
+        // What the page shows (a box of the world, metres), if it said.
+        let seen = page.and_then(|p| l.boxes.get(p)).copied();
+        let inside = |(x, y): (f64, f64), margin: f64| {
+            seen.is_none_or(|[x0, y0, x1, y1]| {
+                x >= x0 - margin && x <= x1 + margin && y >= y0 - margin && y <= y1 + margin
+            })
+        };
+        // A range device is sent when its rays may reach into the box.
+        let mut unseen = std::collections::BTreeSet::new();
+        if seen.is_some() {
+            for (sim, w) in &l.worlds {
+                let live = l.poses.get(sim);
+                for d in &w.devices {
+                    let Some(reach) = d
+                        .sensors
+                        .iter()
+                        .map(|s| f64::from(s.range))
+                        .reduce(f64::max)
+                    else {
+                        continue;
+                    };
+                    let at = live
+                        .and_then(|p| p.poses.iter().find(|(m, _)| *m == d.model))
+                        .map(|(_, p)| *p)
+                        .or_else(|| w.models.get(d.model as usize).map(|m| m.pose));
+                    if let Some([x, y, _]) = at {
+                        if !inside((f64::from(x), f64::from(y)), reach) {
+                            unseen.insert(d.device);
+                        }
+                    }
+                }
+            }
+        }
         let time = l
             .poses
             .values()
@@ -228,6 +270,7 @@ impl Shared {
                 let list: serde_json::Map<String, Value> = p
                     .poses
                     .iter()
+                    .filter(|(_, [x, y, _])| inside((f64::from(*x), f64::from(*y)), POSE_MARGIN))
                     .map(|(m, [x, y, a])| (m.to_string(), json!([round(*x), round(*y), round(*a)])))
                     .collect();
                 (addr(sim), Value::Object(list))
@@ -236,6 +279,7 @@ impl Shared {
         let readings: serde_json::Map<String, Value> = l
             .readings
             .iter()
+            .filter(|(d, _)| !unseen.contains(*d))
             .map(|(d, s)| (addr(d), s.clone()))
             .collect();
         let nav: serde_json::Map<String, Value> =
@@ -728,11 +772,21 @@ pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             )
             .route(
                 "/api/frame",
-                get(|State((s, _)): State<App>| async move { Json(s.frame()) }),
+                get(|State((s, _)): State<App>| async move { Json(s.frame(None)) }),
             )
             .route("/api/stream", get(stream))
             .route("/api/map/{device}", get(map_picture))
             .route("/api/command", axum::routing::post(command))
+            .route(
+                "/api/view",
+                axum::routing::post(
+                    |State((s, _)): State<App>, Json(v): Json<ViewBox>| async move {
+                        s.latest().boxes.insert(v.page, v.area);
+                        s.touch();
+                        "noted"
+                    },
+                ),
+            )
             .route(
                 "/api/report",
                 axum::routing::post(
@@ -780,12 +834,18 @@ fn page(body: &'static str, kind: &'static str) -> Response {
 /// took the last one, something changed, and 1/fps has passed.
 async fn stream(
     State((s, _)): State<App>,
+    axum::extract::Query(q): axum::extract::Query<StreamQuery>,
 ) -> Sse<impl futures::Stream<Item = Result<Event, Infallible>>> {
     let rx = s.changed.subscribe();
     let period = Duration::from_secs_f64(1.0 / s.fps);
+    // The page's box goes with its stream.
+    let page = q.page.map(|page| PageBox {
+        shared: s.clone(),
+        page,
+    });
     let frames = futures::stream::unfold(
-        (s, rx, None::<tokio::time::Instant>),
-        move |(s, mut rx, last)| async move {
+        (s, rx, None::<tokio::time::Instant>, page),
+        move |(s, mut rx, last, page)| async move {
             if let Some(t) = last {
                 tokio::time::sleep_until(t + period).await;
             }
@@ -795,11 +855,39 @@ async fn stream(
             // (The period runs from when a frame is begun: making it is
             // part of the frame's time.)
             let begun = tokio::time::Instant::now();
-            let event = Event::default().data(s.frame().to_string());
-            Some((Ok(event), (s, rx, Some(begun))))
+            let frame = s.frame(page.as_ref().map(|p| p.page.as_str()));
+            let event = Event::default().data(frame.to_string());
+            Some((Ok(event), (s, rx, Some(begun), page)))
         },
     );
     Sse::new(frames).keep_alive(KeepAlive::default())
+}
+
+/// `/api/stream?page=ID`: the page that reads the stream, for its box.
+#[derive(Debug, serde::Deserialize)]
+struct StreamQuery {
+    page: Option<String>,
+}
+
+/// A page's box, forgotten when its stream ends.
+struct PageBox {
+    shared: Arc<Shared>,
+    page: String,
+}
+
+impl Drop for PageBox {
+    fn drop(&mut self) {
+        self.shared.latest().boxes.remove(&self.page);
+    }
+}
+
+/// `POST /api/view`: what a page shows of the world.
+#[derive(Debug, serde::Deserialize)]
+struct ViewBox {
+    page: String,
+    /// x0, y0, x1, y1 (metres).
+    #[serde(rename = "box")]
+    area: [f64; 4],
 }
 
 /// A page's word on how fast it draws (pages opened with `?report`, as

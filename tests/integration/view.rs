@@ -99,10 +99,15 @@ fn post(base: &str, body: &Value) -> (u32, String) {
 
 /// The first frame of the stream that `done` accepts.
 fn frame_where(base: &str, done: impl Fn(&Value) -> bool) -> Value {
+    frame_of(base, "/api/stream", done)
+}
+
+/// The first frame of the stream at `path` that `done` accepts.
+fn frame_of(base: &str, path: &str, done: impl Fn(&Value) -> bool) -> Value {
     let host = base.trim_start_matches("http://").trim_end_matches('/');
     let mut s = TcpStream::connect(host).unwrap();
     s.set_read_timeout(Some(DEADLINE)).unwrap();
-    write!(s, "GET /api/stream HTTP/1.1\r\nHost: {host}\r\n\r\n").unwrap();
+    write!(s, "GET {path} HTTP/1.1\r\nHost: {host}\r\n\r\n").unwrap();
     let deadline = Instant::now() + DEADLINE;
     let mut last = Value::Null;
     for line in BufReader::new(s).lines() {
@@ -223,6 +228,44 @@ fn the_view_draws_the_world_where_the_simulator_has_it() {
         Some(browser) => screenshot_shows_the_world(&browser, &base, &dir),
         None => eprintln!("skipping the browser check: no chromium (.ci/run installs it)"),
     }
+
+    // A page's frames carry what it shows: a box far from r0 gets no ray
+    // of its ranger and no pose of it; a box around r0 gets both.
+    let view_box = |page: &str, b: [f64; 4]| {
+        let host = base.trim_start_matches("http://").trim_end_matches('/');
+        let mut s = TcpStream::connect(host).unwrap();
+        let body = serde_json::json!({ "page": page, "box": b }).to_string();
+        write!(
+            s,
+            "POST /api/view HTTP/1.0\r\nHost: {host}\r\nContent-Type: application/json\r\nContent-Length: {}\r\n\r\n{body}",
+            body.len()
+        )
+        .unwrap();
+        let mut all = String::new();
+        s.read_to_string(&mut all).unwrap();
+        assert!(
+            all.starts_with("HTTP/1.0 200") || all.starts_with("HTTP/1.1 200"),
+            "{all}"
+        );
+    };
+    view_box("far", [20.0, 20.0, 30.0, 30.0]);
+    let far = frame_of(&base, "/api/stream?page=far", |f| {
+        f["poses"]["6665:simulation:0"].is_object()
+    });
+    assert!(far["readings"]["6665:ranger:0"].is_null(), "{far}");
+    assert!(
+        far["poses"]["6665:simulation:0"][r0.to_string()].is_null(),
+        "{far}"
+    );
+    view_box("near", [-1.0, -1.0, 1.0, 1.0]);
+    let near = frame_of(&base, "/api/stream?page=near", |f| {
+        f["poses"]["6665:simulation:0"].is_object()
+    });
+    assert!(near["readings"]["6665:ranger:0"].is_object(), "{near}");
+    assert!(
+        near["poses"]["6665:simulation:0"][r0.to_string()].is_array(),
+        "{near}"
+    );
 
     // Teleop: r0 drives forward, then stops.
     assert_eq!(

@@ -242,8 +242,28 @@ function paint() {
   if (frame && frame.speed !== null) parts.push(`${frame.speed.toFixed(1)}× real time`);
   if (frame) parts.push(`${frame.devices} devices`);
   if (!worlds.length && !maps.length) parts.push("no simulator or map yet");
+  if (!params.has("still")) sendBox(false);
   if (notice && Date.now() < notice.until) parts.push(notice.text);
   statusLine.textContent = parts.join(" · ") || "waiting for data…";
+}
+
+// What this page shows of the world, told to the server (at most four
+// times a second) so that its frames carry only that.
+const pageId = Math.random().toString(36).slice(2);
+let sentBox = "", boxSentAt = 0, boxTimer = null;
+function sendBox(force) {
+  const [hw, hh] = [canvas.width / 2 / view.scale, canvas.height / 2 / view.scale];
+  const box = [view.x - hw, view.y - hh, view.x + hw, view.y + hh].map(v => +v.toFixed(2));
+  const key = JSON.stringify(box);
+  if (!force && key === sentBox) return;
+  const wait = 250 - (performance.now() - boxSentAt);
+  if (!force && wait > 0) {
+    if (!boxTimer) boxTimer = setTimeout(() => { boxTimer = null; sendBox(false); }, wait);
+    return;
+  }
+  sentBox = key;
+  boxSentAt = performance.now();
+  fetch("/api/view", { method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify({ page: pageId, box }) });
 }
 
 let drawing = false;
@@ -486,7 +506,8 @@ setInterval(() => {
   }
   // ?still: this moment only (for a screenshot), no stream.
   if (params.has("still")) return;
-  const events = new EventSource("/api/stream");
+  const events = new EventSource(`/api/stream?page=${pageId}`);
+  events.onopen = () => sendBox(true);
   events.onmessage = m => onFrame(JSON.parse(m.data));
   events.onerror = () => { statusLine.textContent = "reconnecting to the view server…"; };
 })();
