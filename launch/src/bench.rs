@@ -554,6 +554,91 @@ define bench_irs ranger (
 define bench_small position ( size [0.2 0.2 0.1] drive "diff" ctrl "wander" bench_irs( pose [0 0 -0.05 0] ) )
 "#;
 
+/// The 100-Pioneer world as a stack of its own, in `dir`: every robot on
+/// its own port (position2d:0, ranger:0, ranger:1), at `speedup` (-1: flat
+/// out), launched with an embedded router, every device live. Returns the
+/// launcher and the router's endpoint.
+pub(crate) fn p100_stack(
+    dir: &std::path::Path,
+    bitmaps: &std::path::Path,
+    speedup: f64,
+) -> anyhow::Result<(std::process::Child, String)> {
+    use std::io::BufRead;
+    let (mut world, _) = bench_world("pioneers100", bitmaps, 1)?;
+    world.push_str(&format!("speedup {speedup}\n"));
+    std::fs::write(dir.join("p100.world"), world)?;
+    let mut cfg = String::from(
+        "driver ( name \"stage\" provides [\"simulation:0\"] worldfile \"p100.world\" )\n",
+    );
+    for i in 0..100 {
+        let port = 6665 + i;
+        cfg.push_str(&format!(
+            "driver ( name \"stage\" provides [\"{port}:position2d:0\" \"{port}:ranger:0\" \"{port}:ranger:1\"] model \"p{i}\" )\n"
+        ));
+    }
+    std::fs::write(dir.join("p100.cfg"), cfg)?;
+    let mut launcher = Command::new(std::env::current_exe()?)
+        .args(["--no-multicast", "launch"])
+        .arg(dir.join("p100.cfg"))
+        .args(["--no-bridge", "--listen", "tcp/127.0.0.1:0"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()?;
+    let stdout = launcher.stdout.take().context("the launcher's stdout")?;
+    let mut lines = std::io::BufReader::new(stdout).lines();
+    let router = lines
+        .by_ref()
+        .map_while(Result::ok)
+        .find_map(|l| {
+            let rest = l.strip_prefix("troupe launch: router listening on ")?;
+            rest.split_whitespace().next().map(str::to_owned)
+        })
+        .context("the launcher printed no router")?;
+    // Keep draining, so the launcher never blocks on a full pipe.
+    std::thread::spawn(move || lines.for_each(drop));
+    let z = ZenohArgs {
+        connect: vec![router.clone()],
+        no_multicast: true,
+        ..Default::default()
+    };
+    let devices = (0..100u32)
+        .flat_map(|i| ["position2d:0", "ranger:0", "ranger:1"].map(|d| format!("{}:{d}", 6665 + i)))
+        .map(|d| d.parse::<troupe_msgs::DevAddr>())
+        .collect::<Result<Vec<_>, _>>()?;
+    let ready = crate::tools::ready(
+        crate::cli::ReadyArgs {
+            devices,
+            robot: 6665,
+            wait: 120.0,
+        },
+        &z,
+    );
+    if let Err(e) = ready {
+        let _ = launcher.kill();
+        let _ = launcher.wait();
+        return Err(e);
+    }
+    Ok((launcher, router))
+}
+
+/// Stage's sample bitmaps (cave.png, …): `given`, or where the repository
+/// keeps its neighbour `shared/` (run from the repository's top).
+pub(crate) fn stage_bitmaps(given: Option<&std::path::Path>) -> anyhow::Result<std::path::PathBuf> {
+    let dir = given.map_or_else(
+        || std::path::PathBuf::from("../shared/compat/stage/bitmaps"),
+        std::path::Path::to_path_buf,
+    );
+    dir.canonicalize()
+        .ok()
+        .filter(|b| b.join("cave.png").exists())
+        .with_context(|| {
+            format!(
+                "no Stage bitmaps at {} (cave.png); pass --bitmaps DIR",
+                dir.display()
+            )
+        })
+}
+
 pub(crate) fn bench_world(
     name: &str,
     bitmaps: &std::path::Path,

@@ -94,20 +94,7 @@ fn line_after(child: &mut Child, prefix: &str) -> anyhow::Result<String> {
 
 /// Runs `troupe bench view`.
 pub fn run(a: &ViewBenchArgs) -> anyhow::Result<()> {
-    let bitmaps = a
-        .bitmaps
-        .clone()
-        .unwrap_or_else(|| PathBuf::from("../shared/compat/stage/bitmaps"));
-    let bitmaps = bitmaps
-        .canonicalize()
-        .ok()
-        .filter(|b| b.join("cave.png").exists())
-        .with_context(|| {
-            format!(
-                "no Stage bitmaps at {} (cave.png); pass --bitmaps DIR",
-                bitmaps.display()
-            )
-        })?;
+    let bitmaps = crate::bench::stage_bitmaps(a.bitmaps.as_deref())?;
     if a.browsers.iter().any(|&n| n > 0) {
         Command::new(&a.chromium)
             .arg("--version")
@@ -132,49 +119,14 @@ fn measure(
     bitmaps: &std::path::Path,
     dir: &std::path::Path,
 ) -> anyhow::Result<()> {
-    let (mut world, _) = crate::bench::bench_world("pioneers100", bitmaps, 1)?;
-    world.push_str(&format!("speedup {}\n", a.speedup));
-    std::fs::write(dir.join("p100.world"), world)?;
-    let mut cfg = String::from(
-        "driver ( name \"stage\" provides [\"simulation:0\"] worldfile \"p100.world\" )\n",
-    );
-    for i in 0..ROBOTS {
-        let port = 6665 + i;
-        cfg.push_str(&format!(
-            "driver ( name \"stage\" provides [\"{port}:position2d:0\" \"{port}:ranger:0\" \"{port}:ranger:1\"] model \"p{i}\" )\n"
-        ));
-    }
-    std::fs::write(dir.join("p100.cfg"), cfg)?;
-    let exe = std::env::current_exe()?;
-    let mut launcher = Kid(Command::new(&exe)
-        .args(["--no-multicast", "launch"])
-        .arg(dir.join("p100.cfg"))
-        .args(["--no-bridge", "--listen", "tcp/127.0.0.1:0"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()?);
-    let router = line_after(&mut launcher.0, "troupe launch: router listening on ")?;
-    let router = router
-        .split_whitespace()
-        .next()
-        .unwrap_or_default()
-        .to_owned();
+    let (launcher, router) = crate::bench::p100_stack(dir, bitmaps, a.speedup)?;
+    let launcher = Kid(launcher);
     let z = ZenohArgs {
         connect: vec![router.clone()],
         no_multicast: true,
         ..Default::default()
     };
-    let devices = (0..ROBOTS)
-        .map(|i| format!("{}:ranger:1", 6665 + i).parse::<troupe_msgs::DevAddr>())
-        .collect::<Result<Vec<_>, _>>()?;
-    crate::tools::ready(
-        crate::cli::ReadyArgs {
-            devices,
-            robot: 6665,
-            wait: 120.0,
-        },
-        &z,
-    )?;
+    let exe = std::env::current_exe()?;
     let mut view = Kid(Command::new(&exe)
         .args([
             "--no-multicast",

@@ -76,6 +76,59 @@ fn json(base: &str, path: &str) -> Value {
     serde_json::from_str(&body).unwrap()
 }
 
+/// A stack launched from `cfg` in a namespace of its own, with `troupe
+/// view` on a free port beside it.
+struct Viewed {
+    launcher: Proc,
+    view: Proc,
+    ns: String,
+    router: String,
+    /// `http://127.0.0.1:PORT/`.
+    base: String,
+}
+
+impl Viewed {
+    fn launch(name: &str, cfg: &Path, extra: &[&str]) -> Viewed {
+        let ns = troupe_tests::unique_namespace(name);
+        let mut launcher = troupe_tests::launch(&ns, cfg, extra);
+        let (router, _) = troupe_tests::launch_ports(&mut launcher);
+        let mut view = Proc::troupe(
+            "view",
+            &Viewed::args(&ns, &router, &["view", "--port", "0"]),
+        );
+        let line = view.first_line();
+        let base = line
+            .trim()
+            .strip_prefix("troupe view: ")
+            .expect("the view's address")
+            .to_owned();
+        Viewed {
+            launcher,
+            view,
+            ns,
+            router,
+            base,
+        }
+    }
+
+    /// `troupe` arguments for a tool on this stack's network.
+    fn args(ns: &str, router: &str, rest: &[&str]) -> Vec<String> {
+        let mut a = strings(&["--namespace", ns, "--connect", router]);
+        a.extend(strings(rest));
+        a
+    }
+
+    /// Stops the view and the stack, each cleanly.
+    fn stop(mut self) {
+        assert!(self.view.terminate().success(), "{}", self.view.stderr());
+        assert!(
+            self.launcher.terminate().success(),
+            "{}",
+            self.launcher.stderr()
+        );
+    }
+}
+
 /// POSTs `body` to the view's /api/command: the status code and the text.
 fn post(base: &str, body: &Value) -> (u32, String) {
     let host = base.trim_start_matches("http://").trim_end_matches('/');
@@ -132,21 +185,9 @@ fn the_view_draws_the_world_where_the_simulator_has_it() {
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::write(dir.join("view.world"), WORLD).unwrap();
     std::fs::write(dir.join("view.cfg"), CFG).unwrap();
-    let ns = troupe_tests::unique_namespace("view");
-    let mut launcher = troupe_tests::launch(&ns, &dir.join("view.cfg"), &[]);
-    let (router, _) = troupe_tests::launch_ports(&mut launcher);
-    let net = |rest: &[&str]| {
-        let mut a = strings(&["--namespace", &ns, "--connect", &router]);
-        a.extend(strings(rest));
-        a
-    };
-    let mut view = Proc::troupe("view", &net(&["view", "--port", "0"]));
-    let line = view.first_line();
-    let base = line
-        .trim()
-        .strip_prefix("troupe view: ")
-        .expect("the view's address")
-        .to_owned();
+    let stack = Viewed::launch("view", &dir.join("view.cfg"), &[]);
+    let base = stack.base.clone();
+    let net = |rest: &[&str]| Viewed::args(&stack.ns, &stack.router, rest);
 
     // The stream: r0 where the world file puts it, its ranger's middle
     // beams on the wall's face, 1.9 m ahead.
@@ -298,8 +339,7 @@ fn the_view_draws_the_world_where_the_simulator_has_it() {
     assert_eq!(code, 400);
     assert!(why.contains("a planner takes a goal"), "{why}");
 
-    assert!(view.terminate().success(), "{}", view.stderr());
-    assert!(launcher.terminate().success(), "{}", launcher.stderr());
+    stack.stop();
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -316,10 +356,11 @@ fn chromium() -> Option<std::path::PathBuf> {
     found
 }
 
-fn screenshot_shows_the_world(browser: &Path, base: &str, dir: &Path) {
+/// A headless Chromium screenshot of `url` in a `w` × `h` window, after
+/// the page has loaded (`?still` pages open no stream, and the time
+/// budget lets them load).
+fn screenshot(browser: &Path, url: &str, (w, h): (u32, u32), dir: &Path) -> image::RgbImage {
     let shot = dir.join("view.png");
-    // The canvas is the window less the 261-pixel side panel: 639 × 600,
-    // its centre (319.5, 300) the world's origin.
     let status = std::process::Command::new(browser)
         .args([
             "--headless",
@@ -331,18 +372,25 @@ fn screenshot_shows_the_world(browser: &Path, base: &str, dir: &Path) {
             "--user-data-dir={}",
             dir.join("chromium").display()
         ))
-        .arg("--window-size=900,600")
+        .arg(format!("--window-size={w},{h}"))
         .arg(format!("--screenshot={}", shot.display()))
-        // (`still`: this moment, no stream; the budget lets it load.)
         .arg("--virtual-time-budget=5000")
-        .arg(format!("{base}?still&x=0&y=0&scale=50&device=6665:ranger:0"))
+        .arg(url)
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())
         .status()
         .unwrap();
     assert!(status.success(), "chromium: {status}");
     let img = image::open(&shot).unwrap().to_rgb8();
-    assert_eq!(img.dimensions(), (900, 600));
+    assert_eq!(img.dimensions(), (w, h));
+    img
+}
+
+fn screenshot_shows_the_world(browser: &Path, base: &str, dir: &Path) {
+    // The canvas is the window less the 261-pixel side panel: 639 × 600,
+    // its centre (319.5, 300) the world's origin.
+    let url = format!("{base}?still&x=0&y=0&scale=50&device=6665:ranger:0");
+    let img = screenshot(browser, &url, (900, 600), dir);
     let px = |x: f64, y: f64| {
         let (sx, sy) = (319.5 + x * 50.0, 300.0 - y * 50.0);
         img.get_pixel(sx as u32, sy as u32).0
@@ -374,27 +422,8 @@ fn screenshot_shows_the_world(browser: &Path, base: &str, dir: &Path) {
 #[test]
 fn the_view_gives_goals_and_sets_poses() {
     let cfg = Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/nav.cfg");
-    let ns = troupe_tests::unique_namespace("viewnav");
-    let mut launcher = troupe_tests::launch(&ns, &cfg, &["--speedup", "4"]);
-    let (router, _) = troupe_tests::launch_ports(&mut launcher);
-    let mut view = Proc::troupe(
-        "view",
-        &strings(&[
-            "--namespace",
-            &ns,
-            "--connect",
-            &router,
-            "view",
-            "--port",
-            "0",
-        ]),
-    );
-    let line = view.first_line();
-    let base = line
-        .trim()
-        .strip_prefix("troupe view: ")
-        .expect("the view's address")
-        .to_owned();
+    let stack = Viewed::launch("viewnav", &cfg, &["--speedup", "4"]);
+    let (base, router, ns) = (stack.base.clone(), stack.router.clone(), stack.ns.clone());
     let f = frame_where(&base, |f| {
         f["poses"]["6665:simulation:0"]
             .as_object()
@@ -509,8 +538,7 @@ fn the_view_gives_goals_and_sets_poses() {
     }
 
     drop(browser);
-    assert!(view.terminate().success(), "{}", view.stderr());
-    assert!(launcher.terminate().success(), "{}", launcher.stderr());
+    stack.stop();
 }
 
 /// Without a simulator, the view draws the map devices (worlds/map.cfg:
@@ -520,27 +548,8 @@ fn the_view_gives_goals_and_sets_poses() {
 fn the_view_draws_map_devices() {
     use troupe_client::{Client, MapProxy};
     let cfg = Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/map.cfg");
-    let ns = troupe_tests::unique_namespace("viewmap");
-    let mut launcher = troupe_tests::launch(&ns, &cfg, &[]);
-    let (router, _) = troupe_tests::launch_ports(&mut launcher);
-    let mut view = Proc::troupe(
-        "view",
-        &strings(&[
-            "--namespace",
-            &ns,
-            "--connect",
-            &router,
-            "view",
-            "--port",
-            "0",
-        ]),
-    );
-    let line = view.first_line();
-    let base = line
-        .trim()
-        .strip_prefix("troupe view: ")
-        .expect("the view's address")
-        .to_owned();
+    let stack = Viewed::launch("viewmap", &cfg, &[]);
+    let (base, router, ns) = (stack.base.clone(), stack.router.clone(), stack.ns.clone());
     frame_where(&base, |f| f["maps"] == 3);
     let world = json(&base, "/api/world");
     let maps = world["maps"].as_array().unwrap();
@@ -587,8 +596,7 @@ fn the_view_draws_map_devices() {
     let (code, _) = get(&base, "/api/map/6665:map:9");
     assert_eq!(code, 404);
 
-    assert!(view.terminate().success(), "{}", view.stderr());
-    assert!(launcher.terminate().success(), "{}", launcher.stderr());
+    stack.stop();
 }
 
 /// A page of headless Chromium, driven over the DevTools protocol: mouse
@@ -775,34 +783,18 @@ impl Drop for Page {
 fn readme_picture(browser: &Path, base: &str) {
     let dir = std::env::temp_dir().join(troupe_tests::unique_namespace("viewshot"));
     std::fs::create_dir_all(&dir).unwrap();
-    let shot = dir.join("view.png");
-    let status = std::process::Command::new(browser)
-        .args([
-            "--headless",
-            "--no-sandbox",
-            "--disable-gpu",
-            "--hide-scrollbars",
-        ])
-        .arg(format!(
-            "--user-data-dir={}",
-            dir.join("chromium").display()
-        ))
-        .arg("--window-size=1000,650")
-        .arg(format!("--screenshot={}", shot.display()))
-        .arg("--virtual-time-budget=5000")
-        .arg(format!("{base}?still&device=6665:laser:0"))
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::null())
-        .status()
-        .unwrap();
-    assert!(status.success(), "chromium: {status}");
-    let img = image::open(&shot).unwrap().to_rgb8();
+    let img = screenshot(
+        browser,
+        &format!("{base}?still&device=6665:laser:0"),
+        (1000, 650),
+        &dir,
+    );
     let count = |want: [u8; 3]| img.pixels().filter(|p| p.0 == want).count();
     assert!(count([0xe0, 0x70, 0x00]) > 20, "no planner path drawn");
     assert!(count([0xc0, 0x00, 0xc0]) > 20, "no amcl estimate drawn");
     if std::env::var_os("TROUPE_BLESS").is_some() {
         let to = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/view.png");
-        std::fs::copy(&shot, &to).unwrap();
+        img.save(&to).unwrap();
         eprintln!("wrote {}", to.display());
     }
     let _ = std::fs::remove_dir_all(&dir);
