@@ -554,6 +554,20 @@ define bench_irs ranger (
 define bench_small position ( size [0.2 0.2 0.1] drive "diff" ctrl "wander" bench_irs( pose [0 0 -0.05 0] ) )
 "#;
 
+/// The first line of `child`'s stdout that starts with `prefix`, less it.
+pub(crate) fn line_after(child: &mut std::process::Child, prefix: &str) -> anyhow::Result<String> {
+    let out = child.stdout.take().context("the child's stdout")?;
+    let mut lines = std::io::BufRead::lines(std::io::BufReader::new(out));
+    while let Some(Ok(line)) = lines.next() {
+        if let Some(rest) = line.strip_prefix(prefix) {
+            // Keep draining, so the child never blocks on a full pipe.
+            std::thread::spawn(move || lines.for_each(drop));
+            return Ok(rest.trim().to_owned());
+        }
+    }
+    anyhow::bail!("no `{prefix}` line")
+}
+
 /// The 100-Pioneer world as a stack of its own, in `dir`: every robot on
 /// its own port (position2d:0, ranger:0, ranger:1), at `speedup` (-1: flat
 /// out), launched with an embedded router, every device live. Returns the
@@ -563,7 +577,6 @@ pub(crate) fn p100_stack(
     bitmaps: &std::path::Path,
     speedup: f64,
 ) -> anyhow::Result<(std::process::Child, String)> {
-    use std::io::BufRead;
     let (mut world, _) = bench_world("pioneers100", bitmaps, 1)?;
     world.push_str(&format!("speedup {speedup}\n"));
     std::fs::write(dir.join("p100.world"), world)?;
@@ -584,18 +597,11 @@ pub(crate) fn p100_stack(
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::null())
         .spawn()?;
-    let stdout = launcher.stdout.take().context("the launcher's stdout")?;
-    let mut lines = std::io::BufReader::new(stdout).lines();
-    let router = lines
-        .by_ref()
-        .map_while(Result::ok)
-        .find_map(|l| {
-            let rest = l.strip_prefix("troupe launch: router listening on ")?;
-            rest.split_whitespace().next().map(str::to_owned)
-        })
-        .context("the launcher printed no router")?;
-    // Keep draining, so the launcher never blocks on a full pipe.
-    std::thread::spawn(move || lines.for_each(drop));
+    let router = line_after(&mut launcher, "troupe launch: router listening on ")?
+        .split_whitespace()
+        .next()
+        .unwrap_or_default()
+        .to_owned();
     let z = ZenohArgs {
         connect: vec![router.clone()],
         no_multicast: true,

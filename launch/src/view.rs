@@ -31,7 +31,7 @@ use serde_json::{json, Value};
 use tokio::sync::watch;
 use troupe_msgs::{
     codec, keys, laser, localize, map, planner, position2d, power, ranger, simulation, sonar,
-    Command as _, Device, Interface, Pose2d, Request as _,
+    Command as _, Device, Interface, Pose2d,
 };
 use troupe_node::zenoh::sample::SampleKind;
 use troupe_node::ZenohArgs;
@@ -370,40 +370,19 @@ fn take_nav(shared: &Shared, dev: Device, payload: &[u8]) -> Option<Device> {
 /// Asks `dev` (a planner) for its waypoints, or (a localizer) for its
 /// particles, and keeps them with its state.
 async fn ask_nav(session: troupe_node::zenoh::Session, shared: Arc<Shared>, dev: Device) {
-    let (key, payload) = match dev.interface {
-        Interface::Planner => (
-            keys::req(&dev, planner::GetWaypoints::NAME),
-            codec::encode(&planner::GetWaypoints, 0.0),
-        ),
-        _ => (
-            keys::req(&dev, localize::GetParticles::NAME),
-            codec::encode(&localize::GetParticles, 0.0),
-        ),
-    };
-    let Ok(replies) = troupe_node::ask(&session, &key, WORLD_TIMEOUT)
-        .payload(payload)
-        .await
-    else {
-        return;
-    };
-    let Ok(Ok(sample)) = replies.recv_async().await.map(|r| r.into_result()) else {
-        return;
-    };
-    let bytes = sample.payload().to_bytes();
-    let (field, value) = match dev.interface {
-        Interface::Planner => match codec::decode::<planner::Waypoints>(&bytes) {
-            Ok(w) => ("waypoints", w.msg.waypoints.iter().map(pose).collect()),
-            Err(_) => return,
-        },
-        _ => match codec::decode::<localize::Particles>(&bytes) {
-            Ok(p) => {
-                // A few hundred show the cloud as well as thousands do.
-                let every = p.msg.particles.len().div_ceil(PARTICLES_SHOWN).max(1);
-                let shown = p.msg.particles.iter().step_by(every);
-                ("particles", shown.map(|q| pose(&q.pose)).collect())
-            }
-            Err(_) => return,
-        },
+    let (field, value) = if dev.interface == Interface::Planner {
+        let Ok(w) = request(&session, dev, &planner::GetWaypoints).await else {
+            return;
+        };
+        ("waypoints", w.waypoints.iter().map(pose).collect())
+    } else {
+        let Ok(p) = request(&session, dev, &localize::GetParticles).await else {
+            return;
+        };
+        // A few hundred show the cloud as well as thousands do.
+        let every = p.particles.len().div_ceil(PARTICLES_SHOWN).max(1);
+        let shown = p.particles.iter().step_by(every);
+        ("particles", shown.map(|q| pose(&q.pose)).collect::<Value>())
     };
     let mut l = shared.latest();
     let entry = l.nav.entry(dev).or_insert_with(|| json!({}));
@@ -429,23 +408,35 @@ const DRAWN: [Interface; 8] = [
     Interface::Planner,
 ];
 
+/// Takes a sample of a device the page draws: its reading, or its
+/// navigation state (asking a planner for its new path, on `rt`).
+fn ingest(
+    shared: &Arc<Shared>,
+    session: &troupe_node::zenoh::Session,
+    rt: &tokio::runtime::Handle,
+    dev: Device,
+    payload: &[u8],
+) {
+    match dev.interface {
+        Interface::Localize | Interface::Planner => {
+            if let Some(planner) = take_nav(shared, dev, payload) {
+                rt.spawn(ask_nav(session.clone(), shared.clone(), planner));
+            }
+        }
+        _ => take(shared, dev, payload),
+    }
+}
+
 /// Takes the newest samples `dev`'s driver keeps (a device that publishes
 /// only on change, such as a localizer at rest, is drawn at once).
 async fn fetch_latest(session: troupe_node::zenoh::Session, shared: Arc<Shared>, dev: Device) {
     let Ok(replies) = troupe_node::ask(&session, &keys::data(&dev), WORLD_TIMEOUT).await else {
         return;
     };
+    let rt = tokio::runtime::Handle::current();
     while let Ok(reply) = replies.recv_async().await {
         if let Ok(sample) = reply.into_result() {
-            let bytes = sample.payload().to_bytes();
-            match dev.interface {
-                Interface::Localize | Interface::Planner => {
-                    if let Some(planner) = take_nav(&shared, dev, &bytes) {
-                        tokio::spawn(ask_nav(session.clone(), shared.clone(), planner));
-                    }
-                }
-                _ => take(&shared, dev, &bytes),
-            }
+            ingest(&shared, &session, &rt, dev, &sample.payload().to_bytes());
         }
     }
 }
@@ -494,63 +485,57 @@ fn take(shared: &Shared, dev: Device, payload: &[u8]) {
 
 /// Asks the simulator of `sim` for its world and keeps it.
 async fn fetch_world(session: troupe_node::zenoh::Session, shared: Arc<Shared>, sim: Device) {
-    let key = keys::req(&sim, <simulation::GetWorld as troupe_msgs::Request>::NAME);
-    let asked = troupe_node::ask(&session, &key, WORLD_TIMEOUT)
-        .payload(codec::encode(&simulation::GetWorld, 0.0))
-        .await;
-    let reply = match asked {
-        Ok(replies) => replies.recv_async().await.ok(),
-        Err(e) => {
-            tracing::warn!("asking {sim} for its world: {e}");
-            return;
-        }
-    };
-    let Some(Ok(sample)) = reply.map(|r| r.into_result()) else {
-        tracing::warn!("{sim} did not describe its world (not a Troupe simulator?)");
-        return;
-    };
-    match codec::decode::<simulation::World>(&sample.payload().to_bytes()) {
+    match request(&session, sim, &simulation::GetWorld).await {
         Ok(w) => {
-            tracing::info!("{sim}: a world of {} models", w.msg.models.len());
-            shared.latest().worlds.insert(sim, w.msg);
+            tracing::info!("{sim}: a world of {} models", w.models.len());
+            shared.latest().worlds.insert(sim, w);
             shared.touch();
         }
-        Err(e) => tracing::warn!("{sim}: its world does not decode: {e}"),
+        Err(e) => tracing::warn!("no world from {sim} (not a Troupe simulator?): {e}"),
     }
+}
+
+/// Sends request `req` to `dev` and waits (at most [`WORLD_TIMEOUT`]) for
+/// its answer; the error says what went wrong, naming the device.
+async fn request<R: troupe_msgs::Request>(
+    session: &troupe_node::zenoh::Session,
+    dev: Device,
+    req: &R,
+) -> Result<R::Reply, String> {
+    let key = keys::req(&dev, R::NAME);
+    let replies = troupe_node::ask(session, &key, WORLD_TIMEOUT)
+        .payload(codec::encode(req, troupe_node::Clock::wall().now()))
+        .await
+        .map_err(|e| format!("asking {key}: {e}"))?;
+    let reply = replies
+        .recv_async()
+        .await
+        .map_err(|_| {
+            format!("{dev} did not answer (no such device, or this identity may not ask it)")
+        })?
+        .into_result()
+        .map_err(|e| {
+            let reason = codec::decode::<troupe_msgs::common::Nack>(&e.payload().to_bytes())
+                .map_or_else(|_| "no reason given".to_owned(), |n| n.msg.reason);
+            format!("{dev} refused: {reason}")
+        })?;
+    codec::decode::<R::Reply>(&reply.payload().to_bytes())
+        .map(|s| s.msg)
+        .map_err(|e| format!("{dev}'s answer does not decode: {e}"))
 }
 
 /// Asks map device `dev` for its info and every cell, and keeps its
 /// picture: free cells white, unknown grey, occupied black, north up.
 async fn fetch_map(session: troupe_node::zenoh::Session, shared: Arc<Shared>, dev: Device) {
-    async fn ask<R: troupe_msgs::Request>(
-        session: &troupe_node::zenoh::Session,
-        dev: Device,
-        req: &R,
-    ) -> Result<R::Reply, String> {
-        let key = keys::req(&dev, R::NAME);
-        let replies = troupe_node::ask(session, &key, WORLD_TIMEOUT)
-            .payload(codec::encode(req, 0.0))
-            .await
-            .map_err(|e| e.to_string())?;
-        let reply = replies
-            .recv_async()
-            .await
-            .map_err(|_| "no answer".to_owned())?
-            .into_result()
-            .map_err(|_| "refused".to_owned())?;
-        codec::decode::<R::Reply>(&reply.payload().to_bytes())
-            .map(|s| s.msg)
-            .map_err(|e| e.to_string())
-    }
     let picture = async {
-        let info = ask(&session, dev, &map::GetInfo).await?;
+        let info = request(&session, dev, &map::GetInfo).await?;
         let whole = map::GetData {
             col: 0,
             row: 0,
             width: info.width,
             height: info.height,
         };
-        let tile = ask(&session, dev, &whole).await?;
+        let tile = request(&session, dev, &whole).await?;
         let grid = troupe_geom::OccMap::from_tile(info, &tile)?;
         let (w, h) = grid.size();
         let img = image::GrayImage::from_fn(w as u32, h as u32, |x, y| {
@@ -572,7 +557,7 @@ async fn fetch_map(session: troupe_node::zenoh::Session, shared: Arc<Shared>, de
             shared.latest().maps.insert(dev, (info, Arc::new(png)));
             shared.touch();
         }
-        Err(e) => tracing::warn!("{dev}: cannot draw its map: {e}"),
+        Err(e) => tracing::warn!("cannot draw map {dev}: {e}"),
     }
 }
 
@@ -644,27 +629,11 @@ pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             .await
             .map_err(|e| anyhow::anyhow!("watching devices: {e}"))?;
         let mut subs = Vec::new();
-        for i in [Interface::Localize, Interface::Planner] {
-            let (s, sess) = (shared.clone(), session.clone());
-            let handle = tokio::runtime::Handle::current();
-            subs.push(
-                session
-                    .declare_subscriber(keys::data_of(i))
-                    .callback(move |sample| {
-                        let Ok(dev) = keys::parse_data(sample.key_expr().as_str()) else {
-                            return;
-                        };
-                        if let Some(planner) = take_nav(&s, dev, &sample.payload().to_bytes()) {
-                            handle.spawn(ask_nav(sess.clone(), s.clone(), planner));
-                        }
-                    })
-                    .await
-                    .map_err(|e| anyhow::anyhow!("subscribing to {i} data: {e}"))?,
-            );
-        }
-        // Every device's updates, counted; their rates reckoned each second.
+        // Every device's samples: counted (their rates reckoned each
+        // second), and taken where the page draws them.
         {
-            let s = shared.clone();
+            let (s, sess) = (shared.clone(), session.clone());
+            let rt = tokio::runtime::Handle::current();
             subs.push(
                 session
                     .declare_subscriber(keys::data_all())
@@ -676,14 +645,19 @@ pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
                         let Ok((_, stamp, _)) = codec::split(&bytes) else {
                             return;
                         };
-                        let mut l = s.latest();
-                        let u = l.updates.entry(dev).or_insert((f64::NAN, 0, 0));
-                        if u.0 != stamp {
-                            (u.0, u.1) = (stamp, u.1 + 1);
+                        {
+                            let mut l = s.latest();
+                            let u = l.updates.entry(dev).or_insert((f64::NAN, 0, 0));
+                            if u.0 != stamp {
+                                (u.0, u.1) = (stamp, u.1 + 1);
+                            }
+                        }
+                        if DRAWN.contains(&dev.interface) {
+                            ingest(&s, &sess, &rt, dev, &bytes);
                         }
                     })
                     .await
-                    .map_err(|e| anyhow::anyhow!("counting the devices' samples: {e}"))?,
+                    .map_err(|e| anyhow::anyhow!("subscribing to the devices' data: {e}"))?,
             );
             let s = shared.clone();
             tokio::spawn(async move {
@@ -731,27 +705,6 @@ pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
                     }
                 }
             });
-        }
-        for i in [
-            Interface::Simulation,
-            Interface::Laser,
-            Interface::Ranger,
-            Interface::Sonar,
-            Interface::Position2d,
-            Interface::Power,
-        ] {
-            let s = shared.clone();
-            subs.push(
-                session
-                    .declare_subscriber(keys::data_of(i))
-                    .callback(move |sample| {
-                        if let Ok(dev) = keys::parse_data(sample.key_expr().as_str()) {
-                            take(&s, dev, &sample.payload().to_bytes());
-                        }
-                    })
-                    .await
-                    .map_err(|e| anyhow::anyhow!("subscribing to {i} data: {e}"))?,
-            );
         }
         let app = Router::new()
             .route(
@@ -923,65 +876,53 @@ async fn command(State((_, session)): State<App>, Json(o): Json<Order>) -> Respo
         Err(e) => return bad(format!("`{}`: {e}", o.device)),
     };
     let p = |v: [f64; 3]| Pose2d::new(v[0], v[1], v[2]);
-    let stamp = troupe_node::Clock::wall().now();
-    let (key, payload, ask) = match (dev.interface, o.goal, o.pose, o.vel) {
-        (Interface::Planner, Some(g), None, None) => (
-            keys::cmd(&dev, planner::Goal::NAME),
-            codec::encode(&planner::Goal { goal: p(g) }, stamp),
-            false,
-        ),
-        (Interface::Localize, None, Some(m), None) => (
-            keys::req(&dev, localize::SetPose::NAME),
-            codec::encode(
-                &localize::SetPose {
-                    mean: p(m),
-                    // As playerv sets it: half a metre and 10° of doubt.
-                    cov: [0.25, 0.25, 10f64.to_radians().powi(2), 0.0, 0.0, 0.0],
-                },
-                stamp,
-            ),
-            true,
-        ),
-        (Interface::Position2d, None, None, Some(v)) => (
-            keys::cmd(&dev, position2d::CmdVel::NAME),
-            codec::encode(
-                &position2d::CmdVel {
-                    vel: p(v),
-                    state: true,
-                },
-                stamp,
-            ),
-            false,
-        ),
-        _ => {
-            return bad(format!(
-                "{dev}: a planner takes a goal, a localizer a pose, a position2d a vel"
-            ))
-        }
-    };
     let gone = |why: String| (StatusCode::BAD_GATEWAY, why).into_response();
-    if !ask {
-        return match session.put(&key, payload).await {
-            Ok(()) => (StatusCode::OK, "sent").into_response(),
-            Err(e) => gone(format!("sending {key}: {e}")),
-        };
+    // A command goes out; a request is answered.
+    let stamp = troupe_node::Clock::wall().now();
+    match (dev.interface, o.goal, o.pose, o.vel) {
+        (Interface::Planner, Some(g), None, None) => {
+            let goal = planner::Goal { goal: p(g) };
+            put(
+                &session,
+                keys::cmd(&dev, planner::Goal::NAME),
+                codec::encode(&goal, stamp),
+            )
+            .await
+        }
+        (Interface::Position2d, None, None, Some(v)) => {
+            let vel = position2d::CmdVel {
+                vel: p(v),
+                state: true,
+            };
+            put(
+                &session,
+                keys::cmd(&dev, position2d::CmdVel::NAME),
+                codec::encode(&vel, stamp),
+            )
+            .await
+        }
+        (Interface::Localize, None, Some(m), None) => {
+            let set = localize::SetPose {
+                mean: p(m),
+                // As playerv sets it: half a metre and 10° of doubt.
+                cov: [0.25, 0.25, 10f64.to_radians().powi(2), 0.0, 0.0, 0.0],
+            };
+            match request(&session, dev, &set).await {
+                Ok(_) => (StatusCode::OK, "acknowledged").into_response(),
+                Err(e) => gone(e),
+            }
+        }
+        _ => bad(format!(
+            "{dev}: a planner takes a goal, a localizer a pose, a position2d a vel"
+        )),
     }
-    let replies = match troupe_node::ask(&session, &key, WORLD_TIMEOUT)
-        .payload(payload)
-        .await
-    {
-        Ok(r) => r,
-        Err(e) => return gone(format!("asking {key}: {e}")),
-    };
-    match replies.recv_async().await.map(|r| r.into_result()) {
-        Ok(Ok(_)) => (StatusCode::OK, "acknowledged").into_response(),
-        Ok(Err(e)) => gone(format!(
-            "{dev} refused: {}",
-            codec::decode::<troupe_msgs::common::Nack>(&e.payload().to_bytes())
-                .map_or_else(|_| "no reason given".to_owned(), |n| n.msg.reason)
-        )),
-        Err(_) => gone(format!(
-            "{dev} did not answer (no such device, or this identity may not ask it)"
-        )),
+}
+
+/// Puts a command: 200 once sent, 502 if it could not be.
+async fn put(session: &troupe_node::zenoh::Session, key: String, payload: Vec<u8>) -> Response {
+    use axum::http::StatusCode;
+    match session.put(&key, payload).await {
+        Ok(()) => (StatusCode::OK, "sent").into_response(),
+        Err(e) => (StatusCode::BAD_GATEWAY, format!("sending {key}: {e}")).into_response(),
     }
 }

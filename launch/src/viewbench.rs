@@ -78,18 +78,82 @@ fn get(host: &str, path: &str) -> anyhow::Result<String> {
         .unwrap_or_default())
 }
 
-/// The first line of `child`'s stdout that starts with `prefix`, less it.
-fn line_after(child: &mut Child, prefix: &str) -> anyhow::Result<String> {
-    let out = child.stdout.take().context("stdout")?;
-    let mut lines = std::io::BufReader::new(out).lines();
-    while let Some(Ok(line)) = lines.next() {
-        if let Some(rest) = line.strip_prefix(prefix) {
-            // Keep draining, so the child never blocks on a full pipe.
-            std::thread::spawn(move || lines.for_each(drop));
-            return Ok(rest.trim().to_owned());
+/// What a row measures, from its start: the view server's CPU and the
+/// robots' data.
+struct Window {
+    pid: u32,
+    cpu: Duration,
+    odometry: u64,
+    ranges: u64,
+    t: Instant,
+}
+
+/// A row's figures: the server's share of a core, odometry Hz per robot,
+/// ranger samples a second; and the wall seconds they cover.
+struct Figures {
+    cpu: f64,
+    odometry: f64,
+    ranges: f64,
+    wall: f64,
+}
+
+impl Window {
+    fn start(pid: u32, odometry: &AtomicU64, ranges: &AtomicU64) -> Window {
+        Window {
+            pid,
+            cpu: cpu_of(pid),
+            odometry: odometry.load(Ordering::Relaxed),
+            ranges: ranges.load(Ordering::Relaxed),
+            t: Instant::now(),
         }
     }
-    anyhow::bail!("no `{prefix}` line")
+
+    fn end(&self, odometry: &AtomicU64, ranges: &AtomicU64) -> Figures {
+        let wall = self.t.elapsed().as_secs_f64();
+        Figures {
+            cpu: (cpu_of(self.pid) - self.cpu).as_secs_f64() / wall,
+            odometry: (odometry.load(Ordering::Relaxed) - self.odometry) as f64
+                / wall
+                / f64::from(ROBOTS),
+            ranges: (ranges.load(Ordering::Relaxed) - self.ranges) as f64 / wall,
+            wall,
+        }
+    }
+}
+
+/// "lo-hi" of `values`, or "-" for none.
+fn spread(values: impl Iterator<Item = f64>) -> String {
+    let (lo, hi, n) = values.fold((f64::INFINITY, 0.0f64, 0), |(lo, hi, n), v| {
+        (lo.min(v), hi.max(v), n + 1)
+    });
+    if n == 0 {
+        "-".to_owned()
+    } else {
+        format!("{lo:.1}-{hi:.1}")
+    }
+}
+
+/// One row of the table: `who` read the view, `pages` of them.
+fn row(
+    out: &mut impl Write,
+    (who, pages): (&str, usize),
+    fps: &str,
+    draw_ms: &str,
+    f: &Figures,
+) -> std::io::Result<()> {
+    let per = if pages > 0 {
+        format!("{:.1}%", 100.0 * f.cpu / pages as f64)
+    } else {
+        "-".to_owned()
+    };
+    writeln!(
+        out,
+        "  {who:>8}  {fps:>17}  {draw_ms:>14}  {:>19.1}%  {per:>11}  {:>17.2}  {:>16.0}",
+        100.0 * f.cpu,
+        f.odometry,
+        f.ranges
+    )?;
+    out.flush()
 }
 
 /// Runs `troupe bench view`.
@@ -139,7 +203,7 @@ fn measure(
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
         .spawn()?);
-    let url = line_after(&mut view.0, "troupe view: ")?;
+    let url = crate::bench::line_after(&mut view.0, "troupe view: ")?;
     let host = url
         .trim_start_matches("http://")
         .trim_end_matches('/')
@@ -211,54 +275,26 @@ fn measure(
             std::thread::sleep(Duration::from_millis(200));
         }
         std::thread::sleep(Duration::from_secs(if n > 0 { 4 } else { 0 }));
-        let (cpu0, o0, r0, t0) = (
-            cpu_of(view.0.id()),
-            odometry.load(Ordering::Relaxed),
-            ranges.load(Ordering::Relaxed),
-            Instant::now(),
-        );
+        let window = Window::start(view.0.id(), &odometry, &ranges);
         std::thread::sleep(Duration::from_secs_f64(a.seconds));
-        let wall = t0.elapsed().as_secs_f64();
-        let cpu = (cpu_of(view.0.id()) - cpu0).as_secs_f64() / wall;
-        let odo = (odometry.load(Ordering::Relaxed) - o0) as f64 / wall / f64::from(ROBOTS);
-        let rng = (ranges.load(Ordering::Relaxed) - r0) as f64 / wall;
+        let figures = window.end(&odometry, &ranges);
         let reports: Vec<[f64; 2]> = serde_json::from_str::<
             std::collections::BTreeMap<String, [f64; 2]>,
         >(&get(&host, "/api/report")?)
         .unwrap_or_default()
         .into_values()
         .collect();
-        let range = |k: usize| {
-            let (lo, hi) = reports.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), r| {
-                (lo.min(r[k]), hi.max(r[k]))
-            });
-            if reports.is_empty() {
-                "-".to_owned()
-            } else {
-                format!("{lo:.1}-{hi:.1}")
-            }
-        };
-        let (pages_fps, draw_ms) = (range(0), range(1));
-        let per = if n > 0 {
-            format!("{:.1}%", 100.0 * cpu / n as f64)
-        } else {
-            "-".to_owned()
-        };
-        writeln!(
-            out,
-            "  {n:>8}  {pages_fps:>17}  {draw_ms:>14}  {:>19.1}%  {per:>11}  {odo:>17.2}  {rng:>16.0}",
-            100.0 * cpu
+        row(
+            &mut out,
+            (&n.to_string(), n),
+            &spread(reports.iter().map(|r| r[0])),
+            &spread(reports.iter().map(|r| r[1])),
+            &figures,
         )?;
-        out.flush()?;
         drop(pages);
     }
     if a.streams > 0 {
-        let (cpu0, o0, r0, t0) = (
-            cpu_of(view.0.id()),
-            odometry.load(Ordering::Relaxed),
-            ranges.load(Ordering::Relaxed),
-            Instant::now(),
-        );
+        let window = Window::start(view.0.id(), &odometry, &ranges);
         // One stuck reader: asks for the stream, never reads it.
         let mut stuck = TcpStream::connect(&host)?;
         write!(stuck, "GET /api/stream HTTP/1.1\r\nHost: {host}\r\n\r\n")?;
@@ -285,26 +321,17 @@ fn measure(
             .collect();
         std::thread::sleep(Duration::from_secs_f64(a.seconds));
         stop.store(true, Ordering::Relaxed);
-        let wall = t0.elapsed().as_secs_f64();
-        let cpu = (cpu_of(view.0.id()) - cpu0).as_secs_f64() / wall;
-        let odo = (odometry.load(Ordering::Relaxed) - o0) as f64 / wall / f64::from(ROBOTS);
-        let rng = (ranges.load(Ordering::Relaxed) - r0) as f64 / wall;
-        let frames: Vec<f64> = readers
+        let figures = window.end(&odometry, &ranges);
+        let frames = readers
             .into_iter()
             .filter_map(|r| r.join().ok().and_then(Result::ok))
-            .map(|f| f as f64 / wall)
-            .collect();
-        let (lo, hi) = frames.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &f| {
-            (lo.min(f), hi.max(f))
-        });
-        writeln!(
-            out,
-            "  {:>8}  {:>17}  {:>14}  {:>19.1}%  {:>11}  {odo:>17.2}  {rng:>16.0}",
-            format!("{}+1", a.streams),
-            format!("{lo:.1}-{hi:.1}"),
+            .map(|f| f as f64 / figures.wall);
+        row(
+            &mut out,
+            (&format!("{}+1", a.streams), a.streams),
+            &spread(frames),
             "(no drawing)",
-            100.0 * cpu,
-            format!("{:.1}%", 100.0 * cpu / a.streams as f64),
+            &figures,
         )?;
         writeln!(
             out,

@@ -131,13 +131,18 @@ impl Viewed {
 
 /// POSTs `body` to the view's /api/command: the status code and the text.
 fn post(base: &str, body: &Value) -> (u32, String) {
+    post_to(base, "/api/command", body)
+}
+
+/// POSTs `body` to `path` of the view: the status code and the text.
+fn post_to(base: &str, path: &str, body: &Value) -> (u32, String) {
     let host = base.trim_start_matches("http://").trim_end_matches('/');
     let mut s = TcpStream::connect(host).unwrap();
     s.set_read_timeout(Some(DEADLINE)).unwrap();
     let body = body.to_string();
     write!(
         s,
-        "POST /api/command HTTP/1.0\r\nHost: {host}\r\nContent-Type: application/json\r\nContent-Length: {}\r\n\r\n{body}",
+        "POST {path} HTTP/1.0\r\nHost: {host}\r\nContent-Type: application/json\r\nContent-Length: {}\r\n\r\n{body}",
         body.len()
     )
     .unwrap();
@@ -273,21 +278,12 @@ fn the_view_draws_the_world_where_the_simulator_has_it() {
     // A page's frames carry what it shows: a box far from r0 gets no ray
     // of its ranger and no pose of it; a box around r0 gets both.
     let view_box = |page: &str, b: [f64; 4]| {
-        let host = base.trim_start_matches("http://").trim_end_matches('/');
-        let mut s = TcpStream::connect(host).unwrap();
-        let body = serde_json::json!({ "page": page, "box": b }).to_string();
-        write!(
-            s,
-            "POST /api/view HTTP/1.0\r\nHost: {host}\r\nContent-Type: application/json\r\nContent-Length: {}\r\n\r\n{body}",
-            body.len()
-        )
-        .unwrap();
-        let mut all = String::new();
-        s.read_to_string(&mut all).unwrap();
-        assert!(
-            all.starts_with("HTTP/1.0 200") || all.starts_with("HTTP/1.1 200"),
-            "{all}"
+        let (code, text) = post_to(
+            &base,
+            "/api/view",
+            &serde_json::json!({ "page": page, "box": b }),
         );
+        assert_eq!(code, 200, "{text}");
     };
     view_box("far", [20.0, 20.0, 30.0, 30.0]);
     let far = frame_of(&base, "/api/stream?page=far", |f| {

@@ -277,7 +277,7 @@ impl Raster {
                     // Only moving bodies here: the staircase passes to
                     // the region's edge at once.
                     None => {
-                        w.leap(RW);
+                        w.leap();
                         None
                     }
                     Some(cells) => {
@@ -374,7 +374,7 @@ impl Walk {
             n: ax + ay,
             sx: d.0.signum() as i32,
             sy: d.1.signum() as i32,
-            stairs: Stairs::new(ax, ay),
+            stairs: Stairs { ax, ay },
         }
     }
 
@@ -432,14 +432,13 @@ impl Walk {
         found
     }
 
-    /// The steps out of the box of `w` × `w` cells (`w` a power of two
-    /// aligned with the region) holding the current cell, in one go, or
+    /// The steps out of the region, from its cell (cx, cy), in one go, or
     /// to the ray's end.
     #[inline]
-    fn leap(&mut self, w: i32) {
-        let (lx, ly) = (self.cx & (w - 1), self.cy & (w - 1));
-        let kx = if self.sx > 0 { w - lx } else { lx + 1 };
-        let ky = if self.sy > 0 { w - ly } else { ly + 1 };
+    fn leap(&mut self) {
+        let (cx, cy) = (self.cx, self.cy);
+        let kx = if self.sx > 0 { RW - cx } else { cx + 1 };
+        let ky = if self.sy > 0 { RW - cy } else { cy + 1 };
         let (s, i) = self.stairs.leave(self.exy, kx, ky, self.n);
         self.cx += self.sx * i;
         self.cy += self.sy * (s - i);
@@ -464,10 +463,6 @@ struct Stairs {
 }
 
 impl Stairs {
-    fn new(ax: i32, ay: i32) -> Stairs {
-        Stairs { ax, ay }
-    }
-
     /// How many of the next `s` steps go along x, from error term `exy`.
     #[inline]
     fn xs(self, exy: i32, s: i32) -> i32 {
@@ -535,7 +530,7 @@ mod tests {
             if ax + ay == 0 {
                 continue;
             }
-            let st = Stairs::new(ax, ay);
+            let st = Stairs { ax, ay };
             let (bx, by) = (2 * ax, 2 * ay);
             // Walk some steps to get a reachable error term.
             let mut exy = ay - ax;

@@ -608,17 +608,17 @@ impl Sim {
     /// and leaving it buffers to reuse).
     fn file(&mut self, body: &mut Placed) {
         let m = body.model;
-        // (Most steps a body's outline stays in the same regions.)
-        let mut now = std::mem::take(&mut self.touched);
         if let Some(r) = &self.raster {
+            // (Most steps a body's outline stays in the same regions.)
+            let mut now = std::mem::take(&mut self.touched);
             r.regions_of(body.body.polys(), &mut now);
+            if now != self.touches[m] {
+                self.count_touches(m, -1);
+                std::mem::swap(&mut now, &mut self.touches[m]);
+                self.count_touches(m, 1);
+            }
+            self.touched = now;
         }
-        if now != self.touches[m] {
-            self.count_touches(m, -1);
-            std::mem::swap(&mut now, &mut self.touches[m]);
-            self.count_touches(m, 1);
-        }
-        self.touched = now;
         let tiles = body
             .cells
             .into_iter()
