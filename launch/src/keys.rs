@@ -91,6 +91,28 @@ pub enum Kind {
     Viewer,
 }
 
+impl Kind {
+    /// As a config's metadata names it.
+    fn name(self) -> &'static str {
+        match self {
+            Kind::Host => "host",
+            Kind::Operator => "operator",
+            Kind::Viewer => "viewer",
+        }
+    }
+}
+
+/// The viewer a Zenoh config joins a fleet as (`troupe fleet-keys
+/// --viewers`), if it is one: the name its config's metadata gives.
+pub fn viewer_of(c: &troupe_node::zenoh::Config) -> Option<String> {
+    let meta: serde_json::Value = serde_json::from_str(&c.get_json("metadata").ok()?).ok()?;
+    let me = meta.get("troupe")?;
+    if me.get("kind")? != "viewer" {
+        return None;
+    }
+    me.get("identity")?.as_str().map(str::to_owned)
+}
+
 fn member(spec: &str, kind: Kind) -> anyhow::Result<Member> {
     let mut parts = spec.trim().split(':');
     let name = parts.next().unwrap_or("").to_owned();
@@ -161,11 +183,11 @@ pub fn fleet_keys(a: KeysArgs) -> anyhow::Result<()> {
     )?;
     let names: Vec<&str> = members.iter().map(|m| m.name.as_str()).collect();
     let mut dictionary = String::new();
-    for h in &names {
-        let password = password()?;
+    for m in &members {
+        let (h, password) = (&m.name, password()?);
         let cfg = ca
             .identity(h, a.days)?
-            .config(&ca, Role::Member(&password), fleet);
+            .config(&ca, Role::Member(&password, m.kind), fleet);
         write(&a.dir.join(format!("{h}.json5")), &cfg, true)?;
         dictionary.push_str(&format!("{h}:{password}\n"));
     }
@@ -210,7 +232,7 @@ pub fn bench_configs(dir: &Path, robot: u32) -> anyhow::Result<(PathBuf, PathBuf
     let password = password()?;
     let cfg = ca
         .identity("pong", 1)?
-        .config(&ca, Role::Member(&password), fleet);
+        .config(&ca, Role::Member(&password, Kind::Host), fleet);
     write(&pong, &cfg, true)?;
     write(&dir.join(PASSWORDS), &format!("pong:{password}\n"), true)?;
     Ok((router, pong))
@@ -263,8 +285,8 @@ pub enum Role<'a> {
     /// The router: it listens for the fleet, checks each member's password
     /// and enforces what each member may do.
     Router(&'a [Member]),
-    /// A member, with its password: it connects to the router.
-    Member(&'a str),
+    /// A member, with its password and its kind: it connects to the router.
+    Member(&'a str, Kind),
 }
 
 /// Zenoh's access control for the router: deny by default; every member
@@ -472,7 +494,7 @@ impl Identity {
                 c["access_control"] = access_control(members, fleet.namespace);
                 usrpwd = serde_json::json!({ "dictionary_file": PASSWORDS });
             }
-            Role::Member(password) => {
+            Role::Member(password, kind) => {
                 tls["connect_certificate_base64"] = cert.into();
                 tls["connect_private_key_base64"] = key.into();
                 // A client of the router, listening nowhere: every link is
@@ -485,6 +507,11 @@ impl Identity {
                 }
                 c["listen"] = serde_json::json!({ "endpoints": [] });
                 usrpwd = serde_json::json!({ "user": self.name, "password": password });
+                // Who this is, for tools to read (`troupe view` offers no
+                // commands to a viewer); the router's rules are what bind.
+                c["metadata"] = serde_json::json!({
+                    "troupe": { "identity": self.name, "kind": kind.name() }
+                });
             }
         }
         c["transport"] =
@@ -509,10 +536,11 @@ mod tests {
     #[test]
     fn a_host_config_is_a_zenoh_config_with_tls_only() {
         let ca = Authority::new(30).unwrap();
-        let text = ca
-            .identity("robot1", 30)
-            .unwrap()
-            .config(&ca, Role::Member("secret"), FLEET);
+        let text = ca.identity("robot1", 30).unwrap().config(
+            &ca,
+            Role::Member("secret", Kind::Host),
+            FLEET,
+        );
         let path = std::env::temp_dir().join(format!("troupe-keys-{}.json5", std::process::id()));
         std::fs::write(&path, &text).unwrap();
         let c = troupe_node::zenoh::Config::from_file(&path).unwrap();
@@ -526,6 +554,23 @@ mod tests {
             "true"
         );
         assert_eq!(c.get_json("scouting/multicast/enabled").unwrap(), "false");
+        assert_eq!(viewer_of(&c), None, "a host is no viewer");
+    }
+
+    #[test]
+    fn a_viewer_s_config_says_it_is_one() {
+        let ca = Authority::new(30).unwrap();
+        let text = ca.identity("eye", 30).unwrap().config(
+            &ca,
+            Role::Member("secret", Kind::Viewer),
+            FLEET,
+        );
+        let path = std::env::temp_dir().join(format!("troupe-eye-{}.json5", std::process::id()));
+        std::fs::write(&path, &text).unwrap();
+        let c = troupe_node::zenoh::Config::from_file(&path).unwrap();
+        let _ = std::fs::remove_file(&path);
+        assert_eq!(viewer_of(&c).as_deref(), Some("eye"));
+        assert_eq!(viewer_of(&troupe_node::zenoh::Config::default()), None);
     }
 
     #[test]
@@ -581,16 +626,16 @@ mod tests {
                 now - time::Duration::days(30),
             )
             .unwrap()
-            .config(&ca, Role::Member("secret"), FLEET);
-        let foreign =
-            other
-                .identity("stray", 30)
+            .config(&ca, Role::Member("secret", Kind::Host), FLEET);
+        let foreign = other.identity("stray", 30).unwrap().config(
+            &ca,
+            Role::Member("secret", Kind::Host),
+            FLEET,
+        );
+        let good =
+            ca.identity("good", 30)
                 .unwrap()
-                .config(&ca, Role::Member("secret"), FLEET);
-        let good = ca
-            .identity("good", 30)
-            .unwrap()
-            .config(&ca, Role::Member("secret"), FLEET);
+                .config(&ca, Role::Member("secret", Kind::Host), FLEET);
         for (name, text, want) in [
             (
                 "expired",

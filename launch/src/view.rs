@@ -133,6 +133,11 @@ struct Shared {
     /// Bumped whenever something drawn changed.
     changed: watch::Sender<u64>,
     fps: f64,
+    /// The namespace the view watches (its session's), if any.
+    namespace: Option<String>,
+    /// The viewer identity the view joins a fleet as, if it is one: it
+    /// offers no commands (the fleet's rules would drop them unseen).
+    looking_only: Option<String>,
 }
 
 impl Shared {
@@ -194,7 +199,12 @@ impl Shared {
                 })
             })
             .collect();
-        json!({ "worlds": worlds, "maps": maps })
+        json!({
+            "worlds": worlds,
+            "maps": maps,
+            "namespace": self.namespace,
+            "looking_only": self.looking_only,
+        })
     }
 
     /// The frame rates pages reported in the last [`REPORTS_KEPT`], with
@@ -263,6 +273,13 @@ impl Shared {
             .values()
             .map(|p| p.time)
             .fold(None, |a: Option<f64>, t| Some(a.map_or(t, |a| a.max(t))));
+        // Each simulator's time: the page glides its models from one set
+        // of poses to the next.
+        let times: serde_json::Map<String, Value> = l
+            .poses
+            .iter()
+            .map(|(sim, p)| (addr(sim), json!(p.time)))
+            .collect();
         let poses: serde_json::Map<String, Value> = l
             .poses
             .iter()
@@ -291,6 +308,7 @@ impl Shared {
             .collect();
         json!({
             "time": time,
+            "times": times,
             "rates": rates,
             "speed": l.pace.speed,
             "devices": l.devices.len(),
@@ -583,10 +601,23 @@ pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     let Some((rt, mut signals, session)) = crate::supervisor::client_runtime(z, 2)? else {
         return Ok(());
     };
+    // Who the view joins as, and where (a fleet's config may name both).
+    let config = z.config(troupe_node::Mode::Client)?;
+    let looking_only = crate::keys::viewer_of(&config);
+    let namespace = config
+        .get_json("namespace")
+        .ok()
+        .and_then(|j| serde_json::from_str::<Option<String>>(&j).ok())
+        .flatten();
+    if let Some(me) = &looking_only {
+        tracing::info!("joining as the viewer `{me}`: the page offers no commands");
+    }
     let shared = Arc::new(Shared {
         latest: Mutex::default(),
         changed: watch::channel(0).0,
         fps: a.fps.clamp(0.1, 240.0),
+        namespace,
+        looking_only,
     });
     rt.block_on(async move {
         // Devices come and go; a simulator's world is asked for as it comes.
@@ -866,10 +897,21 @@ struct Order {
 }
 
 /// `POST /api/command`: sends the page's order. 200 once sent (a command)
-/// or acknowledged (a request); 400 for an order that makes no sense, 502
-/// with the reason when the driver refused or did not answer.
-async fn command(State((_, session)): State<App>, Json(o): Json<Order>) -> Response {
+/// or acknowledged (a request); 400 for an order that makes no sense, 403
+/// from a view that joins as a viewer, 502 with the reason when the driver
+/// refused or did not answer.
+async fn command(State((s, session)): State<App>, Json(o): Json<Order>) -> Response {
     use axum::http::StatusCode;
+    if let Some(me) = &s.looking_only {
+        return (
+            StatusCode::FORBIDDEN,
+            format!(
+                "this view joins the fleet as the viewer `{me}`, which may look, not command \
+                 (the fleet's access rules would drop the order)"
+            ),
+        )
+            .into_response();
+    }
     let bad = |why: String| (StatusCode::BAD_REQUEST, why).into_response();
     let dev: Device = match o.device.parse::<troupe_msgs::DevAddr>() {
         Ok(a) => a.device(troupe_msgs::DEFAULT_ROBOT),

@@ -478,6 +478,28 @@ fn a_tls_fleet_admits_its_own_certificates_only_and_each_identity_does_only_what
     };
     assert_eq!(answers("robot/6665/simulation/0/req/world"), 1);
     assert_eq!(answers("robot/6665/simulation/0/req/set_pose2d"), 0);
+    // `troupe view` joined as the viewer says so, in the fleet's
+    // namespace, and refuses to command rather than send what the router
+    // would drop unseen.
+    let mut view = Proc::troupe(
+        "view",
+        &with_net(&net(Some(cfg(&ours, "eye"))), &["view", "--port", "0"]),
+    );
+    let line = view.first_line();
+    let base = line
+        .trim()
+        .strip_prefix("troupe view: ")
+        .expect("the view's address");
+    let world = crate::view::json(base, "/api/world");
+    assert_eq!(world["looking_only"], "eye", "{world}");
+    assert_eq!(world["namespace"], ns.as_str(), "{world}");
+    let (code, why) = crate::view::post(
+        base,
+        &serde_json::json!({ "device": "6665:position2d:0", "vel": [0.2, 0.0, 0.0] }),
+    );
+    assert_eq!(code, 403, "{why}");
+    assert!(why.contains("viewer `eye`"), "{why}");
+    assert!(view.terminate().success(), "{}", view.stderr());
 
     // Another authority's certificate, none, or plain TCP: refused, and told why.
     let (status, _, err) = troupe_output(&with_net(

@@ -70,7 +70,7 @@ fn get(base: &str, path: &str) -> (u32, String) {
     (code, String::from_utf8(body).unwrap())
 }
 
-fn json(base: &str, path: &str) -> Value {
+pub(crate) fn json(base: &str, path: &str) -> Value {
     let (code, body) = get(base, path);
     assert_eq!(code, 200, "{path}: {body}");
     serde_json::from_str(&body).unwrap()
@@ -130,7 +130,7 @@ impl Viewed {
 }
 
 /// POSTs `body` to the view's /api/command: the status code and the text.
-fn post(base: &str, body: &Value) -> (u32, String) {
+pub(crate) fn post(base: &str, body: &Value) -> (u32, String) {
     post_to(base, "/api/command", body)
 }
 
@@ -202,6 +202,9 @@ fn the_view_draws_the_world_where_the_simulator_has_it() {
             && f["poses"]["6665:simulation:0"].is_object()
     });
     let world = json(&base, "/api/world");
+    // The view watches its session's namespace, and may command.
+    assert_eq!(world["namespace"], stack.ns.as_str());
+    assert_eq!(world["looking_only"], Value::Null);
     let w = &world["worlds"][0];
     assert_eq!(w["simulation"], "6665:simulation:0");
     let id = |name: &str| {
@@ -222,6 +225,9 @@ fn the_view_draws_the_world_where_the_simulator_has_it() {
     );
     let pose = &f["poses"]["6665:simulation:0"][r0.to_string()];
     assert_eq!(pose, &serde_json::json!([0.0, 0.0, 0.0]), "{f}");
+    // Each simulator's time comes with its poses (the page glides models
+    // from one set to the next).
+    assert_eq!(f["times"]["6665:simulation:0"], f["time"], "{f}");
     let ranges = f["readings"]["6665:ranger:0"]["ranges"].as_array().unwrap();
     assert_eq!(ranges.len(), 90);
     for k in [44, 45] {

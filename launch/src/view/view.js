@@ -37,11 +37,44 @@ function compose(a, b) {
   return [a[0] + b[0] * c - b[1] * s, a[1] + b[0] * s + b[1] * c, a[2] + b[2]];
 }
 
+// Each simulation's last two sets of poses, each with its simulated time
+// and when it came: between them a moving model is drawn gliding from the
+// one to the other over the time the last took to come, so robots move
+// smoothly at the page's frame rate, one pose interval (a tenth of a second
+// at Stage's default step) behind the simulator.
+const motion = {};
+let paintAt = 0;        // when the frame being painted is painted
+let gliding = false;    // a model was drawn between two poses: draw again
+const JUMP = 1.0;       // metres: a pose further than this is a jump, not a glide
+
+function takePoses(f) {
+  const now = performance.now();
+  for (const [sim, poses] of Object.entries(f.poses)) {
+    const time = f.times ? f.times[sim] : f.time;
+    const m = motion[sim];
+    if (m && m.last.time === time) {
+      m.last.poses = poses;   // the same instant, another part of the world
+    } else {
+      motion[sim] = { prev: m ? m.last : null, last: { time, at: now, poses } };
+    }
+  }
+}
+
 // A model's pose in the world: streamed if it moves, as described if not.
 function poseOf(world, id) {
-  const live = frame && frame.poses[world.simulation];
-  if (live && live[id]) return live[id];
-  return world.models[id].pose;
+  const m = params.has("still") ? null : motion[world.simulation];
+  const last = m && m.last.poses[id];
+  if (!last) {
+    const live = frame && frame.poses[world.simulation];
+    return live && live[id] ? live[id] : world.models[id].pose;
+  }
+  const before = m.prev && m.prev.poses[id];
+  if (!before || Math.hypot(last[0] - before[0], last[1] - before[1]) > JUMP) return last;
+  const k = (paintAt - m.last.at) / Math.max(m.last.at - m.prev.at, 1);
+  if (k >= 1) return last;
+  gliding = true;
+  const turn = Math.atan2(Math.sin(last[2] - before[2]), Math.cos(last[2] - before[2]));
+  return [before[0] + (last[0] - before[0]) * k, before[1] + (last[1] - before[1]) * k, before[2] + turn * k];
 }
 
 function fit() {
@@ -196,9 +229,12 @@ function size() {
 let drawn = 0, drawing_ms = 0;   // frames drawn and the time it took, for ?report
 function draw() {
   const t0 = performance.now();
+  paintAt = t0;
+  gliding = false;
   paint();
   drawn++;
   drawing_ms += performance.now() - t0;
+  if (gliding) redraw();
 }
 
 function paint() {
@@ -266,11 +302,19 @@ function sendBox(force) {
   fetch("/api/view", { method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify({ page: pageId, box }) });
 }
 
-let drawing = false;
+// At most ?fps frames a second (60 by default), each at the display's
+// next refresh.
+const maxFps = parseFloat(params.get("fps") || "60");
+let drawing = false, drawnAt = -Infinity;
 function redraw() {
   if (drawing) return;
   drawing = true;
-  requestAnimationFrame(() => { drawing = false; draw(); });
+  requestAnimationFrame(function tick(t) {
+    if (t - drawnAt < 1000 / maxFps - 2) { requestAnimationFrame(tick); return; }
+    drawing = false;
+    drawnAt = t;
+    draw();
+  });
 }
 
 async function getJson(path) {
@@ -282,6 +326,14 @@ async function getJson(path) {
 async function loadWorlds() {
   const all = await getJson("/api/world");
   worlds = all.worlds;
+  document.getElementById("namespace").textContent = all.namespace ? ` in ${all.namespace}` : "";
+  if (all.looking_only) {
+    // A viewer identity: the fleet's rules drop its commands, so it offers none.
+    document.getElementById("commands").hidden = true;
+    const looking = document.getElementById("looking");
+    looking.hidden = false;
+    looking.textContent = `Looking only: this view joins the fleet as the viewer \u201c${all.looking_only}\u201d, which may not command.`;
+  }
   const pictures = await Promise.all(all.maps.map(m => new Promise(done => {
     const image = new Image();
     image.onload = image.onerror = () => done({ ...m, image });
@@ -296,20 +348,28 @@ async function loadWorlds() {
     names.map(n => `<option${n === follow ? " selected" : ""}>${n}</option>`).join("");
 }
 
-// The devices of one interface as a select's options, keeping the choice.
-function offer(select, list, iface, none) {
+// The devices of one interface as a select's options, keeping the choice;
+// with none, the select is hidden and the tool that needs it, `tool`, off.
+function offer(select, list, iface, none, tool) {
   const keep = select.value;
   const names = list.filter(d => d.device.startsWith(iface + ":")).map(d => `${d.robot}:${d.device}`);
   select.innerHTML = (none ? '<option value="">(nothing)</option>' : "") +
     names.map(n => `<option${n === keep ? " selected" : ""}>${n}</option>`).join("");
+  select.hidden = !names.length;
+  if (tool) {
+    const radio = document.querySelector(`input[name="tool"][value="${tool}"]`);
+    radio.disabled = !names.length;
+    radio.parentElement.title = names.length ? "" : `no ${iface} device is live`;
+    if (radio.disabled && radio.checked) document.querySelector('input[name="tool"][value="pan"]').checked = true;
+  }
 }
 
 async function loadDevices() {
   const list = await getJson("/api/devices");
   deviceCount = list.length;
-  offer(plannerSelect, list, "planner", false);
-  offer(localizerSelect, list, "localize", false);
-  offer(teleopSelect, list, "position2d", true);
+  offer(plannerSelect, list, "planner", false, "goal");
+  offer(localizerSelect, list, "localize", false, "pose");
+  offer(teleopSelect, list, "position2d", true, null);
   deviceTable.innerHTML = list.map(d => {
     const key = `${d.robot}:${d.device}`;
     return `<tr data-key="${key}"${key === chosen ? ' class="chosen"' : ""}><td class="robot">${d.robot}</td><td>${d.device}</td><td>${d.driver}</td><td class="rate"></td></tr>`;
@@ -318,6 +378,7 @@ async function loadDevices() {
 
 function onFrame(f) {
   frame = f;
+  takePoses(f);
   const known = new Set(worlds.map(w => w.simulation));
   if (Object.keys(f.poses).some(s => !known.has(s)) || f.maps !== maps.length) loadWorlds().then(redraw, () => {});
   if (f.devices !== deviceCount) loadDevices().catch(() => {});
