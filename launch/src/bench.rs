@@ -516,6 +516,15 @@ pub struct StageBenchArgs {
     /// `stage_quirks 1` turns on), instead of against the exact walls.
     #[arg(long)]
     pub stage_ranges: bool,
+    /// Also run Stage's own benchmark worlds from a Stage checkout (its
+    /// top directory or its worlds/): benchmark/cave.world and
+    /// benchmark/hospital.world, as their authors wrote them, models and
+    /// controllers included (`threads` as given here).
+    #[arg(long, value_name = "DIR")]
+    pub stage_worlds: Option<std::path::PathBuf>,
+    /// Run only this world file in this process.
+    #[arg(long, hide = true)]
+    pub only_file: Option<std::path::PathBuf>,
 }
 
 /// A Pioneer with 16 sonars and a 180-beam SICK, wandering (our own
@@ -720,6 +729,17 @@ pub fn stage_bench(a: &StageBenchArgs) -> anyhow::Result<()> {
             bitmaps.display()
         ),
     };
+    if let Some(path) = &a.only_file {
+        let name = path.file_name().unwrap_or_default().to_string_lossy();
+        let t_load = Instant::now();
+        let mut world = troupe_stage::world::load(path)?;
+        world.threads = a.threads;
+        let what = format!(
+            "{}, as Stage's authors wrote it; sensors sensed as Stage senses them, while its controllers read them",
+            path.display()
+        );
+        return run_world(a, &name, world, t_load, &what, false);
+    }
     if let Some(name) = &a.only {
         let (text, what) = bench_world(name, &bitmaps, a.threads)?;
         let dir = std::env::temp_dir().join(format!("troupe-bench-stage-{}", std::process::id()));
@@ -728,31 +748,8 @@ pub fn stage_bench(a: &StageBenchArgs) -> anyhow::Result<()> {
         std::fs::write(&path, text)?;
         let t_load = Instant::now();
         let world = troupe_stage::world::load(&path)?;
-        let mut sim = troupe_stage::sim::Sim::new(world).map_err(|e| anyhow::anyhow!(e))?;
-        sim.stage_ranges(a.stage_ranges);
-        let load = t_load.elapsed();
         let _ = std::fs::remove_dir_all(&dir);
-        let steps = (a.seconds / sim.world.interval_sim).round() as u64;
-        let t0 = Instant::now();
-        for _ in 0..steps {
-            sim.step();
-        }
-        let wall = t0.elapsed().as_secs_f64();
-        let moving = sim
-            .bases
-            .iter()
-            .filter(|b| b.vel.x != 0.0 || b.vel.yaw != 0.0)
-            .count();
-        writeln!(
-            std::io::stdout().lock(),
-            "  {name:<13} {:>8.0}x real time  {:>7.1} MB peak  ({what}; {:.0} simulated s in {wall:.2} s, load {:.2} s, {moving}/{} moving at the end)",
-            sim.time / wall,
-            peak_rss_mb(),
-            sim.time,
-            load.as_secs_f64(),
-            sim.bases.len()
-        )?;
-        return Ok(());
+        return run_world(a, name, world, t_load, &what, true);
     }
     writeln!(
         std::io::stdout().lock(),
@@ -761,25 +758,74 @@ pub fn stage_bench(a: &StageBenchArgs) -> anyhow::Result<()> {
         a.threads,
         if a.stage_ranges { "on Stage's raster" } else { "against the exact walls" }
     )?;
-    for name in ["simple", "pioneers100", "hospital1000"] {
-        let status = Command::new(std::env::current_exe()?)
-            .args([
-                "bench",
-                "stage",
-                "--only",
-                name,
-                "--seconds",
-                &a.seconds.to_string(),
-                "--threads",
-                &a.threads.to_string(),
-                "--bitmaps",
-            ])
+    let me = std::env::current_exe()?;
+    let run = |what: &[&std::ffi::OsStr]| -> anyhow::Result<()> {
+        let status = Command::new(&me)
+            .args(["bench", "stage", "--seconds", &a.seconds.to_string()])
+            .args(["--threads", &a.threads.to_string(), "--bitmaps"])
             .arg(&bitmaps)
             .args(a.stage_ranges.then_some("--stage-ranges"))
+            .args(what)
             .status()?;
-        if !status.success() {
-            anyhow::bail!("bench world `{name}` failed: {status}");
+        anyhow::ensure!(status.success(), "bench world {what:?} failed: {status}");
+        Ok(())
+    };
+    for name in ["simple", "pioneers100", "hospital1000"] {
+        run(&["--only".as_ref(), name.as_ref()])?;
+    }
+    if let Some(dir) = &a.stage_worlds {
+        let worlds = [dir.join("worlds"), dir.clone()]
+            .into_iter()
+            .find(|d| d.join("benchmark/cave.world").exists())
+            .with_context(|| {
+                format!(
+                    "no benchmark/cave.world in {} or its worlds/: point --stage-worlds at a Stage checkout",
+                    dir.display()
+                )
+            })?;
+        for file in ["benchmark/cave.world", "benchmark/hospital.world"] {
+            run(&["--only-file".as_ref(), worlds.join(file).as_os_str()])?;
         }
     }
+    Ok(())
+}
+
+/// Runs `world` for the bench's seconds and prints its row; every ranger
+/// is sensed every step, or (as Stage does) only those its controllers read.
+fn run_world(
+    a: &StageBenchArgs,
+    name: &str,
+    world: troupe_stage::world::World,
+    t_load: Instant,
+    what: &str,
+    every_sensor: bool,
+) -> anyhow::Result<()> {
+    let mut sim = troupe_stage::sim::Sim::new(world).map_err(|e| anyhow::anyhow!(e))?;
+    sim.stage_ranges(a.stage_ranges);
+    if !every_sensor {
+        // No client: only what the controllers read.
+        sim.sense_only([]);
+    }
+    let load = t_load.elapsed();
+    let steps = (a.seconds / sim.world.interval_sim).round() as u64;
+    let t0 = Instant::now();
+    for _ in 0..steps {
+        sim.step();
+    }
+    let wall = t0.elapsed().as_secs_f64();
+    let moving = sim
+        .bases
+        .iter()
+        .filter(|b| b.vel.x != 0.0 || b.vel.yaw != 0.0)
+        .count();
+    writeln!(
+        std::io::stdout().lock(),
+        "  {name:<13} {:>8.0}x real time  {:>7.1} MB peak  ({what}; {:.0} simulated s in {wall:.2} s, load {:.2} s, {moving}/{} moving at the end)",
+        sim.time / wall,
+        peak_rss_mb(),
+        sim.time,
+        load.as_secs_f64(),
+        sim.bases.len()
+    )?;
     Ok(())
 }

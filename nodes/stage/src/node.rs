@@ -255,6 +255,13 @@ impl Driver for Stage {
                 devices.push((dev, src));
             }
         }
+        // As Stage: a sensor no one reads is not simulated.
+        sim.sense_only(devices.iter().filter_map(|&(_, src)| match src {
+            Source::Ranger { model } | Source::Laser { model } | Source::Sonar { model } => {
+                Some(model)
+            }
+            _ => None,
+        }));
         let mut maps = Vec::new();
         for &(dev, src) in &devices {
             if let Source::Map { model } = src {

@@ -21,6 +21,9 @@ use crate::crew::{spin_until, Crew, Job};
 use crate::movers::{Body, Fan, Movers, Sweep};
 use crate::world::{Drive, Kind, Localization, Sensor, World};
 
+mod ctrl;
+pub use ctrl::{Ctrl, Mind};
+
 /// What a position model was last told to do.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Command {
@@ -49,10 +52,11 @@ pub struct Base {
     pub origin: Pose,
     /// Motors enabled.
     pub enabled: bool,
-    /// Under the built-in `wander` controller.
-    pub wander: bool,
-    /// Direction wander is turning away from an obstacle (+1 left, -1 right).
-    pub wander_turn: f64,
+    /// Its built-in controller (its model's `ctrl`), if any: it drives
+    /// the base while no command has come.
+    pub ctrl: Option<Ctrl>,
+    /// What that controller keeps from step to step.
+    pub mind: Mind,
 }
 
 /// Where a gripper's paddles are going, as Stage's gripper keeps them.
@@ -160,6 +164,10 @@ pub struct Sim {
     crew: Crew,
     /// Each model's subtree (itself first), depth-first.
     trees: Vec<Vec<usize>>,
+    /// Rangers under `lasernoise`: noise on their first sensor's ranges.
+    noisy: Vec<bool>,
+    /// The rangers each step senses (all, unless [`Sim::sense_only`]).
+    sensed: Vec<bool>,
     movable: Vec<bool>,
     /// The cells each static model occupies now.
     cells: Vec<Vec<(usize, usize)>>,
@@ -290,9 +298,9 @@ struct Plan {
     /// Its velocity this step, and its pose at the end of it.
     v: Pose,
     next: Pose,
-    /// Whether it moves, and the way its wander controller turns.
+    /// Whether it moves, and what its controller keeps after this step.
     moving: bool,
-    turn: f64,
+    mind: Mind,
     /// Its tree's bodies where it would move to, and whether they would
     /// meet a static obstacle.
     bodies: Vec<Placed>,
@@ -370,23 +378,42 @@ impl Sim {
         {
             statics.keep_clearance();
         }
-        // Controllers Troupe lacks: said once each, with how many models
-        // stay idle and the first of them.
-        let mut missing: std::collections::BTreeMap<&str, (usize, usize)> = Default::default();
-        for m in (0..n).filter(|&m| world.models[m].kind == Kind::Position) {
+        // Each model's controllers: built in, or said once each (with how
+        // many models stay idle for it, and the first of them).
+        let trees: Vec<Vec<usize>> = (0..n).map(|m| world.subtree(m)).collect();
+        let mut ctrls = vec![None; n];
+        let mut noisy = vec![false; n];
+        let mut missing: std::collections::BTreeMap<String, (usize, usize)> = Default::default();
+        for m in 0..n {
             for c in &world.models[m].ctrl {
-                let name = c.split_whitespace().next().unwrap_or("");
-                if name != "wander" {
-                    missing.entry(name).or_insert((m, 0)).1 += 1;
-                }
+                let why = match ctrl::find(&world, &trees[m], m, c) {
+                    ctrl::Found::Base(found) if ctrls[m].is_none() => {
+                        ctrls[m] = Some(found);
+                        continue;
+                    }
+                    ctrl::Found::Base(_) => format!(
+                        "\"{c}\" is a second controller of one base; the first one drives it"
+                    ),
+                    ctrl::Found::Noise => {
+                        noisy[m] = true;
+                        continue;
+                    }
+                    ctrl::Found::Zone => continue,
+                    ctrl::Found::Unknown => format!(
+                        "controller \"{}\" is not built into Troupe",
+                        c.split_whitespace().next().unwrap_or("")
+                    ),
+                    ctrl::Found::Lacks(why) => why,
+                };
+                missing.entry(why).or_insert((m, 0)).1 += 1;
             }
         }
-        for (name, (first, count)) in missing {
+        for (why, (first, count)) in missing {
             let (pos, model) = (&world.models[first].pos, &world.models[first].name);
             if count == 1 {
-                tracing::warn!("{pos}: controller \"{name}\" is not built into Troupe; model `{model}` stays idle");
+                tracing::warn!("{pos}: {why}; model `{model}` stays idle");
             } else {
-                tracing::warn!("{pos}: controller \"{name}\" is not built into Troupe; {count} models stay idle (the first: `{model}`)");
+                tracing::warn!("{pos}: {why}; {count} models stay idle (the first: `{model}`)");
             }
         }
         let bases = (0..n)
@@ -395,10 +422,6 @@ impl Sim {
                 let (g, _) = world.global(&poses, m);
                 let cfg = world.models[m].position.as_ref();
                 let origin = cfg.and_then(|c| c.localization_origin).unwrap_or(g);
-                let wander = world.models[m]
-                    .ctrl
-                    .iter()
-                    .any(|c| c.split_whitespace().next() == Some("wander"));
                 Base {
                     model: m,
                     cmd: None,
@@ -407,8 +430,8 @@ impl Sim {
                     odom: origin.inverse().compose(&g),
                     origin,
                     enabled: true,
-                    wander,
-                    wander_turn: 1.0,
+                    ctrl: ctrls[m],
+                    mind: Mind::default(),
                 }
             })
             .collect();
@@ -431,7 +454,6 @@ impl Sim {
             .iter()
             .map(|m| (m.kind == Kind::Gripper).then(GripperState::default))
             .collect();
-        let trees: Vec<Vec<usize>> = (0..n).map(|m| world.subtree(m)).collect();
         let heights = (0..n).map(|m| height(&world, &poses, m)).collect();
         let fans = world
             .models
@@ -462,6 +484,8 @@ impl Sim {
             readings,
             grippers,
             trees,
+            noisy,
+            sensed: vec![true; n],
             crew: Crew::default(),
             roots,
             heights,
@@ -477,12 +501,27 @@ impl Sim {
         for m in 0..n {
             sim.place(m);
         }
-        // No more threads than cores: the helpers spin while the bases
-        // move, and one without a core of its own would slow the moves.
-        let cores = std::thread::available_parallelism().map_or(1, usize::from);
-        sim.set_threads(sim.world.threads.clamp(1, cores));
+        sim.set_threads();
         sim.sense();
         Ok(sim)
+    }
+
+    /// From now on senses only the rangers `served` (those whose devices
+    /// a client is given) and those the built-in controllers read, as
+    /// Stage updates only the sensors someone subscribes to; the others
+    /// keep their last readings.
+    pub fn sense_only(&mut self, served: impl IntoIterator<Item = usize>) {
+        let mut on = vec![false; self.world.models.len()];
+        for r in served {
+            on[r] = true;
+        }
+        for bi in 0..self.bases.len() {
+            if let Some(r) = self.ctrl_ranger(bi) {
+                on[r] = true;
+            }
+        }
+        self.sensed = on;
+        self.set_threads();
     }
 
     /// Every ranger, as the crew deals them.
@@ -492,7 +531,7 @@ impl Sim {
             base_of[b.model] = Some(bi);
         }
         (0..self.world.models.len())
-            .filter(|&r| !self.world.models[r].sensors.is_empty())
+            .filter(|&r| self.sensed[r] && !self.world.models[r].sensors.is_empty())
             .map(|r| Job {
                 ranger: r,
                 rays: self.world.models[r].sensors.iter().map(|s| s.samples).sum(),
@@ -501,10 +540,14 @@ impl Sim {
             .collect()
     }
 
-    /// Plans moves and casts rays on `threads` threads: no more than there
-    /// are rangers, and one when a step casts fewer than a few thousand
-    /// rays (threads pay off only then).
-    fn set_threads(&mut self, threads: usize) {
+    /// Plans moves and casts rays on the world's `threads`: no more than
+    /// there are cores (the helpers spin while the bases move, and one
+    /// without a core of its own would slow the moves) or rangers sensed,
+    /// and one when a step casts fewer than a few thousand rays (threads
+    /// pay off only then).
+    fn set_threads(&mut self) {
+        let cores = std::thread::available_parallelism().map_or(1, usize::from);
+        let threads = self.world.threads.clamp(1, cores);
         let jobs = self.jobs();
         let rays: usize = jobs.iter().map(|j| j.rays).sum();
         let threads = if rays < 2000 { 1 } else { threads };
@@ -783,56 +826,6 @@ impl Sim {
         self.steps += 1;
     }
 
-    /// The built-in `wander` controller of base `bi`: the velocity it asks
-    /// for, and the way it turns from obstacles (+1 left, -1 right).
-    fn wander(&self, bi: usize) -> (Pose, f64) {
-        let m = self.bases[bi].model;
-        // The robot's first ranger with many samples, else its first ranger.
-        let mut rangers = self.trees[m]
-            .iter()
-            .copied()
-            .filter(|&k| !self.readings[k].is_empty());
-        let first = rangers.clone().next();
-        let laser = rangers
-            .find(|&k| self.world.models[k].sensors[0].samples > 1)
-            .or(first);
-        let turn = self.bases[bi].wander_turn;
-        let Some(r) = laser else {
-            return (Pose::new(0.4, 0.0, 0.0), turn);
-        };
-        let sensors = &self.world.models[r].sensors;
-        let (mut left, mut right) = (f64::INFINITY, f64::INFINITY);
-        // (A hair over a right angle: the fan's last ray may land on it by
-        // rounding.)
-        let side = std::f64::consts::FRAC_PI_2 + 1e-9;
-        for (s, rd) in sensors.iter().zip(&self.readings[r]) {
-            // Bearings grow ray by ray: those from -side to 0 are on the
-            // right, from 0 to side on the left.
-            let (start, step) = fan(s);
-            let n = rd.ranges.len();
-            let at = |k: usize| start + step * k as f64;
-            let r0 = first_where(n, |k| at(k) >= -side);
-            let mid = first_where(n, |k| at(k) >= 0.0);
-            let l1 = first_where(n, |k| at(k) > side);
-            right = right.min(nearest(&rd.ranges[r0..mid.max(r0)]));
-            left = left.min(nearest(&rd.ranges[mid..l1.max(mid)]));
-        }
-        if left.min(right) < 0.6 {
-            let turn = if (left - right).abs() > 0.1 {
-                if left < right {
-                    -1.0
-                } else {
-                    1.0
-                }
-            } else {
-                turn
-            };
-            (Pose::new(0.0, 0.0, turn), turn)
-        } else {
-            (Pose::new(0.4, 0.0, 0.0), turn)
-        }
-    }
-
     /// Works out what base `bi` does in a step of `dt`, from the poses at
     /// the step's start, into `plan`.
     ///
@@ -849,7 +842,7 @@ impl Sim {
         let Some(cfg) = &self.world.models[m].position else {
             return;
         };
-        plan.turn = self.bases[bi].wander_turn;
+        plan.mind = self.bases[bi].mind;
         let want = match self.bases[bi].cmd {
             _ if !self.bases[bi].enabled => Pose::default(),
             Some(Command::Vel(v)) => v,
@@ -888,12 +881,10 @@ impl Sim {
                     )
                 }
             }
-            None if self.bases[bi].wander => {
-                let (want, turn) = self.wander(bi);
-                plan.turn = turn;
-                want
-            }
-            None => Pose::default(),
+            None => match self.bases[bi].ctrl {
+                Some(c) => self.control(bi, c, &mut plan.mind),
+                None => Pose::default(),
+            },
         };
         let vb = &cfg.velocity_bounds;
         let ab = &cfg.acceleration_bounds;
@@ -941,7 +932,7 @@ impl Sim {
         };
         let (localization, e) = (cfg.localization, cfg.odom_error);
         let v = plan.v;
-        self.bases[bi].wander_turn = plan.turn;
+        self.bases[bi].mind = plan.mind;
         if plan.moving {
             if plan.walled || self.hits_movers(self.roots[m], &plan.bodies) {
                 let b = &mut self.bases[bi];
@@ -1011,6 +1002,11 @@ impl Sim {
                 let mut slot = lock(&work[k]);
                 let (r, out) = &mut *slot;
                 me.sense_one(*r, out, &mut sweep);
+                if me.noisy[*r] {
+                    if let Some(first) = out.first_mut() {
+                        me.add_noise(*r, &mut first.ranges);
+                    }
+                }
             }
         };
         let sim = RwLock::new(&mut *self);
@@ -1846,7 +1842,8 @@ mod tests {
         let (mut one, mut two) = (world(1), world(2));
         assert_eq!(one.crew.threads(), 1);
         // (Two even on a machine of one core.)
-        two.set_threads(2);
+        two.world.threads = 2;
+        two.set_threads();
         for _ in 0..30 {
             one.step();
             two.step();
@@ -2150,7 +2147,7 @@ mod compat {
         }
         let mut s = Sim::new(crate::world::load(&p).unwrap()).unwrap();
         assert!(
-            s.bases.iter().all(|b| b.wander),
+            s.bases.iter().all(|b| b.ctrl == Some(Ctrl::Wander)),
             "both robots have ctrl \"wander\""
         );
         let start = s.global(s.bases[0].model);

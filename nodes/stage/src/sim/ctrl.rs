@@ -1,0 +1,623 @@
+//! Stage's stock controllers, built into the simulator: a model's `ctrl
+//! "name args"` runs here, as Stage's plug-in of that name would run in
+//! Stage (its examples/ctrl/ and worlds/benchmark/ sources are the
+//! reference).
+//!
+//! A controller runs at every step, reading its robot's sensors as they
+//! were at the step's start, and sets speeds that hold until it sets others
+//! (Stage's `SetSpeed`: a controller that returns early leaves them as they
+//! were). What a controller keeps from step to step is its [`Mind`]. Its
+//! random draws are a fixed function of the model and the step, so a world
+//! runs the same on every run and any number of threads.
+
+use troupe_geom::Pose;
+
+use super::{nearest, Sim};
+use crate::world::{Kind, World};
+
+/// A controller and the sensors it reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Ctrl {
+    /// `wander`: ahead at 0.4 m/s; turns in place away from the nearer
+    /// side while anything is within 0.6 m of its first fan of rays.
+    Wander,
+    /// `expand_pioneer` (worlds/benchmark): steers along the sum of its
+    /// first ranger's 16 sonar readings as vectors, ahead at 0.2 m/s when
+    /// the front sonars are clear (0.75 m ahead, less to the sides).
+    ExpandPioneer {
+        /// The sonar ring.
+        ranger: usize,
+    },
+    /// `expand_swarm` (worlds/benchmark): the same over a ring of 12
+    /// single-ray sensors, ahead at 0.3 m/s when clear (0.5 m ahead).
+    ExpandSwarm {
+        /// The ring of sensors.
+        ranger: usize,
+    },
+    /// `wander_accel`: its ranger `ranger:1`'s scan; ahead at 0.4 m/s,
+    /// slowing to 0.05 m/s (0 closer than 0.3 m) and turning at 0.5 rad/s
+    /// away from the nearer side for 10–19 steps when the middle third of
+    /// the scan sees anything within 1 m.
+    WanderAccel {
+        /// The laser (`ranger:1`).
+        laser: usize,
+    },
+    /// `pioneer_flocking`: expands over its first ranger's 8 front sonars
+    /// and, when clear, turns toward the heading of the nearest robot its
+    /// fiducial finder sees, ahead at 0.4 m/s.
+    Flocking {
+        /// The sonars.
+        ranger: usize,
+        /// The fiducial finder.
+        fiducial: usize,
+    },
+}
+
+/// What a controller keeps from step to step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Mind {
+    /// The speeds it last set: they hold until it sets others.
+    pub want: Pose,
+    /// `wander`'s way of turning from obstacles (+1 left, -1 right).
+    pub turn: f64,
+    /// `wander_accel`'s steps left avoiding.
+    pub avoid: u32,
+}
+
+impl Default for Mind {
+    fn default() -> Self {
+        Mind {
+            want: Pose::default(),
+            turn: 1.0,
+            avoid: 0,
+        }
+    }
+}
+
+/// A controller a world names and Troupe builds in, or why it cannot run.
+pub enum Found {
+    /// Runs on a position model.
+    Base(Ctrl),
+    /// `lasernoise`: on a ranger, noise on its first sensor's ranges.
+    Noise,
+    /// `source` or `sink`: zones that hold and take pucks (Stage's flags)
+    /// for `fasr`'s robots; with no robot to carry pucks they have nothing
+    /// to do, so they run as nothing at all.
+    Zone,
+    /// Not built in (`fasr`, a user's own plug-in).
+    Unknown,
+    /// Built in, but the model lacks what it reads.
+    Lacks(String),
+}
+
+/// The controller `line` (a `ctrl` string, `"name args…"`) names on model
+/// `m`, whose subtree (itself first, depth first) is `tree`.
+pub fn find(world: &World, tree: &[usize], m: usize, line: &str) -> Found {
+    let name = line.split_whitespace().next().unwrap_or("");
+    let model = &world.models[m];
+    // Stage's GetUnusedModelOfType: the subtree's first model of a kind
+    // not yet taken, depth first.
+    let mut taken = Vec::new();
+    let mut take = |kind: Kind| {
+        let k = tree
+            .iter()
+            .copied()
+            .find(|&k| k != m && world.models[k].kind == kind && !taken.contains(&k))?;
+        taken.push(k);
+        Some(k)
+    };
+    let position = model.kind == Kind::Position;
+    let sonars = |k: usize, n: usize, name: &str| {
+        let have = world.models[k].sensors.len();
+        if have >= n {
+            Ok(k)
+        } else {
+            Err(Found::Lacks(format!(
+                "\"{name}\" reads {n} sensors of `{}`, which has {have}",
+                world.models[k].name
+            )))
+        }
+    };
+    let on_base =
+        |what: &str| Found::Lacks(format!("\"{name}\" runs on a position model, not {what}"));
+    let no = |what: &str| Found::Lacks(format!("\"{name}\" needs {what}"));
+    match name {
+        "wander" if position => Found::Base(Ctrl::Wander),
+        "expand_pioneer" | "expand_swarm" | "pioneer_flocking" if !position => {
+            on_base(&format!("a {:?}", model.kind).to_lowercase())
+        }
+        "expand_pioneer" => match take(Kind::Ranger).map(|r| sonars(r, 7, name)) {
+            Some(Ok(ranger)) => Found::Base(Ctrl::ExpandPioneer { ranger }),
+            Some(Err(e)) => e,
+            None => no("a ranger (a Pioneer's sonar ring)"),
+        },
+        "expand_swarm" => match take(Kind::Ranger).map(|r| sonars(r, 12, name)) {
+            Some(Ok(ranger)) => Found::Base(Ctrl::ExpandSwarm { ranger }),
+            Some(Err(e)) => e,
+            None => no("a ranger (a ring of 12 sensors)"),
+        },
+        "pioneer_flocking" => {
+            let ranger = match take(Kind::Ranger).map(|r| sonars(r, 7, name)) {
+                Some(Ok(r)) => r,
+                Some(Err(e)) => return e,
+                None => return no("a ranger (a Pioneer's front sonars)"),
+            };
+            match take(Kind::Fiducial) {
+                Some(fiducial) => Found::Base(Ctrl::Flocking { ranger, fiducial }),
+                None => no("a fiducial finder"),
+            }
+        }
+        "wander_accel" if position => {
+            // Stage's GetChild("ranger:1"): the model's second ranger.
+            let laser = world
+                .names
+                .get(&format!("{}.ranger:1", model.name))
+                .copied();
+            match laser {
+                Some(laser) => Found::Base(Ctrl::WanderAccel { laser }),
+                None => no("a second ranger (`ranger:1`, Stage's laser on a Pioneer)"),
+            }
+        }
+        "lasernoise" if model.kind == Kind::Ranger => Found::Noise,
+        "lasernoise" => Found::Lacks("\"lasernoise\" runs on a ranger".into()),
+        "source" | "sink" => Found::Zone,
+        _ => Found::Unknown,
+    }
+}
+
+impl Sim {
+    /// The speeds base `bi`'s controller sets this step, from what its
+    /// sensors read; `mind` is what it keeps.
+    pub(super) fn control(&self, bi: usize, ctrl: Ctrl, mind: &mut Mind) -> Pose {
+        match ctrl {
+            Ctrl::Wander => {
+                let (want, turn) = self.wander(bi, mind.turn);
+                mind.turn = turn;
+                return want;
+            }
+            Ctrl::ExpandPioneer { ranger } => {
+                // Stage's SAFE_DIST 0.75, SAFE_ANGLE 0.5, VSPEED 0.2, WGAIN 1.
+                let s = 0.75;
+                self.expand(ranger, mind, 1.0, |r| {
+                    let ahead = r[3] > s && r[4] > s;
+                    let sides =
+                        r[5] > s / 2.0 && r[6] > s / 4.0 && r[2] > s / 2.0 && r[1] > s / 4.0;
+                    (ahead && sides).then_some(0.2)
+                });
+            }
+            Ctrl::ExpandSwarm { ranger } => {
+                // SAFE_DIST 0.5, VSPEED 0.3.
+                let s = 0.5;
+                self.expand(ranger, mind, 1.0, |r| {
+                    let left = r[1] > s / 1.5 && r[2] > s / 3.0 && r[3] > s / 5.0;
+                    let right = r[9] > s / 5.0 && r[10] > s / 3.0 && r[11] > s / 1.5;
+                    (r[0] > s && left && right).then_some(0.3)
+                });
+            }
+            Ctrl::Flocking { ranger, fiducial } => {
+                // The nearest robot seen: its heading, relative to ours.
+                let seen = self.fiducials(fiducial);
+                let closest = seen
+                    .fiducials
+                    .iter()
+                    .map(|f| (f.pose.x.hypot(f.pose.y), f.pose.yaw))
+                    .min_by(|a, b| a.0.total_cmp(&b.0));
+                let draw = self.chance(self.bases[bi].model, 0);
+                // EXPAND_WGAIN and FLOCK_WGAIN 0.3, SAFE_DIST 1, VSPEED 0.4.
+                let clear = |r: &[f64]| {
+                    r[3] > 1.0 && r[4] > 1.0 && r[5] > 1.0 && r[6] > 0.5 && r[2] > 1.0 && r[1] > 0.5
+                };
+                // (Over the first eight sonars: a Pioneer's front ring.)
+                let Some((ang, r)) = self.resultant(ranger, 8) else {
+                    return mind.want;
+                };
+                let mut turn = 0.3 * ang;
+                let mut fwd = 0.0;
+                if clear(&r) && ang.abs() < 0.5 {
+                    fwd = 0.4;
+                    if let Some((_, heading)) = closest {
+                        turn += 0.3 * heading;
+                    }
+                } else if turn.abs() < 0.1 {
+                    // Stage: drand48(), a left turn of up to 1 rad/s.
+                    turn = draw;
+                }
+                mind.want = Pose::new(fwd, 0.0, turn);
+            }
+            Ctrl::WanderAccel { laser } => {
+                let Some(scan) = self.readings[laser].first().map(|r| &r.ranges[..]) else {
+                    return mind.want;
+                };
+                let n = scan.len();
+                if n == 0 {
+                    return mind.want;
+                }
+                let (mut obstruction, mut stop) = (false, false);
+                let (mut left, mut right) = (1e6f64, 1e6f64);
+                for (i, &r) in scan.iter().enumerate() {
+                    if i > n / 3 && i < n - n / 3 && r < 1.0 {
+                        obstruction = true;
+                    }
+                    if r < 0.3 {
+                        stop = true;
+                    }
+                    if i > n / 2 {
+                        left = left.min(r);
+                    } else {
+                        right = right.min(r);
+                    }
+                }
+                if obstruction || stop || mind.avoid > 0 {
+                    mind.want.x = if stop { 0.0 } else { 0.05 };
+                    if mind.avoid < 1 {
+                        // Stage: random() % 10 + 10 steps.
+                        let draw = self.chance(self.bases[bi].model, 1);
+                        mind.avoid = 10 + (draw * 10.0) as u32;
+                        mind.want.yaw = if left < right { -0.5 } else { 0.5 };
+                    }
+                    mind.avoid -= 1;
+                } else {
+                    mind.avoid = 0;
+                    mind.want = Pose::new(0.4, 0.0, 0.0);
+                }
+            }
+        }
+        mind.want
+    }
+
+    /// The expand controllers: turn toward the resultant of the sensors'
+    /// readings (as vectors along each sensor's heading) by `gain` times
+    /// its angle, and go ahead at the speed `clear` gives when the angle
+    /// is under 0.5 rad. With no resultant (Stage's `dx == 0 || dy == 0`)
+    /// the speeds hold.
+    fn expand(
+        &self,
+        ranger: usize,
+        mind: &mut Mind,
+        gain: f64,
+        clear: impl Fn(&[f64]) -> Option<f64>,
+    ) {
+        if let Some((ang, r)) = self.resultant(ranger, usize::MAX) {
+            let fwd = clear(&r).filter(|_| ang.abs() < 0.5).unwrap_or(0.0);
+            mind.want = Pose::new(fwd, 0.0, gain * ang);
+        }
+    }
+
+    /// The angle of the sum of the first readings of ranger `r`'s first
+    /// `n` sensors as vectors along each sensor's heading, and those
+    /// readings; `None` before it has read or when either sum is exactly 0
+    /// (as Stage's controllers test it).
+    fn resultant(&self, r: usize, n: usize) -> Option<(f64, Vec<f64>)> {
+        let sensors = &self.world.models[r].sensors[..n.min(self.world.models[r].sensors.len())];
+        let read: Vec<f64> = self.readings[r]
+            .iter()
+            .take(sensors.len())
+            .map(|rd| rd.ranges.first().copied().unwrap_or(0.0))
+            .collect();
+        if read.len() < sensors.len() || read.is_empty() {
+            return None;
+        }
+        let (mut dx, mut dy) = (0.0, 0.0);
+        for (s, &v) in sensors.iter().zip(&read) {
+            let (sin, cos) = s.pose.yaw.sin_cos();
+            dx += v * cos;
+            dy += v * sin;
+        }
+        (dx != 0.0 && dy != 0.0).then(|| (dy.atan2(dx), read))
+    }
+
+    /// A uniform draw in [0, 1) for model `m` at this step (`salt` tells
+    /// draws of one step apart): SplitMix64 of the three.
+    pub(super) fn chance(&self, m: usize, salt: u64) -> f64 {
+        unit_draw([m as u64, self.steps, salt])
+    }
+
+    /// The ranger base `bi`'s controller reads, if any.
+    pub(super) fn ctrl_ranger(&self, bi: usize) -> Option<usize> {
+        match self.bases[bi].ctrl? {
+            Ctrl::Wander => self.wander_ranger(self.bases[bi].model),
+            Ctrl::ExpandPioneer { ranger }
+            | Ctrl::ExpandSwarm { ranger }
+            | Ctrl::Flocking { ranger, .. } => Some(ranger),
+            Ctrl::WanderAccel { laser } => Some(laser),
+        }
+    }
+
+    /// The ranger `wander` steers by on base model `m`: its first with
+    /// many samples, else its first.
+    fn wander_ranger(&self, m: usize) -> Option<usize> {
+        let mut rangers = self.trees[m]
+            .iter()
+            .copied()
+            .filter(|&k| !self.world.models[k].sensors.is_empty());
+        let first = rangers.clone().next();
+        rangers
+            .find(|&k| self.world.models[k].sensors[0].samples > 1)
+            .or(first)
+    }
+
+    /// The built-in `wander` controller of base `bi`: the velocity it asks
+    /// for, and the way it turns from obstacles (+1 left, -1 right), given
+    /// the way it turned last.
+    fn wander(&self, bi: usize, turn: f64) -> (Pose, f64) {
+        let Some(r) = self.wander_ranger(self.bases[bi].model) else {
+            return (Pose::new(0.4, 0.0, 0.0), turn);
+        };
+        let sensors = &self.world.models[r].sensors;
+        let (mut left, mut right) = (f64::INFINITY, f64::INFINITY);
+        // (A hair over a right angle: the fan's last ray may land on it by
+        // rounding.)
+        let side = std::f64::consts::FRAC_PI_2 + 1e-9;
+        for (s, rd) in sensors.iter().zip(&self.readings[r]) {
+            // Bearings grow ray by ray: those from -side to 0 are on the
+            // right, from 0 to side on the left.
+            let (start, step) = super::fan(s);
+            let n = rd.ranges.len();
+            let at = |k: usize| start + step * k as f64;
+            let r0 = super::first_where(n, |k| at(k) >= -side);
+            let mid = super::first_where(n, |k| at(k) >= 0.0);
+            let l1 = super::first_where(n, |k| at(k) > side);
+            right = right.min(nearest(&rd.ranges[r0..mid.max(r0)]));
+            left = left.min(nearest(&rd.ranges[mid..l1.max(mid)]));
+        }
+        if left.min(right) < 0.6 {
+            let turn = if (left - right).abs() > 0.1 {
+                if left < right {
+                    -1.0
+                } else {
+                    1.0
+                }
+            } else {
+                turn
+            };
+            (Pose::new(0.0, 0.0, turn), turn)
+        } else {
+            (Pose::new(0.4, 0.0, 0.0), turn)
+        }
+    }
+
+    /// `lasernoise` on ranger `r`'s readings: each range of its first
+    /// sensor times a normal deviate of mean 1 and deviation 0.05, as
+    /// Stage's plug-in draws it (the sum of 12 uniform draws, less 6).
+    pub(super) fn add_noise(&self, r: usize, ranges: &mut [f64]) {
+        const DEVIATION: f64 = 0.05;
+        for (k, v) in ranges.iter_mut().enumerate() {
+            let sum: f64 = (0..12)
+                .map(|j| unit_draw([r as u64, self.steps, 16 + 12 * k as u64 + j]))
+                .sum();
+            *v *= 1.0 + DEVIATION * (sum - 6.0);
+        }
+    }
+}
+
+/// A uniform draw in [0, 1), a fixed function of `keys` (SplitMix64).
+fn unit_draw(keys: [u64; 3]) -> f64 {
+    let mut z = 0x243F_6A88_85A3_08D3u64;
+    for k in keys {
+        z = (z ^ k).wrapping_add(0x9E37_79B9_7F4A_7C15);
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+    }
+    (z >> 11) as f64 / (1u64 << 53) as f64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A simulator of `text` (a world file that may include the project's
+    /// worlds/robots.inc, and gets a 12 m walled room around the origin).
+    fn sim(name: &str, text: &str) -> Sim {
+        let dir = std::env::temp_dir().join(format!("troupe-ctrl-{}-{name}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let inc = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../worlds/robots.inc");
+        let room = "resolution 0.02\ninterval_sim 100\n\
+            model ( name \"n\" pose [0 6 0 0] size [12.2 0.2 0.5] )\n\
+            model ( name \"s\" pose [0 -6 0 0] size [12.2 0.2 0.5] )\n\
+            model ( name \"e\" pose [6 0 0 0] size [0.2 12.2 0.5] )\n\
+            model ( name \"w\" pose [-6 0 0 0] size [0.2 12.2 0.5] )\n";
+        let p = dir.join("t.world");
+        std::fs::write(&p, format!("include \"{}\"\n{room}{text}", inc.display())).unwrap();
+        let w = crate::world::load(&p).unwrap();
+        let _ = std::fs::remove_dir_all(&dir);
+        Sim::new(w).unwrap()
+    }
+
+    fn steps(s: &mut Sim, n: usize) {
+        for _ in 0..n {
+            s.step();
+        }
+    }
+
+    /// Every base's true position.
+    fn spots(s: &Sim) -> Vec<(f64, f64)> {
+        s.bases
+            .iter()
+            .map(|b| {
+                let g = s.global(b.model);
+                (g.x, g.y)
+            })
+            .collect()
+    }
+
+    /// The mean distance from each robot to its nearest neighbour.
+    fn spacing(p: &[(f64, f64)]) -> f64 {
+        let near = |i: usize| {
+            (0..p.len())
+                .filter(|&j| j != i)
+                .map(|j| (p[i].0 - p[j].0).hypot(p[i].1 - p[j].1))
+                .fold(f64::INFINITY, f64::min)
+        };
+        (0..p.len()).map(near).sum::<f64>() / p.len() as f64
+    }
+
+    /// `n`×`n` robots of kind `def`, `gap` metres apart, around the origin,
+    /// facing every way.
+    fn cluster(def: &str, n: usize, gap: f64) -> String {
+        let mut text = String::new();
+        for k in 0..n * n {
+            let (i, j) = ((k % n) as f64, (k / n) as f64);
+            let half = (n as f64 - 1.0) / 2.0;
+            text += &format!(
+                "{def} ( name \"r{k}\" pose [{} {} 0 {}] )\n",
+                (i - half) * gap,
+                (j - half) * gap,
+                k * 137 % 360
+            );
+        }
+        text
+    }
+
+    #[test]
+    fn expand_pioneer_spreads_a_cluster_out() {
+        let text = "define bot tr_robot ( tr_laser() ctrl \"expand_pioneer\" )\n".to_owned()
+            + &cluster("bot", 3, 0.6);
+        let mut s = sim("expand_pioneer", &text);
+        assert!(s
+            .bases
+            .iter()
+            .all(|b| matches!(b.ctrl, Some(Ctrl::ExpandPioneer { .. }))));
+        let before = spacing(&spots(&s));
+        steps(&mut s, 600);
+        let after = spacing(&spots(&s));
+        assert!(
+            after > 2.0 * before,
+            "spacing {before:.2} m → {after:.2} m in 60 s"
+        );
+    }
+
+    #[test]
+    fn expand_swarm_spreads_a_swarm_out() {
+        // As Stage's hospital.world builds its swarmbots: 10 cm, a ring of
+        // 12 single-ray sensors 30° apart, 2 m, lowered into the body.
+        let mut ring = String::new();
+        for i in 0..12 {
+            ring += &format!(
+                "sensor ( pose [0 0 0 {}] range [0 2] fov 30 samples 1 ) ",
+                i * 30
+            );
+        }
+        let text = format!(
+            "define swarmbot position ( size [0.1 0.1 0.1] drive \"diff\" \
+             ranger ( pose [0 0 -0.05 0] {ring} ) ctrl \"expand_swarm\" )\n"
+        ) + &cluster("swarmbot", 5, 0.25);
+        let mut s = sim("expand_swarm", &text);
+        assert!(s
+            .bases
+            .iter()
+            .all(|b| matches!(b.ctrl, Some(Ctrl::ExpandSwarm { .. }))));
+        let before = spacing(&spots(&s));
+        steps(&mut s, 600);
+        let after = spacing(&spots(&s));
+        assert!(
+            after > 2.0 * before,
+            "spacing {before:.2} m → {after:.2} m in 60 s"
+        );
+    }
+
+    #[test]
+    fn flockers_move_and_come_to_share_a_heading() {
+        // Front sonars (ranger:0's first eight), a fiducial finder, seen
+        // by each other's.
+        let text = "define flocker tr_robot ( fiducial ( range_max 8 ) fiducial_return 1 \
+                    ctrl \"pioneer_flocking\" )\n"
+            .to_owned()
+            + &cluster("flocker", 3, 1.5);
+        let mut s = sim("flocking", &text);
+        assert!(s
+            .bases
+            .iter()
+            .all(|b| matches!(b.ctrl, Some(Ctrl::Flocking { .. }))));
+        // How much the robots agree on a heading: the length of the mean
+        // of their headings' unit vectors (1: all alike, ~0: all ways).
+        let order = |s: &Sim| {
+            let (mut c, mut si) = (0.0, 0.0);
+            for b in &s.bases {
+                let a = s.global(b.model).yaw;
+                c += a.cos();
+                si += a.sin();
+            }
+            c.hypot(si) / s.bases.len() as f64
+        };
+        let (mut last, aligned) = (spots(&s), order(&s));
+        let mut path = 0.0;
+        for _ in 0..600 {
+            s.step();
+            let now = spots(&s);
+            path += now
+                .iter()
+                .zip(&last)
+                .map(|(a, b)| (a.0 - b.0).hypot(a.1 - b.1))
+                .sum::<f64>();
+            last = now;
+        }
+        let moved = path / last.len() as f64;
+        let now = order(&s);
+        assert!(moved > 6.0, "moved {moved:.2} m on average in 60 s");
+        assert!(
+            now > aligned + 0.3,
+            "heading agreement {aligned:.2} → {now:.2}"
+        );
+    }
+
+    #[test]
+    fn wander_accel_roams_and_keeps_off_the_walls() {
+        let text = "tr_robot ( name \"r0\" pose [-3 -3 0 30] tr_laser() ctrl \"wander_accel\" )\n\
+                    model ( name \"box\" pose [1 1 0 20] size [1 1 0.5] )\n";
+        let mut s = sim("wander_accel", text);
+        assert!(matches!(s.bases[0].ctrl, Some(Ctrl::WanderAccel { .. })));
+        let mut last = spots(&s)[0];
+        let (mut travelled, mut stalled) = (0.0, 0);
+        for _ in 0..1200 {
+            s.step();
+            let p = spots(&s)[0];
+            travelled += (p.0 - last.0).hypot(p.1 - last.1);
+            last = p;
+            stalled += usize::from(s.bases[0].stall);
+        }
+        assert!(travelled > 20.0, "wandered only {travelled:.1} m in 120 s");
+        assert_eq!(stalled, 0, "stalled against something");
+    }
+
+    #[test]
+    fn only_rangers_served_or_read_by_a_controller_are_sensed() {
+        let text = "tr_robot ( name \"a\" pose [-2 0 0 0] tr_laser() ctrl \"wander_accel\" )\n\
+                    tr_robot ( name \"b\" pose [0 -2 0 0] tr_laser() )\n\
+                    tr_robot ( name \"c\" pose [0 2 0 180] tr_laser() )\n";
+        let mut s = sim("sensed", text);
+        let n = |x: &str| s.world.names[x];
+        let (a, b, c) = (n("a.ranger:1"), n("b.ranger:1"), n("c.ranger:1"));
+        let (b_sonar, c_sonar) = (n("b.ranger:0"), n("c.ranger:0"));
+        // b's laser is served; a's laser is what its controller reads.
+        s.sense_only([b]);
+        let before = s.readings.clone();
+        for bi in [1, 2] {
+            s.bases[bi].cmd = Some(crate::sim::Command::Vel(Pose::new(0.3, 0.0, 0.5)));
+        }
+        steps(&mut s, 10);
+        for (r, sensed) in [(a, true), (b, true), (c, false), (b_sonar, false), (c_sonar, false)] {
+            assert_eq!(s.readings[r] != before[r], sensed, "{}", s.world.models[r].name);
+        }
+    }
+
+    #[test]
+    fn lasernoise_scales_ranges_by_a_normal_deviate() {
+        let text = "tr_robot ( name \"r0\" pose [3 0 0 0] tr_laser( ctrl \"lasernoise\" ) )\n\
+                    tr_robot ( name \"r1\" pose [3 1 0 0] tr_laser() )\n";
+        let mut s = sim("lasernoise", text);
+        steps(&mut s, 5);
+        let laser = |name: &str| s.world.names[name];
+        let (noisy, clean) = (laser("r0.ranger:1"), laser("r1.ranger:1"));
+        // Both face the east wall, 2.9 m off: the middle beams'.
+        let ratios: Vec<f64> = (60..120)
+            .map(|k| s.readings[noisy][0].ranges[k] / s.readings[clean][0].ranges[k])
+            .collect();
+        let n = ratios.len() as f64;
+        let mean = ratios.iter().sum::<f64>() / n;
+        let sd = (ratios.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / n).sqrt();
+        assert!((mean - 1.0).abs() < 0.02, "mean ratio {mean}");
+        assert!((0.03..0.07).contains(&sd), "deviation {sd}");
+        assert!(s.readings[clean][0].ranges[90] < 3.0);
+    }
+}
