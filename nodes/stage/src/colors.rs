@@ -30,6 +30,10 @@ const NAMED: &[(&str, [u8; 3])] = &[
     ("light green", [144, 238, 144]),
     ("DarkRed", [139, 0, 0]),
     ("dark red", [139, 0, 0]),
+    ("DarkCyan", [0, 139, 139]),
+    ("dark cyan", [0, 139, 139]),
+    ("DarkMagenta", [139, 0, 139]),
+    ("dark magenta", [139, 0, 139]),
     ("LightGray", [211, 211, 211]),
     ("LightGrey", [211, 211, 211]),
     ("light gray", [211, 211, 211]),
@@ -135,6 +139,9 @@ mod tests {
         assert_eq!(lookup("gray").unwrap().r, 190.0 / 255.0);
         assert_eq!(lookup("purple").unwrap().g, 32.0 / 255.0);
         assert!(lookup("NavyBlue").is_some() && lookup("LightBlue").is_some());
+        // fasr2.world's zones.
+        assert_eq!(lookup("DarkCyan").unwrap().b, 139.0 / 255.0);
+        assert_eq!(lookup("DarkMagenta").unwrap().r, 139.0 / 255.0);
         assert!(lookup("no such colour").is_none());
     }
 }
