@@ -124,33 +124,40 @@ function drawScan(w, d) {
   const scan = frame && frame.readings[d.device];
   if (!scan || !d.sensors.length) return;
   const base = poseOf(w, d.model);
-  const rays = [];
-  if (scan.kind === "laser") {
-    const s = compose(base, d.sensors[0].pose);
-    scan.ranges.forEach((r, k) => rays.push([s, scan.min + k * scan.res, r]));
-  } else {
-    const total = d.sensors.reduce((n, s) => n + s.samples, 0);
-    let k = 0;
-    for (const sensor of d.sensors) {
-      const s = compose(base, sensor.pose);
-      if (scan.ranges.length === total) {
-        for (let i = 0; i < sensor.samples; i++, k++) {
-          const a = sensor.samples > 1 ? -sensor.fov / 2 + i * sensor.fov / (sensor.samples - 1) : 0;
-          rays.push([s, a, scan.ranges[k]]);
-        }
-      } else if (k < scan.ranges.length) {
-        rays.push([s, 0, scan.ranges[k++]]);
-      }
-    }
-  }
+  // World to canvas, inlined: a scan is thousands of rays a frame.
+  const [cx, cy, k] = [canvas.width / 2 - view.x * view.scale, canvas.height / 2 + view.y * view.scale, view.scale];
   ctx.strokeStyle = scan.kind === "laser" ? "rgba(0,0,255,0.18)" : "rgba(0,160,0,0.35)";
   ctx.lineWidth = 1;
   ctx.beginPath();
-  for (const [s, a, r] of rays) {
-    const [x0, y0] = toScreen(s[0], s[1]);
-    const [x1, y1] = toScreen(s[0] + r * Math.cos(s[2] + a), s[1] + r * Math.sin(s[2] + a));
-    ctx.moveTo(x0, y0);
-    ctx.lineTo(x1, y1);
+  // `n` rays of `ranges` from `from`, from sensor pose `s`, the first at
+  // `a0` (radians, in the sensor's frame), each next `da` on: the
+  // direction is turned step by step, no trigonometry per ray.
+  const fan = (s, a0, da, ranges, from, n) => {
+    const [x0, y0] = [cx + s[0] * k, cy - s[1] * k];
+    let [c, si] = [Math.cos(s[2] + a0), Math.sin(s[2] + a0)];
+    const [dc, ds] = [Math.cos(da), Math.sin(da)];
+    for (let i = 0; i < n; i++) {
+      const r = ranges[from + i] * k;
+      ctx.moveTo(x0, y0);
+      ctx.lineTo(x0 + r * c, y0 - r * si);
+      [c, si] = [c * dc - si * ds, si * dc + c * ds];
+    }
+  };
+  if (scan.kind === "laser") {
+    fan(compose(base, d.sensors[0].pose), scan.min, scan.res, scan.ranges, 0, scan.ranges.length);
+  } else {
+    const total = d.sensors.reduce((n, s) => n + s.samples, 0);
+    let at = 0;
+    for (const sensor of d.sensors) {
+      const s = compose(base, sensor.pose);
+      if (scan.ranges.length === total) {
+        const many = sensor.samples > 1;
+        fan(s, many ? -sensor.fov / 2 : 0, many ? sensor.fov / (sensor.samples - 1) : 0, scan.ranges, at, sensor.samples);
+        at += sensor.samples;
+      } else if (at < scan.ranges.length) {
+        fan(s, 0, 0, scan.ranges, at++, 1);
+      }
+    }
   }
   ctx.stroke();
 }

@@ -408,9 +408,24 @@ impl Sim {
                 missing.entry(why).or_insert((m, 0)).1 += 1;
             }
         }
+        // What Troupe does not simulate, once per world.
+        let cameras: Vec<usize> = (0..n)
+            .filter(|&m| world.models[m].kind == Kind::Camera)
+            .collect();
+        if let Some(&first) = cameras.first() {
+            missing.insert(
+                format!(
+                    "camera models are not simulated (Stage renders them with OpenGL); {} in this world",
+                    cameras.len()
+                ),
+                (first, 0),
+            );
+        }
         for (why, (first, count)) in missing {
             let (pos, model) = (&world.models[first].pos, &world.models[first].name);
-            if count == 1 {
+            if count == 0 {
+                tracing::warn!("{pos}: {why} (the first: `{model}`)");
+            } else if count == 1 {
                 tracing::warn!("{pos}: {why}; model `{model}` stays idle");
             } else {
                 tracing::warn!("{pos}: {why}; {count} models stay idle (the first: `{model}`)");

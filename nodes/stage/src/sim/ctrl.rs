@@ -596,8 +596,19 @@ mod tests {
             s.bases[bi].cmd = Some(crate::sim::Command::Vel(Pose::new(0.3, 0.0, 0.5)));
         }
         steps(&mut s, 10);
-        for (r, sensed) in [(a, true), (b, true), (c, false), (b_sonar, false), (c_sonar, false)] {
-            assert_eq!(s.readings[r] != before[r], sensed, "{}", s.world.models[r].name);
+        for (r, sensed) in [
+            (a, true),
+            (b, true),
+            (c, false),
+            (b_sonar, false),
+            (c_sonar, false),
+        ] {
+            assert_eq!(
+                s.readings[r] != before[r],
+                sensed,
+                "{}",
+                s.world.models[r].name
+            );
         }
     }
 
