@@ -159,6 +159,9 @@ pub struct Sim {
     /// Each model's body from its base to its top, above the floor: Stage
     /// is 2.5D, and a sensor sees only what spans the height of its rays.
     heights: Vec<(f64, f64)>,
+    /// Each model's `ranger_return` is not negative: rangers see it (kept
+    /// apart from the models, for the rays' inner loop).
+    returns: Vec<bool>,
     /// The threads that plan moves and cast rays, and the models with
     /// range sensors among them.
     crew: Crew,
@@ -231,12 +234,14 @@ impl Seen {
 const FAN: usize = 16;
 
 /// A sensor's rays as unit vectors: the first, relative to its ranger,
-/// and the turn from one to the next (see [`fan`]).
+/// and the turn from one to the next (see [`fan`]); and the sensor's
+/// heading.
 struct Rays {
     first: (f64, f64),
     turn: (f64, f64),
     /// The turn's angle.
     step: f64,
+    heading: (f64, f64),
 }
 
 /// A sensor's rays: the angle of the first relative to the sensor, and
@@ -470,6 +475,11 @@ impl Sim {
             .map(|m| (m.kind == Kind::Gripper).then(GripperState::default))
             .collect();
         let heights = (0..n).map(|m| height(&world, &poses, m)).collect();
+        let returns = world
+            .models
+            .iter()
+            .map(|m| m.ranger_return >= 0.0)
+            .collect();
         let fans = world
             .models
             .iter()
@@ -482,6 +492,7 @@ impl Sim {
                             first: unit(first),
                             turn: unit(step),
                             step,
+                            heading: unit(s.pose.yaw),
                         }
                     })
                     .collect()
@@ -504,6 +515,7 @@ impl Sim {
             crew: Crew::default(),
             roots,
             heights,
+            returns,
             movable,
             cells: vec![Vec::new(); n],
             raster: None,
@@ -1192,9 +1204,7 @@ impl Sim {
         let root = self.roots[r];
         move |c: u16| {
             let other = usize::from(c) - 1;
-            self.roots[other] != root
-                && self.world.models[other].ranger_return >= 0.0
-                && self.spans(other, z)
+            self.roots[other] != root && self.returns[other] && self.spans(other, z)
         }
     }
 

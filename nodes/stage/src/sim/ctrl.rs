@@ -15,6 +15,9 @@ use troupe_geom::Pose;
 use super::{nearest, Sim};
 use crate::world::{Kind, World};
 
+/// How many of a ring's readings its controller looks at one by one.
+const READ: usize = 16;
+
 /// A controller and the sensors it reads.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Ctrl {
@@ -284,24 +287,24 @@ impl Sim {
     }
 
     /// The angle of the sum of the first readings of ranger `r`'s first
-    /// `n` sensors as vectors along each sensor's heading, and those
-    /// readings; `None` before it has read or when either sum is exactly 0
-    /// (as Stage's controllers test it).
-    fn resultant(&self, r: usize, n: usize) -> Option<(f64, Vec<f64>)> {
-        let sensors = &self.world.models[r].sensors[..n.min(self.world.models[r].sensors.len())];
-        let read: Vec<f64> = self.readings[r]
-            .iter()
-            .take(sensors.len())
-            .map(|rd| rd.ranges.first().copied().unwrap_or(0.0))
-            .collect();
-        if read.len() < sensors.len() || read.is_empty() {
+    /// `n` sensors as vectors along each sensor's heading, and the first
+    /// [`READ`] of those readings; `None` before it has read or when either
+    /// sum is exactly 0 (as Stage's controllers test it).
+    fn resultant(&self, r: usize, n: usize) -> Option<(f64, [f64; READ])> {
+        let n = n.min(self.world.models[r].sensors.len());
+        let readings = &self.readings[r];
+        if readings.len() < n || n == 0 {
             return None;
         }
         let (mut dx, mut dy) = (0.0, 0.0);
-        for (s, &v) in sensors.iter().zip(&read) {
-            let (sin, cos) = s.pose.yaw.sin_cos();
-            dx += v * cos;
-            dy += v * sin;
+        let mut read = [0.0; READ];
+        for (k, (rd, rays)) in readings.iter().zip(&self.fans[r]).take(n).enumerate() {
+            let v = rd.ranges.first().copied().unwrap_or(0.0);
+            if let Some(slot) = read.get_mut(k) {
+                *slot = v;
+            }
+            dx += v * rays.heading.0;
+            dy += v * rays.heading.1;
         }
         (dx != 0.0 && dy != 0.0).then(|| (dy.atan2(dx), read))
     }
