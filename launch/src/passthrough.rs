@@ -28,6 +28,10 @@
 //!   this stack's network) relays without a Player hop: data, commands and
 //!   requests (answers as they come) pass, and the provided device is live
 //!   exactly while the required one is.
+//! - With Troupe's `namespace "NS"`, the required devices are those of
+//!   another fleet or stack on the same network, in Zenoh namespace NS: a
+//!   second session in NS relays them as above (the plan wires nothing to
+//!   them: they are not this stack's to start).
 
 use std::time::Duration;
 
@@ -53,6 +57,12 @@ pub struct Options {
     pub remote_index: Option<u32>,
     /// Player 2: `r`, `w` or `a`.
     pub access: Option<String>,
+    /// Troupe: the Zenoh namespace the required devices live in, when not
+    /// this stack's.
+    pub namespace: Option<String>,
+    /// The required devices of another namespace (`6665:laser:0`), in
+    /// order: what the plan makes of `requires` when `namespace` is given.
+    pub elsewhere: Vec<String>,
 }
 
 const NAME: &str = "passthrough";
@@ -65,8 +75,9 @@ type Servers = Vec<(String, Vec<((Interface, u32), Device)>)>;
 enum Route {
     /// Devices of Player servers.
     Remote(Servers),
-    /// Devices of this stack's network: (interface and index, from, as).
-    Local(Vec<((Interface, u32), Device, Device)>),
+    /// Devices of this stack's network, or of the namespace named:
+    /// (interface and index, from, as).
+    Local(Vec<((Interface, u32), Device, Device)>, Option<String>),
 }
 
 fn bad(why: impl Into<String>) -> NodeError {
@@ -104,7 +115,14 @@ fn routes(section: &Section) -> Result<(Route, Vec<String>)> {
     if let Some(a) = o.access.as_deref().filter(|a| !["r", "w", "a"].contains(a)) {
         return Err(bad(format!("access \"{a}\" is not r, w or a")));
     }
-    let required: Vec<Device> = section.required().iter().map(|s| s.device).collect();
+    let mut required: Vec<Device> = section.required().iter().map(|s| s.device).collect();
+    for text in &o.elsewhere {
+        let a: troupe_msgs::DevAddr = text.parse().map_err(|e| bad(format!("`{text}`: {e}")))?;
+        required.push(a.device(section.robot));
+    }
+    if !o.elsewhere.is_empty() && o.namespace.is_none() {
+        return Err(bad("`elsewhere` devices need the `namespace` they live in"));
+    }
     if !required.is_empty() {
         if !o.remote.is_empty() || required.len() != provided.len() {
             return Err(bad(format!(
@@ -122,7 +140,7 @@ fn routes(section: &Section) -> Result<(Route, Vec<String>)> {
             }
             pairs.push(((from.interface, from.index), *from, *to));
         }
-        return Ok((Route::Local(pairs), unused));
+        return Ok((Route::Local(pairs, o.namespace), unused));
     }
     let mut wanted = Vec::new();
     if o.remote.is_empty() {
@@ -211,12 +229,35 @@ pub fn run(section: Section, z: &ZenohArgs, _: &NodeConfig) -> Result<()> {
                     }));
                 }
             }
-            Route::Local(pairs) => {
+            Route::Local(pairs, namespace) => {
+                // The required devices' side: this session, or one in
+                // their namespace.
+                let there = match &namespace {
+                    None => session.clone(),
+                    Some(ns) => {
+                        let z = ZenohArgs {
+                            namespace: Some(ns.clone()),
+                            ..z.clone()
+                        };
+                        match z.open_in_background(troupe_node::Mode::Client).await {
+                            Ok(s) => s,
+                            Err(e) => {
+                                tracing::error!("joining namespace `{ns}`: {e}");
+                                return;
+                            }
+                        }
+                    }
+                };
                 for (_, from, to) in pairs {
-                    let (session, stop) = (session.clone(), stop_rx.clone());
+                    let (here, there) = (session.clone(), there.clone());
+                    let stop = stop_rx.clone();
+                    let from_ns = namespace.clone();
                     tasks.push(tokio::spawn(async move {
-                        if let Err(e) = relay(session, from, to, stop).await {
-                            tracing::error!("passing {from} through as {to}: {e}");
+                        if let Err(e) = relay(here, there, from, to, stop).await {
+                            let at = from_ns
+                                .map(|ns| format!(" (namespace {ns})"))
+                                .unwrap_or_default();
+                            tracing::error!("passing {from}{at} through as {to}: {e}");
                         }
                     }));
                 }
@@ -231,11 +272,12 @@ pub fn run(section: Section, z: &ZenohArgs, _: &NodeConfig) -> Result<()> {
     Ok(())
 }
 
-/// Serves `from`, a device on this network, as `to` until `stop`: data
-/// and commands relayed as they come, requests asked of `from` and its
-/// answers returned, `to` live while `from` is.
+/// Serves `from`, a device seen by session `there`, as `to` on session
+/// `here` until `stop`: data and commands relayed as they come, requests
+/// asked of `from` and its answers returned, `to` live while `from` is.
 async fn relay(
     session: troupe_node::zenoh::Session,
+    there: troupe_node::zenoh::Session,
     from: Device,
     to: Device,
     mut stop: tokio::sync::watch::Receiver<bool>,
@@ -243,13 +285,13 @@ async fn relay(
     use troupe_msgs::keys;
     let rt = tokio::runtime::Handle::current();
     let (s, key) = (session.clone(), keys::data(&to));
-    let _data = session
+    let _data = there
         .declare_subscriber(keys::data(&from))
         .callback(move |x| {
             let _ = s.put(&key, x.payload().clone()).wait();
         })
         .await?;
-    let s = session.clone();
+    let s = there.clone();
     let _commands = session
         .declare_subscriber(keys::cmd_any(&to))
         .callback(move |x| {
@@ -257,7 +299,7 @@ async fn relay(
             let _ = s.put(keys::cmd(&from, name), x.payload().clone()).wait();
         })
         .await?;
-    let s = session.clone();
+    let s = there.clone();
     let _requests = session
         .declare_queryable(keys::req_any(&to))
         .callback(move |q| {
@@ -294,7 +336,7 @@ async fn relay(
         })
         .await?;
     // `to` is live while `from` is.
-    let lives = session
+    let lives = there
         .liveliness()
         .declare_subscriber(keys::token_any(&from))
         .history(true)
@@ -422,10 +464,25 @@ mod tests {
                 .contains("dio:0: the interfaces must match")
         );
         let s = section(r#"{"name":"passthrough","provides":["dio:0"],"requires":["6666:dio:3"]}"#);
-        let (Route::Local(pairs), _) = routes(&s).unwrap() else {
+        let (Route::Local(pairs, None), _) = routes(&s).unwrap() else {
             panic!("the local form")
         };
         assert_eq!(pairs[0].1, Device::new(6666, Interface::Dio, 3));
+        // Another namespace's devices, as the plan passes them on.
+        let s = section(
+            r#"{"name":"passthrough","provides":["7000:dio:0"],"options":{"namespace":"a","elsewhere":["6666:dio:3"]}}"#,
+        );
+        let (Route::Local(pairs, Some(ns)), _) = routes(&s).unwrap() else {
+            panic!("the namespace form")
+        };
+        assert_eq!(
+            (pairs[0].1, ns.as_str()),
+            (Device::new(6666, Interface::Dio, 3), "a")
+        );
+        assert!(e(
+            r#"{"name":"passthrough","provides":["dio:0"],"options":{"elsewhere":["dio:3"]}}"#
+        )
+        .contains("need the `namespace`"));
         assert!(
             e(r#"{"name":"passthrough","provides":["dio:0"],"options":{"access":"x"}}"#)
                 .contains("access \"x\" is not r, w or a")

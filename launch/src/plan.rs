@@ -472,10 +472,25 @@ pub fn from_cfg(file: &CfgFile, source: &Path, robot: u32, report: &mut Report) 
             continue;
         }
         // Player's passthrough: a `requires` address with a host is a device
-        // of that Player server, for the driver to reach, not one to wire.
+        // of that Player server, for the driver to reach, not one to wire;
+        // with Troupe's `namespace`, every address is a device of that
+        // namespace, for the driver to relay.
+        let elsewhere = driver == "passthrough" && options.contains_key("namespace");
         let (remote, requires): (Vec<_>, Vec<_>) = requires
             .into_iter()
-            .partition(|(_, a)| driver == "passthrough" && a.host.is_some());
+            .partition(|(_, a)| driver == "passthrough" && (a.host.is_some() || elsewhere));
+        let (remote, there): (Vec<_>, Vec<_>) =
+            remote.into_iter().partition(|(_, a)| a.host.is_some());
+        if !there.is_empty() {
+            let there = there
+                .into_iter()
+                .map(|(_, a)| {
+                    let port = a.robot.unwrap_or(robot);
+                    format!("{port}:{}:{}", a.interface.name(), a.index).into()
+                })
+                .collect();
+            options.insert("elsewhere".into(), serde_json::Value::Array(there));
+        }
         if !remote.is_empty() {
             let remote = remote
                 .into_iter()

@@ -270,3 +270,94 @@ fn a_local_passthrough_relays_and_follows_its_device() {
     }
     assert!(launcher.terminate().success(), "{}", launcher.stderr());
 }
+
+/// Troupe's passthrough across namespaces (issue 30, item 1): robot 6665's
+/// base in one stack's namespace served as robot 7000's in another stack's,
+/// on the first one's router. Odometry comes through, a command moves r0,
+/// and when the first stack's Stage dies 7000's base leaves and comes back
+/// with it.
+#[test]
+fn a_passthrough_relays_a_device_of_another_namespace() {
+    use troupe_client::{Client, Position2dProxy};
+    let world = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/simple.world");
+    let cfg_a = temp_cfg(
+        "ns-a",
+        &format!(
+            "driver ( name \"stage\" provides [\"simulation:0\"] worldfile \"{}\" )\n\
+             driver ( name \"stage\" provides [\"position2d:0\"] model \"r0\" )\n",
+            world.canonicalize().unwrap().display()
+        ),
+    );
+    let (mut a, endpoint, ns_a) = launch(&cfg_a, &["--no-bridge"]);
+    let cfg_b = temp_cfg(
+        "ns-b",
+        &format!(
+            "driver ( name \"passthrough\" requires [\"position2d:0\"] provides [\"7000:position2d:0\"] namespace \"{ns_a}\" )\n"
+        ),
+    );
+    let ns_b = troupe_tests::unique_namespace("launch");
+    let mut b = Proc::troupe(
+        "launch-b",
+        &strings(&[
+            "--namespace",
+            &ns_b,
+            "--connect",
+            &endpoint,
+            "launch",
+            cfg_b.to_str().unwrap(),
+            "--no-bridge",
+        ]),
+    );
+    let session = client_at(&endpoint, &ns_b);
+    troupe_tests::wait_live(&session, &["7000:position2d:0"]);
+    let tokens = token_events(&session);
+    let robot = Client::with_session(session.clone(), 7000);
+    let pp = Position2dProxy::new(&robot, 0).unwrap();
+    let deadline = Instant::now() + DEADLINE;
+    while pp.data().is_none() {
+        assert!(
+            Instant::now() < deadline,
+            "no odometry through 7000:position2d:0"
+        );
+        robot.read().unwrap();
+    }
+    let (x0, y0) = (pp.x(), pp.y());
+    pp.set_speed(0.3, 0.0).unwrap();
+    let deadline = Instant::now() + DEADLINE;
+    while (pp.x() - x0).hypot(pp.y() - y0) < 0.1 {
+        assert!(Instant::now() < deadline, "r0 never moved");
+        robot.read().unwrap();
+    }
+    pp.set_speed(0.0, 0.0).unwrap();
+
+    // The first stack's Stage dies: 7000's base leaves, then comes back
+    // once that stack's launcher has restarted it.
+    let victims = children(a.child.id(), "stage");
+    assert_eq!(victims.len(), 1);
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(victims[0] as i32),
+        nix::sys::signal::Signal::SIGKILL,
+    )
+    .unwrap();
+    let mut left = false;
+    let deadline = Instant::now() + DEADLINE;
+    loop {
+        let s = tokens.recv_deadline(deadline).unwrap().unwrap_or_else(|| {
+            panic!("7000:position2d:0 did not go away and come back (gone: {left})")
+        });
+        if !s
+            .key_expr()
+            .as_str()
+            .starts_with("robot/7000/position2d/0/")
+        {
+            continue;
+        }
+        match s.kind() {
+            SampleKind::Delete => left = true,
+            SampleKind::Put if left => break,
+            SampleKind::Put => {}
+        }
+    }
+    assert!(b.terminate().success(), "{}", b.stderr());
+    assert!(a.terminate().success(), "{}", a.stderr());
+}

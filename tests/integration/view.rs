@@ -471,10 +471,14 @@ fn the_view_gives_goals_and_sets_poses() {
             assert_eq!(code, 200, "{text}");
         }
     }
-    // The page with the path on it: the README's picture.
+    // The page with the path and amcl's estimate on it: the README's
+    // picture.
     frame_where(&base, |f| {
         let p = &f["nav"]["6665:planner:0"];
-        p["valid"] == true && p["waypoints"].as_array().is_some_and(|w| w.len() > 1)
+        let h = &f["nav"]["6665:localize:0"]["hypoths"];
+        p["valid"] == true
+            && p["waypoints"].as_array().is_some_and(|w| w.len() > 1)
+            && h.as_array().is_some_and(|h| !h.is_empty())
     });
     if let Some(browser) = chromium() {
         readme_picture(&browser, &base);
