@@ -480,7 +480,10 @@ fn docker_fleet_comes_up_drives_a_robot_from_a_player_client_and_goes_down_clean
         let m = player.recv();
         assert_eq!(m.kind(), DATA, "{m:?}");
         let now = truth(&session, "r1");
-        if dist(now, goal) < 0.5 {
+        // wavefront is done within its distance_epsilon (0.5 m) of the
+        // goal as amcl has r1, and amcl's estimate is off the truth by
+        // up to 0.3 m.
+        if dist(now, goal) < 0.8 {
             eprintln!(
                 "docker: r1 drove {:.1} m to its goal in {:.1} s",
                 dist(start, goal),

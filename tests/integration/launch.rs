@@ -190,13 +190,70 @@ fn plan_and_dry_run_print_the_plan_and_bad_cfgs_say_where() {
     );
 }
 
+/// Drives robot 7000's base (a passthrough's) 10 cm, from its odometry.
+fn drives_through_7000(robot: &troupe_client::Client) {
+    let pp = troupe_client::Position2dProxy::new(robot, 0).unwrap();
+    let deadline = Instant::now() + DEADLINE;
+    while pp.data().is_none() {
+        assert!(
+            Instant::now() < deadline,
+            "no odometry through 7000:position2d:0"
+        );
+        robot.read().unwrap();
+    }
+    let (x0, y0) = (pp.x(), pp.y());
+    pp.set_speed(0.3, 0.0).unwrap();
+    let deadline = Instant::now() + DEADLINE;
+    while (pp.x() - x0).hypot(pp.y() - y0) < 0.1 {
+        assert!(Instant::now() < deadline, "r0 never moved");
+        robot.read().unwrap();
+    }
+    pp.set_speed(0.0, 0.0).unwrap();
+}
+
+/// Kills `parent`'s child that runs `word`, and sees on `tokens` (which saw
+/// the device live first: their history) the device under key `prefix`
+/// go away and come back with it.
+fn kill_and_see_it_return(
+    parent: u32,
+    word: &str,
+    tokens: &troupe_node::zenoh::pubsub::Subscriber<
+        troupe_node::zenoh::handlers::FifoChannelHandler<troupe_node::zenoh::sample::Sample>,
+    >,
+    prefix: &str,
+) {
+    let victims = children(parent, word);
+    assert_eq!(victims.len(), 1);
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(victims[0] as i32),
+        nix::sys::signal::Signal::SIGKILL,
+    )
+    .unwrap();
+    let mut left = false;
+    let deadline = Instant::now() + DEADLINE;
+    loop {
+        let s = tokens
+            .recv_deadline(deadline)
+            .unwrap()
+            .unwrap_or_else(|| panic!("{prefix} did not go away and come back (gone: {left})"));
+        if !s.key_expr().as_str().starts_with(prefix) {
+            continue;
+        }
+        match s.kind() {
+            SampleKind::Delete => left = true,
+            SampleKind::Put if left => break,
+            SampleKind::Put => {}
+        }
+    }
+}
+
 /// Player 3's local passthrough (issue 30, item 1): robot 6665's laser and
 /// base served again as robot 7000's. Scans and geometry come through, a
 /// velocity command moves 6665's base, and when the laser's driver dies
 /// 7000's laser leaves and comes back with it.
 #[test]
 fn a_local_passthrough_relays_and_follows_its_device() {
-    use troupe_client::{Client, LaserProxy, Position2dProxy};
+    use troupe_client::{Client, LaserProxy};
     let world = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/simple.world");
     let base = format!(
         "driver ( name \"stage\" provides [\"simulation:0\"] worldfile \"{}\" )\n\
@@ -225,49 +282,15 @@ fn a_local_passthrough_relays_and_follows_its_device() {
     let e = lp.request_geom().unwrap_err().to_string();
     assert!(e.contains("the dummy driver refuses every request"), "{e}");
     // A command through 7000 drives r0, robot 6665's base.
-    let pp = Position2dProxy::new(&robot, 0).unwrap();
-    let deadline = Instant::now() + DEADLINE;
-    while pp.data().is_none() {
-        assert!(
-            Instant::now() < deadline,
-            "no odometry through 7000:position2d:0"
-        );
-        robot.read().unwrap();
-    }
-    let (x0, y0) = (pp.x(), pp.y());
-    pp.set_speed(0.3, 0.0).unwrap();
-    let deadline = Instant::now() + DEADLINE;
-    while (pp.x() - x0).hypot(pp.y() - y0) < 0.1 {
-        assert!(Instant::now() < deadline, "r0 never moved");
-        robot.read().unwrap();
-    }
-    pp.set_speed(0.0, 0.0).unwrap();
+    drives_through_7000(&robot);
 
     // rangertolaser dies: 7000:laser:0 leaves, then comes back with it.
-    let victims = children(launcher.child.id(), "rangertolaser");
-    assert_eq!(victims.len(), 1);
-    nix::sys::signal::kill(
-        nix::unistd::Pid::from_raw(victims[0] as i32),
-        nix::sys::signal::Signal::SIGKILL,
-    )
-    .unwrap();
-    // (The subscriber saw it live first: its history.)
-    let mut left = false;
-    let deadline = Instant::now() + DEADLINE;
-    loop {
-        let s = tokens
-            .recv_deadline(deadline)
-            .unwrap()
-            .unwrap_or_else(|| panic!("7000:laser:0 did not go away and come back (gone: {left})"));
-        if !s.key_expr().as_str().starts_with("robot/7000/laser/0/") {
-            continue;
-        }
-        match s.kind() {
-            SampleKind::Delete => left = true,
-            SampleKind::Put if left => break,
-            SampleKind::Put => {}
-        }
-    }
+    kill_and_see_it_return(
+        launcher.child.id(),
+        "rangertolaser",
+        &tokens,
+        "robot/7000/laser/0/",
+    );
     assert!(launcher.terminate().success(), "{}", launcher.stderr());
 }
 
@@ -278,7 +301,7 @@ fn a_local_passthrough_relays_and_follows_its_device() {
 /// with it.
 #[test]
 fn a_passthrough_relays_a_device_of_another_namespace() {
-    use troupe_client::{Client, Position2dProxy};
+    use troupe_client::Client;
     let world = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/simple.world");
     let cfg_a = temp_cfg(
         "ns-a",
@@ -312,52 +335,11 @@ fn a_passthrough_relays_a_device_of_another_namespace() {
     troupe_tests::wait_live(&session, &["7000:position2d:0"]);
     let tokens = token_events(&session);
     let robot = Client::with_session(session.clone(), 7000);
-    let pp = Position2dProxy::new(&robot, 0).unwrap();
-    let deadline = Instant::now() + DEADLINE;
-    while pp.data().is_none() {
-        assert!(
-            Instant::now() < deadline,
-            "no odometry through 7000:position2d:0"
-        );
-        robot.read().unwrap();
-    }
-    let (x0, y0) = (pp.x(), pp.y());
-    pp.set_speed(0.3, 0.0).unwrap();
-    let deadline = Instant::now() + DEADLINE;
-    while (pp.x() - x0).hypot(pp.y() - y0) < 0.1 {
-        assert!(Instant::now() < deadline, "r0 never moved");
-        robot.read().unwrap();
-    }
-    pp.set_speed(0.0, 0.0).unwrap();
+    drives_through_7000(&robot);
 
     // The first stack's Stage dies: 7000's base leaves, then comes back
     // once that stack's launcher has restarted it.
-    let victims = children(a.child.id(), "stage");
-    assert_eq!(victims.len(), 1);
-    nix::sys::signal::kill(
-        nix::unistd::Pid::from_raw(victims[0] as i32),
-        nix::sys::signal::Signal::SIGKILL,
-    )
-    .unwrap();
-    let mut left = false;
-    let deadline = Instant::now() + DEADLINE;
-    loop {
-        let s = tokens.recv_deadline(deadline).unwrap().unwrap_or_else(|| {
-            panic!("7000:position2d:0 did not go away and come back (gone: {left})")
-        });
-        if !s
-            .key_expr()
-            .as_str()
-            .starts_with("robot/7000/position2d/0/")
-        {
-            continue;
-        }
-        match s.kind() {
-            SampleKind::Delete => left = true,
-            SampleKind::Put if left => break,
-            SampleKind::Put => {}
-        }
-    }
+    kill_and_see_it_return(a.child.id(), "stage", &tokens, "robot/7000/position2d/0/");
     assert!(b.terminate().success(), "{}", b.stderr());
     assert!(a.terminate().success(), "{}", a.stderr());
 }

@@ -192,7 +192,9 @@ function arrow(p, len) {
 // Localizers' particles and hypotheses, planners' goals and paths.
 function drawNav() {
   if (!frame || !frame.nav) return;
-  for (const n of Object.values(frame.nav)) {
+  // Plans under estimates: a path starts where the robot is thought to be.
+  const order = n => (n.kind === "planner" ? 0 : 1);
+  for (const n of Object.values(frame.nav).sort((a, b) => order(a) - order(b))) {
     ctx.lineWidth = 2;
     if (n.kind === "localize") {
       ctx.fillStyle = "rgba(200,0,200,0.5)";

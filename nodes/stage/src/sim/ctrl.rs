@@ -472,15 +472,10 @@ mod tests {
         text
     }
 
-    #[test]
-    fn expand_pioneer_spreads_a_cluster_out() {
-        let text = "define bot tr_robot ( tr_laser() ctrl \"expand_pioneer\" )\n".to_owned()
-            + &cluster("bot", 3, 0.6);
-        let mut s = sim("expand_pioneer", &text);
-        assert!(s
-            .bases
-            .iter()
-            .all(|b| matches!(b.ctrl, Some(Ctrl::ExpandPioneer { .. }))));
+    /// Whether every robot runs a controller `is` accepts and, in 60 s,
+    /// they more than double their spacing.
+    fn spreads_out(mut s: Sim, is: impl Fn(Option<Ctrl>) -> bool) {
+        assert!(s.bases.iter().all(|b| is(b.ctrl)));
         let before = spacing(&spots(&s));
         steps(&mut s, 600);
         let after = spacing(&spots(&s));
@@ -488,6 +483,15 @@ mod tests {
             after > 2.0 * before,
             "spacing {before:.2} m → {after:.2} m in 60 s"
         );
+    }
+
+    #[test]
+    fn expand_pioneer_spreads_a_cluster_out() {
+        let text = "define bot tr_robot ( tr_laser() ctrl \"expand_pioneer\" )\n".to_owned()
+            + &cluster("bot", 3, 0.6);
+        spreads_out(sim("expand_pioneer", &text), |c| {
+            matches!(c, Some(Ctrl::ExpandPioneer { .. }))
+        });
     }
 
     #[test]
@@ -505,18 +509,9 @@ mod tests {
             "define swarmbot position ( size [0.1 0.1 0.1] drive \"diff\" \
              ranger ( pose [0 0 -0.05 0] {ring} ) ctrl \"expand_swarm\" )\n"
         ) + &cluster("swarmbot", 5, 0.25);
-        let mut s = sim("expand_swarm", &text);
-        assert!(s
-            .bases
-            .iter()
-            .all(|b| matches!(b.ctrl, Some(Ctrl::ExpandSwarm { .. }))));
-        let before = spacing(&spots(&s));
-        steps(&mut s, 600);
-        let after = spacing(&spots(&s));
-        assert!(
-            after > 2.0 * before,
-            "spacing {before:.2} m → {after:.2} m in 60 s"
-        );
+        spreads_out(sim("expand_swarm", &text), |c| {
+            matches!(c, Some(Ctrl::ExpandSwarm { .. }))
+        });
     }
 
     #[test]
