@@ -103,10 +103,9 @@ impl Kind {
 }
 
 /// The viewer a Zenoh config joins a fleet as (`troupe fleet-keys
-/// --viewers`), if it is one: the name its config's metadata gives.
-pub fn viewer_of(c: &troupe_node::zenoh::Config) -> Option<String> {
-    let meta: serde_json::Value = serde_json::from_str(&c.get_json("metadata").ok()?).ok()?;
-    let me = meta.get("troupe")?;
+/// --viewers`), if it is one: the name the config's `metadata` gives.
+pub fn viewer_of(metadata: &serde_json::Value) -> Option<String> {
+    let me = metadata.get("troupe")?;
     if me.get("kind")? != "viewer" {
         return None;
     }
@@ -535,16 +534,7 @@ mod tests {
 
     #[test]
     fn a_host_config_is_a_zenoh_config_with_tls_only() {
-        let ca = Authority::new(30).unwrap();
-        let text = ca.identity("robot1", 30).unwrap().config(
-            &ca,
-            Role::Member("secret", Kind::Host),
-            FLEET,
-        );
-        let path = std::env::temp_dir().join(format!("troupe-keys-{}.json5", std::process::id()));
-        std::fs::write(&path, &text).unwrap();
-        let c = troupe_node::zenoh::Config::from_file(&path).unwrap();
-        let _ = std::fs::remove_file(&path);
+        let c = member_config("robot1", Kind::Host);
         assert_eq!(
             c.get_json("connect/endpoints").unwrap(),
             r#"["tls/router:7447"]"#
@@ -554,23 +544,36 @@ mod tests {
             "true"
         );
         assert_eq!(c.get_json("scouting/multicast/enabled").unwrap(), "false");
-        assert_eq!(viewer_of(&c), None, "a host is no viewer");
+        assert_eq!(viewer_of(&metadata(&c)), None, "a host is no viewer");
     }
 
     #[test]
     fn a_viewer_s_config_says_it_is_one() {
-        let ca = Authority::new(30).unwrap();
-        let text = ca.identity("eye", 30).unwrap().config(
-            &ca,
-            Role::Member("secret", Kind::Viewer),
-            FLEET,
+        let c = member_config("eye", Kind::Viewer);
+        assert_eq!(viewer_of(&metadata(&c)).as_deref(), Some("eye"));
+        assert_eq!(
+            viewer_of(&metadata(&troupe_node::zenoh::Config::default())),
+            None
         );
-        let path = std::env::temp_dir().join(format!("troupe-eye-{}.json5", std::process::id()));
+    }
+
+    /// The config `fleet-keys` writes for member `name`, as Zenoh reads it.
+    fn member_config(name: &str, kind: Kind) -> troupe_node::zenoh::Config {
+        let ca = Authority::new(30).unwrap();
+        let text = ca
+            .identity(name, 30)
+            .unwrap()
+            .config(&ca, Role::Member("secret", kind), FLEET);
+        let path = std::env::temp_dir().join(format!("troupe-{name}-{}.json5", std::process::id()));
         std::fs::write(&path, &text).unwrap();
         let c = troupe_node::zenoh::Config::from_file(&path).unwrap();
         let _ = std::fs::remove_file(&path);
-        assert_eq!(viewer_of(&c).as_deref(), Some("eye"));
-        assert_eq!(viewer_of(&troupe_node::zenoh::Config::default()), None);
+        c
+    }
+
+    /// A config's `metadata`.
+    fn metadata(c: &troupe_node::zenoh::Config) -> serde_json::Value {
+        serde_json::from_str(&c.get_json("metadata").unwrap()).unwrap()
     }
 
     #[test]

@@ -276,7 +276,7 @@ pub fn run(section: Section, z: &ZenohArgs, _: &NodeConfig) -> Result<()> {
 /// `here` until `stop`: data and commands relayed as they come, requests
 /// asked of `from` and its answers returned, `to` live while `from` is.
 async fn relay(
-    session: troupe_node::zenoh::Session,
+    here: troupe_node::zenoh::Session,
     there: troupe_node::zenoh::Session,
     from: Device,
     to: Device,
@@ -284,7 +284,7 @@ async fn relay(
 ) -> std::result::Result<(), troupe_node::zenoh::Error> {
     use troupe_msgs::keys;
     let rt = tokio::runtime::Handle::current();
-    let (s, key) = (session.clone(), keys::data(&to));
+    let (s, key) = (here.clone(), keys::data(&to));
     let _data = there
         .declare_subscriber(keys::data(&from))
         .callback(move |x| {
@@ -292,7 +292,7 @@ async fn relay(
         })
         .await?;
     let s = there.clone();
-    let _commands = session
+    let _commands = here
         .declare_subscriber(keys::cmd_any(&to))
         .callback(move |x| {
             let name = x.key_expr().as_str().rsplit('/').next().unwrap_or_default();
@@ -300,7 +300,7 @@ async fn relay(
         })
         .await?;
     let s = there.clone();
-    let _requests = session
+    let _requests = here
         .declare_queryable(keys::req_any(&to))
         .callback(move |q| {
             let s = s.clone();
@@ -360,8 +360,7 @@ async fn relay(
             }
         } else if token.is_none() {
             token = Some(
-                session
-                    .liveliness()
+                here.liveliness()
                     .declare_token(keys::token(&to, NAME))
                     .await?,
             );

@@ -475,34 +475,28 @@ pub fn from_cfg(file: &CfgFile, source: &Path, robot: u32, report: &mut Report) 
         // of that Player server, for the driver to reach, not one to wire;
         // with Troupe's `namespace`, every address is a device of that
         // namespace, for the driver to relay.
-        let elsewhere = driver == "passthrough" && options.contains_key("namespace");
-        let (remote, requires): (Vec<_>, Vec<_>) = requires
-            .into_iter()
-            .partition(|(_, a)| driver == "passthrough" && (a.host.is_some() || elsewhere));
-        let (remote, there): (Vec<_>, Vec<_>) =
-            remote.into_iter().partition(|(_, a)| a.host.is_some());
-        if !there.is_empty() {
-            let there = there
-                .into_iter()
-                .map(|(_, a)| {
-                    let port = a.robot.unwrap_or(robot);
-                    format!("{port}:{}:{}", a.interface.name(), a.index).into()
-                })
-                .collect();
-            options.insert("elsewhere".into(), serde_json::Value::Array(there));
+        let passthrough = driver == "passthrough";
+        let elsewhere = passthrough && options.contains_key("namespace");
+        let (mut remote, mut there, mut wired) = (Vec::new(), Vec::new(), Vec::new());
+        for (r, a) in requires {
+            let dev = format!(
+                "{}:{}:{}",
+                a.robot.unwrap_or(robot),
+                a.interface.name(),
+                a.index
+            );
+            match a.host {
+                Some(host) if passthrough => remote.push(format!("{host}:{dev}").into()),
+                None if elsewhere => there.push(dev.into()),
+                _ => wired.push(r),
+            }
         }
-        if !remote.is_empty() {
-            let remote = remote
-                .into_iter()
-                .map(|(_, a)| {
-                    let host = a.host.unwrap_or_default();
-                    let port = a.robot.unwrap_or(robot);
-                    format!("{host}:{port}:{}:{}", a.interface.name(), a.index).into()
-                })
-                .collect();
-            options.insert("remote".into(), serde_json::Value::Array(remote));
+        for (key, list) in [("remote", remote), ("elsewhere", there)] {
+            if !list.is_empty() {
+                options.insert(key.into(), serde_json::Value::Array(list));
+            }
         }
-        let requires: Vec<DeviceRef> = requires.into_iter().map(|(r, _)| r).collect();
+        let requires: Vec<DeviceRef> = wired;
         let n = count.entry(driver.clone()).or_insert(0);
         *n += 1;
         plan.nodes.push(NodeSpec {

@@ -601,13 +601,16 @@ pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     let Some((rt, mut signals, session)) = crate::supervisor::client_runtime(z, 2)? else {
         return Ok(());
     };
-    // Who the view joins as, and where (a fleet's config may name both).
-    let config = z.config(troupe_node::Mode::Client)?;
-    let looking_only = crate::keys::viewer_of(&config);
-    let namespace = config
-        .get_json("namespace")
+    // Who the view joins as, and where (a fleet's config may name both),
+    // as the session has them.
+    let config = session.config();
+    let looking_only = config
+        .get_typed::<Value>("metadata")
         .ok()
-        .and_then(|j| serde_json::from_str::<Option<String>>(&j).ok())
+        .and_then(|m| crate::keys::viewer_of(&m));
+    let namespace = config
+        .get_typed::<Option<String>>("namespace")
+        .ok()
         .flatten();
     if let Some(me) = &looking_only {
         tracing::info!("joining as the viewer `{me}`: the page offers no commands");

@@ -50,7 +50,7 @@ const JUMP = 1.0;       // metres: a pose further than this is a jump, not a gli
 function takePoses(f) {
   const now = performance.now();
   for (const [sim, poses] of Object.entries(f.poses)) {
-    const time = f.times ? f.times[sim] : f.time;
+    const time = f.times[sim];
     const m = motion[sim];
     if (m && m.last.time === time) {
       m.last.poses = poses;   // the same instant, another part of the world
@@ -62,7 +62,8 @@ function takePoses(f) {
 
 // A model's pose in the world: streamed if it moves, as described if not.
 function poseOf(world, id) {
-  const m = params.has("still") ? null : motion[world.simulation];
+  // (?still pages read no stream: nothing glides.)
+  const m = motion[world.simulation];
   const last = m && m.last.poses[id];
   if (!last) {
     const live = frame && frame.poses[world.simulation];
@@ -124,40 +125,33 @@ function drawScan(w, d) {
   const scan = frame && frame.readings[d.device];
   if (!scan || !d.sensors.length) return;
   const base = poseOf(w, d.model);
-  // World to canvas, inlined: a scan is thousands of rays a frame.
-  const [cx, cy, k] = [canvas.width / 2 - view.x * view.scale, canvas.height / 2 + view.y * view.scale, view.scale];
-  ctx.strokeStyle = scan.kind === "laser" ? "rgba(0,0,255,0.18)" : "rgba(0,160,0,0.35)";
-  ctx.lineWidth = 1;
-  ctx.beginPath();
-  // `n` rays of `ranges` from `from`, from sensor pose `s`, the first at
-  // `a0` (radians, in the sensor's frame), each next `da` on: the
-  // direction is turned step by step, no trigonometry per ray.
-  const fan = (s, a0, da, ranges, from, n) => {
-    const [x0, y0] = [cx + s[0] * k, cy - s[1] * k];
-    let [c, si] = [Math.cos(s[2] + a0), Math.sin(s[2] + a0)];
-    const [dc, ds] = [Math.cos(da), Math.sin(da)];
-    for (let i = 0; i < n; i++) {
-      const r = ranges[from + i] * k;
-      ctx.moveTo(x0, y0);
-      ctx.lineTo(x0 + r * c, y0 - r * si);
-      [c, si] = [c * dc - si * ds, si * dc + c * ds];
-    }
-  };
+  const rays = [];
   if (scan.kind === "laser") {
-    fan(compose(base, d.sensors[0].pose), scan.min, scan.res, scan.ranges, 0, scan.ranges.length);
+    const s = compose(base, d.sensors[0].pose);
+    scan.ranges.forEach((r, k) => rays.push([s, scan.min + k * scan.res, r]));
   } else {
     const total = d.sensors.reduce((n, s) => n + s.samples, 0);
-    let at = 0;
+    let k = 0;
     for (const sensor of d.sensors) {
       const s = compose(base, sensor.pose);
       if (scan.ranges.length === total) {
-        const many = sensor.samples > 1;
-        fan(s, many ? -sensor.fov / 2 : 0, many ? sensor.fov / (sensor.samples - 1) : 0, scan.ranges, at, sensor.samples);
-        at += sensor.samples;
-      } else if (at < scan.ranges.length) {
-        fan(s, 0, 0, scan.ranges, at++, 1);
+        for (let i = 0; i < sensor.samples; i++, k++) {
+          const a = sensor.samples > 1 ? -sensor.fov / 2 + i * sensor.fov / (sensor.samples - 1) : 0;
+          rays.push([s, a, scan.ranges[k]]);
+        }
+      } else if (k < scan.ranges.length) {
+        rays.push([s, 0, scan.ranges[k++]]);
       }
     }
+  }
+  ctx.strokeStyle = scan.kind === "laser" ? "rgba(0,0,255,0.18)" : "rgba(0,160,0,0.35)";
+  ctx.lineWidth = 1;
+  ctx.beginPath();
+  for (const [s, a, r] of rays) {
+    const [x0, y0] = toScreen(s[0], s[1]);
+    const [x1, y1] = toScreen(s[0] + r * Math.cos(s[2] + a), s[1] + r * Math.sin(s[2] + a));
+    ctx.moveTo(x0, y0);
+    ctx.lineTo(x1, y1);
   }
   ctx.stroke();
 }

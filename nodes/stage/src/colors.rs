@@ -74,14 +74,21 @@ const NAMED: &[(&str, [u8; 3])] = &[
     ("ivory", [255, 255, 240]),
 ];
 
+/// SplitMix64's step between states.
+pub(crate) const GOLDEN: u64 = 0x9E37_79B9_7F4A_7C15;
+
+/// SplitMix64's output function: a state to well-mixed bits.
+pub(crate) fn mix64(mut z: u64) -> u64 {
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
 /// The `n`-th colour of `color "random"`: opaque, its channels spread over
 /// [0, 1) by a fixed sequence (SplitMix64), so a world looks the same on
 /// every load.
 pub fn random(n: u64) -> Color {
-    let mut z = n.wrapping_add(1).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^= z >> 31;
+    let z = mix64(n.wrapping_add(1).wrapping_mul(GOLDEN));
     let channel = |shift: u32| f32::from(((z >> shift) & 0xff) as u8) / 255.0;
     Color {
         r: channel(0),

@@ -413,28 +413,22 @@ impl Sim {
                 missing.entry(why).or_insert((m, 0)).1 += 1;
             }
         }
-        // What Troupe does not simulate, once per world.
-        let cameras: Vec<usize> = (0..n)
-            .filter(|&m| world.models[m].kind == Kind::Camera)
-            .collect();
-        if let Some(&first) = cameras.first() {
-            missing.insert(
-                format!(
-                    "camera models are not simulated (Stage renders them with OpenGL); {} in this world",
-                    cameras.len()
-                ),
-                (first, 0),
-            );
-        }
         for (why, (first, count)) in missing {
             let (pos, model) = (&world.models[first].pos, &world.models[first].name);
-            if count == 0 {
-                tracing::warn!("{pos}: {why} (the first: `{model}`)");
-            } else if count == 1 {
+            if count == 1 {
                 tracing::warn!("{pos}: {why}; model `{model}` stays idle");
             } else {
                 tracing::warn!("{pos}: {why}; {count} models stay idle (the first: `{model}`)");
             }
+        }
+        // What Troupe does not simulate, once per world.
+        let mut cameras = (0..n).filter(|&m| world.models[m].kind == Kind::Camera);
+        if let Some(first) = cameras.next() {
+            let (pos, model) = (&world.models[first].pos, &world.models[first].name);
+            tracing::warn!(
+                "{pos}: camera models are not simulated (Stage renders them with OpenGL); {} in this world (the first: `{model}`)",
+                1 + cameras.count()
+            );
         }
         let bases = (0..n)
             .filter(|&m| world.models[m].kind == Kind::Position)
@@ -528,7 +522,10 @@ impl Sim {
         for m in 0..n {
             sim.place(m);
         }
-        sim.set_threads();
+        // No more threads than cores: the helpers spin while the bases
+        // move, and one without a core of its own would slow the moves.
+        let cores = std::thread::available_parallelism().map_or(1, usize::from);
+        sim.set_threads(sim.world.threads.clamp(1, cores));
         sim.sense();
         Ok(sim)
     }
@@ -548,7 +545,8 @@ impl Sim {
             }
         }
         self.sensed = on;
-        self.set_threads();
+        // (Fewer rangers never want more threads than the crew has.)
+        self.set_threads(self.crew.threads());
     }
 
     /// Every ranger, as the crew deals them.
@@ -567,14 +565,10 @@ impl Sim {
             .collect()
     }
 
-    /// Plans moves and casts rays on the world's `threads`: no more than
-    /// there are cores (the helpers spin while the bases move, and one
-    /// without a core of its own would slow the moves) or rangers sensed,
-    /// and one when a step casts fewer than a few thousand rays (threads
-    /// pay off only then).
-    fn set_threads(&mut self) {
-        let cores = std::thread::available_parallelism().map_or(1, usize::from);
-        let threads = self.world.threads.clamp(1, cores);
+    /// Plans moves and casts rays on `threads` threads: no more than there
+    /// are rangers sensed, and one when a step casts fewer than a few
+    /// thousand rays (threads pay off only then).
+    fn set_threads(&mut self, threads: usize) {
         let jobs = self.jobs();
         let rays: usize = jobs.iter().map(|j| j.rays).sum();
         let threads = if rays < 2000 { 1 } else { threads };
@@ -1867,8 +1861,7 @@ mod tests {
         let (mut one, mut two) = (world(1), world(2));
         assert_eq!(one.crew.threads(), 1);
         // (Two even on a machine of one core.)
-        two.world.threads = 2;
-        two.set_threads();
+        two.set_threads(2);
         for _ in 0..30 {
             one.step();
             two.step();

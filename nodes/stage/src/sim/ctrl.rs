@@ -13,6 +13,7 @@
 use troupe_geom::Pose;
 
 use super::{nearest, Sim};
+use crate::colors::{mix64, GOLDEN};
 use crate::world::{Kind, World};
 
 /// How many of a ring's readings its controller looks at one by one.
@@ -98,16 +99,12 @@ pub enum Found {
 pub fn find(world: &World, tree: &[usize], m: usize, line: &str) -> Found {
     let name = line.split_whitespace().next().unwrap_or("");
     let model = &world.models[m];
-    // Stage's GetUnusedModelOfType: the subtree's first model of a kind
-    // not yet taken, depth first.
-    let mut taken = Vec::new();
-    let mut take = |kind: Kind| {
-        let k = tree
-            .iter()
+    // Stage's GetUnusedModelOfType: the subtree's first model of a kind,
+    // depth first (no controller takes two of one kind).
+    let take = |kind: Kind| {
+        tree.iter()
             .copied()
-            .find(|&k| k != m && world.models[k].kind == kind && !taken.contains(&k))?;
-        taken.push(k);
-        Some(k)
+            .find(|&k| k != m && world.models[k].kind == kind)
     };
     let position = model.kind == Kind::Position;
     let sonars = |k: usize, n: usize, name: &str| {
@@ -173,15 +170,11 @@ impl Sim {
     /// sensors read; `mind` is what it keeps.
     pub(super) fn control(&self, bi: usize, ctrl: Ctrl, mind: &mut Mind) -> Pose {
         match ctrl {
-            Ctrl::Wander => {
-                let (want, turn) = self.wander(bi, mind.turn);
-                mind.turn = turn;
-                return want;
-            }
+            Ctrl::Wander => return self.wander(bi, mind),
             Ctrl::ExpandPioneer { ranger } => {
                 // Stage's SAFE_DIST 0.75, SAFE_ANGLE 0.5, VSPEED 0.2, WGAIN 1.
                 let s = 0.75;
-                self.expand(ranger, mind, 1.0, |r| {
+                self.expand(ranger, mind, |r| {
                     let ahead = r[3] > s && r[4] > s;
                     let sides =
                         r[5] > s / 2.0 && r[6] > s / 4.0 && r[2] > s / 2.0 && r[1] > s / 4.0;
@@ -191,21 +184,13 @@ impl Sim {
             Ctrl::ExpandSwarm { ranger } => {
                 // SAFE_DIST 0.5, VSPEED 0.3.
                 let s = 0.5;
-                self.expand(ranger, mind, 1.0, |r| {
+                self.expand(ranger, mind, |r| {
                     let left = r[1] > s / 1.5 && r[2] > s / 3.0 && r[3] > s / 5.0;
                     let right = r[9] > s / 5.0 && r[10] > s / 3.0 && r[11] > s / 1.5;
                     (r[0] > s && left && right).then_some(0.3)
                 });
             }
             Ctrl::Flocking { ranger, fiducial } => {
-                // The nearest robot seen: its heading, relative to ours.
-                let seen = self.fiducials(fiducial);
-                let closest = seen
-                    .fiducials
-                    .iter()
-                    .map(|f| (f.pose.x.hypot(f.pose.y), f.pose.yaw))
-                    .min_by(|a, b| a.0.total_cmp(&b.0));
-                let draw = self.chance(self.bases[bi].model, 0);
                 // EXPAND_WGAIN and FLOCK_WGAIN 0.3, SAFE_DIST 1, VSPEED 0.4.
                 let clear = |r: &[f64]| {
                     r[3] > 1.0 && r[4] > 1.0 && r[5] > 1.0 && r[6] > 0.5 && r[2] > 1.0 && r[1] > 0.5
@@ -218,12 +203,19 @@ impl Sim {
                 let mut fwd = 0.0;
                 if clear(&r) && ang.abs() < 0.5 {
                     fwd = 0.4;
+                    // The nearest robot seen: its heading, relative to ours.
+                    let seen = self.fiducials(fiducial);
+                    let closest = seen
+                        .fiducials
+                        .iter()
+                        .map(|f| (f.pose.x.hypot(f.pose.y), f.pose.yaw))
+                        .min_by(|a, b| a.0.total_cmp(&b.0));
                     if let Some((_, heading)) = closest {
                         turn += 0.3 * heading;
                     }
                 } else if turn.abs() < 0.1 {
                     // Stage: drand48(), a left turn of up to 1 rad/s.
-                    turn = draw;
+                    turn = self.chance(self.bases[bi].model, 0);
                 }
                 mind.want = Pose::new(fwd, 0.0, turn);
             }
@@ -269,20 +261,14 @@ impl Sim {
     }
 
     /// The expand controllers: turn toward the resultant of the sensors'
-    /// readings (as vectors along each sensor's heading) by `gain` times
-    /// its angle, and go ahead at the speed `clear` gives when the angle
-    /// is under 0.5 rad. With no resultant (Stage's `dx == 0 || dy == 0`)
-    /// the speeds hold.
-    fn expand(
-        &self,
-        ranger: usize,
-        mind: &mut Mind,
-        gain: f64,
-        clear: impl Fn(&[f64]) -> Option<f64>,
-    ) {
+    /// readings (as vectors along each sensor's heading) by its angle
+    /// (Stage's WGAIN 1), and go ahead at the speed `clear` gives when the
+    /// angle is under 0.5 rad. With no resultant (Stage's `dx == 0 || dy
+    /// == 0`) the speeds hold.
+    fn expand(&self, ranger: usize, mind: &mut Mind, clear: impl Fn(&[f64]) -> Option<f64>) {
         if let Some((ang, r)) = self.resultant(ranger, usize::MAX) {
             let fwd = clear(&r).filter(|_| ang.abs() < 0.5).unwrap_or(0.0);
-            mind.want = Pose::new(fwd, 0.0, gain * ang);
+            mind.want = Pose::new(fwd, 0.0, ang);
         }
     }
 
@@ -340,11 +326,11 @@ impl Sim {
     }
 
     /// The built-in `wander` controller of base `bi`: the velocity it asks
-    /// for, and the way it turns from obstacles (+1 left, -1 right), given
-    /// the way it turned last.
-    fn wander(&self, bi: usize, turn: f64) -> (Pose, f64) {
+    /// for; `mind.turn` is the way it turns from obstacles (+1 left, -1
+    /// right), kept while both sides are about as near.
+    fn wander(&self, bi: usize, mind: &mut Mind) -> Pose {
         let Some(r) = self.wander_ranger(self.bases[bi].model) else {
-            return (Pose::new(0.4, 0.0, 0.0), turn);
+            return Pose::new(0.4, 0.0, 0.0);
         };
         let sensors = &self.world.models[r].sensors;
         let (mut left, mut right) = (f64::INFINITY, f64::INFINITY);
@@ -364,18 +350,12 @@ impl Sim {
             left = left.min(nearest(&rd.ranges[mid..l1.max(mid)]));
         }
         if left.min(right) < 0.6 {
-            let turn = if (left - right).abs() > 0.1 {
-                if left < right {
-                    -1.0
-                } else {
-                    1.0
-                }
-            } else {
-                turn
-            };
-            (Pose::new(0.0, 0.0, turn), turn)
+            if (left - right).abs() > 0.1 {
+                mind.turn = if left < right { -1.0 } else { 1.0 };
+            }
+            Pose::new(0.0, 0.0, mind.turn)
         } else {
-            (Pose::new(0.4, 0.0, 0.0), turn)
+            Pose::new(0.4, 0.0, 0.0)
         }
     }
 
@@ -393,15 +373,12 @@ impl Sim {
     }
 }
 
-/// A uniform draw in [0, 1), a fixed function of `keys` (SplitMix64).
+/// A uniform draw in [0, 1), a fixed function of `keys` (SplitMix64's
+/// mixing, as `color "random"` uses it).
 fn unit_draw(keys: [u64; 3]) -> f64 {
-    let mut z = 0x243F_6A88_85A3_08D3u64;
-    for k in keys {
-        z = (z ^ k).wrapping_add(0x9E37_79B9_7F4A_7C15);
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-    }
+    let z = keys.iter().fold(0x243F_6A88_85A3_08D3u64, |z, &k| {
+        mix64((z ^ k).wrapping_add(GOLDEN))
+    });
     (z >> 11) as f64 / (1u64 << 53) as f64
 }
 
