@@ -16,6 +16,13 @@ use troupe_node::zenoh::Wait;
 /// The goal of the reference run, and what Player 3.1 achieved there.
 const GOAL: (f64, f64) = (-4.5, -5.5);
 const PLAYER_ARRIVAL_SIM_S: f64 = 32.0;
+/// wavefront's `distance_epsilon` in nav_headless.cfg: it is done once
+/// amcl's estimate is this close to the goal.
+const DISTANCE_EPSILON: f64 = 0.5;
+/// How far r0 may still roll after wavefront says done and before its zero
+/// speed reaches Stage through vfh (one control step at vfh's slow speed
+/// near a goal).
+const COAST: f64 = 0.05;
 
 fn compat_cfg() -> Option<PathBuf> {
     let cfg = Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -186,7 +193,13 @@ fn drive_to_goal(cfg: &Path) {
          {worst_amcl:.2} m worst",
         valid_at.unwrap_or(f64::NAN)
     );
-    assert!(off < 0.5, "stopped {off:.2} m from the goal at {end:?}");
+    // Done means amcl's estimate was within the epsilon: the truth may be
+    // as far again as amcl was off, and r0 rolls on a little.
+    assert!(
+        off < DISTANCE_EPSILON + worst_amcl + COAST,
+        "stopped {off:.2} m from the goal at {end:?} (epsilon {DISTANCE_EPSILON} m, \
+         amcl off by up to {worst_amcl:.2} m)"
+    );
     assert!(
         took <= PLAYER_ARRIVAL_SIM_S,
         "took {took:.1} simulated s; Player's stack took {PLAYER_ARRIVAL_SIM_S}"
