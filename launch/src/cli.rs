@@ -117,9 +117,11 @@ in exec form: [\"CMD\", \"/troupe\", \"--connect\", \"tcp/router:7447\", \"ready
   troupe router --zenoh-config secure.json5      # TLS, auth, ACLs")]
     Router(RouterArgs),
 
-    /// Play a serial device (SICK LMS200, Pioneer, Erratic) on a pseudo-terminal, for its driver to talk to.
+    /// Play a serial device (SICK LMS200, Hokuyo URG, Pioneer, Erratic) on a pseudo-terminal, for its driver to talk to.
     #[command(after_help = "Examples:
   troupe emulate sicklms200 --link /tmp/laser     # then: port \"/tmp/laser\" in the .cfg
+  troupe emulate urglaser --link /tmp/urg         # then: port \"/tmp/urg\" use_serial 1 in the .cfg
+  troupe emulate urglaser --link /tmp/urg --usb   # a URG on USB: use_serial 0, SCIP 2.0
   troupe emulate p2os --link /tmp/pioneer --subclass p3at
   troupe emulate erratic --link /tmp/erratic --revision \"Rev G\"
   troupe --connect tcp/127.0.0.1:7447 emulate sicklms200 --link /tmp/laser --stage-laser 6665:laser:1
@@ -361,7 +363,7 @@ pub enum BenchCmd {
     #[command(after_help = "Example:
   cargo run --release -- bench nav --map ../shared/compat/stage/bitmaps/cave.png")]
     Nav(crate::navbench::NavBenchArgs),
-    /// Scan rate of the sicklms200 driver against its emulator at 38400 and 500000 baud.
+    /// Scan rates of the sicklms200 and urglaser drivers against their emulators, at their baud rates.
     #[command(after_help = "Example:
   cargo run --release -- bench serial --seconds 5")]
     Serial(crate::serialbench::SerialBenchArgs),

@@ -47,6 +47,9 @@ pub fn all() -> Vec<Entry> {
             "global path planner feeding waypoints to a position2d",
         ),
         entry::<troupe_sicklms200::SickLms200>("the SICK LMS200 laser over a serial line"),
+        entry::<troupe_urglaser::UrgLaser>(
+            "the Hokuyo URG-04LX laser over RS-232 or USB (SCIP 1.1 and 2.0)",
+        ),
         entry::<troupe_p2os::P2os>("Pioneer robots (P2OS/ARCOS) over a serial line"),
         entry::<troupe_erratic::Erratic>("the Videre Erratic robot over a serial line"),
         entry::<troupe_log::WriteLog>("writes its required devices' data to a Player text log"),
@@ -90,11 +93,6 @@ pub const MISSING: &[(&str, &str, &str)] = &[
         "nd",
         "Nearness Diagram local navigation",
         "`vfh` takes the same goals and velocity commands",
-    ),
-    (
-        "urglaser",
-        "the Hokuyo URG laser over a serial line (SCIP)",
-        "",
     ),
     (
         "rflex",

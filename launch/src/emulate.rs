@@ -14,6 +14,8 @@ use troupe_serial::{Faults, LineOptions};
 pub enum Emulated {
     /// A SICK LMS200 laser scanner in a room with a drifting pillar.
     Sicklms200,
+    /// A Hokuyo URG-04LX laser scanner (SCIP 1.1 and 2.0) in the same room.
+    Urglaser,
     /// A Pioneer (ARCOS) robot with a sonar ring, in an 8 m × 6 m room.
     P2os,
     /// A Videre Erratic with sonars, floor IR and servos, in an 8 m × 6 m room.
@@ -58,7 +60,11 @@ pub struct EmulateArgs {
     /// erratic: the robot's revision ("Rev E", "Rev G" or "Rev H").
     #[arg(long, default_value = "Rev H")]
     pub revision: String,
-    /// sicklms200: take the ranges from this laser of a running stack (a
+    /// urglaser: the URG is on USB, not RS-232: it answers at any baud
+    /// rate, at USB's speed (a cfg's `use_serial 0`).
+    #[arg(long)]
+    pub usb: bool,
+    /// sicklms200, urglaser: take the ranges from this laser of a running stack (a
     /// Stage robot's, say: `6665:laser:1`) instead of the built-in room,
     /// so the hardware path runs in a simulated world. Reached through the
     /// global --connect/--namespace flags.
@@ -68,7 +74,7 @@ pub struct EmulateArgs {
     /// built-in room. p2os, erratic: wheel commands drive the model's
     /// position2d, odometry and stall come from it, and the sonars read its
     /// sonar (or first ranger) device. sicklms200: the ranges are the
-    /// model's laser (or its widest ranger). The model's devices are found
+    /// model's laser (or its widest ranger); urglaser: the same. The model's devices are found
     /// through --stage-sim. Reached through the global --connect/--namespace flags.
     #[arg(long, value_name = "MODEL", conflicts_with = "stage_laser")]
     pub stage_model: Option<String>,
@@ -116,7 +122,7 @@ struct LiveLaser {
     laser: troupe_client::LaserProxy,
 }
 
-impl troupe_sicklms200::emulator::Scene for LiveLaser {
+impl troupe_geom::Scene for LiveLaser {
     fn ranges(&mut self, _t: f64, angles: &[f64]) -> Vec<f64> {
         let Some(scan) = self.laser.scan() else {
             return vec![f64::INFINITY; angles.len()];
@@ -349,7 +355,7 @@ struct LiveRanger {
     config: troupe_msgs::ranger::Config,
 }
 
-impl troupe_sicklms200::emulator::Scene for LiveRanger {
+impl troupe_geom::Scene for LiveRanger {
     fn ranges(&mut self, _t: f64, angles: &[f64]) -> Vec<f64> {
         let ranges = self.ranger.ranges();
         let c = &self.config;
@@ -364,7 +370,7 @@ impl troupe_sicklms200::emulator::Scene for LiveRanger {
 fn laser_scene(
     a: &EmulateArgs,
     z: &troupe_node::ZenohArgs,
-) -> anyhow::Result<Box<dyn troupe_sicklms200::emulator::Scene>> {
+) -> anyhow::Result<Box<dyn troupe_geom::Scene>> {
     use troupe_msgs::Interface;
     let laser = |client: &troupe_client::Client, dev: troupe_msgs::Device| {
         let laser = troupe_client::LaserProxy::new(client, dev.index)
@@ -379,7 +385,7 @@ fn laser_scene(
         return Ok(laser(&client, dev)?);
     }
     let Some(model) = &a.stage_model else {
-        return Ok(Box::new(troupe_sicklms200::emulator::Room));
+        return Ok(Box::new(troupe_geom::Room));
     };
     let mut found = ModelDevices::find(z, model, &a.stage_sim)?;
     if let Some(&dev) = found.of(Interface::Laser).first() {
@@ -421,8 +427,12 @@ pub fn run(a: EmulateArgs, z: &troupe_node::ZenohArgs) -> anyhow::Result<()> {
         seed: a.seed,
         capture: a.capture.clone(),
     };
-    if a.device != Emulated::Sicklms200 && a.stage_laser.is_some() {
-        anyhow::bail!("--stage-laser is for a sicklms200; a robot is backed by a Stage model with --stage-model NAME");
+    let laser = matches!(a.device, Emulated::Sicklms200 | Emulated::Urglaser);
+    if !laser && a.stage_laser.is_some() {
+        anyhow::bail!("--stage-laser is for a laser (sicklms200, urglaser); a robot is backed by a Stage model with --stage-model NAME");
+    }
+    if a.usb && a.device != Emulated::Urglaser {
+        anyhow::bail!("--usb is for a urglaser: the other devices are on RS-232");
     }
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
@@ -444,6 +454,23 @@ pub fn run(a: EmulateArgs, z: &troupe_node::ZenohArgs) -> anyhow::Result<()> {
                 tracing::info!("{} emulated; Ctrl-C stops it", emulator::KIND);
             })
             .with_context(|| format!("emulating a sicklms200 at {}", a.link.display()))?;
+        }
+        Emulated::Urglaser => {
+            use troupe_urglaser::emulator;
+            let mut scene = laser_scene(&a, z)?;
+            let opts = emulator::EmulatorOptions { line, usb: a.usb };
+            emulator::run_with(&opts, scene.as_mut(), &stop, || {
+                banner("urglaser", &a.link);
+                tracing::info!(
+                    "a Hokuyo URG-04LX emulated on {}; Ctrl-C stops it",
+                    if a.usb {
+                        "USB"
+                    } else {
+                        "RS-232 (19200 baud at power-up)"
+                    }
+                );
+            })
+            .with_context(|| format!("emulating a urglaser at {}", a.link.display()))?;
         }
         Emulated::P2os => {
             use troupe_p2os::emulator;

@@ -54,7 +54,7 @@ any! {
     Position2dPositionMode(position2d::PositionMode),
     LaserScan(laser::Scan), LaserScanPose(laser::ScanPose), LaserGeom(laser::Geom),
     LaserConfig(laser::Config), LaserGetGeom(laser::GetGeom), LaserGetConfig(laser::GetConfig),
-    LaserSetConfig(laser::SetConfig),
+    LaserSetConfig(laser::SetConfig), LaserId(laser::Id), LaserGetId(laser::GetId),
     RangerRanges(ranger::Ranges), RangerIntensities(ranger::Intensities), RangerGeom(ranger::Geom),
     RangerConfig(ranger::Config), RangerGetGeom(ranger::GetGeom), RangerGetConfig(ranger::GetConfig),
     RangerSetConfig(ranger::SetConfig), RangerIntensityEnable(ranger::IntensityEnable),

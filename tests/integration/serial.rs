@@ -203,6 +203,134 @@ fn an_unplugged_sicklms200_is_not_ready_until_it_is_back() {
     assert!(log.contains("not ready: withdrew 6665:laser:0"), "{log}");
 }
 
+fn urg_cfg(link: &Path, extra: &str) -> String {
+    format!(
+        "driver ( name \"urglaser\" provides [\"laser:0\"] port \"{}\" \
+         min_angle -115.0 max_angle 115.0 {extra} )\n",
+        link.display()
+    )
+}
+
+/// Waits for `n` scans of the laser, each whole (`count` ranges).
+fn scans(client: &Client, laser: &LaserProxy, n: usize, count: usize, launcher: &mut Proc) {
+    let deadline = Instant::now() + DEADLINE;
+    let mut ids = std::collections::BTreeSet::new();
+    while ids.len() < n {
+        assert!(Instant::now() < deadline, "no scans: {}", launcher.stderr());
+        let _ = client.read_timeout(DEADLINE);
+        if let Some(s) = laser.scan() {
+            assert_eq!(s.ranges.len(), count, "every published scan is whole");
+            ids.insert(s.id);
+        }
+    }
+}
+
+/// urglaser.cfg as Player's sample writes it (RS-232 at 115200, ±115°),
+/// and the same URG on USB: Player's scan window, the room's walls where
+/// they are, the URG's serial number, and the protocol each line speaks.
+#[test]
+fn urglaser_reads_scans_from_the_emulated_urg_over_rs232_and_usb() {
+    for (usb, line, max_range) in [(false, "use_serial 1 baud 115200", 4.095), (true, "", 5.6)] {
+        let rig = Rig::new("urg");
+        let flags: &[&str] = if usb { &["--usb"] } else { &[] };
+        let (_emu, link) = rig.emulate("urglaser", flags);
+        let cfg = rig.cfg(&urg_cfg(&link, &format!("{line} pose [0.1 0 0]")));
+        let (mut launcher, session) = launch(&cfg);
+        let client = Client::with_session(session, 6665);
+        let laser = LaserProxy::new(&client, 0).unwrap();
+        // Steps 57 to 711 of 0..768, 360°/1024 apart: 654 ranges.
+        scans(&client, &laser, 3, 654, &mut launcher);
+        let s = laser.scan().unwrap();
+        let res = (360.0f32 / 1024.0).to_radians();
+        assert!((s.resolution - res).abs() < 1e-6);
+        assert!(
+            (s.min_angle.to_degrees() + 114.96).abs() < 0.01,
+            "{}",
+            s.min_angle
+        );
+        assert!(
+            (s.max_angle.to_degrees() - 114.96).abs() < 0.01,
+            "{}",
+            s.max_angle
+        );
+        assert!((s.max_range - max_range).abs() < 1e-6, "{}", s.max_range);
+        // The room's side walls, 3 m away at ±90° (steps 128 and 640).
+        for i in [128 - 57, 640 - 57] {
+            assert!((s.ranges[i] - 3.0).abs() < 0.002, "{i}: {}", s.ranges[i]);
+        }
+        // Straight behind is out of the URG's view; the back wall 2 m away
+        // at ±114.96° is not, so nothing reads as out of reach there.
+        assert!(s.ranges.iter().all(|&r| r > 0.5 && r <= max_range));
+        let geom = laser.request_geom().unwrap();
+        assert!((geom.pose.x - 0.1).abs() < 1e-9);
+        let config = laser.request_config().unwrap();
+        assert!((config.max_range - max_range).abs() < 1e-6);
+        assert!((config.scanning_frequency - 10.0).abs() < 1e-6);
+        assert_eq!(laser.request_id().unwrap(), 508_486);
+        assert!(laser.configure(config).is_err(), "set_config is refused");
+        launcher.terminate();
+        let log = launcher.stderr();
+        let spoke = if usb {
+            "SCIP 2.0 over USB"
+        } else {
+            "SCIP 1.1 at 115200 baud"
+        };
+        assert!(log.contains(spoke), "{log}");
+    }
+}
+
+/// A URG on USB whose line corrupts, cuts and garbles what it sends, and
+/// which is unplugged and plugged back in: every published scan is whole,
+/// damage is found by SCIP 2.0's checksums and logged, and the laser is not
+/// live while the URG is away.
+#[test]
+fn urglaser_keeps_reading_through_line_faults_and_an_unplug() {
+    let rig = Rig::new("urg-faults");
+    let (mut emu, link) = rig.emulate(
+        "urglaser",
+        &[
+            "--usb",
+            "--corrupt",
+            "0.2",
+            "--noise",
+            "0.2",
+            "--truncate",
+            "0.05",
+            "--unplug-after",
+            "3",
+            "--replug-after",
+            "1",
+            "--seed",
+            "5",
+        ],
+    );
+    let cfg = rig.cfg(&urg_cfg(&link, ""));
+    let (mut launcher, session) = launch(&cfg);
+    let tokens = token_events(&session);
+    let client = Client::with_session(session.clone(), 6665);
+    let laser = LaserProxy::new(&client, 0).unwrap();
+    let deadline = Instant::now() + DEADLINE * 2;
+    let mut events = Vec::new();
+    while events.len() < 3 {
+        let Ok(Some(t)) = tokens.recv_deadline(deadline) else {
+            panic!("token events so far {events:?}: {}", launcher.stderr());
+        };
+        if t.key_expr().as_str().contains("laser") {
+            events.push(t.kind());
+        }
+    }
+    use troupe_node::zenoh::sample::SampleKind::{Delete, Put};
+    assert_eq!(events, vec![Put, Delete, Put]);
+    scans(&client, &laser, 20, 654, &mut launcher);
+    launcher.terminate();
+    let log = launcher.stderr();
+    assert!(log.contains("laser lost"), "{log}");
+    assert!(log.contains("scan dropped: bad checksum"), "{log}");
+    emu.terminate();
+    let emu_log = emu.stderr();
+    assert!(emu_log.contains("corrupted="), "{emu_log}");
+}
+
 /// A Pioneer with a SICK laser, as Player's pioneer.cfg lays it out, both
 /// emulated: the client reads a scan, enables the motors, drives, and sees
 /// odometry and sonar; when it stops commanding, the watchdog stops the robot.

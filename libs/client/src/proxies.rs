@@ -350,6 +350,15 @@ impl LaserProxy {
         self.feed.link.request(&laser::GetConfig)
     }
 
+    /// The laser's serial number (`PLAYER_LASER_REQ_GET_ID`).
+    ///
+    /// # Errors
+    ///
+    /// [`ClientError::Nack`] if the device refuses; [`ClientError::NoAnswer`].
+    pub fn request_id(&self) -> Result<u32> {
+        Ok(self.feed.link.request(&laser::GetId)?.serial_number)
+    }
+
     /// Sets the configuration; returns the configuration in force.
     ///
     /// # Errors

@@ -8,6 +8,7 @@
 //! - [`bitmap`]: loads an image and turns dark pixels into obstacle rectangles;
 //! - [`raster`]: Stage's own raster of block outlines and its ray walk, so
 //!   simulated ranges read as Stage's;
+//! - [`Scene`] and [`Room`]: what an emulated range finder sees;
 //! - [`OccMap`]: a Player map (-1 free, 0 unknown, +1 occupied) with world↔cell
 //!   conversions and tiles.
 //!
@@ -21,9 +22,11 @@ pub mod occmap;
 mod odometry;
 mod pose;
 pub mod raster;
+mod scene;
 
 pub use drive::{Body, DiffDrive};
 pub use grid::{Grid, Hit, Lattice, EMPTY};
 pub use occmap::OccMap;
 pub use odometry::Odometry;
 pub use pose::{bounds, normalize, ray_to_box, Pose};
+pub use scene::{Room, Scene};

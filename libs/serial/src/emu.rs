@@ -139,7 +139,8 @@ impl EmuLine {
     }
 
     /// Waits up to `timeout` for bytes from the driver that a device at
-    /// `baud` can read, and runs the unplug plan.
+    /// `baud` can read (any rate at all when `baud` is 0: a USB device), and
+    /// runs the unplug plan.
     ///
     /// # Errors
     ///
@@ -197,7 +198,7 @@ impl EmuLine {
             return Ok(LineEvent::Idle);
         }
         let line = pty.line_baud();
-        if line != baud {
+        if baud != 0 && line != baud {
             self.wrong_baud += n as u64;
             tracing::debug!("{n} bytes at {line} baud: garbage to a device at {baud}");
             return Ok(LineEvent::Idle);

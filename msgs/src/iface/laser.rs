@@ -81,3 +81,16 @@ pub struct SetConfig {
     pub config: Config,
 }
 message!(SetConfig, "laser/set_config@1", req "set_config" -> Config);
+
+/// The laser's serial number (`player_laser_get_id_config_t`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Id {
+    /// The serial number, as the device reports it.
+    pub serial_number: u32,
+}
+message!(Id, "laser/id@1");
+
+/// Asks for the laser's [`Id`] (`PLAYER_LASER_REQ_GET_ID`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct GetId;
+message!(GetId, "laser/get_id@1", req "get_id" -> Id);

@@ -517,6 +517,9 @@ fn translate(
             request(&laser::SetConfig { config }, t, laser_config)
         }
         (I::Laser, REQ, 3) => request(&laser::GetConfig, t, laser_config),
+        (I::Laser, REQ, 5) => request(&laser::GetId, t, |i, w| {
+            w.u32(i.serial_number);
+        }),
         (I::Laser | I::Ranger | I::Sonar, REQ, _) if is_power(iface, subtype) => {
             request(&common::Power { state: r.flag()? }, t, empty)
         }
