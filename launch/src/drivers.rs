@@ -43,6 +43,9 @@ pub fn all() -> Vec<Entry> {
         entry::<troupe_vfh::Vfh>(
             "VFH+ obstacle avoidance: velocity and goto commands past obstacles",
         ),
+        entry::<troupe_nd::Nd>(
+            "Nearness Diagram navigation: goals reached through narrow gaps and clutter",
+        ),
         entry::<troupe_wavefront::Wavefront>(
             "global path planner feeding waypoints to a position2d",
         ),
@@ -88,11 +91,6 @@ pub const MISSING: &[(&str, &str, &str)] = &[
         "p2os_position",
         "Player 1's name for a Pioneer's base",
         "use `p2os`, which provides position2d and the rest of the robot",
-    ),
-    (
-        "nd",
-        "Nearness Diagram local navigation",
-        "`vfh` takes the same goals and velocity commands",
     ),
     (
         "rflex",
