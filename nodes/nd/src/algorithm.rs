@@ -759,6 +759,57 @@ mod tests {
         assert!(got.is_ok() || got == Err(Refusal::NoRegion), "{got:?}");
     }
 
+    /// Many random scenes all round the robot (what buffered scans or a
+    /// laser with sonars give, where Player's search went round forever):
+    /// every decision returns, and every motion is finite and within the limits.
+    #[test]
+    fn every_random_scene_gets_an_answer() {
+        let nd = pioneer();
+        let mut seed = 0x9E37_79B9_7F4A_7C15u64;
+        let mut unit = || {
+            seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (mut moved, mut refused) = (0, 0);
+        for _ in 0..5000 {
+            let walls = 1 + (unit() * 6.0) as usize;
+            let mut ranges = [8.0; SECTORS];
+            for _ in 0..walls {
+                let (from, len, r) = (unit() * 180.0, unit() * 120.0, 0.3 + unit() * 3.0);
+                for k in 0..len as usize {
+                    ranges[(from as usize + k) % SECTORS] = r;
+                }
+            }
+            let points: Vec<(f64, f64)> = (0..SECTORS * 2)
+                .map(|i| {
+                    let a = i as f64 * PI / SECTORS as f64;
+                    let r = ranges[i / 2];
+                    (r * a.cos(), r * a.sin())
+                })
+                .collect();
+            let g = unit() * TAU;
+            let gr = 0.5 + unit() * 8.0;
+            match nd.decide(
+                (gr * g.cos(), gr * g.sin()),
+                0.3,
+                (0.0, 0.0, 0.0),
+                Motion {
+                    v: unit() * 0.3,
+                    w: unit() - 0.5,
+                },
+                &points,
+            ) {
+                Ok(m) => {
+                    assert!(m.v.is_finite() && (0.0..=0.3).contains(&m.v), "{m:?}");
+                    assert!(m.w.is_finite() && m.w.abs() <= 45f64.to_radians() + 1e-9);
+                    moved += 1;
+                }
+                Err(_) => refused += 1,
+            }
+        }
+        assert!(moved > refused, "{moved} decisions, {refused} refusals");
+    }
+
     #[test]
     fn non_finite_points_are_ignored() {
         let m = decide(&[(f64::NAN, 1.0), (f64::INFINITY, 0.0)]).unwrap();
