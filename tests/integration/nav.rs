@@ -290,8 +290,8 @@ fn amcl_localizes_a_sonar_only_robot_in_the_cave() {
 #[test]
 fn nd_takes_r0_through_the_doorway_and_vfh_is_measured_beside_it() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let nd = passage_trip(&root.join("worlds/passage.cfg"), 0.35);
-    let vfh = passage_trip(&root.join("worlds/passage_vfh.cfg"), 0.35);
+    let nd = passage_trip(&root.join("worlds/passage.cfg"), 0.35, "2");
+    let vfh = passage_trip(&root.join("worlds/passage_vfh.cfg"), 0.35, "4");
     eprintln!("passage: nd {}; vfh {}", nd.describe(), vfh.describe());
     assert!(nd.arrived.is_some(), "nd did not arrive: {}", nd.describe());
     assert!(!nd.collided, "nd collided: {}", nd.describe());
@@ -322,12 +322,13 @@ impl Trip {
     }
 }
 
-/// Launches `cfg` (4× real time), sends r0 to [`PASSAGE_GOAL`] on
+/// Launches `cfg` (`speedup` × real time: nd at 2, so that a loaded
+/// machine's decisions keep up with the robot), sends r0 to [`PASSAGE_GOAL`] on
 /// position2d:1 and follows its true pose until it is within `tol` of the
 /// goal or [`PASSAGE_LIMIT_S`] simulated seconds have passed.
-fn passage_trip(cfg: &Path, tol: f64) -> Trip {
+fn passage_trip(cfg: &Path, tol: f64, speedup: &str) -> Trip {
     let ns = troupe_tests::unique_namespace("passage");
-    let mut launcher = troupe_tests::launch(&ns, cfg, &["--no-bridge", "--speedup", "4"]);
+    let mut launcher = troupe_tests::launch(&ns, cfg, &["--no-bridge", "--speedup", speedup]);
     let endpoint = launcher.endpoint("troupe launch: router listening on");
     let session = troupe_tests::client_at(&endpoint, &ns);
     let sim_time = Arc::new(AtomicU64::new(0));
