@@ -65,17 +65,14 @@ fn amcl_with_50000_particles_keeps_up_on_the_route() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// Launches `cfg`, sends r0 to the goal with the planner and checks the
-/// arrival, the time it took and amcl's error on the way.
-fn drive_to_goal(cfg: &Path) {
-    let ns = troupe_tests::unique_namespace("nav");
-    let mut launcher = troupe_tests::launch(&ns, cfg, &["--no-bridge"]);
-    let endpoint = launcher.endpoint("troupe launch: router listening on");
-    let session = troupe_tests::client_at(&endpoint, &ns);
-    // Simulated time, from the simulator's clock.
+/// Simulated time, from the simulator's clock: the subscriber to keep, and
+/// a reader of the latest time (0 before the first tick).
+fn sim_clock(
+    session: &troupe_node::zenoh::Session,
+) -> (troupe_node::zenoh::pubsub::Subscriber<()>, impl Fn() -> f64) {
     let sim_time = Arc::new(AtomicU64::new(0));
     let t = sim_time.clone();
-    let _clock = session
+    let sub = session
         .declare_subscriber(keys::SIM_CLOCK)
         .callback(move |s| {
             if let Ok(c) = troupe_msgs::decode::<sim::Clock>(&s.payload().to_bytes()) {
@@ -84,7 +81,19 @@ fn drive_to_goal(cfg: &Path) {
         })
         .wait()
         .unwrap();
-    let now = || f64::from_bits(sim_time.load(Ordering::Relaxed));
+    (sub, move || {
+        f64::from_bits(sim_time.load(Ordering::Relaxed))
+    })
+}
+
+/// Launches `cfg`, sends r0 to the goal with the planner and checks the
+/// arrival, the time it took and amcl's error on the way.
+fn drive_to_goal(cfg: &Path) {
+    let ns = troupe_tests::unique_namespace("nav");
+    let mut launcher = troupe_tests::launch(&ns, cfg, &["--no-bridge"]);
+    let endpoint = launcher.endpoint("troupe launch: router listening on");
+    let session = troupe_tests::client_at(&endpoint, &ns);
+    let (_clock, now) = sim_clock(&session);
     // r0's odometry is its true pose (`localization "gps"`, origin 0), and
     // amcl stamps each estimate with the odometry it extends: the two
     // streams, paired by stamp, say how far amcl is from the truth at the
@@ -331,18 +340,7 @@ fn passage_trip(cfg: &Path, tol: f64, speedup: &str) -> Trip {
     let mut launcher = troupe_tests::launch(&ns, cfg, &["--no-bridge", "--speedup", speedup]);
     let endpoint = launcher.endpoint("troupe launch: router listening on");
     let session = troupe_tests::client_at(&endpoint, &ns);
-    let sim_time = Arc::new(AtomicU64::new(0));
-    let t = sim_time.clone();
-    let _clock = session
-        .declare_subscriber(keys::SIM_CLOCK)
-        .callback(move |s| {
-            if let Ok(c) = troupe_msgs::decode::<sim::Clock>(&s.payload().to_bytes()) {
-                t.store(c.msg.time.to_bits(), Ordering::Relaxed);
-            }
-        })
-        .wait()
-        .unwrap();
-    let now = || f64::from_bits(sim_time.load(Ordering::Relaxed));
+    let (_clock, now) = sim_clock(&session);
     let client = Client::with_session(session.clone(), 6665);
     let base = Position2dProxy::new(&client, 0).unwrap();
     let nav = Position2dProxy::new(&client, 1).unwrap();

@@ -67,6 +67,24 @@ fn launch(cfg: &Path) -> (Proc, troupe_node::zenoh::Session) {
     (launcher, session)
 }
 
+/// The laser's token: up once it scans, withdrawn when its device is
+/// unplugged, up again when it is back.
+fn laser_goes_away_and_back(session: &troupe_node::zenoh::Session, launcher: &mut Proc) {
+    let tokens = token_events(session);
+    let deadline = Instant::now() + DEADLINE * 2;
+    let mut events = Vec::new();
+    while events.len() < 3 {
+        let Ok(Some(t)) = tokens.recv_deadline(deadline) else {
+            panic!("token events so far {events:?}: {}", launcher.stderr());
+        };
+        if t.key_expr().as_str().contains("laser") {
+            events.push(t.kind());
+        }
+    }
+    use troupe_node::zenoh::sample::SampleKind::{Delete, Put};
+    assert_eq!(events, vec![Put, Delete, Put]);
+}
+
 fn sick_cfg(link: &Path, extra: &str) -> String {
     format!(
         "driver ( name \"sicklms200\" provides [\"laser:0\"] port \"{}\" {extra} )\n",
@@ -183,20 +201,7 @@ fn an_unplugged_sicklms200_is_not_ready_until_it_is_back() {
     );
     let cfg = rig.cfg(&sick_cfg(&link, "transfer_rate 38400 resolution 100"));
     let (mut launcher, session) = launch(&cfg);
-    let tokens = token_events(&session);
-    let deadline = Instant::now() + DEADLINE * 2;
-    // The laser's token: up once streaming, withdrawn when unplugged, up again.
-    let mut events = Vec::new();
-    while events.len() < 3 {
-        let Ok(Some(t)) = tokens.recv_deadline(deadline) else {
-            panic!("token events so far {events:?}: {}", launcher.stderr());
-        };
-        if t.key_expr().as_str().contains("laser") {
-            events.push(t.kind());
-        }
-    }
-    use troupe_node::zenoh::sample::SampleKind::{Delete, Put};
-    assert_eq!(events, vec![Put, Delete, Put]);
+    laser_goes_away_and_back(&session, &mut launcher);
     launcher.terminate();
     let log = launcher.stderr();
     assert!(log.contains("laser lost"), "{log}");
@@ -306,21 +311,9 @@ fn urglaser_keeps_reading_through_line_faults_and_an_unplug() {
     );
     let cfg = rig.cfg(&urg_cfg(&link, ""));
     let (mut launcher, session) = launch(&cfg);
-    let tokens = token_events(&session);
     let client = Client::with_session(session.clone(), 6665);
     let laser = LaserProxy::new(&client, 0).unwrap();
-    let deadline = Instant::now() + DEADLINE * 2;
-    let mut events = Vec::new();
-    while events.len() < 3 {
-        let Ok(Some(t)) = tokens.recv_deadline(deadline) else {
-            panic!("token events so far {events:?}: {}", launcher.stderr());
-        };
-        if t.key_expr().as_str().contains("laser") {
-            events.push(t.kind());
-        }
-    }
-    use troupe_node::zenoh::sample::SampleKind::{Delete, Put};
-    assert_eq!(events, vec![Put, Delete, Put]);
+    laser_goes_away_and_back(&session, &mut launcher);
     scans(&client, &laser, 20, 654, &mut launcher);
     launcher.terminate();
     let log = launcher.stderr();
