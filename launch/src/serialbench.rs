@@ -66,6 +66,83 @@ pub fn run(a: &SerialBenchArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// What a line thread's update means to a rate measurement.
+enum Seen {
+    /// Connected (the update's own details aside).
+    Ready,
+    /// A scan of this many values.
+    Scan(usize),
+    /// The session ended, for this reason.
+    Lost(String),
+    /// Nothing the measurement counts.
+    Other,
+}
+
+/// Scans per second over `seconds` after the first scan, seconds from
+/// `t0` to the connection, and values per scan, from a line thread's
+/// updates as `see` reads them.
+fn scan_rate<U>(
+    what: &str,
+    updates: &std::sync::mpsc::Receiver<U>,
+    t0: Instant,
+    seconds: f64,
+    mut see: impl FnMut(U) -> Seen,
+) -> anyhow::Result<(f64, f64, usize)> {
+    let (mut connect, mut first, mut scans) = (0.0, None, 0u64);
+    let deadline = Instant::now() + Duration::from_secs(30) + Duration::from_secs_f64(seconds);
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        let Ok(u) = updates.recv_timeout(left) else {
+            anyhow::bail!("{what}: no scans within the deadline");
+        };
+        match see(u) {
+            Seen::Ready => connect = t0.elapsed().as_secs_f64(),
+            Seen::Scan(values) => match first {
+                None => first = Some(Instant::now()),
+                Some(f) => {
+                    scans += 1;
+                    let elapsed = f.elapsed().as_secs_f64();
+                    if elapsed >= seconds {
+                        return Ok((scans as f64 / elapsed, connect, values));
+                    }
+                }
+            },
+            Seen::Lost(why) => anyhow::bail!("{what}: {why}"),
+            Seen::Other => {}
+        }
+    }
+}
+
+fn case(baud: u32, res: u16, seconds: f64) -> anyhow::Result<(f64, f64, usize)> {
+    let emu = Emulator::spawn("bench-serial", |link, stop, linked| {
+        let opts = LineOptions {
+            link,
+            faults: Faults::default(),
+            seed: 1,
+            capture: None,
+        };
+        emulator::run_with(&opts, &mut Room, stop, linked)
+    })?;
+    let settings = Settings::scan_180(emu.link().to_owned(), res, baud);
+    let t0 = Instant::now();
+    let line = device::spawn(settings, Waker::none())?;
+    let measured = scan_rate(
+        &format!("{baud} baud"),
+        line.updates(),
+        t0,
+        seconds,
+        |u| match u {
+            Update::Ready { .. } => Seen::Ready,
+            Update::Scan(raw, _) => Seen::Scan(raw.values.len()),
+            Update::Lost(why) => Seen::Lost(why),
+            Update::Configured(_) => Seen::Other,
+        },
+    )?;
+    line.stop(device::Order::Stop);
+    emu.stop()?;
+    Ok(measured)
+}
+
 /// The urglaser's line thread against the emulated URG, over RS-232 at
 /// `baud` or over USB (0): scans per second, seconds to connect, values
 /// per scan and the protocol spoken.
@@ -94,82 +171,18 @@ fn urg_case(
     };
     let t0 = Instant::now();
     let line = urg::spawn(settings, Waker::none())?;
-    let (mut connect, mut version, mut first) = (0.0, None, None);
-    let mut scans = 0u64;
-    let mut values;
-    let deadline = Instant::now() + Duration::from_secs(30) + Duration::from_secs_f64(seconds);
-    loop {
-        let left = deadline.saturating_duration_since(Instant::now());
-        match line.updates().recv_timeout(left) {
-            Ok(urg::Update::Ready { version: v, .. }) => {
-                connect = t0.elapsed().as_secs_f64();
-                version = Some(v);
-            }
-            Ok(urg::Update::Scan(readings)) => {
-                values = readings.len();
-                match first {
-                    None => first = Some(Instant::now()),
-                    Some(f) => {
-                        scans += 1;
-                        if f.elapsed().as_secs_f64() >= seconds {
-                            break;
-                        }
-                    }
-                }
-            }
-            Ok(urg::Update::Lost(why)) => anyhow::bail!("urglaser at {baud} baud: {why}"),
-            Err(_) => anyhow::bail!("urglaser at {baud} baud: no scans within the deadline"),
+    let mut version = None;
+    let what = format!("urglaser at {baud} baud");
+    let (rate, connect, values) = scan_rate(&what, line.updates(), t0, seconds, |u| match u {
+        urg::Update::Ready { version: v, .. } => {
+            version = Some(v);
+            Seen::Ready
         }
-    }
-    let elapsed = first.map_or(1.0, |f| f.elapsed().as_secs_f64());
+        urg::Update::Scan(readings) => Seen::Scan(readings.len()),
+        urg::Update::Lost(why) => Seen::Lost(why),
+    })?;
     line.stop(urg::Order::Stop);
     emu.stop()?;
     let version = version.ok_or_else(|| anyhow::anyhow!("scans before the URG was ready"))?;
-    Ok((scans as f64 / elapsed, connect, values, version))
-}
-
-fn case(baud: u32, res: u16, seconds: f64) -> anyhow::Result<(f64, f64, usize)> {
-    let emu = Emulator::spawn("bench-serial", |link, stop, linked| {
-        let opts = LineOptions {
-            link,
-            faults: Faults::default(),
-            seed: 1,
-            capture: None,
-        };
-        emulator::run_with(&opts, &mut Room, stop, linked)
-    })?;
-    let settings = Settings::scan_180(emu.link().to_owned(), res, baud);
-    let t0 = Instant::now();
-    let line = device::spawn(settings, Waker::none())?;
-    let rx = line.updates();
-    let mut connect = None;
-    let mut first = None;
-    let mut scans = 0u64;
-    let mut values;
-    let deadline = Instant::now() + Duration::from_secs(30) + Duration::from_secs_f64(seconds);
-    loop {
-        let left = deadline.saturating_duration_since(Instant::now());
-        match rx.recv_timeout(left) {
-            Ok(Update::Ready { .. }) => connect = Some(t0.elapsed().as_secs_f64()),
-            Ok(Update::Scan(raw, _)) => {
-                values = raw.values.len();
-                match first {
-                    None => first = Some(Instant::now()),
-                    Some(f) => {
-                        scans += 1;
-                        if f.elapsed().as_secs_f64() >= seconds {
-                            break;
-                        }
-                    }
-                }
-            }
-            Ok(Update::Lost(why)) => anyhow::bail!("{baud} baud: {why}"),
-            Ok(_) => {}
-            Err(_) => anyhow::bail!("{baud} baud: no scans within the deadline"),
-        }
-    }
-    let elapsed = first.map_or(1.0, |f| f.elapsed().as_secs_f64());
-    line.stop(device::Order::Stop);
-    emu.stop()?;
-    Ok((scans as f64 / elapsed, connect.unwrap_or(0.0), values))
+    Ok((rate, connect, values, version))
 }

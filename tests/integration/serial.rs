@@ -167,20 +167,7 @@ fn sicklms200_keeps_reading_through_line_faults() {
     let (mut launcher, session) = launch(&cfg);
     let client = Client::with_session(session, 6665);
     let laser = LaserProxy::new(&client, 0).unwrap();
-    let deadline = Instant::now() + DEADLINE;
-    let mut seen = std::collections::BTreeSet::new();
-    while seen.len() < 40 {
-        assert!(
-            Instant::now() < deadline,
-            "scans stopped: {}",
-            launcher.stderr()
-        );
-        let _ = client.read_timeout(DEADLINE);
-        if let Some(s) = laser.scan() {
-            assert_eq!(s.ranges.len(), 181, "every published scan is whole");
-            seen.insert(s.id);
-        }
-    }
+    scans(&client, &laser, 40, 181, &mut launcher);
     launcher.terminate();
     let log = launcher.stderr();
     assert!(

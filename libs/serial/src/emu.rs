@@ -250,6 +250,21 @@ impl EmuLine {
         self.pacer.idle_at()
     }
 
+    /// A span carrying what the line counted — bytes at the wrong rate and
+    /// the faults injected — for an emulator's last log line to be entered
+    /// in, so each device logs its own counts beside these.
+    pub fn counts_span(&self) -> tracing::Span {
+        let n = &self.injected;
+        tracing::info_span!(
+            "line",
+            wrong_baud_bytes = self.wrong_baud,
+            noise = n.noise,
+            dropped = n.dropped,
+            corrupted = n.corrupted,
+            truncated = n.truncated
+        )
+    }
+
     /// True while plugged in.
     pub fn plugged(&self) -> bool {
         self.pty.is_some()

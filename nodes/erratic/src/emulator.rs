@@ -214,13 +214,12 @@ pub fn run_with(
         stats.packets += 1;
         obey(&mut robot, body, &p, line, baud, &mut stats)
     })?;
+    let _counts = line.counts_span().entered();
     tracing::info!(
         packets = stats.packets,
         motor_packets = stats.motor,
         servo = stats.servo,
         servos = ?robot.servos,
-        noise = line.injected.noise,
-        corrupted = line.injected.corrupted,
         "emulated erratic stopped"
     );
     Ok(stats)

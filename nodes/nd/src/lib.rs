@@ -261,13 +261,17 @@ impl Driver for Nd {
                 let scan = s.decode::<laser::Scan>()?.msg;
                 let robot = self.robot_pose();
                 if let Some(b) = &mut self.laser {
-                    if let Some(&at) = b.poses.first() {
-                        let points = (0..scan.ranges.len())
-                            .map(|i| {
+                    if let Some(at) = b.poses.first() {
+                        let laser = robot.compose(at);
+                        let points = scan
+                            .ranges
+                            .iter()
+                            .enumerate()
+                            .map(|(i, &r)| {
                                 let a = f64::from(scan.min_angle)
                                     + i as f64 * f64::from(scan.resolution);
-                                let r = f64::from(scan.ranges[i]);
-                                robot.compose(&at).apply(r * a.cos(), r * a.sin())
+                                let r = f64::from(r);
+                                laser.apply(r * a.cos(), r * a.sin())
                             })
                             .collect();
                         b.push(points);

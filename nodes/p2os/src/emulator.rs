@@ -287,14 +287,10 @@ pub fn run_with(
         stats.packets += 1;
         obey(&mut robot, body, &p, line, baud, opts)
     })?;
+    let _counts = line.counts_span().entered();
     tracing::info!(
         packets = stats.packets,
         sips = stats.sips,
-        wrong_baud_bytes = line.wrong_baud,
-        noise = line.injected.noise,
-        dropped = line.injected.dropped,
-        corrupted = line.injected.corrupted,
-        truncated = line.injected.truncated,
         odometry = ?body.odometry(),
         "emulated p2os robot stopped"
     );

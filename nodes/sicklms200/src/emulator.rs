@@ -7,7 +7,7 @@
 //! refuses a configuration outside installation mode, or a wrong password),
 //! and streams 0xB0/0xB7 scan telegrams at the LMS200's own pace — a
 //! 75 Hz mirror, interlaced at 0.5° and 0.25° — or the line's, whichever is
-//! slower. Ranges come from a [`Scene`].
+//! slower. Ranges come from a [`Scene`] (`troupe_geom`'s).
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 use troupe_serial::{EmuLine, Framer, LineEvent, LineOptions};
 
 use crate::telegram::{self, cmd, mode, Telegram, TelegramCodec, ACK_BYTE, NAK_BYTE};
-pub use troupe_geom::{Room, Scene};
+use troupe_geom::Scene;
 
 /// The type string the emulated scanner reports.
 pub const KIND: &str = "LMS200;30106";
@@ -163,15 +163,11 @@ pub fn run_with(
             }
         }
     }
+    let _counts = line.counts_span().entered();
     tracing::info!(
         requests = stats.requests,
         scans = stats.scans,
         refused = stats.refused,
-        wrong_baud_bytes = line.wrong_baud,
-        noise = line.injected.noise,
-        dropped = line.injected.dropped,
-        corrupted = line.injected.corrupted,
-        truncated = line.injected.truncated,
         "emulated sicklms200 stopped"
     );
     Ok(stats)

@@ -8,10 +8,11 @@ use std::sync::mpsc::Receiver;
 use std::time::Duration;
 
 use common::{emulate, settings};
+use troupe_geom::{Room, Scene};
 use troupe_node::Waker;
 use troupe_serial::{recv_where, Faults};
 use troupe_sicklms200::device::{self, Order, Update};
-use troupe_sicklms200::emulator::{self, Room, Scene};
+use troupe_sicklms200::emulator;
 
 /// Waits for an update matching `want`, for at most `secs`.
 fn wait_for(rx: &Receiver<Update>, secs: u64, want: impl FnMut(&Update) -> bool) -> Update {

@@ -82,6 +82,16 @@ impl Urg {
         }
     }
 
+    /// The rates it reads and sends at: on USB the line's rate means
+    /// nothing (0 reads at any rate) and bytes go at USB's speed.
+    fn rates(&self, usb: bool) -> (u32, u32) {
+        if usb {
+            (0, USB_PACE)
+        } else {
+            (self.baud, self.baud)
+        }
+    }
+
     /// When the scan under way at `now` is done.
     fn scan_done(&self, now: Instant) -> Instant {
         let period = Duration::from_secs_f64(60.0 / f64::from(RPM));
@@ -129,12 +139,7 @@ pub fn run_with(
                 p.due.saturating_duration_since(Instant::now())
             })
             .min(Duration::from_millis(100));
-        // On USB the line's rate means nothing: 0 reads at any rate.
-        let (rx, tx) = if opts.usb {
-            (0, USB_PACE)
-        } else {
-            (urg.baud, urg.baud)
-        };
+        let (rx, tx) = urg.rates(opts.usb);
         match line.recv(&mut buf, rx, wait)? {
             LineEvent::Received(n) => {
                 framer.push(&buf[..n]);
@@ -150,27 +155,26 @@ pub fn run_with(
             }
             LineEvent::Idle | LineEvent::Unplugged => {}
         }
-        if pending.as_ref().is_some_and(|p| Instant::now() >= p.due) && line.plugged() {
-            if let Some(p) = pending.take() {
-                let t = p.due.saturating_duration_since(start).as_secs_f64();
-                let values = measure(&urg, scene, t, &p);
-                let ms = p.due.saturating_duration_since(urg.powered).as_millis();
-                let r = scip::encode_scan(&p.echo, p.version, &values, ms as u32);
-                let tx = if opts.usb { USB_PACE } else { urg.baud };
-                line.send(&r.to_bytes(), tx)?;
-                stats.scans += 1;
-            }
+        let done = if line.plugged() {
+            pending.take_if(|p| Instant::now() >= p.due)
+        } else {
+            None
+        };
+        if let Some(p) = done {
+            let t = p.due.saturating_duration_since(start).as_secs_f64();
+            let values = measure(&urg, scene, t, &p);
+            let ms = p.due.saturating_duration_since(urg.powered).as_millis();
+            let r = scip::encode_scan(&p.echo, p.version, &values, ms as u32);
+            // At the rate in force now: a rate change may have come between.
+            line.send(&r.to_bytes(), urg.rates(opts.usb).1)?;
+            stats.scans += 1;
         }
     }
+    let _counts = line.counts_span().entered();
     tracing::info!(
         commands = stats.commands,
         scans = stats.scans,
         refused = stats.refused,
-        wrong_baud_bytes = line.wrong_baud,
-        noise = line.injected.noise,
-        dropped = line.injected.dropped,
-        corrupted = line.injected.corrupted,
-        truncated = line.injected.truncated,
         "emulated urglaser stopped"
     );
     Ok(stats)

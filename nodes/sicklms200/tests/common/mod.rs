@@ -3,9 +3,10 @@
 
 use std::path::{Path, PathBuf};
 
+use troupe_geom::Room;
 use troupe_serial::{Emulator, Faults, LineOptions};
 use troupe_sicklms200::device::Settings;
-use troupe_sicklms200::emulator::{self, EmulatorStats, Room};
+use troupe_sicklms200::emulator::{self, EmulatorStats};
 
 /// An emulated scanner in its room on a thread, its line linked in a
 /// directory of its own, recording to `capture` if given.
