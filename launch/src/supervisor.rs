@@ -86,6 +86,17 @@ pub struct LaunchArgs {
     /// file says (1 = real time; 0 = Player's pace, 100 steps a second)
     #[arg(long, value_name = "X")]
     pub speedup: Option<f64>,
+    /// Also serve `troupe view` (the running world in a browser) on ADDR:
+    /// `--view` alone serves 127.0.0.1:8080, `--view=127.0.0.1:0` any free
+    /// port. Its address is printed (`troupe view: http://…/`).
+    #[arg(
+        long,
+        value_name = "ADDR",
+        num_args = 0..=1,
+        require_equals = true,
+        default_missing_value = "127.0.0.1:8080"
+    )]
+    pub view: Option<std::net::SocketAddr>,
 }
 
 /// Flags of `troupe plan`.
@@ -351,6 +362,14 @@ async fn supervise(
         })
     };
     let exe = std::env::current_exe().context("finding the troupe binary")?;
+    let view = a.view.map(|at| {
+        // A client of the launch's network (it serves a page, not keys).
+        let mut net = child_net.clone();
+        if let Some(k) = net.iter().position(|f| f == "--listen") {
+            net.drain(k..(k + 2).min(net.len()));
+        }
+        tokio::spawn(run_view(exe.clone(), net, at, stop_rx.clone()))
+    });
     let mut tasks = Vec::new();
     for st in &states {
         let ctx = NodeCtx {
@@ -437,6 +456,11 @@ async fn supervise(
     if let Some(b) = bridge {
         let _ = b.await;
     }
+    // The view stops with the stack; one that failed fails the launch.
+    let view_ok = match view {
+        Some(v) => v.await.unwrap_or(false),
+        None => true,
+    };
     if signalled {
         tracing::info!("stopping {} nodes in reverse start order", states.len());
         let grace = Duration::from_secs_f64(a.grace.max(0.0));
@@ -472,11 +496,14 @@ async fn supervise(
     }
     drop(_liveliness);
     let _ = session.close().await;
-    let failed: Vec<&str> = states
+    let mut failed: Vec<&str> = states
         .iter()
         .filter(|s| s.failed.load(Ordering::SeqCst))
         .map(|s| s.spec.name.as_str())
         .collect();
+    if !view_ok {
+        failed.push("the view (--view)");
+    }
     if failed.is_empty() {
         tracing::info!("stack stopped cleanly");
         Ok(())
@@ -486,6 +513,91 @@ async fn supervise(
             failed.join(", ")
         )
     }
+}
+
+/// `launch --view`: runs `troupe view` on `at` until the launch stops
+/// (then SIGTERM, and SIGKILL if it has not gone within 5 s). Its address
+/// line goes to the launcher's stdout, its log to stderr as a node's.
+/// Whether it ran until asked to stop, and then stopped cleanly.
+async fn run_view(
+    exe: PathBuf,
+    net: Vec<String>,
+    at: std::net::SocketAddr,
+    mut stop_rx: watch::Receiver<bool>,
+) -> bool {
+    let mut child = match Command::new(&exe)
+        .args(&net)
+        .args([
+            "view",
+            "--bind",
+            &at.ip().to_string(),
+            "--port",
+            &at.port().to_string(),
+        ])
+        .env(SUPERVISOR_ENV, std::process::id().to_string())
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .process_group(0)
+        .kill_on_drop(true)
+        .spawn()
+    {
+        Ok(c) => c,
+        Err(e) => {
+            tracing::error!("--view: cannot start `troupe view`: {e}");
+            return false;
+        }
+    };
+    let mut forwarders = Vec::new();
+    if let Some(out) = child.stdout.take() {
+        forwarders.push(tokio::spawn(async move {
+            let mut lines = BufReader::new(out).lines();
+            while let Ok(Some(line)) = lines.next_line().await {
+                let mut o = std::io::stdout().lock();
+                let _ = writeln!(o, "{line}");
+                let _ = o.flush();
+            }
+        }));
+    }
+    if let Some(err) = child.stderr.take() {
+        forwarders.push(tokio::spawn(forward(
+            BufReader::new(err),
+            "view".to_owned(),
+            None,
+        )));
+    }
+    let pid = child.id().and_then(|p| i32::try_from(p).ok());
+    let ok = tokio::select! {
+        status = child.wait() => {
+            // It ended on its own (a taken port, a stopped network): the
+            // stack runs on without it.
+            let how = status.map_or_else(|e| e.to_string(), |s| s.to_string());
+            tracing::error!("`troupe view` ended ({how}); the stack runs on without it");
+            false
+        }
+        _ = async { stop_rx.wait_for(|&stop| stop).await.map(|_| ()) } => {
+            if let Some(p) = pid {
+                let _ = kill(Pid::from_raw(p), Signal::SIGTERM);
+            }
+            match tokio::time::timeout(Duration::from_secs(5), child.wait()).await {
+                Ok(Ok(s)) if s.success() => true,
+                Ok(status) => {
+                    let how = status.map_or_else(|e| e.to_string(), |s| s.to_string());
+                    tracing::warn!("`troupe view` stopped: {how}");
+                    false
+                }
+                Err(_) => {
+                    tracing::warn!("`troupe view` ignored SIGTERM for 5 s; killing it");
+                    let _ = child.kill().await;
+                    false
+                }
+            }
+        }
+    };
+    for f in forwarders {
+        let _ = f.await;
+    }
+    ok
 }
 
 fn signal(s: &NodeState, sig: Signal) {

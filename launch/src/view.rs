@@ -21,7 +21,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
-use axum::extract::State;
+use axum::extract::{Query, State};
 use axum::http::header;
 use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{IntoResponse, Json, Response};
@@ -49,6 +49,11 @@ pub struct ViewArgs {
     /// Frames a second sent to each page, at most.
     #[arg(long, default_value_t = 30.0)]
     pub fps: f64,
+    /// Watch these namespaces instead of the session's one (comma-separated;
+    /// `-` for keys under no namespace): the page lists each one's devices
+    /// and draws the world of the one chosen.
+    #[arg(long, value_name = "NS,…", value_delimiter = ',')]
+    pub namespaces: Vec<String>,
 }
 
 /// How long a simulator has to answer for its world (and a driver a request).
@@ -66,8 +71,54 @@ const PARTICLES_SHOWN: usize = 400;
 /// How long a page's report of its frame rate counts (pages report every 2 s).
 const REPORTS_KEPT: Duration = Duration::from_secs(5);
 
-/// What the page's handlers share: the newest samples and the session.
-type App = (Arc<Shared>, troupe_node::zenoh::Session);
+/// What the page's handlers share: each namespace the view watches.
+type App = Arc<View>;
+
+/// The namespaces the view watches, each with its newest samples and its
+/// session, and what pages say of themselves.
+struct View {
+    spaces: Vec<(Arc<Shared>, troupe_node::zenoh::Session)>,
+    /// The frame rates pages opened with `?report` say they draw at, and
+    /// when they said it.
+    reports: Mutex<BTreeMap<String, (Instant, [f64; 2])>>,
+}
+
+impl View {
+    /// Namespace `ns` (an index into `--namespaces`; the first when none is
+    /// asked for), or the page's error.
+    fn space(
+        &self,
+        ns: Option<usize>,
+    ) -> Result<&(Arc<Shared>, troupe_node::zenoh::Session), (axum::http::StatusCode, String)> {
+        let k = ns.unwrap_or(0);
+        self.spaces.get(k).ok_or_else(|| {
+            (
+                axum::http::StatusCode::NOT_FOUND,
+                format!(
+                    "no namespace {k}: this view watches {} (0 to {})",
+                    self.spaces.len(),
+                    self.spaces.len() - 1
+                ),
+            )
+        })
+    }
+
+    /// The frame rates pages reported in the last [`REPORTS_KEPT`], with
+    /// the milliseconds a frame took them to draw.
+    fn reports(&self) -> BTreeMap<String, [f64; 2]> {
+        let r = self.reports.lock().unwrap_or_else(PoisonError::into_inner);
+        r.iter()
+            .filter(|(_, (at, _))| at.elapsed() < REPORTS_KEPT)
+            .map(|(page, &(_, fps))| (page.clone(), fps))
+            .collect()
+    }
+}
+
+/// `?ns=K`: which namespace a request is about.
+#[derive(Debug, Default, serde::Deserialize)]
+struct Ns {
+    ns: Option<usize>,
+}
 
 /// The page and its script, served as they are.
 const INDEX_HTML: &str = include_str!("view/index.html");
@@ -101,9 +152,6 @@ struct Latest {
     /// What each page shows of the world ([x0, y0, x1, y1], metres): its
     /// frames carry only what lies there.
     boxes: BTreeMap<String, [f64; 4]>,
-    /// The frame rates pages opened with `?report` say they draw at, and
-    /// when they said it.
-    pages: BTreeMap<String, (Instant, [f64; 2])>,
 }
 
 /// The simulation's speed against real time.
@@ -128,10 +176,20 @@ impl Pace {
     }
 }
 
+/// The frames made since change `version`, by the box they show.
+#[derive(Default)]
+struct Made {
+    version: u64,
+    frames: Vec<(Option<[f64; 4]>, Arc<str>)>,
+}
+
 struct Shared {
     latest: Mutex<Latest>,
-    /// Bumped whenever something drawn changed.
-    changed: watch::Sender<u64>,
+    /// Bumped whenever something drawn changed (in any namespace watched).
+    changed: Arc<watch::Sender<u64>>,
+    /// The frames made since the last change, by the box they show: pages
+    /// that show the same share one.
+    made: Mutex<Made>,
     fps: f64,
     /// The namespace the view watches (its session's), if any.
     namespace: Option<String>,
@@ -141,6 +199,30 @@ struct Shared {
 }
 
 impl Shared {
+    /// A namespace's state, empty: who the view joins as and where, as
+    /// `session`'s config has them (a fleet's config may name both).
+    fn of(
+        session: &troupe_node::zenoh::Session,
+        changed: Arc<watch::Sender<u64>>,
+        fps: f64,
+    ) -> Shared {
+        let config = session.config();
+        Shared {
+            latest: Mutex::default(),
+            changed,
+            made: Mutex::default(),
+            fps,
+            namespace: config
+                .get_typed::<Option<String>>("namespace")
+                .ok()
+                .flatten(),
+            looking_only: config
+                .get_typed::<Value>("metadata")
+                .ok()
+                .and_then(|m| crate::keys::viewer_of(&m)),
+        }
+    }
+
     fn latest(&self) -> std::sync::MutexGuard<'_, Latest> {
         self.latest.lock().unwrap_or_else(PoisonError::into_inner)
     }
@@ -207,17 +289,6 @@ impl Shared {
         })
     }
 
-    /// The frame rates pages reported in the last [`REPORTS_KEPT`], with
-    /// the milliseconds a frame took them to draw.
-    fn reports(&self) -> BTreeMap<String, [f64; 2]> {
-        let l = self.latest();
-        l.pages
-            .iter()
-            .filter(|(_, (at, _))| at.elapsed() < REPORTS_KEPT)
-            .map(|(page, &(_, fps))| (page.clone(), fps))
-            .collect()
-    }
-
     /// The live devices, as `troupe list --json` prints them.
     fn devices(&self) -> Value {
         let l = self.latest();
@@ -231,12 +302,30 @@ impl Shared {
         )
     }
 
-    /// One frame: the time, the speed, every moving model's pose and every
-    /// range device's readings.
-    fn frame(&self, page: Option<&str>) -> Value {
+    /// The frame for `page` after change `version`, as text: made once for
+    /// every page that shows the same box.
+    fn frame_text(&self, version: u64, page: Option<&str>) -> Arc<str> {
+        let seen = page.and_then(|p| self.latest().boxes.get(p).copied());
+        let mut made = self.made.lock().unwrap_or_else(PoisonError::into_inner);
+        if made.version != version {
+            *made = Made {
+                version,
+                frames: Vec::new(),
+            };
+        }
+        if let Some((_, text)) = made.frames.iter().find(|(b, _)| *b == seen) {
+            return text.clone();
+        }
+        let text: Arc<str> = self.frame(seen).to_string().into();
+        made.frames.push((seen, text.clone()));
+        text
+    }
+
+    /// One frame of what lies in `seen` (a box of the world, metres; all
+    /// of it if `None`): the time, the speed, every moving model's pose and
+    /// every range device's readings.
+    fn frame(&self, seen: Option<[f64; 4]>) -> Value {
         let l = self.latest();
-        // What the page shows (a box of the world, metres), if it said.
-        let seen = page.and_then(|p| l.boxes.get(p)).copied();
         let inside = |(x, y): (f64, f64), margin: f64| {
             seen.is_none_or(|[x0, y0, x1, y1]| {
                 x >= x0 - margin && x <= x1 + margin && y >= y0 - margin && y <= y1 + margin
@@ -581,9 +670,14 @@ async fn fetch_map(session: troupe_node::zenoh::Session, shared: Arc<Shared>, de
 
 /// `GET /api/map/6665:map:0`: a map device's picture.
 async fn map_picture(
-    State((s, _)): State<App>,
+    State(v): State<App>,
+    Query(q): Query<Ns>,
     axum::extract::Path(dev): axum::extract::Path<String>,
 ) -> Response {
+    let s = match v.space(q.ns) {
+        Ok((s, _)) => s,
+        Err(r) => return r.into_response(),
+    };
     let found = dev
         .parse::<troupe_msgs::DevAddr>()
         .ok()
@@ -598,149 +692,59 @@ async fn map_picture(
 /// `troupe view`.
 pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     crate::cli::supervised()?;
-    let Some((rt, mut signals, session)) = crate::supervisor::client_runtime(z, 2)? else {
+    // The namespaces watched: the session's, or those asked for.
+    let namespaces: Vec<Option<String>> = if a.namespaces.is_empty() {
+        vec![z.namespace.clone()]
+    } else {
+        a.namespaces
+            .iter()
+            .map(|n| (n != "-").then(|| n.clone()))
+            .collect()
+    };
+    let joining = |ns: &Option<String>| ZenohArgs {
+        namespace: ns.clone(),
+        ..z.clone()
+    };
+    let Some((rt, mut signals, session)) =
+        crate::supervisor::client_runtime(&joining(&namespaces[0]), 2)?
+    else {
         return Ok(());
     };
-    // Who the view joins as, and where (a fleet's config may name both),
-    // as the session has them.
-    let config = session.config();
-    let looking_only = config
-        .get_typed::<Value>("metadata")
-        .ok()
-        .and_then(|m| crate::keys::viewer_of(&m));
-    let namespace = config
-        .get_typed::<Option<String>>("namespace")
-        .ok()
-        .flatten();
-    if let Some(me) = &looking_only {
-        tracing::info!("joining as the viewer `{me}`: the page offers no commands");
-    }
-    let shared = Arc::new(Shared {
-        latest: Mutex::default(),
-        changed: watch::channel(0).0,
-        fps: a.fps.clamp(0.1, 240.0),
-        namespace,
-        looking_only,
-    });
+    let changed = Arc::new(watch::channel(0).0);
+    let fps = a.fps.clamp(0.1, 240.0);
     rt.block_on(async move {
-        // Devices come and go; a simulator's world is asked for as it comes.
-        let (s, sess) = (shared.clone(), session.clone());
-        let handle = tokio::runtime::Handle::current();
-        let _tokens = session
-            .liveliness()
-            .declare_subscriber(keys::tokens(None))
-            .history(true)
-            .callback(move |sample| {
-                let Ok((dev, driver)) = keys::parse_token(sample.key_expr().as_str()) else {
-                    return;
-                };
-                let mut l = s.latest();
-                match sample.kind() {
-                    SampleKind::Put => {
-                        l.devices.insert(dev, driver);
-                        if dev.interface == Interface::Simulation {
-                            handle.spawn(fetch_world(sess.clone(), s.clone(), dev));
-                        }
-                        if dev.interface == Interface::Map {
-                            handle.spawn(fetch_map(sess.clone(), s.clone(), dev));
-                        }
-                        if DRAWN.contains(&dev.interface) {
-                            handle.spawn(fetch_latest(sess.clone(), s.clone(), dev));
-                        }
-                    }
-                    SampleKind::Delete => {
-                        l.devices.remove(&dev);
-                        l.worlds.remove(&dev);
-                        l.maps.remove(&dev);
-                        l.updates.remove(&dev);
-                        l.poses.remove(&dev);
-                        l.readings.remove(&dev);
-                    }
-                }
-                drop(l);
-                s.touch();
-            })
-            .await
-            .map_err(|e| anyhow::anyhow!("watching devices: {e}"))?;
-        let mut subs = Vec::new();
-        // Every device's samples: counted (their rates reckoned each
-        // second), and taken where the page draws them.
-        {
-            let (s, sess) = (shared.clone(), session.clone());
-            let rt = tokio::runtime::Handle::current();
-            subs.push(
-                session
-                    .declare_subscriber(keys::data_all())
-                    .callback(move |sample| {
-                        let Ok(dev) = keys::parse_data(sample.key_expr().as_str()) else {
-                            return;
-                        };
-                        let bytes = sample.payload().to_bytes();
-                        let Ok((_, stamp, _)) = codec::split(&bytes) else {
-                            return;
-                        };
-                        {
-                            let mut l = s.latest();
-                            let u = l.updates.entry(dev).or_insert((f64::NAN, 0, 0));
-                            if u.0 != stamp {
-                                (u.0, u.1) = (stamp, u.1 + 1);
-                            }
-                        }
-                        if DRAWN.contains(&dev.interface) {
-                            ingest(&s, &sess, &rt, dev, &bytes);
-                        }
-                    })
-                    .await
-                    .map_err(|e| anyhow::anyhow!("subscribing to the devices' data: {e}"))?,
-            );
-            let s = shared.clone();
-            tokio::spawn(async move {
-                let mut every = tokio::time::interval(Duration::from_secs(1));
-                let mut then = Instant::now();
-                loop {
-                    every.tick().await;
-                    let wall = then.elapsed().as_secs_f64().max(1e-3);
-                    then = Instant::now();
-                    let mut l = s.latest();
-                    let Latest {
-                        updates,
-                        rates,
-                        devices,
-                        ..
-                    } = &mut *l;
-                    rates.clear();
-                    for (d, u) in updates.iter_mut() {
-                        if devices.contains_key(d) {
-                            rates.insert(*d, (u.1 - u.2) as f64 / wall);
-                        }
-                        u.2 = u.1;
-                    }
-                    drop(l);
-                    s.touch();
-                }
-            });
+        let mut sessions = vec![session];
+        for ns in &namespaces[1..] {
+            let Some(s) = signals
+                .unless_stopped(joining(ns).open_in_background(troupe_node::Mode::Client))
+                .await?
+            else {
+                return Ok(());
+            };
+            sessions.push(s);
         }
-        // Localizers' particles, twice a second.
-        {
-            let (s, sess) = (shared.clone(), session.clone());
-            tokio::spawn(async move {
-                let mut every = tokio::time::interval(PARTICLES_EVERY);
-                loop {
-                    every.tick().await;
-                    let localizers: Vec<Device> = s
-                        .latest()
-                        .devices
-                        .keys()
-                        .copied()
-                        .filter(|d| d.interface == Interface::Localize)
-                        .collect();
-                    for d in localizers {
-                        ask_nav(sess.clone(), s.clone(), d).await;
-                    }
-                }
-            });
+        let mut spaces = Vec::new();
+        let mut held = Vec::new();
+        for (session, asked) in sessions.into_iter().zip(&namespaces) {
+            let shared = Arc::new(Shared::of(&session, changed.clone(), fps));
+            if asked.is_none() && shared.namespace.is_some() && !a.namespaces.is_empty() {
+                anyhow::bail!(
+                    "--namespaces -: the Zenoh config puts this view's sessions in namespace `{}`; \
+                     it cannot watch keys under none",
+                    shared.namespace.as_deref().unwrap_or_default()
+                );
+            }
+            if let Some(me) = &shared.looking_only {
+                tracing::info!("joining as the viewer `{me}`: the page offers no commands");
+            }
+            held.push(watch_space(shared.clone(), session.clone()).await?);
+            spaces.push((shared, session));
         }
-        let app = Router::new()
+        let app: App = Arc::new(View {
+            spaces,
+            reports: Mutex::default(),
+        });
+        let routes = Router::new()
             .route(
                 "/",
                 get(|| async { page(INDEX_HTML, "text/html; charset=utf-8") }),
@@ -751,42 +755,52 @@ pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             )
             .route(
                 "/api/world",
-                get(|State((s, _)): State<App>| async move { Json(s.worlds()) }),
+                get(|State(v): State<App>, Query(q): Query<Ns>| async move {
+                    v.space(q.ns).map(|(s, _)| {
+                        let mut w = s.worlds();
+                        w["namespaces"] =
+                            v.spaces.iter().map(|(s, _)| json!(s.namespace)).collect();
+                        Json(w)
+                    })
+                }),
             )
             .route(
                 "/api/devices",
-                get(|State((s, _)): State<App>| async move { Json(s.devices()) }),
+                get(|State(v): State<App>, Query(q): Query<Ns>| async move {
+                    v.space(q.ns).map(|(s, _)| Json(s.devices()))
+                }),
             )
             .route(
                 "/api/frame",
-                get(|State((s, _)): State<App>| async move { Json(s.frame(None)) }),
+                get(|State(v): State<App>, Query(q): Query<Ns>| async move {
+                    v.space(q.ns).map(|(s, _)| Json(s.frame(None)))
+                }),
             )
             .route("/api/stream", get(stream))
             .route("/api/map/{device}", get(map_picture))
             .route("/api/command", axum::routing::post(command))
             .route(
                 "/api/view",
-                axum::routing::post(
-                    |State((s, _)): State<App>, Json(v): Json<ViewBox>| async move {
-                        s.latest().boxes.insert(v.page, v.area);
+                axum::routing::post(|State(v): State<App>, Json(b): Json<ViewBox>| async move {
+                    v.space(b.ns).map(|(s, _)| {
+                        s.latest().boxes.insert(b.page, b.area);
                         s.touch();
                         "noted"
-                    },
-                ),
+                    })
+                }),
             )
             .route(
                 "/api/report",
-                axum::routing::post(
-                    |State((s, _)): State<App>, Json(r): Json<Report>| async move {
-                        s.latest()
-                            .pages
-                            .insert(r.page, (Instant::now(), [r.fps, r.ms]));
-                        "noted"
-                    },
-                )
-                .get(|State((s, _)): State<App>| async move { Json(s.reports()) }),
+                axum::routing::post(|State(v): State<App>, Json(r): Json<Report>| async move {
+                    v.reports
+                        .lock()
+                        .unwrap_or_else(PoisonError::into_inner)
+                        .insert(r.page, (Instant::now(), [r.fps, r.ms]));
+                    "noted"
+                })
+                .get(|State(v): State<App>| async move { Json(v.reports()) }),
             )
-            .with_state((shared.clone(), session.clone()));
+            .with_state(app);
         let listener = tokio::net::TcpListener::bind(SocketAddr::new(a.bind, a.port))
             .await
             .with_context(|| format!("serving the view on {}:{}", a.bind, a.port))?;
@@ -796,14 +810,140 @@ pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             writeln!(out, "troupe view: http://{at}/")?;
             out.flush()?;
         }
-        axum::serve(listener, app)
+        axum::serve(listener, routes)
             .with_graceful_shutdown(async move { signals.recv().await })
             .await
             .context("serving the view")?;
         tracing::info!("view stopped");
-        drop(subs);
+        drop(held);
         anyhow::Ok(())
     })
+}
+
+/// Subscriptions that feed a namespace's [`Shared`], held while the view
+/// runs.
+type Held = (
+    troupe_node::zenoh::pubsub::Subscriber<()>,
+    troupe_node::zenoh::pubsub::Subscriber<()>,
+);
+
+/// Feeds `shared` from `session`: the live devices (a simulator's world
+/// and a map's picture asked for as they come), every drawn device's
+/// samples, the devices' rates each second, localizers' particles twice a
+/// second.
+async fn watch_space(
+    shared: Arc<Shared>,
+    session: troupe_node::zenoh::Session,
+) -> anyhow::Result<Held> {
+    let (s, sess) = (shared.clone(), session.clone());
+    let handle = tokio::runtime::Handle::current();
+    let tokens = session
+        .liveliness()
+        .declare_subscriber(keys::tokens(None))
+        .history(true)
+        .callback(move |sample| {
+            let Ok((dev, driver)) = keys::parse_token(sample.key_expr().as_str()) else {
+                return;
+            };
+            let mut l = s.latest();
+            match sample.kind() {
+                SampleKind::Put => {
+                    l.devices.insert(dev, driver);
+                    if dev.interface == Interface::Simulation {
+                        handle.spawn(fetch_world(sess.clone(), s.clone(), dev));
+                    }
+                    if dev.interface == Interface::Map {
+                        handle.spawn(fetch_map(sess.clone(), s.clone(), dev));
+                    }
+                    if DRAWN.contains(&dev.interface) {
+                        handle.spawn(fetch_latest(sess.clone(), s.clone(), dev));
+                    }
+                }
+                SampleKind::Delete => {
+                    l.devices.remove(&dev);
+                    l.worlds.remove(&dev);
+                    l.maps.remove(&dev);
+                    l.updates.remove(&dev);
+                    l.poses.remove(&dev);
+                    l.readings.remove(&dev);
+                }
+            }
+            drop(l);
+            s.touch();
+        })
+        .await
+        .map_err(|e| anyhow::anyhow!("watching devices: {e}"))?;
+    // Every device's samples: counted (their rates reckoned each second),
+    // and taken where the page draws them.
+    let (s, sess) = (shared.clone(), session.clone());
+    let rt = tokio::runtime::Handle::current();
+    let data = session
+        .declare_subscriber(keys::data_all())
+        .callback(move |sample| {
+            let Ok(dev) = keys::parse_data(sample.key_expr().as_str()) else {
+                return;
+            };
+            let bytes = sample.payload().to_bytes();
+            let Ok((_, stamp, _)) = codec::split(&bytes) else {
+                return;
+            };
+            {
+                let mut l = s.latest();
+                let u = l.updates.entry(dev).or_insert((f64::NAN, 0, 0));
+                if u.0 != stamp {
+                    (u.0, u.1) = (stamp, u.1 + 1);
+                }
+            }
+            if DRAWN.contains(&dev.interface) {
+                ingest(&s, &sess, &rt, dev, &bytes);
+            }
+        })
+        .await
+        .map_err(|e| anyhow::anyhow!("subscribing to the devices' data: {e}"))?;
+    let s = shared.clone();
+    tokio::spawn(async move {
+        let mut every = tokio::time::interval(Duration::from_secs(1));
+        let mut then = Instant::now();
+        loop {
+            every.tick().await;
+            let wall = then.elapsed().as_secs_f64().max(1e-3);
+            then = Instant::now();
+            let mut l = s.latest();
+            let Latest {
+                updates,
+                rates,
+                devices,
+                ..
+            } = &mut *l;
+            rates.clear();
+            for (d, u) in updates.iter_mut() {
+                if devices.contains_key(d) {
+                    rates.insert(*d, (u.1 - u.2) as f64 / wall);
+                }
+                u.2 = u.1;
+            }
+            drop(l);
+            s.touch();
+        }
+    });
+    // Localizers' particles, twice a second.
+    tokio::spawn(async move {
+        let mut every = tokio::time::interval(PARTICLES_EVERY);
+        loop {
+            every.tick().await;
+            let localizers: Vec<Device> = shared
+                .latest()
+                .devices
+                .keys()
+                .copied()
+                .filter(|d| d.interface == Interface::Localize)
+                .collect();
+            for d in localizers {
+                ask_nav(session.clone(), shared.clone(), d).await;
+            }
+        }
+    });
+    Ok((tokens, data))
 }
 
 fn page(body: &'static str, kind: &'static str) -> Response {
@@ -820,9 +960,13 @@ fn page(body: &'static str, kind: &'static str) -> Response {
 /// A page's stream of frames: the next frame is made only once the page
 /// took the last one, something changed, and 1/fps has passed.
 async fn stream(
-    State((s, _)): State<App>,
-    axum::extract::Query(q): axum::extract::Query<StreamQuery>,
-) -> Sse<impl futures::Stream<Item = Result<Event, Infallible>>> {
+    State(v): State<App>,
+    Query(q): Query<StreamQuery>,
+) -> Result<
+    Sse<impl futures::Stream<Item = Result<Event, Infallible>>>,
+    (axum::http::StatusCode, String),
+> {
+    let s = v.space(q.ns)?.0.clone();
     let rx = s.changed.subscribe();
     let period = Duration::from_secs_f64(1.0 / s.fps);
     // The page's box goes with its stream.
@@ -838,22 +982,24 @@ async fn stream(
             }
             // Ends with the view (its sender dropped).
             rx.changed().await.ok()?;
-            rx.mark_unchanged();
+            let version = *rx.borrow_and_update();
             // (The period runs from when a frame is begun: making it is
             // part of the frame's time.)
             let begun = tokio::time::Instant::now();
-            let frame = s.frame(page.as_ref().map(|p| p.page.as_str()));
-            let event = Event::default().data(frame.to_string());
+            let frame = s.frame_text(version, page.as_ref().map(|p| p.page.as_str()));
+            let event = Event::default().data(&*frame);
             Some((Ok(event), (s, rx, Some(begun), page)))
         },
     );
-    Sse::new(frames).keep_alive(KeepAlive::default())
+    Ok(Sse::new(frames).keep_alive(KeepAlive::default()))
 }
 
-/// `/api/stream?page=ID`: the page that reads the stream, for its box.
+/// `/api/stream?page=ID&ns=K`: the page that reads the stream, for its
+/// box, and the namespace it shows.
 #[derive(Debug, serde::Deserialize)]
 struct StreamQuery {
     page: Option<String>,
+    ns: Option<usize>,
 }
 
 /// A page's box, forgotten when its stream ends.
@@ -872,6 +1018,8 @@ impl Drop for PageBox {
 #[derive(Debug, serde::Deserialize)]
 struct ViewBox {
     page: String,
+    /// The namespace the page shows (an index into `--namespaces`).
+    ns: Option<usize>,
     /// x0, y0, x1, y1 (metres).
     #[serde(rename = "box")]
     area: [f64; 4],
@@ -892,6 +1040,8 @@ struct Report {
 /// (rviz's "2D Goal" and "2D Pose Estimate"), a base's speeds (teleop).
 #[derive(Debug, serde::Deserialize)]
 struct Order {
+    /// The namespace of the device (an index into `--namespaces`).
+    ns: Option<usize>,
     /// `6665:planner:0`.
     device: String,
     goal: Option<[f64; 3]>,
@@ -903,8 +1053,12 @@ struct Order {
 /// or acknowledged (a request); 400 for an order that makes no sense, 403
 /// from a view that joins as a viewer, 502 with the reason when the driver
 /// refused or did not answer.
-async fn command(State((s, session)): State<App>, Json(o): Json<Order>) -> Response {
+async fn command(State(v): State<App>, Json(o): Json<Order>) -> Response {
     use axum::http::StatusCode;
+    let (s, session) = match v.space(o.ns) {
+        Ok(space) => space,
+        Err(r) => return r.into_response(),
+    };
     if let Some(me) = &s.looking_only {
         return (
             StatusCode::FORBIDDEN,
@@ -928,7 +1082,7 @@ async fn command(State((s, session)): State<App>, Json(o): Json<Order>) -> Respo
         (Interface::Planner, Some(g), None, None) => {
             let goal = planner::Goal { goal: p(g) };
             put(
-                &session,
+                session,
                 keys::cmd(&dev, planner::Goal::NAME),
                 codec::encode(&goal, stamp),
             )
@@ -940,7 +1094,7 @@ async fn command(State((s, session)): State<App>, Json(o): Json<Order>) -> Respo
                 state: true,
             };
             put(
-                &session,
+                session,
                 keys::cmd(&dev, position2d::CmdVel::NAME),
                 codec::encode(&vel, stamp),
             )
@@ -952,7 +1106,7 @@ async fn command(State((s, session)): State<App>, Json(o): Json<Order>) -> Respo
                 // As playerv sets it: half a metre and 10° of doubt.
                 cov: [0.25, 0.25, 10f64.to_radians().powi(2), 0.0, 0.0, 0.0],
             };
-            match request(&session, dev, &set).await {
+            match request(session, dev, &set).await {
                 Ok(_) => (StatusCode::OK, "acknowledged").into_response(),
                 Err(e) => gone(e),
             }
@@ -969,5 +1123,51 @@ async fn put(session: &troupe_node::zenoh::Session, key: String, payload: Vec<u8
     match session.put(&key, payload).await {
         Ok(()) => (StatusCode::OK, "sent").into_response(),
         Err(e) => (StatusCode::BAD_GATEWAY, format!("sending {key}: {e}")).into_response(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn shared() -> Shared {
+        Shared {
+            latest: Mutex::default(),
+            changed: Arc::new(watch::channel(0).0),
+            made: Mutex::default(),
+            fps: 30.0,
+            namespace: None,
+            looking_only: None,
+        }
+    }
+
+    #[test]
+    fn pages_that_show_the_same_share_one_frame_until_the_next_change() {
+        let s = shared();
+        {
+            let mut l = s.latest();
+            l.boxes.insert("a".into(), [0.0, 0.0, 1.0, 1.0]);
+            l.boxes.insert("b".into(), [0.0, 0.0, 1.0, 1.0]);
+            l.boxes.insert("far".into(), [5.0, 5.0, 6.0, 6.0]);
+        }
+        let a = s.frame_text(1, Some("a"));
+        // Same box, same change: the very same text, made once.
+        assert!(Arc::ptr_eq(&a, &s.frame_text(1, Some("b"))));
+        // Another box, or no box: a frame of its own.
+        assert!(!Arc::ptr_eq(&a, &s.frame_text(1, Some("far"))));
+        assert!(!Arc::ptr_eq(&a, &s.frame_text(1, None)));
+        // The next change: made anew, with what changed.
+        s.latest().devices.insert(
+            "6665:laser:0"
+                .parse::<troupe_msgs::DevAddr>()
+                .unwrap()
+                .device(6665),
+            "sicklms200".into(),
+        );
+        let after = s.frame_text(2, Some("b"));
+        assert!(!Arc::ptr_eq(&a, &after));
+        let f: Value = serde_json::from_str(&after).unwrap();
+        assert_eq!(f["devices"], 1);
+        assert_eq!(s.made.lock().unwrap().frames.len(), 1);
     }
 }

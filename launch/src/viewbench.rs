@@ -41,6 +41,12 @@ pub struct ViewBenchArgs {
     /// The world's speed against real time.
     #[arg(long, default_value_t = 1.0)]
     pub speedup: f64,
+    /// Run the browsers under SCHED_IDLE (`chrt --idle 0`): they get only
+    /// the CPU the fleet and the view server leave, as browsers on other
+    /// machines would take none of this one's. Without it, on a small
+    /// machine, the browsers' own drawing competes with the simulator.
+    #[arg(long)]
+    pub idle_browsers: bool,
 }
 
 /// Robots in the world.
@@ -229,15 +235,23 @@ fn measure(
     let mut out = std::io::stdout().lock();
     writeln!(
         out,
-        "troupe bench view: {ROBOTS} Pioneers in real time (odometry, 16 sonars, 180-beam laser each), `troupe view`, headless {}; {} s per row",
+        "troupe bench view: {ROBOTS} Pioneers in real time (odometry, 16 sonars, 180-beam laser each), `troupe view`, headless {}{}; {} s per row",
         a.chromium.display(),
+        if a.idle_browsers { " at idle priority" } else { "" },
         a.seconds
     )?;
     writeln!(out, "  browsers  frames/s per page  ms to draw one  view CPU (of a core)  per browser  odometry Hz/robot  ranger samples/s")?;
     for (k, &n) in a.browsers.iter().enumerate() {
         let mut pages = Vec::new();
         for b in 0..n {
-            pages.push(Kid(Command::new(&a.chromium)
+            let mut browser = if a.idle_browsers {
+                let mut c = Command::new("chrt");
+                c.args(["--idle", "0"]).arg(&a.chromium);
+                c
+            } else {
+                Command::new(&a.chromium)
+            };
+            pages.push(Kid(browser
                 .args([
                     "--headless",
                     "--no-sandbox",
@@ -253,7 +267,13 @@ fn measure(
                 .stdout(Stdio::null())
                 .stderr(Stdio::null())
                 .spawn()
-                .context("starting chromium")?));
+                .with_context(|| {
+                    if a.idle_browsers {
+                        "starting `chrt --idle 0 chromium` (chrt is util-linux's)"
+                    } else {
+                        "starting chromium"
+                    }
+                })?));
         }
         // Every page drawing and reporting (twice: its first report may
         // count its loading).

@@ -605,6 +605,177 @@ fn the_view_draws_map_devices() {
     stack.stop();
 }
 
+/// Two stacks in two namespaces on one network. `launch --view` serves the
+/// first one's view beside it; `troupe view --namespaces A,B` watches both:
+/// each namespace's world, devices, frames and commands are its own, and
+/// the page offers a choice of the two.
+#[test]
+fn one_view_watches_several_namespaces() {
+    let dir = std::env::temp_dir().join(format!("troupe-viewns-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("view.world"), WORLD).unwrap();
+    std::fs::write(dir.join("view.cfg"), CFG).unwrap();
+    // B's r0 stands a metre off A's, in a world of its own.
+    std::fs::create_dir_all(dir.join("b")).unwrap();
+    std::fs::write(
+        dir.join("b/view.world"),
+        WORLD.replace(r#"name "r0" pose [0 0 0 0]"#, r#"name "r0" pose [1 1 0 0]"#),
+    )
+    .unwrap();
+    std::fs::write(dir.join("b/view.cfg"), CFG).unwrap();
+    let (a, b) = (
+        troupe_tests::unique_namespace("viewa"),
+        troupe_tests::unique_namespace("viewb"),
+    );
+
+    // A, with its view served by the launcher; B joins A's router.
+    let mut launcher_a = troupe_tests::launch(&a, &dir.join("view.cfg"), &["--view=127.0.0.1:0"]);
+    let lines = launcher_a.lines();
+    let (mut router, mut own_view) = (None, None);
+    let deadline = Instant::now() + DEADLINE;
+    while router.is_none() || own_view.is_none() {
+        let left = deadline.saturating_duration_since(Instant::now());
+        let line = lines
+            .recv_timeout(left)
+            .expect("the launcher's router and view lines");
+        if let Some(rest) = line.strip_prefix("troupe launch: router listening on ") {
+            router = rest.split_whitespace().next().map(str::to_owned);
+        } else if let Some(rest) = line.strip_prefix("troupe view: ") {
+            own_view = Some(rest.trim().to_owned());
+        }
+    }
+    let (router, own_view) = (router.unwrap(), own_view.unwrap());
+    let mut launcher_b = Proc::troupe(
+        "launch b",
+        &Viewed::args(
+            &b,
+            &router,
+            &[
+                "launch",
+                dir.join("b/view.cfg").to_str().unwrap(),
+                "--no-bridge",
+            ],
+        ),
+    );
+    let mut view = Proc::troupe(
+        "view",
+        &strings(&[
+            "--connect",
+            &router,
+            "view",
+            "--port",
+            "0",
+            "--namespaces",
+            &format!("{a},{b}"),
+        ]),
+    );
+    let base = view
+        .first_line()
+        .trim()
+        .strip_prefix("troupe view: ")
+        .expect("the view's address")
+        .to_owned();
+
+    // launch --view watches the launch's namespace only.
+    let own = json(&own_view, "/api/world");
+    assert_eq!(own["namespace"], a.as_str());
+    assert_eq!(own["namespaces"], serde_json::json!([a]));
+
+    // Each namespace's frames carry its own r0: A's at the origin, B's a
+    // metre off.
+    let r0_at = |ns: usize, x: &dyn Fn(f64) -> bool| {
+        frame_of(&base, &format!("/api/stream?ns={ns}"), |f| {
+            f["poses"]["6665:simulation:0"]["1"][0]
+                .as_f64()
+                .is_some_and(x)
+        })
+    };
+    r0_at(0, &|x| x == 0.0);
+    r0_at(1, &|x| x == 1.0);
+    for (k, ns) in [&a, &b].into_iter().enumerate() {
+        let world = json(&base, &format!("/api/world?ns={k}"));
+        assert_eq!(world["namespace"], ns.as_str());
+        assert_eq!(world["namespaces"], serde_json::json!([a, b]));
+        assert_eq!(world["worlds"][0]["models"][1]["name"], "r0");
+        // Its devices are `troupe list`'s in that namespace.
+        let (ok, out, err) = troupe_tests::troupe_output(&Viewed::args(
+            ns,
+            &router,
+            &["list", "--json", "--wait", "2"],
+        ));
+        assert!(ok.success(), "{err}");
+        let key = |v: &Value| format!("{} {} {}", v["robot"], v["device"], v["driver"]);
+        let mut want: Vec<String> = out
+            .lines()
+            .map(|l| key(&serde_json::from_str(l).unwrap()))
+            .collect();
+        let mut got: Vec<String> = json(&base, &format!("/api/devices?ns={k}"))
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(key)
+            .collect();
+        want.sort();
+        got.sort();
+        assert_eq!(got, want, "namespace {ns}");
+        assert_eq!(got.len(), 3);
+    }
+    let (code, why) = get(&base, "/api/world?ns=2");
+    assert_eq!(code, 404);
+    assert!(why.contains("no namespace 2"), "{why}");
+
+    // A command goes to the namespace it names: B's r0 drives, A's stays.
+    let (code, text) = post(
+        &base,
+        &serde_json::json!({"ns": 1, "device": "6665:position2d:0", "vel": [0.3, 0.0, 0.0]}),
+    );
+    assert_eq!(code, 200, "{text}");
+    r0_at(1, &|x| x > 1.1);
+    assert_eq!(
+        post(
+            &base,
+            &serde_json::json!({"ns": 1, "device": "6665:position2d:0", "vel": [0.0, 0.0, 0.0]})
+        )
+        .0,
+        200
+    );
+    let a_now = json(&base, "/api/frame?ns=0");
+    assert_eq!(
+        a_now["poses"]["6665:simulation:0"]["1"],
+        serde_json::json!([0.0, 0.0, 0.0]),
+        "{a_now}"
+    );
+
+    // In a browser: the page offers both namespaces and lists the chosen
+    // one's devices; ?ns=1 shows B.
+    if let Some(browser) = chromium() {
+        for (k, ns) in [&a, &b].into_iter().enumerate() {
+            let page = Page::open(&browser, &format!("{base}?ns={k}&x=0&y=0&scale=50"));
+            let offered = page.eval(
+                "JSON.stringify([document.getElementById('spaces').hidden, \
+                 [...document.getElementById('space').options].map(o => o.text), \
+                 document.getElementById('space').value, \
+                 document.getElementById('namespace').textContent, \
+                 document.getElementById('devices').rows.length])",
+            );
+            assert_eq!(
+                serde_json::from_str::<Value>(&offered).unwrap(),
+                serde_json::json!([false, [a, b], k.to_string(), format!(" in {ns}"), 3]),
+            );
+        }
+    }
+
+    assert!(view.terminate().success(), "{}", view.stderr());
+    assert!(launcher_b.terminate().success(), "{}", launcher_b.stderr());
+    // The launcher stops its view too, and says it stopped cleanly.
+    assert!(launcher_a.terminate().success(), "{}", launcher_a.stderr());
+    assert!(
+        TcpStream::connect(own_view.trim_start_matches("http://").trim_end_matches('/')).is_err(),
+        "launch --view's page is still served"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// A page of headless Chromium, driven over the DevTools protocol: mouse
 /// presses, drags and clicks as a person's, at page coordinates.
 struct Page {

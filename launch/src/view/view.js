@@ -10,6 +10,7 @@ const plannerSelect = document.getElementById("planner");
 const localizerSelect = document.getElementById("localizer");
 const teleopSelect = document.getElementById("teleop");
 const panel = document.getElementById("panel");
+const spaceSelect = document.getElementById("space");
 
 let worlds = [];          // from /api/world
 let maps = [];            // map devices, from /api/world, each with its picture
@@ -24,6 +25,10 @@ if (view.fixed) {
   view.scale = parseFloat(params.get("scale"));
 }
 let follow = params.get("follow") || "";
+// The namespace shown, of those the server watches (?ns=K, the first by
+// default): its world is drawn, its devices listed and commanded.
+const ns = parseInt(params.get("ns") || "0", 10) || 0;
+const api = path => `${path}${path.includes("?") ? "&" : "?"}ns=${ns}`;
 let chosen = params.get("device") || "";   // the device whose panel is open ("6665:laser:0")
 
 // The world frame to the canvas: x right, y up, `scale` pixels per metre.
@@ -302,7 +307,7 @@ function sendBox(force) {
   }
   sentBox = key;
   boxSentAt = performance.now();
-  fetch("/api/view", { method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify({ page: pageId, box }) });
+  fetch("/api/view", { method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify({ page: pageId, ns, box }) });
 }
 
 // At most ?fps frames a second (60 by default), each at the display's
@@ -327,9 +332,16 @@ async function getJson(path) {
 }
 
 async function loadWorlds() {
-  const all = await getJson("/api/world");
+  const all = await getJson(api("/api/world"));
   worlds = all.worlds;
   document.getElementById("namespace").textContent = all.namespace ? ` in ${all.namespace}` : "";
+  // Several namespaces: a choice of which to show (the page reloads on it).
+  const spaces = document.getElementById("spaces");
+  spaces.hidden = all.namespaces.length < 2;
+  if (!spaces.hidden && !spaceSelect.options.length) {
+    spaceSelect.innerHTML = all.namespaces.map((n, k) =>
+      `<option value="${k}"${k === ns ? " selected" : ""}>${n === null ? "(no namespace)" : n}</option>`).join("");
+  }
   if (all.looking_only) {
     // A viewer identity: the fleet's rules drop its commands, so it offers none.
     document.getElementById("commands").hidden = true;
@@ -340,7 +352,7 @@ async function loadWorlds() {
   const pictures = await Promise.all(all.maps.map(m => new Promise(done => {
     const image = new Image();
     image.onload = image.onerror = () => done({ ...m, image });
-    image.src = `/api/map/${m.device}`;
+    image.src = api(`/api/map/${m.device}`);
   })));
   // Each robot's first map (a stack's filters serve others from it).
   const robot = m => m.device.split(":")[0];
@@ -368,7 +380,7 @@ function offer(select, list, iface, none, tool) {
 }
 
 async function loadDevices() {
-  const list = await getJson("/api/devices");
+  const list = await getJson(api("/api/devices"));
   deviceCount = list.length;
   offer(plannerSelect, list, "planner", false, "goal");
   offer(localizerSelect, list, "localize", false, "pose");
@@ -412,7 +424,7 @@ function showPanel() {
   const r = frame && frame.readings[chosen];
   const n = frame && frame.nav && frame.nav[chosen];
   if (iface === "map") {
-    if (!panel.querySelector("img")) panel.innerHTML = `<img src="/api/map/${chosen}" alt="${chosen}">`;
+    if (!panel.querySelector("img")) panel.innerHTML = `<img src="${api(`/api/map/${chosen}`)}" alt="${chosen}">`;
     return;
   }
   if (r && (r.kind === "laser" || r.kind === "ranger")) {
@@ -450,6 +462,12 @@ function showPanel() {
 }
 
 followSelect.addEventListener("change", () => { follow = followSelect.value; redraw(); });
+spaceSelect.addEventListener("change", () => {
+  const next = new URLSearchParams(location.search);
+  next.set("ns", spaceSelect.value);
+  for (const k of ["follow", "device", "x", "y", "scale"]) next.delete(k);
+  location.search = next.toString();
+});
 
 function tool() {
   return document.querySelector('input[name="tool"]:checked').value;
@@ -463,7 +481,7 @@ function toWorld(e) {
 }
 
 async function order(body) {
-  const r = await fetch("/api/command", { method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify(body) });
+  const r = await fetch("/api/command", { method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify({ ns, ...body }) });
   const text = await r.text();
   if (!r.ok) notice = { text: `${body.device}: ${text}`, until: Date.now() + 5000 };
   return r.ok;
@@ -547,7 +565,7 @@ setInterval(() => {
   try {
     await loadWorlds();
     await loadDevices();
-    frame = await getJson("/api/frame");
+    frame = await getJson(api("/api/frame"));
   } catch (e) {
     statusLine.textContent = `cannot reach the view server: ${e.message}`;
   }
@@ -570,7 +588,7 @@ setInterval(() => {
   }
   // ?still: this moment only (for a screenshot), no stream.
   if (params.has("still")) return;
-  const events = new EventSource(`/api/stream?page=${pageId}`);
+  const events = new EventSource(api(`/api/stream?page=${pageId}`));
   events.onopen = () => sendBox(true);
   events.onmessage = m => onFrame(JSON.parse(m.data));
   events.onerror = () => { statusLine.textContent = "reconnecting to the view server…"; };
