@@ -139,6 +139,23 @@ fn drive_to_goal(cfg: &Path) {
         "amcl's first estimate {:?} is far from the true start {start:?}",
         h.mean
     );
+    // The same, as nalgebra's types: an isometry near the truth and a
+    // symmetric covariance with no negative variance.
+    let (mean, cov) = localize.estimate().unwrap();
+    let truth = troupe_client::na::ToIsometry::isometry(&start);
+    assert!(
+        (mean.translation.vector - truth.translation.vector).norm() < 0.25,
+        "{mean} against {truth}"
+    );
+    assert_eq!(cov, cov.transpose());
+    assert!((0..3).all(|i| cov[(i, i)] >= 0.0), "{cov}");
+    // Odometry as an isometry (r0 stands still: its pose does not change).
+    let odo = odom.data().unwrap().pose;
+    let back = troupe_client::na::pose_of(&odom.isometry());
+    assert!(
+        (back.x - odo.x).abs() < 1e-9 && (back.y - odo.y).abs() < 1e-9,
+        "{back:?} against {odo:?}"
+    );
 
     let t0 = now();
     planner.set_goal_pose(GOAL.0, GOAL.1, 0.0).unwrap();

@@ -523,6 +523,23 @@ fn an_emulated_lms200_backed_by_stage_sees_the_simulated_world() {
             b.max_range
         );
     }
+    // What both saw, as points in the laser's frame (the client API's
+    // nalgebra view): the walls within range, the same ones on both.
+    let (a, b) = (serial.points(), stage.points());
+    assert!(!a.is_empty() && !b.is_empty());
+    let max = stage.max_range();
+    assert!(b.iter().all(|p| p.coords.norm() < max), "{b:?}");
+    let nearest = |p: &troupe_client::nalgebra::Point2<f64>| {
+        b.iter()
+            .map(|q| (p - q).norm())
+            .fold(f64::INFINITY, f64::min)
+    };
+    let close = a.iter().filter(|p| nearest(p) < 0.1).count();
+    assert!(
+        close * 10 >= a.len() * 9,
+        "{close} of {} serial points on Stage's",
+        a.len()
+    );
     launcher.terminate();
     emu.terminate();
 }

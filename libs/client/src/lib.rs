@@ -22,8 +22,10 @@
 #![warn(missing_docs)]
 
 mod client;
+pub mod na;
 mod proxies;
 
 pub use client::{Client, ClientError, Result};
+pub use nalgebra;
 pub use proxies::*;
 pub use troupe_msgs as msgs;

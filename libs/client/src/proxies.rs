@@ -137,6 +137,11 @@ impl Position2dProxy {
     pub fn yaw(&self) -> f64 {
         self.d().pose.yaw
     }
+    /// The odometric pose as nalgebra's isometry (the robot's frame to the
+    /// odometric one).
+    pub fn isometry(&self) -> nalgebra::Isometry2<f64> {
+        crate::na::ToIsometry::isometry(&self.d().pose)
+    }
     /// Forward speed, m/s.
     pub fn x_speed(&self) -> f64 {
         self.d().vel.x
@@ -278,6 +283,16 @@ impl LaserProxy {
     /// Beams in the latest scan.
     pub fn count(&self) -> usize {
         self.feed.get().as_ref().map_or(0, |s| s.ranges.len())
+    }
+
+    /// What the latest scan saw, as points in the laser's frame (x ahead;
+    /// beams at the maximum range saw nothing and are left out).
+    pub fn points(&self) -> Vec<nalgebra::Point2<f64>> {
+        self.feed
+            .get()
+            .as_ref()
+            .map(crate::na::scan_points)
+            .unwrap_or_default()
     }
 
     /// Range of beam `i`, metres.
@@ -718,6 +733,16 @@ impl LocalizeProxy {
                 only::<localize::Hypoths>,
             )?,
         })
+    }
+
+    /// The best hypothesis as nalgebra's types: its mean as an isometry
+    /// and its covariance as a 3 × 3 matrix over (x, y, yaw); `None`
+    /// before the localizer has said anything.
+    pub fn estimate(&self) -> Option<(nalgebra::Isometry2<f64>, nalgebra::Matrix3<f64>)> {
+        use crate::na::ToIsometry;
+        let g = self.feed.get();
+        let best = g.as_ref()?.hypoths.first()?;
+        Some((best.isometry(), crate::na::covariance(&best.cov)))
     }
 
     /// The latest hypotheses, best first.
