@@ -525,6 +525,10 @@ pub struct StageBenchArgs {
     /// Run only this world file in this process.
     #[arg(long, hide = true)]
     pub only_file: Option<std::path::PathBuf>,
+    /// Then cast the same rays on the cave's and the hospital's walls with
+    /// the simulator's grid walk and with parry2d, and print both.
+    #[arg(long)]
+    pub parry: bool,
 }
 
 /// A Pioneer with 16 sonars and a 180-beam SICK, wandering (our own
@@ -786,6 +790,9 @@ pub fn stage_bench(a: &StageBenchArgs) -> anyhow::Result<()> {
         for file in ["benchmark/cave.world", "benchmark/hospital.world"] {
             run(&["--only-file".as_ref(), worlds.join(file).as_os_str()])?;
         }
+    }
+    if a.parry {
+        crate::raybench::run(&bitmaps)?;
     }
     Ok(())
 }

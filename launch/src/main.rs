@@ -17,6 +17,7 @@ mod mcaplog;
 mod navbench;
 mod passthrough;
 mod plan;
+mod raybench;
 mod serialbench;
 mod supervisor;
 mod tools;
