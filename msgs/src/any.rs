@@ -79,6 +79,7 @@ any! {
     FiducialData(fiducial::Data), FiducialGeom(fiducial::Geom), FiducialGetGeom(fiducial::GetGeom),
     FiducialId(fiducial::Id), FiducialGetId(fiducial::GetId), FiducialSetId(fiducial::SetId),
     PowerData(power::Data),
+    GpsData(gps::Data),
     BumperData(bumper::Data), BumperGeom(bumper::Geom), BumperGetGeom(bumper::GetGeom),
     IrData(ir::Data), IrGeom(ir::Geom), IrGetGeom(ir::GetGeom),
     AioData(aio::Data), AioCmd(aio::Cmd),

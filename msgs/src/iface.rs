@@ -6,6 +6,7 @@ pub mod bumper;
 pub mod common;
 pub mod dio;
 pub mod fiducial;
+pub mod gps;
 pub mod gripper;
 pub mod ir;
 pub mod laser;

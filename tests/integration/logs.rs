@@ -376,6 +376,109 @@ fn a_damaged_log_says_where_and_replays_the_rest() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A gps log (no Troupe driver makes fixes: logs are where they come
+/// from) replays through `readlog` and the bridge to a Player client, each
+/// fix in Player's fixed point, and `writelog` logs the replayed device
+/// again, line for line.
+#[test]
+fn a_gps_log_replays_to_a_player_client_and_is_logged_again() {
+    let dir = std::env::temp_dir().join(troupe_tests::unique_namespace("gpslog"));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut text = String::from("## Player version 3.1.1-dev \n## File version 0.3.0 \n");
+    let mut lines = std::collections::BTreeSet::new();
+    for i in 1..=20 {
+        let line = format!(
+            "{:014.3} 16777343 6665 gps 00 001 001 {:.3} {:.7} {:.7} {:.7} {:.3} {:.3} 0.900 1.400 2.500 4.000 1 {} {:.3} -0.500\n",
+            0.1 * f64::from(i),
+            1_700_000_000.0 + 0.1 * f64::from(i),
+            43.5 + 1e-5 * f64::from(i),
+            -79.25 - 1e-5 * f64::from(i),
+            76.5,
+            630_084.25 + f64::from(i),
+            4_833_438.5,
+            6 + i % 3,
+            0.25 * f64::from(i),
+        );
+        text.push_str(&line);
+        lines.insert(
+            line.split_whitespace()
+                .skip(7)
+                .collect::<Vec<_>>()
+                .join(" "),
+        );
+    }
+    std::fs::write(dir.join("gps.log"), text).unwrap();
+    std::fs::write(
+        dir.join("gps.cfg"),
+        "driver ( name \"readlog\" filename \"gps.log\" provides [\"log:0\" \"gps:0\"] autorewind 1 )\n\
+         driver ( name \"writelog\" provides [\"log:1\"] requires [\"gps:0\"] filename \"again.log\" alwayson 1 )\n",
+    )
+    .unwrap();
+    let ns = troupe_tests::unique_namespace("gpslog");
+    let mut launcher = launch_in(&dir, &ns, "gps.cfg", &[]);
+    let (router, addr) = troupe_tests::launch_ports(&mut launcher);
+    // A Rust client's GpsProxy reads the fixes too, in degrees.
+    let client = troupe_client::Client::with_session(troupe_tests::client_at(&router, &ns), 6665);
+    let gps = troupe_client::GpsProxy::new(&client, 0).unwrap();
+    let deadline = Instant::now() + DEADLINE;
+    while gps.data().is_none() {
+        assert!(Instant::now() < deadline, "no fix reached the GpsProxy");
+        let _ = client.read_timeout(DEADLINE);
+    }
+    assert!(
+        (43.5..=43.5002).contains(&gps.latitude()),
+        "{}",
+        gps.latitude()
+    );
+    assert!(
+        (-79.2502..=-79.25).contains(&gps.longitude()),
+        "{}",
+        gps.longitude()
+    );
+    assert_eq!((gps.altitude(), gps.quality()), (76.5, 1));
+    assert!((6..=8).contains(&gps.satellites()));
+    let mut player = Player::connect(addr, 6665);
+    player.open(Device::new(6665, Interface::Gps, 0));
+    let mut fixes = 0;
+    let deadline = Instant::now() + DEADLINE;
+    while fixes < 25 {
+        assert!(
+            Instant::now() < deadline,
+            "{fixes} fixes within {DEADLINE:?}"
+        );
+        let m = player.recv();
+        if m.kind() != DATA || m.h[2] != u32::from(Interface::Gps.code()) {
+            continue;
+        }
+        // Line i's fix, i from its logged time: Player's seconds and
+        // microseconds, 1e-7 degrees, millimetres, dilutions times ten.
+        let i = (m.timestamp * 10.0).round();
+        assert!((1.0..=20.0).contains(&i), "t={}", m.timestamp);
+        let word = |at: usize| u32_at(&m.body, at);
+        let secs = f64::from(word(0)) - 1_700_000_000.0 + f64::from(word(4)) * 1e-6;
+        assert!((secs - i * 0.1).abs() < 2e-6, "t={}: {secs}", m.timestamp);
+        assert_eq!(word(8) as i32, 435_000_000 + 100 * i as i32);
+        assert_eq!(word(12) as i32, -792_500_000 - 100 * i as i32);
+        assert_eq!(word(16) as i32, 76_500);
+        assert_eq!((word(52), word(56)), (1, 6 + i as u32 % 3));
+        assert_eq!((word(60), word(64)), (9, 14));
+        fixes += 1;
+    }
+    assert!(launcher.terminate().success(), "{}", launcher.stderr());
+    // What writelog wrote: gps lines, each a line of the log it replayed.
+    let again = std::fs::read_to_string(dir.join("again.log")).unwrap();
+    let written: Vec<String> = again
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| l.split_whitespace().skip(7).collect::<Vec<_>>().join(" "))
+        .collect();
+    assert!(written.len() >= 5, "{again}");
+    for w in &written {
+        assert!(lines.contains(w), "written {w}, not a line of gps.log");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 fn copy_dir(from: &Path, to: &Path) {
     std::fs::create_dir_all(to).unwrap();
     for e in std::fs::read_dir(from).unwrap() {

@@ -508,6 +508,59 @@ impl SonarProxy {
     }
 }
 
+/// A GPS receiver (`GpsProxy`).
+pub struct GpsProxy {
+    feed: Feed<Option<troupe_msgs::gps::Data>>,
+}
+
+impl GpsProxy {
+    /// Subscribes to `gps:index` of the client's robot.
+    ///
+    /// # Errors
+    ///
+    /// [`ClientError::Node`] if the subscription fails.
+    pub fn new(client: &Client, index: u32) -> Result<Self> {
+        Ok(GpsProxy {
+            feed: Feed::new(
+                client,
+                Interface::Gps,
+                index,
+                only::<troupe_msgs::gps::Data>,
+            )?,
+        })
+    }
+
+    /// The latest fix, if any arrived.
+    pub fn data(&self) -> Option<troupe_msgs::gps::Data> {
+        *self.feed.get()
+    }
+
+    /// Latitude of the latest fix, degrees (0 before one arrived).
+    pub fn latitude(&self) -> f64 {
+        self.data().map_or(0.0, |d| d.latitude)
+    }
+
+    /// Longitude of the latest fix, degrees (0 before one arrived).
+    pub fn longitude(&self) -> f64 {
+        self.data().map_or(0.0, |d| d.longitude)
+    }
+
+    /// Altitude of the latest fix, metres (0 before one arrived).
+    pub fn altitude(&self) -> f64 {
+        self.data().map_or(0.0, |d| d.altitude)
+    }
+
+    /// Satellites in view at the latest fix.
+    pub fn satellites(&self) -> u32 {
+        self.data().map_or(0, |d| d.num_sats)
+    }
+
+    /// Quality of the latest fix: 0 invalid (or none yet), 1 GPS, 2 DGPS.
+    pub fn quality(&self) -> u32 {
+        self.data().map_or(0, |d| d.quality)
+    }
+}
+
 /// A pan-tilt-zoom unit (`PtzProxy`).
 pub struct PtzProxy {
     feed: Feed<Option<ptz::Data>>,

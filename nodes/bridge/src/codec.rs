@@ -261,6 +261,28 @@ pub fn to_player(msg: &AnyMsg) -> Option<(Interface, u8, Vec<u8>)> {
                 .i32(i32::from(p.charging));
             (I::Power, 1)
         }
+        AnyMsg::GpsData(g) => {
+            // player_gps_data_t: Player's fixed-point fields.
+            let fixed = |v: f64| v.round().clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32;
+            let whole = |v: f64| v.round().clamp(0.0, f64::from(u32::MAX)) as u32;
+            let secs = g.time.max(0.0).floor();
+            w.u32(whole(secs))
+                .u32(whole((g.time.max(0.0) - secs) * 1e6).min(999_999))
+                .i32(fixed(g.latitude * 1e7))
+                .i32(fixed(g.longitude * 1e7))
+                .i32(fixed(g.altitude * 1e3))
+                .f64(g.speed)
+                .f64(g.course)
+                .f64(g.utm_e)
+                .f64(g.utm_n)
+                .u32(g.quality)
+                .u32(g.num_sats)
+                .u32(whole(g.hdop * 10.0))
+                .u32(whole(g.vdop * 10.0))
+                .f64(g.err_horz)
+                .f64(g.err_vert);
+            (I::Gps, 1)
+        }
         AnyMsg::BumperData(b) => {
             let bits: Vec<u8> = b.bumpers.iter().map(|&x| u8::from(x)).collect();
             w.bytes(&bits);
@@ -786,6 +808,28 @@ pub fn data_from_player(
                 },
                 stamp,
             ),
+            (I::Gps, 1) => {
+                let (secs, usecs) = (r.u32()?, r.u32()?);
+                encode(
+                    &troupe_msgs::gps::Data {
+                        time: f64::from(secs) + f64::from(usecs) * 1e-6,
+                        latitude: f64::from(r.i32()?) / 1e7,
+                        longitude: f64::from(r.i32()?) / 1e7,
+                        altitude: f64::from(r.i32()?) / 1e3,
+                        speed: r.f64()?,
+                        course: r.f64()?,
+                        utm_e: r.f64()?,
+                        utm_n: r.f64()?,
+                        quality: r.u32()?,
+                        num_sats: r.u32()?,
+                        hdop: f64::from(r.u32()?) / 10.0,
+                        vdop: f64::from(r.u32()?) / 10.0,
+                        err_horz: r.f64()?,
+                        err_vert: r.f64()?,
+                    },
+                    stamp,
+                )
+            }
             (I::Ir, 1) => encode(
                 &ir::Data {
                     voltages: r_f32s(r)?,
@@ -1111,6 +1155,7 @@ mod tests {
                 count: 8,
                 bits: 0xA5,
             }),
+            AnyMsg::GpsData(gps_fix()),
         ];
         for m in samples {
             let (iface, subtype, body) = to_player(&m).unwrap();
@@ -1128,6 +1173,44 @@ mod tests {
         assert!(data_from_player(Interface::Map, 1, &[], 0.0)
             .unwrap()
             .is_none());
+    }
+
+    /// A fix whose values Player's fixed point carries exactly.
+    fn gps_fix() -> troupe_msgs::gps::Data {
+        troupe_msgs::gps::Data {
+            time: 1_700_000_000.5,
+            latitude: 43.5,
+            longitude: -79.25,
+            altitude: 76.125,
+            speed: 1.25,
+            course: 0.5,
+            utm_e: 630_084.25,
+            utm_n: 4_833_438.5,
+            quality: 2,
+            num_sats: 9,
+            hdop: 1.5,
+            vdop: 2.0,
+            err_horz: 0.75,
+            err_vert: 1.5,
+        }
+    }
+
+    /// `player_gps_data_t` as Player's XDR packs it: seconds and
+    /// microseconds, degrees times 1e7, millimetres, the dilutions times ten.
+    #[test]
+    fn gps_data_is_player_s_fixed_point() {
+        let (iface, subtype, body) = to_player(&AnyMsg::GpsData(gps_fix())).unwrap();
+        assert_eq!((iface, subtype), (Interface::Gps, 1));
+        assert_eq!(body.len(), 84);
+        let word = |at: usize| u32::from_be_bytes(body[at..at + 4].try_into().unwrap());
+        assert_eq!((word(0), word(4)), (1_700_000_000, 500_000));
+        assert_eq!(word(8) as i32, 435_000_000);
+        assert_eq!(word(12) as i32, -792_500_000);
+        assert_eq!(word(16) as i32, 76_125);
+        // After speed, course, utm_e and utm_n (doubles): quality,
+        // satellites, hdop and vdop.
+        assert_eq!((word(52), word(56), word(60), word(64)), (2, 9, 15, 20));
+        assert_eq!(f64::from_be_bytes(body[76..84].try_into().unwrap()), 1.5);
     }
 
     /// A Troupe request asked of a Player server is the REQ the bridge would

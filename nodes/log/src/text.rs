@@ -16,8 +16,8 @@
 use std::fmt::Write as _;
 
 use troupe_msgs::{
-    aio, blobfinder, bumper, dio, fiducial, ir, laser, localize, position2d, power, ptz, ranger,
-    sonar, AnyMsg, Interface, Pose2d, Pose3d, Size2d, Size3d,
+    aio, blobfinder, bumper, dio, fiducial, gps, ir, laser, localize, position2d, power, ptz,
+    ranger, sonar, AnyMsg, Interface, Pose2d, Pose3d, Size2d, Size3d,
 };
 
 /// Player's `PLAYER_MSGTYPE_DATA`.
@@ -263,6 +263,31 @@ fn payload(msg: &AnyMsg) -> Option<(u8, u8, String)> {
                 on(power::VALID_WATTS, d.watts),
                 u8::from(d.valid & power::VALID_CHARGING != 0 && d.charging),
                 d.valid
+            );
+            (DATA, 1)
+        }
+        AnyMsg::GpsData(d) => {
+            // The fields Player's readlog reads (21 tokens, speed and
+            // course last), in writelog's formats. (Player 3.1's writelog
+            // has a stray comma in its format: it writes the time twice
+            // over and no speed or course. This is the line it meant.)
+            let _ = write!(
+                s,
+                "{:.3} {:.7} {:.7} {:.7} {:.3} {:.3} {:.3} {:.3} {:.3} {:.3} {} {} {:.3} {:.3}",
+                d.time,
+                d.latitude,
+                d.longitude,
+                d.altitude,
+                d.utm_e,
+                d.utm_n,
+                d.hdop,
+                d.vdop,
+                d.err_horz,
+                d.err_vert,
+                d.quality,
+                d.num_sats,
+                d.speed,
+                d.course
             );
             (DATA, 1)
         }
@@ -545,6 +570,11 @@ impl Fields<'_, '_> {
         Ok(self.f64()? as f32)
     }
 
+    /// Fields not read yet.
+    fn left(&self) -> usize {
+        self.line.fields.len().saturating_sub(self.at)
+    }
+
     /// A count; at most what the rest of the line can hold at `per` fields each.
     fn count(&mut self, per: usize) -> Result<usize, LineError> {
         let v = self.f64()?;
@@ -779,6 +809,36 @@ pub fn message(line: &Line<'_>) -> Result<AnyMsg, LineError> {
                 charging,
             })
         }
+        (I::Gps, DATA, 1) => {
+            let time = f.f64()?;
+            let (latitude, longitude, altitude) = (f.f64()?, f.f64()?, f.f64()?);
+            let (utm_e, utm_n) = (f.f64()?, f.f64()?);
+            let (hdop, vdop) = (f.f64()?, f.f64()?);
+            let (err_horz, err_vert) = (f.f64()?, f.f64()?);
+            let (quality, num_sats) = (f.f64()? as u32, f.f64()? as u32);
+            // Player 3.0's lines end here; 3.1's add speed and course.
+            let (speed, course) = if f.left() >= 2 {
+                (f.f64()?, f.f64()?)
+            } else {
+                (0.0, 0.0)
+            };
+            AnyMsg::GpsData(gps::Data {
+                time,
+                latitude,
+                longitude,
+                altitude,
+                speed,
+                course,
+                utm_e,
+                utm_n,
+                quality,
+                num_sats,
+                hdop,
+                vdop,
+                err_horz,
+                err_vert,
+            })
+        }
         (I::Aio, DATA, 1) => {
             let n = f.count(1)?;
             let voltages = (0..n).map(|_| f.f32()).collect::<Result<_, _>>()?;
@@ -998,6 +1058,22 @@ mod tests {
                 watts: 0.0,
                 charging: false,
             }),
+            AnyMsg::GpsData(gps::Data {
+                time: 1_700_000_000.5,
+                latitude: 43.653_225_1,
+                longitude: -79.383_184_2,
+                altitude: 76.125,
+                speed: 1.25,
+                course: 0.5,
+                utm_e: 630_084.25,
+                utm_n: 4_833_438.5,
+                quality: 2,
+                num_sats: 9,
+                hdop: 1.5,
+                vdop: 2.0,
+                err_horz: 0.75,
+                err_vert: 1.5,
+            }),
             AnyMsg::AioData(aio::Data {
                 voltages: vec![1.0, 2.5],
             }),
@@ -1075,6 +1151,7 @@ mod tests {
             AnyMsg::LocalizeHypoths(_) => I::Localize,
             AnyMsg::PtzData(_) => I::Ptz,
             AnyMsg::PowerData(_) => I::Power,
+            AnyMsg::GpsData(_) => I::Gps,
             AnyMsg::AioData(_) => I::Aio,
             AnyMsg::DioData(_) => I::Dio,
             AnyMsg::IrData(_) => I::Ir,
@@ -1083,6 +1160,53 @@ mod tests {
             AnyMsg::BlobfinderData(_) => I::Blobfinder,
             _ => I::Laser,
         }
+    }
+
+    /// A gps line has the 21 fields Player's readlog reads, in writelog's
+    /// formats; a Player 3.0 line (19 fields: no speed or course) reads too,
+    /// and a line cut before the satellites is refused.
+    #[test]
+    fn gps_lines_are_what_player_s_readlog_reads() {
+        let fix = gps::Data {
+            time: 1_700_000_000.25,
+            latitude: 43.653_225_1,
+            longitude: -79.383_184_2,
+            altitude: 76.5,
+            speed: 1.25,
+            course: -0.5,
+            utm_e: 630_084.25,
+            utm_n: 4_833_438.5,
+            quality: 1,
+            num_sats: 7,
+            hdop: 0.9,
+            vdop: 1.4,
+            err_horz: 2.5,
+            err_vert: 4.0,
+        };
+        let text = line(3.0, 6665, Interface::Gps, 0, &AnyMsg::GpsData(fix)).unwrap();
+        assert_eq!(
+            text,
+            "0000000003.000 16777343 6665 gps 00 001 001 1700000000.250 43.6532251 -79.3831842 76.5000000 \
+             630084.250 4833438.500 0.900 1.400 2.500 4.000 1 7 1.250 -0.500\n"
+        );
+        assert_eq!(text.split_whitespace().count(), 21);
+        let old = "0000000003.000 16777343 6665 gps 00 001 001 1700000000.250 43.6532251 -79.3831842 76.5000000 \
+                   630084.250 4833438.500 0.900 1.400 2.500 4.000 1 7\n";
+        let l = parse(old).unwrap().unwrap();
+        assert_eq!(
+            message(&l).unwrap(),
+            AnyMsg::GpsData(gps::Data {
+                speed: 0.0,
+                course: 0.0,
+                ..fix
+            })
+        );
+        let cut =
+            "0000000003.000 16777343 6665 gps 00 001 001 1700000000.250 43.6532251 -79.3831842\n";
+        let e = message(&parse(cut).unwrap().unwrap())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("gps"), "{e}");
     }
 
     /// Player's own printf layouts, character for character.
