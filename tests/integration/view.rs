@@ -155,6 +155,32 @@ fn post_to(base: &str, path: &str, body: &Value) -> (u32, String) {
     )
 }
 
+/// Asserts that the view's device list at `path` is what `troupe list`
+/// prints in namespace `ns` (robot, device and driver), `n` devices.
+fn lists_as_troupe_list(base: &str, path: &str, ns: &str, router: &str, n: usize) {
+    let (ok, out, err) = troupe_tests::troupe_output(&Viewed::args(
+        ns,
+        router,
+        &["list", "--json", "--wait", "2"],
+    ));
+    assert!(ok.success(), "{err}");
+    let key = |v: &Value| format!("{} {} {}", v["robot"], v["device"], v["driver"]);
+    let mut want: Vec<String> = out
+        .lines()
+        .map(|l| key(&serde_json::from_str(l).unwrap()))
+        .collect();
+    let mut got: Vec<String> = json(base, path)
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(key)
+        .collect();
+    want.sort();
+    got.sort();
+    assert_eq!(got, want, "{path} in {ns}");
+    assert_eq!(got.len(), n);
+}
+
 /// The first frame of the stream that `done` accepts.
 fn frame_where(base: &str, done: impl Fn(&Value) -> bool) -> Value {
     frame_of(base, "/api/stream", done)
@@ -192,7 +218,6 @@ fn the_view_draws_the_world_where_the_simulator_has_it() {
     std::fs::write(dir.join("view.cfg"), CFG).unwrap();
     let stack = Viewed::launch("view", &dir.join("view.cfg"), &[]);
     let base = stack.base.clone();
-    let net = |rest: &[&str]| Viewed::args(&stack.ns, &stack.router, rest);
 
     // The stream: r0 where the world file puts it, its ranger's middle
     // beams on the wall's face, 1.9 m ahead.
@@ -253,24 +278,7 @@ fn the_view_draws_the_world_where_the_simulator_has_it() {
     assert_eq!(ranger["sensors"][0]["samples"], 90);
 
     // The device list is `troupe list`'s.
-    let (ok, out, err) = troupe_tests::troupe_output(&net(&["list", "--json", "--wait", "2"]));
-    assert!(ok.success(), "{err}");
-    let listed: Vec<Value> = out
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect();
-    let key = |v: &Value| format!("{} {} {}", v["robot"], v["device"], v["driver"]);
-    let mut want: Vec<String> = listed.iter().map(key).collect();
-    let mut got: Vec<String> = json(&base, "/api/devices")
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(key)
-        .collect();
-    want.sort();
-    got.sort();
-    assert_eq!(got, want);
-    assert_eq!(got.len(), 3);
+    lists_as_troupe_list(&base, "/api/devices", &stack.ns, &stack.router, 3);
 
     // The page, in a real browser, at 50 pixels a metre around the origin.
     let (code, html) = get(&base, "/");
@@ -698,27 +706,7 @@ fn one_view_watches_several_namespaces() {
         assert_eq!(world["namespaces"], serde_json::json!([a, b]));
         assert_eq!(world["worlds"][0]["models"][1]["name"], "r0");
         // Its devices are `troupe list`'s in that namespace.
-        let (ok, out, err) = troupe_tests::troupe_output(&Viewed::args(
-            ns,
-            &router,
-            &["list", "--json", "--wait", "2"],
-        ));
-        assert!(ok.success(), "{err}");
-        let key = |v: &Value| format!("{} {} {}", v["robot"], v["device"], v["driver"]);
-        let mut want: Vec<String> = out
-            .lines()
-            .map(|l| key(&serde_json::from_str(l).unwrap()))
-            .collect();
-        let mut got: Vec<String> = json(&base, &format!("/api/devices?ns={k}"))
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(key)
-            .collect();
-        want.sort();
-        got.sort();
-        assert_eq!(got, want, "namespace {ns}");
-        assert_eq!(got.len(), 3);
+        lists_as_troupe_list(&base, &format!("/api/devices?ns={k}"), ns, &router, 3);
     }
     let (code, why) = get(&base, "/api/world?ns=2");
     assert_eq!(code, 404);

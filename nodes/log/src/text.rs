@@ -269,8 +269,10 @@ fn payload(msg: &AnyMsg) -> Option<(u8, u8, String)> {
         AnyMsg::GpsData(d) => {
             // The fields Player's readlog reads (21 tokens, speed and
             // course last), in writelog's formats. (Player 3.1's writelog
-            // has a stray comma in its format: it writes the time twice
-            // over and no speed or course. This is the line it meant.)
+            // has a stray comma in its format string: its quality and
+            // satellite fields come out wrong, speed and course are never
+            // written, and its time adds the seconds where the
+            // microseconds belong. This is the line its readlog reads.)
             let _ = write!(
                 s,
                 "{:.3} {:.7} {:.7} {:.7} {:.3} {:.3} {:.3} {:.3} {:.3} {:.3} {} {} {:.3} {:.3}",
