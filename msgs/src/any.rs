@@ -80,6 +80,7 @@ any! {
     FiducialId(fiducial::Id), FiducialGetId(fiducial::GetId), FiducialSetId(fiducial::SetId),
     PowerData(power::Data),
     GpsData(gps::Data),
+    CameraData(camera::Data),
     BumperData(bumper::Data), BumperGeom(bumper::Geom), BumperGetGeom(bumper::GetGeom),
     IrData(ir::Data), IrGeom(ir::Geom), IrGetGeom(ir::GetGeom),
     AioData(aio::Data), AioCmd(aio::Cmd),

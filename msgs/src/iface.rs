@@ -3,6 +3,7 @@
 pub mod aio;
 pub mod blobfinder;
 pub mod bumper;
+pub mod camera;
 pub mod common;
 pub mod dio;
 pub mod fiducial;

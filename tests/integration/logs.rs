@@ -479,6 +479,84 @@ fn a_gps_log_replays_to_a_player_client_and_is_logged_again() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A camera log replays through `readlog` to a Player client, image for
+/// image, and `writelog` logs it again two ways: the image in the line as
+/// hex, and (`camera_log_images 0`, `camera_save_images 1`) the sizes
+/// only, each image in a .pnm file of its own.
+#[test]
+fn a_camera_log_replays_and_is_logged_with_its_images_in_files() {
+    let dir = std::env::temp_dir().join(troupe_tests::unique_namespace("camlog"));
+    std::fs::create_dir_all(&dir).unwrap();
+    // Three 2 x 2 RGB images, each pixel (i, 16 k, 255 - i).
+    let images: Vec<Vec<u8>> = (0..3u8)
+        .map(|i| (0..4u8).flat_map(|k| [i, 16 * k, 255 - i]).collect())
+        .collect();
+    let mut text = String::from("## Player version 3.1.1-dev \n## File version 0.3.0 \n");
+    for (i, img) in images.iter().enumerate() {
+        let hex: String = img.iter().map(|b| format!("{b:02X}")).collect();
+        text.push_str(&format!(
+            "{:014.3} 16777343 6665 camera 00 001 001 2 2 24 5 0 12 {hex}\n",
+            0.1 * (i + 1) as f64
+        ));
+    }
+    std::fs::write(dir.join("cam.log"), text).unwrap();
+    std::fs::write(
+        dir.join("cam.cfg"),
+        "driver ( name \"readlog\" filename \"cam.log\" provides [\"log:0\" \"camera:0\"] autorewind 1 )\n\
+         driver ( name \"writelog\" provides [\"log:1\"] requires [\"camera:0\"] filename \"hex.log\" alwayson 1 )\n\
+         driver ( name \"writelog\" provides [\"log:2\"] requires [\"camera:0\"] filename \"files.log\" camera_log_images 0 camera_save_images 1 alwayson 1 )\n",
+    )
+    .unwrap();
+    let ns = troupe_tests::unique_namespace("camlog");
+    let mut launcher = launch_in(&dir, &ns, "cam.cfg", &[]);
+    let (_, addr) = troupe_tests::launch_ports(&mut launcher);
+    let mut player = Player::connect(addr, 6665);
+    player.open(Device::new(6665, Interface::Camera, 0));
+    let mut seen = 0;
+    let deadline = Instant::now() + DEADLINE;
+    while seen < 6 {
+        assert!(
+            Instant::now() < deadline,
+            "{seen} images within {DEADLINE:?}"
+        );
+        let m = player.recv();
+        if m.kind() != DATA || m.h[2] != u32::from(Interface::Camera.code()) {
+            continue;
+        }
+        // width, height, bpp, format, fdiv, compression, then the image.
+        let fields: Vec<u32> = (0..6).map(|k| u32_at(&m.body, 4 * k)).collect();
+        assert_eq!(fields, [2, 2, 24, 5, 0, 0]);
+        assert_eq!((u32_at(&m.body, 24), u32_at(&m.body, 28)), (12, 12));
+        let i = (m.timestamp * 10.0).round() as usize - 1;
+        assert_eq!(m.body[32..44], images[i], "t={}", m.timestamp);
+        seen += 1;
+    }
+    assert!(launcher.terminate().success(), "{}", launcher.stderr());
+    let original = std::fs::read_to_string(dir.join("cam.log")).unwrap();
+    let payloads = |t: &str| -> Vec<String> {
+        t.lines()
+            .filter(|l| !l.starts_with('#'))
+            .map(|l| l.splitn(8, ' ').nth(7).unwrap_or_default().to_owned())
+            .collect()
+    };
+    let logged = payloads(&original);
+    let hex = payloads(&std::fs::read_to_string(dir.join("hex.log")).unwrap());
+    assert!(!hex.is_empty());
+    assert!(hex.iter().all(|p| logged.contains(p)), "{hex:?}");
+    let sizes = payloads(&std::fs::read_to_string(dir.join("files.log")).unwrap());
+    assert!(!sizes.is_empty());
+    assert!(sizes.iter().all(|p| p == "2 2 24 5 0 12 "), "{sizes:?}");
+    // One file per image logged, numbered from 0, each a PPM of one of them.
+    for k in 0..sizes.len() {
+        let file = dir.join(format!("files_camera_00_{k:06}.pnm"));
+        let bytes = std::fs::read(&file).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
+        let (head, body) = bytes.split_at(11);
+        assert_eq!(head, b"P6\n2 2\n255\n");
+        assert!(images.iter().any(|i| i == body), "{}", file.display());
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 fn copy_dir(from: &Path, to: &Path) {
     std::fs::create_dir_all(to).unwrap();
     for e in std::fs::read_dir(from).unwrap() {

@@ -283,6 +283,16 @@ pub fn to_player(msg: &AnyMsg) -> Option<(Interface, u8, Vec<u8>)> {
                 .f64(g.err_vert);
             (I::Gps, 1)
         }
+        AnyMsg::CameraData(c) => {
+            w.u32(c.width)
+                .u32(c.height)
+                .u32(c.bpp)
+                .u32(c.format)
+                .u32(c.fdiv)
+                .u32(c.compression)
+                .bytes(&c.image);
+            (I::Camera, 1)
+        }
         AnyMsg::BumperData(b) => {
             let bits: Vec<u8> = b.bumpers.iter().map(|&x| u8::from(x)).collect();
             w.bytes(&bits);
@@ -830,6 +840,18 @@ pub fn data_from_player(
                     stamp,
                 )
             }
+            (I::Camera, 1) => encode(
+                &troupe_msgs::camera::Data {
+                    width: r.u32()?,
+                    height: r.u32()?,
+                    bpp: r.u32()?,
+                    format: r.u32()?,
+                    fdiv: r.u32()?,
+                    compression: r.u32()?,
+                    image: r.bytes()?.to_vec(),
+                },
+                stamp,
+            ),
             (I::Ir, 1) => encode(
                 &ir::Data {
                     voltages: r_f32s(r)?,
@@ -1156,6 +1178,15 @@ mod tests {
                 bits: 0xA5,
             }),
             AnyMsg::GpsData(gps_fix()),
+            AnyMsg::CameraData(troupe_msgs::camera::Data {
+                width: 3,
+                height: 1,
+                bpp: 8,
+                format: troupe_msgs::camera::FORMAT_MONO8,
+                fdiv: 0,
+                compression: troupe_msgs::camera::COMPRESS_RAW,
+                image: vec![0, 128, 255],
+            }),
         ];
         for m in samples {
             let (iface, subtype, body) = to_player(&m).unwrap();

@@ -16,8 +16,8 @@
 use std::fmt::Write as _;
 
 use troupe_msgs::{
-    aio, blobfinder, bumper, dio, fiducial, gps, ir, laser, localize, position2d, power, ptz,
-    ranger, sonar, AnyMsg, Interface, Pose2d, Pose3d, Size2d, Size3d,
+    aio, blobfinder, bumper, camera, dio, fiducial, gps, ir, laser, localize, position2d, power,
+    ptz, ranger, sonar, AnyMsg, Interface, Pose2d, Pose3d, Size2d, Size3d,
 };
 
 /// Player's `PLAYER_MSGTYPE_DATA`.
@@ -293,6 +293,26 @@ fn payload(msg: &AnyMsg) -> Option<(u8, u8, String)> {
             );
             (DATA, 1)
         }
+        AnyMsg::CameraData(d) => {
+            // writelog's fields (no fdiv), then the image as upper-case hex
+            // (Player's EncodeHex).
+            let _ = write!(
+                s,
+                "{} {} {} {} {} {} ",
+                d.width,
+                d.height,
+                d.bpp,
+                d.format,
+                d.compression,
+                d.image.len()
+            );
+            s.reserve(2 * d.image.len());
+            for b in &d.image {
+                s.push(char::from(HEX[usize::from(b >> 4)]));
+                s.push(char::from(HEX[usize::from(b & 0x0f)]));
+            }
+            (DATA, 1)
+        }
         AnyMsg::AioData(d) => {
             values(&mut s, true, &d.voltages);
             (DATA, 1)
@@ -454,7 +474,26 @@ pub enum LineError {
         /// Fields needed.
         want: usize,
     },
+    /// A camera image field that is not hex digits, two per byte.
+    #[error("camera payload field {n} `{text}…` is not an image in hex (two digits a byte)")]
+    Hex {
+        /// Its position in the payload, from 1.
+        n: usize,
+        /// Its start.
+        text: String,
+    },
+    /// A camera image of another size than its count says.
+    #[error("camera image of {got} bytes, its count says {count}")]
+    Image {
+        /// The count the line gives.
+        count: usize,
+        /// The bytes its hex holds.
+        got: usize,
+    },
 }
+
+/// Player's EncodeHex digits.
+const HEX: &[u8; 16] = b"0123456789ABCDEF";
 
 /// Splits a line into its header and payload fields; `Ok(None)` for a
 /// blank line, a `#` comment or a `##` header line.
@@ -570,6 +609,32 @@ impl Fields<'_, '_> {
 
     fn f32(&mut self) -> Result<f32, LineError> {
         Ok(self.f64()? as f32)
+    }
+
+    /// A field of hex digits (Player's EncodeHex: two per byte, either
+    /// case read) as bytes.
+    fn hex(&mut self) -> Result<Vec<u8>, LineError> {
+        let interface = self.line.interface.name();
+        let text = self.line.fields.get(self.at).ok_or(LineError::Truncated {
+            interface,
+            got: self.line.fields.len(),
+            want: self.at + 1,
+        })?;
+        self.at += 1;
+        let digit = |c: u8| char::from(c).to_digit(16).map(|d| d as u8);
+        let bytes = text.as_bytes();
+        let bad = || LineError::Hex {
+            n: self.at,
+            text: text.chars().take(16).collect(),
+        };
+        if bytes.len() % 2 != 0 {
+            return Err(bad());
+        }
+        bytes
+            .chunks(2)
+            .map(|p| Some(digit(p[0])? << 4 | digit(p[1])?))
+            .collect::<Option<Vec<u8>>>()
+            .ok_or_else(bad)
     }
 
     /// Fields not read yet.
@@ -839,6 +904,27 @@ pub fn message(line: &Line<'_>) -> Result<AnyMsg, LineError> {
                 vdop,
                 err_horz,
                 err_vert,
+            })
+        }
+        (I::Camera, DATA, 1) => {
+            let (width, height, bpp) = (f.f64()? as u32, f.f64()? as u32, f.f64()? as u32);
+            let (format, compression) = (f.f64()? as u32, f.f64()? as u32);
+            let count = f.f64()? as usize;
+            let image = f.hex()?;
+            if image.len() != count {
+                return Err(LineError::Image {
+                    count,
+                    got: image.len(),
+                });
+            }
+            AnyMsg::CameraData(camera::Data {
+                width,
+                height,
+                bpp,
+                format,
+                fdiv: 0,
+                compression,
+                image,
             })
         }
         (I::Aio, DATA, 1) => {
@@ -1154,6 +1240,7 @@ mod tests {
             AnyMsg::PtzData(_) => I::Ptz,
             AnyMsg::PowerData(_) => I::Power,
             AnyMsg::GpsData(_) => I::Gps,
+            AnyMsg::CameraData(_) => I::Camera,
             AnyMsg::AioData(_) => I::Aio,
             AnyMsg::DioData(_) => I::Dio,
             AnyMsg::IrData(_) => I::Ir,
@@ -1162,6 +1249,51 @@ mod tests {
             AnyMsg::BlobfinderData(_) => I::Blobfinder,
             _ => I::Laser,
         }
+    }
+
+    /// A camera line is writelog's: six numbers, then the image in
+    /// upper-case hex; read back byte for byte, lower case too; a count
+    /// that does not match or a digit that is not hex is refused.
+    #[test]
+    fn camera_lines_carry_the_image_in_hex() {
+        let image = camera::Data {
+            width: 2,
+            height: 1,
+            bpp: 24,
+            format: camera::FORMAT_RGB888,
+            fdiv: 0,
+            compression: camera::COMPRESS_RAW,
+            image: vec![0x00, 0x7f, 0xff, 0x10, 0xab, 0x01],
+        };
+        let text = line(
+            1.5,
+            6665,
+            Interface::Camera,
+            0,
+            &AnyMsg::CameraData(image.clone()),
+        )
+        .unwrap();
+        assert_eq!(
+            text,
+            "0000000001.500 16777343 6665 camera 00 001 001 2 1 24 5 0 6 007FFF10AB01\n"
+        );
+        let back = message(&parse(&text).unwrap().unwrap()).unwrap();
+        assert_eq!(back, AnyMsg::CameraData(image.clone()));
+        let lower = text.replace("007FFF10AB01", "007fff10ab01");
+        assert_eq!(
+            message(&parse(&lower).unwrap().unwrap()).unwrap(),
+            AnyMsg::CameraData(image)
+        );
+        let short = text.replace(" 6 007FFF", " 7 007FFF");
+        let e = message(&parse(&short).unwrap().unwrap())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("6 bytes, its count says 7"), "{e}");
+        let bad = text.replace("007FFF", "0G7FFF");
+        let e = message(&parse(&bad).unwrap().unwrap())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("not an image in hex"), "{e}");
     }
 
     /// A gps line has the 21 fields Player's readlog reads, in writelog's

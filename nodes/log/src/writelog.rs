@@ -10,7 +10,7 @@
 //! |---|---|
 //! | requires | the devices to log, any interface the format has a layout for |
 //! | provides | one `log` (start/stop, state, file name) |
-//! | options | `filename`, or `log_directory` + `basename` (`writelog_`) + `timestamp` (1) + `extension` (`.log`); `timestamp_directory` (0), `autorecord` (1), `write_particles` (0) |
+//! | options | `filename`, or `log_directory` + `basename` (`writelog_`) + `timestamp` (1) + `extension` (`.log`); `timestamp_directory` (0), `autorecord` (1), `write_particles` (0), `camera_log_images` (1), `camera_save_images` (0) |
 //!
 //! # Behavior
 //!
@@ -26,6 +26,11 @@
 //!   which, `set_filename` closes the file and opens another (refused while
 //!   writing). With `write_particles 1`, each localize estimate is followed
 //!   by the particle set.
+//! - A camera image is written in the line as hex (`camera_log_images 0`:
+//!   its sizes only, as Player wrote them); `camera_save_images 1` also
+//!   writes each image beside the log as Player named them,
+//!   `<log's stem>_camera_<index>_<frame>.pnm` (raw 8-bit grey or RGB) or
+//!   `.jpg` (JPEG).
 //! - A failed write (a full disk) is an error at once naming the file; the
 //!   lines before it stay in the file, and writing stops until a new
 //!   `set_filename`.
@@ -38,8 +43,8 @@ use std::path::PathBuf;
 
 use serde::Deserialize;
 use troupe_msgs::{
-    bumper, decode_any, fiducial, ir, laser, localize, log, position2d, ranger, sonar, AnyMsg,
-    Device, Interface, Stamped,
+    bumper, camera, decode_any, fiducial, ir, laser, localize, log, position2d, ranger, sonar,
+    AnyMsg, Device, Interface, Stamped,
 };
 use troupe_node::{Ctx, Driver, Event, NodeError, RequestId, Result, Sample, Section, Switch};
 
@@ -66,9 +71,9 @@ pub struct Options {
     pub autorecord: Option<Switch>,
     /// After each localize estimate, ask for and log the particles.
     pub write_particles: Option<Switch>,
-    /// Camera options Player has (no camera here): accepted, unused.
+    /// Write each camera image into its line, as hex (default on).
     pub camera_log_images: Option<Switch>,
-    /// See `camera_log_images`.
+    /// Also write each camera image to a file of its own (default off).
     pub camera_save_images: Option<Switch>,
 }
 
@@ -80,6 +85,10 @@ pub struct WriteLog {
     file: Option<std::fs::File>,
     enabled: bool,
     particles: bool,
+    /// Camera images into the log's lines; into files of their own, with
+    /// each camera's next frame number.
+    log_images: bool,
+    save_images: Option<HashMap<Device, u32>>,
     /// The geometry requests in `requires` order, each with its answer's
     /// line once in (`None` while waiting), and the data lines held until
     /// all are in.
@@ -148,6 +157,11 @@ impl Driver for WriteLog {
             file: None,
             enabled: o.autorecord.is_none_or(Switch::on),
             particles: o.write_particles.is_some_and(Switch::on),
+            log_images: o.camera_log_images.is_none_or(Switch::on),
+            save_images: o
+                .camera_save_images
+                .is_some_and(Switch::on)
+                .then(HashMap::new),
             asked: Vec::new(),
             held: Vec::new(),
             particle_requests: HashMap::new(),
@@ -342,7 +356,10 @@ impl WriteLog {
     /// Writes `msg` (of schema tag `schema`) from `dev`, or holds it until
     /// the geometries are in, or counts it when the format has no layout.
     fn write_msg(&mut self, dev: Device, schema: &str, stamp: f64, msg: &AnyMsg) -> Result<()> {
-        let Some(line) = text::line(stamp, dev.robot, dev.interface, dev.index, msg) else {
+        if let AnyMsg::CameraData(image) = msg {
+            self.save_image(dev, image);
+        }
+        let Some(mut line) = text::line(stamp, dev.robot, dev.interface, dev.index, msg) else {
             let counts = self.skipped.entry(dev).or_default();
             match counts.get_mut(schema) {
                 Some(n) => *n += 1,
@@ -353,11 +370,59 @@ impl WriteLog {
             }
             return Ok(());
         };
+        if matches!(msg, AnyMsg::CameraData(_)) && !self.log_images {
+            // The sizes only: the line ends after the image's count, as
+            // Player's did.
+            if let Some(cut) = line.rfind(' ') {
+                line.truncate(cut + 1);
+                line.push('\n');
+            }
+        }
         if self.asked.is_empty() {
             self.write(&line)
         } else {
             self.held.push(line);
             Ok(())
+        }
+    }
+
+    /// With `camera_save_images`, writes `image` from camera `dev` to its
+    /// own file beside the log, named as Player named them; a failure is
+    /// said and the log goes on.
+    fn save_image(&mut self, dev: Device, image: &camera::Data) {
+        let Some(frames) = self.save_images.as_mut() else {
+            return;
+        };
+        let frame = frames.entry(dev).or_insert(0);
+        let header = match (image.compression, image.format) {
+            (camera::COMPRESS_RAW, camera::FORMAT_RGB888) => Some("P6"),
+            (camera::COMPRESS_RAW, camera::FORMAT_MONO8) => Some("P5"),
+            (camera::COMPRESS_JPEG, _) => None,
+            _ => {
+                tracing::warn!(
+                    "camera {dev}: not saving an image of format {} compression {} (Player saved raw 8-bit grey and RGB, and JPEG)",
+                    image.format,
+                    image.compression
+                );
+                return;
+            }
+        };
+        let stem = self
+            .path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let ext = if header.is_some() { "pnm" } else { "jpg" };
+        let file = self
+            .path
+            .with_file_name(format!("{stem}_camera_{:02}_{frame:06}.{ext}", dev.index));
+        *frame += 1;
+        let mut bytes = header
+            .map(|h| format!("{h}\n{} {}\n255\n", image.width, image.height).into_bytes())
+            .unwrap_or_default();
+        bytes.extend_from_slice(&image.image);
+        if let Err(e) = std::fs::write(&file, bytes) {
+            tracing::error!("cannot write camera image {}: {e}", file.display());
         }
     }
 
