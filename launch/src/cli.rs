@@ -200,7 +200,12 @@ chromium --headless --screenshot URL?still).")]
 
 Each sample is kept byte for byte (schema tag, stamp, body) on an MCAP
 channel named by its key; devices' comings and goings too. A recorder
-that falls behind drops, counts and says so, and exits non-zero.")]
+that falls behind drops, counts and says so, and exits non-zero.
+
+The recorder joins as a Zenoh peer (unless --mode says otherwise): it
+finds the publishers through the router and takes their data from them
+directly where it can reach them, so nothing waits in the router's queue
+(where a burst of a fast simulation would be dropped).")]
     Record(crate::mcaplog::RecordArgs),
 
     /// Publish a recording back onto its keys, at any speed.

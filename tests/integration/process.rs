@@ -157,6 +157,15 @@ fn with_reconnect_start_order_does_not_matter_and_ready_says_when_devices_are_li
     let (status, _, err) = ready(&["ranger:0"]);
     assert!(!status.success());
     assert!(err.contains("no Zenoh router answers"), "{err}");
+    // So does `record`, though it joins as a peer (which alone would go on
+    // hearing nothing).
+    let out = std::env::temp_dir().join(format!("{ns}.mcap"));
+    let (status, _, err) = troupe_output(&with_net(
+        &net,
+        &["record", "-o", out.to_str().unwrap(), "--duration", "5"],
+    ));
+    assert!(!status.success());
+    assert!(err.contains("no Zenoh router answers"), "{err}");
 
     // A launcher and a node that keep trying, started before the router.
     let plan = std::env::temp_dir().join(format!("{ns}.toml"));

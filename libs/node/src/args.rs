@@ -201,6 +201,38 @@ impl ZenohArgs {
         refused.explain(zenoh::open(config).wait())
     }
 
+    /// A session that is a peer unless `--mode` says otherwise, but needs
+    /// its router as a client does: without `--reconnect`, opening fails
+    /// when no `--connect` endpoint answers (a peer's would go on alone,
+    /// hearing nothing). For tools that take much data (`troupe record`): a
+    /// peer takes it from the publishers directly where it can reach them,
+    /// not through the router's queues.
+    ///
+    /// # Errors
+    ///
+    /// As [`ZenohArgs::open`].
+    pub fn open_peer(&self) -> Result<Session> {
+        let mut config = self.config(Mode::Peer)?;
+        if !self.reconnect {
+            let set = |c: &mut Config, key: &str, value: &str| {
+                c.insert_json5(key, value)
+                    .map_err(|e| NodeError::config("zenoh", format!("{key}: {e}")))
+            };
+            set(
+                &mut config,
+                "connect/timeout_ms",
+                r#"{"router":-1,"peer":0,"client":0}"#,
+            )?;
+            set(
+                &mut config,
+                "connect/exit_on_failure",
+                r#"{"router":false,"peer":true,"client":true}"#,
+            )?;
+        }
+        let refused = Refused::of(&config);
+        refused.explain(zenoh::open(config).wait())
+    }
+
     /// [`ZenohArgs::open`] on a thread of its own, as a future: with
     /// `--reconnect` a client's open blocks until its router answers, and a
     /// caller can race this against a signal (the thread is left behind).
@@ -396,7 +428,10 @@ impl Refused {
     /// Zenoh's own words name a source file; say what to do instead.
     fn explain(self, r: zenoh::Result<Session>) -> Result<Session> {
         r.map_err(|e| {
-            if !e.to_string().contains("Unable to connect to any of") {
+            // (A client's words, and a peer's that must reach its endpoints.)
+            let text = e.to_string();
+            if !text.contains("Unable to connect to any of") && !text.contains("Can not create a new")
+            {
                 return NodeError::zenoh("opening the session", e);
             }
             if self.tls {
