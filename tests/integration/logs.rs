@@ -437,19 +437,7 @@ fn a_gps_log_replays_to_a_player_client_and_is_logged_again() {
     );
     assert_eq!((gps.altitude(), gps.quality()), (76.5, 1));
     assert!((6..=8).contains(&gps.satellites()));
-    let mut player = Player::connect(addr, 6665);
-    player.open(Device::new(6665, Interface::Gps, 0));
-    let mut fixes = 0;
-    let deadline = Instant::now() + DEADLINE;
-    while fixes < 25 {
-        assert!(
-            Instant::now() < deadline,
-            "{fixes} fixes within {DEADLINE:?}"
-        );
-        let m = player.recv();
-        if m.kind() != DATA || m.h[2] != u32::from(Interface::Gps.code()) {
-            continue;
-        }
+    each_data(addr, Interface::Gps, 25, |m| {
         // Line i's fix, i from its logged time: Player's seconds and
         // microseconds, 1e-7 degrees, millimetres, dilutions times ten.
         let i = (m.timestamp * 10.0).round();
@@ -462,8 +450,7 @@ fn a_gps_log_replays_to_a_player_client_and_is_logged_again() {
         assert_eq!(word(16) as i32, 76_500);
         assert_eq!((word(52), word(56)), (1, 6 + i as u32 % 3));
         assert_eq!((word(60), word(64)), (9, 14));
-        fixes += 1;
-    }
+    });
     assert!(launcher.terminate().success(), "{}", launcher.stderr());
     // What writelog wrote: gps lines, each a line of the log it replayed.
     let again = std::fs::read_to_string(dir.join("again.log")).unwrap();
@@ -510,27 +497,14 @@ fn a_camera_log_replays_and_is_logged_with_its_images_in_files() {
     let ns = troupe_tests::unique_namespace("camlog");
     let mut launcher = launch_in(&dir, &ns, "cam.cfg", &[]);
     let (_, addr) = troupe_tests::launch_ports(&mut launcher);
-    let mut player = Player::connect(addr, 6665);
-    player.open(Device::new(6665, Interface::Camera, 0));
-    let mut seen = 0;
-    let deadline = Instant::now() + DEADLINE;
-    while seen < 6 {
-        assert!(
-            Instant::now() < deadline,
-            "{seen} images within {DEADLINE:?}"
-        );
-        let m = player.recv();
-        if m.kind() != DATA || m.h[2] != u32::from(Interface::Camera.code()) {
-            continue;
-        }
+    each_data(addr, Interface::Camera, 6, |m| {
         // width, height, bpp, format, fdiv, compression, then the image.
         let fields: Vec<u32> = (0..6).map(|k| u32_at(&m.body, 4 * k)).collect();
         assert_eq!(fields, [2, 2, 24, 5, 0, 0]);
         assert_eq!((u32_at(&m.body, 24), u32_at(&m.body, 28)), (12, 12));
         let i = (m.timestamp * 10.0).round() as usize - 1;
         assert_eq!(m.body[32..44], images[i], "t={}", m.timestamp);
-        seen += 1;
-    }
+    });
     assert!(launcher.terminate().success(), "{}", launcher.stderr());
     let original = std::fs::read_to_string(dir.join("cam.log")).unwrap();
     let payloads = |t: &str| -> Vec<String> {
@@ -555,6 +529,31 @@ fn a_camera_log_replays_and_is_logged_with_its_images_in_files() {
         assert!(images.iter().any(|i| i == body), "{}", file.display());
     }
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Connects a Player client to robot 6665 at `addr`, opens `iface`:0
+/// and hands `check` its first `n` DATA messages, within the deadline.
+fn each_data(
+    addr: std::net::SocketAddr,
+    iface: Interface,
+    n: usize,
+    check: impl Fn(&crate::player::Frame),
+) {
+    let mut player = Player::connect(addr, 6665);
+    player.open(Device::new(6665, iface, 0));
+    let deadline = Instant::now() + DEADLINE;
+    let mut seen = 0;
+    while seen < n {
+        assert!(
+            Instant::now() < deadline,
+            "{seen} {iface} messages within {DEADLINE:?}"
+        );
+        let m = player.recv();
+        if m.kind() == DATA && m.h[2] == u32::from(iface.code()) {
+            check(&m);
+            seen += 1;
+        }
+    }
 }
 
 fn copy_dir(from: &Path, to: &Path) {
