@@ -220,10 +220,12 @@ fn the_view_draws_the_world_where_the_simulator_has_it() {
     let base = stack.base.clone();
 
     // The stream: r0 where the world file puts it, its ranger's middle
-    // beams on the wall's face, 1.9 m ahead.
+    // beams on the wall's face, 1.9 m ahead. (Each device's first reading
+    // comes on its own: the frame waited for has all that is read of it.)
     let f = frame_where(&base, |f| {
         f["devices"] == 3
             && f["readings"]["6665:ranger:0"].is_object()
+            && f["readings"]["6665:position2d:0"].is_object()
             && f["poses"]["6665:simulation:0"].is_object()
     });
     let world = json(&base, "/api/world");
