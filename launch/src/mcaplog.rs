@@ -860,16 +860,20 @@ pub fn bench(a: &RecordBenchArgs) -> anyhow::Result<()> {
         // The world's own speed, before anything records it.
         let alone = {
             let watcher = z.open(Mode::Client)?;
-            let clock = Arc::new(std::sync::Mutex::new(Vec::new()));
+            // The first tick heard and the last: (wall, simulated).
+            type Ticks = Option<((Instant, f64), (Instant, f64))>;
+            let clock = Arc::new(std::sync::Mutex::new(Ticks::None));
             let seen = clock.clone();
             let sub = watcher
                 .declare_subscriber(keys::SIM_CLOCK)
                 .callback(move |s| {
                     if let Ok(t) = codec::decode::<troupe_msgs::sim::Clock>(&s.payload().to_bytes())
                     {
-                        seen.lock()
-                            .unwrap_or_else(std::sync::PoisonError::into_inner)
-                            .push((Instant::now(), t.msg.time));
+                        let now = (Instant::now(), t.msg.time);
+                        let mut c = seen
+                            .lock()
+                            .unwrap_or_else(std::sync::PoisonError::into_inner);
+                        *c = Some((c.map_or(now, |(first, _)| first), now));
                     }
                 })
                 .wait()
@@ -879,8 +883,8 @@ pub fn bench(a: &RecordBenchArgs) -> anyhow::Result<()> {
             let c = clock
                 .lock()
                 .unwrap_or_else(std::sync::PoisonError::into_inner);
-            match (c.first(), c.last()) {
-                (Some(a), Some(b)) if b.0 > a.0 => (b.1 - a.1) / (b.0 - a.0).as_secs_f64(),
+            match *c {
+                Some((a, b)) if b.0 > a.0 => (b.1 - a.1) / (b.0 - a.0).as_secs_f64(),
                 _ => 0.0,
             }
         };

@@ -515,6 +515,23 @@ async fn supervise(
     }
 }
 
+/// `troupe` with the launch's network flags `net`, as the launcher runs
+/// its children: supervised (it dies with the launcher), its output piped
+/// to be forwarded, in a process group of its own (a terminal's Ctrl-C
+/// reaches only the launcher, which stops its children in order), killed
+/// if its handle is dropped.
+fn troupe_child(exe: &std::path::Path, net: &[String]) -> Command {
+    let mut cmd = Command::new(exe);
+    cmd.args(net)
+        .env(SUPERVISOR_ENV, std::process::id().to_string())
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .process_group(0)
+        .kill_on_drop(true);
+    cmd
+}
+
 /// `launch --view`: runs `troupe view` on `at` until the launch stops
 /// (then SIGTERM, and SIGKILL if it has not gone within 5 s). Its address
 /// line goes to the launcher's stdout, its log to stderr as a node's.
@@ -525,8 +542,7 @@ async fn run_view(
     at: std::net::SocketAddr,
     mut stop_rx: watch::Receiver<bool>,
 ) -> bool {
-    let mut child = match Command::new(&exe)
-        .args(&net)
+    let mut child = match troupe_child(&exe, &net)
         .args([
             "view",
             "--bind",
@@ -534,12 +550,6 @@ async fn run_view(
             "--port",
             &at.port().to_string(),
         ])
-        .env(SUPERVISOR_ENV, std::process::id().to_string())
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .process_group(0)
-        .kill_on_drop(true)
         .spawn()
     {
         Ok(c) => c,
@@ -743,21 +753,11 @@ async fn run_node(st: Arc<NodeState>, mut ctx: NodeCtx) {
         if st.stopping.load(Ordering::SeqCst) {
             return;
         }
-        let mut cmd = Command::new(&ctx.exe);
-        cmd.args(&ctx.net);
+        let mut cmd = troupe_child(&ctx.exe, &ctx.net);
         cmd.args(["node", &st.spec.driver, "--section", &section_json]);
         if ctx.sim_time {
             cmd.arg("--sim-time");
         }
-        cmd
-            .env(SUPERVISOR_ENV, std::process::id().to_string())
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            // Its own process group: a terminal's Ctrl-C reaches only the
-            // launcher, which stops nodes in order.
-            .process_group(0)
-            .kill_on_drop(true);
         let t0 = Instant::now();
         let mut child = match cmd.spawn() {
             Ok(c) => c,

@@ -734,7 +734,8 @@ pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
                     shared.namespace.as_deref().unwrap_or_default()
                 );
             }
-            if let Some(me) = &shared.looking_only {
+            // (Every session has the same config: said once.)
+            if let (true, Some(me)) = (spaces.is_empty(), &shared.looking_only) {
                 tracing::info!("joining as the viewer `{me}`: the page offers no commands");
             }
             held.push(watch_space(shared.clone(), session.clone()).await?);

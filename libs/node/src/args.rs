@@ -99,10 +99,6 @@ impl ZenohArgs {
             }
             None => Config::default(),
         };
-        let set = |c: &mut Config, key: &str, json: String| {
-            c.insert_json5(key, &json)
-                .map_err(|e| bad(format!("{key} = {json}: {e}")))
-        };
         // A file's mode stands unless --mode says otherwise.
         let file_mode = c
             .get_json("mode")
@@ -189,7 +185,12 @@ impl ZenohArgs {
     /// [`NodeError::Zenoh`] when the session cannot be opened (a listen address
     /// in use, a bad config).
     pub fn open(&self, default_mode: Mode) -> Result<Session> {
-        let config = self.config(default_mode)?;
+        self.open_config(self.config(default_mode)?)
+    }
+
+    /// Opens a session on `config` (this session's, from
+    /// [`ZenohArgs::config`]), a refused link said as what to do.
+    fn open_config(&self, config: Config) -> Result<Session> {
         let refused = Refused::of(&config);
         if self.reconnect && config.get_json("mode").is_ok_and(|m| m == r#""client""#) {
             // A client's open now blocks until its router answers.
@@ -214,23 +215,18 @@ impl ZenohArgs {
     pub fn open_peer(&self) -> Result<Session> {
         let mut config = self.config(Mode::Peer)?;
         if !self.reconnect {
-            let set = |c: &mut Config, key: &str, value: &str| {
-                c.insert_json5(key, value)
-                    .map_err(|e| NodeError::config("zenoh", format!("{key}: {e}")))
-            };
             set(
                 &mut config,
                 "connect/timeout_ms",
-                r#"{"router":-1,"peer":0,"client":0}"#,
+                r#"{"router":-1,"peer":0,"client":0}"#.into(),
             )?;
             set(
                 &mut config,
                 "connect/exit_on_failure",
-                r#"{"router":false,"peer":true,"client":true}"#,
+                r#"{"router":false,"peer":true,"client":true}"#.into(),
             )?;
         }
-        let refused = Refused::of(&config);
-        refused.explain(zenoh::open(config).wait())
+        self.open_config(config)
     }
 
     /// [`ZenohArgs::open`] on a thread of its own, as a future: with
@@ -462,6 +458,12 @@ pub fn locators(session: &Session) -> Vec<String> {
         .iter()
         .map(ToString::to_string)
         .collect()
+}
+
+/// Sets `key` of `c` to `json`, a refusal named as a config error.
+fn set(c: &mut Config, key: &str, json: String) -> Result<()> {
+    c.insert_json5(key, &json)
+        .map_err(|e| NodeError::config("zenoh", format!("{key} = {json}: {e}")))
 }
 
 fn json_str(s: &str) -> String {

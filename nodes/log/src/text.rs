@@ -588,15 +588,21 @@ struct Fields<'a, 'b> {
     at: usize,
 }
 
-impl Fields<'_, '_> {
-    fn f64(&mut self) -> Result<f64, LineError> {
-        let interface = self.line.interface.name();
+impl<'a> Fields<'a, '_> {
+    /// The next field as it is written.
+    fn next(&mut self) -> Result<&'a str, LineError> {
         let text = self.line.fields.get(self.at).ok_or(LineError::Truncated {
-            interface,
+            interface: self.line.interface.name(),
             got: self.line.fields.len(),
             want: self.at + 1,
         })?;
         self.at += 1;
+        Ok(text)
+    }
+
+    fn f64(&mut self) -> Result<f64, LineError> {
+        let interface = self.line.interface.name();
+        let text = self.next()?;
         text.parse::<f64>()
             .ok()
             .filter(|v| v.is_finite())
@@ -614,13 +620,7 @@ impl Fields<'_, '_> {
     /// A field of hex digits (Player's EncodeHex: two per byte, either
     /// case read) as bytes.
     fn hex(&mut self) -> Result<Vec<u8>, LineError> {
-        let interface = self.line.interface.name();
-        let text = self.line.fields.get(self.at).ok_or(LineError::Truncated {
-            interface,
-            got: self.line.fields.len(),
-            want: self.at + 1,
-        })?;
-        self.at += 1;
+        let text = self.next()?;
         let digit = |c: u8| char::from(c).to_digit(16).map(|d| d as u8);
         let bytes = text.as_bytes();
         let bad = || LineError::Hex {
