@@ -86,6 +86,29 @@ impl Body {
     pub fn circle(&self) -> (f64, f64, f64) {
         self.circle
     }
+    /// Whether it overlaps `other`: an edge of one crosses an edge of the
+    /// other, or one holds a corner of the other.
+    pub fn overlaps(&self, other: &Body) -> bool {
+        let ((ax, ay, ar), (bx, by, br)) = (self.circle, other.circle);
+        if (ax - bx).powi(2) + (ay - by).powi(2) > (ar + br).powi(2) || ar < 0.0 || br < 0.0 {
+            return false;
+        }
+        let bbox = |ps: &[(f64, f64)]| bounds(ps.iter().copied());
+        // Boxes that do not meet (or polygons with no points) are apart.
+        let apart = |a: Option<[f64; 4]>, b: Option<[f64; 4]>| match (a, b) {
+            (Some(a), Some(b)) => a[2] < b[0] || b[2] < a[0] || a[3] < b[1] || b[3] < a[1],
+            _ => true,
+        };
+        self.polys.iter().any(|a| {
+            let ba = bbox(a);
+            other.polys.iter().any(|b| {
+                !apart(ba, bbox(b))
+                    && (edges_cross(a, b)
+                        || a.first().is_some_and(|&p| inside(b, p))
+                        || b.first().is_some_and(|&p| inside(a, p)))
+            })
+        })
+    }
 }
 
 impl Movers {
@@ -154,29 +177,9 @@ impl Movers {
         self.in_tile.get(t).map_or(&[], Vec::as_slice)
     }
 
-    /// Whether model `m`'s filed body overlaps `body`: an edge of one
-    /// crosses an edge of the other, or one holds a corner of the other.
+    /// Whether model `m`'s filed body overlaps `body`.
     pub fn overlaps(&self, m: usize, body: &Body) -> bool {
-        let ((ax, ay, ar), (bx, by, br)) = (self.bodies[m].circle, body.circle);
-        if (ax - bx).powi(2) + (ay - by).powi(2) > (ar + br).powi(2) || ar < 0.0 || br < 0.0 {
-            return false;
-        }
-        let polys = &body.polys;
-        let bbox = |ps: &[(f64, f64)]| bounds(ps.iter().copied());
-        // Boxes that do not meet (or polygons with no points) are apart.
-        let apart = |a: Option<[f64; 4]>, b: Option<[f64; 4]>| match (a, b) {
-            (Some(a), Some(b)) => a[2] < b[0] || b[2] < a[0] || a[3] < b[1] || b[3] < a[1],
-            _ => true,
-        };
-        self.bodies[m].polys.iter().any(|a| {
-            let ba = bbox(a);
-            polys.iter().any(|b| {
-                !apart(ba, bbox(b))
-                    && (edges_cross(a, b)
-                        || a.first().is_some_and(|&p| inside(b, p))
-                        || b.first().is_some_and(|&p| inside(a, p)))
-            })
-        })
+        self.bodies[m].overlaps(body)
     }
 
     /// Where the ray from `o` along the unit vector `d` first meets model

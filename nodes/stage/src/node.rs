@@ -773,6 +773,9 @@ impl Stage {
                     self.quit_time,
                     self.sim.steps
                 );
+                if let Some(flags) = self.sim.flags_held() {
+                    tracing::info!("flags held: {flags}");
+                }
                 ctx.request_stop();
                 break;
             }

@@ -22,7 +22,9 @@ use crate::movers::{Body, Fan, Movers, Sweep};
 use crate::world::{Drive, Kind, Localization, Sensor, World};
 
 mod ctrl;
-pub use ctrl::{Ctrl, Mind};
+mod energy;
+pub use ctrl::{Ctrl, Mind, Mode};
+pub use energy::Pack;
 
 /// What a position model was last told to do.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -171,6 +173,11 @@ pub struct Sim {
     noisy: Vec<bool>,
     /// The rangers each step senses (all, unless [`Sim::sense_only`]).
     sensed: Vec<bool>,
+    /// What the controllers read or run on besides the bases and rangers
+    /// (fiducial finders, zones): they run, as Stage's subscribed models.
+    used: Vec<bool>,
+    /// Power packs and flags.
+    energy: energy::Energy,
     movable: Vec<bool>,
     /// The cells each static model occupies now.
     cells: Vec<Vec<(usize, usize)>>,
@@ -388,11 +395,19 @@ impl Sim {
         let trees: Vec<Vec<usize>> = (0..n).map(|m| world.subtree(m)).collect();
         let mut ctrls = vec![None; n];
         let mut noisy = vec![false; n];
+        let mut used = vec![false; n];
+        let mut energy = energy::Energy::new(&world);
         let mut missing: std::collections::BTreeMap<String, (usize, usize)> = Default::default();
         for m in 0..n {
             for c in &world.models[m].ctrl {
                 let why = match ctrl::find(&world, &trees[m], m, c) {
                     ctrl::Found::Base(found) if ctrls[m].is_none() => {
+                        if let Ctrl::Fasr {
+                            fiducial: Some(f), ..
+                        } = found
+                        {
+                            used[f] = true;
+                        }
                         ctrls[m] = Some(found);
                         continue;
                     }
@@ -403,7 +418,16 @@ impl Sim {
                         noisy[m] = true;
                         continue;
                     }
-                    ctrl::Found::Zone => continue,
+                    ctrl::Found::Source(capacity) => {
+                        used[m] = true;
+                        energy.sources.push((m, capacity));
+                        continue;
+                    }
+                    ctrl::Found::Sink => {
+                        used[m] = true;
+                        energy.sinks.push(m);
+                        continue;
+                    }
                     ctrl::Found::Unknown => format!(
                         "controller \"{}\" is not built into Troupe",
                         c.split_whitespace().next().unwrap_or("")
@@ -506,6 +530,8 @@ impl Sim {
             trees,
             noisy,
             sensed: vec![true; n],
+            used,
+            energy,
             crew: Crew::default(),
             roots,
             heights,
@@ -733,11 +759,18 @@ impl Sim {
         self.roots[other] != root && self.world.models[other].obstacle_return
     }
 
+    /// Whether model `m`'s body meets obstacles when it moves: as in
+    /// Stage, one with no `obstacle_return` (a charging bump on a robot's
+    /// nose) passes through them as they pass through it.
+    fn collides(&self, m: usize) -> bool {
+        self.world.models[m].obstacle_return
+    }
+
     /// True when the `bodies` (of the tree of `root`) would overlap an
     /// unrelated static obstacle.
     fn hits_statics(&self, root: usize, bodies: &[Placed]) -> bool {
         let blocks = |c: usize| self.blocks(root, c - 1);
-        for body in bodies {
+        for body in bodies.iter().filter(|b| self.collides(b.model)) {
             let (polys, Some((lo, hi))) = (body.body.polys(), body.cells) else {
                 continue;
             };
@@ -772,7 +805,7 @@ impl Sim {
     /// unrelated moving body.
     fn hits_movers(&self, root: usize, bodies: &[Placed]) -> bool {
         let blocks = |c: usize| self.blocks(root, c - 1);
-        for body in bodies {
+        for body in bodies.iter().filter(|b| self.collides(b.model)) {
             let Some((lo, hi)) = body.cells else {
                 continue;
             };
@@ -843,6 +876,7 @@ impl Sim {
     pub fn step(&mut self) {
         let dt = self.world.interval_sim;
         self.run(Some(dt));
+        self.chores();
         self.time += dt;
         self.steps += 1;
     }
@@ -907,16 +941,14 @@ impl Sim {
                 None => Pose::default(),
             },
         };
+        // As Stage's velocity control: the speeds asked for, within the
+        // velocity bounds (its acceleration bounds are for its
+        // acceleration control, which no controller here uses).
         let vb = &cfg.velocity_bounds;
-        let ab = &cfg.acceleration_bounds;
-        let cur = self.bases[bi].vel;
-        let limit = |w: f64, c: f64, lo: f64, hi: f64, alo: f64, ahi: f64| {
-            (w.clamp(lo, hi)).clamp(c + alo * dt, c + ahi * dt)
-        };
         let mut v = Pose::new(
-            limit(want.x, cur.x, vb[0], vb[1], ab[0], ab[1]),
-            limit(want.y, cur.y, vb[2], vb[3], ab[2], ab[3]),
-            limit(want.yaw, cur.yaw, vb[6], vb[7], ab[6], ab[7]),
+            want.x.clamp(vb[0], vb[1]),
+            want.y.clamp(vb[2], vb[3]),
+            want.yaw.clamp(vb[6], vb[7]),
         );
         if cfg.drive != Drive::Omni {
             v.y = 0.0;
@@ -1798,16 +1830,20 @@ mod tests {
     }
 
     #[test]
-    fn velocity_and_acceleration_bounds_hold() {
+    fn velocity_bounds_hold_and_speeds_are_taken_at_once() {
+        // As Stage's velocity control: acceleration bounds do not apply.
         let mut s = sim("bounds", &format!("{ROOM}position ( name \"r\" size [0.4 0.4 0.2] velocity_bounds [-0.5 0.5 0 0 0 0 -90 90] acceleration_bounds [-1 1 0 0 0 0 -90 90] )\n"));
-        s.bases[0].cmd = Some(Command::Vel(Pose::new(2.0, 0.0, 0.0)));
+        s.bases[0].cmd = Some(Command::Vel(Pose::new(2.0, 0.0, -3.0)));
         s.step();
-        assert!(
-            (s.bases[0].vel.x - 0.1).abs() < 1e-9,
-            "accel 1 m/s² over 0.1 s"
-        );
-        steps(&mut s, 20);
         assert!((s.bases[0].vel.x - 0.5).abs() < 1e-9, "capped at 0.5 m/s");
+        let quarter = -std::f64::consts::FRAC_PI_2;
+        assert!(
+            (s.bases[0].vel.yaw - quarter).abs() < 1e-9,
+            "capped at 90°/s"
+        );
+        s.bases[0].cmd = Some(Command::Vel(Pose::new(0.1, 0.0, 0.0)));
+        s.step();
+        assert!((s.bases[0].vel.x - 0.1).abs() < 1e-9, "slowed at once");
     }
 
     #[test]

@@ -67,7 +67,8 @@ pub struct PositionCfg {
     pub drive: Drive,
     /// `[xmin xmax ymin ymax zmin zmax amin amax]`, m/s and rad/s.
     pub velocity_bounds: [f64; 8],
-    /// Same layout, m/s² and rad/s².
+    /// Same layout, m/s² and rad/s²: read, but as in Stage they bound
+    /// only its acceleration control, which nothing here commands.
     pub acceleration_bounds: [f64; 8],
     /// Reported pose source.
     pub localization: Localization,
@@ -124,6 +125,27 @@ pub struct FiducialCfg {
     pub fov: f64,
 }
 
+/// A model's part in Stage's energy model (its power pack, what it uses
+/// while it runs, what it gives and takes as a charger and a charged).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Energy {
+    /// Its own power pack: joules stored and its capacity (`joules`,
+    /// `kjoules` and their `*_capacity`); a store below 0 never runs out.
+    /// A model without one draws on its nearest ancestor's.
+    pub pack: Option<(f64, f64)>,
+    /// Watts it uses while it runs (`watts`; a position model's follow
+    /// its speed, a ranger's its sensors, as in Stage).
+    pub watts: f64,
+    /// Watts it gives at most to each pack that touches it (`give_watts`).
+    pub give: f64,
+    /// Watts it takes at most from a giver it touches (`take_watts`).
+    pub take: f64,
+    /// Kilograms (`mass`): a position model uses 10 W per kg per m/s.
+    pub mass: f64,
+    /// Runs with no one to read it (`alwayson`): a charger gives.
+    pub always_on: bool,
+}
+
 /// A model with everything the simulator needs.
 #[derive(Debug, Clone)]
 pub struct ModelDef {
@@ -168,6 +190,10 @@ pub struct ModelDef {
     pub sensors: Vec<Sensor>,
     /// Controllers (`ctrl "wander"`).
     pub ctrl: Vec<String>,
+    /// Seconds between its updates (Stage's `update_interval`, 100 ms).
+    pub update_interval: f64,
+    /// Energy: power pack, use, charging.
+    pub energy: Energy,
     /// Blobfinder settings, for blobfinders.
     pub blobfinder: Option<BlobfinderCfg>,
     /// Fiducial detector settings, for fiducial models.
@@ -317,6 +343,33 @@ impl Reader {
                 }
             }
             _ => default,
+        }
+    }
+    /// Stage's energy properties, read in Stage's order: `joules` fills a
+    /// pack of that size, `joules_capacity` resizes it, then the same in
+    /// kilojoules (a store above a new capacity is cut to it).
+    fn energy(&self, e: &Entity) -> Energy {
+        let mut pack: Option<(f64, f64)> = None;
+        for (name, scale, fill) in [
+            ("joules", 1.0, true),
+            ("joules_capacity", 1.0, false),
+            ("kjoules", 1000.0, true),
+            ("kjoules_capacity", 1000.0, false),
+        ] {
+            if self.prop(e, name).is_none() {
+                continue;
+            }
+            let (stored, capacity) = pack.unwrap_or_default();
+            let j = scale * self.float(e, name, if fill { stored } else { capacity });
+            pack = Some(if fill { (j, j) } else { (stored.min(j), j) });
+        }
+        Energy {
+            pack,
+            watts: self.float(e, "watts", 0.0),
+            give: self.float(e, "give_watts", 0.0),
+            take: self.float(e, "take_watts", 0.0),
+            mass: self.float(e, "mass", 0.0),
+            always_on: self.int(e, "alwayson", 0) != 0,
         }
     }
     fn bounds(&self, e: &Entity, name: &str, default: [f64; 8]) -> Result<[f64; 8], WorldError> {
@@ -768,6 +821,8 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
             position,
             sensors,
             ctrl,
+            update_interval: r.float(e, "update_interval", 100.0).max(1.0) / 1000.0,
+            energy: r.energy(e),
             blobfinder,
             fiducial,
             pos: e.pos.clone(),
@@ -857,6 +912,23 @@ mod tests {
         let r = load(&p);
         let _ = std::fs::remove_dir_all(&dir);
         r
+    }
+
+    #[test]
+    fn power_packs_read_in_stages_order() {
+        let text = "model ( name \"a\" kjoules 5 )\n\
+                    model ( name \"b\" joules 900 joules_capacity 500 )\n\
+                    model ( name \"c\" joules -1 give_watts 2000 alwayson 1 )\n\
+                    position ( name \"d\" mass 23 model ( take_watts 100 watts 3 ) )\n";
+        let w = load_text("energy", text).unwrap();
+        let e = |n: &str| w.models[w.names[n]].energy.clone();
+        assert_eq!(e("a").pack, Some((5000.0, 5000.0)));
+        assert_eq!(e("b").pack, Some((500.0, 500.0)));
+        assert_eq!(e("c").pack, Some((-1.0, -1.0)));
+        assert!(e("c").always_on && e("c").give == 2000.0);
+        assert_eq!((e("d").mass, e("d").pack), (23.0, None));
+        let bump = e("d.model:0");
+        assert_eq!((bump.take, bump.watts), (100.0, 3.0));
     }
 
     #[test]

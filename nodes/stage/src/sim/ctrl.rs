@@ -10,8 +10,9 @@
 //! random draws are a fixed function of the model and the step, so a world
 //! runs the same on every run and any number of threads.
 
-use troupe_geom::Pose;
+use troupe_geom::{normalize, Pose};
 
+use super::energy::Energy;
 use super::{nearest, Sim};
 use crate::colors::{mix64, GOLDEN};
 use crate::world::{Kind, World};
@@ -55,6 +56,34 @@ pub enum Ctrl {
         /// The fiducial finder.
         fiducial: usize,
     },
+    /// `fasr` (examples/ctrl/fasr.cc): carries flags from the zone named
+    /// `source` (near (-7, -7)) to the one named `sink` (near (7, 7)),
+    /// heading by fasr.world's cave-shaped lookup tables of 4 m cells,
+    /// avoiding what its laser (`ranger:1`) sees, and when its power pack
+    /// runs low (under a quarter) heads for the chargers, docks at one
+    /// its fiducial finder sees (id 2) and charges until 95% full.
+    Fasr {
+        /// The laser (`ranger:1`).
+        laser: usize,
+        /// The fiducial finder that looks for chargers, if any.
+        fiducial: Option<usize>,
+        /// The zone it takes flags from…
+        source: usize,
+        /// …and the one it brings them to.
+        sink: usize,
+    },
+}
+
+/// What `fasr` is about.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Mode {
+    /// Carrying flags (or heading for the chargers when hungry).
+    #[default]
+    Work,
+    /// Driving into a charger it sees.
+    Dock,
+    /// Backing off a charger, charged.
+    Undock,
 }
 
 /// What a controller keeps from step to step.
@@ -64,8 +93,17 @@ pub struct Mind {
     pub want: Pose,
     /// `wander`'s way of turning from obstacles (+1 left, -1 right).
     pub turn: f64,
-    /// `wander_accel`'s steps left avoiding.
+    /// `wander_accel`'s and `fasr`'s updates left avoiding.
     pub avoid: u32,
+    /// `fasr`'s mode.
+    pub mode: Mode,
+    /// `fasr` sees a charger now, and the range and bearing it last saw
+    /// one at.
+    pub charger: (bool, f64, f64),
+    /// `fasr`'s updates spent loading at the source…
+    pub work_get: u32,
+    /// …and unloading at the sink.
+    pub work_put: u32,
 }
 
 impl Default for Mind {
@@ -74,6 +112,10 @@ impl Default for Mind {
             want: Pose::default(),
             turn: 1.0,
             avoid: 0,
+            mode: Mode::Work,
+            charger: (false, 0.0, 0.0),
+            work_get: 0,
+            work_put: 0,
         }
     }
 }
@@ -84,11 +126,12 @@ pub enum Found {
     Base(Ctrl),
     /// `lasernoise`: on a ranger, noise on its first sensor's ranges.
     Noise,
-    /// `source` or `sink`: zones that hold and take pucks (Stage's flags)
-    /// for `fasr`'s robots; with no robot to carry pucks they have nothing
-    /// to do, so they run as nothing at all.
-    Zone,
-    /// Not built in (`fasr`, a user's own plug-in).
+    /// `source N`: a zone that gains a flag each update while it holds
+    /// fewer than N.
+    Source(u32),
+    /// `sink`: a zone that takes the flags robots bring.
+    Sink,
+    /// Not built in (`fasr2`, a user's own plug-in).
     Unknown,
     /// Built in, but the model lacks what it reads.
     Lacks(String),
@@ -160,7 +203,39 @@ pub fn find(world: &World, tree: &[usize], m: usize, line: &str) -> Found {
         }
         "lasernoise" if model.kind == Kind::Ranger => Found::Noise,
         "lasernoise" => Found::Lacks("\"lasernoise\" runs on a ranger".into()),
-        "source" | "sink" => Found::Zone,
+        "fasr" if !position => on_base(&format!("a {:?}", model.kind).to_lowercase()),
+        "fasr" => {
+            // fasr.cc: GetChild("ranger:1"), and the world's models named
+            // "source" and "sink".
+            let laser = world
+                .names
+                .get(&format!("{}.ranger:1", model.name))
+                .copied();
+            let zone = |z: &str| {
+                world
+                    .names
+                    .get(z)
+                    .copied()
+                    .filter(|&k| world.models[k].parent.is_none())
+            };
+            match (laser, zone("source"), zone("sink")) {
+                (None, ..) => no("a second ranger (`ranger:1`, Stage's laser on a Pioneer)"),
+                (_, None, _) | (_, _, None) => no("models named \"source\" and \"sink\""),
+                (Some(laser), Some(source), Some(sink)) => Found::Base(Ctrl::Fasr {
+                    laser,
+                    fiducial: take(Kind::Fiducial),
+                    source,
+                    sink,
+                }),
+            }
+        }
+        // source.cc: its first argument, read as atoi reads it (fasr2.world
+        // gives two; Stage's release build reads the first).
+        "source" => match line.split_whitespace().nth(1) {
+            Some(capacity) => Found::Source(atoi(capacity)),
+            None => Found::Lacks("\"source\" takes an argument, its capacity".into()),
+        },
+        "sink" => Found::Sink,
         _ => Found::Unknown,
     }
 }
@@ -220,44 +295,151 @@ impl Sim {
                 mind.want = Pose::new(fwd, 0.0, turn);
             }
             Ctrl::WanderAccel { laser } => {
-                let Some(scan) = self.readings[laser].first().map(|r| &r.ranges[..]) else {
+                let Some(scan) = self.scan(laser) else {
                     return mind.want;
                 };
-                let n = scan.len();
-                if n == 0 {
-                    return mind.want;
-                }
-                let (mut obstruction, mut stop) = (false, false);
-                let (mut left, mut right) = (1e6f64, 1e6f64);
-                for (i, &r) in scan.iter().enumerate() {
-                    if i > n / 3 && i < n - n / 3 && r < 1.0 {
-                        obstruction = true;
-                    }
-                    if r < 0.3 {
-                        stop = true;
-                    }
-                    if i > n / 2 {
-                        left = left.min(r);
-                    } else {
-                        right = right.min(r);
-                    }
-                }
-                if obstruction || stop || mind.avoid > 0 {
-                    mind.want.x = if stop { 0.0 } else { 0.05 };
-                    if mind.avoid < 1 {
-                        // Stage: random() % 10 + 10 steps.
-                        let draw = self.chance(self.bases[bi].model, 1);
-                        mind.avoid = 10 + (draw * 10.0) as u32;
-                        mind.want.yaw = if left < right { -0.5 } else { 0.5 };
-                    }
-                    mind.avoid -= 1;
-                } else {
+                // Stage's wander_accel: the middle third within 1 m.
+                if !self.avoid(bi, scan, 3, 1.0, 0.3, mind) {
                     mind.avoid = 0;
                     mind.want = Pose::new(0.4, 0.0, 0.0);
                 }
             }
+            Ctrl::Fasr {
+                laser, fiducial, ..
+            } => {
+                // Its callbacks run as its sensors update (100 ms apart
+                // unless their `update_interval` says otherwise).
+                if let Some(f) = fiducial.filter(|&f| self.due(f)) {
+                    mind.charger.0 = false;
+                    let seen = self.fiducials(f);
+                    if let Some(c) = seen.fiducials.iter().find(|c| c.id == 2) {
+                        let (x, y) = (c.pose.x, c.pose.y);
+                        mind.charger = (true, x.hypot(y), y.atan2(x));
+                    }
+                }
+                if self.due(laser) {
+                    if let Some(scan) = self.scan(laser) {
+                        self.fasr(bi, scan, mind);
+                    }
+                }
+            }
         }
         mind.want
+    }
+
+    /// The first sensor's ranges of ranger `r`, when it has read any.
+    fn scan(&self, r: usize) -> Option<&[f64]> {
+        self.readings[r]
+            .first()
+            .map(|r| &r.ranges[..])
+            .filter(|s| !s.is_empty())
+    }
+
+    /// Stage's ObstacleAvoid (wander_accel's and fasr's): when the middle
+    /// of the `scan` (all but the `1/part` at each side) sees anything
+    /// nearer than `near`, anything is nearer than `stop`, or it is still
+    /// avoiding, it creeps (stops, for `stop`) and turns away from the
+    /// nearer side at 0.5 rad/s for 10–19 updates, and says so.
+    fn avoid(
+        &self,
+        bi: usize,
+        scan: &[f64],
+        part: usize,
+        near: f64,
+        stop: f64,
+        mind: &mut Mind,
+    ) -> bool {
+        let n = scan.len();
+        let (mut obstruction, mut halt) = (false, false);
+        let (mut left, mut right) = (1e6f64, 1e6f64);
+        for (i, &r) in scan.iter().enumerate() {
+            if i > n / part && i < n - n / part && r < near {
+                obstruction = true;
+            }
+            if r < stop {
+                halt = true;
+            }
+            if i > n / 2 {
+                left = left.min(r);
+            } else {
+                right = right.min(r);
+            }
+        }
+        if !(obstruction || halt || mind.avoid > 0) {
+            return false;
+        }
+        mind.want.x = if halt { 0.0 } else { 0.05 };
+        if mind.avoid < 1 {
+            // Stage: random() % 10 + 10 updates.
+            let draw = self.chance(self.bases[bi].model, 1);
+            mind.avoid = 10 + (draw * 10.0) as u32;
+            mind.want.yaw = if left < right { -0.5 } else { 0.5 };
+        }
+        mind.avoid -= 1;
+        true
+    }
+
+    /// `fasr`'s laser callback: work, dock or undock (fasr.cc).
+    fn fasr(&self, bi: usize, scan: &[f64], mind: &mut Mind) {
+        let m = self.bases[bi].model;
+        let fraction = self.energy.pack(m).map_or(1.0, |p| p.fraction());
+        let (seen, range, bearing) = mind.charger;
+        let avoid = |mind: &mut Mind| self.avoid(bi, scan, 4, 0.7, 0.5, mind);
+        match mind.mode {
+            Mode::Work => {
+                if avoid(mind) {
+                    return;
+                }
+                mind.want.x = 0.4;
+                let pose = self.global(m);
+                // fasr.world's cave in 4 m cells, clamped to it.
+                let cell = |v: f64| (((v + 8.0) / 4.0) as i64).clamp(0, 3) as usize;
+                let (x, y) = (cell(pose.x), cell(pose.y));
+                let mut goal = if self.energy.flags[m] > 0 {
+                    HAVE[y][x]
+                } else {
+                    NEED[y][x]
+                };
+                if fraction < 0.25 {
+                    goal = REFUEL[y][x];
+                    if seen {
+                        mind.mode = Mode::Dock;
+                    }
+                }
+                mind.want.yaw = normalize(goal.to_radians() - pose.yaw);
+            }
+            Mode::Dock => {
+                if !seen {
+                    mind.want = Pose::default();
+                    mind.mode = Mode::Work;
+                } else if range > 0.5 {
+                    if !avoid(mind) {
+                        mind.want.x = 0.4;
+                        mind.want.yaw = normalize(bearing);
+                    }
+                } else {
+                    // Creeps in; stops close enough; backs off a touch
+                    // when it stalls against the charger.
+                    mind.want = Pose::new(0.02, 0.0, normalize(bearing));
+                    if range < 0.08 {
+                        mind.want = Pose::default();
+                    }
+                    if self.bases[bi].stall {
+                        mind.want.x = -0.01;
+                    }
+                }
+                if fraction > 0.95 {
+                    mind.mode = Mode::Undock;
+                }
+            }
+            Mode::Undock => {
+                // Backs off to 0.3 m from the charger it last saw.
+                mind.want.x = if range < 0.3 { -0.05 } else { 0.0 };
+                if range > 0.3 {
+                    mind.mode = Mode::Work;
+                }
+            }
+        }
     }
 
     /// The expand controllers: turn toward the resultant of the sensors'
@@ -308,7 +490,7 @@ impl Sim {
             Ctrl::ExpandPioneer { ranger }
             | Ctrl::ExpandSwarm { ranger }
             | Ctrl::Flocking { ranger, .. } => Some(ranger),
-            Ctrl::WanderAccel { laser } => Some(laser),
+            Ctrl::WanderAccel { laser } | Ctrl::Fasr { laser, .. } => Some(laser),
         }
     }
 
@@ -373,6 +555,69 @@ impl Sim {
     }
 }
 
+/// fasr.world's headings (degrees) by 4 m cell, `[y][x]` from (-8, -8):
+/// to the sink with a flag, to the source without, to the chargers.
+const HAVE: [[f64; 4]; 4] = [
+    [90.0, 180.0, 180.0, 180.0],
+    [90.0, -90.0, 180.0, 90.0],
+    [90.0, 90.0, 180.0, 90.0],
+    [0.0, 45.0, 0.0, 0.0],
+];
+const NEED: [[f64; 4]; 4] = [
+    [-120.0, -180.0, 180.0, 180.0],
+    [-90.0, -120.0, 180.0, 90.0],
+    [-90.0, -90.0, 180.0, 180.0],
+    [-90.0, -180.0, -90.0, -90.0],
+];
+const REFUEL: [[f64; 4]; 4] = [
+    [0.0, 0.0, 45.0, 120.0],
+    [0.0, -90.0, -60.0, -160.0],
+    [-90.0, -90.0, 180.0, 180.0],
+    [-90.0, -180.0, -90.0, -90.0],
+];
+
+/// `fasr`'s position callback on robot `m` at (x, y): a robot with no
+/// flag within 2 m of the source's spot (-7, -7) takes one from it every
+/// 21st update, and one within 1 m of the sink's (7, 7) gives it one
+/// every 21st (fasr.cc's workduration).
+pub(super) fn fasr_position(
+    e: &mut Energy,
+    mind: &mut Mind,
+    m: usize,
+    (x, y): (f64, f64),
+    source: usize,
+    sink: usize,
+) {
+    const PAYLOAD: u32 = 1;
+    const WORK: u32 = 20;
+    if e.flags[m] < PAYLOAD && (-7.0 - x).hypot(-7.0 - y) < 2.0 {
+        mind.work_get += 1;
+        if mind.work_get > WORK {
+            e.pass_flag(source, m);
+            mind.work_get = 0;
+        }
+    }
+    if (7.0 - x).hypot(7.0 - y) < 1.0 {
+        mind.work_put += 1;
+        if mind.work_put > WORK {
+            e.pass_flag(m, sink);
+            mind.work_put = 0;
+        }
+    }
+}
+
+/// C's `atoi`: the leading digits (after a sign), 0 when there are none;
+/// here a count, so a negative one is 0.
+fn atoi(text: &str) -> u32 {
+    let digits = text.strip_prefix('+').unwrap_or(text);
+    let end = digits
+        .find(|c: char| !c.is_ascii_digit())
+        .unwrap_or(digits.len());
+    digits[..end]
+        .parse()
+        .unwrap_or(if end > 0 { u32::MAX } else { 0 })
+}
+
 /// A uniform draw in [0, 1), a fixed function of `keys` (SplitMix64's
 /// mixing, as `color "random"` uses it).
 fn unit_draw(keys: [u64; 3]) -> f64 {
@@ -389,14 +634,20 @@ mod tests {
     /// A simulator of `text` (a world file that may include the project's
     /// worlds/robots.inc, and gets a 12 m walled room around the origin).
     fn sim(name: &str, text: &str) -> Sim {
-        let dir = std::env::temp_dir().join(format!("troupe-ctrl-{}-{name}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let inc = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../worlds/robots.inc");
         let room = "resolution 0.02\ninterval_sim 100\n\
             model ( name \"n\" pose [0 6 0 0] size [12.2 0.2 0.5] )\n\
             model ( name \"s\" pose [0 -6 0 0] size [12.2 0.2 0.5] )\n\
             model ( name \"e\" pose [6 0 0 0] size [0.2 12.2 0.5] )\n\
             model ( name \"w\" pose [-6 0 0 0] size [0.2 12.2 0.5] )\n";
+        sim_in(name, room, text)
+    }
+
+    /// A simulator of `room` and `text` (which may include the project's
+    /// worlds/robots.inc).
+    fn sim_in(name: &str, room: &str, text: &str) -> Sim {
+        let dir = std::env::temp_dir().join(format!("troupe-ctrl-{}-{name}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let inc = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../worlds/robots.inc");
         let p = dir.join("t.world");
         std::fs::write(&p, format!("include \"{}\"\n{room}{text}", inc.display())).unwrap();
         let w = crate::world::load(&p).unwrap();
@@ -585,6 +836,104 @@ mod tests {
                 s.world.models[r].name
             );
         }
+    }
+
+    /// fasr's world, as a test writes it: a 16 m room, a source zone
+    /// making a flag a second in the south-west corner, a sink in the
+    /// north-east, two chargers on the east wall (a block that gives 2 kW
+    /// and shows fiducial id 2, on a base) and `n` Pioneer-sized carriers
+    /// with `kjoules` each: a laser as `ranger:1`, and in front a bump that
+    /// takes 2 kW and carries the fiducial finder.
+    fn fasr_world(name: &str, n: usize, kjoules: f64) -> Sim {
+        let room = "resolution 0.02\ninterval_sim 100\n\
+            model ( name \"n\" pose [0 8 0 0] size [16.2 0.2 0.5] )\n\
+            model ( name \"s\" pose [0 -8 0 0] size [16.2 0.2 0.5] )\n\
+            model ( name \"e\" pose [8 0 0 0] size [0.2 16.2 0.5] )\n\
+            model ( name \"w\" pose [-8 0 0 0] size [0.2 16.2 0.5] )\n";
+        let mut text = "define zone model ( size [2 2 0.01] obstacle_return 0 ranger_return -1 )\n\
+            zone ( name \"source\" pose [-7 -7 0 0] ctrl \"source 1\" update_interval 1000 )\n\
+            zone ( name \"sink\" pose [7 7 0 0] ctrl \"sink\" )\n\
+            define charger model ( size [0.1 0.3 0.1] \
+              model ( pose [0.01 0 0 0] size [0.05 0.2 0.1] joules -1 give_watts 2000 \
+                      fiducial_return 2 alwayson 1 ) )\n\
+            charger ( pose [7.85 -2.5 0 0] )\n\
+            charger ( pose [7.85 -3.8 0 0] )\n\
+            define carrier tr_robot ( mass 23 ctrl \"fasr\" \
+              ranger ( pose [0 0 -0.1 0] sensor ( range [0 3] fov 180 samples 32 ) size [0.15 0.15 0.1] ) \
+              model ( pose [0.24 0 -0.1 0] size [0.12 0.05 0.1] take_watts 2000 \
+                      obstacle_return 0 fiducial ( range_max 5 pose [0 0 -0.1 0] ) ) )\n"
+            .to_owned();
+        for k in 0..n {
+            let (x, y) = (2.0 + 1.2 * (k % 3) as f64, 3.0 + 1.2 * (k / 3) as f64);
+            text += &format!(
+                "carrier ( name \"r{k}\" pose [{x} {y} 0 {}] kjoules {kjoules} )\n",
+                k * 77 % 360
+            );
+        }
+        sim_in(name, room, &text)
+    }
+
+    #[test]
+    fn fasr_carries_flags_from_the_source_to_the_sink() {
+        let mut s = fasr_world("fasr", 6, 1000.0);
+        assert!(s.bases.iter().all(|b| matches!(
+            b.ctrl,
+            Some(Ctrl::Fasr {
+                fiducial: Some(_),
+                ..
+            })
+        )));
+        let (source, sink) = (s.world.names["source"], s.world.names["sink"]);
+        steps(&mut s, 3000);
+        let delivered = s.flags(sink);
+        let carried: u32 = s.bases.iter().map(|b| s.flags(b.model)).sum();
+        assert!(delivered >= 5, "{delivered} flags delivered in 300 s");
+        // Flags are moved, never made or lost: each left the source.
+        assert!(carried <= 6 && s.flags(source) <= 1);
+    }
+
+    #[test]
+    fn fasr_goes_to_charge_when_hungry_and_comes_back_full() {
+        let mut s = fasr_world("fasr-charge", 3, 40.0);
+        let packs = |s: &Sim| -> Vec<f64> {
+            s.bases
+                .iter()
+                .map(|b| s.pack(b.model).map_or(1.0, |p| p.fraction()))
+                .collect()
+        };
+        let (mut hungry, mut recharged) = (vec![false; 3], vec![false; 3]);
+        for _ in 0..6000 {
+            s.step();
+            for (k, f) in packs(&s).into_iter().enumerate() {
+                hungry[k] |= f < 0.25;
+                recharged[k] |= hungry[k] && f > 0.95;
+            }
+        }
+        assert!(hungry.iter().all(|&h| h), "hungry: {hungry:?}");
+        let n = recharged.iter().filter(|&&r| r).count();
+        assert!(n >= 2, "{n} of 3 robots recharged: {:?}", packs(&s));
+    }
+
+    #[test]
+    fn sources_read_their_capacity_as_stage_does() {
+        assert_eq!(atoi("200"), 200);
+        assert_eq!(atoi("+7x"), 7);
+        assert_eq!(atoi("-3"), 0);
+        assert_eq!(atoi("many"), 0);
+        let mut s = sim(
+            "source",
+            "model ( name \"a\" pose [-3 0 0 0] size [1 1 0.01] ctrl \"source 2 10\" update_interval 500 )\n\
+             model ( name \"b\" pose [3 0 0 0] size [1 1 0.01] ctrl \"source\" )\n",
+        );
+        let (a, b) = (s.world.names["a"], s.world.names["b"]);
+        // One flag each update (0.5 s) up to its capacity; `b` has none.
+        steps(&mut s, 4);
+        assert_eq!(s.flags(a), 0);
+        steps(&mut s, 1);
+        assert_eq!(s.flags(a), 1);
+        steps(&mut s, 30);
+        assert_eq!((s.flags(a), s.flags(b)), (2, 0));
+        assert_eq!(s.flags_held().as_deref(), Some("`a` 2"));
     }
 
     #[test]
