@@ -23,6 +23,7 @@ use crate::world::{Drive, Kind, Localization, Sensor, World};
 
 mod ctrl;
 mod energy;
+mod fasr2;
 pub use ctrl::{Ctrl, Mind, Mode};
 pub use energy::Pack;
 
@@ -178,6 +179,8 @@ pub struct Sim {
     used: Vec<bool>,
     /// Power packs and flags.
     energy: energy::Energy,
+    /// The `fasr2` robots' shared state, in a world that has them.
+    fasr2: Option<Box<fasr2::Fasr2>>,
     movable: Vec<bool>,
     /// The cells each static model occupies now.
     cells: Vec<Vec<(usize, usize)>>,
@@ -397,16 +400,28 @@ impl Sim {
         let mut noisy = vec![false; n];
         let mut used = vec![false; n];
         let mut energy = energy::Energy::new(&world);
+        let mut fasr2: Option<Result<Box<fasr2::Fasr2>, String>> = None;
         let mut missing: std::collections::BTreeMap<String, (usize, usize)> = Default::default();
         for m in 0..n {
             for c in &world.models[m].ctrl {
                 let why = match ctrl::find(&world, &trees[m], m, c) {
                     ctrl::Found::Base(found) if ctrls[m].is_none() => {
-                        if let Ctrl::Fasr {
-                            fiducial: Some(f), ..
-                        } = found
-                        {
-                            used[f] = true;
+                        match found {
+                            Ctrl::Fasr {
+                                fiducial: Some(f), ..
+                            } => used[f] = true,
+                            Ctrl::Fasr2 { fiducial, .. } => {
+                                // The tasks are the first robot's, as in Stage.
+                                if fasr2.is_none() {
+                                    fasr2 = Some(fasr2::setup(&world, c).map(Box::new));
+                                }
+                                if let Some(Err(why)) = &fasr2 {
+                                    missing.entry(why.clone()).or_insert((m, 0)).1 += 1;
+                                    continue;
+                                }
+                                used[fiducial] = true;
+                            }
+                            _ => {}
                         }
                         ctrls[m] = Some(found);
                         continue;
@@ -532,6 +547,7 @@ impl Sim {
             sensed: vec![true; n],
             used,
             energy,
+            fasr2: fasr2.and_then(Result::ok),
             crew: Crew::default(),
             roots,
             heights,
@@ -547,6 +563,18 @@ impl Sim {
         };
         for m in 0..n {
             sim.place(m);
+        }
+        if let Some(mut f) = sim.fasr2.take() {
+            let n = sim.bases.len();
+            for bi in 0..n {
+                if matches!(sim.bases[bi].ctrl, Some(Ctrl::Fasr2 { .. })) {
+                    let m = sim.bases[bi].model;
+                    f.join(n, bi, sim.chance(m, 4));
+                    // A robot wears the colour of the zone it heads for.
+                    sim.colors[m] = sim.colors[f.goal(bi)];
+                }
+            }
+            sim.fasr2 = Some(f);
         }
         // No more threads than cores: the helpers spin while the bases
         // move, and one without a core of its own would slow the moves.
@@ -568,6 +596,9 @@ impl Sim {
         for bi in 0..self.bases.len() {
             if let Some(r) = self.ctrl_ranger(bi) {
                 on[r] = true;
+            }
+            if let Some(Ctrl::Fasr2 { sonar, .. }) = self.bases[bi].ctrl {
+                on[sonar] = true;
             }
         }
         self.sensed = on;

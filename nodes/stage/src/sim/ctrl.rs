@@ -72,6 +72,16 @@ pub enum Ctrl {
         /// …and the one it brings them to.
         sink: usize,
     },
+    /// `fasr2` (examples/ctrl/fasr2.cc): tasks between named zones, A*
+    /// over the `cave`, docking at chargers (see [`super::fasr2`]).
+    Fasr2 {
+        /// The laser (`ranger:1`).
+        laser: usize,
+        /// The sonars (`ranger:0`): it backs off a charger by them.
+        sonar: usize,
+        /// The fiducial finder that looks for chargers.
+        fiducial: usize,
+    },
 }
 
 /// What `fasr` is about.
@@ -131,7 +141,7 @@ pub enum Found {
     Source(u32),
     /// `sink`: a zone that takes the flags robots bring.
     Sink,
-    /// Not built in (`fasr2`, a user's own plug-in).
+    /// Not built in (a user's own plug-in).
     Unknown,
     /// Built in, but the model lacks what it reads.
     Lacks(String),
@@ -229,6 +239,18 @@ pub fn find(world: &World, tree: &[usize], m: usize, line: &str) -> Found {
                 }),
             }
         }
+        "fasr2" if !position => on_base(&format!("a {:?}", model.kind).to_lowercase()),
+        "fasr2" => {
+            let child = |name: &str| world.names.get(&format!("{}.{name}", model.name)).copied();
+            match (child("ranger:1"), child("ranger:0"), take(Kind::Fiducial)) {
+                (Some(laser), Some(sonar), Some(fiducial)) => Found::Base(Ctrl::Fasr2 {
+                    laser,
+                    sonar,
+                    fiducial,
+                }),
+                _ => no("sonars (`ranger:0`), a laser (`ranger:1`) and a fiducial finder"),
+            }
+        }
         // source.cc: its first argument, read as atoi reads it (fasr2.world
         // gives two; Stage's release build reads the first).
         "source" => match line.split_whitespace().nth(1) {
@@ -304,6 +326,8 @@ impl Sim {
                     mind.want = Pose::new(0.4, 0.0, 0.0);
                 }
             }
+            // Its update runs in series, after the moves (Sim::chores).
+            Ctrl::Fasr2 { .. } => {}
             Ctrl::Fasr {
                 laser, fiducial, ..
             } => {
@@ -328,7 +352,7 @@ impl Sim {
     }
 
     /// The first sensor's ranges of ranger `r`, when it has read any.
-    fn scan(&self, r: usize) -> Option<&[f64]> {
+    pub(super) fn scan(&self, r: usize) -> Option<&[f64]> {
         self.readings[r]
             .first()
             .map(|r| &r.ranges[..])
@@ -340,7 +364,7 @@ impl Sim {
     /// nearer than `near`, anything is nearer than `stop`, or it is still
     /// avoiding, it creeps (stops, for `stop`) and turns away from the
     /// nearer side at 0.5 rad/s for 10–19 updates, and says so.
-    fn avoid(
+    pub(super) fn avoid(
         &self,
         bi: usize,
         scan: &[f64],
@@ -490,7 +514,9 @@ impl Sim {
             Ctrl::ExpandPioneer { ranger }
             | Ctrl::ExpandSwarm { ranger }
             | Ctrl::Flocking { ranger, .. } => Some(ranger),
-            Ctrl::WanderAccel { laser } | Ctrl::Fasr { laser, .. } => Some(laser),
+            Ctrl::WanderAccel { laser } | Ctrl::Fasr { laser, .. } | Ctrl::Fasr2 { laser, .. } => {
+                Some(laser)
+            }
         }
     }
 
@@ -912,6 +938,101 @@ mod tests {
         assert!(hungry.iter().all(|&h| h), "hungry: {hungry:?}");
         let n = recharged.iter().filter(|&&r| r).count();
         assert!(n >= 2, "{n} of 3 robots recharged: {:?}", packs(&s));
+    }
+
+    /// fasr2's world, as a test writes it: a 32 m `cave` with a 6 m
+    /// thick block from its south wall to 10 m short of the north one, the
+    /// `red` task's source west of it and its sink east (a straight line
+    /// meets the block), a fuel zone and a charger in the north-west, and
+    /// `n` carriers with `kjoules` each.
+    fn fasr2_world(name: &str, n: usize, kjoules: f64) -> Sim {
+        let wall = |x0: f64, y0: f64, x1: f64, y1: f64| {
+            format!(
+                "block ( points 4 point[0] [{x0} {y0}] point[1] [{x1} {y0}] \
+                 point[2] [{x1} {y1}] point[3] [{x0} {y1}] z [0 0.5] ) "
+            )
+        };
+        let room = format!(
+            "resolution 0.02\ninterval_sim 100\n\
+             model ( name \"cave\" size [32 32 0.5] {}{}{}{}{})\n",
+            wall(-16.0, -16.0, 16.0, -15.8),
+            wall(-16.0, 15.8, 16.0, 16.0),
+            wall(-16.0, -16.0, -15.8, 16.0),
+            wall(15.8, -16.0, 16.0, 16.0),
+            wall(-3.0, -16.0, 3.0, 6.0),
+        );
+        let mut text = "define zone model ( size [3 3 0.01] obstacle_return 0 ranger_return -1 )\n\
+            zone ( name \"red_source\" pose [-10 -10 0 0] color \"red\" ctrl \"source 5\" )\n\
+            zone ( name \"red_sink\" pose [10 -10 0 0] color \"DarkRed\" ctrl \"sink\" )\n\
+            zone ( name \"fuel_zone\" pose [-13 13 0 0] size [1 1 0.01] )\n\
+            model ( name \"charger\" pose [-15.7 13 0 0] size [0.1 0.3 0.3] obstacle_return 0 \
+                    ranger_return 0 fiducial_return 2 kjoules -1 give_watts 1000 alwayson 1 )\n\
+            define carrier tr_robot ( mass 23 ctrl \"fasr2 red\" \
+              ranger ( pose [0 0 -0.1 0] sensor ( range [0 2] fov 180 samples 32 ) size [0.15 0.15 0.1] ) \
+              model ( pose [0.24 0 -0.1 0] size [0.12 0.05 0.1] take_watts 1000 \
+                      obstacle_return 0 fiducial ( range_max 9 range_max_id 9 pose [0 0 -0.05 0] ) ) )\n"
+            .to_owned();
+        for k in 0..n {
+            let (x, y) = (-12.0 + 1.5 * (k % 3) as f64, -6.0 + 1.5 * (k / 3) as f64);
+            text += &format!(
+                "carrier ( name \"r{k}\" pose [{x} {y} 0 {}] kjoules {kjoules} )\n",
+                k * 77 % 360
+            );
+        }
+        sim_in(name, &room, &text)
+    }
+
+    #[test]
+    fn fasr2_plans_around_the_wall_to_carry_flags() {
+        let mut s = fasr2_world("fasr2", 4, 400.0);
+        assert!(s
+            .bases
+            .iter()
+            .all(|b| matches!(b.ctrl, Some(Ctrl::Fasr2 { .. }))));
+        let sink = s.world.names["red_sink"];
+        let mut east = 0;
+        for _ in 0..9000 {
+            s.step();
+            // Robots reach the sink's side only round the block's north end.
+            for b in &s.bases {
+                let g = s.global(b.model);
+                if g.x > 4.0 && g.y < 0.0 {
+                    east += 1;
+                }
+            }
+        }
+        let delivered = s.flags(sink);
+        assert!(delivered >= 8, "{delivered} flags delivered in 900 s");
+        assert!(east > 0);
+    }
+
+    #[test]
+    fn fasr2_without_its_zones_or_cave_leaves_its_robots_idle() {
+        let text = "tr_robot ( name \"r0\" ranger ( sensor ( samples 32 ) ) fiducial ( ) \
+                    ctrl \"fasr2 red\" )\n";
+        let s = sim("fasr2-lacks", text);
+        assert_eq!(s.bases[0].ctrl, None);
+        assert!(matches!(
+            super::super::fasr2::setup(&s.world, "fasr2 red"),
+            Err(why) if why.contains("red_source")
+        ));
+        assert!(super::super::fasr2::setup(&s.world, "fasr2").is_err());
+    }
+
+    #[test]
+    fn fasr2_recharges_at_the_fuel_zone() {
+        let mut s = fasr2_world("fasr2-charge", 2, 30.0);
+        let (mut hungry, mut recharged) = (vec![false; 2], vec![false; 2]);
+        for _ in 0..8000 {
+            s.step();
+            for (k, b) in s.bases.iter().enumerate() {
+                let f = s.pack(b.model).map_or(1.0, |p| p.fraction());
+                hungry[k] |= f < 0.2;
+                recharged[k] |= hungry[k] && f > 0.95;
+            }
+        }
+        assert!(hungry.iter().all(|&h| h), "hungry: {hungry:?}");
+        assert!(recharged.iter().all(|&r| r), "recharged: {recharged:?}");
     }
 
     #[test]

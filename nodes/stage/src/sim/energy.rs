@@ -150,6 +150,16 @@ impl Sim {
                 }
             }
         }
+        if let Some(mut f) = self.fasr2.take() {
+            for bi in 0..self.bases.len() {
+                if matches!(self.bases[bi].ctrl, Some(ctrl::Ctrl::Fasr2 { .. }))
+                    && self.due(self.bases[bi].model)
+                {
+                    self.fasr2_update(bi, &mut f);
+                }
+            }
+            self.fasr2 = Some(f);
+        }
         for k in 0..self.energy.sources.len() {
             let (zone, capacity) = self.energy.sources[k];
             if self.due(zone) && self.energy.flags[zone] < capacity {
