@@ -205,6 +205,23 @@ pub struct Sim {
     plans: Vec<Mutex<Plan>>,
 }
 
+/// Stage's `rasterize` controller: model `m`'s outline drawn into 40×20
+/// cells, said row by row from the top (`O` drawn, `.` not).
+fn rasterize(world: &World, m: usize) {
+    const W: usize = 40;
+    const H: usize = 20;
+    let def = &world.models[m];
+    let cells = fasr2::outline(&def.blocks, (def.size[0], def.size[1]), (W, H));
+    tracing::info!("[Rasterize] Raster of model \"{}\":", def.name);
+    for row in cells.chunks(W).rev() {
+        let line: String = row
+            .iter()
+            .map(|&c| if c == fasr2::FREE { '.' } else { 'O' })
+            .collect();
+        tracing::info!("[Rasterize] {line}");
+    }
+}
+
 /// A body as it would stand at a global pose: in world coordinates, with
 /// the cells of its box (`None` off the grid), made once (by the thread
 /// that plans the move) for both the collision tests and the filing.
@@ -436,6 +453,12 @@ impl Sim {
                     ctrl::Found::Source(capacity) => {
                         used[m] = true;
                         energy.sources.push((m, capacity));
+                        continue;
+                    }
+                    ctrl::Found::AtLoad => {
+                        if c.split_whitespace().next() == Some("rasterize") {
+                            rasterize(&world, m);
+                        }
                         continue;
                     }
                     ctrl::Found::Sink => {

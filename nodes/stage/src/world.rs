@@ -836,6 +836,72 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
         world.names.insert(auto, idx);
         world.names.insert(name, idx);
     }
+    // Stage's `dynamic` controller: at start-up, 100 blue 10 cm boxes on
+    // its model, anywhere within a metre of its centre, facing any way
+    // (Stage draws them at random; here the same on every load).
+    for m in 0..world.models.len() {
+        let ctrl = &world.models[m].ctrl;
+        if !ctrl
+            .iter()
+            .any(|c| c.split_whitespace().next() == Some("dynamic"))
+        {
+            continue;
+        }
+        let blue = Color {
+            r: 0.0,
+            g: 0.0,
+            b: 1.0,
+            a: 1.0,
+        };
+        for i in 0..100u64 {
+            let draw = |k: u64| {
+                let z = colors::mix64(((m as u64 * 100 + i) * 4 + k) ^ colors::GOLDEN);
+                (z >> 11) as f64 / (1u64 << 53) as f64
+            };
+            let k = counts.entry((Some(m), "model".to_owned())).or_insert(0);
+            let name = format!("{}.model:{k}", world.models[m].name);
+            *k += 1;
+            let idx = world.models.len();
+            let parent = &world.models[m];
+            let child = ModelDef {
+                name: name.clone(),
+                kind: Kind::Model,
+                parent: Some(m),
+                children: Vec::new(),
+                pose: Pose::new(
+                    -1.0 + 2.0 * draw(0),
+                    -1.0 + 2.0 * draw(1),
+                    troupe_geom::normalize(2.0 * PI * draw(2)),
+                ),
+                z: 0.0,
+                size: [0.1, 0.1, 0.1],
+                origin: Pose::default(),
+                color: blue,
+                blocks: Vec::new(),
+                position: None,
+                sensors: Vec::new(),
+                ctrl: Vec::new(),
+                blobfinder: None,
+                fiducial: None,
+                energy: Energy::default(),
+                update_interval: 0.1,
+                obstacle_return: true,
+                ranger_return: 1.0,
+                blob_return: true,
+                fiducial_return: 0,
+                gripper_return: false,
+                stack_children: true,
+                map_resolution: 0.1,
+                pos: parent.pos.clone(),
+            };
+            world.models.push(child);
+            world.models[m].children.push(idx);
+            raw_blocks.push(vec![rect(-0.5, -0.5, 0.5, 0.5)]);
+            has_default_block.push(true);
+            boundaries.push(false);
+            world.names.insert(name, idx);
+        }
+    }
     // Bodies: stretch to size, add boundary walls, apply the origin.
     for (m, mut blocks) in raw_blocks.into_iter().enumerate() {
         let (sx, sy) = (world.models[m].size[0], world.models[m].size[1]);
@@ -912,6 +978,24 @@ mod tests {
         let r = load(&p);
         let _ = std::fs::remove_dir_all(&dir);
         r
+    }
+
+    #[test]
+    fn dynamic_makes_its_hundred_boxes_on_its_model() {
+        let text = "model ( name \"base\" pose [5 5 0 0] size [3 3 0.2] ctrl \"dynamic\" )\n";
+        let w = load_text("dynamic", text).unwrap();
+        let base = w.names["base"];
+        let kids = &w.models[base].children;
+        assert_eq!(kids.len(), 100);
+        assert_eq!(w.names["base.model:99"], kids[99]);
+        for &k in kids {
+            let c = &w.models[k];
+            assert_eq!((c.parent, c.size), (Some(base), [0.1, 0.1, 0.1]));
+            assert!(c.pose.x.abs() <= 1.0 && c.pose.y.abs() <= 1.0);
+            assert_eq!(c.blocks.len(), 1);
+        }
+        let spread = kids.iter().map(|&k| w.models[k].pose.x).fold(0.0, f64::max);
+        assert!(spread > 0.8, "boxes spread over the metre: {spread}");
     }
 
     #[test]

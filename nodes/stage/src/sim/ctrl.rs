@@ -141,6 +141,9 @@ pub enum Found {
     Source(u32),
     /// `sink`: a zone that takes the flags robots bring.
     Sink,
+    /// Done as the world loads: `dynamic` (its 100 boxes are made with
+    /// the world) and `rasterize` (prints the model's raster).
+    AtLoad,
     /// Not built in (a user's own plug-in).
     Unknown,
     /// Built in, but the model lacks what it reads.
@@ -255,9 +258,12 @@ pub fn find(world: &World, tree: &[usize], m: usize, line: &str) -> Found {
         // gives two; Stage's release build reads the first).
         "source" => match line.split_whitespace().nth(1) {
             Some(capacity) => Found::Source(atoi(capacity)),
-            None => Found::Lacks("\"source\" takes an argument, its capacity".into()),
+            None => Found::Lacks(
+                "\"source\" takes an argument, its capacity (Stage's source.cc asserts it)".into(),
+            ),
         },
         "sink" => Found::Sink,
+        "dynamic" | "rasterize" => Found::AtLoad,
         _ => Found::Unknown,
     }
 }

@@ -20,7 +20,7 @@ use crate::world::World;
 /// The planner's raster of the `cave`, cells across and up.
 const CELLS: usize = 32;
 /// A cell's cost: free, and never entered.
-const FREE: u8 = 1;
+pub(super) const FREE: u8 = 1;
 const WALL: u8 = 9;
 
 /// One task: where flags come from and where they go.
@@ -104,8 +104,19 @@ pub fn setup(world: &World, line: &str) -> Result<Fasr2, String> {
 /// (every edge as a line of cells) into a `CELLS`² raster of a model of
 /// `size`, walls `WALL`, the rest `FREE`.
 fn raster(blocks: &[Vec<(f64, f64)>], size: (f64, f64)) -> Vec<u8> {
-    let mut map = vec![FREE; CELLS * CELLS];
-    let (cw, ch) = (size.0 / CELLS as f64, size.1 / CELLS as f64);
+    outline(blocks, size, (CELLS, CELLS))
+}
+
+/// Stage's Model::Rasterize: each block's outline drawn (every edge as a
+/// line of cells) into a `w`×`h` raster (row by row from the bottom) of a
+/// model of `size`, `WALL` where drawn, `FREE` elsewhere.
+pub(super) fn outline(
+    blocks: &[Vec<(f64, f64)>],
+    size: (f64, f64),
+    (w, h): (usize, usize),
+) -> Vec<u8> {
+    let mut map = vec![FREE; w * h];
+    let (cw, ch) = (size.0 / w as f64, size.1 / h as f64);
     for poly in blocks {
         for (k, &a) in poly.iter().enumerate() {
             let b = poly[(k + 1) % poly.len()];
@@ -116,8 +127,8 @@ fn raster(blocks: &[Vec<(f64, f64)>], size: (f64, f64)) -> Vec<u8> {
                 let t = i as f64 / n as f64;
                 let x = ((a.0 + (b.0 - a.0) * t + size.0 / 2.0) / cw).floor();
                 let y = ((a.1 + (b.1 - a.1) * t + size.1 / 2.0) / ch).floor();
-                if (0.0..CELLS as f64).contains(&x) && (0.0..CELLS as f64).contains(&y) {
-                    map[y as usize * CELLS + x as usize] = WALL;
+                if (0.0..w as f64).contains(&x) && (0.0..h as f64).contains(&y) {
+                    map[y as usize * w + x as usize] = WALL;
                 }
             }
         }
@@ -481,6 +492,11 @@ mod tests {
         assert_eq!(at(1, 16), FREE, "inside, not on the outline");
         assert_eq!(at(20, 16), FREE);
         assert_eq!((cell(-50.0, 100.0), cell(49.9, 100.0)), (0, 31));
+        // rasterize's 40×20 of a 4×2 m box: its border.
+        let square = vec![(-1.95, -0.95), (1.95, -0.95), (1.95, 0.95), (-1.95, 0.95)];
+        let box_map = outline(&[square], (4.0, 2.0), (40, 20));
+        let drawn = box_map.iter().filter(|&&c| c == WALL).count();
+        assert_eq!(drawn, 2 * 40 + 2 * 18);
         assert!((centre(0, 100.0) + 48.4375).abs() < 1e-9);
     }
 }
