@@ -162,9 +162,9 @@ pub struct Sim {
     /// Each model's body from its base to its top, above the floor: Stage
     /// is 2.5D, and a sensor sees only what spans the height of its rays.
     heights: Vec<(f64, f64)>,
-    /// Each model's `ranger_return` is not negative: rangers see it (kept
-    /// apart from the models, for the rays' inner loop).
-    returns: Vec<bool>,
+    /// What a ray asks of each model, side by side (one cache line, not
+    /// three): its tree, whether rangers see it, its heights.
+    looks: Vec<Look>,
     /// The threads that plan moves and cast rays, and the models with
     /// range sensors among them.
     crew: Crew,
@@ -253,6 +253,18 @@ impl Seen {
         }
         true
     }
+}
+
+/// What a ray asks of a model it meets (see `Sim::ranger_sees`).
+#[derive(Debug, Clone, Copy)]
+struct Look {
+    /// The model at the root of its tree.
+    root: u32,
+    /// Rangers see it (its `ranger_return` is not negative).
+    seen: bool,
+    /// Its body's base and top above the floor.
+    lo: f64,
+    hi: f64,
 }
 
 /// Sensors with at least this many rays look around their origin once, so
@@ -530,11 +542,14 @@ impl Sim {
             .iter()
             .map(|m| (m.kind == Kind::Gripper).then(GripperState::default))
             .collect();
-        let heights = (0..n).map(|m| height(&world, &poses, m)).collect();
-        let returns = world
-            .models
-            .iter()
-            .map(|m| m.ranger_return >= 0.0)
+        let heights: Vec<(f64, f64)> = (0..n).map(|m| height(&world, &poses, m)).collect();
+        let looks = (0..n)
+            .map(|m| Look {
+                root: roots[m] as u32,
+                seen: world.models[m].ranger_return >= 0.0,
+                lo: heights[m].0,
+                hi: heights[m].1,
+            })
             .collect();
         let fans = world
             .models
@@ -573,8 +588,8 @@ impl Sim {
             fasr2: fasr2.and_then(Result::ok),
             crew: Crew::default(),
             roots,
+            looks,
             heights,
-            returns,
             movable,
             cells: vec![Vec::new(); n],
             raster: None,
@@ -912,6 +927,7 @@ impl Sim {
         for k in self.trees[m].clone() {
             // Its height too: a 3D pose may have lifted it.
             self.heights[k] = height(&self.world, &self.poses, k);
+            (self.looks[k].lo, self.looks[k].hi) = self.heights[k];
             self.place(k);
         }
         if let Some(b) = self.bases.iter_mut().find(|b| b.model == m) {
@@ -1281,10 +1297,10 @@ impl Sim {
     /// What ranger `r`'s rays at height `z` stop at: anything with a ranger
     /// return at that height that is not part of its own robot.
     fn ranger_sees(&self, r: usize, z: f64) -> impl Fn(u16) -> bool + Copy + '_ {
-        let root = self.roots[r];
+        let root = self.roots[r] as u32;
         move |c: u16| {
-            let other = usize::from(c) - 1;
-            self.roots[other] != root && self.returns[other] && self.spans(other, z)
+            let o = &self.looks[usize::from(c) - 1];
+            o.root != root && o.seen && o.lo <= z && z <= o.hi
         }
     }
 
