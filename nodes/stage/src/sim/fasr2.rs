@@ -136,6 +136,15 @@ pub(super) fn outline(
     map
 }
 
+/// Whether `n` is 10, 100, 1000…
+fn power_of_ten(n: usize) -> bool {
+    let mut n = n;
+    while n >= 10 && n % 10 == 0 {
+        n /= 10;
+    }
+    n == 1
+}
+
 /// fasr2's MetersToCell: metres from the map's centre to a cell index
 /// (off the map: a cell that is not on it).
 fn cell(m: f64, size: f64) -> usize {
@@ -237,15 +246,18 @@ impl Fasr2 {
         );
         if !self.plans.contains_key(&key) {
             let path = astar(&self.map, start, goal).unwrap_or_else(|| {
+                // Said the first time, then at every power of ten, counted.
                 self.failed += 1;
                 if self.failed == 1 {
                     tracing::warn!(
-                        "fasr2: no path from ({:.2}, {:.2}) to ({:.2}, {:.2}) on the `cave`'s raster; the robot wanders (said once)",
+                        "fasr2: no path from ({:.2}, {:.2}) to ({:.2}, {:.2}) on the `cave`'s raster; the robot heads nowhere in particular until it is elsewhere",
                         from.0,
                         from.1,
                         to.0,
                         to.1
                     );
+                } else if power_of_ten(self.failed) {
+                    tracing::warn!("fasr2: {} plans have found no path", self.failed);
                 }
                 Vec::new()
             });
@@ -478,6 +490,12 @@ mod tests {
             map[10 * CELLS + x] = WALL;
         }
         assert_eq!(astar(&map, (2, 2), (8, 2)), None);
+    }
+
+    #[test]
+    fn failures_are_counted_at_powers_of_ten() {
+        let said: Vec<usize> = (2..=1000).filter(|&n| power_of_ten(n)).collect();
+        assert_eq!(said, [10, 100, 1000]);
     }
 
     #[test]
