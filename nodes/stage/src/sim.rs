@@ -1124,6 +1124,12 @@ impl Sim {
             while let Some(k) = to_sense.take() {
                 let mut slot = lock(&work[k]);
                 let (r, out) = &mut *slot;
+                // As Stage, a ranger senses every `update_interval` (100
+                // ms), however short the steps; in between it keeps its
+                // readings.
+                if moves && !me.due(*r) {
+                    continue;
+                }
                 me.sense_one(*r, out, &mut sweep);
                 if me.noisy[*r] {
                     if let Some(first) = out.first_mut() {
@@ -1926,6 +1932,27 @@ mod tests {
         // The wall's face is at x = 4.9; the robot's front at x + 0.2.
         assert!(p.x + 0.2 < 4.92 && p.x > 4.5, "{p:?}");
         assert_eq!(s.bases[0].vel, Pose::default());
+    }
+
+    #[test]
+    fn rangers_sense_every_100_ms_however_short_the_steps() {
+        // 20 ms steps, as Stage's fasr.world takes them: the ranger reads
+        // at every fifth, and holds its readings in between.
+        let room = ROOM.replace("interval_sim 100", "interval_sim 20");
+        let mut s = sim("interval", &format!("{room}position ( name \"r\" pose [0 0 0 0] size [0.4 0.4 0.2] ranger ( sensor ( range [0 8] samples 1 ) ) )\n"));
+        s.bases[0].cmd = Some(Command::Vel(Pose::new(0.5, 0.0, 0.0)));
+        let r = s.world.names["r.ranger:0"];
+        let mut seen = vec![s.readings[r][0].ranges[0]];
+        for _ in 0..10 {
+            s.step();
+            seen.push(s.readings[r][0].ranges[0]);
+        }
+        let changed: Vec<usize> = (1..seen.len())
+            .filter(|&k| seen[k] != seen[k - 1])
+            .collect();
+        assert_eq!(changed, [5, 10], "{seen:?}");
+        // Each time, 5 cm nearer the wall (0.5 m/s for 0.1 s).
+        assert!((seen[5] - seen[10] - 0.05).abs() < 1e-6, "{seen:?}");
     }
 
     #[test]

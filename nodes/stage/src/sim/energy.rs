@@ -11,6 +11,8 @@
 //! rates. Flags are what Stage's models carry and zones hold: here only
 //! how many.
 
+use troupe_geom::Pose;
+
 use super::{ctrl, Sim};
 use crate::movers::Body;
 use crate::world::{Kind, World};
@@ -59,6 +61,9 @@ pub struct Energy {
     /// Models that give energy, and those that take it.
     givers: Vec<usize>,
     takers: Vec<usize>,
+    /// How far each model's body reaches from its pose (givers and
+    /// takers): two farther apart than their reaches cannot touch.
+    reach: Vec<f64>,
     /// How many flags each model holds.
     pub flags: Vec<u32>,
     /// Source zones and the flags they hold at most.
@@ -96,9 +101,21 @@ impl Energy {
                 .filter(|&m| pack_of[m].is_some() && f(&world.models[m].energy) > 0.0)
                 .collect()
         };
+        let reach = world
+            .models
+            .iter()
+            .map(|m| {
+                m.blocks
+                    .iter()
+                    .flatten()
+                    .map(|p| p.0.hypot(p.1))
+                    .fold(0.0, f64::max)
+            })
+            .collect();
         Energy {
             givers: with(|e| e.give),
             takers: with(|e| e.take),
+            reach,
             packs,
             pack_of,
             flags: vec![0; n],
@@ -129,7 +146,7 @@ impl Energy {
 impl Sim {
     /// Whether model `m` updates in the step from `self.time`: Stage
     /// updates a model every `update_interval`, at its multiples.
-    pub(super) fn due(&self, m: usize) -> bool {
+    pub(crate) fn due(&self, m: usize) -> bool {
         let every = self.world.models[m].update_interval;
         let k = |t: f64| (t / every + 1e-9).floor();
         k(self.time + self.world.interval_sim) > k(self.time)
@@ -217,18 +234,30 @@ impl Sim {
             pack.charging = false;
         }
         let (mut mine, mut his) = (Body::default(), Body::default());
+        let takers: Vec<(usize, Pose)> = self
+            .energy
+            .takers
+            .iter()
+            .map(|&t| (t, self.global(t)))
+            .collect();
         for gi in 0..self.energy.givers.len() {
             let g = self.energy.givers[gi];
             if !running[g] {
                 continue;
             }
-            mine.place(&self.world.models[g].blocks, self.global(g));
-            for ti in 0..self.energy.takers.len() {
-                let t = self.energy.takers[ti];
-                if self.roots[t] == self.roots[g] {
+            let at = self.global(g);
+            let mut placed = false;
+            for &(t, there) in &takers {
+                let reach = self.energy.reach[g] + self.energy.reach[t];
+                if self.roots[t] == self.roots[g] || (at.x - there.x).hypot(at.y - there.y) > reach
+                {
                     continue;
                 }
-                his.place(&self.world.models[t].blocks, self.global(t));
+                if !placed {
+                    mine.place(&self.world.models[g].blocks, at);
+                    placed = true;
+                }
+                his.place(&self.world.models[t].blocks, there);
                 if !mine.overlaps(&his) {
                     continue;
                 }
