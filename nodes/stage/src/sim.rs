@@ -1688,9 +1688,10 @@ impl Sim {
                 (c.b * 255.0) as u8,
             ])
         };
-        // Rays first, bodies over them.
+        // Rays first (of the rangers that sense: the others hold their
+        // first, full-range readings), bodies over them.
         for (r, rd) in self.readings.iter().enumerate() {
-            if rd.is_empty() {
+            if rd.is_empty() || !self.sensed[r] {
                 continue;
             }
             let base = self.global(r).compose(&self.world.models[r].origin);
@@ -1953,6 +1954,23 @@ mod tests {
         assert_eq!(changed, [5, 10], "{seen:?}");
         // Each time, 5 cm nearer the wall (0.5 m/s for 0.1 s).
         assert!((seen[5] - seen[10] - 0.05).abs() < 1e-6, "{seen:?}");
+    }
+
+    #[test]
+    fn controllers_decide_as_their_rangers_update() {
+        // 20 ms steps: `wander` first decides when its laser first reads,
+        // at 100 ms, and its speeds hold between its decisions.
+        let room = ROOM.replace("interval_sim 100", "interval_sim 20");
+        let mut s = sim("ctrl-interval", &format!("{room}position ( name \"r\" pose [0 0 0 0] size [0.4 0.4 0.2] ctrl \"wander\" ranger ( sensor ( range [0 8] fov 180 samples 31 ) ) )\n"));
+        steps(&mut s, 4);
+        assert_eq!(s.bases[0].vel, Pose::default());
+        s.step();
+        assert!((s.bases[0].vel.x - 0.4).abs() < 1e-9);
+        steps(&mut s, 3);
+        assert!(
+            (s.bases[0].vel.x - 0.4).abs() < 1e-9,
+            "held between decisions"
+        );
     }
 
     #[test]

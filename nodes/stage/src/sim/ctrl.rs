@@ -272,8 +272,13 @@ impl Sim {
     /// The speeds base `bi`'s controller sets this step, from what its
     /// sensors read; `mind` is what it keeps.
     pub(super) fn control(&self, bi: usize, ctrl: Ctrl, mind: &mut Mind) -> Pose {
+        // Stage runs a controller as the ranger it reads updates (every
+        // 100 ms, however short the steps); the speeds it set hold between.
+        if self.ctrl_ranger(bi).is_some_and(|r| !self.due(r)) {
+            return mind.want;
+        }
         match ctrl {
-            Ctrl::Wander => return self.wander(bi, mind),
+            Ctrl::Wander => mind.want = self.wander(bi, mind),
             Ctrl::ExpandPioneer { ranger } => {
                 // Stage's SAFE_DIST 0.75, SAFE_ANGLE 0.5, VSPEED 0.2, WGAIN 1.
                 let s = 0.75;
