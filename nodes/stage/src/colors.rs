@@ -75,13 +75,23 @@ const NAMED: &[(&str, [u8; 3])] = &[
 ];
 
 /// SplitMix64's step between states.
-pub(crate) const GOLDEN: u64 = 0x9E37_79B9_7F4A_7C15;
+const GOLDEN: u64 = 0x9E37_79B9_7F4A_7C15;
 
 /// SplitMix64's output function: a state to well-mixed bits.
-pub(crate) fn mix64(mut z: u64) -> u64 {
+fn mix64(mut z: u64) -> u64 {
     z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
     z ^ (z >> 31)
+}
+
+/// A uniform draw in [0, 1), a fixed function of `keys` (SplitMix64's
+/// mixing, as `color "random"` uses it): the simulator's random numbers,
+/// the same on every run.
+pub(crate) fn unit_draw<const N: usize>(keys: [u64; N]) -> f64 {
+    let z = keys.iter().fold(0x243F_6A88_85A3_08D3u64, |z, &k| {
+        mix64((z ^ k).wrapping_add(GOLDEN))
+    });
+    (z >> 11) as f64 / (1u64 << 53) as f64
 }
 
 /// The `n`-th colour of `color "random"`: opaque, its channels spread over

@@ -24,7 +24,7 @@ use crate::world::{Drive, Kind, Localization, Sensor, World};
 mod ctrl;
 mod energy;
 mod fasr2;
-pub use ctrl::{Ctrl, Mind, Mode};
+pub use ctrl::{Charger, Ctrl, Mind, Mode};
 pub use energy::Pack;
 
 /// What a position model was last told to do.
@@ -159,11 +159,10 @@ pub struct Sim {
     /// Gripper state of each gripper model (`None` for other models).
     pub grippers: Vec<Option<GripperState>>,
     roots: Vec<usize>,
-    /// Each model's body from its base to its top, above the floor: Stage
-    /// is 2.5D, and a sensor sees only what spans the height of its rays.
-    heights: Vec<(f64, f64)>,
     /// What a ray asks of each model, side by side (one cache line, not
-    /// three): its tree, whether rangers see it, its heights.
+    /// three): its tree, whether rangers see it, and its body from its base
+    /// to its top above the floor (Stage is 2.5D: a sensor sees only what
+    /// spans the height of its rays).
     looks: Vec<Look>,
     /// The threads that plan moves and cast rays, and the models with
     /// range sensors among them.
@@ -265,6 +264,14 @@ struct Look {
     /// Its body's base and top above the floor.
     lo: f64,
     hi: f64,
+}
+
+impl Look {
+    /// Whether its body spans height `z` (Stage's ray z test).
+    #[inline]
+    fn spans(&self, z: f64) -> bool {
+        self.lo <= z && z <= self.hi
+    }
 }
 
 /// Sensors with at least this many rays look around their origin once, so
@@ -435,22 +442,17 @@ impl Sim {
             for c in &world.models[m].ctrl {
                 let why = match ctrl::find(&world, &trees[m], m, c) {
                     ctrl::Found::Base(found) if ctrls[m].is_none() => {
-                        match found {
-                            Ctrl::Fasr {
-                                fiducial: Some(f), ..
-                            } => used[f] = true,
-                            Ctrl::Fasr2 { fiducial, .. } => {
-                                // The tasks are the first robot's, as in Stage.
-                                if fasr2.is_none() {
-                                    fasr2 = Some(fasr2::setup(&world, c).map(Box::new));
-                                }
-                                if let Some(Err(why)) = &fasr2 {
-                                    missing.entry(why.clone()).or_insert((m, 0)).1 += 1;
-                                    continue;
-                                }
-                                used[fiducial] = true;
+                        if let Ctrl::Fasr2 { .. } = found {
+                            // The tasks are the first robot's, as in Stage.
+                            let setup =
+                                fasr2.get_or_insert_with(|| fasr2::setup(&world, c).map(Box::new));
+                            if let Err(why) = setup {
+                                missing.entry(why.clone()).or_insert((m, 0)).1 += 1;
+                                continue;
                             }
-                            _ => {}
+                        }
+                        for k in found.also_reads() {
+                            used[k] = true;
                         }
                         ctrls[m] = Some(found);
                         continue;
@@ -467,10 +469,9 @@ impl Sim {
                         energy.sources.push((m, capacity));
                         continue;
                     }
-                    ctrl::Found::AtLoad => {
-                        if c.split_whitespace().next() == Some("rasterize") {
-                            rasterize(&world, m);
-                        }
+                    ctrl::Found::Loaded => continue,
+                    ctrl::Found::Rasterize => {
+                        rasterize(&world, m);
                         continue;
                     }
                     ctrl::Found::Sink => {
@@ -542,13 +543,15 @@ impl Sim {
             .iter()
             .map(|m| (m.kind == Kind::Gripper).then(GripperState::default))
             .collect();
-        let heights: Vec<(f64, f64)> = (0..n).map(|m| height(&world, &poses, m)).collect();
         let looks = (0..n)
-            .map(|m| Look {
-                root: roots[m] as u32,
-                seen: world.models[m].ranger_return >= 0.0,
-                lo: heights[m].0,
-                hi: heights[m].1,
+            .map(|m| {
+                let (lo, hi) = height(&world, &poses, m);
+                Look {
+                    root: roots[m] as u32,
+                    seen: world.models[m].ranger_return >= 0.0,
+                    lo,
+                    hi,
+                }
             })
             .collect();
         let fans = world
@@ -589,7 +592,6 @@ impl Sim {
             crew: Crew::default(),
             roots,
             looks,
-            heights,
             movable,
             cells: vec![Vec::new(); n],
             raster: None,
@@ -632,11 +634,9 @@ impl Sim {
             on[r] = true;
         }
         for bi in 0..self.bases.len() {
-            if let Some(r) = self.ctrl_ranger(bi) {
+            let also = self.bases[bi].ctrl.into_iter().flat_map(Ctrl::also_reads);
+            for r in self.ctrl_ranger(bi).into_iter().chain(also) {
                 on[r] = true;
-            }
-            if let Some(Ctrl::Fasr2 { sonar, .. }) = self.bases[bi].ctrl {
-                on[sonar] = true;
             }
         }
         self.sensed = on;
@@ -926,8 +926,7 @@ impl Sim {
         self.poses[m] = pose;
         for k in self.trees[m].clone() {
             // Its height too: a 3D pose may have lifted it.
-            self.heights[k] = height(&self.world, &self.poses, k);
-            (self.looks[k].lo, self.looks[k].hi) = self.heights[k];
+            (self.looks[k].lo, self.looks[k].hi) = height(&self.world, &self.poses, k);
             self.place(k);
         }
         if let Some(b) = self.bases.iter_mut().find(|b| b.model == m) {
@@ -940,6 +939,36 @@ impl Sim {
                 b.odom = b.origin.inverse().compose(&g);
             }
         }
+    }
+
+    /// Whether model `m` updates in the step from `self.time`: Stage
+    /// updates a model every `update_interval`, at its multiples.
+    fn due(&self, m: usize) -> bool {
+        let every = self.world.models[m].update_interval;
+        let k = |t: f64| (t / every + 1e-9).floor();
+        k(self.time + self.world.interval_sim) > k(self.time)
+    }
+
+    /// What is done in series once the bases have moved and the rangers
+    /// read: `fasr`'s robots load and unload, `fasr2`'s take their whole
+    /// update (their flags change hands), then sources refill and packs
+    /// are used and charged.
+    fn chores(&mut self) {
+        let mut fasr2 = self.fasr2.take();
+        for bi in 0..self.bases.len() {
+            let m = self.bases[bi].model;
+            match (self.bases[bi].ctrl, &mut fasr2) {
+                (Some(Ctrl::Fasr { source, sink, .. }), _) if self.due(m) => {
+                    let g = self.global(m);
+                    let mind = &mut self.bases[bi].mind;
+                    ctrl::fasr_position(&mut self.energy, mind, m, (g.x, g.y), source, sink);
+                }
+                (Some(Ctrl::Fasr2 { .. }), Some(f)) if self.due(m) => self.fasr2_update(bi, f),
+                _ => {}
+            }
+        }
+        self.fasr2 = fasr2;
+        self.update_energy();
     }
 
     /// Advances the world by one `interval_sim`.
@@ -1296,8 +1325,7 @@ impl Sim {
 
     /// Whether model `m`'s body spans height `z` (Stage's ray z test).
     fn spans(&self, m: usize, z: f64) -> bool {
-        let (lo, hi) = self.heights[m];
-        lo <= z && z <= hi
+        self.looks[m].spans(z)
     }
 
     /// What ranger `r`'s rays at height `z` stop at: anything with a ranger
@@ -1306,7 +1334,7 @@ impl Sim {
         let root = self.roots[r] as u32;
         move |c: u16| {
             let o = &self.looks[usize::from(c) - 1];
-            o.root != root && o.seen && o.lo <= z && z <= o.hi
+            o.root != root && o.seen && o.spans(z)
         }
     }
 
@@ -2316,7 +2344,9 @@ mod compat {
         }
         let mut s = Sim::new(crate::world::load(&p).unwrap()).unwrap();
         assert!(
-            s.bases.iter().all(|b| b.ctrl == Some(Ctrl::Wander)),
+            s.bases
+                .iter()
+                .all(|b| matches!(b.ctrl, Some(Ctrl::Wander { .. }))),
             "both robots have ctrl \"wander\""
         );
         let start = s.global(s.bases[0].model);

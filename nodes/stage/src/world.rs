@@ -854,10 +854,7 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
             a: 1.0,
         };
         for i in 0..100u64 {
-            let draw = |k: u64| {
-                let z = colors::mix64(((m as u64 * 100 + i) * 4 + k) ^ colors::GOLDEN);
-                (z >> 11) as f64 / (1u64 << 53) as f64
-            };
+            let draw = |k: u64| colors::unit_draw([m as u64, i, k]);
             let k = counts.entry((Some(m), "model".to_owned())).or_insert(0);
             let name = format!("{}.model:{k}", world.models[m].name);
             *k += 1;

@@ -14,7 +14,7 @@ use troupe_geom::{normalize, Pose};
 
 use super::energy::Energy;
 use super::{nearest, Sim};
-use crate::colors::{mix64, GOLDEN};
+use crate::colors::unit_draw;
 use crate::world::{Kind, World};
 
 /// How many of a ring's readings its controller looks at one by one.
@@ -25,7 +25,11 @@ const READ: usize = 16;
 pub enum Ctrl {
     /// `wander`: ahead at 0.4 m/s; turns in place away from the nearer
     /// side while anything is within 0.6 m of its first fan of rays.
-    Wander,
+    Wander {
+        /// The ranger it steers by: its robot's first with many samples,
+        /// else its first (none: it goes straight ahead).
+        ranger: Option<usize>,
+    },
     /// `expand_pioneer` (worlds/benchmark): steers along the sum of its
     /// first ranger's 16 sonar readings as vectors, ahead at 0.2 m/s when
     /// the front sonars are clear (0.75 m ahead, less to the sides).
@@ -84,6 +88,22 @@ pub enum Ctrl {
     },
 }
 
+impl Ctrl {
+    /// The sensors it reads besides the ranger it decides by
+    /// ([`Sim::ctrl_ranger`]): they run too, as Stage's subscribed models.
+    pub fn also_reads(self) -> impl Iterator<Item = usize> {
+        let (a, b) = match self {
+            Ctrl::Flocking { fiducial, .. } => (Some(fiducial), None),
+            Ctrl::Fasr { fiducial, .. } => (fiducial, None),
+            Ctrl::Fasr2 {
+                sonar, fiducial, ..
+            } => (Some(sonar), Some(fiducial)),
+            _ => (None, None),
+        };
+        a.into_iter().chain(b)
+    }
+}
+
 /// What `fasr` is about.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Mode {
@@ -94,6 +114,19 @@ pub enum Mode {
     Dock,
     /// Backing off a charger, charged.
     Undock,
+}
+
+/// A charger as `fasr` and `fasr2` see it (a fiducial of id 2).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Charger {
+    /// Seen at the last look (else what follows is from an earlier one).
+    pub seen: bool,
+    /// Metres from the finder…
+    pub range: f64,
+    /// …in this direction, radians.
+    pub bearing: f64,
+    /// Its heading relative to the finder's.
+    pub heading: f64,
 }
 
 /// What a controller keeps from step to step.
@@ -107,9 +140,8 @@ pub struct Mind {
     pub avoid: u32,
     /// `fasr`'s mode.
     pub mode: Mode,
-    /// `fasr` sees a charger now, and the range and bearing it last saw
-    /// one at.
-    pub charger: (bool, f64, f64),
+    /// The charger `fasr` sees now, or the last it saw.
+    pub charger: Charger,
     /// `fasr`'s updates spent loading at the source…
     pub work_get: u32,
     /// …and unloading at the sink.
@@ -123,7 +155,7 @@ impl Default for Mind {
             turn: 1.0,
             avoid: 0,
             mode: Mode::Work,
-            charger: (false, 0.0, 0.0),
+            charger: Charger::default(),
             work_get: 0,
             work_put: 0,
         }
@@ -141,9 +173,11 @@ pub enum Found {
     Source(u32),
     /// `sink`: a zone that takes the flags robots bring.
     Sink,
-    /// Done as the world loads: `dynamic` (its 100 boxes are made with
-    /// the world) and `rasterize` (prints the model's raster).
-    AtLoad,
+    /// `dynamic`: done as the world loaded (its 100 boxes were made with
+    /// it).
+    Loaded,
+    /// `rasterize`: says the model's raster once, as it starts.
+    Rasterize,
     /// Not built in (a user's own plug-in).
     Unknown,
     /// Built in, but the model lacks what it reads.
@@ -178,7 +212,17 @@ pub fn find(world: &World, tree: &[usize], m: usize, line: &str) -> Found {
         |what: &str| Found::Lacks(format!("\"{name}\" runs on a position model, not {what}"));
     let no = |what: &str| Found::Lacks(format!("\"{name}\" needs {what}"));
     match name {
-        "wander" if position => Found::Base(Ctrl::Wander),
+        "wander" if position => {
+            let mut rangers = tree
+                .iter()
+                .copied()
+                .filter(|&k| !world.models[k].sensors.is_empty());
+            let first = rangers.clone().next();
+            let ranger = rangers
+                .find(|&k| world.models[k].sensors[0].samples > 1)
+                .or(first);
+            Found::Base(Ctrl::Wander { ranger })
+        }
         "expand_pioneer" | "expand_swarm" | "pioneer_flocking" if !position => {
             on_base(&format!("a {:?}", model.kind).to_lowercase())
         }
@@ -263,7 +307,8 @@ pub fn find(world: &World, tree: &[usize], m: usize, line: &str) -> Found {
             ),
         },
         "sink" => Found::Sink,
-        "dynamic" | "rasterize" => Found::AtLoad,
+        "dynamic" => Found::Loaded,
+        "rasterize" => Found::Rasterize,
         _ => Found::Unknown,
     }
 }
@@ -278,7 +323,7 @@ impl Sim {
             return mind.want;
         }
         match ctrl {
-            Ctrl::Wander => mind.want = self.wander(bi, mind),
+            Ctrl::Wander { ranger } => mind.want = self.wander(ranger, mind),
             Ctrl::ExpandPioneer { ranger } => {
                 // Stage's SAFE_DIST 0.75, SAFE_ANGLE 0.5, VSPEED 0.2, WGAIN 1.
                 let s = 0.75;
@@ -344,22 +389,42 @@ impl Sim {
             } => {
                 // Its callbacks run as its sensors update (100 ms apart
                 // unless their `update_interval` says otherwise).
+                // (fasr.cc takes the first charger its finder reports.)
                 if let Some(f) = fiducial.filter(|&f| self.due(f)) {
-                    mind.charger.0 = false;
-                    let seen = self.fiducials(f);
-                    if let Some(c) = seen.fiducials.iter().find(|c| c.id == 2) {
-                        let (x, y) = (c.pose.x, c.pose.y);
-                        mind.charger = (true, x.hypot(y), y.atan2(x));
-                    }
+                    self.look_for_charger(f, &mut mind.charger, |c| c.first().copied());
                 }
-                if self.due(laser) {
-                    if let Some(scan) = self.scan(laser) {
-                        self.fasr(bi, scan, mind);
-                    }
+                if let Some(scan) = self.scan(laser) {
+                    self.fasr(bi, scan, mind);
                 }
             }
         }
         mind.want
+    }
+
+    /// Updates `charger` from what fiducial finder `f` sees: the charger
+    /// `pick` picks from those it reports (fiducial id 2), or none seen.
+    pub(super) fn look_for_charger(
+        &self,
+        f: usize,
+        charger: &mut Charger,
+        pick: impl Fn(&[Charger]) -> Option<Charger>,
+    ) {
+        let seen: Vec<Charger> = self
+            .fiducials(f)
+            .fiducials
+            .iter()
+            .filter(|c| c.id == 2)
+            .map(|c| Charger {
+                seen: true,
+                range: c.pose.x.hypot(c.pose.y),
+                bearing: c.pose.y.atan2(c.pose.x),
+                heading: c.pose.yaw,
+            })
+            .collect();
+        match pick(&seen) {
+            Some(c) => *charger = c,
+            None => charger.seen = false,
+        }
     }
 
     /// The first sensor's ranges of ranger `r`, when it has read any.
@@ -418,7 +483,12 @@ impl Sim {
     fn fasr(&self, bi: usize, scan: &[f64], mind: &mut Mind) {
         let m = self.bases[bi].model;
         let fraction = self.energy.pack(m).map_or(1.0, |p| p.fraction());
-        let (seen, range, bearing) = mind.charger;
+        let Charger {
+            seen,
+            range,
+            bearing,
+            ..
+        } = mind.charger;
         let avoid = |mind: &mut Mind| self.avoid(bi, scan, 4, 0.7, 0.5, mind);
         match mind.mode {
             Mode::Work => {
@@ -521,7 +591,7 @@ impl Sim {
     /// The ranger base `bi`'s controller reads, if any.
     pub(super) fn ctrl_ranger(&self, bi: usize) -> Option<usize> {
         match self.bases[bi].ctrl? {
-            Ctrl::Wander => self.wander_ranger(self.bases[bi].model),
+            Ctrl::Wander { ranger } => ranger,
             Ctrl::ExpandPioneer { ranger }
             | Ctrl::ExpandSwarm { ranger }
             | Ctrl::Flocking { ranger, .. } => Some(ranger),
@@ -531,24 +601,11 @@ impl Sim {
         }
     }
 
-    /// The ranger `wander` steers by on base model `m`: its first with
-    /// many samples, else its first.
-    fn wander_ranger(&self, m: usize) -> Option<usize> {
-        let mut rangers = self.trees[m]
-            .iter()
-            .copied()
-            .filter(|&k| !self.world.models[k].sensors.is_empty());
-        let first = rangers.clone().next();
-        rangers
-            .find(|&k| self.world.models[k].sensors[0].samples > 1)
-            .or(first)
-    }
-
-    /// The built-in `wander` controller of base `bi`: the velocity it asks
-    /// for; `mind.turn` is the way it turns from obstacles (+1 left, -1
-    /// right), kept while both sides are about as near.
-    fn wander(&self, bi: usize, mind: &mut Mind) -> Pose {
-        let Some(r) = self.wander_ranger(self.bases[bi].model) else {
+    /// The built-in `wander` controller steering by `ranger`: the velocity
+    /// it asks for; `mind.turn` is the way it turns from obstacles (+1
+    /// left, -1 right), kept while both sides are about as near.
+    fn wander(&self, ranger: Option<usize>, mind: &mut Mind) -> Pose {
+        let Some(r) = ranger else {
             return Pose::new(0.4, 0.0, 0.0);
         };
         let sensors = &self.world.models[r].sensors;
@@ -653,15 +710,6 @@ fn atoi(text: &str) -> u32 {
     digits[..end]
         .parse()
         .unwrap_or(if end > 0 { u32::MAX } else { 0 })
-}
-
-/// A uniform draw in [0, 1), a fixed function of `keys` (SplitMix64's
-/// mixing, as `color "random"` uses it).
-fn unit_draw(keys: [u64; 3]) -> f64 {
-    let z = keys.iter().fold(0x243F_6A88_85A3_08D3u64, |z, &k| {
-        mix64((z ^ k).wrapping_add(GOLDEN))
-    });
-    (z >> 11) as f64 / (1u64 << 53) as f64
 }
 
 #[cfg(test)]

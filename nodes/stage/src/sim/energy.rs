@@ -13,7 +13,7 @@
 
 use troupe_geom::Pose;
 
-use super::{ctrl, Sim};
+use super::Sim;
 use crate::movers::Body;
 use crate::world::{Kind, World};
 
@@ -32,8 +32,6 @@ pub struct Pack {
     pub stored: f64,
     /// Joules it holds when full.
     pub capacity: f64,
-    /// A charger gave it energy in the last update.
-    pub charging: bool,
 }
 
 impl Pack {
@@ -55,6 +53,8 @@ impl Pack {
 pub struct Energy {
     /// Each model's own pack.
     packs: Vec<Option<Pack>>,
+    /// Some model has a pack: there is energy to account for.
+    powered: bool,
     /// The model whose pack each model draws on (itself or its nearest
     /// ancestor with one).
     pack_of: Vec<Option<usize>>,
@@ -80,11 +80,9 @@ impl Energy {
             .models
             .iter()
             .map(|m| {
-                m.energy.pack.map(|(stored, capacity)| Pack {
-                    stored,
-                    capacity,
-                    charging: false,
-                })
+                m.energy
+                    .pack
+                    .map(|(stored, capacity)| Pack { stored, capacity })
             })
             .collect();
         let mut pack_of = vec![None; n];
@@ -113,6 +111,7 @@ impl Energy {
             })
             .collect();
         Energy {
+            powered: packs.iter().any(Option::is_some),
             givers: with(|e| e.give),
             takers: with(|e| e.take),
             reach,
@@ -136,54 +135,19 @@ impl Energy {
             self.flags[to] += 1;
         }
     }
-
-    /// Whether any model has a pack (else there is nothing to update).
-    fn any(&self) -> bool {
-        self.pack_of.iter().any(Option::is_some)
-    }
 }
 
 impl Sim {
-    /// Whether model `m` updates in the step from `self.time`: Stage
-    /// updates a model every `update_interval`, at its multiples.
-    pub(crate) fn due(&self, m: usize) -> bool {
-        let every = self.world.models[m].update_interval;
-        let k = |t: f64| (t / every + 1e-9).floor();
-        k(self.time + self.world.interval_sim) > k(self.time)
-    }
-
-    /// What is done in series once the bases have moved and the rangers
-    /// read: `fasr`'s robots load and unload, sources refill, packs are
-    /// used and charged.
-    pub(super) fn chores(&mut self) {
-        for bi in 0..self.bases.len() {
-            let m = self.bases[bi].model;
-            if let Some(ctrl::Ctrl::Fasr { source, sink, .. }) = self.bases[bi].ctrl {
-                if self.due(m) {
-                    let g = self.global(m);
-                    let mut mind = self.bases[bi].mind;
-                    ctrl::fasr_position(&mut self.energy, &mut mind, m, (g.x, g.y), source, sink);
-                    self.bases[bi].mind = mind;
-                }
-            }
-        }
-        if let Some(mut f) = self.fasr2.take() {
-            for bi in 0..self.bases.len() {
-                if matches!(self.bases[bi].ctrl, Some(ctrl::Ctrl::Fasr2 { .. }))
-                    && self.due(self.bases[bi].model)
-                {
-                    self.fasr2_update(bi, &mut f);
-                }
-            }
-            self.fasr2 = Some(f);
-        }
+    /// Once the robots have done their part of a step: sources refill,
+    /// packs are used and charged.
+    pub(super) fn update_energy(&mut self) {
         for k in 0..self.energy.sources.len() {
             let (zone, capacity) = self.energy.sources[k];
             if self.due(zone) && self.energy.flags[zone] < capacity {
                 self.energy.flags[zone] += 1;
             }
         }
-        if self.energy.any() {
+        if self.energy.powered {
             let running = self.running();
             self.use_energy(&running);
             self.charge(&running);
@@ -230,9 +194,6 @@ impl Sim {
 
     /// Every running giver passes energy to the takers that touch it.
     fn charge(&mut self, running: &[bool]) {
-        for pack in self.energy.packs.iter_mut().flatten() {
-            pack.charging = false;
-        }
         let (mut mine, mut his) = (Body::default(), Body::default());
         let takers: Vec<(usize, Pose)> = self
             .energy
@@ -292,7 +253,6 @@ impl Sim {
         }
         if let Some(t) = &mut self.energy.packs[to] {
             t.stored += amount;
-            t.charging = true;
         }
     }
 

@@ -14,6 +14,7 @@ use std::f64::consts::PI;
 
 use troupe_geom::{normalize, Pose};
 
+use super::ctrl::Charger;
 use super::{Ctrl, Mind, Mode, Sim};
 use crate::world::World;
 
@@ -45,8 +46,6 @@ struct Robot {
     force_recharge: bool,
     /// Its heading when it docked.
     docked_angle: f64,
-    /// The heading of the charger it last saw, relative to its own.
-    charger_heading: f64,
 }
 
 /// The robots of a world that run `fasr2`, and what they share.
@@ -305,20 +304,13 @@ impl Sim {
         let fraction = self.energy.pack(m).map_or(1.0, |p| p.fraction());
         // The finder is read while fasr2 subscribes to it: when hungry,
         // docking and undocking.
-        mind.charger.0 = false;
+        // (fasr2.cc takes the nearest charger.)
         if r.force_recharge || fraction < 0.2 || mind.mode != Mode::Work {
-            let seen = self.fiducials(fiducial);
-            let nearest = seen.fiducials.iter().filter(|c| c.id == 2).min_by(|a, b| {
-                a.pose
-                    .x
-                    .hypot(a.pose.y)
-                    .total_cmp(&b.pose.x.hypot(b.pose.y))
+            self.look_for_charger(fiducial, &mut mind.charger, |c| {
+                c.iter().copied().min_by(|a, b| a.range.total_cmp(&b.range))
             });
-            if let Some(c) = nearest {
-                let (x, y) = (c.pose.x, c.pose.y);
-                mind.charger = (true, x.hypot(y), y.atan2(x));
-                r.charger_heading = c.pose.yaw;
-            }
+        } else {
+            mind.charger.seen = false;
         }
         let task = f.tasks[r.task].clone();
         let zone = |z: usize| {
@@ -359,7 +351,12 @@ impl Sim {
         let full = fraction > 0.95;
         let scan = self.scan(laser).map(<[f64]>::to_vec).unwrap_or_default();
         let avoid = |me: &Sim, mind: &mut Mind| me.avoid(bi, &scan, 4, 0.7, 0.5, mind);
-        let (ahoy, range, bearing) = mind.charger;
+        let Charger {
+            seen: ahoy,
+            range,
+            bearing,
+            heading,
+        } = mind.charger;
         match mind.mode {
             Mode::Work => {
                 if !avoid(self, &mut mind) {
@@ -389,7 +386,7 @@ impl Sim {
             }
             Mode::Dock => {
                 if ahoy {
-                    let orient = normalize(PI - (bearing - r.charger_heading));
+                    let orient = normalize(PI - (bearing - heading));
                     let a_goal = normalize(bearing - 2.0 * orient);
                     if range > 0.5 {
                         if !avoid(self, &mut mind) {
