@@ -25,6 +25,10 @@ pub struct Movers {
     tiles_of: Vec<Vec<usize>>,
     /// Model ids (index + 1) filed under each tile.
     in_tile: Vec<Vec<u16>>,
+    /// One bit per tile: whether anything is filed under it. Most tiles a
+    /// ray crosses hold no body, and these bits (1000 × 400 tiles in 50 KB)
+    /// stay in cache where the lists' headers would not.
+    busy: Vec<u64>,
 }
 
 /// A moving body: its polygons in world coordinates, and what rays and
@@ -118,6 +122,7 @@ impl Movers {
             bodies: vec![Body::default(); models],
             tiles_of: vec![Vec::new(); models],
             in_tile: vec![Vec::new(); tiles],
+            busy: vec![0; tiles.div_ceil(64)],
         }
     }
 
@@ -136,6 +141,7 @@ impl Movers {
             for t in tiles {
                 if let Some(list) = self.in_tile.get_mut(t) {
                     list.push(id);
+                    self.busy[t / 64] |= 1 << (t % 64);
                 }
                 self.tiles_of[m].push(t);
             }
@@ -160,6 +166,9 @@ impl Movers {
         for &t in &self.tiles_of[m] {
             if let Some(list) = self.in_tile.get_mut(t) {
                 list.retain(|&k| k != id);
+                if list.is_empty() {
+                    self.busy[t / 64] &= !(1 << (t % 64));
+                }
             }
         }
         self.tiles_of[m].clear();
@@ -173,7 +182,15 @@ impl Movers {
     }
 
     /// The ids filed under tile `t`.
+    #[inline]
     pub fn in_tile(&self, t: usize) -> &[u16] {
+        let busy = self
+            .busy
+            .get(t / 64)
+            .is_some_and(|b| b >> (t % 64) & 1 != 0);
+        if !busy {
+            return &[];
+        }
         self.in_tile.get(t).map_or(&[], Vec::as_slice)
     }
 

@@ -181,8 +181,11 @@ pub struct Sim {
     /// The `fasr2` robots' shared state, in a world that has them.
     fasr2: Option<Box<fasr2::Fasr2>>,
     movable: Vec<bool>,
-    /// The cells each static model occupies now.
-    cells: Vec<Vec<(usize, usize)>>,
+    /// The global pose each static model's body was written into the
+    /// grid at (`None`: not written). Taking it out writes the same cells
+    /// again, emptied: a floorplan covers millions of cells, and keeping
+    /// their list cost 16 bytes each (1.6 GB for Stage's large.world).
+    written_at: Vec<Option<Pose>>,
     statics: Grid,
     /// The bodies as Stage draws them for its rays (the static ones by
     /// id, the moving ones counted in the regions they touch), when rays
@@ -593,7 +596,7 @@ impl Sim {
             roots,
             looks,
             movable,
-            cells: vec![Vec::new(); n],
+            written_at: vec![None; n],
             raster: None,
             drawn: vec![Vec::new(); n],
             touches: vec![Vec::new(); n],
@@ -675,15 +678,15 @@ impl Sim {
         !d.blocks.is_empty() && (d.obstacle_return || d.ranger_return >= 0.0)
     }
 
-    /// The cells model `m`'s body covers at its current pose.
-    fn body_cells(&self, m: usize) -> Vec<(usize, usize)> {
-        let mut out = Vec::new();
-        for pts in self.placed(m, self.global(m)).body.polys() {
-            self.statics
-                .lattice()
-                .polygon_cells(pts, |i, j| out.push((i, j)));
+    /// Calls `f(grid, i, j)` with the static grid for each cell model
+    /// `m`'s body covers at the global pose `at` (a cell may come more than
+    /// once).
+    fn body_cells(&mut self, m: usize, at: Pose, mut f: impl FnMut(&mut Grid, usize, usize)) {
+        let body = self.placed(m, at);
+        let lat = *self.statics.lattice();
+        for pts in body.body.polys() {
+            lat.polygon_cells(pts, |i, j| f(&mut self.statics, i, j));
         }
-        out
     }
 
     /// (Re)writes model `m`'s body at its current pose: into the static
@@ -695,8 +698,7 @@ impl Sim {
         if self.movable[m] {
             self.file(&mut self.placed(m, self.global(m)));
         } else {
-            let cells = self.body_cells(m);
-            self.occupy(m, cells);
+            self.occupy(m, self.global(m));
             self.draw(m);
         }
     }
@@ -795,13 +797,12 @@ impl Sim {
         }
     }
 
-    /// Moves static model `m`'s body in the grid from its old cells to `cells`.
-    fn occupy(&mut self, m: usize, cells: Vec<(usize, usize)>) {
+    /// Moves static model `m`'s body in the grid from where it was to the
+    /// global pose `at`.
+    fn occupy(&mut self, m: usize, at: Pose) {
         self.unplace(m);
-        for &(i, j) in &cells {
-            self.statics.set(i, j, id(m));
-        }
-        self.cells[m] = cells;
+        self.body_cells(m, at, |g, i, j| g.set(i, j, id(m)));
+        self.written_at[m] = Some(at);
     }
 
     /// Every body in the tree of `m` (itself and what it carries) as it
@@ -1529,12 +1530,13 @@ impl Sim {
             }
         }
         self.drawn[m].clear();
-        for &(i, j) in &self.cells[m] {
-            if self.statics.get(i, j) == id(m) {
-                self.statics.set(i, j, EMPTY);
-            }
+        if let Some(at) = self.written_at[m].take() {
+            self.body_cells(m, at, |g, i, j| {
+                if g.get(i, j) == id(m) {
+                    g.set(i, j, EMPTY);
+                }
+            });
         }
-        self.cells[m].clear();
     }
 
     /// Updates the grippers every 100 ms of simulated time, and moves
@@ -2303,6 +2305,25 @@ mod tests {
             Paddles::Open,
             "open 1.4 s after the command"
         );
+    }
+
+    #[test]
+    fn a_static_box_moved_leaves_no_cells_behind() {
+        // Two boxes overlapping by 0.1 m; "a" moves away and back.
+        let mut s = sim(
+            "moved",
+            "model ( name \"a\" pose [0 0 0 0] size [0.4 0.4 0.2] obstacle_return 1 )\n\
+             model ( name \"b\" pose [0.3 0 0 0] size [0.4 0.4 0.2] obstacle_return 1 )\n",
+        );
+        let (a, b) = (s.world.names["a"], s.world.names["b"]);
+        let at = |s: &Sim, x: f64| s.statics.at(x, 0.01);
+        assert_eq!((at(&s, -0.1), at(&s, 0.4)), (id(a), id(b)));
+        s.set_pose(a, Pose::new(2.0, 0.0, 0.0));
+        assert_eq!((at(&s, -0.1), at(&s, 2.0)), (EMPTY, id(a)));
+        // Where they overlapped, b's cells: a's were taken, b's stay.
+        assert_eq!((at(&s, 0.15), at(&s, 0.4)), (id(b), id(b)));
+        s.set_pose(a, Pose::new(-1.0, 0.0, 0.0));
+        assert_eq!((at(&s, 2.0), at(&s, -1.0)), (EMPTY, id(a)));
     }
 
     #[test]
