@@ -522,9 +522,11 @@ pub struct StageBenchArgs {
     /// controllers included (`threads` as given here).
     #[arg(long, value_name = "DIR")]
     pub stage_worlds: Option<std::path::PathBuf>,
-    /// Run only this world file in this process.
-    #[arg(long, hide = true)]
-    pub only_file: Option<std::path::PathBuf>,
+    /// Run just this world file instead, as its authors wrote it, models
+    /// and controllers included (e.g. Stage's worlds/large.world), and
+    /// print its row: time to load, time to run, peak memory.
+    #[arg(long, value_name = "FILE")]
+    pub world: Option<std::path::PathBuf>,
     /// Then cast the same rays on the cave's and the hospital's walls with
     /// the simulator's grid walk and with parry2d, and print both.
     #[arg(long)]
@@ -722,6 +724,17 @@ fn peak_rss_mb() -> f64 {
 
 /// `troupe bench stage`: simulated seconds per wall second and peak memory.
 pub fn stage_bench(a: &StageBenchArgs) -> anyhow::Result<()> {
+    if let Some(path) = &a.world {
+        let name = path.file_name().unwrap_or_default().to_string_lossy();
+        let t_load = Instant::now();
+        let mut world = troupe_stage::world::load(path)?;
+        world.threads = a.threads;
+        let what = format!(
+            "{}, as Stage's authors wrote it; sensors sensed as Stage senses them, while its controllers read them",
+            path.display()
+        );
+        return run_world(a, &name, world, t_load, &what, false);
+    }
     let bitmaps = a
         .bitmaps
         .clone()
@@ -733,17 +746,6 @@ pub fn stage_bench(a: &StageBenchArgs) -> anyhow::Result<()> {
             bitmaps.display()
         ),
     };
-    if let Some(path) = &a.only_file {
-        let name = path.file_name().unwrap_or_default().to_string_lossy();
-        let t_load = Instant::now();
-        let mut world = troupe_stage::world::load(path)?;
-        world.threads = a.threads;
-        let what = format!(
-            "{}, as Stage's authors wrote it; sensors sensed as Stage senses them, while its controllers read them",
-            path.display()
-        );
-        return run_world(a, &name, world, t_load, &what, false);
-    }
     if let Some(name) = &a.only {
         let (text, what) = bench_world(name, &bitmaps, a.threads)?;
         let dir = std::env::temp_dir().join(format!("troupe-bench-stage-{}", std::process::id()));
@@ -788,7 +790,7 @@ pub fn stage_bench(a: &StageBenchArgs) -> anyhow::Result<()> {
                 )
             })?;
         for file in ["benchmark/cave.world", "benchmark/hospital.world"] {
-            run(&["--only-file".as_ref(), worlds.join(file).as_os_str()])?;
+            run(&["--world".as_ref(), worlds.join(file).as_os_str()])?;
         }
     }
     if a.parry {

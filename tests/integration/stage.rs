@@ -373,3 +373,28 @@ fn with_stage_quirks_the_laser_reads_as_real_stage_s() {
     assert!(launcher.terminate().success(), "{}", launcher.stderr());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `troupe bench stage --world FILE` runs one world as written and prints
+/// its row: how long it took and its peak memory; a file that is not
+/// there is named in the error.
+#[test]
+fn bench_stage_runs_one_world_file_and_prints_its_row() {
+    let world = Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/simple.world");
+    let out = std::process::Command::new(troupe_tests::troupe_bin())
+        .args(["bench", "stage", "--seconds", "2", "--world"])
+        .arg(&world)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}{}", String::from_utf8_lossy(&out.stderr));
+    let row = text.lines().find(|l| l.contains("simple.world")).unwrap_or("");
+    for part in ["x real time", "MB peak", "2 simulated s in", "moving at the end"] {
+        assert!(row.contains(part), "no {part:?} in {text:?}");
+    }
+    let out = std::process::Command::new(troupe_tests::troupe_bin())
+        .args(["bench", "stage", "--world", "no/such.world"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("no/such.world"), "{err}");
+}
