@@ -386,9 +386,21 @@ fn bench_stage_runs_one_world_file_and_prints_its_row() {
         .output()
         .unwrap();
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{text}{}", String::from_utf8_lossy(&out.stderr));
-    let row = text.lines().find(|l| l.contains("simple.world")).unwrap_or("");
-    for part in ["x real time", "MB peak", "2 simulated s in", "moving at the end"] {
+    assert!(
+        out.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let row = text
+        .lines()
+        .find(|l| l.contains("simple.world"))
+        .unwrap_or("");
+    for part in [
+        "x real time",
+        "MB peak",
+        "2 simulated s in",
+        "moving at the end",
+    ] {
         assert!(row.contains(part), "no {part:?} in {text:?}");
     }
     let out = std::process::Command::new(troupe_tests::troupe_bin())
@@ -396,5 +408,8 @@ fn bench_stage_runs_one_world_file_and_prints_its_row() {
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success() && err.contains("no/such.world"), "{err}");
+    assert!(
+        !out.status.success() && err.contains("no/such.world"),
+        "{err}"
+    );
 }
