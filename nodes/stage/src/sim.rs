@@ -158,7 +158,6 @@ pub struct Sim {
     pub readings: Vec<Vec<Reading>>,
     /// Gripper state of each gripper model (`None` for other models).
     pub grippers: Vec<Option<GripperState>>,
-    roots: Vec<usize>,
     /// What a ray asks of each model, side by side (one cache line, not
     /// three): its tree, whether rangers see it, and its body from its base
     /// to its top above the floor (Stage is 2.5D: a sensor sees only what
@@ -260,7 +259,8 @@ impl Seen {
 /// What a ray asks of a model it meets (see `Sim::ranger_sees`).
 #[derive(Debug, Clone, Copy)]
 struct Look {
-    /// The model at the root of its tree.
+    /// The model at the root of its tree (kept here alone: a gripper
+    /// changes it as it takes and drops).
     root: u32,
     /// Rangers see it (its `ranger_return` is not negative).
     seen: bool,
@@ -593,7 +593,6 @@ impl Sim {
             energy,
             fasr2: fasr2.and_then(Result::ok),
             crew: Crew::default(),
-            roots,
             looks,
             movable,
             written_at: vec![None; n],
@@ -658,7 +657,7 @@ impl Sim {
             .map(|r| Job {
                 ranger: r,
                 rays: self.world.models[r].sensors.iter().map(|s| s.samples).sum(),
-                base: base_of[self.roots[r]],
+                base: base_of[self.root(r)],
             })
             .collect()
     }
@@ -826,7 +825,7 @@ impl Sim {
 
     /// Whether model `other` blocks the bodies of the tree of `root`.
     fn blocks(&self, root: usize, other: usize) -> bool {
-        self.roots[other] != root && self.world.models[other].obstacle_return
+        self.root(other) != root && self.world.models[other].obstacle_return
     }
 
     /// Whether model `m`'s body meets obstacles when it moves: as in
@@ -1069,14 +1068,14 @@ impl Sim {
         plan.moving = v.x != 0.0 || v.y != 0.0 || v.yaw != 0.0;
         if plan.moving {
             self.tree_at(m, g_next, &mut plan.bodies);
-            plan.walled = self.hits_statics(self.roots[m], &plan.bodies);
+            plan.walled = self.hits_statics(self.root(m), &plan.bodies);
         }
     }
 
     /// Carries out base `bi`'s `plan` (see [`Sim::plan`]).
     fn apply(&mut self, bi: usize, dt: f64, plan: &mut Plan) {
         let m = self.bases[bi].model;
-        if self.roots[m] != m {
+        if self.root(m) != m {
             // On another model's back: planned where that one moved to.
             self.plan(bi, dt, plan);
         }
@@ -1087,7 +1086,7 @@ impl Sim {
         let v = plan.v;
         self.bases[bi].mind = plan.mind;
         if plan.moving {
-            if plan.walled || self.hits_movers(self.roots[m], &plan.bodies) {
+            if plan.walled || self.hits_movers(self.root(m), &plan.bodies) {
                 let b = &mut self.bases[bi];
                 b.stall = true;
                 b.vel = Pose::default();
@@ -1324,6 +1323,12 @@ impl Sim {
         open.max(0.0)
     }
 
+    /// The model at the root of model `m`'s tree (a held box's is its
+    /// gripper's robot).
+    fn root(&self, m: usize) -> usize {
+        self.looks[m].root as usize
+    }
+
     /// Whether model `m`'s body spans height `z` (Stage's ray z test).
     fn spans(&self, m: usize, z: f64) -> bool {
         self.looks[m].spans(z)
@@ -1332,7 +1337,7 @@ impl Sim {
     /// What ranger `r`'s rays at height `z` stop at: anything with a ranger
     /// return at that height that is not part of its own robot.
     fn ranger_sees(&self, r: usize, z: f64) -> impl Fn(u16) -> bool + Copy + '_ {
-        let root = self.roots[r] as u32;
+        let root = self.looks[r].root;
         move |c: u16| {
             let o = &self.looks[usize::from(c) - 1];
             o.root != root && o.seen && o.spans(z)
@@ -1464,7 +1469,7 @@ impl Sim {
                         // Let go where it is (Stage puts it at the
                         // gripper's pose: it is there already).
                         for t in self.trees[k].clone() {
-                            self.roots[t] = self.world.root(t);
+                            self.looks[t].root = self.world.root(t) as u32;
                         }
                     }
                     st.close_limit = 1.0;
@@ -1501,7 +1506,7 @@ impl Sim {
             // Taken: to the gripper's centre, and along with it from now on.
             st.held = Some((k, Pose::default()));
             st.close_limit = (1.0 - self.world.models[k].size[1] / (sy - PADDLE_Y / 2.0)).max(0.0);
-            self.roots[k] = self.roots[g];
+            self.looks[k].root = self.looks[g].root;
             if !self.movable[k] {
                 for t in self.trees[k].clone() {
                     self.unplace(t);
@@ -1581,8 +1586,8 @@ impl Sim {
         let (w, h) = cfg.image;
         let n = w as usize;
         let eye = self.global(m).compose(&self.world.models[m].origin);
-        let root = self.roots[m];
-        let accept = |id: u16| self.roots[usize::from(id) - 1] != root;
+        let root = self.root(m);
+        let accept = |id: u16| self.root(usize::from(id) - 1) != root;
         let step = cfg.fov / n.saturating_sub(1).max(1) as f64;
         let samples: Vec<Option<(Color, f64)>> = (0..n)
             .map(|s| {
@@ -1652,10 +1657,10 @@ impl Sim {
         };
         let (g, z) = self.world.global(&self.poses, m);
         let eye = g.compose(&self.world.models[m].origin);
-        let root = self.roots[m];
+        let root = self.root(m);
         let mut items = Vec::new();
         for (k, target) in self.world.models.iter().enumerate() {
-            if target.fiducial_return == 0 || self.roots[k] == root {
+            if target.fiducial_return == 0 || self.root(k) == root {
                 continue;
             }
             let rel = eye.inverse().compose(&self.global(k));
@@ -1669,7 +1674,7 @@ impl Sim {
             // finder's range): one below or above that height is not seen.
             let accept = |id: u16| {
                 let o = usize::from(id) - 1;
-                self.roots[o] != root && self.spans(o, z)
+                self.root(o) != root && self.spans(o, z)
             };
             let first = self.cast(
                 eye.x,
@@ -2278,6 +2283,9 @@ mod tests {
         assert_eq!(moving, 13, "12 steps closing, the 13th stops on the box");
         assert!((st(&s).position - 0.6).abs() < 1e-9, "{:?}", st(&s));
         assert_eq!(st(&s).held.map(|h| h.0), Some(bx));
+        // Held, the box is part of r: r's rays pass it, as its own body.
+        let r = s.world.names["r"];
+        assert!(!s.ranger_sees(r, 0.05)(id(bx)), "held: r's own");
         assert_ne!(
             st(&s).beams & 0x04,
             0,
@@ -2296,6 +2304,7 @@ mod tests {
         s.bases[0].cmd = Some(Command::Vel(Pose::new(-0.5, 0.0, 0.0)));
         s.step();
         assert_eq!((st(&s).paddles, st(&s).held), (Paddles::Opening, None));
+        assert!(s.ranger_sees(r, 0.05)(id(bx)), "dropped: seen again");
         for _ in 0..13 {
             s.step();
         }

@@ -210,8 +210,7 @@ impl Sim {
             let mut placed = false;
             for &(t, there) in &takers {
                 let reach = self.energy.reach[g] + self.energy.reach[t];
-                if self.roots[t] == self.roots[g] || (at.x - there.x).hypot(at.y - there.y) > reach
-                {
+                if self.root(t) == self.root(g) || (at.x - there.x).hypot(at.y - there.y) > reach {
                     continue;
                 }
                 if !placed {
