@@ -299,7 +299,7 @@ impl Grid {
             return;
         }
         let t = self.tile_of(i, j);
-        let row = &mut self.bits[t * TILE + j % TILE];
+        let row = &mut self.bits[bit_row(self.tw, i, j)];
         let bit = 1 << (i % TILE);
         if id == EMPTY {
             *row &= !bit;
@@ -411,7 +411,7 @@ impl Grid {
         // A block's four rows of four bits, in one row of its tile each.
         let of = |bi: usize, bj: usize| {
             let (i, j) = (bi * BLOCK, bj * BLOCK);
-            let rows = bits[((j / TILE) * tw + i / TILE) * TILE + j % TILE..][..BLOCK].iter();
+            let rows = bits[bit_row(tw, i, j)..][..BLOCK].iter();
             if rows.fold(0, |any, &r| any | r >> (i % TILE) & 0xF) != 0 {
                 0
             } else {
@@ -523,7 +523,7 @@ impl Grid {
         while k < r.n {
             let c = r.col(k);
             let v = row(v_in);
-            let (i, j) = if r.x_major { (c, v) } else { (v, c) };
+            let (i, j) = r.cell(c, v);
             let open = least_cells(self.clear[(j / BLOCK) * bw + i / BLOCK]);
             if open >= 2 {
                 // The next `open - 1` columns lie in the free square around
@@ -536,8 +536,7 @@ impl Grid {
                 continue;
             }
             let v_o = r.v_out(k);
-            let w = row(v_o);
-            let (ib, jb) = if r.x_major { (c, w) } else { (w, c) };
+            let (ib, jb) = r.cell(c, row(v_o));
             if occupied(&self.bits, self.tw, i, j) || occupied(&self.bits, self.tw, ib, jb) {
                 let (a, b) = (self.get(i, j), self.get(ib, jb));
                 if let Some((t, id)) = r.hit_in(k, (a, b), (v_in, v_o), &mut accept) {
@@ -825,15 +824,21 @@ impl Aim {
         (self.vb0 + k as i64 * self.dvs).clamp(self.lo, self.hi)
     }
 
+    /// The cell (i, j) in grid column `c` and row `v`.
+    #[inline(always)]
+    fn cell(&self, c: usize, v: usize) -> (usize, usize) {
+        if self.x_major {
+            (c, v)
+        } else {
+            (v, c)
+        }
+    }
+
     /// The id in column k (counted from the first) at fixed-point v.
     #[inline(always)]
     fn id_at(&self, grid: &Grid, k: usize, v: i64) -> u16 {
-        let (c, v) = (self.col(k), row(v));
-        if self.x_major {
-            grid.get(c, v)
-        } else {
-            grid.get(v, c)
-        }
+        let (i, j) = self.cell(self.col(k), row(v));
+        grid.get(i, j)
     }
 
     /// The grid column of column k.
@@ -939,12 +944,18 @@ fn in_tile(i: usize, j: usize) -> usize {
     (j % TILE) * TILE + i % TILE
 }
 
+/// Where the row of bits holding cell (i, j) lies in `bits` (see
+/// [`Grid`]) of a grid `tw` tiles wide; the cell is its bit `i % TILE`.
+#[inline(always)]
+fn bit_row(tw: usize, i: usize, j: usize) -> usize {
+    ((j / TILE) * tw + i / TILE) * TILE + j % TILE
+}
+
 /// Whether cell (i, j) is occupied, in `bits` (see [`Grid`]) of a grid
 /// `tw` tiles wide.
 #[inline(always)]
 fn occupied(bits: &[u16], tw: usize, i: usize, j: usize) -> bool {
-    let row = bits[((j / TILE) * tw + i / TILE) * TILE + j % TILE];
-    row >> (i % TILE) & 1 != 0
+    bits[bit_row(tw, i, j)] >> (i % TILE) & 1 != 0
 }
 
 impl Columns {
