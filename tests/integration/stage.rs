@@ -380,17 +380,18 @@ fn with_stage_quirks_the_laser_reads_as_real_stage_s() {
 #[test]
 fn bench_stage_runs_one_world_file_and_prints_its_row() {
     let world = Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/simple.world");
-    let out = std::process::Command::new(troupe_tests::troupe_bin())
-        .args(["bench", "stage", "--seconds", "2", "--world"])
-        .arg(&world)
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{text}{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let bench = |world: &str| {
+        troupe_tests::troupe_output(&troupe_tests::strings(&[
+            "bench",
+            "stage",
+            "--seconds",
+            "2",
+            "--world",
+            world,
+        ]))
+    };
+    let (status, text, err) = bench(world.to_str().unwrap());
+    assert!(status.success(), "{text}{err}");
     let row = text
         .lines()
         .find(|l| l.contains("simple.world"))
@@ -403,13 +404,6 @@ fn bench_stage_runs_one_world_file_and_prints_its_row() {
     ] {
         assert!(row.contains(part), "no {part:?} in {text:?}");
     }
-    let out = std::process::Command::new(troupe_tests::troupe_bin())
-        .args(["bench", "stage", "--world", "no/such.world"])
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        !out.status.success() && err.contains("no/such.world"),
-        "{err}"
-    );
+    let (status, _, err) = bench("no/such.world");
+    assert!(!status.success() && err.contains("no/such.world"), "{err}");
 }
