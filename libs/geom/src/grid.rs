@@ -600,15 +600,19 @@ impl Grid {
                 tcol + (row(v_in) >> shift) * r.tv,
                 tcol + (row(v_last) >> shift) * r.tv,
             );
-            for t in [ta, tb].into_iter().take(if ta == tb { 1 } else { 2 }) {
+            let mut ask = |t: usize| {
                 if let Some(h) = in_tile(t) {
                     if h.range * inv_res < best_t {
                         best_t = h.range * inv_res;
                         best = Some(h);
                     }
                 }
+            };
+            ask(ta);
+            if tb != ta {
+                ask(tb);
             }
-            if r.t_in(k) >= best_t {
+            if best.is_some() && r.t_in(k) >= best_t {
                 return end(best);
             }
             if self.tiles[ta] | self.tiles[tb] != 0 {

@@ -64,6 +64,14 @@ impl Pose {
         let (s, c) = self.yaw.sin_cos();
         (self.x + c * x - s * y, self.y + s * x + c * y)
     }
+
+    /// [`Pose::apply`] for many points: the sine and cosine worked out
+    /// once.
+    pub fn applier(&self) -> impl Fn(f64, f64) -> (f64, f64) + Copy {
+        let (s, c) = self.yaw.sin_cos();
+        let (x0, y0) = (self.x, self.y);
+        move |x, y| (x0 + c * x - s * y, y0 + s * x + c * y)
+    }
 }
 
 impl From<Pose2d> for Pose {

@@ -21,9 +21,9 @@ use troupe_geom::{bounds, Hit, Pose};
 pub struct Movers {
     /// Each model's body (no polygons when not filed).
     bodies: Vec<Body>,
-    /// Each body's circle (see [`Body`]), side by side: what rays and
-    /// sweeps read first, 24 bytes a body where a `Body` is 200.
-    circles: Vec<(f64, f64, f64)>,
+    /// What rays read of each body (see [`Shape`]), side by side: a cache
+    /// line a body where a `Body` spans four.
+    shapes: Vec<Shape>,
     /// The tiles each model is filed under.
     tiles_of: Vec<Vec<usize>>,
     /// Model ids (index + 1) filed under each tile.
@@ -66,15 +66,21 @@ impl Body {
     /// reusing its buffers.
     pub fn place(&mut self, blocks: &[Vec<(f64, f64)>], at: Pose) {
         self.polys.resize_with(blocks.len(), Vec::new);
+        let apply = at.applier();
         for (poly, b) in self.polys.iter_mut().zip(blocks) {
             poly.clear();
-            poly.extend(b.iter().map(|&(x, y)| at.apply(x, y)));
+            poly.extend(b.iter().map(|&(x, y)| apply(x, y)));
         }
         self.bounds = bounds(self.polys.iter().flatten().copied());
-        self.circle = circle_around(&self.polys, self.bounds);
         self.rect = match &self.polys[..] {
             [one] => Rect::of(one),
             _ => None,
+        };
+        self.circle = match self.rect {
+            // Centred on the rectangle, so that rays read both from one
+            // centre (see [`Shape`]).
+            Some(r) => (r.c.0, r.c.1, pad(r.half.0.hypot(r.half.1))),
+            None => circle_around(&self.polys, self.bounds),
         };
     }
 
@@ -123,7 +129,7 @@ impl Movers {
     pub fn new(models: usize, tiles: usize) -> Self {
         Movers {
             bodies: vec![Body::default(); models],
-            circles: vec![Body::default().circle; models],
+            shapes: vec![Shape::of(&Body::default()); models],
             tiles_of: vec![Vec::new(); models],
             in_tile: vec![Vec::new(); tiles],
             busy: vec![0; tiles.div_ceil(64)],
@@ -152,7 +158,7 @@ impl Movers {
         }
         // (Most steps a body stays in its tiles: only its shape moved.)
         std::mem::swap(&mut self.bodies[m], body);
-        self.circles[m] = self.bodies[m].circle;
+        self.shapes[m] = Shape::of(&self.bodies[m]);
     }
 
     /// Model `m`'s filed polygons, in world coordinates (none when not filed).
@@ -164,7 +170,7 @@ impl Movers {
     pub fn unfile(&mut self, m: usize, id: u16) {
         self.untile(m, id);
         self.bodies[m] = Body::default();
-        self.circles[m] = self.bodies[m].circle;
+        self.shapes[m] = Shape::of(&self.bodies[m]);
     }
 
     /// Takes model `m` (id `id`) out of every tile, keeping its shape.
@@ -183,7 +189,7 @@ impl Movers {
     /// How far point `p` is from model `m`'s body, at least (the distance to
     /// the circle around it; negative inside the circle).
     pub fn clearance(&self, m: usize, p: (f64, f64)) -> f64 {
-        let (cx, cy, r) = self.circles[m];
+        let (cx, cy, r) = self.shapes[m].circle;
         ((cx - p.0).powi(2) + (cy - p.1).powi(2)).sqrt() - r
     }
 
@@ -206,18 +212,27 @@ impl Movers {
     }
 
     /// Where the ray from `o` along the unit vector `d` first meets model
-    /// `m`'s body: metres, 0 when `o` is inside it.
+    /// `m`'s body (id `id`), if it `accept`s that id: metres, 0 when `o` is
+    /// inside it.
     #[inline]
-    pub fn hit(&self, m: usize, id: u16, o: (f64, f64), d: (f64, f64)) -> Option<Hit> {
+    pub fn hit(
+        &self,
+        m: usize,
+        id: u16,
+        o: (f64, f64),
+        d: (f64, f64),
+        accept: impl Fn(u16) -> bool,
+    ) -> Option<Hit> {
         // Most rays that pass a body's tiles miss it: the circle says so
-        // without testing edges.
-        let (cx, cy, r) = self.circles[m];
+        // without testing edges, or asking whether the ray stops at it.
+        let shape = &self.shapes[m];
+        let (cx, cy, r) = shape.circle;
         let w = (cx - o.0, cy - o.1);
-        if (w.0 * d.1 - w.1 * d.0).abs() > r || w.0 * d.0 + w.1 * d.1 < -r {
+        if (w.0 * d.1 - w.1 * d.0).abs() > r || w.0 * d.0 + w.1 * d.1 < -r || !accept(id) {
             return None;
         }
-        if let Some(rect) = &self.bodies[m].rect {
-            return rect.hit(o, d).map(|range| Hit { range, id });
+        if shape.half.0 >= 0.0 {
+            return shape.hit_rect(o, d).map(|range| Hit { range, id });
         }
         self.hit_edges(m, id, o, d)
     }
@@ -312,7 +327,14 @@ impl Sweep {
         let half_plane = span <= PI + SLACK;
         let below = -SLACK * fan.reach;
         let (ex, ey) = fan.first;
-        for (m, &(cx, cy, r)) in movers.circles.iter().enumerate() {
+        for (
+            m,
+            &Shape {
+                circle: (cx, cy, r),
+                ..
+            },
+        ) in movers.shapes.iter().enumerate()
+        {
             // The circle in the fan's frame: x along the first ray.
             let (dx, dy) = (cx - fan.o.0, cy - fan.o.1);
             let (x, y) = (dx * ex + dy * ey, dy * ex - dx * ey);
@@ -426,14 +448,40 @@ impl Rect {
             half: (la / 2.0, lb / 2.0),
         })
     }
+}
+
+/// What a ray reads of a body, in one cache line: the circle around it
+/// (centre x, y, radius; negative when it has no points) and, when it is a
+/// rectangle, that rectangle about the same centre: the unit vector along
+/// its first side and its half extents (negative when it is not one).
+#[derive(Debug, Clone, Copy)]
+#[repr(align(64))]
+struct Shape {
+    circle: (f64, f64, f64),
+    u: (f64, f64),
+    half: (f64, f64),
+}
+
+impl Shape {
+    /// What a ray reads of `body`.
+    fn of(body: &Body) -> Shape {
+        let (u, half) = body
+            .rect
+            .map_or(((1.0, 0.0), (-1.0, -1.0)), |r| (r.u, r.half));
+        Shape {
+            circle: body.circle,
+            u,
+            half,
+        }
+    }
 
     /// Where the ray from `o` along the unit vector `d` enters the
-    /// rectangle: metres, 0 when `o` is inside it. In the rectangle's frame
+    /// rectangle (when the body is one): metres, 0 when `o` is inside it. In the rectangle's frame
     /// it is a box: the ray's span in each slab, met.
     #[inline]
-    fn hit(&self, o: (f64, f64), d: (f64, f64)) -> Option<f64> {
+    fn hit_rect(&self, o: (f64, f64), d: (f64, f64)) -> Option<f64> {
         let (ux, uy) = self.u;
-        let w = (o.0 - self.c.0, o.1 - self.c.1);
+        let w = (o.0 - self.circle.0, o.1 - self.circle.1);
         // Origin and direction along the sides: u, and v = u turned left.
         let (ox, oy) = (w.0 * ux + w.1 * uy, w.1 * ux - w.0 * uy);
         let (dx, dy) = (d.0 * ux + d.1 * uy, d.1 * ux - d.0 * uy);
@@ -462,8 +510,13 @@ fn circle_around(polys: &[Vec<(f64, f64)>], bounds: Option<[f64; 4]>) -> (f64, f
         .flatten()
         .map(|&(x, y)| (x - cx).powi(2) + (y - cy).powi(2))
         .fold(0.0, f64::max);
-    // A hair more, so rays grazing a corner are still tested exactly.
-    (cx, cy, r2.sqrt() * (1.0 + 1e-9) + 1e-12)
+    (cx, cy, pad(r2.sqrt()))
+}
+
+/// Radius `r` and a hair more, so that rays grazing a corner are still
+/// tested exactly.
+fn pad(r: f64) -> f64 {
+    r * (1.0 + 1e-9) + 1e-12
 }
 
 /// Whether an edge of polygon `a` crosses an edge of polygon `b`.
@@ -554,21 +607,32 @@ mod tests {
         assert_eq!(m.in_tile(3), &[2]);
         assert_eq!(m.in_tile(1), &[2]);
         assert!(m.in_tile(0).is_empty() && m.in_tile(99).is_empty());
-        let h = m.hit(1, 2, (0.0, 0.0), (1.0, 0.0)).unwrap();
+        let h = m.hit(1, 2, (0.0, 0.0), (1.0, 0.0), |_| true).unwrap();
         assert!((h.range - 1.5).abs() < 1e-12 && h.id == 2);
+        // A ray that does not stop at the body passes through it.
+        assert!(m.hit(1, 2, (0.0, 0.0), (1.0, 0.0), |id| id != 2).is_none());
         // Diagonal: enters the square's lower left corner region.
         let s = std::f64::consts::FRAC_1_SQRT_2;
-        let h = m.hit(1, 2, (1.0, -1.0), (s, s)).unwrap();
+        let h = m.hit(1, 2, (1.0, -1.0), (s, s), |_| true).unwrap();
         assert!((h.range - 0.5f64.hypot(0.5)).abs() < 1e-9, "{}", h.range);
-        assert!(m.hit(1, 2, (0.0, 0.0), (-1.0, 0.0)).is_none(), "behind");
-        assert!(m.hit(1, 2, (0.0, 0.0), (0.0, 1.0)).is_none(), "beside");
-        assert_eq!(m.hit(1, 2, (2.1, 0.2), (1.0, 0.0)).unwrap().range, 0.0);
+        assert!(
+            m.hit(1, 2, (0.0, 0.0), (-1.0, 0.0), |_| true).is_none(),
+            "behind"
+        );
+        assert!(
+            m.hit(1, 2, (0.0, 0.0), (0.0, 1.0), |_| true).is_none(),
+            "beside"
+        );
+        assert_eq!(
+            m.hit(1, 2, (2.1, 0.2), (1.0, 0.0), |_| true).unwrap().range,
+            0.0
+        );
         // Moving re-files; unfiling empties the tiles.
         m.file(1, 2, &mut shape(vec![square(5.0, 0.0, 0.5)]), vec![0]);
         assert!(m.in_tile(3).is_empty() && m.in_tile(0) == [2]);
-        assert!((m.hit(1, 2, (0.0, 0.0), (1.0, 0.0)).unwrap().range - 4.5).abs() < 1e-12);
+        assert!((m.hit(1, 2, (0.0, 0.0), (1.0, 0.0), |_| true).unwrap().range - 4.5).abs() < 1e-12);
         m.unfile(1, 2);
-        assert!(m.in_tile(0).is_empty() && m.hit(1, 2, (0.0, 0.0), (1.0, 0.0)).is_none());
+        assert!(m.in_tile(0).is_empty() && m.hit(1, 2, (0.0, 0.0), (1.0, 0.0), |_| true).is_none());
     }
 
     #[test]
@@ -607,7 +671,7 @@ mod tests {
                         exact = exact.min(t);
                     }
                 }
-                let got = m.hit(0, 1, o, d).map(|h| h.range);
+                let got = m.hit(0, 1, o, d, |_| true).map(|h| h.range);
                 if inside(&body, o) {
                     assert_eq!(got, Some(0.0));
                 } else if exact.is_finite() {
@@ -628,14 +692,28 @@ mod tests {
         assert!(m.bodies[0].rect.is_some());
         // Parallel to the sides: through the middle, just inside and just
         // outside the side at y = 0.5.
-        assert!((m.hit(0, 1, (0.0, 0.0), (1.0, 0.0)).unwrap().range - 1.5).abs() < 1e-12);
-        assert!((m.hit(0, 1, (0.0, 0.49), (1.0, 0.0)).unwrap().range - 1.5).abs() < 1e-12);
-        assert!(m.hit(0, 1, (0.0, 0.51), (1.0, 0.0)).is_none());
+        assert!((m.hit(0, 1, (0.0, 0.0), (1.0, 0.0), |_| true).unwrap().range - 1.5).abs() < 1e-12);
         assert!(
-            m.hit(0, 1, (2.0, 0.51), (0.0, 1.0)).is_none(),
+            (m.hit(0, 1, (0.0, 0.49), (1.0, 0.0), |_| true)
+                .unwrap()
+                .range
+                - 1.5)
+                .abs()
+                < 1e-12
+        );
+        assert!(m.hit(0, 1, (0.0, 0.51), (1.0, 0.0), |_| true).is_none());
+        assert!(
+            m.hit(0, 1, (2.0, 0.51), (0.0, 1.0), |_| true).is_none(),
             "above, going away"
         );
-        assert!((m.hit(0, 1, (2.0, 1.5), (0.0, -1.0)).unwrap().range - 1.0).abs() < 1e-12);
+        assert!(
+            (m.hit(0, 1, (2.0, 1.5), (0.0, -1.0), |_| true)
+                .unwrap()
+                .range
+                - 1.0)
+                .abs()
+                < 1e-12
+        );
     }
 
     #[test]

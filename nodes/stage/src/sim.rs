@@ -262,14 +262,21 @@ struct Look {
     /// The model at the root of its tree (kept here alone: a gripper
     /// changes it as it takes and drops).
     root: u32,
-    /// Rangers see it (its `ranger_return` is not negative).
-    seen: bool,
+    /// Its `ranger_return`: rangers see it when this is not negative, and
+    /// read it as the intensity of a hit.
+    ret: f64,
     /// Its body's base and top above the floor.
     lo: f64,
     hi: f64,
 }
 
 impl Look {
+    /// Whether rangers see it.
+    #[inline]
+    fn seen(&self) -> bool {
+        self.ret >= 0.0
+    }
+
     /// Whether its body spans height `z` (Stage's ray z test).
     #[inline]
     fn spans(&self, z: f64) -> bool {
@@ -282,14 +289,24 @@ impl Look {
 /// look costs more than it spares).
 const FAN: usize = 16;
 
-/// A sensor's rays as unit vectors: the first, relative to its ranger,
-/// and the turn from one to the next (see [`fan`]); and the sensor's
-/// heading.
+/// A sensor's rays as the ranger casts them: unit vectors for the first,
+/// relative to its ranger, and the turn from one to the next (see
+/// [`fan`]); and what of the sensor the rays read, kept beside them so
+/// that a ranger's rays read one short array, not its sensors too.
 struct Rays {
     first: (f64, f64),
     turn: (f64, f64),
     /// The turn's angle.
     step: f64,
+    /// Where the rays start, in the ranger's frame.
+    at: (f64, f64),
+    /// Their height above the ranger's base: the middle of the sensor's.
+    z: f64,
+    /// The sensor's range, in metres: nearest and farthest.
+    range: (f64, f64),
+    /// How many rays.
+    samples: usize,
+    /// The sensor's heading on its ranger.
     heading: (f64, f64),
 }
 
@@ -412,12 +429,12 @@ impl Sim {
         }
         // The grids cover every body, with a margin for robots that wander off.
         let [x0, y0, x1, y1] = bounds((0..n).flat_map(|m| {
-            let (g, _) = world.global(&poses, m);
+            let apply = world.global(&poses, m).0.applier();
             world.models[m]
                 .blocks
                 .iter()
                 .flatten()
-                .map(move |&(x, y)| g.apply(x, y))
+                .map(move |&(x, y)| apply(x, y))
         }))
         .unwrap_or([-1.0, -1.0, 1.0, 1.0]);
         let margin = 2.0;
@@ -551,7 +568,7 @@ impl Sim {
                 let (lo, hi) = height(&world, &poses, m);
                 Look {
                     root: roots[m] as u32,
-                    seen: world.models[m].ranger_return >= 0.0,
+                    ret: world.models[m].ranger_return,
                     lo,
                     hi,
                 }
@@ -569,6 +586,12 @@ impl Sim {
                             first: unit(first),
                             turn: unit(step),
                             step,
+                            at: (s.pose.x, s.pose.y),
+                            // As Stage: rays leave from the middle of the
+                            // sensor's height.
+                            z: s.z + s.size[2] / 2.0,
+                            range: s.range,
+                            samples: s.samples,
                             heading: unit(s.pose.yaw),
                         }
                     })
@@ -808,7 +831,9 @@ impl Sim {
     /// would be if `m` were at the global pose `at`, into `bodies` (whose
     /// buffers are reused).
     fn tree_at(&self, m: usize, at: Pose, bodies: &mut Vec<Placed>) {
-        let shift = at.compose(&self.global(m).inverse());
+        // The move from where the tree is to `at`, worked out for the
+        // tree's other bodies (most trees have one: `m`, which goes to `at`).
+        let mut shift = None;
         let mut n = 0;
         for &k in &self.trees[m] {
             if self.world.models[k].blocks.is_empty() {
@@ -817,7 +842,14 @@ impl Sim {
             if bodies.len() == n {
                 bodies.push(Placed::default());
             }
-            self.place_into(k, shift.compose(&self.global(k)), &mut bodies[n]);
+            let to = if k == m {
+                at
+            } else {
+                shift
+                    .get_or_insert_with(|| at.compose(&self.global(m).inverse()))
+                    .compose(&self.global(k))
+            };
+            self.place_into(k, to, &mut bodies[n]);
             n += 1;
         }
         bodies.truncate(n);
@@ -1226,15 +1258,12 @@ impl Sim {
         range: (f64, f64),
         accept: impl Fn(u16) -> bool,
     ) -> Option<Hit> {
-        // A body spans a few tiles: test each once (the first few, at least).
-        let mut tested = Seen::default();
+        // (A body filed in several tiles the ray crosses is tested in each:
+        // the circle test that turns most away costs less than keeping
+        // track of those tested.)
         let movers = |t: usize| {
             let ids = self.movers.in_tile(t).iter().copied();
-            self.nearest_body(
-                (x, y),
-                (dx, dy),
-                ids.filter(|&k| accept(k) && tested.first(k)),
-            )
+            self.nearest_body((x, y), (dx, dy), ids, &accept)
         };
         self.statics
             .cast_with(x, y, (dx, dy), range, &accept, movers)
@@ -1252,7 +1281,7 @@ impl Sim {
         bodies: impl Iterator<Item = u16>,
     ) -> Option<Hit> {
         let best = self
-            .nearest_body((x, y), d, bodies)
+            .nearest_body((x, y), d, bodies, |_| true)
             .filter(|h| h.range <= max_range);
         let reach = best.map_or(max_range, |b| b.range);
         match self.statics.cast_open(x, y, d, (from, reach), &accept) {
@@ -1272,27 +1301,28 @@ impl Sim {
         reach: f64,
         accept: impl Fn(u16) -> bool,
     ) -> Option<Hit> {
-        let mut tested = Seen::default();
         let movers = |t: usize| {
             let ids = self.movers.in_tile(t).iter().copied();
-            self.nearest_body((x, y), d, ids.filter(|&k| accept(k) && tested.first(k)))
+            self.nearest_body((x, y), d, ids, &accept)
         };
         self.statics
             .cast_with(x, y, d, (0.0, reach), |_| false, movers)
     }
 
-    /// The first of the moving `bodies` met by the ray from `o` along the
-    /// unit vector `d` (the earliest of those met equally near).
+    /// The first of the moving `bodies` whose id `accept`s met by the ray
+    /// from `o` along the unit vector `d` (the earliest of those met
+    /// equally near).
     #[inline(always)]
     fn nearest_body(
         &self,
         o: (f64, f64),
         d: (f64, f64),
         bodies: impl Iterator<Item = u16>,
+        accept: impl Fn(u16) -> bool,
     ) -> Option<Hit> {
         let mut best: Option<Hit> = None;
         for k in bodies {
-            if let Some(h) = self.movers.hit(usize::from(k) - 1, k, o, d) {
+            if let Some(h) = self.movers.hit(usize::from(k) - 1, k, o, d, &accept) {
                 if best.is_none_or(|b| h.range < b.range) {
                     best = Some(h);
                 }
@@ -1340,7 +1370,7 @@ impl Sim {
         let root = self.looks[r].root;
         move |c: u16| {
             let o = &self.looks[usize::from(c) - 1];
-            o.root != root && o.seen && o.spans(z)
+            o.root != root && o.seen() && o.spans(z)
         }
     }
 
@@ -1352,11 +1382,9 @@ impl Sim {
         // One sine and cosine per ranger: its sensors' poses and first rays
         // are turned by it.
         let turn = unit(base.yaw);
-        let sensors = &self.world.models[r].sensors;
-        for ((s, rays), rd) in sensors.iter().zip(&self.fans[r]).zip(out.iter_mut()) {
-            // As Stage: rays leave from the middle of the sensor's height.
-            let accept = self.ranger_sees(r, gz + s.z + s.size[2] / 2.0);
-            let (ox, oy) = turned(turn, (s.pose.x, s.pose.y));
+        for (s, rd) in self.fans[r].iter().zip(out.iter_mut()) {
+            let accept = self.ranger_sees(r, gz + s.z);
+            let (ox, oy) = turned(turn, s.at);
             let (ox, oy) = (base.x + ox, base.y + oy);
             // A fan of rays shares one look at the moving bodies within
             // reach, so that each ray tests only those in its direction,
@@ -1368,8 +1396,8 @@ impl Sim {
                     &self.movers,
                     &Fan {
                         o: (ox, oy),
-                        first: turned(turn, rays.first),
-                        step: rays.step,
+                        first: turned(turn, s.first),
+                        step: s.step,
                         n: s.samples,
                         reach: s.range.1,
                     },
@@ -1384,10 +1412,10 @@ impl Sim {
             };
             // Sample directions by rotating the first one step by step
             // (no trigonometry per ray).
-            let mut d = turned(turn, rays.first);
+            let mut d = turned(turn, s.first);
             for k in 0..s.samples {
                 if k > 0 {
-                    d = turned(rays.turn, d);
+                    d = turned(s.turn, d);
                 }
                 let hit = match (&self.raster, fan) {
                     // Static bodies as Stage sees them; moving bodies
@@ -1396,7 +1424,7 @@ impl Sim {
                         let wall = r.cast(ox, oy, d, s.range.1, accept);
                         let reach = wall.map_or(s.range.1, |h| h.range);
                         let body = if fan {
-                            self.nearest_body((ox, oy), d, sweep.at(k))
+                            self.nearest_body((ox, oy), d, sweep.at(k), |_| true)
                                 .filter(|h| h.range <= reach)
                         } else {
                             self.cast_movers(ox, oy, d, reach, accept)
@@ -1411,7 +1439,7 @@ impl Sim {
                 let (range, intensity) = match hit {
                     Some(h) => (
                         h.range.max(s.range.0),
-                        self.world.models[usize::from(h.id) - 1].ranger_return,
+                        self.looks[usize::from(h.id) - 1].ret,
                     ),
                     None => (s.range.1, 0.0),
                 };

@@ -564,7 +564,7 @@ impl Sim {
     /// [`READ`] of those readings; `None` before it has read or when either
     /// sum is exactly 0 (as Stage's controllers test it).
     fn resultant(&self, r: usize, n: usize) -> Option<(f64, [f64; READ])> {
-        let n = n.min(self.world.models[r].sensors.len());
+        let n = n.min(self.fans[r].len());
         let readings = &self.readings[r];
         if readings.len() < n || n == 0 {
             return None;
