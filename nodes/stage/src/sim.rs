@@ -156,6 +156,10 @@ pub struct Sim {
     pub bases: Vec<Base>,
     /// Latest readings of each ranger model, one per sensor (empty for other models).
     pub readings: Vec<Vec<Reading>>,
+    /// Each ranger's sensors' first readings, side by side: what the
+    /// built-in controllers read every step, in one short array a ranger
+    /// where its readings lie in two allocations a sensor.
+    firsts: Vec<Vec<f64>>,
     /// Gripper state of each gripper model (`None` for other models).
     pub grippers: Vec<Option<GripperState>>,
     /// What a ray asks of each model, side by side (one cache line, not
@@ -282,6 +286,11 @@ impl Look {
     fn spans(&self, z: f64) -> bool {
         self.lo <= z && z <= self.hi
     }
+}
+
+/// The first of a sensor's `ranges` (0 when it has none).
+fn first_of(ranges: &[f64]) -> f64 {
+    ranges.first().copied().unwrap_or(0.0)
 }
 
 /// Sensors with at least this many rays look around their origin once, so
@@ -544,7 +553,7 @@ impl Sim {
                 }
             })
             .collect();
-        let readings = world
+        let readings: Vec<Vec<Reading>> = world
             .models
             .iter()
             .map(|m| {
@@ -556,6 +565,10 @@ impl Sim {
                     })
                     .collect()
             })
+            .collect();
+        let firsts = readings
+            .iter()
+            .map(|rs| rs.iter().map(|rd| first_of(&rd.ranges)).collect())
             .collect();
         let colors = world.models.iter().map(|m| m.color).collect();
         let grippers = world
@@ -608,6 +621,7 @@ impl Sim {
             colors,
             bases,
             readings,
+            firsts,
             grippers,
             trees,
             noisy,
@@ -1167,10 +1181,13 @@ impl Sim {
         kept.resize_with(self.bases.len(), Mutex::default);
         let moves = dt.is_some();
         let dt = dt.unwrap_or(0.0);
-        let work: Vec<Mutex<(usize, Vec<Reading>)>> = crew
+        // Each ranger's readings and first readings, moved out of the
+        // simulator while its rays are cast.
+        type Slot = (usize, Vec<Reading>, Vec<f64>);
+        let work: Vec<Mutex<Slot>> = crew
             .rangers()
             .iter()
-            .map(|&r| Mutex::new((r, Vec::new())))
+            .map(|&r| Mutex::new((r, Vec::new(), Vec::new())))
             .collect();
         let (to_plan, to_sense) = (crew.bases_to_plan(), crew.rangers_to_sense());
         let sensing = AtomicBool::new(false);
@@ -1184,7 +1201,7 @@ impl Sim {
             let mut sweep = Sweep::default();
             while let Some(k) = to_sense.take() {
                 let mut slot = lock(&work[k]);
-                let (r, out) = &mut *slot;
+                let (r, out, firsts) = &mut *slot;
                 // As Stage, a ranger senses every `update_interval` (100
                 // ms), however short the steps; in between it keeps its
                 // readings.
@@ -1196,6 +1213,9 @@ impl Sim {
                     if let Some(first) = out.first_mut() {
                         me.add_noise(*r, &mut first.ranges);
                     }
+                }
+                for (f, rd) in firsts.iter_mut().zip(out.iter()) {
+                    *f = first_of(&rd.ranges);
                 }
             }
         };
@@ -1231,6 +1251,7 @@ impl Sim {
                 for slot in &work {
                     let mut slot = lock(slot);
                     slot.1 = std::mem::take(&mut me.readings[slot.0]);
+                    slot.2 = std::mem::take(&mut me.firsts[slot.0]);
                 }
             }
             sensing.store(true, Ordering::Release);
@@ -1238,8 +1259,9 @@ impl Sim {
         };
         crew.run(helper, main);
         for slot in work {
-            let (r, out) = slot.into_inner().unwrap_or_else(PoisonError::into_inner);
+            let (r, out, firsts) = slot.into_inner().unwrap_or_else(PoisonError::into_inner);
             self.readings[r] = out;
+            self.firsts[r] = firsts;
         }
         self.plans = kept;
         self.crew = crew;

@@ -564,15 +564,14 @@ impl Sim {
     /// [`READ`] of those readings; `None` before it has read or when either
     /// sum is exactly 0 (as Stage's controllers test it).
     fn resultant(&self, r: usize, n: usize) -> Option<(f64, [f64; READ])> {
-        let n = n.min(self.fans[r].len());
-        let readings = &self.readings[r];
-        if readings.len() < n || n == 0 {
+        let firsts = &self.firsts[r];
+        let n = n.min(firsts.len());
+        if n == 0 {
             return None;
         }
         let (mut dx, mut dy) = (0.0, 0.0);
         let mut read = [0.0; READ];
-        for (k, (rd, rays)) in readings.iter().zip(&self.fans[r]).take(n).enumerate() {
-            let v = rd.ranges.first().copied().unwrap_or(0.0);
+        for (k, (&v, rays)) in firsts.iter().zip(&self.fans[r]).take(n).enumerate() {
             if let Some(slot) = read.get_mut(k) {
                 *slot = v;
             }
