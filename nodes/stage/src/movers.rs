@@ -27,11 +27,50 @@ pub struct Movers {
     /// The tiles each model is filed under.
     tiles_of: Vec<Vec<usize>>,
     /// Model ids (index + 1) filed under each tile.
-    in_tile: Vec<Vec<u16>>,
+    filed: Vec<Filed>,
+    /// The ids of tiles that hold more than [`INLINE`] (see [`Filed`]).
+    spilled: Vec<Vec<u16>>,
+    /// Lists in `spilled` no tile uses.
+    free: Vec<usize>,
     /// One bit per tile: whether anything is filed under it. Most tiles a
     /// ray crosses hold no body, and these bits (1000 × 400 tiles in 50 KB)
     /// stay in cache where the lists' headers would not.
     busy: Vec<u64>,
+}
+
+/// How many ids a tile keeps in place (see [`Filed`]).
+const INLINE: usize = 7;
+
+/// [`Filed::n`] of a tile whose ids are in a list of their own.
+const SPILLED: u16 = u16::MAX;
+
+/// The ids filed under a tile: up to [`INLINE`] in place, 16 bytes a tile
+/// read in one go (a tile a body is in holds one to three, most often);
+/// more in a list of their own in [`Movers`], whose index the first two
+/// hold.
+#[derive(Debug, Clone, Copy, Default)]
+struct Filed {
+    ids: [u16; INLINE],
+    /// How many, or [`SPILLED`].
+    n: u16,
+}
+
+impl Filed {
+    /// A tile whose ids are in list `k`.
+    fn spilled(k: usize) -> Filed {
+        let mut f = Filed {
+            ids: [0; INLINE],
+            n: SPILLED,
+        };
+        f.ids[0] = k as u16;
+        f.ids[1] = (k >> 16) as u16;
+        f
+    }
+
+    /// The list its ids are in, when [`SPILLED`].
+    fn list(&self) -> usize {
+        usize::from(self.ids[0]) | usize::from(self.ids[1]) << 16
+    }
 }
 
 /// A moving body: its polygons in world coordinates, and what rays and
@@ -131,7 +170,9 @@ impl Movers {
             bodies: vec![Body::default(); models],
             shapes: vec![Shape::of(&Body::default()); models],
             tiles_of: vec![Vec::new(); models],
-            in_tile: vec![Vec::new(); tiles],
+            filed: vec![Filed::default(); tiles],
+            spilled: Vec::new(),
+            free: Vec::new(),
             busy: vec![0; tiles.div_ceil(64)],
         }
     }
@@ -149,8 +190,8 @@ impl Movers {
         if !tiles.clone().eq(self.tiles_of[m].iter().copied()) {
             self.untile(m, id);
             for t in tiles {
-                if let Some(list) = self.in_tile.get_mut(t) {
-                    list.push(id);
+                if t < self.filed.len() {
+                    self.push(t, id);
                     self.busy[t / 64] |= 1 << (t % 64);
                 }
                 self.tiles_of[m].push(t);
@@ -175,15 +216,62 @@ impl Movers {
 
     /// Takes model `m` (id `id`) out of every tile, keeping its shape.
     fn untile(&mut self, m: usize, id: u16) {
-        for &t in &self.tiles_of[m] {
-            if let Some(list) = self.in_tile.get_mut(t) {
-                list.retain(|&k| k != id);
-                if list.is_empty() {
-                    self.busy[t / 64] &= !(1 << (t % 64));
-                }
+        let tiles = std::mem::take(&mut self.tiles_of[m]);
+        for &t in &tiles {
+            if t < self.filed.len() && self.remove(t, id) {
+                self.busy[t / 64] &= !(1 << (t % 64));
             }
         }
+        self.tiles_of[m] = tiles;
         self.tiles_of[m].clear();
+    }
+
+    /// Files `id` under tile `t`, after those there.
+    fn push(&mut self, t: usize, id: u16) {
+        let f = &mut self.filed[t];
+        match f.n {
+            SPILLED => self.spilled[f.list()].push(id),
+            n if usize::from(n) < INLINE => {
+                f.ids[usize::from(n)] = id;
+                f.n += 1;
+            }
+            _ => {
+                let k = self.free.pop().unwrap_or_else(|| {
+                    self.spilled.push(Vec::new());
+                    self.spilled.len() - 1
+                });
+                self.spilled[k].extend_from_slice(&f.ids);
+                self.spilled[k].push(id);
+                *f = Filed::spilled(k);
+            }
+        }
+    }
+
+    /// Takes `id` out of tile `t`, keeping the others' order: true when
+    /// none is left.
+    fn remove(&mut self, t: usize, id: u16) -> bool {
+        let f = &mut self.filed[t];
+        if f.n == SPILLED {
+            let k = f.list();
+            let list = &mut self.spilled[k];
+            list.retain(|&i| i != id);
+            if list.len() <= INLINE {
+                // Back in place: the list is free for another tile.
+                let mut back = Filed::default();
+                back.ids[..list.len()].copy_from_slice(list);
+                back.n = list.len() as u16;
+                list.clear();
+                self.free.push(k);
+                *f = back;
+            }
+        } else {
+            let n = usize::from(f.n);
+            if let Some(at) = f.ids[..n].iter().position(|&i| i == id) {
+                f.ids.copy_within(at + 1..n, at);
+                f.n -= 1;
+            }
+        }
+        f.n == 0
     }
 
     /// How far point `p` is from model `m`'s body, at least (the distance to
@@ -203,7 +291,11 @@ impl Movers {
         if !busy {
             return &[];
         }
-        self.in_tile.get(t).map_or(&[], Vec::as_slice)
+        match self.filed.get(t) {
+            Some(f) if f.n == SPILLED => &self.spilled[f.list()],
+            Some(f) => &f.ids[..usize::from(f.n)],
+            None => &[],
+        }
     }
 
     /// Whether model `m`'s filed body overlaps `body`.
@@ -571,6 +663,42 @@ mod tests {
             (cx + h, cy + h),
             (cx - h, cy + h),
         ]
+    }
+
+    #[test]
+    fn a_crowded_tile_keeps_its_ids_in_order_in_a_list_and_back_in_place() {
+        let n = INLINE + 3;
+        let mut m = Movers::new(n, 2);
+        for k in 0..n {
+            let id = k as u16 + 1;
+            m.file(k, id, &mut shape(vec![square(k as f64, 0.0, 0.4)]), vec![1]);
+        }
+        let all: Vec<u16> = (1..=n as u16).collect();
+        assert_eq!(m.in_tile(1), all.as_slice());
+        assert_eq!(m.spilled.len(), 1);
+        // Out of the middle, in order; then few enough to fit in place.
+        m.unfile(2, 3);
+        assert_eq!(m.in_tile(1)[..3], [1, 2, 4]);
+        for k in 3..6 {
+            m.unfile(k, k as u16 + 1);
+        }
+        assert_eq!(m.in_tile(1), [1, 2, 7, 8, 9, 10]);
+        assert_eq!(m.filed[1].n, 6, "back in place");
+        // The freed list serves the next crowded tile.
+        for k in 2..6 {
+            m.file(
+                k,
+                k as u16 + 1,
+                &mut shape(vec![square(0.0, 0.0, 0.1)]),
+                vec![1],
+            );
+        }
+        assert_eq!(m.in_tile(1).len(), 10);
+        assert_eq!(m.spilled.len(), 1);
+        for k in 0..n {
+            m.unfile(k, k as u16 + 1);
+        }
+        assert!(m.in_tile(1).is_empty() && m.in_tile(0).is_empty());
     }
 
     #[test]
