@@ -305,7 +305,8 @@ impl Movers {
 
     /// Where the ray from `o` along the unit vector `d` first meets model
     /// `m`'s body (id `id`), if it `accept`s that id: metres, 0 when `o` is
-    /// inside it.
+    /// inside it. A body that is not a rectangle is tested edge by edge
+    /// only if `once(id)` (false: this ray has tested it already).
     #[inline]
     pub fn hit(
         &self,
@@ -314,6 +315,7 @@ impl Movers {
         o: (f64, f64),
         d: (f64, f64),
         accept: impl Fn(u16) -> bool,
+        once: impl FnOnce(u16) -> bool,
     ) -> Option<Hit> {
         // Most rays that pass a body's tiles miss it: the circle says so
         // without testing edges, or asking whether the ray stops at it.
@@ -325,6 +327,9 @@ impl Movers {
         }
         if shape.half.0 >= 0.0 {
             return shape.hit_rect(o, d).map(|range| Hit { range, id });
+        }
+        if !once(id) {
+            return None;
         }
         self.hit_edges(m, id, o, d)
     }
@@ -735,32 +740,53 @@ mod tests {
         assert_eq!(m.in_tile(3), &[2]);
         assert_eq!(m.in_tile(1), &[2]);
         assert!(m.in_tile(0).is_empty() && m.in_tile(99).is_empty());
-        let h = m.hit(1, 2, (0.0, 0.0), (1.0, 0.0), |_| true).unwrap();
+        let h = m
+            .hit(1, 2, (0.0, 0.0), (1.0, 0.0), |_| true, |_| true)
+            .unwrap();
         assert!((h.range - 1.5).abs() < 1e-12 && h.id == 2);
         // A ray that does not stop at the body passes through it.
-        assert!(m.hit(1, 2, (0.0, 0.0), (1.0, 0.0), |id| id != 2).is_none());
+        assert!(m
+            .hit(1, 2, (0.0, 0.0), (1.0, 0.0), |id| id != 2, |_| true)
+            .is_none());
         // Diagonal: enters the square's lower left corner region.
         let s = std::f64::consts::FRAC_1_SQRT_2;
-        let h = m.hit(1, 2, (1.0, -1.0), (s, s), |_| true).unwrap();
+        let h = m
+            .hit(1, 2, (1.0, -1.0), (s, s), |_| true, |_| true)
+            .unwrap();
         assert!((h.range - 0.5f64.hypot(0.5)).abs() < 1e-9, "{}", h.range);
         assert!(
-            m.hit(1, 2, (0.0, 0.0), (-1.0, 0.0), |_| true).is_none(),
+            m.hit(1, 2, (0.0, 0.0), (-1.0, 0.0), |_| true, |_| true)
+                .is_none(),
             "behind"
         );
         assert!(
-            m.hit(1, 2, (0.0, 0.0), (0.0, 1.0), |_| true).is_none(),
+            m.hit(1, 2, (0.0, 0.0), (0.0, 1.0), |_| true, |_| true)
+                .is_none(),
             "beside"
         );
         assert_eq!(
-            m.hit(1, 2, (2.1, 0.2), (1.0, 0.0), |_| true).unwrap().range,
+            m.hit(1, 2, (2.1, 0.2), (1.0, 0.0), |_| true, |_| true)
+                .unwrap()
+                .range,
             0.0
         );
         // Moving re-files; unfiling empties the tiles.
         m.file(1, 2, &mut shape(vec![square(5.0, 0.0, 0.5)]), vec![0]);
         assert!(m.in_tile(3).is_empty() && m.in_tile(0) == [2]);
-        assert!((m.hit(1, 2, (0.0, 0.0), (1.0, 0.0), |_| true).unwrap().range - 4.5).abs() < 1e-12);
+        assert!(
+            (m.hit(1, 2, (0.0, 0.0), (1.0, 0.0), |_| true, |_| true)
+                .unwrap()
+                .range
+                - 4.5)
+                .abs()
+                < 1e-12
+        );
         m.unfile(1, 2);
-        assert!(m.in_tile(0).is_empty() && m.hit(1, 2, (0.0, 0.0), (1.0, 0.0), |_| true).is_none());
+        assert!(
+            m.in_tile(0).is_empty()
+                && m.hit(1, 2, (0.0, 0.0), (1.0, 0.0), |_| true, |_| true)
+                    .is_none()
+        );
     }
 
     #[test]
@@ -799,7 +825,7 @@ mod tests {
                         exact = exact.min(t);
                     }
                 }
-                let got = m.hit(0, 1, o, d, |_| true).map(|h| h.range);
+                let got = m.hit(0, 1, o, d, |_| true, |_| true).map(|h| h.range);
                 if inside(&body, o) {
                     assert_eq!(got, Some(0.0));
                 } else if exact.is_finite() {
@@ -820,22 +846,32 @@ mod tests {
         assert!(m.bodies[0].rect.is_some());
         // Parallel to the sides: through the middle, just inside and just
         // outside the side at y = 0.5.
-        assert!((m.hit(0, 1, (0.0, 0.0), (1.0, 0.0), |_| true).unwrap().range - 1.5).abs() < 1e-12);
         assert!(
-            (m.hit(0, 1, (0.0, 0.49), (1.0, 0.0), |_| true)
+            (m.hit(0, 1, (0.0, 0.0), (1.0, 0.0), |_| true, |_| true)
                 .unwrap()
                 .range
                 - 1.5)
                 .abs()
                 < 1e-12
         );
-        assert!(m.hit(0, 1, (0.0, 0.51), (1.0, 0.0), |_| true).is_none());
         assert!(
-            m.hit(0, 1, (2.0, 0.51), (0.0, 1.0), |_| true).is_none(),
+            (m.hit(0, 1, (0.0, 0.49), (1.0, 0.0), |_| true, |_| true)
+                .unwrap()
+                .range
+                - 1.5)
+                .abs()
+                < 1e-12
+        );
+        assert!(m
+            .hit(0, 1, (0.0, 0.51), (1.0, 0.0), |_| true, |_| true)
+            .is_none());
+        assert!(
+            m.hit(0, 1, (2.0, 0.51), (0.0, 1.0), |_| true, |_| true)
+                .is_none(),
             "above, going away"
         );
         assert!(
-            (m.hit(0, 1, (2.0, 1.5), (0.0, -1.0), |_| true)
+            (m.hit(0, 1, (2.0, 1.5), (0.0, -1.0), |_| true, |_| true)
                 .unwrap()
                 .range
                 - 1.0)

@@ -1280,12 +1280,13 @@ impl Sim {
         range: (f64, f64),
         accept: impl Fn(u16) -> bool,
     ) -> Option<Hit> {
-        // (A body filed in several tiles the ray crosses is tested in each:
-        // the circle test that turns most away costs less than keeping
-        // track of those tested.)
+        // A body filed in several tiles the ray crosses is met in each: its
+        // circle and a rectangle cost less to test again than to look up
+        // among those tested, but a body of many edges is tested once.
+        let mut tested = Seen::default();
         let movers = |t: usize| {
             let ids = self.movers.in_tile(t).iter().copied();
-            self.nearest_body((x, y), (dx, dy), ids, &accept)
+            self.nearest_body((x, y), (dx, dy), ids, &accept, &mut tested)
         };
         self.statics
             .cast_with(x, y, (dx, dy), range, &accept, movers)
@@ -1303,7 +1304,7 @@ impl Sim {
         bodies: impl Iterator<Item = u16>,
     ) -> Option<Hit> {
         let best = self
-            .nearest_body((x, y), d, bodies, |_| true)
+            .nearest_body((x, y), d, bodies, |_| true, &mut Seen::default())
             .filter(|h| h.range <= max_range);
         let reach = best.map_or(max_range, |b| b.range);
         match self.statics.cast_open(x, y, d, (from, reach), &accept) {
@@ -1323,9 +1324,10 @@ impl Sim {
         reach: f64,
         accept: impl Fn(u16) -> bool,
     ) -> Option<Hit> {
+        let mut tested = Seen::default();
         let movers = |t: usize| {
             let ids = self.movers.in_tile(t).iter().copied();
-            self.nearest_body((x, y), d, ids, &accept)
+            self.nearest_body((x, y), d, ids, &accept, &mut tested)
         };
         self.statics
             .cast_with(x, y, d, (0.0, reach), |_| false, movers)
@@ -1333,7 +1335,8 @@ impl Sim {
 
     /// The first of the moving `bodies` whose id `accept`s met by the ray
     /// from `o` along the unit vector `d` (the earliest of those met
-    /// equally near).
+    /// equally near); bodies of many edges in `tested` are not tested
+    /// again.
     #[inline(always)]
     fn nearest_body(
         &self,
@@ -1341,10 +1344,12 @@ impl Sim {
         d: (f64, f64),
         bodies: impl Iterator<Item = u16>,
         accept: impl Fn(u16) -> bool,
+        tested: &mut Seen,
     ) -> Option<Hit> {
         let mut best: Option<Hit> = None;
         for k in bodies {
-            if let Some(h) = self.movers.hit(usize::from(k) - 1, k, o, d, &accept) {
+            let once = |k| tested.first(k);
+            if let Some(h) = self.movers.hit(usize::from(k) - 1, k, o, d, &accept, once) {
                 if best.is_none_or(|b| h.range < b.range) {
                     best = Some(h);
                 }
@@ -1446,8 +1451,14 @@ impl Sim {
                         let wall = r.cast(ox, oy, d, s.range.1, accept);
                         let reach = wall.map_or(s.range.1, |h| h.range);
                         let body = if fan {
-                            self.nearest_body((ox, oy), d, sweep.at(k), |_| true)
-                                .filter(|h| h.range <= reach)
+                            self.nearest_body(
+                                (ox, oy),
+                                d,
+                                sweep.at(k),
+                                |_| true,
+                                &mut Seen::default(),
+                            )
+                            .filter(|h| h.range <= reach)
                         } else {
                             self.cast_movers(ox, oy, d, reach, accept)
                         };
