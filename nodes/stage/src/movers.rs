@@ -282,7 +282,7 @@ impl Movers {
     }
 
     /// The ids filed under tile `t`.
-    #[inline]
+    #[inline(always)]
     pub fn in_tile(&self, t: usize) -> &[u16] {
         let busy = self
             .busy
@@ -307,7 +307,7 @@ impl Movers {
     /// `m`'s body (id `id`), if it `accept`s that id: metres, 0 when `o` is
     /// inside it. A body that is not a rectangle is tested edge by edge
     /// only if `once(id)` (false: this ray has tested it already).
-    #[inline]
+    #[inline(always)]
     pub fn hit(
         &self,
         m: usize,
