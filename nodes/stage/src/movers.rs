@@ -216,14 +216,15 @@ impl Movers {
 
     /// Takes model `m` (id `id`) out of every tile, keeping its shape.
     fn untile(&mut self, m: usize, id: u16) {
-        let tiles = std::mem::take(&mut self.tiles_of[m]);
+        // (Taken out while `remove` borrows the rest; its buffer goes back.)
+        let mut tiles = std::mem::take(&mut self.tiles_of[m]);
         for &t in &tiles {
             if t < self.filed.len() && self.remove(t, id) {
                 self.busy[t / 64] &= !(1 << (t % 64));
             }
         }
+        tiles.clear();
         self.tiles_of[m] = tiles;
-        self.tiles_of[m].clear();
     }
 
     /// Files `id` under tile `t`, after those there.
@@ -424,14 +425,8 @@ impl Sweep {
         let half_plane = span <= PI + SLACK;
         let below = -SLACK * fan.reach;
         let (ex, ey) = fan.first;
-        for (
-            m,
-            &Shape {
-                circle: (cx, cy, r),
-                ..
-            },
-        ) in movers.shapes.iter().enumerate()
-        {
+        for (m, shape) in movers.shapes.iter().enumerate() {
+            let (cx, cy, r) = shape.circle;
             // The circle in the fan's frame: x along the first ray.
             let (dx, dy) = (cx - fan.o.0, cy - fan.o.1);
             let (x, y) = (dx * ex + dy * ey, dy * ex - dx * ey);
@@ -661,6 +656,12 @@ mod tests {
         b
     }
 
+    /// [`Movers::hit`] for a ray that stops at every body and tests each
+    /// afresh.
+    fn hit(m: &Movers, k: usize, id: u16, o: (f64, f64), d: (f64, f64)) -> Option<Hit> {
+        m.hit(k, id, o, d, |_| true, |_| true)
+    }
+
     fn square(cx: f64, cy: f64, h: f64) -> Vec<(f64, f64)> {
         vec![
             (cx - h, cy - h),
@@ -740,9 +741,7 @@ mod tests {
         assert_eq!(m.in_tile(3), &[2]);
         assert_eq!(m.in_tile(1), &[2]);
         assert!(m.in_tile(0).is_empty() && m.in_tile(99).is_empty());
-        let h = m
-            .hit(1, 2, (0.0, 0.0), (1.0, 0.0), |_| true, |_| true)
-            .unwrap();
+        let h = hit(&m, 1, 2, (0.0, 0.0), (1.0, 0.0)).unwrap();
         assert!((h.range - 1.5).abs() < 1e-12 && h.id == 2);
         // A ray that does not stop at the body passes through it.
         assert!(m
@@ -750,43 +749,17 @@ mod tests {
             .is_none());
         // Diagonal: enters the square's lower left corner region.
         let s = std::f64::consts::FRAC_1_SQRT_2;
-        let h = m
-            .hit(1, 2, (1.0, -1.0), (s, s), |_| true, |_| true)
-            .unwrap();
+        let h = hit(&m, 1, 2, (1.0, -1.0), (s, s)).unwrap();
         assert!((h.range - 0.5f64.hypot(0.5)).abs() < 1e-9, "{}", h.range);
-        assert!(
-            m.hit(1, 2, (0.0, 0.0), (-1.0, 0.0), |_| true, |_| true)
-                .is_none(),
-            "behind"
-        );
-        assert!(
-            m.hit(1, 2, (0.0, 0.0), (0.0, 1.0), |_| true, |_| true)
-                .is_none(),
-            "beside"
-        );
-        assert_eq!(
-            m.hit(1, 2, (2.1, 0.2), (1.0, 0.0), |_| true, |_| true)
-                .unwrap()
-                .range,
-            0.0
-        );
+        assert!(hit(&m, 1, 2, (0.0, 0.0), (-1.0, 0.0)).is_none(), "behind");
+        assert!(hit(&m, 1, 2, (0.0, 0.0), (0.0, 1.0)).is_none(), "beside");
+        assert_eq!(hit(&m, 1, 2, (2.1, 0.2), (1.0, 0.0)).unwrap().range, 0.0);
         // Moving re-files; unfiling empties the tiles.
         m.file(1, 2, &mut shape(vec![square(5.0, 0.0, 0.5)]), vec![0]);
         assert!(m.in_tile(3).is_empty() && m.in_tile(0) == [2]);
-        assert!(
-            (m.hit(1, 2, (0.0, 0.0), (1.0, 0.0), |_| true, |_| true)
-                .unwrap()
-                .range
-                - 4.5)
-                .abs()
-                < 1e-12
-        );
+        assert!((hit(&m, 1, 2, (0.0, 0.0), (1.0, 0.0)).unwrap().range - 4.5).abs() < 1e-12);
         m.unfile(1, 2);
-        assert!(
-            m.in_tile(0).is_empty()
-                && m.hit(1, 2, (0.0, 0.0), (1.0, 0.0), |_| true, |_| true)
-                    .is_none()
-        );
+        assert!(m.in_tile(0).is_empty() && hit(&m, 1, 2, (0.0, 0.0), (1.0, 0.0)).is_none());
     }
 
     #[test]
@@ -825,7 +798,7 @@ mod tests {
                         exact = exact.min(t);
                     }
                 }
-                let got = m.hit(0, 1, o, d, |_| true, |_| true).map(|h| h.range);
+                let got = hit(&m, 0, 1, o, d).map(|h| h.range);
                 if inside(&body, o) {
                     assert_eq!(got, Some(0.0));
                 } else if exact.is_finite() {
@@ -846,38 +819,14 @@ mod tests {
         assert!(m.bodies[0].rect.is_some());
         // Parallel to the sides: through the middle, just inside and just
         // outside the side at y = 0.5.
+        assert!((hit(&m, 0, 1, (0.0, 0.0), (1.0, 0.0)).unwrap().range - 1.5).abs() < 1e-12);
+        assert!((hit(&m, 0, 1, (0.0, 0.49), (1.0, 0.0)).unwrap().range - 1.5).abs() < 1e-12);
+        assert!(hit(&m, 0, 1, (0.0, 0.51), (1.0, 0.0)).is_none());
         assert!(
-            (m.hit(0, 1, (0.0, 0.0), (1.0, 0.0), |_| true, |_| true)
-                .unwrap()
-                .range
-                - 1.5)
-                .abs()
-                < 1e-12
-        );
-        assert!(
-            (m.hit(0, 1, (0.0, 0.49), (1.0, 0.0), |_| true, |_| true)
-                .unwrap()
-                .range
-                - 1.5)
-                .abs()
-                < 1e-12
-        );
-        assert!(m
-            .hit(0, 1, (0.0, 0.51), (1.0, 0.0), |_| true, |_| true)
-            .is_none());
-        assert!(
-            m.hit(0, 1, (2.0, 0.51), (0.0, 1.0), |_| true, |_| true)
-                .is_none(),
+            hit(&m, 0, 1, (2.0, 0.51), (0.0, 1.0)).is_none(),
             "above, going away"
         );
-        assert!(
-            (m.hit(0, 1, (2.0, 1.5), (0.0, -1.0), |_| true, |_| true)
-                .unwrap()
-                .range
-                - 1.0)
-                .abs()
-                < 1e-12
-        );
+        assert!((hit(&m, 0, 1, (2.0, 1.5), (0.0, -1.0)).unwrap().range - 1.0).abs() < 1e-12);
     }
 
     #[test]
