@@ -575,7 +575,7 @@ impl Grid {
         d: (f64, f64),
         (from, max_range): (f64, f64),
         mut accept: impl FnMut(u16) -> bool,
-        mut in_tile: impl FnMut(usize) -> Option<Hit>,
+        mut in_tile: impl InTile,
     ) -> Option<Hit> {
         let r = self.aim(x, y, d, (from, max_range))?;
         let inv_res = 1.0 / r.res;
@@ -601,7 +601,7 @@ impl Grid {
                 tcol + (row(v_last) >> shift) * r.tv,
             );
             let mut ask = |t: usize| {
-                if let Some(h) = in_tile(t) {
+                if let Some(h) = in_tile.in_tile(t) {
                     if h.range * inv_res < best_t {
                         best_t = h.range * inv_res;
                         best = Some(h);
@@ -761,6 +761,22 @@ impl Grid {
             hi,
             v_in0: (((gv + dv * t0) * ONE) as i64).clamp(0, top),
         })
+    }
+}
+
+/// What [`Grid::cast_with`] asks of each tile a ray enters: the nearest
+/// hit among what the caller keeps there. A closure will do; a type of
+/// its own can have its answer inlined into the ray's walk.
+pub trait InTile {
+    /// The nearest hit (range from the ray's origin) among what is kept in
+    /// tile `t`.
+    fn in_tile(&mut self, t: usize) -> Option<Hit>;
+}
+
+impl<F: FnMut(usize) -> Option<Hit>> InTile for F {
+    #[inline(always)]
+    fn in_tile(&mut self, t: usize) -> Option<Hit> {
+        self(t)
     }
 }
 

@@ -967,7 +967,7 @@ impl Stage {
             match find(&self.sim, &q.name) {
                 Some(m) => {
                     // Roll and pitch are not Stage's.
-                    self.sim.world.models[m].z = q.pose.z;
+                    self.sim.set_z(m, q.pose.z);
                     let p = q.pose;
                     self.sim
                         .set_pose(m, troupe_geom::Pose::new(p.x, p.y, p.yaw));

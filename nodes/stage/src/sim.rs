@@ -14,7 +14,7 @@ use std::sync::{Mutex, PoisonError, RwLock};
 
 use troupe_geom::occmap::{FREE, OCCUPIED};
 use troupe_geom::raster::{self, Raster};
-use troupe_geom::{bounds, normalize, Grid, Hit, Lattice, OccMap, Pose, EMPTY};
+use troupe_geom::{bounds, normalize, Grid, Hit, InTile, Lattice, OccMap, Pose, EMPTY};
 use troupe_msgs::{map, Color};
 
 use crate::crew::{spin_until, Crew, Job};
@@ -167,6 +167,8 @@ pub struct Sim {
     /// to its top above the floor (Stage is 2.5D: a sensor sees only what
     /// spans the height of its rays).
     looks: Vec<Look>,
+    /// What a step reads of each model's place in its tree (see [`Frame`]).
+    frames: Vec<Frame>,
     /// The threads that plan moves and cast rays, and the models with
     /// range sensors among them.
     crew: Crew,
@@ -257,6 +259,69 @@ impl Seen {
             self.n += 1;
         }
         true
+    }
+}
+
+/// The moving bodies a ray from `o` along `d` meets in each tile it
+/// enters, nearest first (see [`Sim::cast`]): a type of its own, so that
+/// the test is inlined into the ray's walk, not called tile by tile.
+struct TileBodies<'a, A> {
+    sim: &'a Sim,
+    o: (f64, f64),
+    d: (f64, f64),
+    accept: A,
+    own: u16,
+    tested: Seen,
+}
+
+impl<A: Fn(u16) -> bool> InTile for TileBodies<'_, A> {
+    #[inline(always)]
+    fn in_tile(&mut self, t: usize) -> Option<Hit> {
+        let ids = self.sim.movers.in_tile(t).iter().copied();
+        let (o, d, own) = (self.o, self.d, self.own);
+        self.sim
+            .nearest_body(o, d, ids, &self.accept, own, &mut self.tested)
+    }
+}
+
+/// What a step reads of a model's definition, side by side with the
+/// other models' (a `ModelDef` spans eleven cache lines, and reading a
+/// field or two of each of 2000 of them, pass after pass, was a tenth of
+/// Stage's hospital.world): where it sits in its tree, how often it
+/// updates, whether it has a body and blocks others.
+#[derive(Debug, Clone, Copy)]
+struct Frame {
+    /// Its parent, or [`Frame::ROOT`].
+    parent: u32,
+    /// Whether it has blocks.
+    body: bool,
+    /// Its `obstacle_return`.
+    obstacle: bool,
+    /// Its height above its parent's top (`ModelDef::z`).
+    z: f64,
+    /// How far above its base its children stand: its height when it
+    /// stacks them, else 0.
+    stack: f64,
+    /// Its `update_interval`, in seconds.
+    every: f64,
+}
+
+impl Frame {
+    /// [`Frame::parent`] of a model at the root of its tree.
+    const ROOT: u32 = u32::MAX;
+
+    fn of(d: &crate::world::ModelDef) -> Frame {
+        Frame {
+            parent: d
+                .parent
+                .and_then(|p| u32::try_from(p).ok())
+                .unwrap_or(Frame::ROOT),
+            body: !d.blocks.is_empty(),
+            obstacle: d.obstacle_return,
+            z: d.z,
+            stack: if d.stack_children { d.size[2] } else { 0.0 },
+            every: d.update_interval,
+        }
     }
 }
 
@@ -587,6 +652,7 @@ impl Sim {
                 }
             })
             .collect();
+        let frames = world.models.iter().map(Frame::of).collect();
         let fans = world
             .models
             .iter()
@@ -631,6 +697,7 @@ impl Sim {
             fasr2: fasr2.and_then(Result::ok),
             crew: Crew::default(),
             looks,
+            frames,
             movable,
             written_at: vec![None; n],
             raster: None,
@@ -850,7 +917,7 @@ impl Sim {
         let mut shift = None;
         let mut n = 0;
         for &k in &self.trees[m] {
-            if self.world.models[k].blocks.is_empty() {
+            if !self.frames[k].body {
                 continue;
             }
             if bodies.len() == n {
@@ -871,14 +938,14 @@ impl Sim {
 
     /// Whether model `other` blocks the bodies of the tree of `root`.
     fn blocks(&self, root: usize, other: usize) -> bool {
-        self.root(other) != root && self.world.models[other].obstacle_return
+        self.root(other) != root && self.frames[other].obstacle
     }
 
     /// Whether model `m`'s body meets obstacles when it moves: as in
     /// Stage, one with no `obstacle_return` (a charging bump on a robot's
     /// nose) passes through them as they pass through it.
     fn collides(&self, m: usize) -> bool {
-        self.world.models[m].obstacle_return
+        self.frames[m].obstacle
     }
 
     /// True when the `bodies` (of the tree of `root`) would overlap an
@@ -975,8 +1042,8 @@ impl Sim {
             (self.looks[k].lo, self.looks[k].hi) = height(&self.world, &self.poses, k);
             self.place(k);
         }
+        let g = self.global(m);
         if let Some(b) = self.bases.iter_mut().find(|b| b.model == m) {
-            let g = self.world.global(&self.poses, m).0;
             if self.world.models[m]
                 .position
                 .as_ref()
@@ -990,7 +1057,7 @@ impl Sim {
     /// Whether model `m` updates in the step from `self.time`: Stage
     /// updates a model every `update_interval`, at its multiples.
     fn due(&self, m: usize) -> bool {
-        let every = self.world.models[m].update_interval;
+        let every = self.frames[m].every;
         let k = |t: f64| (t / every + 1e-9).floor();
         k(self.time + self.world.interval_sim) > k(self.time)
     }
@@ -1100,13 +1167,11 @@ impl Sim {
         }
         let here = self.poses[m];
         let next = here.compose(&Pose::new(v.x * dt, v.y * dt, v.yaw * dt));
-        let root_parent = self.world.models[m].parent.is_none();
+        let root_parent = self.frames[m].parent == Frame::ROOT;
         let g_next = if root_parent {
             next
         } else {
-            self.world
-                .global(&self.poses, m)
-                .0
+            self.global(m)
                 .compose(&Pose::new(v.x * dt, v.y * dt, v.yaw * dt))
         };
         plan.v = v;
@@ -1271,7 +1336,9 @@ impl Sim {
     /// `(dx, dy)`, within `range`, whose id `accept`s: walls and other static
     /// bodies from the static grid, moving bodies tested exactly as the ray
     /// passes their tiles. The ray is looked at from `range.0` on: the
-    /// caller knows nothing it accepts lies nearer.
+    /// caller knows nothing it accepts lies nearer. Body `own` (0 for
+    /// none), which `accept` refuses, is passed over untested: a ranger's
+    /// rays start in their own robot.
     fn cast(
         &self,
         x: f64,
@@ -1279,14 +1346,18 @@ impl Sim {
         (dx, dy): (f64, f64),
         range: (f64, f64),
         accept: impl Fn(u16) -> bool,
+        own: u16,
     ) -> Option<Hit> {
         // A body filed in several tiles the ray crosses is met in each: its
         // circle and a rectangle cost less to test again than to look up
         // among those tested, but a body of many edges is tested once.
-        let mut tested = Seen::default();
-        let movers = |t: usize| {
-            let ids = self.movers.in_tile(t).iter().copied();
-            self.nearest_body((x, y), (dx, dy), ids, &accept, &mut tested)
+        let movers = TileBodies {
+            sim: self,
+            o: (x, y),
+            d: (dx, dy),
+            accept: &accept,
+            own,
+            tested: Seen::default(),
         };
         self.statics
             .cast_with(x, y, (dx, dy), range, &accept, movers)
@@ -1304,7 +1375,7 @@ impl Sim {
         bodies: impl Iterator<Item = u16>,
     ) -> Option<Hit> {
         let best = self
-            .nearest_body((x, y), d, bodies, |_| true, &mut Seen::default())
+            .nearest_body((x, y), d, bodies, |_| true, 0, &mut Seen::default())
             .filter(|h| h.range <= max_range);
         let reach = best.map_or(max_range, |b| b.range);
         match self.statics.cast_open(x, y, d, (from, reach), &accept) {
@@ -1324,10 +1395,13 @@ impl Sim {
         reach: f64,
         accept: impl Fn(u16) -> bool,
     ) -> Option<Hit> {
-        let mut tested = Seen::default();
-        let movers = |t: usize| {
-            let ids = self.movers.in_tile(t).iter().copied();
-            self.nearest_body((x, y), d, ids, &accept, &mut tested)
+        let movers = TileBodies {
+            sim: self,
+            o: (x, y),
+            d,
+            accept,
+            own: 0,
+            tested: Seen::default(),
         };
         self.statics
             .cast_with(x, y, d, (0.0, reach), |_| false, movers)
@@ -1336,7 +1410,7 @@ impl Sim {
     /// The first of the moving `bodies` whose id `accept`s met by the ray
     /// from `o` along the unit vector `d` (the earliest of those met
     /// equally near); bodies of many edges in `tested` are not tested
-    /// again.
+    /// again, nor body `own`.
     #[inline(always)]
     fn nearest_body(
         &self,
@@ -1344,10 +1418,11 @@ impl Sim {
         d: (f64, f64),
         bodies: impl Iterator<Item = u16>,
         accept: impl Fn(u16) -> bool,
+        own: u16,
         tested: &mut Seen,
     ) -> Option<Hit> {
         let mut best: Option<Hit> = None;
-        for k in bodies {
+        for k in bodies.filter(|&k| k != own) {
             let once = |k| tested.first(k);
             if let Some(h) = self.movers.hit(usize::from(k) - 1, k, o, d, &accept, once) {
                 if best.is_none_or(|b| h.range < b.range) {
@@ -1404,11 +1479,13 @@ impl Sim {
     /// Ranger `r`'s readings into `out`; `sweep` is room for its fans' look
     /// at the moving bodies, kept from ranger to ranger.
     fn sense_one(&self, r: usize, out: &mut [Reading], sweep: &mut Sweep) {
-        let (g, gz) = self.world.global(&self.poses, r);
+        let (g, gz) = self.global_z(r);
         let base = g.compose(&self.world.models[r].origin);
         // One sine and cosine per ranger: its sensors' poses and first rays
         // are turned by it.
         let turn = unit(base.yaw);
+        // The body the rays start in, which they never stop at.
+        let own = u16::try_from(self.looks[r].root + 1).unwrap_or(0);
         for (s, rd) in self.fans[r].iter().zip(out.iter_mut()) {
             let accept = self.ranger_sees(r, gz + s.z);
             let (ox, oy) = turned(turn, s.at);
@@ -1456,6 +1533,7 @@ impl Sim {
                                 d,
                                 sweep.at(k),
                                 |_| true,
+                                0,
                                 &mut Seen::default(),
                             )
                             .filter(|h| h.range <= reach)
@@ -1467,7 +1545,7 @@ impl Sim {
                     (None, true) => {
                         self.cast_among(ox, oy, d, (from, s.range.1), accept, sweep.at(k))
                     }
-                    (None, false) => self.cast(ox, oy, d, (from, s.range.1), accept),
+                    (None, false) => self.cast(ox, oy, d, (from, s.range.1), accept, own),
                 };
                 let (range, intensity) = match hit {
                     Some(h) => (
@@ -1497,14 +1575,14 @@ impl Sim {
         if len <= 0.0 {
             return None;
         }
-        let (at, z) = self.world.global(&self.poses, g);
+        let (at, z) = self.global_z(g);
         let o = at.compose(&self.world.models[g].origin).apply(x, y);
         let accept = |id: u16| {
             let k = usize::from(id) - 1;
             k != g && self.world.models[k].gripper_return && self.spans(k, z)
         };
         let d = unit(at.yaw + yaw);
-        self.cast(o.0, o.1, d, (0.0, len), accept)
+        self.cast(o.0, o.1, d, (0.0, len), accept, 0)
             .map(|h| usize::from(h.id) - 1)
     }
 
@@ -1653,7 +1731,7 @@ impl Sim {
         let samples: Vec<Option<(Color, f64)>> = (0..n)
             .map(|s| {
                 let a = eye.yaw + cfg.pan - cfg.fov / 2.0 + s as f64 * step;
-                self.cast(eye.x, eye.y, unit(a), (0.0, cfg.range), accept)
+                self.cast(eye.x, eye.y, unit(a), (0.0, cfg.range), accept, 0)
                     .map(|hit| (self.colors[usize::from(hit.id) - 1], hit.range))
             })
             .collect();
@@ -1716,7 +1794,7 @@ impl Sim {
         let Some(cfg) = &self.world.models[m].fiducial else {
             return Data::default();
         };
-        let (g, z) = self.world.global(&self.poses, m);
+        let (g, z) = self.global_z(m);
         let eye = g.compose(&self.world.models[m].origin);
         let root = self.root(m);
         let mut items = Vec::new();
@@ -1743,6 +1821,7 @@ impl Sim {
                 unit(eye.yaw + bearing),
                 (0.0, cfg.range_max),
                 accept,
+                0,
             );
             if first.is_none_or(|h| usize::from(h.id) - 1 != k) {
                 continue;
@@ -1838,7 +1917,27 @@ impl Sim {
 
     /// The global pose of model `m`.
     pub fn global(&self, m: usize) -> Pose {
-        self.world.global(&self.poses, m).0
+        self.global_z(m).0
+    }
+
+    /// The global pose of model `m` and its base's height above the floor
+    /// (as [`World::global`], from the models' frames).
+    fn global_z(&self, m: usize) -> (Pose, f64) {
+        let f = &self.frames[m];
+        match f.parent {
+            Frame::ROOT => (self.poses[m], f.z),
+            p => {
+                let p = p as usize;
+                let (gp, gz) = self.global_z(p);
+                (gp.compose(&self.poses[m]), gz + f.z + self.frames[p].stack)
+            }
+        }
+    }
+
+    /// Sets model `m`'s height above its parent's top (`z` of its pose).
+    pub fn set_z(&mut self, m: usize, z: f64) {
+        self.world.models[m].z = z;
+        self.frames[m].z = z;
     }
 
     /// The occupancy map of model `m`'s body, as the Stage plugin's `map`
@@ -1959,7 +2058,7 @@ mod tests {
                 for (k, &got) in s.readings[r][0].ranges.iter().enumerate() {
                     let a = o.yaw - sensor.fov / 2.0 + sensor.fov * k as f64 / 270.0;
                     let want = s
-                        .cast(o.x, o.y, unit(a), (0.0, sensor.range.1), accept)
+                        .cast(o.x, o.y, unit(a), (0.0, sensor.range.1), accept, 0)
                         .map_or(sensor.range.1, |h| h.range.max(sensor.range.0));
                     assert!(
                         (got - want).abs() < 1e-9,
@@ -2244,7 +2343,7 @@ mod tests {
         assert_eq!(ids, [5], "only the model at the finder's height");
         // Lifted to the finder's height, `low` hides `tall` behind it.
         let low = s.world.names["low"];
-        s.world.models[low].z = 0.15;
+        s.set_z(low, 0.15);
         s.set_pose(low, Pose::new(1.0, 0.0, 0.0));
         let ids: Vec<i32> = s.fiducials(f).fiducials.iter().map(|i| i.id).collect();
         assert_eq!(ids, [3]);
