@@ -496,8 +496,8 @@ impl Stage {
     /// one-sensor ranger, or the first sample of each sensor.
     fn ranger_data(&self, model: usize) -> (Vec<f64>, Vec<f64>) {
         let rd = &self.sim.readings[model];
-        if rd.len() == 1 {
-            (rd[0].ranges.clone(), rd[0].intensities.clone())
+        if let (1, Some(first)) = (rd.len(), rd.first()) {
+            (first.ranges.to_vec(), first.intensities.to_vec())
         } else {
             (
                 rd.iter()

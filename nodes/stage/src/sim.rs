@@ -131,13 +131,107 @@ const BEAM_INSET: [f64; 2] = [0.75 * PADDLE_X, 0.25 * PADDLE_X];
 const PADDLE_STEP: f64 = 0.05;
 const GRIPPER_INTERVAL: f64 = 0.1;
 
-/// One sensor's latest readings.
+/// A ranger's latest readings: its sensors' ranges and intensities, one
+/// sensor after another in two arrays. (Two arrays per sensor were, for
+/// Stage's hospital.world, 24000 small allocations read and written every
+/// step, a cache miss each.)
 #[derive(Debug, Clone, Default, PartialEq)]
-pub struct Reading {
+pub struct Readings {
+    ranges: Vec<f64>,
+    intensities: Vec<f64>,
+    /// Where each sensor's readings start, then where the last one's end.
+    starts: Vec<usize>,
+}
+
+/// One sensor's latest readings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reading<'a> {
     /// Metres, one per sample.
-    pub ranges: Vec<f64>,
+    pub ranges: &'a [f64],
     /// The hit model's `ranger_return` (0 when nothing was hit).
-    pub intensities: Vec<f64>,
+    pub intensities: &'a [f64],
+}
+
+impl Readings {
+    /// `sensors`' readings before they sense: every range the farthest,
+    /// every intensity 0.
+    fn new(sensors: &[Sensor]) -> Readings {
+        let mut starts = vec![0];
+        let mut ranges = Vec::new();
+        for s in sensors {
+            ranges.extend(std::iter::repeat_n(s.range.1, s.samples));
+            starts.push(ranges.len());
+        }
+        let intensities = vec![0.0; ranges.len()];
+        Readings {
+            ranges,
+            intensities,
+            starts,
+        }
+    }
+
+    /// How many sensors.
+    pub fn len(&self) -> usize {
+        self.starts.len().saturating_sub(1)
+    }
+
+    /// Whether there are no sensors.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Sensor `i`'s readings, if there is such a sensor.
+    pub fn get(&self, i: usize) -> Option<Reading<'_>> {
+        let (&a, &b) = (self.starts.get(i)?, self.starts.get(i + 1)?);
+        Some(Reading {
+            ranges: &self.ranges[a..b],
+            intensities: &self.intensities[a..b],
+        })
+    }
+
+    /// Sensor `i`'s readings.
+    ///
+    /// # Panics
+    ///
+    /// When there is no sensor `i`.
+    pub fn sensor(&self, i: usize) -> Reading<'_> {
+        let (a, b) = (self.starts[i], self.starts[i + 1]);
+        Reading {
+            ranges: &self.ranges[a..b],
+            intensities: &self.intensities[a..b],
+        }
+    }
+
+    /// The first sensor's readings.
+    pub fn first(&self) -> Option<Reading<'_>> {
+        self.get(0)
+    }
+
+    /// Each sensor's readings, in order.
+    pub fn iter(&self) -> impl Iterator<Item = Reading<'_>> + '_ {
+        (0..self.len()).filter_map(|i| self.get(i))
+    }
+
+    /// Sensor `i`'s first range (0 when it has none).
+    pub(crate) fn first_range(&self, i: usize) -> f64 {
+        if self.ranges.len() == self.len() {
+            // A ray per sensor: sensor i's is the i-th.
+            return self.ranges.get(i).copied().unwrap_or(0.0);
+        }
+        match (self.starts.get(i), self.starts.get(i + 1)) {
+            (Some(&a), Some(&b)) if a < b => self.ranges[a],
+            _ => 0.0,
+        }
+    }
+
+    /// Sensor `i`'s ranges and intensities, to write (none when there is no
+    /// such sensor).
+    fn sensor_mut(&mut self, i: usize) -> (&mut [f64], &mut [f64]) {
+        match (self.starts.get(i), self.starts.get(i + 1)) {
+            (Some(&a), Some(&b)) => (&mut self.ranges[a..b], &mut self.intensities[a..b]),
+            _ => (&mut [], &mut []),
+        }
+    }
 }
 
 /// The simulated world.
@@ -155,11 +249,7 @@ pub struct Sim {
     /// Mobile bases.
     pub bases: Vec<Base>,
     /// Latest readings of each ranger model, one per sensor (empty for other models).
-    pub readings: Vec<Vec<Reading>>,
-    /// Each ranger's sensors' first readings, side by side: what the
-    /// built-in controllers read every step, in one short array a ranger
-    /// where its readings lie in two allocations a sensor.
-    firsts: Vec<Vec<f64>>,
+    pub readings: Vec<Readings>,
     /// Gripper state of each gripper model (`None` for other models).
     pub grippers: Vec<Option<GripperState>>,
     /// What a ray asks of each model, side by side (one cache line, not
@@ -351,11 +441,6 @@ impl Look {
     fn spans(&self, z: f64) -> bool {
         self.lo <= z && z <= self.hi
     }
-}
-
-/// The first of a sensor's `ranges` (0 when it has none).
-fn first_of(ranges: &[f64]) -> f64 {
-    ranges.first().copied().unwrap_or(0.0)
 }
 
 /// Sensors with at least this many rays look around their origin once, so
@@ -618,22 +703,10 @@ impl Sim {
                 }
             })
             .collect();
-        let readings: Vec<Vec<Reading>> = world
+        let readings = world
             .models
             .iter()
-            .map(|m| {
-                m.sensors
-                    .iter()
-                    .map(|s| Reading {
-                        ranges: vec![s.range.1; s.samples],
-                        intensities: vec![0.0; s.samples],
-                    })
-                    .collect()
-            })
-            .collect();
-        let firsts = readings
-            .iter()
-            .map(|rs| rs.iter().map(|rd| first_of(&rd.ranges)).collect())
+            .map(|m| Readings::new(&m.sensors))
             .collect();
         let colors = world.models.iter().map(|m| m.color).collect();
         let grippers = world
@@ -687,7 +760,6 @@ impl Sim {
             colors,
             bases,
             readings,
-            firsts,
             grippers,
             trees,
             noisy,
@@ -1246,13 +1318,12 @@ impl Sim {
         kept.resize_with(self.bases.len(), Mutex::default);
         let moves = dt.is_some();
         let dt = dt.unwrap_or(0.0);
-        // Each ranger's readings and first readings, moved out of the
-        // simulator while its rays are cast.
-        type Slot = (usize, Vec<Reading>, Vec<f64>);
-        let work: Vec<Mutex<Slot>> = crew
+        // Each ranger's readings, moved out of the simulator while its rays
+        // are cast.
+        let work: Vec<Mutex<(usize, Readings)>> = crew
             .rangers()
             .iter()
-            .map(|&r| Mutex::new((r, Vec::new(), Vec::new())))
+            .map(|&r| Mutex::new((r, Readings::default())))
             .collect();
         let (to_plan, to_sense) = (crew.bases_to_plan(), crew.rangers_to_sense());
         let sensing = AtomicBool::new(false);
@@ -1266,7 +1337,7 @@ impl Sim {
             let mut sweep = Sweep::default();
             while let Some(k) = to_sense.take() {
                 let mut slot = lock(&work[k]);
-                let (r, out, firsts) = &mut *slot;
+                let (r, out) = &mut *slot;
                 // As Stage, a ranger senses every `update_interval` (100
                 // ms), however short the steps; in between it keeps its
                 // readings.
@@ -1275,12 +1346,7 @@ impl Sim {
                 }
                 me.sense_one(*r, out, &mut sweep);
                 if me.noisy[*r] {
-                    if let Some(first) = out.first_mut() {
-                        me.add_noise(*r, &mut first.ranges);
-                    }
-                }
-                for (f, rd) in firsts.iter_mut().zip(out.iter()) {
-                    *f = first_of(&rd.ranges);
+                    me.add_noise(*r, out.sensor_mut(0).0);
                 }
             }
         };
@@ -1316,7 +1382,6 @@ impl Sim {
                 for slot in &work {
                     let mut slot = lock(slot);
                     slot.1 = std::mem::take(&mut me.readings[slot.0]);
-                    slot.2 = std::mem::take(&mut me.firsts[slot.0]);
                 }
             }
             sensing.store(true, Ordering::Release);
@@ -1324,9 +1389,8 @@ impl Sim {
         };
         crew.run(helper, main);
         for slot in work {
-            let (r, out, firsts) = slot.into_inner().unwrap_or_else(PoisonError::into_inner);
+            let (r, out) = slot.into_inner().unwrap_or_else(PoisonError::into_inner);
             self.readings[r] = out;
-            self.firsts[r] = firsts;
         }
         self.plans = kept;
         self.crew = crew;
@@ -1478,7 +1542,7 @@ impl Sim {
 
     /// Ranger `r`'s readings into `out`; `sweep` is room for its fans' look
     /// at the moving bodies, kept from ranger to ranger.
-    fn sense_one(&self, r: usize, out: &mut [Reading], sweep: &mut Sweep) {
+    fn sense_one(&self, r: usize, out: &mut Readings, sweep: &mut Sweep) {
         let (g, gz) = self.global_z(r);
         let base = g.compose(&self.world.models[r].origin);
         // One sine and cosine per ranger: its sensors' poses and first rays
@@ -1486,7 +1550,8 @@ impl Sim {
         let turn = unit(base.yaw);
         // The body the rays start in, which they never stop at.
         let own = u16::try_from(self.looks[r].root + 1).unwrap_or(0);
-        for (s, rd) in self.fans[r].iter().zip(out.iter_mut()) {
+        for (i, s) in self.fans[r].iter().enumerate() {
+            let (ranges, intensities) = out.sensor_mut(i);
             let accept = self.ranger_sees(r, gz + s.z);
             let (ox, oy) = turned(turn, s.at);
             let (ox, oy) = (base.x + ox, base.y + oy);
@@ -1554,8 +1619,8 @@ impl Sim {
                     ),
                     None => (s.range.1, 0.0),
                 };
-                rd.ranges[k] = range;
-                rd.intensities[k] = intensity;
+                ranges[k] = range;
+                intensities[k] = intensity;
             }
         }
     }
@@ -1870,7 +1935,7 @@ impl Sim {
                 continue;
             }
             let base = self.global(r).compose(&self.world.models[r].origin);
-            for (s, reading) in self.world.models[r].sensors.iter().zip(rd) {
+            for (s, reading) in self.world.models[r].sensors.iter().zip(rd.iter()) {
                 let o = base.compose(&s.pose);
                 for (k, &range) in reading.ranges.iter().enumerate() {
                     let a = if s.samples > 1 {
@@ -2022,6 +2087,49 @@ mod tests {
         }
     }
 
+    /// A ranger's readings lie sensor after sensor: each sensor reads and
+    /// writes its own stretch, a sensor of no rays included, whether the
+    /// sensors have a ray each or many.
+    #[test]
+    fn readings_keep_each_sensor_to_its_own_stretch() {
+        let sensor = |samples: usize, far: f64| Sensor {
+            pose: Pose::default(),
+            z: 0.0,
+            size: [0.1; 3],
+            range: (0.0, far),
+            fov: 1.0,
+            samples,
+        };
+        let mut rd = Readings::new(&[
+            sensor(3, 8.0),
+            sensor(1, 5.0),
+            sensor(0, 4.0),
+            sensor(2, 2.0),
+        ]);
+        assert_eq!(rd.len(), 4);
+        assert_eq!(rd.sensor(0).ranges, &[8.0; 3]);
+        assert_eq!(rd.sensor(2).ranges, &[] as &[f64]);
+        assert_eq!(rd.get(4), None);
+        let (ranges, intensities) = rd.sensor_mut(3);
+        ranges.copy_from_slice(&[1.5, 1.25]);
+        intensities[1] = 0.5;
+        assert_eq!(rd.sensor(3).ranges, &[1.5, 1.25]);
+        assert_eq!(rd.sensor(3).intensities, &[0.0, 0.5]);
+        assert_eq!(rd.sensor(1).ranges, &[5.0]);
+        let firsts: Vec<f64> = (0..5).map(|i| rd.first_range(i)).collect();
+        assert_eq!(firsts, [8.0, 5.0, 0.0, 1.5, 0.0]);
+        assert_eq!(
+            rd.iter().map(|r| r.ranges.len()).collect::<Vec<_>>(),
+            [3, 1, 0, 2]
+        );
+        // A ray each: sensor k's reading is the k-th.
+        let mut ring = Readings::new(&[sensor(1, 2.0), sensor(1, 2.0), sensor(1, 2.0)]);
+        ring.sensor_mut(1).0[0] = 0.75;
+        let firsts: Vec<f64> = (0..4).map(|i| ring.first_range(i)).collect();
+        assert_eq!(firsts, [2.0, 0.75, 2.0, 0.0]);
+        assert!(Readings::default().is_empty());
+    }
+
     /// Fans start their rays beyond the open space around them; every
     /// reading stays what a ray walked from its origin reads, with robots
     /// crowding each other, a box and the wall nearby.
@@ -2055,7 +2163,7 @@ mod tests {
                 let accept = s.ranger_sees(r, z + sensor.z + sensor.size[2] / 2.0);
                 let o = g.compose(&s.world.models[r].origin).compose(&sensor.pose);
                 skipped += s.open_around(o.x, o.y, accept);
-                for (k, &got) in s.readings[r][0].ranges.iter().enumerate() {
+                for (k, &got) in s.readings[r].sensor(0).ranges.iter().enumerate() {
                     let a = o.yaw - sensor.fov / 2.0 + sensor.fov * k as f64 / 270.0;
                     let want = s
                         .cast(o.x, o.y, unit(a), (0.0, sensor.range.1), accept, 0)
@@ -2138,10 +2246,10 @@ mod tests {
         let mut s = sim("interval", &format!("{room}position ( name \"r\" pose [0 0 0 0] size [0.4 0.4 0.2] ranger ( sensor ( range [0 8] samples 1 ) ) )\n"));
         s.bases[0].cmd = Some(Command::Vel(Pose::new(0.5, 0.0, 0.0)));
         let r = s.world.names["r.ranger:0"];
-        let mut seen = vec![s.readings[r][0].ranges[0]];
+        let mut seen = vec![s.readings[r].sensor(0).ranges[0]];
         for _ in 0..10 {
             s.step();
-            seen.push(s.readings[r][0].ranges[0]);
+            seen.push(s.readings[r].sensor(0).ranges[0]);
         }
         let changed: Vec<usize> = (1..seen.len())
             .filter(|&k| seen[k] != seen[k - 1])
@@ -2244,7 +2352,7 @@ mod tests {
         s.stage_ranges(true);
         let start: Vec<Pose> = s.bases.iter().map(|b| s.global(b.model)).collect();
         steps(&mut s, 40);
-        let moved: Vec<Vec<Reading>> = s.readings.clone();
+        let moved: Vec<Readings> = s.readings.clone();
         s.stage_ranges(false);
         s.stage_ranges(true);
         assert_eq!(s.readings, moved);
@@ -2292,7 +2400,7 @@ mod tests {
         );
         s.step();
         let r = s.world.names["r.ranger:0"];
-        let laser = &s.readings[r][0];
+        let laser = &s.readings[r].sensor(0);
         // Straight ahead: the wall face at x = 4.9, from x = 1.
         assert!(
             (laser.ranges[90] - 3.9).abs() < 0.03,
@@ -2310,7 +2418,7 @@ mod tests {
         assert_eq!(laser.ranges[180], 8.0);
         assert_eq!(laser.intensities[180], 0.0);
         // The second sensor looks left: max range 5.
-        assert_eq!(s.readings[r][1].ranges[0], 5.0);
+        assert_eq!(s.readings[r].sensor(1).ranges[0], 5.0);
     }
 
     /// Stage is 2.5D: a ray at a sensor's height passes over what is
@@ -2334,9 +2442,9 @@ mod tests {
         // The ray leaves at 0.2 m + half the sensor's height: over `low`,
         // under `shelf` (0.5 to 0.8 m), onto `tall`'s face at 2.9 m.
         assert!(
-            (s.readings[r][0].ranges[0] - 2.9).abs() < 0.03,
+            (s.readings[r].sensor(0).ranges[0] - 2.9).abs() < 0.03,
             "{}",
-            s.readings[r][0].ranges[0]
+            s.readings[r].sensor(0).ranges[0]
         );
         let f = s.world.names["a.fiducial:0"];
         let ids: Vec<i32> = s.fiducials(f).fiducials.iter().map(|i| i.id).collect();
@@ -2361,15 +2469,15 @@ mod tests {
         let r = s.world.names["a.ranger:0"];
         // Moving bodies are met exactly, not at a grid cell's edge.
         assert!(
-            (s.readings[r][0].ranges[0] - 1.8).abs() < 1e-9,
+            (s.readings[r].sensor(0).ranges[0] - 1.8).abs() < 1e-9,
             "{}",
-            s.readings[r][0].ranges[0]
+            s.readings[r].sensor(0).ranges[0]
         );
         // Move b away through the simulation interface: a sees nothing.
         let b = s.world.names["b"];
         s.set_pose(b, Pose::new(2.0, 3.0, 0.0));
         s.step();
-        assert_eq!(s.readings[r][0].ranges[0], 8.0);
+        assert_eq!(s.readings[r].sensor(0).ranges[0], 8.0);
     }
 
     #[test]
@@ -2605,7 +2713,7 @@ mod compat {
             return;
         }
         let s = Sim::new(crate::world::load(&p).unwrap()).unwrap();
-        let r = &s.readings[s.world.names["r0.ranger:1"]][0];
+        let r = &s.readings[s.world.names["r0.ranger:1"]].sensor(0);
         let on_r1: Vec<usize> = (0..r.ranges.len())
             .filter(|&k| r.intensities[k] == 1.0)
             .collect();
@@ -2650,9 +2758,10 @@ mod compat {
         assert_eq!(stage.len(), 180);
         let mut sim = Sim::new(crate::world::load(&world).unwrap()).unwrap();
         let laser = sim.world.names["r0.ranger:1"];
-        let exact = sim.readings[laser][0].clone();
+        let exact = sim.readings[laser].clone();
+        let exact = exact.sensor(0);
         sim.stage_ranges(true);
-        let ours = &sim.readings[laser][0];
+        let ours = &sim.readings[laser].sensor(0);
         // Beams on r1's laser (a moving body, measured exactly either way)
         // read intensity 1; the cave returns 0.5, nothing 0.
         let walls: Vec<usize> = (0..180).filter(|&k| ours.intensities[k] != 1.0).collect();
@@ -2672,7 +2781,7 @@ mod compat {
         );
         // And back.
         sim.stage_ranges(false);
-        assert_eq!(sim.readings[laser][0].ranges, exact.ranges);
+        assert_eq!(sim.readings[laser].sensor(0).ranges, exact.ranges);
     }
 
     #[test]

@@ -431,7 +431,7 @@ impl Sim {
     pub(super) fn scan(&self, r: usize) -> Option<&[f64]> {
         self.readings[r]
             .first()
-            .map(|r| &r.ranges[..])
+            .map(|r| r.ranges)
             .filter(|s| !s.is_empty())
     }
 
@@ -564,14 +564,15 @@ impl Sim {
     /// [`READ`] of those readings; `None` before it has read or when either
     /// sum is exactly 0 (as Stage's controllers test it).
     fn resultant(&self, r: usize, n: usize) -> Option<(f64, [f64; READ])> {
-        let firsts = &self.firsts[r];
-        let n = n.min(firsts.len());
+        let readings = &self.readings[r];
+        let n = n.min(readings.len());
         if n == 0 {
             return None;
         }
-        let (mut dx, mut dy) = (0.0, 0.0);
+        let (mut dx, mut dy) = (0.0_f64, 0.0);
         let mut read = [0.0; READ];
-        for (k, (&v, rays)) in firsts.iter().zip(&self.fans[r]).take(n).enumerate() {
+        for (k, rays) in self.fans[r].iter().take(n).enumerate() {
+            let v = readings.first_range(k);
             if let Some(slot) = read.get_mut(k) {
                 *slot = v;
             }
@@ -612,7 +613,7 @@ impl Sim {
         // (A hair over a right angle: the fan's last ray may land on it by
         // rounding.)
         let side = std::f64::consts::FRAC_PI_2 + 1e-9;
-        for (s, rd) in sensors.iter().zip(&self.readings[r]) {
+        for (s, rd) in sensors.iter().zip(self.readings[r].iter()) {
             // Bearings grow ray by ray: those from -side to 0 are on the
             // right, from 0 to side on the left.
             let (start, step) = super::fan(s);
@@ -1125,13 +1126,13 @@ mod tests {
         let (noisy, clean) = (laser("r0.ranger:1"), laser("r1.ranger:1"));
         // Both face the east wall, 2.9 m off: the middle beams'.
         let ratios: Vec<f64> = (60..120)
-            .map(|k| s.readings[noisy][0].ranges[k] / s.readings[clean][0].ranges[k])
+            .map(|k| s.readings[noisy].sensor(0).ranges[k] / s.readings[clean].sensor(0).ranges[k])
             .collect();
         let n = ratios.len() as f64;
         let mean = ratios.iter().sum::<f64>() / n;
         let sd = (ratios.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / n).sqrt();
         assert!((mean - 1.0).abs() < 0.02, "mean ratio {mean}");
         assert!((0.03..0.07).contains(&sd), "deviation {sd}");
-        assert!(s.readings[clean][0].ranges[90] < 3.0);
+        assert!(s.readings[clean].sensor(0).ranges[90] < 3.0);
     }
 }
