@@ -248,6 +248,9 @@ pub struct Sim {
     pub colors: Vec<Color>,
     /// Mobile bases.
     pub bases: Vec<Base>,
+    /// Each base's `position` settings as its moves read them (see
+    /// [`Motion`]).
+    motions: Vec<Option<Motion>>,
     /// Latest readings of each ranger model, one per sensor (empty for other models).
     pub readings: Vec<Readings>,
     /// Gripper state of each gripper model (`None` for other models).
@@ -297,7 +300,7 @@ pub struct Sim {
     /// Moving bodies, for sensors and collisions.
     movers: Movers,
     /// Each model's sensors' rays.
-    fans: Vec<Vec<Rays>>,
+    fans: Vec<Fans>,
     /// Each base's plan for the step, kept for its buffers.
     plans: Vec<Mutex<Plan>>,
 }
@@ -415,6 +418,31 @@ impl Frame {
     }
 }
 
+/// What a base's move reads of its `position` settings, side by side
+/// with the other bases' (see [`Frame`]).
+#[derive(Debug, Clone, Copy)]
+struct Motion {
+    drive: Drive,
+    localization: Localization,
+    wheelbase: f64,
+    /// Its velocity bounds on x, y and yaw: least, most.
+    bounds: [f64; 6],
+    odom_error: [f64; 3],
+}
+
+impl Motion {
+    fn of(c: &crate::world::PositionCfg) -> Motion {
+        let vb = &c.velocity_bounds;
+        Motion {
+            drive: c.drive,
+            localization: c.localization,
+            wheelbase: c.wheelbase,
+            bounds: [vb[0], vb[1], vb[2], vb[3], vb[6], vb[7]],
+            odom_error: c.odom_error,
+        }
+    }
+}
+
 /// What a ray asks of a model it meets (see `Sim::ranger_sees`).
 #[derive(Debug, Clone, Copy)]
 struct Look {
@@ -448,25 +476,37 @@ impl Look {
 /// look costs more than it spares).
 const FAN: usize = 16;
 
-/// A sensor's rays as the ranger casts them: unit vectors for the first,
-/// relative to its ranger, and the turn from one to the next (see
-/// [`fan`]); and what of the sensor the rays read, kept beside them so
-/// that a ranger's rays read one short array, not its sensors too.
+/// A ranger's sensors as its rays and its controllers read them, each
+/// in an array of its own: every step reads them for a thousand rangers,
+/// so what each reads is laid out to cost it the fewest cache lines.
+#[derive(Default)]
+struct Fans {
+    /// The ranger's pose on its parent (its `origin`).
+    origin: Pose,
+    /// What every sensor's rays read: a cache line a sensor.
+    rays: Vec<Rays>,
+    /// Each sensor's turn from one ray to the next (see [`fan`]): as a
+    /// unit vector and as an angle. Only sensors of several rays read it.
+    turns: Vec<((f64, f64), f64)>,
+    /// Each sensor's heading on the ranger, which the controllers sum
+    /// the first readings along (see `Sim::resultant`).
+    headings: Vec<(f64, f64)>,
+}
+
+/// A sensor's rays as the ranger casts them: the unit vector of the
+/// first, relative to the ranger (see [`fan`]), and what of the sensor
+/// the rays read, kept beside it in one cache line.
+#[repr(align(64))]
 struct Rays {
     first: (f64, f64),
-    turn: (f64, f64),
-    /// The turn's angle.
-    step: f64,
     /// Where the rays start, in the ranger's frame.
     at: (f64, f64),
-    /// Their height above the ranger's base: the middle of the sensor's.
-    z: f64,
     /// The sensor's range, in metres: nearest and farthest.
     range: (f64, f64),
+    /// Their height above the ranger's base: the middle of the sensor's.
+    z: f64,
     /// How many rays.
     samples: usize,
-    /// The sensor's heading on its ranger.
-    heading: (f64, f64),
 }
 
 /// A sensor's rays: the angle of the first relative to the sensor, and
@@ -702,6 +742,10 @@ impl Sim {
                     mind: Mind::default(),
                 }
             })
+            .collect::<Vec<Base>>();
+        let motions = bases
+            .iter()
+            .map(|b| world.models[b.model].position.as_ref().map(Motion::of))
             .collect();
         let readings = world
             .models
@@ -730,24 +774,25 @@ impl Sim {
             .models
             .iter()
             .map(|m| {
-                m.sensors
-                    .iter()
-                    .map(|s| {
-                        let (first, step) = fan(s);
-                        Rays {
-                            first: unit(first),
-                            turn: unit(step),
-                            step,
-                            at: (s.pose.x, s.pose.y),
-                            // As Stage: rays leave from the middle of the
-                            // sensor's height.
-                            z: s.z + s.size[2] / 2.0,
-                            range: s.range,
-                            samples: s.samples,
-                            heading: unit(s.pose.yaw),
-                        }
-                    })
-                    .collect()
+                let rays = m.sensors.iter().map(|s| Rays {
+                    first: unit(fan(s).0),
+                    at: (s.pose.x, s.pose.y),
+                    range: s.range,
+                    // As Stage: rays leave from the middle of the sensor's
+                    // height.
+                    z: s.z + s.size[2] / 2.0,
+                    samples: s.samples,
+                });
+                Fans {
+                    origin: m.origin,
+                    rays: rays.collect(),
+                    turns: m
+                        .sensors
+                        .iter()
+                        .map(|s| (unit(fan(s).1), fan(s).1))
+                        .collect(),
+                    headings: m.sensors.iter().map(|s| unit(s.pose.yaw)).collect(),
+                }
             })
             .collect();
         let mut sim = Sim {
@@ -759,6 +804,7 @@ impl Sim {
             poses,
             colors,
             bases,
+            motions,
             readings,
             grippers,
             trees,
@@ -1178,7 +1224,7 @@ impl Sim {
     /// model's back is planned there too, as it stands once that has moved.
     fn plan(&self, bi: usize, dt: f64, plan: &mut Plan) {
         let m = self.bases[bi].model;
-        let Some(cfg) = &self.world.models[m].position else {
+        let Some(cfg) = &self.motions[bi] else {
             return;
         };
         plan.mind = self.bases[bi].mind;
@@ -1228,11 +1274,11 @@ impl Sim {
         // As Stage's velocity control: the speeds asked for, within the
         // velocity bounds (its acceleration bounds are for its
         // acceleration control, which no controller here uses).
-        let vb = &cfg.velocity_bounds;
+        let vb = &cfg.bounds;
         let mut v = Pose::new(
             want.x.clamp(vb[0], vb[1]),
             want.y.clamp(vb[2], vb[3]),
-            want.yaw.clamp(vb[6], vb[7]),
+            want.yaw.clamp(vb[4], vb[5]),
         );
         if cfg.drive != Drive::Omni {
             v.y = 0.0;
@@ -1262,7 +1308,7 @@ impl Sim {
             // On another model's back: planned where that one moved to.
             self.plan(bi, dt, plan);
         }
-        let Some(cfg) = &self.world.models[m].position else {
+        let Some(cfg) = &self.motions[bi] else {
             return;
         };
         let (localization, e) = (cfg.localization, cfg.odom_error);
@@ -1544,13 +1590,14 @@ impl Sim {
     /// at the moving bodies, kept from ranger to ranger.
     fn sense_one(&self, r: usize, out: &mut Readings, sweep: &mut Sweep) {
         let (g, gz) = self.global_z(r);
-        let base = g.compose(&self.world.models[r].origin);
+        let fans = &self.fans[r];
+        let base = g.compose(&fans.origin);
         // One sine and cosine per ranger: its sensors' poses and first rays
         // are turned by it.
         let turn = unit(base.yaw);
         // The body the rays start in, which they never stop at.
         let own = u16::try_from(self.looks[r].root + 1).unwrap_or(0);
-        for (i, s) in self.fans[r].iter().enumerate() {
+        for (i, s) in fans.rays.iter().enumerate() {
             let (ranges, intensities) = out.sensor_mut(i);
             let accept = self.ranger_sees(r, gz + s.z);
             let (ox, oy) = turned(turn, s.at);
@@ -1566,7 +1613,7 @@ impl Sim {
                     &Fan {
                         o: (ox, oy),
                         first: turned(turn, s.first),
-                        step: s.step,
+                        step: fans.turns[i].1,
                         n: s.samples,
                         reach: s.range.1,
                     },
@@ -1584,7 +1631,7 @@ impl Sim {
             let mut d = turned(turn, s.first);
             for k in 0..s.samples {
                 if k > 0 {
-                    d = turned(s.turn, d);
+                    d = turned(fans.turns[i].0, d);
                 }
                 let hit = match (&self.raster, fan) {
                     // Static bodies as Stage sees them; moving bodies

@@ -571,13 +571,13 @@ impl Sim {
         }
         let (mut dx, mut dy) = (0.0_f64, 0.0);
         let mut read = [0.0; READ];
-        for (k, rays) in self.fans[r].iter().take(n).enumerate() {
+        for (k, heading) in self.fans[r].headings.iter().take(n).enumerate() {
             let v = readings.first_range(k);
             if let Some(slot) = read.get_mut(k) {
                 *slot = v;
             }
-            dx += v * rays.heading.0;
-            dy += v * rays.heading.1;
+            dx += v * heading.0;
+            dy += v * heading.1;
         }
         (dx != 0.0 && dy != 0.0).then(|| (dy.atan2(dx), read))
     }
