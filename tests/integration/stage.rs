@@ -399,6 +399,7 @@ fn bench_stage_runs_one_world_file_and_prints_its_row() {
     for part in [
         "x real time",
         "MB peak",
+        "MB data",
         "2 simulated s in",
         "moving at the end",
     ] {
