@@ -195,10 +195,9 @@ impl Readings {
     ///
     /// When there is no sensor `i`.
     pub fn sensor(&self, i: usize) -> Reading<'_> {
-        let (a, b) = (self.starts[i], self.starts[i + 1]);
-        Reading {
-            ranges: &self.ranges[a..b],
-            intensities: &self.intensities[a..b],
+        match self.get(i) {
+            Some(rd) => rd,
+            None => panic!("sensor {i} of a ranger of {}", self.len()),
         }
     }
 
@@ -2046,7 +2045,9 @@ impl Sim {
         }
     }
 
-    /// Sets model `m`'s height above its parent's top (`z` of its pose).
+    /// Sets model `m`'s height above its parent's top (`z` of its pose):
+    /// in its definition and in the frame the steps read (see [`Frame`]),
+    /// so set it here, not in `world`.
     pub fn set_z(&mut self, m: usize, z: f64) {
         self.world.models[m].z = z;
         self.frames[m].z = z;
