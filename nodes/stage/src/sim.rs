@@ -1590,17 +1590,24 @@ impl Sim {
     fn sense_one(&self, r: usize, out: &mut Readings, sweep: &mut Sweep) {
         let (g, gz) = self.global_z(r);
         let fans = &self.fans[r];
-        let base = g.compose(&fans.origin);
-        // One sine and cosine per ranger: its sensors' poses and first rays
-        // are turned by it.
-        let turn = unit(base.yaw);
+        // One sine and cosine per ranger: it is placed on its parent by
+        // it, and its sensors' poses and first rays are turned by it (or
+        // by a second, when its origin is turned).
+        let o = &fans.origin;
+        let (sin, cos) = g.yaw.sin_cos();
+        let base = (g.x + cos * o.x - sin * o.y, g.y + sin * o.x + cos * o.y);
+        let turn = if o.yaw == 0.0 {
+            (cos, sin)
+        } else {
+            unit(g.yaw + o.yaw)
+        };
         // The body the rays start in, which they never stop at.
         let own = u16::try_from(self.looks[r].root + 1).unwrap_or(0);
         for (i, s) in fans.rays.iter().enumerate() {
             let (ranges, intensities) = out.sensor_mut(i);
             let accept = self.ranger_sees(r, gz + s.z);
             let (ox, oy) = turned(turn, s.at);
-            let (ox, oy) = (base.x + ox, base.y + oy);
+            let (ox, oy) = (base.0 + ox, base.1 + oy);
             // A fan of rays shares one look at the moving bodies within
             // reach, so that each ray tests only those in its direction,
             // and (against the exact bodies) one look around its origin,
@@ -2467,6 +2474,25 @@ mod tests {
         assert_eq!(laser.intensities[180], 0.0);
         // The second sensor looks left: max range 5.
         assert_eq!(s.readings[r].sensor(1).ranges[0], 5.0);
+    }
+
+    /// A ranger's rays leave from its `origin` on its parent, turned by it:
+    /// a robot facing +y with a ranger whose origin is half a metre ahead
+    /// and turned back by 90° looks along +x from (0, 0.5), onto a post.
+    #[test]
+    fn a_rangers_rays_leave_from_its_turned_origin() {
+        let mut s = sim(
+            "origin",
+            &format!(
+                "{ROOM}position ( name \"a\" pose [0 0 0 90] size [0.4 0.4 0.2]\n\
+                   ranger ( origin [0.5 0 0 -90] sensor ( range [0 8] ) ) )\n\
+                 model ( name \"post\" pose [1 0.5 0 0] size [0.2 0.2 1] )\n"
+            ),
+        );
+        s.step();
+        let r = s.world.names["a.ranger:0"];
+        let got = s.readings[r].sensor(0).ranges[0];
+        assert!((got - 0.9).abs() < 0.03, "read {got}, not the post's 0.9");
     }
 
     /// Stage is 2.5D: a ray at a sensor's height passes over what is
