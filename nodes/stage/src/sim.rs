@@ -180,12 +180,18 @@ impl Readings {
         self.len() == 0
     }
 
+    /// Where sensor `i`'s readings lie in the arrays, if there is such a
+    /// sensor.
+    fn span(&self, i: usize) -> Option<std::ops::Range<usize>> {
+        Some(*self.starts.get(i)?..*self.starts.get(i + 1)?)
+    }
+
     /// Sensor `i`'s readings, if there is such a sensor.
     pub fn get(&self, i: usize) -> Option<Reading<'_>> {
-        let (&a, &b) = (self.starts.get(i)?, self.starts.get(i + 1)?);
+        let span = self.span(i)?;
         Some(Reading {
-            ranges: &self.ranges[a..b],
-            intensities: &self.intensities[a..b],
+            ranges: &self.ranges[span.clone()],
+            intensities: &self.intensities[span],
         })
     }
 
@@ -213,22 +219,17 @@ impl Readings {
 
     /// Sensor `i`'s first range (0 when it has none).
     pub(crate) fn first_range(&self, i: usize) -> f64 {
-        if self.ranges.len() == self.len() {
-            // A ray per sensor: sensor i's is the i-th.
-            return self.ranges.get(i).copied().unwrap_or(0.0);
-        }
-        match (self.starts.get(i), self.starts.get(i + 1)) {
-            (Some(&a), Some(&b)) if a < b => self.ranges[a],
-            _ => 0.0,
-        }
+        self.span(i)
+            .and_then(|span| self.ranges[span].first().copied())
+            .unwrap_or(0.0)
     }
 
     /// Sensor `i`'s ranges and intensities, to write (none when there is no
     /// such sensor).
     fn sensor_mut(&mut self, i: usize) -> (&mut [f64], &mut [f64]) {
-        match (self.starts.get(i), self.starts.get(i + 1)) {
-            (Some(&a), Some(&b)) => (&mut self.ranges[a..b], &mut self.intensities[a..b]),
-            _ => (&mut [], &mut []),
+        match self.span(i) {
+            Some(span) => (&mut self.ranges[span.clone()], &mut self.intensities[span]),
+            None => (&mut [], &mut []),
         }
     }
 }
@@ -364,6 +365,19 @@ struct TileBodies<'a, A> {
     accept: A,
     own: u16,
     tested: Seen,
+}
+
+impl<'a, A> TileBodies<'a, A> {
+    fn new(sim: &'a Sim, o: (f64, f64), d: (f64, f64), accept: A, own: u16) -> Self {
+        TileBodies {
+            sim,
+            o,
+            d,
+            accept,
+            own,
+            tested: Seen::default(),
+        }
+    }
 }
 
 impl<A: Fn(u16) -> bool> InTile for TileBodies<'_, A> {
@@ -773,25 +787,25 @@ impl Sim {
             .models
             .iter()
             .map(|m| {
-                let rays = m.sensors.iter().map(|s| Rays {
-                    first: unit(fan(s).0),
-                    at: (s.pose.x, s.pose.y),
-                    range: s.range,
-                    // As Stage: rays leave from the middle of the sensor's
-                    // height.
-                    z: s.z + s.size[2] / 2.0,
-                    samples: s.samples,
-                });
-                Fans {
+                let mut fans = Fans {
                     origin: m.origin,
-                    rays: rays.collect(),
-                    turns: m
-                        .sensors
-                        .iter()
-                        .map(|s| (unit(fan(s).1), fan(s).1))
-                        .collect(),
-                    headings: m.sensors.iter().map(|s| unit(s.pose.yaw)).collect(),
+                    ..Fans::default()
+                };
+                for s in &m.sensors {
+                    let (first, step) = fan(s);
+                    fans.rays.push(Rays {
+                        first: unit(first),
+                        at: (s.pose.x, s.pose.y),
+                        range: s.range,
+                        // As Stage: rays leave from the middle of the
+                        // sensor's height.
+                        z: s.z + s.size[2] / 2.0,
+                        samples: s.samples,
+                    });
+                    fans.turns.push((unit(step), step));
+                    fans.headings.push(unit(s.pose.yaw));
                 }
+                fans
             })
             .collect();
         let mut sim = Sim {
@@ -1460,14 +1474,7 @@ impl Sim {
         // A body filed in several tiles the ray crosses is met in each: its
         // circle and a rectangle cost less to test again than to look up
         // among those tested, but a body of many edges is tested once.
-        let movers = TileBodies {
-            sim: self,
-            o: (x, y),
-            d: (dx, dy),
-            accept: &accept,
-            own,
-            tested: Seen::default(),
-        };
+        let movers = TileBodies::new(self, (x, y), (dx, dy), &accept, own);
         self.statics
             .cast_with(x, y, (dx, dy), range, &accept, movers)
     }
@@ -1504,14 +1511,7 @@ impl Sim {
         reach: f64,
         accept: impl Fn(u16) -> bool,
     ) -> Option<Hit> {
-        let movers = TileBodies {
-            sim: self,
-            o: (x, y),
-            d,
-            accept,
-            own: 0,
-            tested: Seen::default(),
-        };
+        let movers = TileBodies::new(self, (x, y), d, accept, 0);
         self.statics
             .cast_with(x, y, d, (0.0, reach), |_| false, movers)
     }
@@ -2182,6 +2182,9 @@ mod tests {
         ring.sensor_mut(1).0[0] = 0.75;
         let firsts: Vec<f64> = (0..4).map(|i| ring.first_range(i)).collect();
         assert_eq!(firsts, [2.0, 0.75, 2.0, 0.0]);
+        // As many rays as sensors, but not one each: the second has none.
+        let uneven = Readings::new(&[sensor(2, 3.0), sensor(0, 1.0)]);
+        assert_eq!([uneven.first_range(0), uneven.first_range(1)], [3.0, 0.0]);
         assert!(Readings::default().is_empty());
     }
 
@@ -2474,6 +2477,42 @@ mod tests {
         assert_eq!(laser.intensities[180], 0.0);
         // The second sensor looks left: max range 5.
         assert_eq!(s.readings[r].sensor(1).ranges[0], 5.0);
+    }
+
+    /// The steps' poses and heights (from the models' frames) are the
+    /// world's own, through a tree three deep, stacked and not, after the
+    /// simulation interface lifts a model.
+    #[test]
+    fn frames_place_models_as_the_world_does() {
+        let mut s = sim(
+            "frames",
+            &format!(
+                "{ROOM}position ( name \"a\" pose [1 2 0.1 30] size [0.4 0.4 0.2]\n\
+                   model ( name \"deck\" pose [0.1 0 0.05 45] size [0.2 0.2 0.1]\n\
+                     model ( name \"cup\" pose [0 0.05 0 -20] size [0.05 0.05 0.05] ) )\n\
+                   model ( name \"loose\" pose [-0.1 0 0 0] size [0.1 0.1 0.1] stack_children 0\n\
+                     model ( name \"flag\" pose [0 0 0.2 0] size [0.01 0.01 0.3] ) ) )\n"
+            ),
+        );
+        let cup = s.world.names["a.deck.cup"];
+        s.set_z(cup, 0.02);
+        s.step();
+        for m in 0..s.world.models.len() {
+            let ((p, z), (q, w)) = (s.global_z(m), s.world.global(&s.poses, m));
+            assert_eq!(
+                (p.x, p.y, p.yaw, z),
+                (q.x, q.y, q.yaw, w),
+                "{}",
+                s.world.models[m].name
+            );
+        }
+        let flag = s.world.names["a.loose.flag"];
+        // `loose` stands on `a` (0.1 + 0.2); `flag` 0.2 over its base, not on top.
+        assert!(
+            (s.global_z(flag).1 - 0.5).abs() < 1e-12,
+            "stacked on `loose`"
+        );
+        assert!((s.global_z(cup).1 - (0.1 + 0.2 + 0.05 + 0.1 + 0.02)).abs() < 1e-12);
     }
 
     /// A ranger's rays leave from its `origin` on its parent, turned by it:
