@@ -211,13 +211,21 @@ fn drive_to_goal(cfg: &Path) {
     );
     let worst_amcl = errors.iter().copied().fold(0.0, f64::max);
     let mean_amcl = errors.iter().sum::<f64>() / errors.len() as f64;
+    // How often amcl said where r0 is (odometry comes every 0.1 s).
+    let gap = estimates
+        .lock()
+        .unwrap()
+        .windows(2)
+        .map(|w| w[1].0 - w[0].0)
+        .fold(0.0, f64::max);
     let end = sim.get_pose2d("r0").unwrap();
     let off = (end.x - GOAL.0).hypot(end.y - GOAL.1);
     eprintln!(
         "nav: valid path after {:.2} simulated s, arrived after {took:.1} simulated s, \
          {off:.2} m from the goal; amcl's error on the way {mean_amcl:.3} m mean, \
-         {worst_amcl:.2} m worst",
-        valid_at.unwrap_or(f64::NAN)
+         {worst_amcl:.2} m worst, over {} estimates at most {gap:.1} s apart",
+        valid_at.unwrap_or(f64::NAN),
+        errors.len()
     );
     // Done means amcl's estimate was within the epsilon: the truth may be
     // as far again as amcl was off, and r0 rolls on a little.

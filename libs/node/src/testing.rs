@@ -268,6 +268,16 @@ impl<D: Driver> Harness<D> {
         self.deliver(Event::Tick)
     }
 
+    /// Delivers [`Event::Wake`], as a [`crate::Waker`] would from the
+    /// driver's own thread (the harness's wakers wake nobody).
+    ///
+    /// # Errors
+    ///
+    /// What the driver's `on_event` returned.
+    pub fn wake(&mut self) -> Result<()> {
+        self.deliver(Event::Wake)
+    }
+
     /// Everything of type `M` the driver published on `dev`, oldest first.
     pub fn published<M: Message>(&self, dev: Device) -> Vec<M> {
         self.published_at(dev).into_iter().map(|(_, m)| m).collect()

@@ -42,6 +42,13 @@
 //!   the KLD bound. Odometry is always the latest sample and a scan is the
 //!   latest one (the runtime replaces queued samples), so a filter slower
 //!   than its inputs works on fresh data and never falls behind a backlog.
+//! - The update runs on amcl's own filter thread. Meanwhile the driver goes
+//!   on taking odometry and publishing the pose carried along by it; a
+//!   reading that comes meanwhile is dropped (the next one after the update
+//!   is fresher), and `set_pose` and `particles` are answered once the
+//!   update is back. (With 50 000 particles on a loaded machine, an update
+//!   done on the driver's thread held the pose back by up to 6 simulated s
+//!   and r0's trip across the cave took twice as long.)
 //! - After each update `localize` publishes every hypothesis (cluster of
 //!   particles, heaviest first, at most 100) with its weight, mean and
 //!   covariance (Player's six terms); `position2d` publishes the best
@@ -57,6 +64,8 @@
 pub mod laser;
 pub mod pf;
 
+use std::sync::{mpsc, Arc};
+
 use serde::Deserialize;
 use troupe_geom::occmap::OccMap;
 use troupe_geom::Pose;
@@ -64,7 +73,9 @@ use troupe_msgs::{
     common, laser as laser_msg, localize, position2d, sonar, Device, Interface, Pose2d, Pose3d,
     Size3d,
 };
-use troupe_node::{Ctx, Driver, Event, MapFetch, NodeError, RequestId, Result, Section, Unit};
+use troupe_node::{
+    Ctx, Driver, Event, MapFetch, NodeError, Request, RequestId, Result, Section, Unit, Waker,
+};
 
 use crate::laser::{Beams, DistanceMap, Model};
 use crate::pf::Filter;
@@ -191,15 +202,16 @@ fn bearing_step(scan: &laser_msg::Scan) -> f64 {
 
 /// The localizer without the network: odometry and scans in, estimates out.
 pub struct Localizer {
-    filter: Filter,
+    /// `None` while an update has it ([`Localizer::start`]).
+    filter: Option<Filter>,
     model: Model,
     max_beams: usize,
     thresh: (f64, f64),
     drift: [[f64; 3]; 3],
-    map: Option<DistanceMap>,
+    map: Option<Arc<DistanceMap>>,
     laser_pose: Pose,
     /// The sonar transducers' poses on the robot, when a sonar is the sensor.
-    sonar_poses: Vec<Pose>,
+    sonar_poses: Arc<[Pose]>,
     /// Odometry at the last filter update; `None` until the first sample.
     odom_ref: Option<Pose>,
     /// Recent odometry, (stamp, pose), oldest first.
@@ -297,14 +309,14 @@ impl Localizer {
         );
         let hypoths = prior(&filter);
         Ok(Localizer {
-            filter,
+            filter: Some(filter),
             model,
             max_beams: o.laser_max_beams,
             thresh,
             drift,
             map: None,
             laser_pose: Pose::default(),
-            sonar_poses: Vec::new(),
+            sonar_poses: Arc::new([]),
             odom_ref: None,
             odom: std::collections::VecDeque::new(),
             pending: None,
@@ -319,7 +331,7 @@ impl Localizer {
 
     /// Sets the map the laser sees.
     pub fn set_map(&mut self, map: &OccMap) {
-        self.map = Some(DistanceMap::new(map));
+        self.map = Some(Arc::new(DistanceMap::new(map)));
     }
 
     /// Sets the laser's pose on the robot.
@@ -329,21 +341,28 @@ impl Localizer {
 
     /// Sets the sonar transducers' poses on the robot.
     pub fn set_sonar_poses(&mut self, poses: Vec<Pose>) {
-        self.sonar_poses = poses;
+        self.sonar_poses = poses.into();
     }
 
-    /// Restarts the filter around `mean` with covariance `cov` (Player's six terms).
-    pub fn set_pose(&mut self, mean: Pose, cov: &[f64; 6]) {
+    /// Restarts the filter around `mean` with covariance `cov` (Player's
+    /// six terms). False, and nothing done, while an update is out: call
+    /// again once it is back.
+    pub fn set_pose(&mut self, mean: Pose, cov: &[f64; 6]) -> bool {
+        let Some(filter) = &mut self.filter else {
+            return false;
+        };
         let c = [
             [cov[0], cov[3], cov[5]],
             [cov[3], cov[1], cov[4]],
             [cov[5], cov[4], cov[2]],
         ];
-        self.filter.init(mean, &c);
-        self.hypoths = prior(&self.filter);
+        filter.init(mean, &c);
+        self.hypoths = prior(filter);
         self.updated_at = None;
         self.odom_ref = None;
         self.due = false;
+        self.pending = None;
+        true
     }
 
     /// Takes an odometry pose stamped `stamp`; returns the pose estimate
@@ -384,12 +403,19 @@ impl Localizer {
         self.updated_at
     }
 
-    /// Takes a scan stamped `stamp`; returns true when it updated the
-    /// filter. A scan newer than the latest odometry waits for odometry of
-    /// its time (see [`Localizer::poll`]).
+    /// Takes a scan stamped `stamp` and updates the filter with it at
+    /// once; returns true when it did. A scan newer than the latest
+    /// odometry waits for odometry of its time (see [`Localizer::poll`]).
     pub fn scan(&mut self, scan: &laser_msg::Scan, stamp: f64) -> bool {
+        self.offer_scan(scan, stamp);
+        self.poll()
+    }
+
+    /// Keeps a scan stamped `stamp` for the next update when one is due
+    /// (see [`Localizer::start`]).
+    pub fn offer_scan(&mut self, scan: &laser_msg::Scan, stamp: f64) {
         if !self.due {
-            return false;
+            return;
         }
         let beams = Beams::pick(
             &scan.ranges,
@@ -399,19 +425,22 @@ impl Localizer {
             self.max_beams,
         );
         self.pending = Some((stamp, Reading::Laser(beams)));
-        self.poll()
     }
 
     /// Takes a sonar ring's ranges stamped `stamp` (one per transducer, in
-    /// the order of [`Localizer::set_sonar_poses`]); returns true when they
-    /// updated the filter.
+    /// the order of [`Localizer::set_sonar_poses`]) and updates the filter
+    /// with them at once; returns true when it did.
     pub fn sonar(&mut self, ranges: &[f32], stamp: f64) -> bool {
-        if !self.due {
-            return false;
-        }
-        let ranges = ranges.iter().map(|&r| f64::from(r)).collect();
-        self.pending = Some((stamp, Reading::Sonar(ranges)));
+        self.offer_sonar(ranges, stamp);
         self.poll()
+    }
+
+    /// Keeps a sonar reading for the next update when one is due.
+    pub fn offer_sonar(&mut self, ranges: &[f32], stamp: f64) {
+        if self.due {
+            let ranges = ranges.iter().map(|&r| f64::from(r)).collect();
+            self.pending = Some((stamp, Reading::Sonar(ranges)));
+        }
     }
 
     /// The odometric pose at time `t`, interpolated; `None` while odometry
@@ -433,47 +462,67 @@ impl Localizer {
         Some(p0.compose(&Pose::new(d.x * f, d.y * f, d.yaw * f)))
     }
 
-    /// Updates the filter with a waiting scan once odometry has caught up
-    /// with it; returns true when it did.
+    /// Updates the filter with a waiting reading once odometry has caught
+    /// up with it; returns true when it did. [`Localizer::start`] and
+    /// [`Localizer::finish`] with the update run in between.
     pub fn poll(&mut self) -> bool {
-        let Some(stamp) = self.pending.as_ref().map(|p| p.0) else {
-            return false;
-        };
+        match self.start() {
+            Some(update) => {
+                self.finish(update.run());
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// The update a waiting reading makes once odometry has caught up with
+    /// it, to run anywhere ([`Update::run`]) and hand back to
+    /// [`Localizer::finish`]. It takes the filter along: until it is back,
+    /// the pose goes on being the last update's carried along by odometry,
+    /// readings wait, and [`Localizer::filter`] is `None`.
+    pub fn start(&mut self) -> Option<Update> {
+        let stamp = self.pending.as_ref()?.0;
         let (Some(map), Some(odom), Some(r)) = (&self.map, self.odom_at(stamp), self.odom_ref)
         else {
-            return false;
+            return None;
         };
-        let Some((_, reading)) = self.pending.take() else {
-            return false;
-        };
-        if self.moved {
-            self.filter.action(relative(&odom, &r), &self.drift);
-        }
-        match reading {
-            Reading::Laser(beams) if !beams.beams.is_empty() => {
-                let (model, laser) = (self.model, self.laser_pose);
-                self.filter
-                    .sensor(|p| model.likelihood_on(map, p, &laser, &beams));
-            }
-            Reading::Sonar(ranges) if !self.sonar_poses.is_empty() => {
-                let sonars = &self.sonar_poses;
-                self.filter
-                    .sensor(|p| laser::sonar_likelihood(map, p, sonars, &ranges));
-            }
-            Reading::Laser(_) | Reading::Sonar(_) => {}
-        }
-        self.filter.resample();
-        self.hypoths = self.filter.clusters();
-        self.hypoths.truncate(MAX_HYPOTHS);
+        let map = map.clone();
+        let filter = self.filter.take()?;
+        let (_, reading) = self.pending.take()?;
+        Some(Update {
+            filter,
+            step: self.moved.then(|| (relative(&odom, &r), self.drift)),
+            reading,
+            map,
+            model: self.model,
+            laser_pose: self.laser_pose,
+            sonar_poses: self.sonar_poses.clone(),
+            stamp,
+            odom,
+        })
+    }
+
+    /// Takes back the filter of an update: its hypotheses become the
+    /// estimate, and odometry is counted from the pose of its reading.
+    pub fn finish(&mut self, done: Updated) {
+        self.filter = Some(done.filter);
+        self.hypoths = done.hypoths;
         if let Some(h) = self.hypoths.first() {
             self.best = Some(h.mean);
         }
-        self.odom_ref = Some(odom);
-        self.updated_at = Some(stamp);
+        self.odom_ref = Some(done.odom);
+        self.updated_at = Some(done.stamp);
+        // What came in meanwhile was weighed against the old reference: the
+        // next odometry sample decides afresh.
+        self.pending = None;
         self.due = false;
         self.moved = false;
         self.updates += 1;
-        true
+    }
+
+    /// True while an update has the filter.
+    pub fn busy(&self) -> bool {
+        self.filter.is_none()
     }
 
     /// The best hypothesis so far.
@@ -486,15 +535,72 @@ impl Localizer {
         &self.hypoths
     }
 
-    /// The particle filter.
-    pub fn filter(&self) -> &Filter {
-        &self.filter
+    /// The particle filter; `None` while an update has it.
+    pub fn filter(&self) -> Option<&Filter> {
+        self.filter.as_ref()
     }
 
     /// Filter updates so far.
     pub fn updates(&self) -> u64 {
         self.updates
     }
+}
+
+/// One filter update: the filter with what moves and weighs it. The
+/// costly part of amcl, run off the driver's thread.
+pub struct Update {
+    filter: Filter,
+    /// The odometric step since the last update and the drift it adds.
+    step: Option<(Pose, [[f64; 3]; 3])>,
+    reading: Reading,
+    map: Arc<DistanceMap>,
+    model: Model,
+    laser_pose: Pose,
+    sonar_poses: Arc<[Pose]>,
+    /// The reading's stamp, and the odometry of that time.
+    stamp: f64,
+    odom: Pose,
+}
+
+impl Update {
+    /// Moves every particle by the odometric step, weighs it by the
+    /// reading, resamples and clusters.
+    pub fn run(mut self) -> Updated {
+        if let Some((delta, drift)) = &self.step {
+            self.filter.action(*delta, drift);
+        }
+        let map = &*self.map;
+        match &self.reading {
+            Reading::Laser(beams) if !beams.beams.is_empty() => {
+                let (model, laser) = (self.model, self.laser_pose);
+                self.filter
+                    .sensor(|p| model.likelihood_on(map, p, &laser, beams));
+            }
+            Reading::Sonar(ranges) if !self.sonar_poses.is_empty() => {
+                let sonars = &*self.sonar_poses;
+                self.filter
+                    .sensor(|p| laser::sonar_likelihood(map, p, sonars, ranges));
+            }
+            Reading::Laser(_) | Reading::Sonar(_) => {}
+        }
+        self.filter.resample();
+        let mut hypoths = self.filter.clusters();
+        hypoths.truncate(MAX_HYPOTHS);
+        Updated {
+            filter: self.filter,
+            hypoths,
+            stamp: self.stamp,
+            odom: self.odom,
+        }
+    }
+}
+
+/// An update that has run, for [`Localizer::finish`].
+pub struct Updated {
+    filter: Filter,
+    hypoths: Vec<pf::Cluster>,
+    stamp: f64,
+    odom: Pose,
 }
 
 /// A range reading waiting to update the filter.
@@ -529,6 +635,44 @@ pub struct Amcl {
     /// The map, while it is being fetched.
     fetch: Option<MapFetch>,
     geom: Option<RequestId>,
+    /// Runs the updates; started by `setup`.
+    worker: Option<Worker>,
+    /// Requests for the filter that came while an update had it.
+    deferred: Vec<Request>,
+}
+
+/// amcl's filter thread: runs the updates handed to it, one at a time,
+/// and wakes the driver when one is done. Meanwhile the driver goes on
+/// answering each odometry sample with the pose carried along by it: a
+/// filter slower than the robot's odometry (50 000 particles on a busy
+/// machine) delays its corrections, never the pose.
+struct Worker {
+    updates: mpsc::Sender<Update>,
+    done: mpsc::Receiver<Updated>,
+}
+
+impl Worker {
+    fn spawn(waker: Waker) -> Result<Worker> {
+        let (updates, todo) = mpsc::channel::<Update>();
+        let (finished, done) = mpsc::channel();
+        std::thread::Builder::new()
+            .name("amcl-filter".into())
+            .spawn(move || {
+                // Ends when the driver, and with it `updates`, is gone.
+                for update in todo {
+                    if finished.send(update.run()).is_err() {
+                        break;
+                    }
+                    waker.wake();
+                }
+            })
+            .map_err(|e| NodeError::Driver(Box::new(e)))?;
+        Ok(Worker { updates, done })
+    }
+}
+
+fn filter_thread_gone() -> NodeError {
+    NodeError::Driver("amcl's filter thread has stopped".into())
 }
 
 impl Driver for Amcl {
@@ -591,10 +735,13 @@ impl Driver for Amcl {
             loc,
             fetch: None,
             geom: None,
+            worker: None,
+            deferred: Vec::new(),
         })
     }
 
     fn setup(&mut self, ctx: &mut Ctx) -> Result<()> {
+        self.worker = Some(Worker::spawn(ctx.waker())?);
         self.fetch = Some(MapFetch::start(ctx, self.map)?);
         self.geom = Some(match self.sensor {
             Sensor::Laser(d) => ctx.request(&d, &laser_msg::GetGeom)?,
@@ -612,29 +759,31 @@ impl Driver for Amcl {
             Event::Data(s) if s.device == self.odom && s.is::<position2d::Data>() => {
                 let d = s.decode::<position2d::Data>()?;
                 self.loc.odometry(d.msg.pose.into(), d.stamp);
-                if self.loc.poll() {
-                    self.publish_hypotheses(ctx)?;
-                }
+                self.start_update()?;
                 self.publish_pose(ctx)
             }
             Event::Data(s) if s.device == self.sensor.device() && s.is::<laser_msg::Scan>() => {
                 let scan = s.decode::<laser_msg::Scan>()?;
-                if self.loc.scan(&scan.msg, scan.stamp) {
-                    self.publish(ctx)?;
-                }
-                Ok(())
+                self.loc.offer_scan(&scan.msg, scan.stamp);
+                self.start_update()
             }
             Event::Data(s) if s.device == self.sensor.device() && s.is::<sonar::Ranges>() => {
                 let d = s.decode::<sonar::Ranges>()?;
-                if self.loc.sonar(&d.msg.ranges, d.stamp) {
-                    self.publish(ctx)?;
-                }
-                Ok(())
+                self.loc.offer_sonar(&d.msg.ranges, d.stamp);
+                self.start_update()
             }
             Event::Data(s) => Err(s.unexpected()),
             Event::Reply(r) => self.on_reply(ctx, r),
+            Event::Request(r)
+                if self.loc.busy()
+                    && (r.is::<localize::SetPose>() || r.is::<localize::GetParticles>()) =>
+            {
+                self.deferred.push(r);
+                Ok(())
+            }
             Event::Request(r) if r.is::<localize::SetPose>() => {
                 let q = r.decode::<localize::SetPose>()?;
+                // Not busy: such requests wait for the update (above).
                 self.loc.set_pose(q.mean.into(), &q.cov);
                 tracing::info!(
                     "filter reset around ({:.3}, {:.3}, {:.3})",
@@ -646,7 +795,9 @@ impl Driver for Amcl {
                 self.publish_hypotheses(ctx)
             }
             Event::Request(r) if r.is::<localize::GetParticles>() => {
-                let f = self.loc.filter();
+                let Some(f) = self.loc.filter() else {
+                    return Ok(()); // not busy: such requests wait (above)
+                };
                 let (mx, my, variance) = f.cep_stats();
                 r.reply(&localize::Particles {
                     mean: Pose2d::new(mx, my, 0.0),
@@ -682,12 +833,43 @@ impl Driver for Amcl {
                 tracing::debug!("amcl takes no commands; ignored `{}`", c.key);
                 Ok(())
             }
-            Event::Tick | Event::Wake => Ok(()),
+            Event::Wake => self.finish_update(ctx),
+            Event::Tick => Ok(()),
         }
     }
 }
 
 impl Amcl {
+    /// Hands the update that is due, if any, to the filter thread.
+    fn start_update(&mut self) -> Result<()> {
+        let Some(update) = self.loc.start() else {
+            return Ok(());
+        };
+        let worker = self.worker.as_ref().ok_or_else(filter_thread_gone)?;
+        worker
+            .updates
+            .send(update)
+            .map_err(|_| filter_thread_gone())
+    }
+
+    /// Takes back the update the filter thread woke the driver for,
+    /// publishes its estimate and answers the requests that waited for it.
+    fn finish_update(&mut self, ctx: &mut Ctx) -> Result<()> {
+        if !self.loc.busy() {
+            return Ok(());
+        }
+        let worker = self.worker.as_ref().ok_or_else(filter_thread_gone)?;
+        // The thread wakes the driver after sending, so this does not wait
+        // (under the test harness, which wakes by hand, it waits for the run).
+        let done = worker.done.recv().map_err(|_| filter_thread_gone())?;
+        self.loc.finish(done);
+        self.publish(ctx)?;
+        for r in std::mem::take(&mut self.deferred) {
+            self.on_event(ctx, Event::Request(r))?;
+        }
+        Ok(())
+    }
+
     /// The localizer (tests).
     pub fn localizer(&self) -> &Localizer {
         &self.loc
@@ -860,7 +1042,10 @@ mod tests {
             "{model}: estimate strayed {worst_late} m along the route"
         );
         assert!(loc.updates() > 20, "{}", loc.updates());
-        assert!(loc.filter().particles().len() < 5000, "KLD shrank the set");
+        assert!(
+            loc.filter().unwrap().particles().len() < 5000,
+            "KLD shrank the set"
+        );
         let h = loc.hypotheses();
         assert!(h[0].weight > 0.5 && h.windows(2).all(|w| w[0].weight >= w[1].weight));
     }
@@ -988,7 +1173,7 @@ mod tests {
             Pose::new(1.0, 1.0, 0.0),
             &[0.01, 0.01, 0.005, 0.0, 0.0, 0.0],
         );
-        assert_eq!(loc.filter().particles().len(), 10_000);
+        assert_eq!(loc.filter().unwrap().particles().len(), 10_000);
         assert_eq!(
             loc.odometry(Pose::new(0.1, 0.0, 0.0), 2.0),
             None,
@@ -1052,6 +1237,130 @@ mod tests {
                 .is_empty(),
             "the pose waits for the first update"
         );
+    }
+
+    #[test]
+    fn while_an_update_is_out_the_pose_follows_odometry_and_readings_wait() {
+        let m = room();
+        let d = DistanceMap::new(&m);
+        let mut loc = Localizer::new(&Options {
+            init_pose: vec![1.0, 1.0, 0.0],
+            init_pose_var: vec![0.1, 0.1, 0.1],
+            ..Options::default()
+        })
+        .unwrap();
+        loc.set_map(&m);
+        let p = Pose::new(1.0, 1.0, 0.0);
+        loc.odometry(Pose::default(), 0.0);
+        loc.offer_scan(&d.scan(&p, 8.0), 0.0);
+        let first = loc.start().expect("the first reading is due");
+        assert!(loc.busy() && loc.filter().is_none());
+        assert!(loc.start().is_none(), "one update at a time");
+        // Nothing to carry along yet: no estimate before the first update.
+        assert_eq!(loc.odometry(Pose::new(0.05, 0.0, 0.0), 0.5), None);
+        loc.finish(first.run());
+        assert_eq!(loc.updates(), 1);
+        let b = loc.best().unwrap();
+
+        // The robot moves past the threshold; the second update goes out.
+        loc.odometry(Pose::new(0.3, 0.0, 0.0), 1.0);
+        loc.offer_scan(&d.scan(&Pose::new(1.3, 1.0, 0.0), 8.0), 1.0);
+        let second = loc.start().expect("moved 0.3 m: due");
+        // Meanwhile each odometry sample still gives a pose: the first
+        // update's estimate carried along, from the odometry of its reading.
+        let r = Pose::default();
+        for (k, x) in [0.4, 0.5, 0.6].into_iter().enumerate() {
+            let e = loc.odometry(Pose::new(x, 0.0, 0.0), 1.1 + k as f64 / 10.0);
+            let want = b.compose(&relative(&Pose::new(x, 0.0, 0.0), &r));
+            let e = e.expect("a pose while the filter is out");
+            assert!((e.x - want.x).abs() < 1e-12, "{e:?} against {want:?}");
+        }
+        // A reading that comes meanwhile is not kept, a reset not taken.
+        loc.offer_scan(&d.scan(&Pose::new(1.6, 1.0, 0.0), 8.0), 1.3);
+        assert!(!loc.set_pose(Pose::default(), &[0.1, 0.1, 0.1, 0.0, 0.0, 0.0]));
+        loc.finish(second.run());
+        assert!(!loc.busy());
+        assert_eq!((loc.updates(), loc.updated_at()), (2, Some(1.0)));
+        assert!(!loc.poll(), "the reading that came meanwhile was dropped");
+        // Odometry is now counted from the second update's reading.
+        let b2 = loc.best().unwrap();
+        let e = loc.odometry(Pose::new(0.7, 0.0, 0.0), 1.4).unwrap();
+        assert!((e.x - b2.compose(&Pose::new(0.4, 0.0, 0.0)).x).abs() < 1e-12);
+        assert!(
+            (b2.x - 1.3).abs() < 0.1 && (b2.y - 1.0).abs() < 0.1,
+            "{b2:?}"
+        );
+    }
+
+    /// The driver with its filter thread: an update runs off the driver's
+    /// thread, and until it is back the pose is published on every odometry
+    /// sample while the requests that need the filter wait.
+    #[test]
+    fn the_driver_publishes_poses_while_its_filter_thread_updates() {
+        use troupe_node::testing::Harness;
+        let mut h = Harness::<Amcl>::from_json(
+            r#"{"name":"amcl","provides":["localize:0","position2d:2"],
+                "requires":["odometry::position2d:0","laser:0","laser::map:0"],
+                "options":{"init_pose":[1.0,1.0,0.0],"init_pose_var":[0.2,0.2,0.17]}}"#,
+        )
+        .unwrap();
+        let (odom, laser) = (
+            Device::new(6665, Interface::Position2d, 0),
+            Device::new(6665, Interface::Laser, 0),
+        );
+        let (loc_dev, pos_dev) = (
+            Device::new(6665, Interface::Localize, 0),
+            Device::new(6665, Interface::Position2d, 2),
+        );
+        let m = room();
+        let d = DistanceMap::new(&m);
+        // The map and the laser's geometry, as their drivers answer.
+        for q in h.requests_sent() {
+            if q.is::<laser_msg::GetGeom>() {
+                h.answer(q.id, &laser_msg::Geom::default()).unwrap();
+            } else if q.is::<map::GetInfo>() {
+                h.answer(q.id, &m.info).unwrap();
+            }
+        }
+        let cells = h
+            .requests_sent()
+            .into_iter()
+            .find(|q| q.is::<map::GetData>());
+        let cells = cells.expect("the cells are asked after the info");
+        let (tile, _) = m.tile(0, 0, m.info.width, m.info.height);
+        h.answer(cells.id, &tile).unwrap();
+        let at = |x: f64| position2d::Data {
+            pose: Pose2d::new(x, 0.0, 0.0),
+            ..Default::default()
+        };
+        h.input(odom, &at(0.0)).unwrap();
+        h.input(laser, &d.scan(&Pose::new(1.0, 1.0, 0.0), 8.0))
+            .unwrap();
+        assert!(h.published::<position2d::Data>(pos_dev).is_empty());
+        h.wake().unwrap();
+        assert_eq!(h.published::<localize::Hypoths>(loc_dev).len(), 2);
+        // Moved 0.3 m: the next scan sends an update to the filter thread.
+        h.set_time(1.0);
+        h.input(odom, &at(0.3)).unwrap();
+        h.input(laser, &d.scan(&Pose::new(1.3, 1.0, 0.0), 8.0))
+            .unwrap();
+        assert!(h.driver().localizer().busy());
+        let asked = h.request(loc_dev, &localize::GetParticles).unwrap();
+        let poses = h.published::<position2d::Data>(pos_dev).len();
+        for x in [0.4, 0.5, 0.6] {
+            h.input(odom, &at(x)).unwrap();
+        }
+        let published = h.published::<position2d::Data>(pos_dev);
+        assert_eq!(published.len(), poses + 3, "a pose per odometry sample");
+        let last = published.last().unwrap().pose;
+        assert!((last.x - 1.6).abs() < 0.1, "carried along: {last:?}");
+        assert_eq!(h.published::<localize::Hypoths>(loc_dev).len(), 2);
+        assert!(h.reply::<localize::Particles>(asked).is_none(), "waits");
+        h.wake().unwrap();
+        assert_eq!(h.published::<localize::Hypoths>(loc_dev).len(), 3);
+        let particles = h.reply::<localize::Particles>(asked).unwrap().unwrap();
+        assert!(!particles.particles.is_empty());
+        assert_eq!(h.driver().localizer().updates(), 2);
     }
 
     #[test]
