@@ -827,7 +827,7 @@ fn run_world(
         sim.sense_only([]);
     }
     let load = t_load.elapsed();
-    let steps = (a.seconds / sim.world.interval_sim).round() as u64;
+    let steps = (a.seconds / sim.world().interval_sim).round() as u64;
     let t0 = Instant::now();
     for _ in 0..steps {
         sim.step();

@@ -126,7 +126,7 @@ fn resolve(
     dev: &Device,
     used: &mut Used,
 ) -> std::result::Result<Source, String> {
-    let w = &sim.world;
+    let w = &sim.world();
     let tree = w.subtree(base);
     let i = dev.interface;
     let free = |pred: &dyn Fn(usize) -> bool, used: &Used| {
@@ -234,9 +234,9 @@ impl Driver for Stage {
                 let src = if a.interface == Interface::Simulation {
                     Source::Simulation
                 } else {
-                    let base = sim.world.names.get(&map.model).copied().ok_or_else(|| {
+                    let base = sim.world().names.get(&map.model).copied().ok_or_else(|| {
                         let mut names: Vec<&str> = sim
-                            .world
+                            .world()
                             .names
                             .keys()
                             .filter(|n| !n.contains(':'))
@@ -271,13 +271,13 @@ impl Driver for Stage {
                     map.info.width,
                     map.info.height,
                     map.info.resolution,
-                    sim.world.models[model].name
+                    sim.world().models[model].name
                 );
                 maps.push((model, map));
             }
         }
-        let speedup = o.speedup.unwrap_or(sim.world.speedup);
-        let interval = sim.world.interval_sim;
+        let speedup = o.speedup.unwrap_or(sim.world().speedup);
+        let interval = sim.world().interval_sim;
         let rate = o.update_rate.filter(|r| r.is_finite() && *r > 0.0);
         let (period, steps_per_tick) = if speedup > 0.0 {
             (Duration::from_secs_f64((interval / speedup).max(1e-4)), 1)
@@ -289,7 +289,7 @@ impl Driver for Stage {
         };
         let told = o.step_when_told.is_some_and(Switch::on);
         Ok(Stage {
-            quit_time: o.quit_time.unwrap_or(sim.world.quit_time),
+            quit_time: o.quit_time.unwrap_or(sim.world().quit_time),
             sim,
             devices,
             maps,
@@ -434,7 +434,7 @@ impl Stage {
                     ctx.publish(&dev, &ranger::Intensities { intensities })?;
                 }
                 Source::Laser { model } => {
-                    let m = &self.sim.world.models[model];
+                    let m = &self.sim.world().models[model];
                     let (Some(s), Some(rd)) = (m.sensors.first(), self.sim.readings[model].first())
                     else {
                         continue;
@@ -513,7 +513,7 @@ impl Stage {
     /// As Stage's plugin answers: the body's planar pose and footprint
     /// (no height), each element's pose in the body's frame.
     fn ranger_geom(&self, model: usize) -> ranger::Geom {
-        let m = &self.sim.world.models[model];
+        let m = &self.sim.world().models[model];
         ranger::Geom {
             pose: pose3(m.pose, 0.0),
             size: troupe_msgs::Size3d {
@@ -536,7 +536,7 @@ impl Stage {
     }
 
     fn position_geom(&self, model: usize) -> position2d::Geom {
-        let d = &self.sim.world.models[model];
+        let d = &self.sim.world().models[model];
         position2d::Geom {
             pose: pose3(d.origin, 0.0),
             size: size3(d.size),
@@ -553,7 +553,7 @@ impl Stage {
 
     fn laser_config(&self, model: usize) -> Option<laser::Config> {
         let c = self.ranger_config(model)?;
-        let s = &self.sim.world.models[model].sensors[0];
+        let s = &self.sim.world().models[model].sensors[0];
         Some(laser::Config {
             min_angle: c.min_angle as f32,
             max_angle: c.max_angle as f32,
@@ -603,15 +603,15 @@ impl Stage {
     }
 
     fn ranger_config(&self, model: usize) -> Option<ranger::Config> {
-        let s = self.sim.world.models[model].sensors.first()?;
+        let s = self.sim.world().models[model].sensors.first()?;
         Some(ranger::Config {
             min_angle: -s.fov / 2.0,
             max_angle: s.fov / 2.0,
             angular_res: s.fov / s.samples as f64,
             min_range: s.range.0,
             max_range: s.range.1,
-            range_res: self.sim.world.resolution,
-            frequency: 1.0 / self.sim.world.interval_sim,
+            range_res: self.sim.world().resolution,
+            frequency: 1.0 / self.sim.world().interval_sim,
         })
     }
 
@@ -630,7 +630,7 @@ impl Stage {
                     }
                     r.reply(&common::Ack);
                 } else if r.is::<position2d::SetOdom>() || r.is::<position2d::ResetOdom>() {
-                    let gps = self.sim.world.models[m]
+                    let gps = self.sim.world().models[m]
                         .position
                         .as_ref()
                         .is_some_and(|c| c.localization == Localization::Gps);
@@ -689,7 +689,7 @@ impl Stage {
             Source::Sonar { model } => {
                 if r.is::<sonar::GetGeom>() {
                     // Player's sonar poses are in the robot's frame.
-                    let m = &self.sim.world.models[model];
+                    let m = &self.sim.world().models[model];
                     r.reply(&sonar::Geom {
                         poses: m
                             .sensors
@@ -706,7 +706,7 @@ impl Stage {
             }
             Source::Fiducial { model } => {
                 if r.is::<fiducial::GetGeom>() {
-                    let m = &self.sim.world.models[model];
+                    let m = &self.sim.world().models[model];
                     r.reply(&fiducial::Geom {
                         pose: pose3(m.pose, m.z),
                         size: size3(m.size),
@@ -717,11 +717,11 @@ impl Stage {
                     });
                 } else if r.is::<fiducial::GetId>() {
                     // The finder's own model's fiducial_return, as Stage answers.
-                    let id = self.sim.world.models[model].fiducial_return;
+                    let id = self.sim.world().models[model].fiducial_return;
                     r.reply(&fiducial::Id { id: id as u32 });
                 } else if r.is::<fiducial::SetId>() {
                     let id = r.decode::<fiducial::SetId>()?.id;
-                    self.sim.world.models[model].fiducial_return = id as i32;
+                    self.sim.set_fiducial_return(model, id as i32);
                     r.reply(&fiducial::Id { id });
                 } else {
                     let n = r.name.clone();
@@ -730,7 +730,7 @@ impl Stage {
             }
             Source::Gripper { model } => {
                 if r.is::<gripper::GetGeom>() {
-                    let m = &self.sim.world.models[model];
+                    let m = &self.sim.world().models[model];
                     r.reply(&gripper::Geom {
                         pose: pose3(m.pose, m.z),
                         outer_size: size3(m.size),
@@ -787,7 +787,7 @@ impl Stage {
     /// `6665:position2d:0 6665:sonar:0`: how a tool outside (an emulator
     /// backed by a Stage robot) finds a model's devices by its name.
     fn devices_of(&self, m: usize) -> String {
-        let tree = self.sim.world.subtree(m);
+        let tree = self.sim.world().subtree(m);
         let list: Vec<String> = self
             .devices
             .iter()
@@ -814,7 +814,7 @@ impl Stage {
 
     /// The world as a viewer draws it (`simulation` `world` request).
     fn world_view(&self) -> simulation::World {
-        let w = &self.sim.world;
+        let w = &self.sim.world();
         let f = |v: f64| v as f32;
         let pose = |p: Pose| [f(p.x), f(p.y), f(p.yaw)];
         let models = (0..w.models.len())
@@ -881,7 +881,7 @@ impl Stage {
             return Ok(());
         }
         self.poses_sent.set(Some(now));
-        let poses = (0..self.sim.world.models.len())
+        let poses = (0..self.sim.world().models.len())
             .filter(|&m| self.sim.moves(m))
             .map(|m| {
                 let p = self.sim.global(m);
@@ -915,7 +915,7 @@ impl Stage {
     }
 
     fn simulation(&mut self, ctx: &mut Ctx, r: troupe_node::Request) -> Result<()> {
-        let find = |sim: &Sim, name: &str| sim.world.names.get(name).copied();
+        let find = |sim: &Sim, name: &str| sim.world().names.get(name).copied();
         if r.is::<simulation::GetWorld>() {
             r.reply(&self.world_view());
         } else if r.is::<simulation::GetPose2d>() {
@@ -956,7 +956,7 @@ impl Stage {
             let q = r.decode::<simulation::GetPose3d>()?;
             match find(&self.sim, &q.name) {
                 Some(m) => r.reply(&simulation::Pose3dOf {
-                    pose: pose3(self.sim.poses[m], self.sim.world.models[m].z),
+                    pose: pose3(self.sim.poses[m], self.sim.world().models[m].z),
                     name: q.name,
                     simtime: (self.sim.time * 1e6).round(),
                 }),
@@ -1317,7 +1317,7 @@ mod tests {
         let start = pose_of(&mut h, "r0");
         assert_eq!((start.x, start.y), (0.0, 0.0));
         assert_eq!(pose_of(&mut h, "r0"), start, "the kept answer");
-        let r0 = h.driver().sim.world.names["r0"];
+        let r0 = h.driver().sim.world().names["r0"];
         assert_eq!(h.driver().watched, [(sim, "r0".to_owned(), r0)]);
         // Set: the kept answer is renewed before the set is acknowledged.
         let to = troupe_msgs::Pose2d::new(1.0, -1.0, 0.5);

@@ -236,8 +236,11 @@ impl Readings {
 
 /// The simulated world.
 pub struct Sim {
-    /// The loaded world.
-    pub world: World,
+    /// The loaded world, read through [`Sim::world`]: the steps read copies
+    /// of parts of it ([`Frame`], [`Motion`], [`Fans`]), so what changes at
+    /// run time changes through `Sim` ([`Sim::set_z`],
+    /// [`Sim::set_fiducial_return`]).
+    world: World,
     /// Simulated seconds.
     pub time: f64,
     /// Steps taken.
@@ -2058,6 +2061,17 @@ impl Sim {
     pub fn set_z(&mut self, m: usize, z: f64) {
         self.world.models[m].z = z;
         self.frames[m].z = z;
+    }
+
+    /// The loaded world.
+    pub fn world(&self) -> &World {
+        &self.world
+    }
+
+    /// Sets the id fiducial finders read of model `m` (Stage's
+    /// `fiducial_return`).
+    pub fn set_fiducial_return(&mut self, m: usize, id: i32) {
+        self.world.models[m].fiducial_return = id;
     }
 
     /// The occupancy map of model `m`'s body, as the Stage plugin's `map`
