@@ -774,17 +774,12 @@ impl Driver for Amcl {
             }
             Event::Data(s) => Err(s.unexpected()),
             Event::Reply(r) => self.on_reply(ctx, r),
-            Event::Request(r)
-                if self.loc.busy()
-                    && (r.is::<localize::SetPose>() || r.is::<localize::GetParticles>()) =>
-            {
-                self.deferred.push(r);
-                Ok(())
-            }
             Event::Request(r) if r.is::<localize::SetPose>() => {
                 let q = r.decode::<localize::SetPose>()?;
-                // Not busy: such requests wait for the update (above).
-                self.loc.set_pose(q.mean.into(), &q.cov);
+                if !self.loc.set_pose(q.mean.into(), &q.cov) {
+                    self.deferred.push(r); // an update has the filter: after it
+                    return Ok(());
+                }
                 tracing::info!(
                     "filter reset around ({:.3}, {:.3}, {:.3})",
                     q.mean.x,
@@ -796,7 +791,8 @@ impl Driver for Amcl {
             }
             Event::Request(r) if r.is::<localize::GetParticles>() => {
                 let Some(f) = self.loc.filter() else {
-                    return Ok(()); // not busy: such requests wait (above)
+                    self.deferred.push(r); // an update has the filter: after it
+                    return Ok(());
                 };
                 let (mx, my, variance) = f.cep_stats();
                 r.reply(&localize::Particles {
@@ -1346,6 +1342,11 @@ mod tests {
             .unwrap();
         assert!(h.driver().localizer().busy());
         let asked = h.request(loc_dev, &localize::GetParticles).unwrap();
+        let reset = localize::SetPose {
+            mean: Pose2d::new(2.0, 3.0, 0.5),
+            cov: [0.01, 0.01, 0.01, 0.0, 0.0, 0.0],
+        };
+        let reset = h.request(loc_dev, &reset).unwrap();
         let poses = h.published::<position2d::Data>(pos_dev).len();
         for x in [0.4, 0.5, 0.6] {
             h.input(odom, &at(x)).unwrap();
@@ -1356,10 +1357,20 @@ mod tests {
         assert!((last.x - 1.6).abs() < 0.1, "carried along: {last:?}");
         assert_eq!(h.published::<localize::Hypoths>(loc_dev).len(), 2);
         assert!(h.reply::<localize::Particles>(asked).is_none(), "waits");
+        assert!(h.reply::<common::Ack>(reset).is_none(), "waits");
         h.wake().unwrap();
-        assert_eq!(h.published::<localize::Hypoths>(loc_dev).len(), 3);
         let particles = h.reply::<localize::Particles>(asked).unwrap().unwrap();
         assert!(!particles.particles.is_empty());
+        // The update's hypotheses, then the reset's, in the order asked.
+        let all = h.published::<localize::Hypoths>(loc_dev);
+        assert_eq!(all.len(), 4);
+        assert!((all[2].hypoths[0].mean.x - 1.3).abs() < 0.1, "{:?}", all[2]);
+        assert!(
+            (all[3].hypoths[0].mean.x - 2.0).abs() < 0.05,
+            "{:?}",
+            all[3]
+        );
+        assert!(h.reply::<common::Ack>(reset).is_some_and(|r| r.is_ok()));
         assert_eq!(h.driver().localizer().updates(), 2);
     }
 
