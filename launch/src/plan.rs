@@ -19,8 +19,8 @@ use troupe_msgs::addr::AddrError;
 use troupe_msgs::{keys, DevAddr, Device};
 use troupe_node::{Section, Unit};
 
+use crate::catalog::Catalog;
 use crate::cfg::{self, CfgFile, Value};
-use crate::drivers;
 
 /// What a node's supervisor does when it exits.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -323,7 +323,13 @@ fn merge_stage(
 
 /// Translates a parsed cfg into a plan; `robot` is the default robot field
 /// (`-p PORT`). Problems are collected in the report, not returned early.
-pub fn from_cfg(file: &CfgFile, source: &Path, robot: u32, report: &mut Report) -> Plan {
+pub fn from_cfg(
+    file: &CfgFile,
+    source: &Path,
+    robot: u32,
+    catalog: &Catalog,
+    report: &mut Report,
+) -> Plan {
     let mut plan = Plan {
         launch: Meta {
             source: Some(source.display().to_string()),
@@ -423,7 +429,7 @@ pub fn from_cfg(file: &CfgFile, source: &Path, robot: u32, report: &mut Report) 
         // The host that runs the node: the last one its provides name.
         let host = provides.iter().rev().find_map(|(_, a)| a.host.clone());
         let provides: Vec<DeviceRef> = provides.into_iter().map(|(r, _)| r).collect();
-        let Some(entry) = drivers::find(driver) else {
+        let Some(entry) = catalog.find(driver) else {
             unknown
                 .entry(driver.clone())
                 .or_default()
@@ -539,14 +545,14 @@ pub fn from_cfg(file: &CfgFile, source: &Path, robot: u32, report: &mut Report) 
         report.errors.push(format!(
             "{}: {}",
             places[0],
-            drivers::unavailable(&driver, &also)
+            catalog.unavailable(&driver, &also)
         ));
     }
     plan
 }
 
 /// Checks a plan and fills in start orders. Problems go to the report.
-pub fn check(plan: &mut Plan, report: &mut Report) {
+pub fn check(plan: &mut Plan, catalog: &Catalog, report: &mut Report) {
     let mut names = HashMap::new();
     for n in &plan.nodes {
         if names.insert(n.name.clone(), ()).is_some() {
@@ -561,10 +567,10 @@ pub fn check(plan: &mut Plan, report: &mut Report) {
             .source
             .clone()
             .unwrap_or_else(|| format!("node `{}`", n.name));
-        let Some(entry) = drivers::find(&n.driver) else {
+        let Some(entry) = catalog.find(&n.driver) else {
             report
                 .errors
-                .push(format!("{at}: {}", drivers::unavailable(&n.driver, "")));
+                .push(format!("{at}: {}", catalog.unavailable(&n.driver, "")));
             continue;
         };
         match n.section() {
@@ -704,8 +710,8 @@ pub fn check(plan: &mut Plan, report: &mut Report) {
 /// # Errors
 ///
 /// Every problem found, each with its place.
-pub fn load(path: &Path, robot: u32) -> Result<(Plan, Vec<String>), PlanError> {
-    load_with(path, robot, &[])
+pub fn load(path: &Path, robot: u32, catalog: &Catalog) -> Result<(Plan, Vec<String>), PlanError> {
+    load_with(path, robot, &[], catalog)
 }
 
 /// [`load`], with `external` devices (`laser:0`, `6665:laser:0`) added to
@@ -719,6 +725,7 @@ pub fn load_with(
     path: &Path,
     robot: u32,
     external: &[String],
+    catalog: &Catalog,
 ) -> Result<(Plan, Vec<String>), PlanError> {
     let mut report = Report::default();
     let is_toml = path.extension().is_some_and(|e| e == "toml");
@@ -729,7 +736,7 @@ pub fn load_with(
             .map_err(|e| PlanError(vec![format!("{}: {e}", path.display())]))?
     } else {
         let file = cfg::parse_file(path).map_err(|e| PlanError(vec![e.to_string()]))?;
-        from_cfg(&file, path, robot, &mut report)
+        from_cfg(&file, path, robot, catalog, &mut report)
     };
     let mut plan = plan;
     for e in external {
@@ -738,14 +745,18 @@ pub fn load_with(
             Err(err) => report.errors.push(format!("--external {e}: {err}")),
         }
     }
-    checked(plan, report)
+    checked(plan, catalog, report)
 }
 
 /// Checks `plan` unless building it already failed: the plan and its
 /// warnings, or every error.
-fn checked(mut plan: Plan, mut report: Report) -> Result<(Plan, Vec<String>), PlanError> {
+fn checked(
+    mut plan: Plan,
+    catalog: &Catalog,
+    mut report: Report,
+) -> Result<(Plan, Vec<String>), PlanError> {
     if report.errors.is_empty() {
-        check(&mut plan, &mut report);
+        check(&mut plan, catalog, &mut report);
     }
     if report.errors.is_empty() {
         Ok((plan, report.warnings))
@@ -848,8 +859,9 @@ mod tests {
         let file =
             cfg::parse_str(text, Path::new("t.cfg")).map_err(|e| PlanError(vec![e.to_string()]))?;
         let mut report = Report::default();
-        let plan = from_cfg(&file, Path::new("t.cfg"), 6665, &mut report);
-        checked(plan, report)
+        let catalog = crate::catalog::tests::catalog();
+        let plan = from_cfg(&file, Path::new("t.cfg"), 6665, &catalog, &mut report);
+        checked(plan, &catalog, report)
     }
 
     const STACK: &str = "driver( name \"dummy\" provides [\"ranger:0\"] rate 20 colour \"red\" )\n\
@@ -898,8 +910,9 @@ mod tests {
         )
         .unwrap();
         let mut r = Report::default();
-        let mut plan = from_cfg(&file, Path::new("t.cfg"), 7000, &mut r);
-        check(&mut plan, &mut r);
+        let catalog = crate::catalog::tests::catalog();
+        let mut plan = from_cfg(&file, Path::new("t.cfg"), 7000, &catalog, &mut r);
+        check(&mut plan, &catalog, &mut r);
         assert!(r.errors.is_empty(), "{:?}", r.errors);
         assert_eq!(plan.nodes[0].requires[0].device, "robot/7000/ranger/0");
         assert_eq!(plan.nodes[0].requires[0].role.as_deref(), Some("input"));
@@ -981,11 +994,11 @@ mod tests {
             option_pos: Default::default(),
         });
         let mut r = Report::default();
-        check(&mut plan, &mut r);
+        check(&mut plan, &crate::catalog::tests::catalog(), &mut r);
         assert_eq!(r.errors.len(), 1);
         plan.launch.external.push("robot/6665/ranger/9".into());
         let mut r = Report::default();
-        check(&mut plan, &mut r);
+        check(&mut plan, &crate::catalog::tests::catalog(), &mut r);
         assert!(r.errors.is_empty(), "{:?}", r.errors);
     }
 
@@ -1020,122 +1033,5 @@ mod tests {
             to_json(&Value::Str("/abs.png".into()), Some(Unit::Path), &u, here).unwrap(),
             "/abs.png"
         );
-    }
-}
-
-/// Golden tests: the plan (or the errors) of every cfg in ../shared/compat.
-///
-/// Set `TROUPE_BLESS=1` to rewrite the expected files after a deliberate change.
-#[cfg(test)]
-mod golden {
-    use std::path::{Path, PathBuf};
-
-    fn compat() -> Option<PathBuf> {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/compat");
-        dir.is_dir().then(|| dir.canonicalize().unwrap_or(dir))
-    }
-
-    fn cfgs(dir: &Path, out: &mut Vec<PathBuf>) {
-        let mut entries: Vec<_> = std::fs::read_dir(dir)
-            .unwrap()
-            .flatten()
-            .map(|e| e.path())
-            .collect();
-        entries.sort();
-        for p in entries {
-            if p.is_dir() {
-                cfgs(&p, out);
-            } else if p.extension().is_some_and(|e| e == "cfg") {
-                out.push(p);
-            }
-        }
-    }
-
-    #[test]
-    fn every_compat_cfg_parses_and_plans_or_says_why_not() {
-        let Some(compat) = compat() else {
-            eprintln!("skipping: ../shared/compat is absent");
-            return;
-        };
-        let golden = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden");
-        let bless = std::env::var_os("TROUPE_BLESS").is_some();
-        let mut files = Vec::new();
-        cfgs(&compat, &mut files);
-        assert!(
-            files.len() >= 20,
-            "expected the compat cfgs, found {}",
-            files.len()
-        );
-        let mut failures = Vec::new();
-        for f in files {
-            let rel = f
-                .strip_prefix(&compat)
-                .unwrap()
-                .to_string_lossy()
-                .into_owned();
-            // Every file must parse: syntax is never the reason a compat cfg fails.
-            if let Err(e) = crate::cfg::parse_file(&f) {
-                failures.push(format!("{rel}: does not parse: {e}"));
-                continue;
-            }
-            let got = match super::load(&f, troupe_msgs::DEFAULT_ROBOT) {
-                Ok((plan, warnings)) => {
-                    let mut s = super::to_toml(&plan);
-                    for w in warnings {
-                        s.push_str(&format!("# warning: {w}\n"));
-                    }
-                    s
-                }
-                Err(e) => format!("error:\n{e}\n"),
-            };
-            let got = got.replace(&compat.display().to_string(), "compat");
-            let want_path = golden.join(format!("{}.txt", rel.replace('/', "__")));
-            if bless {
-                std::fs::create_dir_all(&golden).unwrap();
-                std::fs::write(&want_path, &got).unwrap();
-                continue;
-            }
-            match std::fs::read_to_string(&want_path) {
-                Ok(want) if want == got => {}
-                Ok(want) => failures.push(format!(
-                    "{rel}: plan changed\n--- want\n{want}\n--- got\n{got}"
-                )),
-                Err(_) => failures.push(format!(
-                    "{rel}: no golden file {} (run with TROUPE_BLESS=1)",
-                    want_path.display()
-                )),
-            }
-        }
-        assert!(failures.is_empty(), "{}", failures.join("\n\n"));
-    }
-}
-
-/// The project's own sample cfgs (worlds/) plan without error or warning.
-#[cfg(test)]
-mod samples {
-    use std::path::Path;
-
-    #[test]
-    fn sample_cfgs_plan_cleanly() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds");
-        let mut n = 0;
-        for e in std::fs::read_dir(&dir).unwrap().flatten() {
-            let p = e.path();
-            if p.extension().is_some_and(|x| x == "cfg") {
-                // With the `--external` devices its own usage comment gives.
-                let text = std::fs::read_to_string(&p).unwrap();
-                let external: Vec<String> = text
-                    .split("--external ")
-                    .skip(1)
-                    .filter_map(|rest| rest.split_whitespace().next().map(str::to_owned))
-                    .collect();
-                let (plan, warnings) = super::load_with(&p, 6665, &external)
-                    .unwrap_or_else(|e| panic!("{}: {e}", p.display()));
-                assert!(warnings.is_empty(), "{}: {warnings:?}", p.display());
-                assert!(!plan.nodes.is_empty());
-                n += 1;
-            }
-        }
-        assert!(n >= 2, "worlds/ holds the sample cfgs");
     }
 }

@@ -27,13 +27,12 @@ use tokio::io::{AsyncBufReadExt, BufReader};
 use tokio::process::Command;
 use tokio::sync::watch;
 use troupe_msgs::{keys, Device};
+use troupe_node::process::{StopSignals, SUPERVISOR_ENV};
 use troupe_node::zenoh::Wait;
 use troupe_node::{Mode, ZenohArgs};
 
+use crate::catalog::Catalog;
 use crate::plan::{self, NodeSpec, Policy};
-
-/// The environment variable that tells `troupe node` who supervises it.
-pub const SUPERVISOR_ENV: &str = "TROUPE_SUPERVISOR_PID";
 
 /// Flags of `troupe launch`.
 #[derive(Debug, Args)]
@@ -110,8 +109,8 @@ pub struct PlanArgs {
 }
 
 /// `troupe plan`: prints the plan as TOML, warnings on stderr.
-pub fn print_plan(a: PlanArgs) -> anyhow::Result<()> {
-    let (plan, warnings) = plan::load(&a.file, a.robot)?;
+pub fn print_plan(a: PlanArgs, catalog: &Catalog) -> anyhow::Result<()> {
+    let (plan, warnings) = plan::load(&a.file, a.robot, catalog)?;
     for w in warnings {
         let _ = writeln!(std::io::stderr(), "warning: {w}");
     }
@@ -121,8 +120,8 @@ pub fn print_plan(a: PlanArgs) -> anyhow::Result<()> {
 }
 
 /// `troupe launch`.
-pub fn launch(a: LaunchArgs, z: &ZenohArgs) -> anyhow::Result<()> {
-    let (mut plan, warnings) = plan::load_with(&a.file, a.robot, &a.external)?;
+pub fn launch(a: LaunchArgs, z: &ZenohArgs, catalog: &Catalog) -> anyhow::Result<()> {
+    let (mut plan, warnings) = plan::load_with(&a.file, a.robot, &a.external, catalog)?;
     for w in &warnings {
         tracing::warn!("{w}");
     }
@@ -140,7 +139,7 @@ pub fn launch(a: LaunchArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         || plan
             .nodes
             .iter()
-            .any(|n| crate::drivers::find(&n.driver).is_some_and(|e| e.clock_source));
+            .any(|n| catalog.find(&n.driver).is_some_and(|e| e.clock_source));
     let nodes: Vec<NodeSpec> = match &a.host {
         None => plan.nodes.clone(),
         Some(h) => {
@@ -174,11 +173,17 @@ pub fn launch(a: LaunchArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         std::fs::create_dir_all(d)
             .with_context(|| format!("creating --log-dir {}", d.display()))?;
     }
+    // The simulator (or a replay) keeps its own time; the rest follow it.
+    let clocks: BTreeSet<String> = nodes
+        .iter()
+        .filter(|n| catalog.find(&n.driver).is_some_and(|e| e.clock_source))
+        .map(|n| n.driver.clone())
+        .collect();
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
         .build()?;
-    rt.block_on(supervise(a, z.clone(), nodes, sim_time))
+    rt.block_on(supervise(a, z.clone(), nodes, sim_time, clocks))
 }
 
 /// Overrides the `speedup` of every simulator in the plan (`--speedup`).
@@ -256,6 +261,7 @@ async fn supervise(
     z: ZenohArgs,
     specs: Vec<NodeSpec>,
     sim_time: bool,
+    clocks: BTreeSet<String>,
 ) -> anyhow::Result<()> {
     let started = Instant::now();
     let mut signals = StopSignals::new().context("catching SIGTERM and SIGINT")?;
@@ -380,8 +386,7 @@ async fn supervise(
             live_rx: live_rx.clone(),
             stop_rx: stop_rx.clone(),
             local: local.clone(),
-            sim_time: sim_time
-                && !crate::drivers::find(&st.spec.driver).is_some_and(|e| e.clock_source),
+            sim_time: sim_time && !clocks.contains(&st.spec.driver),
         };
         tasks.push(tokio::spawn(run_node(st.clone(), ctx)));
     }
@@ -618,80 +623,6 @@ fn signal(s: &NodeState, sig: Signal) {
     }
 }
 
-/// SIGTERM and SIGINT, caught from the moment this is made: as a
-/// container's PID 1 a signal with no handler is ignored, not fatal.
-pub(crate) struct StopSignals {
-    term: tokio::signal::unix::Signal,
-    int: tokio::signal::unix::Signal,
-}
-
-impl StopSignals {
-    /// Installs the handlers (needs a Tokio runtime).
-    pub(crate) fn new() -> std::io::Result<StopSignals> {
-        use tokio::signal::unix::{signal, SignalKind};
-        Ok(StopSignals {
-            term: signal(SignalKind::terminate())?,
-            int: signal(SignalKind::interrupt())?,
-        })
-    }
-
-    /// The next SIGTERM or SIGINT (Ctrl-C), logged.
-    pub(crate) async fn recv(&mut self) {
-        tokio::select! {
-            _ = self.term.recv() => tracing::info!("SIGTERM"),
-            _ = self.int.recv() => tracing::info!("SIGINT"),
-        }
-    }
-
-    /// The session `open` makes, or `None` when a signal comes first (with
-    /// `--reconnect` an open waits for its router, and PID 1 must still stop).
-    pub(crate) async fn unless_stopped(
-        &mut self,
-        open: impl std::future::Future<Output = troupe_node::Result<troupe_node::zenoh::Session>>,
-    ) -> troupe_node::Result<Option<troupe_node::zenoh::Session>> {
-        tokio::select! {
-            s = open => s.map(Some),
-            () = self.recv() => {
-                tracing::info!("stopped before the router answered");
-                Ok(None)
-            }
-        }
-    }
-}
-
-/// How a long-running client (the bridge, a passthrough) starts: a
-/// runtime of `threads` workers, SIGTERM and SIGINT caught before the
-/// session opens (with `--reconnect` the open waits for its router, and a
-/// container's PID 1 must still stop), then the client session; `None`
-/// when a signal came first.
-pub(crate) fn client_runtime(
-    z: &ZenohArgs,
-    threads: usize,
-) -> anyhow::Result<
-    Option<(
-        tokio::runtime::Runtime,
-        StopSignals,
-        troupe_node::zenoh::Session,
-    )>,
-> {
-    let rt = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(threads)
-        .enable_all()
-        .build()
-        .context("starting the runtime")?;
-    let mut signals = rt
-        .block_on(async { StopSignals::new() })
-        .context("catching SIGTERM and SIGINT")?;
-    let session = rt.block_on(signals.unless_stopped(z.open_in_background(Mode::Client)))?;
-    Ok(session.map(|s| (rt, signals, s)))
-}
-
-/// SIGTERM or SIGINT (Ctrl-C), logged.
-pub(crate) async fn wait_signal() -> anyhow::Result<()> {
-    StopSignals::new()?.recv().await;
-    Ok(())
-}
-
 struct NodeCtx {
     exe: PathBuf,
     net: Vec<String>,
@@ -915,7 +846,7 @@ async fn serve_bridge(
             return;
         }
     };
-    crate::bridge::announce(&bridge);
+    troupe_bridge::command::announce(&bridge);
     bridge
         .run(async move {
             let _ = stop.wait_for(|&s| s).await;
@@ -950,7 +881,9 @@ mod tests {
         let p = Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("../worlds")
             .join(name);
-        crate::plan::load(&p, 6665).expect("sample plan").0
+        crate::plan::load(&p, 6665, &crate::catalog::tests::catalog())
+            .expect("sample plan")
+            .0
     }
 
     #[test]

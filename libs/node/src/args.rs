@@ -497,6 +497,16 @@ pub fn init_logging(filter: Option<&str>) {
         .try_init();
 }
 
+/// The viewer a Zenoh config joins a fleet as (`troupe fleet-keys
+/// --viewers`), if it is one: the name the config's `metadata` gives.
+pub fn viewer_of(metadata: &serde_json::Value) -> Option<String> {
+    let me = metadata.get("troupe")?;
+    if me.get("kind")? != "viewer" {
+        return None;
+    }
+    me.get("identity")?.as_str().map(str::to_owned)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

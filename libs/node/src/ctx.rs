@@ -7,8 +7,8 @@ use std::time::Duration;
 use troupe_msgs::{codec, Command, Device, Message, Request};
 
 use crate::clock::Clock;
-use crate::driver::RequestId;
 use crate::error::{NodeError, Result};
+use crate::event::RequestId;
 use crate::inbox::Inbox;
 
 /// How long a request waits for its answer: libplayerc's default.

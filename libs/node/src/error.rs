@@ -80,7 +80,7 @@ pub enum NodeError {
     },
     /// A request the driver sent got no usable answer.
     #[error("request failed: {0}")]
-    Request(#[from] crate::driver::RequestError),
+    Request(#[from] RequestError),
     /// The driver failed; the node stops and the supervisor may restart it.
     #[error("driver failed: {0}")]
     Driver(BoxError),
@@ -106,3 +106,20 @@ impl NodeError {
 
 /// The runtime's result type.
 pub type Result<T, E = NodeError> = std::result::Result<T, E>;
+
+/// Why a request got no usable answer.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RequestError {
+    /// The device refused (Player's RESP_NACK).
+    #[error("refused: {0}")]
+    Nack(String),
+    /// Nothing answered within the deadline.
+    #[error("no answer within {0:?}")]
+    Timeout(Duration),
+    /// No device serves this request.
+    #[error("no device answers this request")]
+    NoReplier,
+    /// The answer did not decode.
+    #[error("malformed answer: {0}")]
+    Decode(DecodeError),
+}

@@ -14,7 +14,7 @@ use std::collections::VecDeque;
 use std::sync::{Condvar, Mutex, MutexGuard};
 use std::time::Instant;
 
-use crate::driver::{Event, Sample};
+use crate::event::{Event, Sample};
 
 #[derive(Default)]
 struct State {

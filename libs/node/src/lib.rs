@@ -7,6 +7,8 @@
 //!   command, request, read the [`Clock`]);
 //! - [`run`]/[`spawn`]: the Zenoh-backed runtime (liveliness per provided
 //!   device, latest-value queryables, request queryables, sim clock, signals);
+//! - [`process`]: how a process lives and dies (stop signals, tied to its
+//!   launcher) for the clients and tools that are not drivers;
 //! - [`syntax`]: the lexical grammar of Player's .cfg and Stage's world files;
 //! - [`testing::Harness`]: the same driver, driven by hand without the network.
 //!
@@ -18,18 +20,21 @@ mod clock;
 mod ctx;
 mod driver;
 mod error;
+mod event;
 mod inbox;
 mod mapfetch;
+pub mod process;
 mod runtime;
 mod section;
 pub mod syntax;
 pub mod testing;
 
-pub use args::{init_logging, locators, Mode, ZenohArgs, DEFAULT_ROUTER};
+pub use args::{init_logging, locators, viewer_of, Mode, ZenohArgs, DEFAULT_ROUTER};
 pub use clock::Clock;
 pub use ctx::{Ctx, Waker, REQUEST_TIMEOUT};
-pub use driver::{Driver, Event, Reply, Request, RequestError, RequestId, Responder, Sample, Unit};
-pub use error::{BoxError, NodeError, Result};
+pub use driver::{Driver, Unit};
+pub use error::{BoxError, NodeError, RequestError, Result};
+pub use event::{Event, Reply, Request, RequestId, Responder, Sample};
 pub use mapfetch::MapFetch;
 pub use runtime::{ask, check, run, spawn, wait_live, NodeConfig, NodeHandle, Stop, Unused};
 pub use section::{NoOptions, Section, Slot, Switch};

@@ -32,11 +32,9 @@ use zenoh::{Session, Wait};
 use crate::args::{Mode, ZenohArgs};
 use crate::clock::Clock;
 use crate::ctx::{Bus, Ctx, ReadyAnswers};
-use crate::driver::{
-    nack_reason, Driver, Event, Reply, ReplySink, Request, RequestError, RequestId, Responder,
-    Sample,
-};
-use crate::error::{NodeError, Result};
+use crate::driver::Driver;
+use crate::error::{NodeError, RequestError, Result};
+use crate::event::{nack_reason, Event, Reply, ReplySink, Request, RequestId, Responder, Sample};
 use crate::inbox::{Inbox, Popped};
 use crate::section::Section;
 

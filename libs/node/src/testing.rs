@@ -25,10 +25,9 @@ use troupe_msgs::{codec, keys, Command, Device, Message, Request};
 
 use crate::clock::Clock;
 use crate::ctx::{Bus, Ctx, ReadyAnswers};
-use crate::driver::{
-    nack_reason, Driver, Event, Reply, ReplySink, RequestError, RequestId, Responder, Sample,
-};
-use crate::error::{NodeError, Result};
+use crate::driver::Driver;
+use crate::error::{NodeError, RequestError, Result};
+use crate::event::{nack_reason, Event, Reply, ReplySink, RequestId, Responder, Sample};
 use crate::runtime::{build, dispatch, Stats};
 use crate::section::Section;
 
@@ -240,7 +239,7 @@ impl<D: Driver> Harness<D> {
         let sink = Box::new(RecSink(self.rec.clone(), id));
         let what = format!("request `{}` to {dev}", R::NAME);
         let responder = Responder::new(sink, self.clock.clone(), what);
-        self.deliver(Event::Request(crate::driver::Request {
+        self.deliver(Event::Request(crate::event::Request {
             sample: Sample::new(dev, keys::req(&dev, R::NAME), p),
             name: R::NAME.to_owned(),
             responder,

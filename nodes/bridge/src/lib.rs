@@ -15,9 +15,11 @@
 //! - [`queue`]: a client's queue (PUSH/PULL, SYNCH, replace rules, overflow);
 //! - [`Bridge`]: listeners, connections, Zenoh subscriptions and requests;
 //! - [`import`]: the other way round, a Player server's devices on Troupe.
+//! - [`command`]: `troupe bridge`, the bridge as a process of its own.
 #![warn(missing_docs)]
 
 pub mod codec;
+pub mod command;
 pub mod import;
 pub mod queue;
 mod server;

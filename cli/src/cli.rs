@@ -1,14 +1,8 @@
-//! The command line: every subcommand, its flags and its help.
+//! The command line: every subcommand and its help; each subcommand's
+//! flags are defined by the crate that runs it.
 
-use std::path::Path;
-use std::time::Duration;
-
-use anyhow::Context;
-use clap::{Args, Parser, Subcommand};
-use troupe_msgs::DevAddr;
-use troupe_node::{NodeConfig, Section, ZenohArgs};
-
-use crate::drivers;
+use clap::{Parser, Subcommand};
+use troupe_node::ZenohArgs;
 
 /// Troupe: Player/Stage rebuilt on Zenoh. Every driver is its own process;
 /// devices meet on keys like robot/6665/laser/0.
@@ -46,12 +40,12 @@ pub enum Command {
 
 An embedded Zenoh router listens on tcp/127.0.0.1:7447 unless --connect names
 another. Ctrl-C stops the nodes in reverse start order.")]
-    Launch(crate::supervisor::LaunchArgs),
+    Launch(troupe_launch::supervisor::LaunchArgs),
 
     /// Translate a Player .cfg into a launch plan (TOML) and print it.
     #[command(after_help = "Example:
   troupe plan robot.cfg > plan.toml && $EDITOR plan.toml && troupe launch plan.toml")]
-    Plan(crate::supervisor::PlanArgs),
+    Plan(troupe_launch::supervisor::PlanArgs),
 
     /// Run one driver as this process.
     #[command(after_help = "Examples:
@@ -63,7 +57,7 @@ another. Ctrl-C stops the nodes in reverse start order.")]
 
 The section is what a `driver ( … )` block of a Player .cfg says; flags add to it.
 The node waits for every required device to be live, then announces its own.")]
-    Node(NodeArgs),
+    Node(troupe_launch::node::NodeArgs),
 
     /// Serve the devices to Player clients (libplayerc, libplayerc++, playerv) over TCP.
     #[command(after_help = "Examples:
@@ -77,7 +71,7 @@ The node waits for every required device to be live, then announces its own.")]
 Each port speaks Player 3 TCP/XDR: DEVLIST lists the live devices of that robot,
 subscriptions follow their keys (robot/6665/laser/0), commands and requests go to
 their drivers. `troupe launch` starts one for the robots of its plan.")]
-    Bridge(crate::bridge::BridgeArgs),
+    Bridge(troupe_bridge::command::BridgeArgs),
 
     /// Print the devices live on the network, like Player's "Available devices".
     #[command(after_help = "Example:
@@ -85,20 +79,20 @@ their drivers. `troupe launch` starts one for the robots of its plan.")]
   robot/6665  laser:0       rangertolaser  ready
   robot/6665  ranger:0      dummy          ready
   $ troupe list --watch          # + and - lines as devices come and go")]
-    List(ListArgs),
+    List(troupe_inspect::ListArgs),
 
     /// Print the samples of a device, decoded (like playerprint).
     #[command(after_help = "Examples:
   troupe echo laser:0                 # robot 6665
   troupe echo 6666:position2d:0 --count 1
   troupe echo robot/6665/laser/0 --json | jq .msg")]
-    Echo(EchoArgs),
+    Echo(troupe_inspect::EchoArgs),
 
     /// Measure the rate and jitter of a device's samples.
     #[command(after_help = "Example:
   $ troupe hz laser:0
   rate: 10.000 Hz  min: 0.0998 s  max: 0.1003 s  std dev: 0.00012 s  window: 10")]
-    Hz(HzArgs),
+    Hz(troupe_inspect::HzArgs),
 
     /// Exit 0 once the given devices are live (a container's health check).
     #[command(after_help = "Examples:
@@ -108,14 +102,14 @@ their drivers. `troupe launch` starts one for the robots of its plan.")]
 
 With no device it checks that the router answers. As a Docker health check,
 in exec form: [\"CMD\", \"/troupe\", \"--connect\", \"tcp/router:7447\", \"ready\", \"6665:laser:0\"].")]
-    Ready(ReadyArgs),
+    Ready(troupe_inspect::ReadyArgs),
 
     /// Run a Zenoh router, for multi-host setups.
     #[command(after_help = "Examples:
   troupe router                                  # listens on tcp/[::]:7447
   troupe router --listen tcp/127.0.0.1:7447      # this host only
   troupe router --zenoh-config secure.json5      # TLS, auth, ACLs")]
-    Router(RouterArgs),
+    Router(troupe_launch::router::RouterArgs),
 
     /// Play a serial device (SICK LMS200, Hokuyo URG, Pioneer, Erratic) on a pseudo-terminal, for its driver to talk to.
     #[command(after_help = "Examples:
@@ -135,7 +129,7 @@ The emulator speaks the device's side of the protocol at the device's own
 speed: it powers up at its default baud rate, ignores bytes sent at another,
 and carries each byte in the time the line would. Faults are injected on
 what it sends.")]
-    Emulate(crate::emulate::EmulateArgs),
+    Emulate(troupe_emulate::EmulateArgs),
 
     /// Build the Docker image: this binary, the libraries it loads, the sample worlds.
     #[command(after_help = "Examples:
@@ -145,7 +139,7 @@ what it sends.")]
 
 The image starts FROM scratch (no registry is needed): /troupe is the
 entrypoint, run as user 10000, with the worlds at /worlds.")]
-    Image(crate::docker::ImageArgs),
+    Image(troupe_fleet::docker::ImageArgs),
 
     /// Write a Docker Compose file that runs a .cfg or plan as a fleet of containers.
     #[command(after_help = "Examples:
@@ -157,7 +151,7 @@ provides, \"robot1:6665:laser:0\"; a plan without hosts is one service, `stack`)
 each running `troupe launch FILE --host NAME`, its nodes still one process each;
 a router, and a Player bridge on 127.0.0.1 of this machine. Health checks
 (`troupe ready`), restart policies, reconnection and a short lease are set.")]
-    Compose(crate::docker::ComposeArgs),
+    Compose(troupe_fleet::docker::ComposeArgs),
 
     /// Make a fleet's certificates and each host's Zenoh config (TLS, mutual authentication).
     #[command(after_help = "Example:
@@ -170,7 +164,7 @@ certificate per identity, its common name the identity's name. Each
 identity's .json5 holds its key and certificate and the authority's
 certificate: a host whose certificate another authority signed, or that has
 none, cannot join.")]
-    FleetKeys(crate::keys::KeysArgs),
+    FleetKeys(troupe_fleet::keys::KeysArgs),
 
     /// Watch the running world in a browser: walls, robots, their sensors, the live devices.
     #[command(after_help = "Examples:
@@ -190,7 +184,7 @@ drive a chosen position2d. Drag to pan, scroll to zoom, pick a robot to
 follow. URL parameters fix the view: ?x=-4&y=-4&scale=60 (metres, pixels
 per metre); ?still draws one moment and opens no stream (for screenshots:
 chromium --headless --screenshot URL?still).")]
-    View(crate::view::ViewArgs),
+    View(troupe_view::ViewArgs),
 
     /// Record devices' samples (default: all of them, and the clock) to an MCAP file.
     #[command(after_help = "Examples:
@@ -206,7 +200,7 @@ The recorder joins as a Zenoh peer (unless --mode says otherwise): it
 finds the publishers through the router and takes their data from them
 directly where it can reach them, so nothing waits in the router's queue
 (where a burst of a fast simulation would be dropped).")]
-    Record(crate::mcaplog::RecordArgs),
+    Record(troupe_record::RecordArgs),
 
     /// Publish a recording back onto its keys, at any speed.
     #[command(after_help = "Examples:
@@ -217,11 +211,11 @@ directly where it can reach them, so nothing waits in the router's queue
 
 The devices the recording saw live are declared live while it plays, so a
 stack's `requires` (amcl on laser:0) are met by the replay.")]
-    Play(crate::mcaplog::PlayArgs),
+    Play(troupe_record::PlayArgs),
 
     /// Look into a recording: `info`, or `export` it as JSON lines or a Player log.
     #[command(subcommand)]
-    Log(crate::mcaplog::LogCmd),
+    Log(troupe_record::LogCmd),
 
     /// List the drivers this build can run (`--all`: and the Player drivers
     /// sample files name that it cannot, with what to use instead).
@@ -236,223 +230,5 @@ stack's `requires` (amcl on laser:0) are met by the replay.")]
 
     /// Benchmarks that print numbers.
     #[command(subcommand)]
-    Bench(BenchCmd),
-}
-
-#[derive(Debug, Args)]
-pub struct NodeArgs {
-    /// The Player driver name (see `troupe drivers`).
-    pub driver: String,
-
-    /// The driver's section, as JSON text or a path to a JSON file.
-    #[arg(long, value_name = "JSON|FILE")]
-    pub section: Option<String>,
-
-    /// A device this driver provides (repeatable), e.g. `laser:0`.
-    #[arg(long, value_name = "ADDR")]
-    pub provides: Vec<DevAddr>,
-
-    /// A device this driver requires (repeatable), e.g. `odometry:::position2d:0`.
-    #[arg(long, value_name = "ADDR")]
-    pub requires: Vec<DevAddr>,
-
-    /// An option, by Player's name (repeatable): `-o rate=20`, `-o pose=[0,0,0]`.
-    #[arg(short = 'o', long = "option", value_name = "KEY=VALUE")]
-    pub options: Vec<String>,
-
-    /// Robot field (port) for addresses that give none, as `player -p PORT`.
-    #[arg(short = 'p', long = "robot", value_name = "PORT")]
-    pub robot: Option<u32>,
-
-    /// The world file of the `stage` driver (sets its `worldfile` option).
-    #[arg(long, value_name = "FILE")]
-    pub world: Option<std::path::PathBuf>,
-
-    /// With `stage`: write a PNG of the world when the node stops.
-    #[arg(long, value_name = "FILE.png")]
-    pub snapshot: Option<std::path::PathBuf>,
-
-    /// Follow the simulator's clock (sim/clock) instead of wall time.
-    #[arg(long)]
-    pub sim_time: bool,
-
-    /// Seconds to wait for each required device.
-    #[arg(long, value_name = "SECS", default_value_t = 30.0)]
-    pub requires_timeout: f64,
-}
-
-#[derive(Debug, Args)]
-pub struct ListArgs {
-    /// Only this robot (port).
-    #[arg(short = 'p', long = "robot", value_name = "PORT")]
-    pub robot: Option<u32>,
-    /// One JSON object per device.
-    #[arg(long)]
-    pub json: bool,
-    /// Seconds to wait for answers.
-    #[arg(long, value_name = "SECS", default_value_t = 2.0)]
-    pub wait: f64,
-    /// Keep running and print each device as it comes (`+`) and goes (`-`).
-    #[arg(long)]
-    pub watch: bool,
-}
-
-#[derive(Debug, Args)]
-pub struct ReadyArgs {
-    /// Devices that must be live (`laser:0`, `6666:position2d:0`).
-    #[arg(value_name = "DEVICE")]
-    pub devices: Vec<DevAddr>,
-    /// Robot (port) for a device that names none.
-    #[arg(short = 'p', long = "robot", value_name = "PORT", default_value_t = troupe_msgs::DEFAULT_ROBOT)]
-    pub robot: u32,
-    /// Seconds to wait for them to come up (0: look once).
-    #[arg(long, value_name = "SECS", default_value_t = 0.0)]
-    pub wait: f64,
-}
-
-#[derive(Debug, Args)]
-pub struct EchoArgs {
-    /// A device (`laser:0`, `6666:position2d:0`) or a key (`robot/6665/laser/0`, `sim/clock`).
-    pub target: String,
-    /// Robot (port) for a device that names none.
-    #[arg(short = 'p', long = "robot", value_name = "PORT", default_value_t = troupe_msgs::DEFAULT_ROBOT)]
-    pub robot: u32,
-    /// One JSON object per sample, arrays in full.
-    #[arg(long)]
-    pub json: bool,
-    /// Stop after N samples.
-    #[arg(short = 'n', long, value_name = "N")]
-    pub count: Option<u64>,
-    /// Give up after this many seconds without a sample (default: wait forever).
-    #[arg(long, value_name = "SECS")]
-    pub timeout: Option<f64>,
-}
-
-#[derive(Debug, Args)]
-pub struct HzArgs {
-    /// A device (`laser:0`) or a key.
-    pub target: String,
-    /// Robot (port) for a device that names none.
-    #[arg(short = 'p', long = "robot", value_name = "PORT", default_value_t = troupe_msgs::DEFAULT_ROBOT)]
-    pub robot: u32,
-    /// Samples in the moving window.
-    #[arg(long, value_name = "N", default_value_t = 100)]
-    pub window: usize,
-    /// Stop after N reports (one a second).
-    #[arg(short = 'n', long, value_name = "N")]
-    pub count: Option<u64>,
-}
-
-#[derive(Debug, Args)]
-pub struct RouterArgs {}
-
-#[derive(Debug, Subcommand)]
-pub enum BenchCmd {
-    /// Latency of one sample between two processes (put/sub round trip and get/reply).
-    #[command(after_help = "Example:
-  cargo run --release -- bench latency --size 1500 --samples 5000")]
-    Latency(crate::bench::LatencyArgs),
-    /// Time from `troupe launch` to all devices live, and restart after a kill, for a 5-node plan.
-    #[command(after_help = "Example:
-  cargo run --release -- bench launch --runs 5")]
-    Launch(crate::bench::LaunchBenchArgs),
-    /// Simulator speed (simulated s per wall s) and peak memory on three worlds.
-    #[command(after_help = "Example:
-  cargo run --release -- bench stage --bitmaps ../shared/compat/stage/bitmaps")]
-    Stage(crate::bench::StageBenchArgs),
-    /// Player clients through the bridge to real mapfile and Stage drivers: request round trips, a full map fetch, 100 clients at 10 Hz.
-    #[command(after_help = "Example:
-  cargo run --release -- bench bridge --map ../shared/compat/stage/bitmaps/cave.png")]
-    Bridge(crate::bridgebench::BridgeBenchArgs),
-    /// Navigation cores: amcl updates/s by particle count, wavefront plan time, vfh decision time.
-    #[command(after_help = "Example:
-  cargo run --release -- bench nav --map ../shared/compat/stage/bitmaps/cave.png")]
-    Nav(crate::navbench::NavBenchArgs),
-    /// Scan rates of the sicklms200 and urglaser drivers against their emulators, at their baud rates.
-    #[command(after_help = "Example:
-  cargo run --release -- bench serial --seconds 5")]
-    Serial(crate::serialbench::SerialBenchArgs),
-    /// Recording the 100-Pioneer world flat out (loss, CPU, bytes/s), playing it back, `log info` on a large file.
-    #[command(after_help = "Example:
-  cargo run --release -- bench record --seconds 20")]
-    Record(crate::mcaplog::RecordBenchArgs),
-    /// `troupe view` under load: 100 Pioneers in real time, headless browsers on its page: their frame rates, the server's CPU, the robots' data rates.
-    #[command(after_help = "Example:
-  cargo run --release -- bench view --browsers 0,1,20 --bitmaps ../shared/compat/stage/bitmaps")]
-    View(crate::viewbench::ViewBenchArgs),
-    /// The echo side of `bench latency` (started by it).
-    #[command(hide = true)]
-    Pong {
-        /// Where its keys live (`bench`, or a robot's keys under access control).
-        #[arg(long, default_value = "bench")]
-        prefix: String,
-    },
-}
-
-/// `troupe node`: builds the section from flags and runs the driver.
-pub fn node(a: NodeArgs, z: &ZenohArgs) -> anyhow::Result<()> {
-    let mut section = match &a.section {
-        None => Section::new(&a.driver),
-        Some(s) => {
-            let text = if s.trim_start().starts_with('{') {
-                s.clone()
-            } else {
-                std::fs::read_to_string(Path::new(s))
-                    .with_context(|| format!("reading section file {s}"))?
-            };
-            Section::from_json(&text)?
-        }
-    };
-    if section.name != a.driver {
-        anyhow::bail!(
-            "the section is for driver `{}`, not `{}`",
-            section.name,
-            a.driver
-        );
-    }
-    section.provides.extend(a.provides);
-    section.requires.extend(a.requires);
-    if let Some(r) = a.robot {
-        section.robot = r;
-    }
-    if let Some(w) = &a.world {
-        section
-            .options
-            .insert("worldfile".into(), w.display().to_string().into());
-    }
-    if let Some(p) = &a.snapshot {
-        section
-            .options
-            .insert("snapshot".into(), p.display().to_string().into());
-    }
-    for o in &a.options {
-        let (k, v) = o
-            .split_once('=')
-            .with_context(|| format!("option `{o}` is not KEY=VALUE"))?;
-        let value = serde_json::from_str(v).unwrap_or_else(|_| serde_json::Value::String(v.into()));
-        section.options.insert(k.to_owned(), value);
-    }
-    supervised()?;
-    if !(a.requires_timeout.is_finite() && a.requires_timeout > 0.0) {
-        anyhow::bail!("--requires-timeout must be a positive number of seconds");
-    }
-    let cfg = NodeConfig {
-        sim_time: a.sim_time,
-        requires_timeout: Duration::from_secs_f64(a.requires_timeout),
-    };
-    drivers::run(&a.driver, section, z, &cfg)
-}
-
-/// Under `troupe launch`: die with the launcher, never outlive it.
-pub fn supervised() -> anyhow::Result<()> {
-    let Ok(ppid) = std::env::var(crate::supervisor::SUPERVISOR_ENV) else {
-        return Ok(());
-    };
-    nix::sys::prctl::set_pdeathsig(nix::sys::signal::Signal::SIGTERM)
-        .context("asking to be stopped with the launcher")?;
-    // The launcher may have died before the request took effect.
-    if nix::unistd::getppid().as_raw().to_string() != ppid {
-        anyhow::bail!("the launcher (pid {ppid}) is gone");
-    }
-    Ok(())
+    Bench(troupe_bench::BenchCmd),
 }

@@ -19,7 +19,7 @@ use troupe_msgs::{codec, keys, map, Device, Interface};
 use troupe_node::zenoh::Wait;
 use troupe_node::{Mode, NodeConfig, NodeHandle, Section, Stop, ZenohArgs};
 
-use crate::bench::{percentile, us};
+use crate::harness::{percentile, us};
 
 /// Flags of `troupe bench bridge`.
 #[derive(Debug, Args)]

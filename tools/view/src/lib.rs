@@ -121,8 +121,8 @@ struct Ns {
 }
 
 /// The page and its script, served as they are.
-const INDEX_HTML: &str = include_str!("view/index.html");
-const VIEW_JS: &str = include_str!("view/view.js");
+const INDEX_HTML: &str = include_str!("page/index.html");
+const VIEW_JS: &str = include_str!("page/view.js");
 
 /// The newest of everything the page draws.
 #[derive(Default)]
@@ -219,7 +219,7 @@ impl Shared {
             looking_only: config
                 .get_typed::<Value>("metadata")
                 .ok()
-                .and_then(|m| crate::keys::viewer_of(&m)),
+                .and_then(|m| troupe_node::viewer_of(&m)),
         }
     }
 
@@ -691,7 +691,7 @@ async fn map_picture(
 
 /// `troupe view`.
 pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
-    crate::cli::supervised()?;
+    troupe_node::process::supervised()?;
     // The namespaces watched: the session's, or those asked for.
     let namespaces: Vec<Option<String>> = if a.namespaces.is_empty() {
         vec![z.namespace.clone()]
@@ -706,7 +706,7 @@ pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         ..z.clone()
     };
     let Some((rt, mut signals, session)) =
-        crate::supervisor::client_runtime(&joining(&namespaces[0]), 2)?
+        troupe_node::process::client_runtime(&joining(&namespaces[0]), 2)?
     else {
         return Ok(());
     };

@@ -442,7 +442,7 @@ pub fn run(a: EmulateArgs, z: &troupe_node::ZenohArgs) -> anyhow::Result<()> {
     std::thread::Builder::new()
         .name("signals".into())
         .spawn(move || {
-            let _ = rt.block_on(crate::supervisor::wait_signal());
+            let _ = rt.block_on(troupe_node::process::wait_signal());
             flag.store(true, Ordering::Relaxed);
         })?;
     match a.device {

@@ -102,16 +102,6 @@ impl Kind {
     }
 }
 
-/// The viewer a Zenoh config joins a fleet as (`troupe fleet-keys
-/// --viewers`), if it is one: the name the config's `metadata` gives.
-pub fn viewer_of(metadata: &serde_json::Value) -> Option<String> {
-    let me = metadata.get("troupe")?;
-    if me.get("kind")? != "viewer" {
-        return None;
-    }
-    me.get("identity")?.as_str().map(str::to_owned)
-}
-
 fn member(spec: &str, kind: Kind) -> anyhow::Result<Member> {
     let mut parts = spec.trim().split(':');
     let name = parts.next().unwrap_or("").to_owned();
@@ -526,6 +516,7 @@ impl Identity {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use troupe_node::viewer_of;
 
     const FLEET: Fleet<'static> = Fleet {
         router: "router",

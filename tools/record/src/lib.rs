@@ -144,8 +144,9 @@ enum Heard {
     },
 }
 
-/// The files of one recording and what is in them so far.
-struct Files {
+/// The files of one recording and what is in them so far: one MCAP file,
+/// or a series of them (`--split-size`, `--split-duration`).
+pub struct Files {
     base: PathBuf,
     split: bool,
     compress: Compress,
@@ -161,8 +162,13 @@ struct Files {
 }
 
 impl Files {
+    /// Bytes written to the current file so far.
+    pub fn bytes(&self) -> u64 {
+        self.bytes
+    }
+
     /// Nothing open yet: [`Files::open`] starts the first file.
-    fn new(base: PathBuf, split: bool, compress: Compress) -> Files {
+    pub fn new(base: PathBuf, split: bool, compress: Compress) -> Files {
         Files {
             base,
             split,
@@ -178,7 +184,12 @@ impl Files {
         }
     }
 
-    fn open(&mut self, at: u64) -> anyhow::Result<()> {
+    /// Starts the next file, `at` ns since the epoch.
+    ///
+    /// # Errors
+    ///
+    /// The file cannot be created.
+    pub fn open(&mut self, at: u64) -> anyhow::Result<()> {
         self.path = if self.split {
             let stem = self
                 .base
@@ -210,7 +221,12 @@ impl Files {
         Ok(())
     }
 
-    fn close(&mut self) -> anyhow::Result<()> {
+    /// Finishes the file being written (its summary and index).
+    ///
+    /// # Errors
+    ///
+    /// The file cannot be written.
+    pub fn close(&mut self) -> anyhow::Result<()> {
         if let Some(mut w) = self.writer.take() {
             w.finish()
                 .with_context(|| format!("finishing {}", self.path.display()))?;
@@ -220,7 +236,11 @@ impl Files {
 
     /// Writes one message on the channel of `key` and `schema` (allocating
     /// only for a channel's first message: this runs for every sample).
-    fn write(
+    ///
+    /// # Errors
+    ///
+    /// The file cannot be written.
+    pub fn write(
         &mut self,
         key: &str,
         schema: &str,
@@ -450,20 +470,26 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
 fn stop_signal() -> std::sync::mpsc::Receiver<()> {
     let (tx, rx) = std::sync::mpsc::channel();
     std::thread::spawn(move || {
-        let _ = crate::tools::wait_for_signal();
+        let _ = troupe_node::process::wait_for_signal();
         let _ = tx.send(());
     });
     rx
 }
 
 /// One message of a recording, as [`each_message`] hands it over.
-struct Msg<'a> {
-    topic: &'a str,
-    encoding: &'a str,
-    schema: &'a str,
-    log_time: u64,
-    publish_time: u64,
-    data: &'a [u8],
+pub struct Msg<'a> {
+    /// The channel's topic: the sample's key.
+    pub topic: &'a str,
+    /// The channel's message encoding ([`ENCODING`] for samples).
+    pub encoding: &'a str,
+    /// The schema's name: the sample's schema tag.
+    pub schema: &'a str,
+    /// When the recorder received it, ns since the Unix epoch.
+    pub log_time: u64,
+    /// The sample's own stamp, ns.
+    pub publish_time: u64,
+    /// The payload as it travelled.
+    pub data: &'a [u8],
 }
 
 /// Calls `each` on every message of a recording in file order, reading the
@@ -471,7 +497,7 @@ struct Msg<'a> {
 /// `each` returns false to stop. A damaged or cut file stops at the damage,
 /// said once with how far the file was read; what came before has been
 /// handed over.
-fn each_message(
+pub fn each_message(
     path: &Path,
     mut each: impl FnMut(&Msg<'_>) -> anyhow::Result<bool>,
 ) -> anyhow::Result<()> {
@@ -824,218 +850,4 @@ fn export(path: &Path, format: Format) -> anyhow::Result<()> {
         );
     }
     Ok(())
-}
-
-/// Flags of `troupe bench record`.
-#[derive(Debug, Args)]
-pub struct RecordBenchArgs {
-    /// Wall seconds to record the 100-Pioneer world.
-    #[arg(long, default_value_t = 20.0)]
-    pub seconds: f64,
-    /// Size of the file `log info` is timed on, MB.
-    #[arg(long, value_name = "MB", default_value_t = 1000)]
-    pub info_mb: u64,
-    /// Where Stage's sample bitmaps are (cave.png).
-    #[arg(long, value_name = "DIR")]
-    pub bitmaps: Option<PathBuf>,
-}
-
-/// `troupe bench record`: the 100-Pioneer world (100 lasers, 100 sonar
-/// rings, 100 odometries every 100 simulated ms) run flat out and recorded
-/// whole; what was lost, the recorder's CPU and bytes per second; the file
-/// played back as fast as a subscriber takes it; `log info` on a large file.
-pub fn bench(a: &RecordBenchArgs) -> anyhow::Result<()> {
-    let bitmaps = crate::bench::stage_bitmaps(a.bitmaps.as_deref())?;
-    let dir = std::env::temp_dir().join(format!("troupe-bench-record-{}", std::process::id()));
-    std::fs::create_dir_all(&dir)?;
-    let mut out = std::io::stdout().lock();
-    writeln!(out, "troupe bench record: 100 Pioneers (16 sonars, 180-beam laser, odometry) flat out, recorded for {} s", a.seconds)?;
-    let (mut launcher, router) = crate::bench::p100_stack(&dir, &bitmaps, -1.0)?;
-    let z = ZenohArgs {
-        connect: vec![router],
-        no_multicast: true,
-        ..Default::default()
-    };
-    let result = (|| -> anyhow::Result<()> {
-        // The world's own speed, before anything records it.
-        let alone = {
-            let watcher = z.open(Mode::Client)?;
-            // The first tick heard and the last: (wall, simulated).
-            type Ticks = Option<((Instant, f64), (Instant, f64))>;
-            let clock = Arc::new(std::sync::Mutex::new(Ticks::None));
-            let seen = clock.clone();
-            let sub = watcher
-                .declare_subscriber(keys::SIM_CLOCK)
-                .callback(move |s| {
-                    if let Ok(t) = codec::decode::<troupe_msgs::sim::Clock>(&s.payload().to_bytes())
-                    {
-                        let now = (Instant::now(), t.msg.time);
-                        let mut c = seen
-                            .lock()
-                            .unwrap_or_else(std::sync::PoisonError::into_inner);
-                        *c = Some((c.map_or(now, |(first, _)| first), now));
-                    }
-                })
-                .wait()
-                .map_err(|e| anyhow::anyhow!("watching the clock: {e}"))?;
-            std::thread::sleep(Duration::from_secs(3));
-            drop(sub);
-            let c = clock
-                .lock()
-                .unwrap_or_else(std::sync::PoisonError::into_inner);
-            match *c {
-                Some((a, b)) if b.0 > a.0 => (b.1 - a.1) / (b.0 - a.0).as_secs_f64(),
-                _ => 0.0,
-            }
-        };
-        let file = dir.join("p100.mcap");
-        let (cpu0, t0) = (crate::navbench::cpu_time(), Instant::now());
-        record(
-            RecordArgs {
-                keys: Vec::new(),
-                output: file.clone(),
-                duration: Some(a.seconds),
-                split_size: None,
-                split_duration: None,
-                compress: Compress::None,
-                queue: 100_000,
-            },
-            &z,
-        )?;
-        let (cpu, wall) = (
-            crate::navbench::cpu_time()
-                .saturating_sub(cpu0)
-                .as_secs_f64(),
-            t0.elapsed().as_secs_f64(),
-        );
-
-        // What was lost: each device publishes once per step, so between its
-        // first and last stamp it owes one message per 100 ms. (Not the
-        // simulator's poses for viewers: it sends those at most 30 times a
-        // wall second by design.)
-        let mut stamps: HashMap<String, (f64, f64, u64)> = HashMap::new();
-        let (mut count, mut bytes) = (0u64, 0u64);
-        each_message(&file, |m| {
-            if m.encoding != ENCODING || m.schema == "simulation/poses@1" {
-                return Ok(true);
-            }
-            count += 1;
-            bytes += m.data.len() as u64;
-            let t = m.publish_time as f64 / 1e9;
-            let e = stamps
-                .entry(format!("{}#{}", m.topic, m.schema))
-                .or_insert((t, t, 0));
-            e.0 = e.0.min(t);
-            e.1 = e.1.max(t);
-            e.2 += 1;
-            Ok(true)
-        })?;
-        let owed: u64 = stamps
-            .values()
-            .map(|(first, last, _)| ((last - first) / 0.1).round() as u64 + 1)
-            .sum();
-        let sim = stamps
-            .get("sim/clock#sim/clock@1")
-            .map_or(0.0, |(f, l, _)| l - f);
-        // Where the losses are, by message kind.
-        let mut by_kind: BTreeMap<&str, (u64, u64)> = BTreeMap::new();
-        for (key, (first, last, n)) in &stamps {
-            let kind = key.rsplit_once('#').map_or("?", |(_, k)| k);
-            let e = by_kind.entry(kind).or_default();
-            e.0 += ((last - first) / 0.1).round() as u64 + 1;
-            e.1 += n;
-        }
-        writeln!(
-            out,
-            "  record: {count} messages, {:.1} MB in {wall:.1} s ({:.0} messages/s, {:.1} MB/s); the world ran {:.1}x real time ({alone:.1}x before the recorder joined); lost {} of {owed}; recorder CPU {cpu:.1} s = {:.0}% of one core",
-            bytes as f64 / 1e6,
-            count as f64 / wall,
-            bytes as f64 / 1e6 / wall,
-            sim / wall,
-            owed.saturating_sub(count),
-            100.0 * cpu / wall
-        )?;
-        for (kind, (owed, got)) in &by_kind {
-            writeln!(out, "    {kind:<24} {got:>8} of {owed:>8}")?;
-        }
-
-        // Played back as fast as a subscriber takes it.
-        let sink = ZenohArgs {
-            namespace: Some("benchplay".into()),
-            ..z.clone()
-        }
-        .open(Mode::Client)?;
-        let got = Arc::new(AtomicU64::new(0));
-        let counter = got.clone();
-        let _sub = sink
-            .declare_subscriber("**")
-            .callback(move |_| {
-                counter.fetch_add(1, Ordering::Relaxed);
-            })
-            .wait()
-            .map_err(|e| anyhow::anyhow!("{e}"))?;
-        let player = std::process::Command::new(std::env::current_exe()?)
-            .args(z.to_child_args())
-            .args(["--namespace", "benchplay", "play"])
-            .arg(&file)
-            .args(["--rate", "0"])
-            .output()?;
-        let played = String::from_utf8_lossy(&player.stdout);
-        writeln!(
-            out,
-            "  play --rate 0, into a subscriber: {} ({} received)",
-            played.trim(),
-            got.load(Ordering::Relaxed)
-        )?;
-        drop(sink);
-
-        // `log info` on a large file, made of this recording over and over.
-        let big = dir.join("big.mcap");
-        {
-            let mut files = Files::new(big.clone(), false, Compress::None);
-            files.open(0)?;
-            let mut shift = 0u64;
-            while files.bytes < a.info_mb * 1_000_000 {
-                each_message(&file, |m| {
-                    files.write(
-                        m.topic,
-                        m.schema,
-                        m.encoding,
-                        m.data,
-                        m.log_time + shift,
-                        m.publish_time,
-                    )?;
-                    Ok(true)
-                })?;
-                shift += secs_ns(wall);
-            }
-            files.close()?;
-        }
-        let size = std::fs::metadata(&big)?.len();
-        let t = Instant::now();
-        let info = std::process::Command::new(std::env::current_exe()?)
-            .args(["log", "info"])
-            .arg(&big)
-            .output()?;
-        let took = t.elapsed().as_secs_f64();
-        anyhow::ensure!(
-            info.status.success(),
-            "log info failed: {}",
-            String::from_utf8_lossy(&info.stderr)
-        );
-        writeln!(
-            out,
-            "  log info on a {:.0} MB file: {:.3} s (the summary only; target under 1 s)",
-            size as f64 / 1e6,
-            took
-        )?;
-        Ok(())
-    })();
-    let _ = nix::sys::signal::kill(
-        nix::unistd::Pid::from_raw(i32::try_from(launcher.id()).unwrap_or(0)),
-        nix::sys::signal::Signal::SIGTERM,
-    );
-    let _ = launcher.wait();
-    let _ = std::fs::remove_dir_all(&dir);
-    result
 }

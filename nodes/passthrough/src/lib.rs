@@ -65,7 +65,8 @@ pub struct Options {
     pub elsewhere: Vec<String>,
 }
 
-const NAME: &str = "passthrough";
+/// Player's name for this driver.
+pub const NAME: &str = "passthrough";
 
 /// Each remote server (`HOST:PORT`) and what to take from it.
 type Servers = Vec<(String, Vec<((Interface, u32), Device)>)>;
@@ -213,7 +214,7 @@ pub fn run(section: Section, z: &ZenohArgs, _: &NodeConfig) -> Result<()> {
     for o in unused {
         tracing::warn!("option `{o}` is not used by driver `{NAME}`");
     }
-    let started = crate::supervisor::client_runtime(z, 1);
+    let started = troupe_node::process::client_runtime(z, 1);
     let Some((rt, mut signals, session)) = started.map_err(|e| NodeError::Driver(e.into()))? else {
         return Ok(());
     };

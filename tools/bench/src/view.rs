@@ -164,7 +164,7 @@ fn row(
 
 /// Runs `troupe bench view`.
 pub fn run(a: &ViewBenchArgs) -> anyhow::Result<()> {
-    let bitmaps = crate::bench::stage_bitmaps(a.bitmaps.as_deref())?;
+    let bitmaps = crate::harness::stage_bitmaps(a.bitmaps.as_deref())?;
     if a.browsers.iter().any(|&n| n > 0) {
         Command::new(&a.chromium)
             .arg("--version")
@@ -189,7 +189,7 @@ fn measure(
     bitmaps: &std::path::Path,
     dir: &std::path::Path,
 ) -> anyhow::Result<()> {
-    let (launcher, router) = crate::bench::p100_stack(dir, bitmaps, a.speedup)?;
+    let (launcher, router) = crate::harness::p100_stack(dir, bitmaps, a.speedup)?;
     let launcher = Kid(launcher);
     let z = ZenohArgs {
         connect: vec![router.clone()],
@@ -209,7 +209,7 @@ fn measure(
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
         .spawn()?);
-    let url = crate::bench::line_after(&mut view.0, "troupe view: ")?;
+    let url = crate::harness::line_after(&mut view.0, "troupe view: ")?;
     let host = url
         .trim_start_matches("http://")
         .trim_end_matches('/')

@@ -11,6 +11,8 @@ use troupe_geom::Pose;
 use troupe_msgs::{map, Pose2d};
 use troupe_wavefront::plan::{Params, Planner};
 
+use crate::harness::cpu_time;
+
 /// Flags of `troupe bench nav`.
 #[derive(Debug, Args)]
 pub struct NavBenchArgs {
@@ -65,14 +67,6 @@ fn nearest_clear(m: &OccMap, dist: &[f32], x: f64, y: f64, clear: f32) -> (f64, 
         })
         .map_or(0, |(k, _)| k);
     m.centre(best)
-}
-
-/// CPU time of the whole process so far (every thread): the particle
-/// filter weighs large particle sets on both cores, and its target is CPU
-/// time, not wall time.
-pub(crate) fn cpu_time() -> Duration {
-    use nix::time::{clock_gettime, ClockId};
-    clock_gettime(ClockId::CLOCK_PROCESS_CPUTIME_ID).map_or(Duration::ZERO, Duration::from)
 }
 
 fn per(total: Duration, n: usize) -> f64 {
@@ -195,7 +189,7 @@ fn vfh() {
 }
 
 /// `troupe bench nav`.
-pub fn nav_bench(a: &NavBenchArgs) -> anyhow::Result<()> {
+pub fn run(a: &NavBenchArgs) -> anyhow::Result<()> {
     let m = match &a.map {
         Some(p) => troupe_mapfile::load(p, 0.032, false, Some((-8.0, -8.0)))?,
         None => synthetic(),

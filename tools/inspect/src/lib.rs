@@ -1,15 +1,83 @@
-//! Introspection tools: list, echo, hz, router, drivers, interfaces.
+//! Looking at a running system from any host, as Player's tools did:
+//! `troupe list` (Player's "Available devices"), `echo` (playerprint),
+//! `hz`, `ready` (a container's health check), and what this build knows:
+//! `drivers`, `interfaces`. Each is a Zenoh client; none changes anything.
 
 use std::io::Write;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
+use clap::Args;
+use troupe_launch::catalog::{self, Catalog};
 use troupe_msgs::{decode_any, keys, AddrError, DevAddr, Interface};
 use troupe_node::zenoh::Wait;
 use troupe_node::{Mode, ZenohArgs};
 
-use crate::cli::{EchoArgs, HzArgs, ListArgs, RouterArgs};
-use crate::drivers;
+/// Flags of `troupe list`.
+#[derive(Debug, Args)]
+pub struct ListArgs {
+    /// Only this robot (port).
+    #[arg(short = 'p', long = "robot", value_name = "PORT")]
+    pub robot: Option<u32>,
+    /// One JSON object per device.
+    #[arg(long)]
+    pub json: bool,
+    /// Seconds to wait for answers.
+    #[arg(long, value_name = "SECS", default_value_t = 2.0)]
+    pub wait: f64,
+    /// Keep running and print each device as it comes (`+`) and goes (`-`).
+    #[arg(long)]
+    pub watch: bool,
+}
+
+/// Flags of `troupe ready`.
+#[derive(Debug, Args)]
+pub struct ReadyArgs {
+    /// Devices that must be live (`laser:0`, `6666:position2d:0`).
+    #[arg(value_name = "DEVICE")]
+    pub devices: Vec<DevAddr>,
+    /// Robot (port) for a device that names none.
+    #[arg(short = 'p', long = "robot", value_name = "PORT", default_value_t = troupe_msgs::DEFAULT_ROBOT)]
+    pub robot: u32,
+    /// Seconds to wait for them to come up (0: look once).
+    #[arg(long, value_name = "SECS", default_value_t = 0.0)]
+    pub wait: f64,
+}
+
+/// Flags of `troupe echo`.
+#[derive(Debug, Args)]
+pub struct EchoArgs {
+    /// A device (`laser:0`, `6666:position2d:0`) or a key (`robot/6665/laser/0`, `sim/clock`).
+    pub target: String,
+    /// Robot (port) for a device that names none.
+    #[arg(short = 'p', long = "robot", value_name = "PORT", default_value_t = troupe_msgs::DEFAULT_ROBOT)]
+    pub robot: u32,
+    /// One JSON object per sample, arrays in full.
+    #[arg(long)]
+    pub json: bool,
+    /// Stop after N samples.
+    #[arg(short = 'n', long, value_name = "N")]
+    pub count: Option<u64>,
+    /// Give up after this many seconds without a sample (default: wait forever).
+    #[arg(long, value_name = "SECS")]
+    pub timeout: Option<f64>,
+}
+
+/// Flags of `troupe hz`.
+#[derive(Debug, Args)]
+pub struct HzArgs {
+    /// A device (`laser:0`) or a key.
+    pub target: String,
+    /// Robot (port) for a device that names none.
+    #[arg(short = 'p', long = "robot", value_name = "PORT", default_value_t = troupe_msgs::DEFAULT_ROBOT)]
+    pub robot: u32,
+    /// Samples in the moving window.
+    #[arg(long, value_name = "N", default_value_t = 100)]
+    pub window: usize,
+    /// Stop after N reports (one a second).
+    #[arg(short = 'n', long, value_name = "N")]
+    pub count: Option<u64>,
+}
 
 /// A live device, from its liveliness token.
 #[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, serde::Serialize)]
@@ -114,7 +182,7 @@ pub fn list(a: ListArgs, z: &ZenohArgs) -> anyhow::Result<()> {
 
 /// `troupe ready`: succeeds once every device named is live; with none,
 /// once the router answers.
-pub fn ready(a: crate::cli::ReadyArgs, z: &ZenohArgs) -> anyhow::Result<()> {
+pub fn ready(a: ReadyArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     use std::collections::BTreeSet;
     let want: BTreeSet<troupe_msgs::Device> = a.devices.iter().map(|d| d.device(a.robot)).collect();
     let session = z.open(Mode::Client)?;
@@ -387,75 +455,15 @@ pub fn hz(a: HzArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     }
 }
 
-/// `troupe router`: a Zenoh router until SIGINT/SIGTERM.
-pub fn router(_: RouterArgs, z: &ZenohArgs) -> anyhow::Result<()> {
-    if std::env::var_os(ZENOH_RUNTIME).is_none() {
-        // Read once, when Zenoh starts its runtimes (below); no thread of
-        // ours runs yet.
-        std::env::set_var(ZENOH_RUNTIME, ROUTER_RUNTIME);
-    }
-    let mut z = z.clone();
-    if z.listen.is_empty() && z.zenoh_config.is_none() {
-        z.listen.push("tcp/[::]:7447".into());
-    }
-    let session = z.open(Mode::Router)?;
-    let list = troupe_node::locators(&session);
-    // The first line on stdout is the contract for scripts and tests.
-    let mut out = std::io::stdout().lock();
-    writeln!(out, "troupe router listening on {}", list.join(" "))?;
-    out.flush()?;
-    drop(out);
-    tracing::info!(zid = %session.zid(), "router up");
-    wait_for_signal()?;
-    tracing::info!("router stopping");
-    session
-        .close()
-        .wait()
-        .map_err(|e| anyhow::anyhow!("closing the router: {e}"))?;
-    Ok(())
-}
-
-/// Zenoh reads the sizes of its thread pools from this variable.
-const ZENOH_RUNTIME: &str = "ZENOH_RUNTIME";
-
-/// A router's thread pools. Zenoh's default is two threads to read every
-/// link; a host cut off from the network leaves full queues behind, and
-/// messages that must not be dropped (declarations) wait on them for up to
-/// 5 s on a reading thread. With two such waits no link is read: in a
-/// fleet of seven containers every client's lease then ran out and all 28
-/// devices left and came back, when only the cut-off host's 6 should have.
-/// With eight readers only the cut-off host's devices leave (4 of 4 runs
-/// before, 0 after).
-const ROUTER_RUNTIME: &str =
-    "(rx: (worker_threads: 8), tx: (worker_threads: 4), net: (worker_threads: 2))";
-
-/// Blocks until SIGINT or SIGTERM.
-pub fn wait_for_signal() -> anyhow::Result<()> {
-    use tokio::signal::unix::{signal, SignalKind};
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()?;
-    rt.block_on(async {
-        let mut term = signal(SignalKind::terminate())?;
-        let mut int = signal(SignalKind::interrupt())?;
-        tokio::select! {
-            _ = term.recv() => {}
-            _ = int.recv() => {}
-        }
-        Ok::<_, std::io::Error>(())
-    })?;
-    Ok(())
-}
-
 /// `troupe drivers`.
-pub fn print_drivers(all: bool) -> anyhow::Result<()> {
+pub fn print_drivers(catalog: &Catalog, all: bool) -> anyhow::Result<()> {
     let mut out = std::io::stdout().lock();
-    for e in drivers::all() {
+    for e in catalog.entries() {
         writeln!(out, "{:<16} {}", e.name, e.about)?;
     }
     if all {
-        for (name, about, instead) in drivers::MISSING {
-            let what = drivers::missing_about(about, instead);
+        for (name, about, instead) in catalog::MISSING {
+            let what = catalog::missing_about(about, instead);
             writeln!(out, "{name:<16} not available {what}")?;
         }
     }

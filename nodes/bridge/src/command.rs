@@ -1,12 +1,14 @@
-//! `troupe bridge`: serve Troupe's devices to Player clients over TCP.
+//! `troupe bridge`: the bridge as a process of its own, serving robot
+//! ports or (`--import`) bringing a Player server's devices in.
 
 use std::io::Write;
 use std::net::{IpAddr, SocketAddr};
 
 use anyhow::Context;
 use clap::Args;
-use troupe_bridge::{Bridge, Config, Port};
 use troupe_node::ZenohArgs;
+
+use crate::{Bridge, Config, Port};
 
 /// Flags of `troupe bridge`.
 #[derive(Debug, Args)]
@@ -29,11 +31,11 @@ pub struct BridgeArgs {
     /// Accept Player clients only from this network or address (repeatable,
     /// e.g. `--allow 10.1.0.0/16 --allow 10.2.0.7`); others are closed
     /// before the banner. Default: anyone who reaches --bind.
-    #[arg(long, value_name = "CIDR", value_parser = troupe_bridge::parse_network)]
-    pub allow: Vec<troupe_bridge::IpNetwork>,
+    #[arg(long, value_name = "CIDR", value_parser = crate::parse_network)]
+    pub allow: Vec<crate::IpNetwork>,
 
     /// Data messages a client's queue holds before dropping (Player's 1024).
-    #[arg(long, value_name = "N", default_value_t = troupe_bridge::queue::DEFAULT_MAXLEN)]
+    #[arg(long, value_name = "N", default_value_t = crate::queue::DEFAULT_MAXLEN)]
     pub queue_len: usize,
 
     /// The other way round: connect to the Player server at HOST:PORT as a
@@ -91,16 +93,16 @@ pub fn run(a: BridgeArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             .map(|s| port(s, a.bind))
             .collect::<anyhow::Result<Vec<_>>>()?,
     };
-    crate::cli::supervised()?;
-    let Some((rt, mut signals, session)) = crate::supervisor::client_runtime(z, 2)? else {
+    troupe_node::process::supervised()?;
+    let Some((rt, mut signals, session)) = troupe_node::process::client_runtime(z, 2)? else {
         return Ok(());
     };
     let stop = async move { signals.recv().await };
     if let Some(server) = &a.import {
-        rt.block_on(troupe_bridge::import::run(
+        rt.block_on(crate::import::run(
             session,
             server,
-            &troupe_bridge::import::Select::All {
+            &crate::import::Select::All {
                 as_robot: a.as_robot,
             },
             stop,
@@ -124,7 +126,7 @@ pub fn run(a: BridgeArgs, z: &ZenohArgs) -> anyhow::Result<()> {
 
 /// `troupe bridge: robot 6665 on ADDR:PORT` on stdout for each robot port,
 /// for scripts and tests that let the ports be chosen.
-pub(crate) fn announce(bridge: &Bridge) {
+pub fn announce(bridge: &Bridge) {
     let mut out = std::io::stdout().lock();
     for (robot, addr) in bridge.local_addrs() {
         let _ = writeln!(out, "troupe bridge: robot {robot} on {addr}");
@@ -159,10 +161,15 @@ mod tests {
     #[test]
     fn import_serves_no_port_so_it_refuses_one() {
         use clap::Parser;
-        let parse = |args: &[&str]| crate::cli::Cli::try_parse_from(args);
-        assert!(parse(&["troupe", "bridge", "--import", "robot7:6665"]).is_ok());
-        assert!(parse(&["troupe", "bridge", "-p", "6666"]).is_ok());
-        let e = parse(&["troupe", "bridge", "--import", "robot7:6665", "-p", "6666"])
+        #[derive(Debug, Parser)]
+        struct Bridge {
+            #[command(flatten)]
+            args: BridgeArgs,
+        }
+        let parse = |args: &[&str]| Bridge::try_parse_from(args);
+        assert!(parse(&["bridge", "--import", "robot7:6665"]).is_ok());
+        assert!(parse(&["bridge", "-p", "6666"]).is_ok());
+        let e = parse(&["bridge", "--import", "robot7:6665", "-p", "6666"])
             .unwrap_err()
             .to_string();
         assert!(e.contains("--port"), "{e}");

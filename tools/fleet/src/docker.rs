@@ -18,10 +18,11 @@ use anyhow::Context;
 use clap::Args;
 use troupe_msgs::{keys, Device};
 
-use crate::plan::{self, Plan};
+use troupe_launch::catalog::Catalog;
+use troupe_launch::plan::{self, Plan};
 
 /// The Dockerfile `troupe image` builds (docker/Dockerfile).
-const DOCKERFILE: &str = include_str!("../../docker/Dockerfile");
+const DOCKERFILE: &str = include_str!("../../../docker/Dockerfile");
 
 /// The image's user and group: numeric, not root.
 pub const UID: u32 = 10000;
@@ -327,8 +328,8 @@ pub struct ComposeArgs {
 }
 
 /// `troupe compose`.
-pub fn compose(a: ComposeArgs) -> anyhow::Result<()> {
-    let text = render(&a)?;
+pub fn compose(a: ComposeArgs, catalog: &Catalog) -> anyhow::Result<()> {
+    let text = render(&a, catalog)?;
     match &a.output {
         Some(p) => std::fs::write(p, text).with_context(|| format!("writing {}", p.display()))?,
         None => std::io::stdout().lock().write_all(text.as_bytes())?,
@@ -337,8 +338,8 @@ pub fn compose(a: ComposeArgs) -> anyhow::Result<()> {
 }
 
 /// The compose file `troupe compose` writes for these flags.
-pub fn render(a: &ComposeArgs) -> anyhow::Result<String> {
-    let (plan, warnings) = plan::load(&a.file, a.robot)?;
+pub fn render(a: &ComposeArgs, catalog: &Catalog) -> anyhow::Result<String> {
+    let (plan, warnings) = plan::load(&a.file, a.robot, catalog)?;
     for w in &warnings {
         let _ = writeln!(std::io::stderr(), "warning: {w}");
     }
@@ -829,71 +830,6 @@ mod tests {
         assert_eq!(
             relative_to(Path::new("/srv/w"), Path::new("/tmp")).unwrap(),
             "/srv/w"
-        );
-    }
-
-    /// The repository's docker-compose.yml is `troupe compose`'s output for
-    /// worlds/fleet.cfg: regenerate it (the command is in its first line)
-    /// when this fails.
-    #[test]
-    fn the_root_compose_file_is_the_generator_s_output() {
-        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-        let file = root.join("docker-compose.yml");
-        let args = ComposeArgs {
-            file: root.join("worlds/fleet.cfg"),
-            robot: troupe_msgs::DEFAULT_ROBOT,
-            output: Some(file.clone()),
-            image: "troupe:latest".into(),
-            in_image: Some("/worlds".into()),
-            secure: None,
-            lease: 3.0,
-        };
-        let want = render(&args).unwrap();
-        let have = std::fs::read_to_string(&file).unwrap();
-        assert!(
-            have == want,
-            "docker-compose.yml drifted from `troupe compose`: run `cargo run --release -- compose worlds/fleet.cfg --in-image /worlds -o docker-compose.yml`"
-        );
-        assert!(want.starts_with(
-            "# Written by `troupe compose worlds/fleet.cfg --in-image /worlds -o docker-compose.yml`"
-        ));
-        for host in [
-            "router",
-            "sim",
-            "robot6665",
-            "robot6666",
-            "robot6667",
-            "bridge",
-        ] {
-            assert!(
-                want.contains(&format!("\n  {host}:\n")),
-                "no service {host}"
-            );
-        }
-    }
-
-    #[test]
-    fn a_plan_without_hosts_is_one_service_with_its_directory_mounted() {
-        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-        let args = ComposeArgs {
-            file: root.join("worlds/simple.cfg"),
-            robot: troupe_msgs::DEFAULT_ROBOT,
-            output: Some(root.join("docker-compose.yml")),
-            image: "troupe:latest".into(),
-            in_image: None,
-            secure: None,
-            lease: 3.0,
-        };
-        let y = render(&args).unwrap();
-        assert!(y.contains("\n  stack:\n"), "{y}");
-        assert!(
-            y.contains(r#""launch", "/stack/simple.cfg", "--no-bridge"]"#),
-            "{y}"
-        );
-        assert!(y.contains(r#"- "./worlds:/stack:ro""#), "{y}");
-        assert!(
-            y.contains(r#""127.0.0.1:${TROUPE_PORT_6665-6665}:6665""#),
-            "{y}"
         );
     }
 

@@ -1,0 +1,63 @@
+//! `troupe`: one binary for every Troupe process and tool.
+//!
+//! This crate only wires: `cli` defines the command line, `drivers` lists
+//! the drivers this binary links, and `run` hands each subcommand to the
+//! crate that does it (the launcher, a driver, a tool). Errors travel back
+//! up as `anyhow` chains and are printed whole; the exit code says whether
+//! the command succeeded.
+
+mod cli;
+mod drivers;
+#[cfg(test)]
+mod samples;
+
+use std::io::Write;
+use std::process::ExitCode;
+
+use clap::Parser;
+
+fn main() -> ExitCode {
+    let cli = cli::Cli::parse();
+    troupe_node::init_logging(cli.log.as_deref());
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            if e.chain().any(|c| {
+                c.downcast_ref::<std::io::Error>()
+                    .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+            }) {
+                return ExitCode::SUCCESS;
+            }
+            // Ignore a failed write: there is nobody left to tell.
+            let _ = writeln!(std::io::stderr(), "troupe: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: cli::Cli) -> anyhow::Result<()> {
+    use cli::Command;
+    let z = &cli.zenoh;
+    match cli.command {
+        Command::Launch(a) => troupe_launch::supervisor::launch(a, z, &drivers::catalog()),
+        Command::Plan(a) => troupe_launch::supervisor::print_plan(a, &drivers::catalog()),
+        Command::Node(a) => troupe_launch::node::run(a, z, &drivers::catalog()),
+        Command::Router(a) => troupe_launch::router::run(a, z),
+        Command::List(a) => troupe_inspect::list(a, z),
+        Command::Echo(a) => troupe_inspect::echo(a, z),
+        Command::Hz(a) => troupe_inspect::hz(a, z),
+        Command::Ready(a) => troupe_inspect::ready(a, z),
+        Command::Drivers { all } => troupe_inspect::print_drivers(&drivers::catalog(), all),
+        Command::Interfaces => troupe_inspect::print_interfaces(),
+        Command::Record(a) => troupe_record::record(a, z),
+        Command::Play(a) => troupe_record::play(a, z),
+        Command::Log(c) => troupe_record::log(c),
+        Command::View(a) => troupe_view::run(a, z),
+        Command::Emulate(a) => troupe_emulate::run(a, z),
+        Command::Bench(b) => troupe_bench::run(b, z),
+        Command::Bridge(a) => troupe_bridge::command::run(a, z),
+        Command::Image(a) => troupe_fleet::docker::image(a),
+        Command::Compose(a) => troupe_fleet::docker::compose(a, &drivers::catalog()),
+        Command::FleetKeys(a) => troupe_fleet::keys::fleet_keys(a),
+    }
+}

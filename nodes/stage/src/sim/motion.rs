@@ -1,0 +1,213 @@
+//! How bases move: the commands a position model takes, each base's
+//! state and settings, and a step's move — planned on the crew's threads,
+//! applied in model order (Stage's kinematics, odometry error, stalls).
+
+use super::*;
+
+/// What a position model was last told to do.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Command {
+    /// Velocity: forward, sideways (m/s), turn (rad/s).
+    Vel(Pose),
+    /// Car-like: speed (m/s) and steering angle (rad).
+    Car(f64, f64),
+    /// Go to a pose of the odometric frame.
+    GoTo(Pose),
+}
+
+/// A mobile base's state.
+#[derive(Debug, Clone)]
+pub struct Base {
+    /// Its model.
+    pub model: usize,
+    /// The last command (`None`: idle, or under its `ctrl`).
+    pub cmd: Option<Command>,
+    /// Velocity in the robot frame, m/s and rad/s.
+    pub vel: Pose,
+    /// Blocked by an obstacle on the last step.
+    pub stall: bool,
+    /// The reported pose (odometry or GPS).
+    pub odom: Pose,
+    /// The frame of the reported pose.
+    pub origin: Pose,
+    /// Motors enabled.
+    pub enabled: bool,
+    /// Its built-in controller (its model's `ctrl`), if any: it drives
+    /// the base while no command has come.
+    pub ctrl: Option<Ctrl>,
+    /// What that controller keeps from step to step.
+    pub mind: Mind,
+}
+
+/// What a base's move reads of its `position` settings, side by side
+/// with the other bases' (see [`Frame`]).
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Motion {
+    pub(super) drive: Drive,
+    pub(super) localization: Localization,
+    pub(super) wheelbase: f64,
+    /// Its velocity bounds on x, y and yaw: least, most.
+    pub(super) bounds: [f64; 6],
+    pub(super) odom_error: [f64; 3],
+}
+
+impl Motion {
+    pub(super) fn of(c: &crate::world::PositionCfg) -> Motion {
+        let vb = &c.velocity_bounds;
+        Motion {
+            drive: c.drive,
+            localization: c.localization,
+            wheelbase: c.wheelbase,
+            bounds: [vb[0], vb[1], vb[2], vb[3], vb[6], vb[7]],
+            odom_error: c.odom_error,
+        }
+    }
+}
+
+/// What a base does in a step (see [`Sim::plan`]); kept from step to step
+/// for its buffers.
+#[derive(Default)]
+pub(super) struct Plan {
+    /// Its velocity this step, and its pose at the end of it.
+    pub(super) v: Pose,
+    pub(super) next: Pose,
+    /// Whether it moves, and what its controller keeps after this step.
+    pub(super) moving: bool,
+    pub(super) mind: Mind,
+    /// Its tree's bodies where it would move to, and whether they would
+    /// meet a static obstacle.
+    pub(super) bodies: Vec<Placed>,
+    pub(super) walled: bool,
+}
+
+impl Sim {
+    /// Works out what base `bi` does in a step of `dt`, from the poses at
+    /// the step's start, into `plan`.
+    ///
+    /// # Behavior
+    ///
+    /// Bases move one after another, each seeing those before it where they
+    /// moved to; but what a base asks for and whether it would meet a wall
+    /// depend on it alone, so every base is planned at once (on every
+    /// thread), and only the test against the other robots and the move
+    /// itself are left for [`Sim::apply`], in order. A base on another
+    /// model's back is planned there too, as it stands once that has moved.
+    pub(super) fn plan(&self, bi: usize, dt: f64, plan: &mut Plan) {
+        let m = self.bases[bi].model;
+        let Some(cfg) = &self.motions[bi] else {
+            return;
+        };
+        plan.mind = self.bases[bi].mind;
+        let want = match self.bases[bi].cmd {
+            _ if !self.bases[bi].enabled => Pose::default(),
+            Some(Command::Vel(v)) => v,
+            Some(Command::Car(speed, steer)) => {
+                Pose::new(speed, 0.0, speed * steer.tan() / cfg.wheelbase.max(1e-6))
+            }
+            Some(Command::GoTo(goal)) => {
+                let o = self.bases[bi].odom;
+                let (dx, dy) = (goal.x - o.x, goal.y - o.y);
+                let dist = dx.hypot(dy);
+                if dist > 0.05 {
+                    let err = normalize(dy.atan2(dx) - o.yaw);
+                    let (s, c) = o.yaw.sin_cos();
+                    match cfg.drive {
+                        Drive::Omni => Pose::new(
+                            (c * dx + s * dy).clamp(-1.0, 1.0),
+                            (-s * dx + c * dy).clamp(-1.0, 1.0),
+                            (2.0 * normalize(goal.yaw - o.yaw)).clamp(-1.0, 1.0),
+                        ),
+                        _ => Pose::new(
+                            dist.min(1.0) * err.cos().max(0.0),
+                            0.0,
+                            (2.0 * err).clamp(-1.5, 1.5),
+                        ),
+                    }
+                } else {
+                    let err = normalize(goal.yaw - o.yaw);
+                    Pose::new(
+                        0.0,
+                        0.0,
+                        if err.abs() > 0.02 {
+                            (2.0 * err).clamp(-1.0, 1.0)
+                        } else {
+                            0.0
+                        },
+                    )
+                }
+            }
+            None => match self.bases[bi].ctrl {
+                Some(c) => self.control(bi, c, &mut plan.mind),
+                None => Pose::default(),
+            },
+        };
+        // As Stage's velocity control: the speeds asked for, within the
+        // velocity bounds (its acceleration bounds are for its
+        // acceleration control, which no controller here uses).
+        let vb = &cfg.bounds;
+        let mut v = Pose::new(
+            want.x.clamp(vb[0], vb[1]),
+            want.y.clamp(vb[2], vb[3]),
+            want.yaw.clamp(vb[4], vb[5]),
+        );
+        if cfg.drive != Drive::Omni {
+            v.y = 0.0;
+        }
+        let here = self.poses[m];
+        let next = here.compose(&Pose::new(v.x * dt, v.y * dt, v.yaw * dt));
+        let root_parent = self.frames[m].parent == Frame::ROOT;
+        let g_next = if root_parent {
+            next
+        } else {
+            self.global(m)
+                .compose(&Pose::new(v.x * dt, v.y * dt, v.yaw * dt))
+        };
+        plan.v = v;
+        plan.next = next;
+        plan.moving = v.x != 0.0 || v.y != 0.0 || v.yaw != 0.0;
+        if plan.moving {
+            self.tree_at(m, g_next, &mut plan.bodies);
+            plan.walled = self.hits_statics(self.root(m), &plan.bodies);
+        }
+    }
+
+    /// Carries out base `bi`'s `plan` (see [`Sim::plan`]).
+    pub(super) fn apply(&mut self, bi: usize, dt: f64, plan: &mut Plan) {
+        let m = self.bases[bi].model;
+        if self.root(m) != m {
+            // On another model's back: planned where that one moved to.
+            self.plan(bi, dt, plan);
+        }
+        let Some(cfg) = &self.motions[bi] else {
+            return;
+        };
+        let (localization, e) = (cfg.localization, cfg.odom_error);
+        let v = plan.v;
+        self.bases[bi].mind = plan.mind;
+        if plan.moving {
+            if plan.walled || self.hits_movers(self.root(m), &plan.bodies) {
+                let b = &mut self.bases[bi];
+                b.stall = true;
+                b.vel = Pose::default();
+                return;
+            }
+            self.poses[m] = plan.next;
+            self.commit(&mut plan.bodies);
+            if localization == Localization::Gps {
+                let g = self.global(m);
+                let b = &mut self.bases[bi];
+                b.odom = b.origin.inverse().compose(&g);
+            }
+        }
+        self.bases[bi].stall = false;
+        self.bases[bi].vel = v;
+        if localization == Localization::Odom {
+            let b = &mut self.bases[bi];
+            b.odom = b.odom.compose(&Pose::new(
+                v.x * dt * (1.0 + e[0]),
+                v.y * dt * (1.0 + e[1]),
+                v.yaw * dt * (1.0 + e[2]),
+            ));
+        }
+    }
+}

@@ -1,0 +1,205 @@
+//! What the benchmarks share: the worlds and stacks they run (the
+//! 100-Pioneer world among them), where Stage's bitmaps are, reading a
+//! child's announced address, and the statistics they print.
+
+use std::process::Command;
+use std::time::Duration;
+
+use anyhow::Context;
+use troupe_node::ZenohArgs;
+
+pub(crate) fn percentile(sorted: &[Duration], q: f64) -> Duration {
+    if sorted.is_empty() {
+        return Duration::ZERO;
+    }
+    let i = ((sorted.len() - 1) as f64 * q).round() as usize;
+    sorted[i.min(sorted.len() - 1)]
+}
+
+pub(crate) fn us(d: Duration) -> String {
+    format!("{:.0} µs", d.as_secs_f64() * 1e6)
+}
+
+/// A Pioneer with 16 sonars and a 180-beam SICK, wandering (our own
+/// definitions). Stage is 2.5D: the sonars sit inside the top of the base,
+/// as in Stage's pioneer.inc, and so does the SICK here (Stage's sits on
+/// top), so that both see the other robots' bases and the wander
+/// controller, which steers by the laser, keeps a crowd moving.
+const PIONEER: &str = r#"
+define bench_sonar sensor ( size [0.01 0.05 0.01] range [0 5.0] fov 15 samples 1 )
+define bench_sonars ranger (
+  bench_sonar( pose [ 0.075 0.130 0 90 ] ) bench_sonar( pose [ 0.115 0.115 0 50 ] )
+  bench_sonar( pose [ 0.150 0.080 0 30 ] ) bench_sonar( pose [ 0.170 0.025 0 10 ] )
+  bench_sonar( pose [ 0.170 -0.025 0 -10 ] ) bench_sonar( pose [ 0.150 -0.080 0 -30 ] )
+  bench_sonar( pose [ 0.115 -0.115 0 -50 ] ) bench_sonar( pose [ 0.075 -0.130 0 -90 ] )
+  bench_sonar( pose [ -0.155 -0.130 0 -90 ] ) bench_sonar( pose [ -0.195 -0.115 0 -130 ] )
+  bench_sonar( pose [ -0.230 -0.080 0 -150 ] ) bench_sonar( pose [ -0.250 -0.025 0 -170 ] )
+  bench_sonar( pose [ -0.250 0.025 0 170 ] ) bench_sonar( pose [ -0.230 0.080 0 150 ] )
+  bench_sonar( pose [ -0.195 0.115 0 130 ] ) bench_sonar( pose [ -0.155 0.130 0 90 ] )
+)
+define bench_sick ranger ( sensor( range [0 8.0] fov 180 samples 180 ) size [0.156 0.155 0.19] )
+define bench_pioneer position (
+  size [0.44 0.38 0.22] origin [-0.04 0 0 0] drive "diff" ctrl "wander"
+  bench_sonars( pose [0 0 -0.03 0] ) bench_sick( pose [0 0 -0.1 0] )
+)
+"#;
+
+/// A small robot with 12 IR rangers around it, wandering.
+const SMALL: &str = r#"
+define bench_ir sensor ( size [0.01 0.01 0.01] range [0 1.0] fov 10 samples 1 )
+define bench_irs ranger (
+  bench_ir( pose [0.1 0 0 0] ) bench_ir( pose [0.087 0.05 0 30] ) bench_ir( pose [0.05 0.087 0 60] )
+  bench_ir( pose [0 0.1 0 90] ) bench_ir( pose [-0.05 0.087 0 120] ) bench_ir( pose [-0.087 0.05 0 150] )
+  bench_ir( pose [-0.1 0 0 180] ) bench_ir( pose [-0.087 -0.05 0 -150] ) bench_ir( pose [-0.05 -0.087 0 -120] )
+  bench_ir( pose [0 -0.1 0 -90] ) bench_ir( pose [0.05 -0.087 0 -60] ) bench_ir( pose [0.087 -0.05 0 -30] )
+)
+define bench_small position ( size [0.2 0.2 0.1] drive "diff" ctrl "wander" bench_irs( pose [0 0 -0.05 0] ) )
+"#;
+
+/// The first line of `child`'s stdout that starts with `prefix`, less it.
+pub(crate) fn line_after(child: &mut std::process::Child, prefix: &str) -> anyhow::Result<String> {
+    let out = child.stdout.take().context("the child's stdout")?;
+    let mut lines = std::io::BufRead::lines(std::io::BufReader::new(out));
+    while let Some(Ok(line)) = lines.next() {
+        if let Some(rest) = line.strip_prefix(prefix) {
+            // Keep draining, so the child never blocks on a full pipe.
+            std::thread::spawn(move || lines.for_each(drop));
+            return Ok(rest.trim().to_owned());
+        }
+    }
+    anyhow::bail!("no `{prefix}` line")
+}
+
+/// The 100-Pioneer world as a stack of its own, in `dir`: every robot on
+/// its own port (position2d:0, ranger:0, ranger:1), at `speedup` (-1: flat
+/// out), launched with an embedded router, every device live. Returns the
+/// launcher and the router's endpoint.
+pub(crate) fn p100_stack(
+    dir: &std::path::Path,
+    bitmaps: &std::path::Path,
+    speedup: f64,
+) -> anyhow::Result<(std::process::Child, String)> {
+    let (mut world, _) = bench_world("pioneers100", bitmaps, 1)?;
+    world.push_str(&format!("speedup {speedup}\n"));
+    std::fs::write(dir.join("p100.world"), world)?;
+    let mut cfg = String::from(
+        "driver ( name \"stage\" provides [\"simulation:0\"] worldfile \"p100.world\" )\n",
+    );
+    for i in 0..100 {
+        let port = 6665 + i;
+        cfg.push_str(&format!(
+            "driver ( name \"stage\" provides [\"{port}:position2d:0\" \"{port}:ranger:0\" \"{port}:ranger:1\"] model \"p{i}\" )\n"
+        ));
+    }
+    std::fs::write(dir.join("p100.cfg"), cfg)?;
+    let mut launcher = Command::new(std::env::current_exe()?)
+        .args(["--no-multicast", "launch"])
+        .arg(dir.join("p100.cfg"))
+        .args(["--no-bridge", "--listen", "tcp/127.0.0.1:0"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()?;
+    let router = line_after(&mut launcher, "troupe launch: router listening on ")?
+        .split_whitespace()
+        .next()
+        .unwrap_or_default()
+        .to_owned();
+    let z = ZenohArgs {
+        connect: vec![router.clone()],
+        no_multicast: true,
+        ..Default::default()
+    };
+    let devices = (0..100u32)
+        .flat_map(|i| ["position2d:0", "ranger:0", "ranger:1"].map(|d| format!("{}:{d}", 6665 + i)))
+        .map(|d| d.parse::<troupe_msgs::DevAddr>())
+        .collect::<Result<Vec<_>, _>>()?;
+    let ready = troupe_inspect::ready(
+        troupe_inspect::ReadyArgs {
+            devices,
+            robot: 6665,
+            wait: 120.0,
+        },
+        &z,
+    );
+    if let Err(e) = ready {
+        let _ = launcher.kill();
+        let _ = launcher.wait();
+        return Err(e);
+    }
+    Ok((launcher, router))
+}
+
+/// Stage's sample bitmaps (cave.png, …): `given`, or where the repository
+/// keeps its neighbour `shared/` (run from the repository's top).
+pub(crate) fn stage_bitmaps(given: Option<&std::path::Path>) -> anyhow::Result<std::path::PathBuf> {
+    let dir = given.map_or_else(
+        || std::path::PathBuf::from("../shared/compat/stage/bitmaps"),
+        std::path::Path::to_path_buf,
+    );
+    dir.canonicalize()
+        .ok()
+        .filter(|b| b.join("cave.png").exists())
+        .with_context(|| {
+            format!(
+                "no Stage bitmaps at {} (cave.png); pass --bitmaps DIR",
+                dir.display()
+            )
+        })
+}
+
+pub(crate) fn bench_world(
+    name: &str,
+    bitmaps: &std::path::Path,
+    threads: usize,
+) -> anyhow::Result<(String, String)> {
+    let mut w = String::from("resolution 0.02\ninterval_sim 100\n");
+    w.push_str(&format!("threads {threads}\n"));
+    let map = |file: &str, size: &str| {
+        format!(
+            "model ( name \"map\" bitmap \"{}\" size [{size} 0.8] color \"gray30\" boundary 1 obstacle_return 0 ranger_return 0.5 )\n",
+            bitmaps.join(file).display()
+        )
+    };
+    let what = match name {
+        "simple" => {
+            w.push_str(PIONEER);
+            w.push_str(&map("cave.png", "16 16"));
+            w.push_str("bench_pioneer( name \"r0\" pose [-6.946 -6.947 0 45] )\nbench_pioneer( name \"r1\" pose [-3.946 -6.947 0 45] )\n");
+            "2 Pioneers (16 sonars + 180-beam laser), 16 m cave"
+        }
+        "pioneers100" => {
+            w.push_str(PIONEER);
+            w.push_str(&map("cave.png", "16 16"));
+            for i in 0..100 {
+                let (x, y) = (-6.75 + 1.5 * (i % 10) as f64, -6.75 + 1.5 * (i / 10) as f64);
+                w.push_str(&format!(
+                    "bench_pioneer( name \"p{i}\" pose [{x} {y} 0 {}] )\n",
+                    (i * 37) % 360
+                ));
+            }
+            "100 Pioneers (16 sonars + 180-beam laser), 16 m cave, all moving"
+        }
+        "hospital1000" => {
+            w.push_str(SMALL);
+            w.push_str(&map("hospital_section.png", "140 60"));
+            for i in 0..1000 {
+                let (x, y) = (-68.0 + 3.4 * (i % 40) as f64, -28.0 + 2.3 * (i / 40) as f64);
+                w.push_str(&format!(
+                    "bench_small( name \"s{i}\" pose [{x} {y} 0 {}] )\n",
+                    (i * 53) % 360
+                ));
+            }
+            "1000 small robots (12 IR rangers), 140x60 m hospital, all moving"
+        }
+        other => anyhow::bail!("unknown bench world `{other}` (simple, pioneers100, hospital1000)"),
+    };
+    Ok((w, what.to_owned()))
+}
+
+/// CPU time of the whole process so far (every thread): the particle
+/// filter weighs large particle sets on both cores, and its target is CPU
+/// time, not wall time.
+pub(crate) fn cpu_time() -> Duration {
+    use nix::time::{clock_gettime, ClockId};
+    clock_gettime(ClockId::CLOCK_PROCESS_CPUTIME_ID).map_or(Duration::ZERO, Duration::from)
+}

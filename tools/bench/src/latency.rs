@@ -1,0 +1,288 @@
+//! `troupe bench latency`: what a sample costs between two Troupe processes.
+//!
+//! This process runs a router on an ephemeral loopback port (as `troupe
+//! launch` embeds one), starts `troupe bench pong` as a child peer, and
+//! times laser-scan-sized messages through the full codec (encode, put,
+//! decode, re-encode, put back, decode) and through a request/reply.
+
+use std::io::{Read, Write};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use clap::Args;
+use troupe_msgs::{codec, keys, laser};
+use troupe_node::zenoh::Wait;
+use troupe_node::{Mode, ZenohArgs};
+
+use crate::harness::{percentile, us};
+
+/// `troupe bench latency`: plain, and with `--secure` over TLS too.
+pub fn run(a: &LatencyArgs) -> anyhow::Result<()> {
+    latency(a, None)?;
+    if a.secure {
+        let dir = std::env::temp_dir().join(format!("troupe-bench-keys-{}", std::process::id()));
+        let r = latency(a, Some(&dir));
+        let _ = std::fs::remove_dir_all(&dir);
+        r?;
+    }
+    Ok(())
+}
+
+/// Flags of `troupe bench latency`.
+#[derive(Debug, Args)]
+pub struct LatencyArgs {
+    /// Payload size in bytes (a laser scan with as many beams as fit).
+    #[arg(long, default_value_t = 1500)]
+    pub size: usize,
+    /// Timed round trips of each kind.
+    #[arg(long, default_value_t = 5000)]
+    pub samples: usize,
+    /// Untimed round trips first.
+    #[arg(long, default_value_t = 500)]
+    pub warmup: usize,
+    /// Also run over TLS with mutual authentication and the router's access
+    /// control, as `troupe fleet-keys` sets them up, and print both.
+    #[arg(long)]
+    pub secure: bool,
+}
+
+/// The bench's keys under `prefix`: ping, pong, req, ready.
+fn bench_keys(prefix: &str) -> [String; 4] {
+    ["ping", "pong", "req", "ready"].map(|k| format!("{prefix}/{k}"))
+}
+
+/// A robot port no stack uses, whose keys the secure bench runs under.
+const SECURE_ROBOT: u32 = 65_000;
+
+/// A scan whose encoded payload is about `size` bytes.
+fn scan_of_size(size: usize) -> laser::Scan {
+    let base = codec::encode(&laser::Scan::default(), 0.0).len();
+    let beams = size.saturating_sub(base + 2) / 4;
+    laser::Scan {
+        ranges: vec![4.2; beams],
+        ..Default::default()
+    }
+}
+
+/// Plain TCP with a namespace, or (`keys`: a directory for them) TLS with
+/// mutual authentication and access control, the pong a host of robot
+/// `SECURE_ROBOT` whose keys the bench uses.
+fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()> {
+    let ns = format!("bench-{}", std::process::id());
+    let (zr, prefix, pong_net) = match keys {
+        None => (
+            ZenohArgs {
+                listen: vec!["tcp/127.0.0.1:0".into()],
+                no_multicast: true,
+                namespace: Some(ns.clone()),
+                ..Default::default()
+            },
+            keys::BENCH_PING.trim_end_matches("/ping").to_owned(),
+            vec![
+                "--no-multicast".to_owned(),
+                "--namespace".to_owned(),
+                ns.clone(),
+            ],
+        ),
+        Some(dir) => {
+            let (router, pong) = troupe_fleet::keys::bench_configs(dir, SECURE_ROBOT)?;
+            (
+                ZenohArgs {
+                    listen: vec!["tls/127.0.0.1:0".into()],
+                    zenoh_config: Some(router),
+                    ..Default::default()
+                },
+                format!("robot/{SECURE_ROBOT}/bench"),
+                vec!["--zenoh-config".to_owned(), pong.display().to_string()],
+            )
+        }
+    };
+    let [ping_key, pong_key, req_key, ready_key] = bench_keys(&prefix);
+    let session = zr.open(Mode::Router)?;
+    let locator = troupe_node::locators(&session)
+        .into_iter()
+        .next()
+        .context("the bench router has no locator")?;
+    // Certificates name `localhost`, not the address.
+    let locator = locator.replace("tls/127.0.0.1", "tls/localhost");
+
+    let ready = session
+        .liveliness()
+        .declare_subscriber(&ready_key)
+        .history(true)
+        .wait()
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let mut child = Command::new(std::env::current_exe()?)
+        .args(["--connect", &locator])
+        .args(&pong_net)
+        .args(["bench", "pong", "--prefix", &prefix])
+        .stdin(Stdio::piped())
+        .spawn()
+        .context("starting `troupe bench pong`")?;
+    let result = (|| {
+        ready
+            .recv_timeout(Duration::from_secs(20))
+            .map_err(|e| anyhow::anyhow!("{e}"))?
+            .context("`troupe bench pong` did not come up within 20 s")?;
+
+        let replies = session
+            .declare_subscriber(&pong_key)
+            .wait()
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        let publisher = session
+            .declare_publisher(&ping_key)
+            .express(true)
+            .wait()
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        let msg = scan_of_size(a.size);
+        let size = codec::encode(&msg, 0.0).len();
+        let total = a.warmup + a.samples;
+
+        let mut pubsub = Vec::with_capacity(a.samples);
+        for i in 0..total {
+            let payload = codec::encode(&msg, i as f64);
+            let t0 = Instant::now();
+            publisher
+                .put(payload)
+                .wait()
+                .map_err(|e| anyhow::anyhow!("{e}"))?;
+            loop {
+                let s = replies
+                    .recv_timeout(Duration::from_secs(5))
+                    .map_err(|e| anyhow::anyhow!("{e}"))?
+                    .context("no echo within 5 s")?;
+                let back = codec::decode::<laser::Scan>(&s.payload().to_bytes())?;
+                if back.stamp == i as f64 {
+                    break;
+                }
+            }
+            if i >= a.warmup {
+                pubsub.push(t0.elapsed());
+            }
+        }
+
+        let mut getreply = Vec::with_capacity(a.samples);
+        for i in 0..total {
+            let payload = codec::encode(&msg, i as f64);
+            let t0 = Instant::now();
+            let rx = session
+                .get(&req_key)
+                .payload(payload)
+                .timeout(Duration::from_secs(5))
+                .wait()
+                .map_err(|e| anyhow::anyhow!("{e}"))?;
+            let r = rx.recv().map_err(|e| anyhow::anyhow!("no reply: {e}"))?;
+            let s = r
+                .into_result()
+                .map_err(|e| anyhow::anyhow!("refused: {e:?}"))?;
+            codec::decode::<laser::Scan>(&s.payload().to_bytes())?;
+            if i >= a.warmup {
+                getreply.push(t0.elapsed());
+            }
+        }
+        pubsub.sort();
+        getreply.sort();
+        let mut out = std::io::stdout().lock();
+        let over = if keys.is_some() {
+            "tls/127.0.0.1, mutual authentication and access control"
+        } else {
+            "tcp/127.0.0.1"
+        };
+        writeln!(out, "troupe bench latency: {size}-byte laser/scan@1 payload, {} samples (+{} warm-up), two processes, Zenoh over {over}", a.samples, a.warmup)?;
+        let row = |out: &mut std::io::StdoutLock, name: &str, v: &[Duration], half: bool| {
+            let f = |d: Duration| if half { d / 2 } else { d };
+            writeln!(
+                out,
+                "  {name:<26} p50 {:>7}  p90 {:>7}  p99 {:>7}  max {:>7}",
+                us(f(percentile(v, 0.5))),
+                us(f(percentile(v, 0.9))),
+                us(f(percentile(v, 0.99))),
+                us(f(percentile(v, 1.0)))
+            )
+        };
+        row(&mut out, "put/sub round trip", &pubsub, false)?;
+        row(&mut out, "one sample (round trip/2)", &pubsub, true)?;
+        row(&mut out, "get/reply round trip", &getreply, false)?;
+        Ok(())
+    })();
+    // Closing the child's stdin tells it to exit; kill it if it does not.
+    drop(child.stdin.take());
+    match child.wait_timeout_or_kill(Duration::from_secs(5)) {
+        Ok(()) => {}
+        Err(e) => tracing::warn!("bench pong: {e}"),
+    }
+    result
+}
+
+trait WaitOrKill {
+    fn wait_timeout_or_kill(&mut self, t: Duration) -> std::io::Result<()>;
+}
+
+impl WaitOrKill for std::process::Child {
+    fn wait_timeout_or_kill(&mut self, t: Duration) -> std::io::Result<()> {
+        let deadline = Instant::now() + t;
+        while Instant::now() < deadline {
+            if self.try_wait()?.is_some() {
+                return Ok(());
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        self.kill()?;
+        self.wait().map(|_| ())
+    }
+}
+
+/// The echo side: decodes each ping as a node would, re-encodes it and sends it back.
+pub fn pong(z: &ZenohArgs, prefix: &str) -> anyhow::Result<()> {
+    let [ping_key, pong_key, req_key, ready_key] = bench_keys(prefix);
+    let session = z.open(Mode::Peer)?;
+    let back = session
+        .declare_publisher(pong_key)
+        .express(true)
+        .wait()
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let _sub = session
+        .declare_subscriber(ping_key)
+        .callback(
+            move |s| match codec::decode::<laser::Scan>(&s.payload().to_bytes()) {
+                Ok(m) => {
+                    if let Err(e) = back.put(codec::encode(&m.msg, m.stamp)).wait() {
+                        tracing::warn!("pong: {e}");
+                    }
+                }
+                Err(e) => tracing::warn!("pong: {e}"),
+            },
+        )
+        .wait()
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let _q = session
+        .declare_queryable(req_key)
+        .callback(|q| {
+            let bytes = q
+                .payload()
+                .map(|p| p.to_bytes().into_owned())
+                .unwrap_or_default();
+            let sent = match codec::decode::<laser::Scan>(&bytes) {
+                Ok(m) => q
+                    .reply(q.key_expr().clone(), codec::encode(&m.msg, m.stamp))
+                    .wait(),
+                Err(e) => q.reply_err(e.to_string()).wait(),
+            };
+            if let Err(e) = sent {
+                tracing::warn!("pong: {e}");
+            }
+        })
+        .wait()
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let _token = session
+        .liveliness()
+        .declare_token(ready_key)
+        .wait()
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    // Runs until the parent closes our stdin (or dies).
+    let mut sink = Vec::new();
+    let _ = std::io::stdin().read_to_end(&mut sink);
+    let _ = session.close().wait();
+    Ok(())
+}

@@ -1,0 +1,81 @@
+//! `troupe bench`: the benchmarks that print Troupe's figures, each beside
+//! the reference it must beat where one exists (Player's, Stage's, a TCP
+//! round trip).
+//!
+//! One module per `troupe bench` subcommand; [`harness`] holds what they
+//! share (the stacks and worlds they run, statistics). They start stacks
+//! as a user does, with this binary as a child. ARCHITECTURE.md says why
+//! the benchmarks are one crate at the top of the tree.
+
+pub mod bridge;
+mod harness;
+pub mod latency;
+pub mod launch;
+pub mod nav;
+mod ray;
+pub mod record;
+pub mod serial;
+pub mod stage;
+pub mod view;
+
+use clap::Subcommand;
+use troupe_node::ZenohArgs;
+
+/// `troupe bench`'s subcommands.
+#[derive(Debug, Subcommand)]
+pub enum BenchCmd {
+    /// Latency of one sample between two processes (put/sub round trip and get/reply).
+    #[command(after_help = "Example:
+  cargo run --release -- bench latency --size 1500 --samples 5000")]
+    Latency(latency::LatencyArgs),
+    /// Time from `troupe launch` to all devices live, and restart after a kill, for a 5-node plan.
+    #[command(after_help = "Example:
+  cargo run --release -- bench launch --runs 5")]
+    Launch(launch::LaunchBenchArgs),
+    /// Simulator speed (simulated s per wall s) and peak memory on three worlds.
+    #[command(after_help = "Example:
+  cargo run --release -- bench stage --bitmaps ../shared/compat/stage/bitmaps")]
+    Stage(stage::StageBenchArgs),
+    /// Player clients through the bridge to real mapfile and Stage drivers: request round trips, a full map fetch, 100 clients at 10 Hz.
+    #[command(after_help = "Example:
+  cargo run --release -- bench bridge --map ../shared/compat/stage/bitmaps/cave.png")]
+    Bridge(crate::bridge::BridgeBenchArgs),
+    /// Navigation cores: amcl updates/s by particle count, wavefront plan time, vfh decision time.
+    #[command(after_help = "Example:
+  cargo run --release -- bench nav --map ../shared/compat/stage/bitmaps/cave.png")]
+    Nav(crate::nav::NavBenchArgs),
+    /// Scan rates of the sicklms200 and urglaser drivers against their emulators, at their baud rates.
+    #[command(after_help = "Example:
+  cargo run --release -- bench serial --seconds 5")]
+    Serial(crate::serial::SerialBenchArgs),
+    /// Recording the 100-Pioneer world flat out (loss, CPU, bytes/s), playing it back, `log info` on a large file.
+    #[command(after_help = "Example:
+  cargo run --release -- bench record --seconds 20")]
+    Record(crate::record::RecordBenchArgs),
+    /// `troupe view` under load: 100 Pioneers in real time, headless browsers on its page: their frame rates, the server's CPU, the robots' data rates.
+    #[command(after_help = "Example:
+  cargo run --release -- bench view --browsers 0,1,20 --bitmaps ../shared/compat/stage/bitmaps")]
+    View(crate::view::ViewBenchArgs),
+    /// The echo side of `bench latency` (started by it).
+    #[command(hide = true)]
+    Pong {
+        /// Where its keys live (`bench`, or a robot's keys under access control).
+        #[arg(long, default_value = "bench")]
+        prefix: String,
+    },
+}
+
+/// Runs a `troupe bench` subcommand.
+pub fn run(cmd: BenchCmd, z: &ZenohArgs) -> anyhow::Result<()> {
+    match cmd {
+        BenchCmd::Latency(a) => latency::run(&a),
+        BenchCmd::Pong { prefix } => latency::pong(z, &prefix),
+        BenchCmd::Launch(a) => launch::run(&a),
+        BenchCmd::Stage(a) => stage::run(&a),
+        BenchCmd::Bridge(a) => bridge::run(&a),
+        BenchCmd::Nav(a) => nav::run(&a),
+        BenchCmd::Serial(a) => serial::run(&a),
+        BenchCmd::Record(a) => record::run(&a),
+        BenchCmd::View(a) => view::run(&a),
+    }
+}

@@ -1,0 +1,12 @@
+//! Fleets: what it takes to run a plan on many hosts or in containers.
+//!
+//! - [`docker`]: `troupe image` (the one `FROM scratch` image) and
+//!   `troupe compose` (a compose file running a plan, one container per host);
+//! - [`keys`]: `troupe fleet-keys` (one authority, a certificate and a Zenoh
+//!   config per member, and the access rules the router enforces).
+//!
+//! Depends on the launcher for plans; nothing depends on it but the binary
+//! and the benchmarks.
+
+pub mod docker;
+pub mod keys;
