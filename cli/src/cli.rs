@@ -217,6 +217,10 @@ stack's `requires` (amcl on laser:0) are met by the replay.")]
     #[command(subcommand)]
     Log(troupe_record::LogCmd),
 
+    /// Maps from logs: `build` one with SLAM from a robot's odometry and laser, `show` one.
+    #[command(subcommand)]
+    Map(troupe_map::MapCmd),
+
     /// List the drivers this build can run (`--all`: and the Player drivers
     /// sample files name that it cannot, with what to use instead).
     Drivers {

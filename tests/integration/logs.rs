@@ -700,6 +700,28 @@ fn a_recorded_run_localizes_offline_as_it_did_live() {
         .fold(0.0, f64::max);
     assert!(moved > 1.0, "r0 wandered only {moved} m");
 
+    // The README's next step: a map from the log, shown in the terminal.
+    let log = dir.join("r0.log").display().to_string();
+    let yaml = dir.join("office.yaml").display().to_string();
+    let (status, out, err) =
+        troupe_tests::troupe_output(&troupe_tests::strings(&["map", "build", &log, "-o", &yaml]));
+    assert!(status.success(), "map build: {err}");
+    assert!(out.contains("scans used"), "{out}");
+    let text = std::fs::read_to_string(&yaml).unwrap();
+    assert!(
+        text.contains("image: office.png") && text.contains("resolution: 0.05"),
+        "{text}"
+    );
+    assert!(dir.join("office.png").exists());
+    let (status, out, err) =
+        troupe_tests::troupe_output(&troupe_tests::strings(&["map", "show", &yaml]));
+    assert!(status.success(), "map show: {err}");
+    assert!(out.contains("cells of 0.05 m"), "{out}");
+    assert!(
+        out.contains('█') || out.contains('▀') || out.contains('▄'),
+        "no walls drawn: {out}"
+    );
+
     // Replay into amcl, with no simulator: its estimates until the log's end.
     let ns = troupe_tests::unique_namespace("replay");
     let mut rep = launch_in(&dir, &ns, "worlds/replay.cfg", &[]);

@@ -9,7 +9,7 @@
 //! |---|---|
 //! | provides | one `map` |
 //! | requires | nothing |
-//! | options | `filename` (required; PNG, PGM/PPM/PBM, gzipped PNM), `resolution` (m/cell, required), `negate` (0), `origin` (centre of the map) |
+//! | options | `filename` (required; PNG, PGM/PPM/PBM, gzipped PNM, or a ROS map_server YAML naming one), `resolution` (m/cell, required for an image), `negate` (0), `origin` (centre of the map) |
 //!
 //! # Behavior
 //!
@@ -23,13 +23,19 @@
 //! - `info` answers the size, resolution and origin; `data` answers any tile,
 //!   cells off the map reading unknown (0), as Player's. A tile larger than
 //!   the whole map is refused.
+//! - A `filename` ending in `.yaml` or `.yml` is a ROS map_server map (as
+//!   `troupe map build` writes it): its image, `resolution`, `origin`,
+//!   `negate`, `occupied_thresh` and `free_thresh` are used; the cfg's own
+//!   `resolution`, `negate` or `origin`, where given, win.
 //! - `filename` is relative to the `.cfg`'s directory (Player's
 //!   `ReadFilename`); a file that cannot be read or decoded stops the node
 //!   before it provides anything, with the file and the reason.
 
 pub mod filter;
+pub mod yaml;
 
 pub use filter::{MapCspace, MapScale};
+pub use yaml::{load_any, MapYaml};
 
 use std::io::Read as _;
 use std::path::{Path, PathBuf};
@@ -74,6 +80,27 @@ pub fn load(
     resolution: f64,
     negate: bool,
     origin: Option<(f64, f64)>,
+) -> std::result::Result<OccMap, LoadError> {
+    load_with(path, resolution, negate, origin, PLAYER_THRESHOLDS)
+}
+
+/// Player's thresholds: occupied above 0.95, free below 0.1.
+pub const PLAYER_THRESHOLDS: (f64, f64) = (0.95, 0.1);
+
+/// [`load`] with other thresholds: a cell whose occupancy (`(255 - avg) /
+/// 255`, or `avg / 255` negated) is above `thresholds.0` is occupied, below
+/// `thresholds.1` free, unknown between (ROS map_server's
+/// `occupied_thresh` and `free_thresh`).
+///
+/// # Errors
+///
+/// The file cannot be read, ungzipped or decoded.
+pub fn load_with(
+    path: &Path,
+    resolution: f64,
+    negate: bool,
+    origin: Option<(f64, f64)>,
+    thresholds: (f64, f64),
 ) -> std::result::Result<OccMap, LoadError> {
     let err = |reason: String| LoadError {
         path: path.display().to_string(),
@@ -120,9 +147,9 @@ pub fn load(
         } else {
             (255.0 - a) / 255.0
         };
-        if occ > 0.95 {
+        if occ > thresholds.0 {
             OCCUPIED
-        } else if occ < 0.1 {
+        } else if occ < thresholds.1 {
             FREE
         } else {
             UNKNOWN
@@ -196,14 +223,14 @@ impl Driver for MapFile {
     fn new(section: &Section, o: Options) -> Result<Self> {
         let bad = |why: &str| NodeError::config(Self::NAME, why);
         let device = section.provided_one(Interface::Map, None)?;
-        let filename = o
-            .filename
-            .ok_or_else(|| bad("must specify map filename (filename \"map.png\")"))?;
-        let resolution = match o.resolution {
-            Some(r) if r > 0.0 && r.is_finite() => r,
-            Some(r) => return Err(bad(&format!("resolution must be positive, not {r}"))),
-            None => return Err(bad("must specify the map resolution (resolution 0.05)")),
-        };
+        let filename = o.filename.ok_or_else(|| {
+            bad("must specify map filename (filename \"map.png\" or \"map.yaml\")")
+        })?;
+        if let Some(r) = o.resolution {
+            if !(r > 0.0 && r.is_finite()) {
+                return Err(bad(&format!("resolution must be positive, not {r}")));
+            }
+        }
         let origin = match o.origin.as_deref() {
             None => None,
             Some([x, y, ..]) => Some((*x, *y)),
@@ -213,8 +240,22 @@ impl Driver for MapFile {
                 )))
             }
         };
-        let map = load(&filename, resolution, o.negate != 0.0, origin)
-            .map_err(|e| bad(&e.to_string()))?;
+        let map = if yaml::is_yaml(&filename) {
+            // ROS map_server's YAML names the image and says the rest; what
+            // the cfg says as well is taken over it, as Player's options.
+            let y = MapYaml::read(&filename).map_err(|e| bad(&e.to_string()))?;
+            let resolution = o.resolution.unwrap_or(y.resolution);
+            let negate = if o.negate != 0.0 { true } else { y.negate };
+            let origin = origin.or(Some((y.origin.0, y.origin.1)));
+            load_with(&y.image, resolution, negate, origin, y.thresholds())
+                .map_err(|e| bad(&e.to_string()))?
+        } else {
+            let resolution = o.resolution.ok_or_else(|| {
+                bad("must specify the map resolution (resolution 0.05), or give a map_server YAML as filename")
+            })?;
+            load(&filename, resolution, o.negate != 0.0, origin).map_err(|e| bad(&e.to_string()))?
+        };
+        let resolution = map.resolution();
         tracing::info!(
             "read a {} x {} map at {resolution:.3} m/pix from {}",
             map.info.width,
@@ -342,6 +383,43 @@ mod tests {
             .to_string();
         assert!(e.contains("origin"), "{e}");
         assert!(h(&format!(r#"{file},"resolution":1,"origin":[1,2,45]"#)).is_ok());
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn a_map_server_yaml_is_served_with_its_own_resolution_origin_and_thresholds() {
+        let d = tmpdir("yaml");
+        // map_server's trinary values: occupied 0, free 254, unknown 205.
+        write_pgm(&d, "built.pgm", 3, 1, &[0, 254, 205]);
+        std::fs::write(
+            d.join("built.yaml"),
+            "image: built.pgm\nresolution: 0.05\norigin: [-1.5, 2.0, 0.0]\nnegate: 0\n\
+             occupied_thresh: 0.65\nfree_thresh: 0.196\n",
+        )
+        .unwrap();
+        let h = |opts: &str| {
+            Harness::<MapFile>::from_json(&format!(
+                r#"{{"name":"mapfile","provides":["map:0"],"options":{{"filename":"{}"{opts}}}}}"#,
+                d.join("built.yaml").display()
+            ))
+        };
+        let mut served = h("").unwrap();
+        let p = served.request(MAP, &map::GetInfo).unwrap();
+        let info: map::Info = served.reply(p).unwrap().unwrap();
+        assert_eq!((info.width, info.height, info.resolution), (3, 1, 0.05));
+        assert_eq!(info.origin, Pose2d::new(-1.5, 2.0, 0.0));
+        assert_eq!(served.driver().map().cells, vec![OCCUPIED, FREE, UNKNOWN]);
+        // What the cfg says wins, as Player's options do.
+        let over = h(r#","resolution":0.1,"origin":[0,0]"#).unwrap();
+        assert_eq!(over.driver().map().info.origin, Pose2d::new(0.0, 0.0, 0.0));
+        assert_eq!(over.driver().map().info.resolution, 0.1);
+        // A broken YAML names its line.
+        std::fs::write(d.join("built.yaml"), "image: built.pgm\nresolution: x\n").unwrap();
+        let e = h("").err().unwrap().to_string();
+        assert!(
+            e.contains("built.yaml:2: resolution `x` is not a number"),
+            "{e}"
+        );
         let _ = std::fs::remove_dir_all(&d);
     }
 

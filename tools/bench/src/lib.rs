@@ -15,6 +15,7 @@ pub mod nav;
 mod ray;
 pub mod record;
 pub mod serial;
+pub mod slam;
 pub mod stage;
 pub mod view;
 
@@ -56,6 +57,10 @@ pub enum BenchCmd {
     #[command(after_help = "Example:
   cargo run --release -- bench view --browsers 0,1,20 --bitmaps ../shared/compat/stage/bitmaps")]
     View(crate::view::ViewBenchArgs),
+    /// Maps built from simulated wanders (office, Stage's cave and autolab): accuracy, coverage, speed.
+    #[command(after_help = "Example:
+  cargo run --release -- bench slam --seconds 900 --stage-worlds ../shared/compat/stage")]
+    Slam(slam::SlamBenchArgs),
     /// The echo side of `bench latency` (started by it).
     #[command(hide = true)]
     Pong {
@@ -77,5 +82,6 @@ pub fn run(cmd: BenchCmd, z: &ZenohArgs) -> anyhow::Result<()> {
         BenchCmd::Serial(a) => serial::run(&a),
         BenchCmd::Record(a) => record::run(&a),
         BenchCmd::View(a) => view::run(&a),
+        BenchCmd::Slam(a) => slam::run(&a),
     }
 }

@@ -1,0 +1,101 @@
+//! How good a built map is, against the world it was made in:
+//!
+//! - **accuracy**: the share of the map's occupied cells within 10 cm of a
+//!   true obstacle, after the best rigid alignment of map to world;
+//! - **coverage**: the share of the walls the robot saw (where its true
+//!   beams ended) that the map has an occupied cell within 10 cm of.
+//!
+//! The alignment starts where the caller says the map's frame is in the
+//! world (the robot's true pose at its first keyframe) and is refined by
+//! matching the map's occupied cells against the true obstacles.
+
+use troupe_geom::Pose;
+
+use crate::matcher::{Matcher, Window};
+
+/// A set of points, filed by cell for "is there one within `d`?".
+pub struct Near {
+    cell: f64,
+    cells: std::collections::HashMap<(i64, i64), Vec<(f64, f64)>>,
+}
+
+impl Near {
+    /// Files `points` in cells of `cell` metres.
+    pub fn new(points: &[(f64, f64)], cell: f64) -> Near {
+        let mut cells: std::collections::HashMap<(i64, i64), Vec<(f64, f64)>> =
+            std::collections::HashMap::new();
+        for &(x, y) in points {
+            cells
+                .entry(((x / cell).floor() as i64, (y / cell).floor() as i64))
+                .or_default()
+                .push((x, y));
+        }
+        Near { cell, cells }
+    }
+
+    /// Whether a point lies within `d` (no more than the cell size) of `(x, y)`.
+    pub fn within(&self, x: f64, y: f64, d: f64) -> bool {
+        let (ci, cj) = (
+            (x / self.cell).floor() as i64,
+            (y / self.cell).floor() as i64,
+        );
+        (-1..=1).any(|di| {
+            (-1..=1).any(|dj| {
+                self.cells.get(&(ci + di, cj + dj)).is_some_and(|v| {
+                    v.iter()
+                        .any(|&(px, py)| (px - x).powi(2) + (py - y).powi(2) <= d * d)
+                })
+            })
+        })
+    }
+}
+
+/// A map's figures against the truth.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Score {
+    /// Share of occupied map cells within the tolerance of an obstacle.
+    pub accuracy: f64,
+    /// Share of seen wall points with an occupied map cell within the tolerance.
+    pub coverage: f64,
+    /// The map-to-world transform used.
+    pub alignment: Pose,
+}
+
+/// Scores `occupied` (map frame) against the true `obstacles` and the
+/// `seen` wall points (world frame), the map frame guessed at `guess` in
+/// the world; `tolerance` metres (0.1).
+pub fn score(
+    occupied: &[(f64, f64)],
+    obstacles: &[(f64, f64)],
+    seen: &[(f64, f64)],
+    guess: Pose,
+    tolerance: f64,
+) -> Score {
+    // The best rigid alignment: the map's cells on the obstacles' field.
+    let m = Matcher::new(obstacles, 0.05, 1.0);
+    let sample: Vec<(f64, f64)> = occupied.iter().step_by(3).copied().collect();
+    let reach = sample.iter().map(|&(x, y)| x.hypot(y)).fold(1.0, f64::max);
+    let found = m.search(&sample, guess, Window { xy: 0.5, yaw: 0.1 }, reach, None);
+    let alignment = if found.score >= m.field().score(&sample, guess) {
+        found.pose
+    } else {
+        guess
+    };
+    let place = alignment.applier();
+    let placed: Vec<(f64, f64)> = occupied.iter().map(|&(x, y)| place(x, y)).collect();
+    let truth = Near::new(obstacles, tolerance.max(0.05));
+    let good = placed
+        .iter()
+        .filter(|&&(x, y)| truth.within(x, y, tolerance))
+        .count();
+    let map = Near::new(&placed, tolerance.max(0.05));
+    let covered = seen
+        .iter()
+        .filter(|&&(x, y)| map.within(x, y, tolerance))
+        .count();
+    Score {
+        accuracy: good as f64 / occupied.len().max(1) as f64,
+        coverage: covered as f64 / seen.len().max(1) as f64,
+        alignment,
+    }
+}

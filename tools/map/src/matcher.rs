@@ -1,0 +1,394 @@
+//! Correlative scan matching (Olson, "Real-Time Correlative Scan Matching",
+//! 2009): a scan's points are laid on a likelihood field of what was seen
+//! before at every pose of a window, and the pose where they fit best wins.
+//!
+//! The search is exhaustive, so it cannot be caught in a local optimum the
+//! way ICP can, and it says how good the best fit is (the share of points
+//! that land on something), which is what a loop closure is accepted on.
+//! It runs on two fields: a coarse one (cells 4× larger, blurred wider)
+//! over the whole window, then the fine one around the best few coarse
+//! poses, then a last look between the fine steps.
+
+use troupe_geom::Pose;
+
+/// For each cell, how likely a beam ending there hit something:
+/// `exp(-d² / 2σ²)` of its distance `d` to the nearest point seen.
+#[derive(Debug, Clone)]
+pub struct Field {
+    x0: f64,
+    y0: f64,
+    res: f64,
+    w: usize,
+    h: usize,
+    cells: Vec<f32>,
+}
+
+impl Field {
+    /// The field of `points` (world frame) with cells of `res` metres and a
+    /// falloff of `sigma`, covering the points and `margin` around them.
+    pub fn new(points: &[(f64, f64)], res: f64, sigma: f64, margin: f64) -> Field {
+        let (mut lo, mut hi) = ((f64::MAX, f64::MAX), (f64::MIN, f64::MIN));
+        for &(x, y) in points {
+            lo = (lo.0.min(x), lo.1.min(y));
+            hi = (hi.0.max(x), hi.1.max(y));
+        }
+        if points.is_empty() {
+            (lo, hi) = ((0.0, 0.0), (0.0, 0.0));
+        }
+        let (x0, y0) = (lo.0 - margin, lo.1 - margin);
+        let w = (((hi.0 + margin - x0) / res).ceil() as usize).max(1);
+        let h = (((hi.1 + margin - y0) / res).ceil() as usize).max(1);
+        let mut cells = vec![0f32; w * h];
+        // Each cell within 3σ of a point takes the likelihood of its centre.
+        let reach = (3.0 * sigma / res).ceil() as i64;
+        let k = -1.0 / (2.0 * sigma * sigma);
+        for &(x, y) in points {
+            let ci = ((x - x0) / res).floor() as i64;
+            let cj = ((y - y0) / res).floor() as i64;
+            for j in (cj - reach).max(0)..=(cj + reach).min(h as i64 - 1) {
+                let dy = y0 + (j as f64 + 0.5) * res - y;
+                let row = &mut cells[j as usize * w..(j as usize + 1) * w];
+                for i in (ci - reach).max(0)..=(ci + reach).min(w as i64 - 1) {
+                    let dx = x0 + (i as f64 + 0.5) * res - x;
+                    let v = ((dx * dx + dy * dy) * k).exp() as f32;
+                    let c = &mut row[i as usize];
+                    *c = c.max(v);
+                }
+            }
+        }
+        Field {
+            x0,
+            y0,
+            res,
+            w,
+            h,
+            cells,
+        }
+    }
+
+    /// Metres per cell.
+    pub fn res(&self) -> f64 {
+        self.res
+    }
+
+    #[inline]
+    fn cell(&self, i: i64, j: i64) -> f32 {
+        if i >= 0 && j >= 0 && (i as usize) < self.w && (j as usize) < self.h {
+            self.cells[j as usize * self.w + i as usize]
+        } else {
+            0.0
+        }
+    }
+
+    /// The field at a world point, interpolated between cells.
+    pub fn at(&self, x: f64, y: f64) -> f64 {
+        let fx = (x - self.x0) / self.res - 0.5;
+        let fy = (y - self.y0) / self.res - 0.5;
+        let (i, j) = (fx.floor() as i64, fy.floor() as i64);
+        let (u, v) = ((fx - i as f64) as f32, (fy - j as f64) as f32);
+        let a = self.cell(i, j) * (1.0 - u) + self.cell(i + 1, j) * u;
+        let b = self.cell(i, j + 1) * (1.0 - u) + self.cell(i + 1, j + 1) * u;
+        f64::from(a * (1.0 - v) + b * v)
+    }
+
+    /// The mean of the field under `points` (robot frame) placed at `pose`.
+    pub fn score(&self, points: &[(f64, f64)], pose: Pose) -> f64 {
+        if points.is_empty() {
+            return 0.0;
+        }
+        let place = pose.applier();
+        let sum: f64 = points
+            .iter()
+            .map(|&(x, y)| {
+                let (wx, wy) = place(x, y);
+                self.at(wx, wy)
+            })
+            .sum();
+        sum / points.len() as f64
+    }
+}
+
+/// How far from its guess a pose is looked for.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Window {
+    /// Metres either way, in x and y.
+    pub xy: f64,
+    /// Radians either way.
+    pub yaw: f64,
+}
+
+/// The best pose found and how well the scan fits there (0–1: the mean
+/// likelihood of its points).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Match {
+    /// The pose.
+    pub pose: Pose,
+    /// The fit.
+    pub score: f64,
+}
+
+/// A fine and a coarse field of the same points.
+#[derive(Debug, Clone)]
+pub struct Matcher {
+    fine: Field,
+    coarse: Field,
+}
+
+/// How many of the best coarse poses are refined.
+const CANDIDATES: usize = 6;
+
+/// What odometry says of a pose: a match is charged `weight × ((d /
+/// xy)² + (dyaw / yaw)²)` for lying `d` metres and `dyaw` radians from its
+/// guess, so where the scan cannot tell (along a corridor) the guess wins.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Prior {
+    /// Metres at which the charge is `weight`.
+    pub xy: f64,
+    /// Radians at which the charge is `weight`.
+    pub yaw: f64,
+    /// The charge there.
+    pub weight: f64,
+}
+
+impl Prior {
+    fn charge(&self, guess: Pose, p: Pose) -> f64 {
+        let d2 = (p.x - guess.x).powi(2) + (p.y - guess.y).powi(2);
+        let a = troupe_geom::normalize(p.yaw - guess.yaw);
+        self.weight * (d2 / (self.xy * self.xy) + a * a / (self.yaw * self.yaw))
+    }
+}
+
+impl Matcher {
+    /// The fields of `points` (world frame) at `res` metres.
+    pub fn new(points: &[(f64, f64)], res: f64, margin: f64) -> Matcher {
+        Matcher {
+            fine: Field::new(points, res, 1.5 * res, margin),
+            coarse: Field::new(points, 4.0 * res, 4.0 * res, margin),
+        }
+    }
+
+    /// The fine field.
+    pub fn field(&self) -> &Field {
+        &self.fine
+    }
+
+    /// The pose within `window` of `guess` where `points` (robot frame)
+    /// fit best, less what `prior` charges for straying from the guess;
+    /// `reach` is the farthest point's range, which sets the angular step
+    /// (a step moves the farthest point about a cell). The match's score
+    /// is the fit alone.
+    pub fn search(
+        &self,
+        points: &[(f64, f64)],
+        guess: Pose,
+        window: Window,
+        reach: f64,
+        prior: Option<Prior>,
+    ) -> Match {
+        let reach = reach.max(1.0);
+        let inside = |p: Pose| {
+            (p.x - guess.x).abs() <= window.xy + 1e-9
+                && (p.y - guess.y).abs() <= window.xy + 1e-9
+                && troupe_geom::normalize(p.yaw - guess.yaw).abs() <= window.yaw + 1e-9
+        };
+        let value = |p: Pose, fit: f64| fit - prior.map_or(0.0, |pr| pr.charge(guess, p));
+        let coarse_step = self.coarse.res / reach;
+        let coarse = grid_search(
+            &self.coarse,
+            points,
+            guess,
+            window,
+            coarse_step,
+            4 * CANDIDATES,
+        );
+        let mut coarse: Vec<(f64, Match)> = coarse
+            .into_iter()
+            .filter(|m| inside(m.pose))
+            .map(|m| (value(m.pose, m.score), m))
+            .collect();
+        coarse.sort_by(|a, b| b.0.total_cmp(&a.0));
+        coarse.truncate(CANDIDATES);
+        // Refine each on the fine field, within one coarse step, scoring
+        // each pose on the interpolated field.
+        let fine_step = self.fine.res / reach;
+        let (nxy, nyaw) = (
+            (self.coarse.res / self.fine.res).round() as i64,
+            (coarse_step / fine_step).round() as i64,
+        );
+        let mut best = Match {
+            pose: guess,
+            score: self.fine.score(points, guess),
+        };
+        let mut best_value = value(guess, best.score);
+        for (_, c) in coarse {
+            for k in -nyaw..=nyaw {
+                for j in -nxy..=nxy {
+                    for i in -nxy..=nxy {
+                        let p = Pose::new(
+                            c.pose.x + i as f64 * self.fine.res,
+                            c.pose.y + j as f64 * self.fine.res,
+                            c.pose.yaw + k as f64 * fine_step,
+                        );
+                        if !inside(p) {
+                            continue;
+                        }
+                        let fit = self.fine.score(points, p);
+                        let v = value(p, fit);
+                        if v > best_value {
+                            (best, best_value) = (
+                                Match {
+                                    pose: p,
+                                    score: fit,
+                                },
+                                v,
+                            );
+                        }
+                    }
+                }
+            }
+        }
+        // A last look between the fine steps.
+        let (mut dxy, mut dyaw) = (self.fine.res / 2.0, fine_step / 2.0);
+        for _ in 0..3 {
+            let around = best.pose;
+            for (dx, dy, da) in [
+                (dxy, 0.0, 0.0),
+                (-dxy, 0.0, 0.0),
+                (0.0, dxy, 0.0),
+                (0.0, -dxy, 0.0),
+                (0.0, 0.0, dyaw),
+                (0.0, 0.0, -dyaw),
+            ] {
+                let p = Pose::new(around.x + dx, around.y + dy, around.yaw + da);
+                let fit = self.fine.score(points, p);
+                let v = value(p, fit);
+                if v > best_value && inside(p) {
+                    (best, best_value) = (
+                        Match {
+                            pose: p,
+                            score: fit,
+                        },
+                        v,
+                    );
+                }
+            }
+            dxy /= 2.0;
+            dyaw /= 2.0;
+        }
+        best
+    }
+}
+
+/// The `keep` best poses (by the mean field under the points, read at the
+/// nearest cell) on a lattice: every `yaw_step` radians and every cell of
+/// `field` within `window` of `guess`.
+fn grid_search(
+    field: &Field,
+    points: &[(f64, f64)],
+    guess: Pose,
+    window: Window,
+    yaw_step: f64,
+    keep: usize,
+) -> Vec<Match> {
+    let res = field.res;
+    let n_xy = (window.xy / res).ceil() as i64;
+    let n_yaw = (window.yaw / yaw_step).ceil() as i64;
+    let mut found: Vec<Match> = Vec::new();
+    let mut cells: Vec<(i64, i64)> = Vec::with_capacity(points.len());
+    let mut sums = vec![0f32; ((2 * n_xy + 1) * (2 * n_xy + 1)) as usize];
+    for k in -n_yaw..=n_yaw {
+        let yaw = guess.yaw + k as f64 * yaw_step;
+        let (s, c) = yaw.sin_cos();
+        cells.clear();
+        for &(x, y) in points {
+            let wx = guess.x + c * x - s * y;
+            let wy = guess.y + s * x + c * y;
+            cells.push((
+                ((wx - field.x0) / res).floor() as i64,
+                ((wy - field.y0) / res).floor() as i64,
+            ));
+        }
+        sums.iter_mut().for_each(|v| *v = 0.0);
+        let side = (2 * n_xy + 1) as usize;
+        for &(ci, cj) in &cells {
+            for dj in -n_xy..=n_xy {
+                let j = cj + dj;
+                if j < 0 || j as usize >= field.h {
+                    continue;
+                }
+                let row = &field.cells[j as usize * field.w..(j as usize + 1) * field.w];
+                let out = &mut sums[(dj + n_xy) as usize * side..][..side];
+                for (o, di) in out.iter_mut().zip(-n_xy..=n_xy) {
+                    let i = ci + di;
+                    if i >= 0 && (i as usize) < field.w {
+                        *o += row[i as usize];
+                    }
+                }
+            }
+        }
+        for (idx, &sum) in sums.iter().enumerate() {
+            let (di, dj) = ((idx % side) as i64 - n_xy, (idx / side) as i64 - n_xy);
+            let score = f64::from(sum) / points.len().max(1) as f64;
+            if found.len() < keep || score > found[found.len() - 1].score {
+                let pose = Pose::new(guess.x + di as f64 * res, guess.y + dj as f64 * res, yaw);
+                // Keep the best `keep`, at least a cell apart.
+                if let Some(near) = found.iter_mut().find(|m| {
+                    (m.pose.x - pose.x).abs() < 2.0 * res
+                        && (m.pose.y - pose.y).abs() < 2.0 * res
+                        && (m.pose.yaw - pose.yaw).abs() < 2.0 * yaw_step
+                }) {
+                    if score > near.score {
+                        *near = Match { pose, score };
+                    }
+                } else {
+                    found.push(Match { pose, score });
+                }
+                found.sort_by(|a, b| b.score.total_cmp(&a.score));
+                found.truncate(keep);
+            }
+        }
+    }
+    found
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An L of walls: 4 m along x at y = 2, 3 m along y at x = 3.
+    fn walls() -> Vec<(f64, f64)> {
+        let mut v: Vec<(f64, f64)> = (0..80).map(|i| (-1.0 + i as f64 * 0.05, 2.0)).collect();
+        v.extend((0..60).map(|i| (3.0, -1.0 + i as f64 * 0.05)));
+        v
+    }
+
+    #[test]
+    fn a_scan_of_the_walls_is_found_where_it_was_taken() {
+        let truth = Pose::new(0.4, -0.3, 0.2);
+        let to_robot = truth.inverse();
+        let points: Vec<(f64, f64)> = walls()
+            .iter()
+            .step_by(2)
+            .map(|&(x, y)| to_robot.apply(x, y))
+            .collect();
+        let m = Matcher::new(&walls(), 0.05, 1.0);
+        let guess = Pose::new(0.1, 0.0, 0.0);
+        let got = m.search(&points, guess, Window { xy: 0.5, yaw: 0.4 }, 4.0, None);
+        assert!(
+            (got.pose.x - truth.x).abs() < 0.02
+                && (got.pose.y - truth.y).abs() < 0.02
+                && (got.pose.yaw - truth.yaw).abs() < 0.01,
+            "{got:?}"
+        );
+        assert!(got.score > 0.8, "{got:?}");
+        // Out of the window it is not found, and the fit says so.
+        let far = m.search(
+            &points,
+            Pose::new(2.0, 2.0, 1.5),
+            Window { xy: 0.2, yaw: 0.1 },
+            4.0,
+            None,
+        );
+        assert!(far.score < 0.5, "{far:?}");
+    }
+}

@@ -1,0 +1,309 @@
+//! The map itself: every scan's beams traced through a grid of log-odds
+//! (a beam's cells are more likely free, its end more likely occupied),
+//! then written as ROS map_server writes a map — a PNG and a YAML beside
+//! it — which `mapfile`, Nav2, slam_toolbox and Foxglove read.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use troupe_geom::Pose;
+
+/// Log-odds added where a beam ends (p = 0.7) and where it passes (p = 0.4).
+const HIT: f32 = 0.847;
+const MISS: f32 = -0.405;
+/// Log-odds are kept within ±this.
+const CLAMP: f32 = 6.0;
+/// map_server's thresholds: above `occupied_thresh` a cell is occupied,
+/// below `free_thresh` free, unknown between.
+pub const OCCUPIED_THRESH: f64 = 0.65;
+/// See [`OCCUPIED_THRESH`].
+pub const FREE_THRESH: f64 = 0.196;
+
+/// A growing occupancy grid.
+#[derive(Debug, Clone)]
+pub struct Occupancy {
+    res: f64,
+    /// World coordinates of cell (0, 0)'s corner.
+    x0: f64,
+    y0: f64,
+    w: usize,
+    h: usize,
+    odds: Vec<f32>,
+}
+
+/// What a cell is, by map_server's thresholds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Cell {
+    /// Likely free.
+    Free,
+    /// Likely occupied.
+    Occupied,
+    /// Seen too little to say.
+    Unknown,
+}
+
+impl Occupancy {
+    /// An empty grid of `res` metres per cell.
+    pub fn new(res: f64) -> Occupancy {
+        Occupancy {
+            res,
+            x0: 0.0,
+            y0: 0.0,
+            w: 0,
+            h: 0,
+            odds: Vec::new(),
+        }
+    }
+
+    /// Metres per cell.
+    pub fn res(&self) -> f64 {
+        self.res
+    }
+
+    /// Cells across and up.
+    pub fn size(&self) -> (usize, usize) {
+        (self.w, self.h)
+    }
+
+    /// World coordinates of the grid's lower-left corner.
+    pub fn origin(&self) -> (f64, f64) {
+        (self.x0, self.y0)
+    }
+
+    /// Grows the grid to hold the box `lo`–`hi` (world coordinates).
+    fn reserve(&mut self, lo: (f64, f64), hi: (f64, f64)) {
+        let margin = 1.0;
+        let (nx0, ny0, nx1, ny1) = if self.w == 0 {
+            (lo.0 - margin, lo.1 - margin, hi.0 + margin, hi.1 + margin)
+        } else {
+            let (x1, y1) = (
+                self.x0 + self.w as f64 * self.res,
+                self.y0 + self.h as f64 * self.res,
+            );
+            if lo.0 >= self.x0 && lo.1 >= self.y0 && hi.0 < x1 && hi.1 < y1 {
+                return;
+            }
+            (
+                self.x0.min(lo.0 - margin),
+                self.y0.min(lo.1 - margin),
+                x1.max(hi.0 + margin),
+                y1.max(hi.1 + margin),
+            )
+        };
+        // Keep the old cells on the same lattice.
+        let shift_x = ((self.x0 - nx0) / self.res).ceil().max(0.0) as usize;
+        let shift_y = ((self.y0 - ny0) / self.res).ceil().max(0.0) as usize;
+        let (x0, y0) = if self.w == 0 {
+            (nx0, ny0)
+        } else {
+            (
+                self.x0 - shift_x as f64 * self.res,
+                self.y0 - shift_y as f64 * self.res,
+            )
+        };
+        let w = ((nx1 - x0) / self.res).ceil() as usize + 1;
+        let h = ((ny1 - y0) / self.res).ceil() as usize + 1;
+        let mut odds = vec![0f32; w * h];
+        for j in 0..self.h {
+            let from = &self.odds[j * self.w..(j + 1) * self.w];
+            let at = (j + shift_y) * w + shift_x;
+            odds[at..at + self.w].copy_from_slice(from);
+        }
+        (self.x0, self.y0, self.w, self.h, self.odds) = (x0, y0, w, h, odds);
+    }
+
+    fn index(&self, x: f64, y: f64) -> (i64, i64) {
+        (
+            ((x - self.x0) / self.res).floor() as i64,
+            ((y - self.y0) / self.res).floor() as i64,
+        )
+    }
+
+    fn bump(&mut self, i: i64, j: i64, by: f32) {
+        if i >= 0 && j >= 0 && (i as usize) < self.w && (j as usize) < self.h {
+            let c = &mut self.odds[j as usize * self.w + i as usize];
+            *c = (*c + by).clamp(-CLAMP, CLAMP);
+        }
+    }
+
+    /// Traces one scan's beams from `sensor` (its pose in the world): the
+    /// cells along each beam are seen free, the cell it ends in occupied
+    /// (unless the beam hit nothing, at `max_range`).
+    pub fn add(&mut self, sensor: Pose, min_angle: f64, step: f64, max_range: f64, ranges: &[f32]) {
+        let reach = max_range.min(30.0);
+        self.reserve(
+            (sensor.x - reach, sensor.y - reach),
+            (sensor.x + reach, sensor.y + reach),
+        );
+        let o = self.index(sensor.x, sensor.y);
+        for (k, &r) in ranges.iter().enumerate() {
+            let r = f64::from(r);
+            if !r.is_finite() || r <= 0.0 {
+                continue;
+            }
+            let hit = r < max_range - 0.01;
+            let r = r.min(reach);
+            let a = sensor.yaw + min_angle + k as f64 * step;
+            let end = self.index(sensor.x + r * a.cos(), sensor.y + r * a.sin());
+            self.trace(o, end, hit);
+        }
+    }
+
+    /// Bresenham from `a` to `b`: free along, occupied at `b` if `hit`.
+    /// A hit's last cell before `b` is left alone: a beam grazing a wall
+    /// passes through the wall's cells next to the one it ends in, and
+    /// would otherwise wear away walls seen at a slant.
+    fn trace(&mut self, a: (i64, i64), b: (i64, i64), hit: bool) {
+        let (dx, dy) = ((b.0 - a.0).abs(), -(b.1 - a.1).abs());
+        let (sx, sy) = ((b.0 - a.0).signum(), (b.1 - a.1).signum());
+        let (mut x, mut y, mut err) = (a.0, a.1, dx + dy);
+        let spare = i64::from(hit);
+        let mut left = dx.max(-dy);
+        while (x, y) != b {
+            if left > spare {
+                self.bump(x, y, MISS);
+            }
+            left -= 1;
+            let e2 = 2 * err;
+            if e2 >= dy {
+                err += dy;
+                x += sx;
+            }
+            if e2 <= dx {
+                err += dx;
+                y += sy;
+            }
+        }
+        self.bump(b.0, b.1, if hit { HIT } else { MISS });
+    }
+
+    /// Cell (`i`, `j`) (from the lower left) by map_server's thresholds.
+    pub fn cell(&self, i: usize, j: usize) -> Cell {
+        let l = self.odds[j * self.w + i];
+        let p = 1.0 - 1.0 / (1.0 + f64::from(l).exp());
+        if p > OCCUPIED_THRESH {
+            Cell::Occupied
+        } else if p < FREE_THRESH {
+            Cell::Free
+        } else {
+            Cell::Unknown
+        }
+    }
+
+    /// The world coordinates of the centres of the occupied cells.
+    pub fn occupied(&self) -> Vec<(f64, f64)> {
+        let mut out = Vec::new();
+        for j in 0..self.h {
+            for i in 0..self.w {
+                if self.cell(i, j) == Cell::Occupied {
+                    out.push((
+                        self.x0 + (i as f64 + 0.5) * self.res,
+                        self.y0 + (j as f64 + 0.5) * self.res,
+                    ));
+                }
+            }
+        }
+        out
+    }
+
+    /// Cuts the grid down to the cells seen, and a margin of `cells`.
+    pub fn trim(&mut self, cells: usize) {
+        let (mut lo, mut hi) = ((usize::MAX, usize::MAX), (0, 0));
+        for j in 0..self.h {
+            for i in 0..self.w {
+                if self.odds[j * self.w + i] != 0.0 {
+                    lo = (lo.0.min(i), lo.1.min(j));
+                    hi = (hi.0.max(i), hi.1.max(j));
+                }
+            }
+        }
+        if lo.0 == usize::MAX {
+            return;
+        }
+        let (i0, j0) = (lo.0.saturating_sub(cells), lo.1.saturating_sub(cells));
+        let (i1, j1) = (
+            (hi.0 + cells).min(self.w - 1),
+            (hi.1 + cells).min(self.h - 1),
+        );
+        let (w, h) = (i1 - i0 + 1, j1 - j0 + 1);
+        let mut odds = Vec::with_capacity(w * h);
+        for j in j0..=j1 {
+            odds.extend_from_slice(&self.odds[j * self.w + i0..=j * self.w + i1]);
+        }
+        self.x0 += i0 as f64 * self.res;
+        self.y0 += j0 as f64 * self.res;
+        (self.w, self.h, self.odds) = (w, h, odds);
+    }
+
+    /// The map as map_server's trinary image: occupied 0, free 254,
+    /// unknown 205, the top row the grid's highest.
+    pub fn image(&self) -> image::GrayImage {
+        let (w, h) = (self.w as u32, self.h as u32);
+        image::GrayImage::from_fn(w, h, |x, y| {
+            let j = (h - 1 - y) as usize;
+            image::Luma([match self.cell(x as usize, j) {
+                Cell::Occupied => 0,
+                Cell::Free => 254,
+                Cell::Unknown => 205,
+            }])
+        })
+    }
+
+    /// Writes `yaml` and the PNG it names (same stem), in map_server's format.
+    ///
+    /// # Errors
+    ///
+    /// A file cannot be written.
+    pub fn save(&self, yaml: &Path) -> Result<PathBuf, MapWriteError> {
+        let png = yaml.with_extension("png");
+        let name = png
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        self.image()
+            .save_with_format(&png, image::ImageFormat::Png)
+            .map_err(|e| MapWriteError(png.clone(), e.to_string()))?;
+        let mut text = String::new();
+        let _ = writeln!(
+            text,
+            "# Written by `troupe map build`: an occupancy map in ROS map_server's format."
+        );
+        let _ = writeln!(text, "image: {name}");
+        let _ = writeln!(text, "resolution: {}", self.res);
+        let _ = writeln!(text, "origin: [{:.4}, {:.4}, 0.0]", self.x0, self.y0);
+        let _ = writeln!(text, "negate: 0");
+        let _ = writeln!(text, "occupied_thresh: {OCCUPIED_THRESH}");
+        let _ = writeln!(text, "free_thresh: {FREE_THRESH}");
+        std::fs::write(yaml, text).map_err(|e| MapWriteError(yaml.to_owned(), e.to_string()))?;
+        Ok(png)
+    }
+}
+
+/// A map file that could not be written.
+#[derive(Debug, thiserror::Error)]
+#[error("writing {path}: {why}", path = .0.display(), why = .1)]
+pub struct MapWriteError(pub PathBuf, pub String);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_beam_clears_its_way_and_marks_its_end() {
+        let mut g = Occupancy::new(0.1);
+        for _ in 0..5 {
+            g.add(Pose::new(0.0, 0.0, 0.0), 0.0, 0.0, 8.0, &[2.0]);
+        }
+        let (x0, y0) = g.origin();
+        let at = |x: f64, y: f64| g.cell(((x - x0) / 0.1) as usize, ((y - y0) / 0.1) as usize);
+        assert_eq!(at(1.0, 0.05), Cell::Free);
+        assert_eq!(at(2.05, 0.05), Cell::Occupied);
+        assert_eq!(at(3.0, 0.05), Cell::Unknown);
+        assert_eq!(g.occupied().len(), 1);
+        // Growing the grid keeps what it knew.
+        g.add(Pose::new(-20.0, 0.0, 0.0), 0.0, 0.0, 8.0, &[1.0]);
+        assert_eq!(g.occupied().len(), 2);
+        g.trim(2);
+        assert_eq!(g.occupied().len(), 2);
+    }
+}

@@ -1,0 +1,263 @@
+//! Logs to build maps from, made with Troupe's Stage: a robot of a world
+//! wanders (its own controller, `ctrl "wander"` or given here) with its
+//! odometry off by a fixed error, and its odometry and laser are written
+//! as Player's `writelog` writes them. Beside the log: the truth to judge
+//! a map by — the robot's true poses, where its beams truly ended, and the
+//! world's static obstacles.
+//!
+//! The simulator has no randomness of its own here (no `lasernoise`), so a
+//! world, a robot and a duration always give the same log.
+
+use troupe_geom::Pose;
+use troupe_msgs::{laser, position2d, AnyMsg, Interface, Pose2d, Pose3d, Size3d};
+use troupe_stage::sim::{Command, Sim};
+use troupe_stage::world::{Kind, Localization, World};
+
+/// A simulated run: its log and its truth.
+#[derive(Debug, Clone)]
+pub struct Run {
+    /// The Player text log (odometry on `6665:position2d:0`, the laser on
+    /// `6665:laser:0`).
+    pub log: String,
+    /// The robot's true pose at each logged scan.
+    pub truth: Vec<(f64, Pose)>,
+    /// Where the true beams ended, one point per 5 cm.
+    pub seen: Vec<(f64, f64)>,
+    /// The static obstacles, one point per cell of the world's raster.
+    pub obstacles: Vec<(f64, f64)>,
+    /// Metres the robot truly drove.
+    pub driven: f64,
+}
+
+/// What to simulate.
+#[derive(Debug, Clone)]
+pub struct Setup {
+    /// The robot's name in the world.
+    pub robot: String,
+    /// Simulated seconds.
+    pub seconds: f64,
+    /// Odometry's error in x, y and yaw (a fraction: 0.05 reads 5% long).
+    pub odom_error: [f64; 3],
+    /// Seconds between logged scans (and odometry).
+    pub every: f64,
+    /// Who drives the robot.
+    pub driver: Driver,
+}
+
+/// Who drives the simulated robot.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Driver {
+    /// Its own controller, as the world file says (`ctrl "wander"`).
+    Own,
+    /// This Stage controller instead (`wander`).
+    Ctrl(String),
+    /// [`Explorer`]: cruises, steers to open space, backs out of stalls.
+    Explore,
+}
+
+/// A driver for exploring a building: Stage's `wander` turns in place
+/// where it meets something and wedges itself in doorways. This one
+/// cruises at 0.45 m/s steering towards the more open side, turns away
+/// from what is ahead, backs out of a stall, and every 40 s takes a turn
+/// of its own, so it sees the rooms, not one wall.
+#[derive(Debug, Clone, Default)]
+pub struct Explorer {
+    backing: u32,
+    turning: u32,
+    turn_left: bool,
+}
+
+impl Explorer {
+    /// The velocity (forward m/s, turn rad/s) for a scan of beams evenly
+    /// over `fov` radians (rightmost first), at step `k`.
+    pub fn drive(&mut self, ranges: &[f64], fov: f64, stalled: bool, k: u64) -> (f64, f64) {
+        let n = ranges.len().max(1);
+        let angle = |i: usize| -fov / 2.0 + fov * i as f64 / (n - 1).max(1) as f64;
+        let over = |lo: f64, hi: f64, f: fn(f64, f64) -> f64, init: f64| {
+            ranges
+                .iter()
+                .enumerate()
+                .filter(|&(i, _)| (lo..=hi).contains(&angle(i)))
+                .fold(init, |a, (_, &r)| f(a, r))
+        };
+        let front = over(-0.45, 0.45, f64::min, f64::INFINITY);
+        let left = over(0.5, 1.6, |a, r| a + r, 0.0);
+        let right = over(-1.6, -0.5, |a, r| a + r, 0.0);
+        if stalled && self.backing == 0 {
+            self.backing = 15;
+            self.turn_left = left > right;
+        }
+        if self.backing > 0 {
+            self.backing -= 1;
+            let w = if self.turn_left { 0.8 } else { -0.8 };
+            return (-0.15, w);
+        }
+        if k % 400 == 0 {
+            self.turning = 20;
+            self.turn_left = left > right;
+        }
+        if front < 0.8 || self.turning > 0 {
+            self.turning = self.turning.saturating_sub(1);
+            if front < 0.8 && self.turning == 0 {
+                self.turn_left = left > right;
+            }
+            return (0.05, if self.turn_left { 0.9 } else { -0.9 });
+        }
+        let steer = (0.15 * (left - right) / (left + right).max(1e-6) * 4.0).clamp(-0.4, 0.4);
+        (0.45, steer)
+    }
+}
+
+/// Runs `world` and logs `setup.robot`'s odometry and laser.
+///
+/// # Errors
+///
+/// No such robot, no laser on it (a ranger of many beams), or a world the
+/// simulator refuses.
+pub fn simulate(mut world: World, setup: &Setup) -> Result<Run, String> {
+    let Some(&robot) = world.names.get(&setup.robot) else {
+        return Err(format!("the world has no model `{}`", setup.robot));
+    };
+    let Some(pos) = world.models[robot].position.as_mut() else {
+        return Err(format!("`{}` is not a position model", setup.robot));
+    };
+    pos.localization = Localization::Odom;
+    pos.odom_error = setup.odom_error;
+    match &setup.driver {
+        Driver::Own => {}
+        Driver::Ctrl(c) => world.models[robot].ctrl = vec![c.clone()],
+        Driver::Explore => world.models[robot].ctrl.clear(),
+    }
+    let laser = world.models[robot]
+        .children
+        .iter()
+        .copied()
+        .find(|&c| {
+            world.models[c].kind == Kind::Ranger
+                && world.models[c]
+                    .sensors
+                    .first()
+                    .is_some_and(|s| s.samples > 1)
+        })
+        .ok_or_else(|| format!("`{}` has no laser (a ranger of many beams)", setup.robot))?;
+    let sensor = world.models[laser].sensors[0].clone();
+    let on_robot = world.models[laser].pose.compose(&sensor.pose);
+    let (fov, samples) = (sensor.fov, sensor.samples);
+    let obstacles = statics(&world)?;
+    let mut sim = Sim::new(world)?;
+    let base = sim
+        .bases
+        .iter()
+        .position(|b| b.model == robot)
+        .ok_or_else(|| format!("`{}` is not a base the simulator drives", setup.robot))?;
+    sim.sense_only([laser]);
+    let step = sim.world().interval_sim;
+    let every = (setup.every / step).round().max(1.0) as u64;
+    let steps = (setup.seconds / step).round() as u64;
+    let mut log = troupe_log::text::header();
+    let geom = AnyMsg::LaserGeom(laser::Geom {
+        pose: Pose3d {
+            x: on_robot.x,
+            y: on_robot.y,
+            yaw: on_robot.yaw,
+            ..Pose3d::default()
+        },
+        size: Size3d::default(),
+    });
+    push(&mut log, 0.0, Interface::Laser, &geom);
+    let res = fov / (samples.max(2) - 1) as f64;
+    let mut run = Run {
+        log: String::new(),
+        truth: Vec::new(),
+        seen: Vec::new(),
+        obstacles,
+        driven: 0.0,
+    };
+    let mut seen = std::collections::HashSet::new();
+    let mut last: Option<Pose> = None;
+    let mut explorer = (setup.driver == Driver::Explore).then(Explorer::default);
+    for k in 1..=steps {
+        if let (Some(e), Some(r)) = (explorer.as_mut(), sim.readings[laser].first()) {
+            let stalled = sim.bases[base].stall;
+            let (v, w) = e.drive(r.ranges, fov, stalled, k);
+            sim.bases[base].cmd = Some(Command::Vel(Pose::new(v, 0.0, w)));
+        }
+        sim.step();
+        let truth = sim.global(robot);
+        if let Some(l) = last {
+            run.driven += (truth.x - l.x).hypot(truth.y - l.y);
+        }
+        last = Some(truth);
+        if k % every != 0 {
+            continue;
+        }
+        let t = sim.time;
+        let b = &sim.bases[base];
+        let odom = AnyMsg::Position2dData(position2d::Data {
+            pose: Pose2d::new(b.odom.x, b.odom.y, b.odom.yaw),
+            vel: Pose2d::new(b.vel.x, b.vel.y, b.vel.yaw),
+            stall: b.stall,
+        });
+        push(&mut log, t, Interface::Position2d, &odom);
+        let Some(reading) = sim.readings[laser].first() else {
+            continue;
+        };
+        let ranges: Vec<f32> = reading.ranges.iter().map(|&r| r as f32).collect();
+        let at = truth.compose(&on_robot);
+        for (i, &r) in reading.ranges.iter().enumerate() {
+            if r < sensor.range.1 - 0.01 {
+                let a = at.yaw - fov / 2.0 + i as f64 * res;
+                let (x, y) = (at.x + r * a.cos(), at.y + r * a.sin());
+                if seen.insert(((x / 0.05).floor() as i64, (y / 0.05).floor() as i64)) {
+                    run.seen.push((x, y));
+                }
+            }
+        }
+        let scan = AnyMsg::LaserScan(laser::Scan {
+            min_angle: (-fov / 2.0) as f32,
+            max_angle: (fov / 2.0) as f32,
+            resolution: res as f32,
+            max_range: sensor.range.1 as f32,
+            ranges,
+            intensity: Vec::new(),
+            id: k as u32,
+        });
+        push(&mut log, t, Interface::Laser, &scan);
+        run.truth.push((t, truth));
+    }
+    run.log = log;
+    Ok(run)
+}
+
+fn push(log: &mut String, t: f64, iface: Interface, msg: &AnyMsg) {
+    if let Some(line) = troupe_log::text::line(t, 6665, iface, 0, msg) {
+        log.push_str(&line);
+    }
+}
+
+/// The centres of the cells of the static models a laser sees, world frame.
+fn statics(world: &World) -> Result<Vec<(f64, f64)>, String> {
+    let mut world = world.clone();
+    for m in &mut world.models {
+        m.map_resolution = 0.05;
+    }
+    let sim = Sim::new(world.clone())?;
+    let mut out = Vec::new();
+    for (m, def) in world.models.iter().enumerate() {
+        let moving = def.position.is_some() || def.parent.is_some();
+        // What the laser sees: Stage's own floorplans have no obstacle_return.
+        if moving || def.blocks.is_empty() || def.ranger_return < 0.0 {
+            continue;
+        }
+        let map = sim.model_map(m)?;
+        let (w, h) = map.size();
+        for j in 0..h {
+            for i in 0..w {
+                if map.get(i as i64, j as i64).is_some_and(|c| c > 0) {
+                    out.push(troupe_geom::occmap::centre(&map.info, j * w + i));
+                }
+            }
+        }
+    }
+    Ok(out)
+}

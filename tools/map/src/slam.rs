@@ -1,0 +1,343 @@
+//! Graph SLAM, as Karto and slam_toolbox do it: keyframes every so often
+//! along the way, each matched against the map the last few made (its
+//! pose corrected from odometry's guess), an edge between consecutive
+//! keyframes, and a loop closure — an edge to a keyframe made long before —
+//! whenever the scan matches the map around an old keyframe nearby well
+//! enough. Each closure is followed by an optimisation of the whole graph.
+//!
+//! The front end is pure: [`Slam::add`] takes one odometry pose and one
+//! scan's points, so the offline builder and the online driver feed it the
+//! same way.
+
+use troupe_geom::Pose;
+
+use crate::graph::{Edge, Graph};
+use crate::matcher::{Matcher, Prior, Window};
+use crate::source::Scan;
+
+/// How the builder looks and decides.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Params {
+    /// Metres per cell of the matching fields (and of the map).
+    pub resolution: f64,
+    /// A keyframe after this many metres of travel…
+    pub keyframe_dist: f64,
+    /// …or this many radians of turning.
+    pub keyframe_turn: f64,
+    /// Keyframes whose points make the local map.
+    pub local: usize,
+    /// How far from odometry's guess a keyframe is looked for.
+    pub window: Window,
+    /// A local match fitting worse than this keeps odometry's guess.
+    pub min_fit: f64,
+    /// Loop closures look this far (metres) from the keyframe.
+    pub loop_radius: f64,
+    /// …at keyframes at least this many metres of travel before.
+    pub loop_gap: f64,
+    /// …within this window of where the graph puts them.
+    pub loop_window: Window,
+    /// …and are kept if the scan fits that old map this well.
+    pub loop_fit: f64,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Params {
+            resolution: 0.05,
+            keyframe_dist: 0.3,
+            keyframe_turn: 0.3,
+            local: 15,
+            window: Window { xy: 0.25, yaw: 0.2 },
+            min_fit: 0.25,
+            loop_radius: 3.0,
+            loop_gap: 20.0,
+            loop_window: Window { xy: 0.75, yaw: 0.2 },
+            loop_fit: 0.7,
+        }
+    }
+}
+
+/// A keyframe: a scan's points (in the robot's frame) and the robot's pose
+/// when it was taken, by odometry and as the graph has it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Keyframe {
+    /// Seconds.
+    pub t: f64,
+    /// The odometric pose.
+    pub odom: Pose,
+    /// The points, robot frame.
+    pub points: Vec<(f64, f64)>,
+    /// The farthest point's range.
+    pub reach: f64,
+    /// Metres travelled (by the graph) from the start to here.
+    pub travelled: f64,
+    /// How well its scan fit the local map (1 for the first).
+    pub fit: f64,
+}
+
+/// The builder's state.
+#[derive(Debug, Clone)]
+pub struct Slam {
+    params: Params,
+    /// The keyframes, in order.
+    pub keyframes: Vec<Keyframe>,
+    /// Their poses and the edges between them.
+    pub graph: Graph,
+    /// Loop closures made.
+    pub closures: usize,
+    /// Local matches that fit too badly and kept odometry's guess.
+    pub unmatched: usize,
+    /// The keyframe of the last closure: the next waits a few keyframes,
+    /// so driving along an old path does not optimise at every step.
+    last_closure: Option<usize>,
+}
+
+/// Keyframes between two loop closures.
+const CLOSURE_EVERY: usize = 8;
+
+/// What odometry is worth between keyframes (2% in distance, a few % in
+/// turn: a centimetre, a hundredth of a radian): a local match pays 0.01
+/// of fit for straying 5 cm or 0.03 rad from it, so it corrects odometry
+/// where the scan says so and keeps it where the scan cannot tell.
+const ODOMETRY: Prior = Prior {
+    xy: 0.05,
+    yaw: 0.03,
+    weight: 0.01,
+};
+
+/// What the graph's pose is worth after a loop's length of travel: a
+/// closure pays 0.05 of fit for lying half a metre or 0.3 rad from it, so
+/// of two places that fit alike the one the graph expects wins.
+const DRIFT: Prior = Prior {
+    xy: 0.5,
+    yaw: 0.3,
+    weight: 0.05,
+};
+
+/// Whether a loop closure's match stands out: shifted 0.3 m any way or
+/// turned 0.1 rad, the scan fits clearly worse (it would not along a
+/// corridor, where any place along it fits as well).
+fn distinct(
+    field: &crate::matcher::Field,
+    points: &[(f64, f64)],
+    found: crate::matcher::Match,
+) -> bool {
+    let p = found.pose;
+    let (s, c) = p.yaw.sin_cos();
+    [
+        (0.3, 0.0, 0.0),
+        (-0.3, 0.0, 0.0),
+        (0.0, 0.3, 0.0),
+        (0.0, -0.3, 0.0),
+        (0.0, 0.0, 0.1),
+        (0.0, 0.0, -0.1),
+    ]
+    .iter()
+    .all(|&(dx, dy, da)| {
+        let q = Pose::new(p.x + c * dx - s * dy, p.y + s * dx + c * dy, p.yaw + da);
+        field.score(points, q) < found.score - 0.2
+    })
+}
+
+/// The points of `scan`, in the robot's frame (the sensor at `sensor` on
+/// it), one per `cell` metres: beams that hit nothing are left out.
+pub fn points(scan: &Scan, sensor: Pose, cell: f64) -> (Vec<(f64, f64)>, f64) {
+    let place = sensor.applier();
+    let mut seen = std::collections::HashSet::new();
+    let mut out = Vec::with_capacity(scan.ranges.len());
+    let mut reach = 0f64;
+    for (i, &r) in scan.ranges.iter().enumerate() {
+        let r = f64::from(r);
+        if !(r.is_finite() && r > 0.05 && r < scan.max_range - 0.01) {
+            continue;
+        }
+        let a = scan.min_angle + i as f64 * scan.step;
+        let (x, y) = place(r * a.cos(), r * a.sin());
+        if seen.insert(((x / cell).floor() as i64, (y / cell).floor() as i64)) {
+            out.push((x, y));
+            reach = reach.max(r);
+        }
+    }
+    (out, reach)
+}
+
+impl Slam {
+    /// An empty builder.
+    pub fn new(params: Params) -> Slam {
+        Slam {
+            params,
+            keyframes: Vec::new(),
+            graph: Graph::default(),
+            closures: 0,
+            unmatched: 0,
+            last_closure: None,
+        }
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &Params {
+        &self.params
+    }
+
+    /// The graph's pose of the robot at odometric pose `odom`, carried from
+    /// the last keyframe by odometry.
+    pub fn pose_of(&self, odom: Pose) -> Pose {
+        match self.keyframes.last() {
+            None => odom,
+            Some(k) => {
+                let at = self.graph.poses[self.keyframes.len() - 1];
+                at.compose(&k.odom.inverse().compose(&odom))
+            }
+        }
+    }
+
+    /// Whether odometric pose `odom` is far enough from the last keyframe
+    /// to make a new one.
+    pub fn due(&self, odom: Pose) -> bool {
+        match self.keyframes.last() {
+            None => true,
+            Some(k) => {
+                let d = k.odom.inverse().compose(&odom);
+                d.x.hypot(d.y) >= self.params.keyframe_dist
+                    || d.yaw.abs() >= self.params.keyframe_turn
+            }
+        }
+    }
+
+    /// Takes a scan's `points` (robot frame) seen at odometric pose `odom`:
+    /// a keyframe if it is [`due`](Self::due) and has points enough to
+    /// match. Returns whether it made one.
+    pub fn add(&mut self, t: f64, odom: Pose, points: Vec<(f64, f64)>, reach: f64) -> bool {
+        if !self.due(odom) || points.len() < 10 {
+            return false;
+        }
+        let n = self.keyframes.len();
+        let guess = self.pose_of(odom);
+        let mut fit = 1.0;
+        let pose = if n == 0 {
+            guess
+        } else {
+            let local = self.world_points(n.saturating_sub(self.params.local)..n);
+            let m = Matcher::new(&local, self.params.resolution, 1.0);
+            let found = m.search(&points, guess, self.params.window, reach, Some(ODOMETRY));
+            fit = found.score;
+            if found.score >= self.params.min_fit {
+                found.pose
+            } else {
+                self.unmatched += 1;
+                guess
+            }
+        };
+        let travelled = match self.keyframes.last() {
+            None => 0.0,
+            Some(k) => {
+                let last = self.graph.poses[n - 1];
+                k.travelled + (pose.x - last.x).hypot(pose.y - last.y)
+            }
+        };
+        self.graph.poses.push(pose);
+        if n > 0 {
+            let z = self.graph.poses[n - 1].inverse().compose(&pose);
+            self.graph.edges.push(Edge {
+                from: n - 1,
+                to: n,
+                z,
+                info: [400.0, 400.0, 1000.0],
+            });
+        }
+        self.keyframes.push(Keyframe {
+            t,
+            odom,
+            points,
+            reach,
+            travelled,
+            fit,
+        });
+        let rested = self.last_closure.is_none_or(|c| n >= c + CLOSURE_EVERY);
+        if rested && self.close_loop(n) {
+            self.closures += 1;
+            self.last_closure = Some(n);
+            self.graph.optimize(10);
+        }
+        true
+    }
+
+    /// The points of keyframes `range`, in the world frame.
+    fn world_points(&self, range: std::ops::Range<usize>) -> Vec<(f64, f64)> {
+        let mut out = Vec::new();
+        for i in range {
+            let place = self.graph.poses[i].applier();
+            out.extend(self.keyframes[i].points.iter().map(|&(x, y)| place(x, y)));
+        }
+        out
+    }
+
+    /// Looks for a loop closure for keyframe `n`; adds its edge if found.
+    fn close_loop(&mut self, n: usize) -> bool {
+        let p = &self.params;
+        let here = self.graph.poses[n];
+        let travelled = self.keyframes[n].travelled;
+        let Some(old) = (0..n)
+            .filter(|&i| travelled - self.keyframes[i].travelled >= p.loop_gap)
+            .map(|i| {
+                let q = self.graph.poses[i];
+                (i, (q.x - here.x).hypot(q.y - here.y))
+            })
+            .filter(|&(_, d)| d <= p.loop_radius)
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(i, _)| i)
+        else {
+            return false;
+        };
+        // The map around the old keyframe: its neighbours made it too.
+        let lo = old.saturating_sub(p.local / 2);
+        let hi = (old + p.local / 2 + 1).min(n);
+        let hi = (lo..hi)
+            .take_while(|&i| travelled - self.keyframes[i].travelled >= p.loop_gap / 2.0)
+            .last()
+            .map_or(lo + 1, |i| i + 1);
+        let around = self.world_points(lo..hi);
+        let m = Matcher::new(&around, p.resolution, p.loop_window.xy + 1.0);
+        let k = &self.keyframes[n];
+        let found = m.search(&k.points, here, p.loop_window, k.reach, Some(DRIFT));
+        // A true closure fits the old map about as well as the scan fit
+        // its own, and nowhere near as well a little way off.
+        if found.score < p.loop_fit.max(0.9 * k.fit) || !distinct(m.field(), &k.points, found) {
+            return false;
+        }
+        let z = self.graph.poses[old].inverse().compose(&found.pose);
+        self.graph.edges.push(Edge {
+            from: old,
+            to: n,
+            z,
+            info: [400.0, 400.0, 1000.0],
+        });
+        true
+    }
+
+    /// Optimises the graph once more, at the end of a run.
+    pub fn finish(&mut self) {
+        if self.closures > 0 {
+            self.graph.optimize(20);
+        }
+    }
+
+    /// The robot's pose at odometric pose `odom` taken at time `t`, by the
+    /// graph: carried by odometry from the last keyframe before `t`.
+    pub fn corrected(&self, t: f64, odom: Pose) -> Pose {
+        let i = self.keyframes.partition_point(|k| k.t <= t);
+        if i == 0 {
+            return match self.keyframes.first() {
+                None => odom,
+                Some(k) => self.graph.poses[0].compose(&k.odom.inverse().compose(&odom)),
+            };
+        }
+        let k = &self.keyframes[i - 1];
+        self.graph.poses[i - 1].compose(&k.odom.inverse().compose(&odom))
+    }
+
+    /// Metres the corrected trajectory runs.
+    pub fn length(&self) -> f64 {
+        self.keyframes.last().map_or(0.0, |k| k.travelled)
+    }
+}
