@@ -11,7 +11,7 @@
 
 use troupe_geom::Pose;
 
-use crate::matcher::{Matcher, Window};
+use troupe_slam::matcher::{Matcher, Window};
 
 /// A set of points, filed by cell for "is there one within `d`?".
 pub struct Near {

@@ -2,22 +2,18 @@
 //! robot's odometry and laser, as Player's course had users do with
 //! GMapping, and `troupe map show` draws one in the terminal.
 //!
+//! The algorithm is libs/slam's (troupe-slam); this crate reads the logs,
+//! runs it, writes and judges the map:
+//!
 //! - [`source`]: odometry and scans from Player text logs and MCAP recordings;
-//! - [`matcher`]: correlative scan matching on likelihood fields;
-//! - [`graph`]: the pose graph and its optimisation;
-//! - [`slam`]: keyframes, local matching, loop closures;
-//! - [`occupancy`]: the grid the scans are traced into, written as ROS
-//!   map_server's PNG and YAML;
 //! - [`eval`]: a map's accuracy and coverage against the true world;
 //! - [`simulate`]: logs made with Troupe's Stage, with their truth.
 
 pub mod eval;
-pub mod graph;
-pub mod matcher;
-pub mod occupancy;
 pub mod simulate;
-pub mod slam;
 pub mod source;
+
+pub use troupe_slam::{graph, matcher, occupancy, slam};
 
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
@@ -28,9 +24,9 @@ use clap::{Args, Subcommand};
 use troupe_geom::Pose;
 use troupe_msgs::DevAddr;
 
-use crate::occupancy::Occupancy;
-use crate::slam::{Params, Slam};
 use crate::source::{Recording, Select};
+use troupe_slam::occupancy::Occupancy;
+use troupe_slam::slam::{Params, Slam};
 
 /// `troupe map`'s subcommands.
 #[derive(Debug, Subcommand)]

@@ -15,6 +15,7 @@ use std::path::{Path, PathBuf};
 
 use troupe_geom::Pose;
 use troupe_msgs::{decode_any, keys, AnyMsg, DevAddr, Device, Interface, DEFAULT_ROBOT};
+pub use troupe_slam::Scan;
 
 /// A pose of the robot's odometry, at a time.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -23,22 +24,6 @@ pub struct Odom {
     pub t: f64,
     /// The odometric pose.
     pub pose: Pose,
-}
-
-/// One range scan: beam `i` points at `min_angle + i * step` in the
-/// sensor's frame.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Scan {
-    /// Seconds.
-    pub t: f64,
-    /// Radians, the first beam.
-    pub min_angle: f64,
-    /// Radians between beams.
-    pub step: f64,
-    /// Metres: a beam reading this far (or farther) hit nothing.
-    pub max_range: f64,
-    /// Metres, one per beam.
-    pub ranges: Vec<f32>,
 }
 
 /// Which devices of a log to build from.

@@ -13,7 +13,7 @@ use troupe_geom::Pose;
 
 use crate::graph::{Edge, Graph};
 use crate::matcher::{Matcher, Prior, Window};
-use crate::source::Scan;
+use crate::Scan;
 
 /// How the builder looks and decides.
 #[derive(Debug, Clone, Copy, PartialEq)]
