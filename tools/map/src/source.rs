@@ -625,6 +625,91 @@ mod tests {
     }
 
     #[test]
+    fn a_recording_gives_what_the_player_log_would() {
+        use troupe_msgs::{laser, position2d, Message, Pose2d};
+        let dir = std::env::temp_dir().join(format!("troupe-map-mcap-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("run.mcap");
+        let mut files =
+            troupe_record::Files::new(path.clone(), false, troupe_record::Compress::None);
+        files.open(0).unwrap();
+        for k in 1..=3u32 {
+            let t = f64::from(k) * 0.1;
+            let odom = position2d::Data {
+                pose: Pose2d::new(t, 0.0, 0.0),
+                ..Default::default()
+            };
+            let scan = laser::Scan {
+                min_angle: -1.0,
+                max_angle: 1.0,
+                resolution: 1.0,
+                max_range: 8.0,
+                ranges: vec![2.0; 3],
+                ..Default::default()
+            };
+            let ns = (t * 1e9) as u64;
+            for (key, schema, data) in [
+                (
+                    "robot/6665/position2d/0",
+                    position2d::Data::SCHEMA,
+                    troupe_msgs::encode(&odom, t),
+                ),
+                (
+                    "robot/6665/laser/0",
+                    laser::Scan::SCHEMA,
+                    troupe_msgs::encode(&scan, t),
+                ),
+            ] {
+                files
+                    .write(key, schema, troupe_record::ENCODING, &data, ns, ns)
+                    .unwrap();
+            }
+        }
+        files.close().unwrap();
+        let rec = read(&[path], &Select::default()).unwrap();
+        assert_eq!(rec.odom.len(), 3);
+        assert_eq!(rec.scans.len(), 3);
+        assert_eq!(rec.scans[2].ranges, vec![2.0; 3]);
+        assert!((rec.odom[2].pose.x - 0.3).abs() < 1e-9);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_ranger_reads_as_a_laser_where_the_log_holds_its_configuration() {
+        let p = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../../shared/compat/player-log/simple-r0.log");
+        if !p.exists() {
+            eprintln!("skipping: ../shared/compat is absent");
+            return;
+        }
+        let sel = Select {
+            odom: None,
+            scan: Some("6665:ranger:1".parse().unwrap()),
+        };
+        let rec = read(std::slice::from_ref(&p), &sel).unwrap();
+        assert_eq!(
+            rec.scan_device.map(|d| d.interface),
+            Some(Interface::Ranger)
+        );
+        assert_eq!(rec.scans.len(), 337);
+        let s = &rec.scans[0];
+        assert_eq!(s.ranges.len(), 180);
+        assert!(
+            (s.min_angle + std::f64::consts::FRAC_PI_2).abs() < 1e-3,
+            "{}",
+            s.min_angle
+        );
+        assert!((s.max_range - 8.0).abs() < 1e-9);
+        // The sonar ring has its configuration too, but one beam a sensor.
+        let sel = Select {
+            odom: None,
+            scan: Some("6665:position2d:0".parse().unwrap()),
+        };
+        let e = read(&[p], &sel).unwrap_err().to_string();
+        assert!(e.contains("scans come from a laser or a ranger"), "{e}");
+    }
+
+    #[test]
     fn players_own_log_reads_its_laser_and_odometry() {
         let p = Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("../../../shared/compat/player-log/simple-r0.log");
