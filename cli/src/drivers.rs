@@ -35,6 +35,9 @@ pub fn catalog() -> Catalog {
         Entry::of::<troupe_log::ReadLog>(
             "replays a Player text log as live devices, and is its stack's clock",
         ),
+        Entry::of::<troupe_slam_node::SlamNode>(
+            "a map built as the robot drives (SLAM): odometry and a laser in, a map and the corrected pose out",
+        ),
         Entry::of::<troupe_stage::Stage>(
             "the 2D multi-robot simulator: a Stage world's robots and sensors",
         ),

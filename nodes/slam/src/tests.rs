@@ -1,0 +1,140 @@
+//! The driver in the harness, in a room of four walls that a laser model
+//! casts into: the robot drives loops with odometry that reads its turns
+//! 5% long, and the served map and the corrected pose are judged against
+//! the room.
+
+use troupe_geom::ray_to_box;
+use troupe_node::testing::Harness;
+
+use super::*;
+
+const ODOM: Device = Device::new(6665, Interface::Position2d, 0);
+const LASER: Device = Device::new(6665, Interface::Laser, 0);
+const MAP: Device = Device::new(6665, Interface::Map, 0);
+const POSE: Device = Device::new(6665, Interface::Position2d, 1);
+
+/// The room: x from -4 to 4, y from -3 to 3, and a pillar.
+const ROOM: (f64, f64, f64, f64) = (-4.0, 4.0, -3.0, 3.0);
+const PILLAR: (f64, f64, f64, f64) = (1.0, 1.6, -0.5, 0.1);
+
+fn range(x: f64, y: f64, a: f64) -> f64 {
+    let wall = ray_to_box(x, y, a, ROOM);
+    // The pillar, seen from outside: the nearest crossing of its sides.
+    let (x0, x1, y0, y1) = PILLAR;
+    let (c, s) = (a.cos(), a.sin());
+    let mut best = wall;
+    for t in [(x0 - x) / c, (x1 - x) / c] {
+        if t > 0.0 && t.is_finite() && (y0..=y1).contains(&(y + t * s)) {
+            best = best.min(t);
+        }
+    }
+    for t in [(y0 - y) / s, (y1 - y) / s] {
+        if t > 0.0 && t.is_finite() && (x0..=x1).contains(&(x + t * c)) {
+            best = best.min(t);
+        }
+    }
+    best
+}
+
+fn near_a_wall(x: f64, y: f64) -> bool {
+    let d_room = [x - ROOM.0, ROOM.1 - x, y - ROOM.2, ROOM.3 - y]
+        .iter()
+        .fold(f64::MAX, |a, &b| a.min(b.abs()));
+    let (x0, x1, y0, y1) = PILLAR;
+    let dx = (x0 - x).max(0.0).max(x - x1);
+    let dy = (y0 - y).max(0.0).max(y - y1);
+    d_room <= 0.1 || dx.hypot(dy) <= 0.1
+}
+
+#[test]
+fn the_map_grows_as_the_robot_drives_and_its_pose_is_corrected() {
+    let mut h = Harness::<SlamNode>::from_json(
+        r#"{"name":"slam","requires":["odometry:::position2d:0","laser:0"],
+            "provides":["map:0","position2d:1"],"options":{"laser_pose":[0,0,0],"map_every":5}}"#,
+    )
+    .unwrap();
+    let start = Pose::new(-2.0, -1.5, 0.0);
+    let (mut truth, mut odom) = (start, Pose::default());
+    let dt = 0.1;
+    for k in 0..3000u32 {
+        let t = f64::from(k) * dt;
+        // Loops around the pillar: 0.4 m/s, turning at 0.25 rad/s.
+        let (v, w) = (0.4, 0.25);
+        truth = truth.compose(&Pose::new(v * dt, 0.0, w * dt));
+        odom = odom.compose(&Pose::new(v * dt, 0.0, w * dt * 1.05));
+        h.set_time(t);
+        h.input(
+            ODOM,
+            &position2d::Data {
+                pose: odom.into(),
+                vel: Pose2d::new(v, 0.0, w),
+                stall: false,
+            },
+        )
+        .unwrap();
+        let ranges: Vec<f32> = (0..181)
+            .map(|i| {
+                let a = truth.yaw - std::f64::consts::FRAC_PI_2 + f64::from(i).to_radians();
+                range(truth.x, truth.y, a).min(8.0) as f32
+            })
+            .collect();
+        h.input(
+            LASER,
+            &laser::Scan {
+                min_angle: -std::f32::consts::FRAC_PI_2,
+                max_angle: std::f32::consts::FRAC_PI_2,
+                resolution: 1f32.to_radians(),
+                max_range: 8.0,
+                ranges,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+    }
+    // The map answers as mapfile does.
+    let p = h.request(MAP, &map::GetInfo).unwrap();
+    let info: map::Info = h.reply(p).unwrap().unwrap();
+    assert!(info.width > 100 && info.height > 80, "{info:?}");
+    let m = h.driver().map();
+    let occupied: Vec<(f64, f64)> = (0..m.cells.len())
+        .filter(|&k| m.cells[k] == OCCUPIED)
+        .map(|k| troupe_geom::occmap::centre(&m.info, k))
+        .collect();
+    assert!(occupied.len() > 200, "{} occupied cells", occupied.len());
+    // In the room's frame (the map's is the odometry's at the start).
+    let on_walls = occupied
+        .iter()
+        .filter(|&&(x, y)| {
+            let (wx, wy) = start.apply(x, y);
+            near_a_wall(wx, wy)
+        })
+        .count();
+    let accuracy = on_walls as f64 / occupied.len() as f64;
+    assert!(accuracy > 0.9, "{accuracy:.3} of the map's cells on a wall");
+    // The corrected pose ends where the robot is; odometry does not.
+    let last: position2d::Data = h.published(POSE).pop().unwrap();
+    let corrected = start.compose(&last.pose.into());
+    let raw = start.compose(&odom);
+    let miss = |p: Pose| (p.x - truth.x).hypot(p.y - truth.y);
+    assert!(miss(raw) > 0.5, "odometry ends {:.2} m off", miss(raw));
+    assert!(
+        miss(corrected) < 0.15,
+        "the corrected pose ends {:.2} m off",
+        miss(corrected)
+    );
+    assert!(h.driver().slam().closures > 0);
+}
+
+#[test]
+fn options_are_checked() {
+    let h = |opts: &str| {
+        Harness::<SlamNode>::from_json(&format!(
+            r#"{{"name":"slam","requires":["position2d:0","laser:0"],"provides":["map:0"],"options":{{{opts}}}}}"#
+        ))
+    };
+    assert!(h("").is_ok());
+    let e = h(r#""resolution":0"#).err().unwrap().to_string();
+    assert!(e.contains("resolution must be a positive"), "{e}");
+    let e = h(r#""laser_pose":[1,2]"#).err().unwrap().to_string();
+    assert!(e.contains("laser_pose takes [x y yaw]"), "{e}");
+}
