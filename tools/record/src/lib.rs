@@ -614,6 +614,7 @@ fn remap(key: &str, remaps: &[(String, String)]) -> String {
 
 /// `troupe play`.
 pub fn play(a: PlayArgs, z: &ZenohArgs) -> anyhow::Result<()> {
+    ensure_mcap(&a.file)?;
     if !(a.rate.is_finite() && a.rate >= 0.0) {
         anyhow::bail!(
             "--rate {}: expected 0 (as fast as possible) or more",
@@ -719,9 +720,44 @@ pub fn play(a: PlayArgs, z: &ZenohArgs) -> anyhow::Result<()> {
 /// `troupe log`.
 pub fn log(cmd: LogCmd) -> anyhow::Result<()> {
     match cmd {
-        LogCmd::Info { file } => info(&file),
-        LogCmd::Export { file, format } => export(&file, format),
+        LogCmd::Info { file } => {
+            ensure_mcap(&file)?;
+            info(&file)
+        }
+        LogCmd::Export { file, format } => {
+            ensure_mcap(&file)?;
+            export(&file, format)
+        }
     }
+}
+
+/// The first bytes of every MCAP file.
+const MCAP_MAGIC: &[u8] = &[0x89, b'M', b'C', b'A', b'P', 0x30, b'\r', b'\n'];
+
+/// Fails, saying what the file is instead, unless `path` is an MCAP file.
+fn ensure_mcap(path: &Path) -> anyhow::Result<()> {
+    use std::io::Read as _;
+    let mut head = [0u8; 64];
+    let n = std::fs::File::open(path)
+        .and_then(|mut f| f.read(&mut head))
+        .with_context(|| format!("opening {}", path.display()))?;
+    let head = &head[..n];
+    if head.starts_with(MCAP_MAGIC) {
+        return Ok(());
+    }
+    if head.starts_with(b"## Player") {
+        anyhow::bail!(
+            "{} is a Player text log, not an MCAP recording: the readlog driver replays it \
+             (`driver ( name \"readlog\" filename \"{}\" … )`), and `troupe map build` reads it",
+            path.display(),
+            path.file_name()
+                .map_or_else(String::new, |f| f.to_string_lossy().into_owned())
+        );
+    }
+    anyhow::bail!(
+        "{} is not an MCAP recording (MCAP files begin with \\x89MCAP0; `troupe record` writes them)",
+        path.display()
+    )
 }
 
 fn info(path: &Path) -> anyhow::Result<()> {
@@ -850,4 +886,41 @@ fn export(path: &Path, format: Format) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_file_that_is_not_mcap_is_refused_saying_what_it_is() {
+        let dir = std::env::temp_dir().join(format!("troupe-record-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let log = dir.join("run.log");
+        std::fs::write(
+            &log,
+            "## Player version 3.1.1-dev \n## File version 0.3.0 \n",
+        )
+        .unwrap();
+        let e = format!("{:#}", log_info(&log));
+        assert!(
+            e.contains("run.log is a Player text log, not an MCAP recording"),
+            "{e}"
+        );
+        assert!(e.contains("readlog"), "{e}");
+        let junk = dir.join("junk.bin");
+        std::fs::write(&junk, b"hello").unwrap();
+        let e = format!("{:#}", log_info(&junk));
+        assert!(e.contains("junk.bin is not an MCAP recording"), "{e}");
+        let e = format!("{:#}", log_info(&dir.join("absent.mcap")));
+        assert!(e.contains("opening") && e.contains("absent.mcap"), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    fn log_info(path: &Path) -> anyhow::Error {
+        log(LogCmd::Info {
+            file: path.to_owned(),
+        })
+        .unwrap_err()
+    }
 }
