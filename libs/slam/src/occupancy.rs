@@ -149,6 +149,17 @@ impl Occupancy {
         }
     }
 
+    /// Traces `scan`, its sensor at `sensor` in the world.
+    pub fn add_scan(&mut self, sensor: Pose, scan: &crate::Scan) {
+        self.add(
+            sensor,
+            scan.min_angle,
+            scan.step,
+            scan.max_range,
+            &scan.ranges,
+        );
+    }
+
     /// Bresenham from `a` to `b`: free along, occupied at `b` if `hit`.
     /// A hit's last cell before `b` is left alone: a beam grazing a wall
     /// passes through the wall's cells next to the one it ends in, and

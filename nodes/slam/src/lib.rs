@@ -67,9 +67,8 @@ pub struct SlamNode {
     odom: Option<Pose>,
     slam: Slam,
     grid: Occupancy,
-    /// Each keyframe's scan, to trace the grid anew after a closure.
-    keyscans: Vec<Scan>,
-    /// Every scan's odometry and scan since the start, for the same.
+    /// Every scan since the start with its odometry, to trace the grid
+    /// anew after a loop closure.
     traced: Vec<(Pose, Scan)>,
     closures: usize,
     since_refresh: u32,
@@ -108,26 +107,23 @@ impl SlamNode {
         let res = self.slam.params().resolution;
         if self.slam.due(odom) {
             let (pts, reach) = slam::points(&scan, sensor, res);
-            if self.slam.add(t, odom, pts, reach) {
-                self.keyscans.push(scan.clone());
-            }
+            self.slam.add(t, odom, pts, reach);
         }
         self.traced.push((odom, scan));
+        let place = |sc: &Scan, o: Pose| self.slam.corrected(sc.t, o).compose(&sensor);
         if self.slam.closures != self.closures {
             // The graph moved: trace every scan again from where it now puts it.
             self.closures = self.slam.closures;
-            self.grid = Occupancy::new(res);
+            let mut grid = Occupancy::new(res);
             for (o, sc) in &self.traced {
-                let at = self.slam.corrected(sc.t, *o).compose(&sensor);
-                self.grid
-                    .add(at, sc.min_angle, sc.step, sc.max_range, &sc.ranges);
+                grid.add_scan(place(sc, *o), sc);
             }
+            self.grid = grid;
             return self.refresh(ctx);
         }
         if let Some((o, sc)) = self.traced.last() {
-            let at = self.slam.corrected(sc.t, *o).compose(&sensor);
-            self.grid
-                .add(at, sc.min_angle, sc.step, sc.max_range, &sc.ranges);
+            let at = place(sc, *o);
+            self.grid.add_scan(at, sc);
         }
         self.since_refresh += 1;
         if self.since_refresh >= self.every {
@@ -207,7 +203,6 @@ impl Driver for SlamNode {
             slam: Slam::new(params),
             map: to_occmap(&grid),
             grid,
-            keyscans: Vec::new(),
             traced: Vec::new(),
             closures: 0,
             since_refresh: 0,

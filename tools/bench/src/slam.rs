@@ -16,7 +16,6 @@ use std::time::Instant;
 
 use clap::Args;
 use troupe_map::eval;
-use troupe_map::occupancy::Occupancy;
 use troupe_map::simulate::{simulate, Driver, Setup};
 use troupe_map::slam::Params;
 use troupe_map::source::{self, Select};
@@ -105,12 +104,7 @@ pub fn run(a: &SlamBenchArgs) -> anyhow::Result<()> {
         let took = t0.elapsed().as_secs_f64();
         built.grid.save(&dir.join(format!("{name}.yaml")))?;
         let t_first = rec.scans[0].t;
-        let truth = run
-            .truth
-            .iter()
-            .find(|(t, _)| *t >= t_first)
-            .map_or_else(Default::default, |x| x.1);
-        let frame = truth.compose(&rec.odom_at(t_first).unwrap_or_default().inverse());
+        let frame = run.frame(&rec);
         let s = eval::score(
             &built.grid.occupied(),
             &run.obstacles,
@@ -118,13 +112,7 @@ pub fn run(a: &SlamBenchArgs) -> anyhow::Result<()> {
             frame,
             0.1,
         );
-        let mut odometry = Occupancy::new(0.05);
-        for scan in &rec.scans {
-            if let Some(odom) = rec.odom_at(scan.t) {
-                let at = odom.compose(&rec.sensor);
-                odometry.add(at, scan.min_angle, scan.step, scan.max_range, &scan.ranges);
-            }
-        }
+        let odometry = troupe_map::odometry_map(&rec, 0.05);
         let raw = eval::score(&odometry.occupied(), &run.obstacles, &run.seen, frame, 0.1);
         let span = rec.scans.last().map_or(0.0, |l| l.t) - t_first;
         let walls = eval::Near::new(&run.obstacles, 0.1);

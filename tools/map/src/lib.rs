@@ -111,16 +111,12 @@ pub struct Built {
 /// Builds the map of `rec`; `progress` is told how many scans are done
 /// and the log time reached.
 pub fn build(rec: &Recording, params: Params, mut progress: impl FnMut(usize, f64)) -> Built {
+    let placed = rec.placed();
     let mut slam = Slam::new(params);
-    let mut unplaced = 0;
-    for (k, scan) in rec.scans.iter().enumerate() {
-        let Some(odom) = rec.odom_at(scan.t) else {
-            unplaced += 1;
-            continue;
-        };
-        if slam.due(odom) {
+    for (k, (odom, scan)) in placed.iter().enumerate() {
+        if slam.due(*odom) {
             let (pts, reach) = slam::points(scan, rec.sensor, params.resolution);
-            slam.add(scan.t, odom, pts, reach);
+            slam.add(scan.t, *odom, pts, reach);
         }
         if k % 50 == 0 {
             progress(k, scan.t);
@@ -128,23 +124,27 @@ pub fn build(rec: &Recording, params: Params, mut progress: impl FnMut(usize, f6
     }
     slam.finish();
     let mut grid = Occupancy::new(params.resolution);
-    let mut scans = 0;
-    for scan in &rec.scans {
-        let Some(odom) = rec.odom_at(scan.t) else {
-            continue;
-        };
-        let at = slam.corrected(scan.t, odom).compose(&rec.sensor);
-        grid.add(at, scan.min_angle, scan.step, scan.max_range, &scan.ranges);
-        scans += 1;
+    for (odom, scan) in &placed {
+        grid.add_scan(slam.corrected(scan.t, *odom).compose(&rec.sensor), scan);
     }
     grid.trim(10);
     progress(rec.scans.len(), rec.scans.last().map_or(0.0, |s| s.t));
     Built {
         slam,
         grid,
-        scans,
-        unplaced,
+        scans: placed.len(),
+        unplaced: rec.scans.len() - placed.len(),
     }
+}
+
+/// The map odometry alone makes of `rec`: every scan traced from the
+/// odometric pose, uncorrected (what a map is judged against).
+pub fn odometry_map(rec: &Recording, resolution: f64) -> Occupancy {
+    let mut grid = Occupancy::new(resolution);
+    for (odom, scan) in rec.placed() {
+        grid.add_scan(odom.compose(&rec.sensor), scan);
+    }
+    grid
 }
 
 fn build_cmd(a: &BuildArgs) -> anyhow::Result<()> {

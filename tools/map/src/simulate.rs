@@ -29,6 +29,23 @@ pub struct Run {
     pub driven: f64,
 }
 
+impl Run {
+    /// Where the frame of `rec`'s map (its odometry's frame at the first
+    /// scan) lies in the world: the robot's true pose there, less its
+    /// odometry.
+    pub fn frame(&self, rec: &crate::source::Recording) -> Pose {
+        let Some(first) = rec.scans.first() else {
+            return Pose::default();
+        };
+        let truth = self
+            .truth
+            .iter()
+            .find(|(t, _)| *t >= first.t)
+            .map_or_else(Pose::default, |x| x.1);
+        truth.compose(&rec.odom_at(first.t).unwrap_or_default().inverse())
+    }
+}
+
 /// What to simulate.
 #[derive(Debug, Clone)]
 pub struct Setup {

@@ -104,9 +104,6 @@ impl Problems {
     }
 }
 
-/// The first bytes of every MCAP file.
-const MCAP_MAGIC: &[u8] = &[0x89, b'M', b'C', b'A', b'P', 0x30, b'\r', b'\n'];
-
 /// One message of a log: where it came from and what it is.
 struct Entry {
     t: f64,
@@ -160,13 +157,7 @@ fn read_file(
         path: path.to_owned(),
         source,
     };
-    let mut magic = [0u8; 8];
-    let n = {
-        use std::io::Read as _;
-        let mut f = std::fs::File::open(path).map_err(io)?;
-        f.read(&mut magic).map_err(io)?
-    };
-    if magic[..n].starts_with(MCAP_MAGIC) {
+    if troupe_record::is_mcap(path).map_err(io)? {
         return read_mcap(path, out, problems);
     }
     let bytes = std::fs::read(path).map_err(io)?;
@@ -515,14 +506,22 @@ impl Recording {
         Some(before.pose.compose(&Pose::new(d.x * f, d.y * f, d.yaw * f)))
     }
 
+    /// Each scan within the odometry's time span, with the odometric pose
+    /// it was taken at.
+    pub fn placed(&self) -> Vec<(Pose, &Scan)> {
+        self.scans
+            .iter()
+            .filter_map(|s| Some((self.odom_at(s.t)?, s)))
+            .collect()
+    }
+
     /// One line on what was read: the devices, how many of each, the time span.
     pub fn describe(&self) -> String {
         let mut s = String::new();
-        let span = |v: &[f64]| match (v.first(), v.last()) {
-            (Some(a), Some(b)) => format!("{a:.1}–{b:.1} s"),
+        let span = match (self.scans.first(), self.scans.last()) {
+            (Some(a), Some(b)) => format!("{:.1}–{:.1} s", a.t, b.t),
             _ => "—".to_owned(),
         };
-        let ts: Vec<f64> = self.scans.iter().map(|s| s.t).collect();
         let _ = write!(
             s,
             "{} odometry samples of {}, {} scans of {} ({})",
@@ -530,7 +529,7 @@ impl Recording {
             device_name(self.odom_device),
             self.scans.len(),
             device_name(self.scan_device),
-            span(&ts)
+            span
         );
         s
     }

@@ -30,26 +30,13 @@ fn run(name: &str, seconds: f64, yaw_error: f64) -> (Run, Recording) {
     (run, rec)
 }
 
-/// The map frame in the world: the robot's true pose at its first scan,
-/// less the odometry there.
-fn frame(run: &Run, rec: &Recording) -> Pose {
-    let t0 = rec.scans[0].t;
-    let truth = run
-        .truth
-        .iter()
-        .find(|(t, _)| *t >= t0)
-        .map(|x| x.1)
-        .unwrap();
-    truth.compose(&rec.odom_at(t0).unwrap().inverse())
-}
-
 #[test]
 fn a_wander_through_the_office_makes_an_accurate_map() {
     let (run, rec) = run("office", 600.0, 0.04);
     assert!(run.driven > 60.0, "the robot drove {} m", run.driven);
     let built = build(&rec, Params::default(), |_, _| {});
     let occupied = built.grid.occupied();
-    let s = eval::score(&occupied, &run.obstacles, &run.seen, frame(&run, &rec), 0.1);
+    let s = eval::score(&occupied, &run.obstacles, &run.seen, run.frame(&rec), 0.1);
     eprintln!(
         "office, 600 s, {:.0} m driven: accuracy {:.3}, coverage {:.3}, {} keyframes, {} closures",
         run.driven,
@@ -62,17 +49,12 @@ fn a_wander_through_the_office_makes_an_accurate_map() {
     assert!(s.coverage >= 0.75, "coverage {:.3}", s.coverage);
 
     // The same log with odometry alone is far worse: the test can fail.
-    let mut odometry = Occupancy::new(0.05);
-    for scan in &rec.scans {
-        let odom = rec.odom_at(scan.t).unwrap();
-        let at = odom.compose(&rec.sensor);
-        odometry.add(at, scan.min_angle, scan.step, scan.max_range, &scan.ranges);
-    }
+    let odometry = odometry_map(&rec, 0.05);
     let raw = eval::score(
         &odometry.occupied(),
         &run.obstacles,
         &run.seen,
-        frame(&run, &rec),
+        run.frame(&rec),
         0.1,
     );
     eprintln!("odometry alone: accuracy {:.3}", raw.accuracy);
@@ -94,7 +76,7 @@ fn a_wander_through_the_office_makes_an_accurate_map() {
 fn a_loop_odometry_misses_by_half_a_metre_closes() {
     let (run, rec) = run("loop", 300.0, 0.06);
     let built = build(&rec, Params::default(), |_, _| {});
-    let f = frame(&run, &rec);
+    let f = run.frame(&rec);
     let (t_end, truth_end) = *run.truth.last().unwrap();
     let end_odom = rec.odom_at(t_end).unwrap();
     let miss = |p: Pose| {

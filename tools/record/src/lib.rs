@@ -731,18 +731,27 @@ pub fn log(cmd: LogCmd) -> anyhow::Result<()> {
     }
 }
 
-/// The first bytes of every MCAP file.
-const MCAP_MAGIC: &[u8] = &[0x89, b'M', b'C', b'A', b'P', 0x30, b'\r', b'\n'];
+/// The first bytes of the file at `path` (64 at most).
+fn head(path: &Path) -> std::io::Result<Vec<u8>> {
+    use std::io::Read as _;
+    let mut head = Vec::with_capacity(64);
+    std::fs::File::open(path)?.take(64).read_to_end(&mut head)?;
+    Ok(head)
+}
+
+/// Whether the file at `path` is an MCAP file, by its first bytes.
+///
+/// # Errors
+///
+/// The file cannot be read.
+pub fn is_mcap(path: &Path) -> std::io::Result<bool> {
+    Ok(head(path)?.starts_with(mcap::MAGIC))
+}
 
 /// Fails, saying what the file is instead, unless `path` is an MCAP file.
 fn ensure_mcap(path: &Path) -> anyhow::Result<()> {
-    use std::io::Read as _;
-    let mut head = [0u8; 64];
-    let n = std::fs::File::open(path)
-        .and_then(|mut f| f.read(&mut head))
-        .with_context(|| format!("opening {}", path.display()))?;
-    let head = &head[..n];
-    if head.starts_with(MCAP_MAGIC) {
+    let head = head(path).with_context(|| format!("opening {}", path.display()))?;
+    if head.starts_with(mcap::MAGIC) {
         return Ok(());
     }
     if head.starts_with(b"## Player") {
