@@ -71,9 +71,15 @@ impl StopSignals {
 
     /// The next SIGTERM or SIGINT (Ctrl-C), logged.
     pub async fn recv(&mut self) {
+        let which = self.next().await;
+        tracing::info!("{which}");
+    }
+
+    /// The next SIGTERM or SIGINT: its name.
+    async fn next(&mut self) -> &'static str {
         tokio::select! {
-            _ = self.term.recv() => tracing::info!("SIGTERM"),
-            _ = self.int.recv() => tracing::info!("SIGINT"),
+            _ = self.term.recv() => "SIGTERM",
+            _ = self.int.recv() => "SIGINT",
         }
     }
 
@@ -135,23 +141,17 @@ pub async fn wait_signal() -> std::io::Result<()> {
     Ok(())
 }
 
-/// Blocks until SIGINT or SIGTERM.
+/// Blocks until SIGINT or SIGTERM (not logged).
 ///
 /// # Errors
 ///
 /// The runtime or the handlers cannot start.
 pub fn wait_for_signal() -> std::io::Result<()> {
-    use tokio::signal::unix::{signal, SignalKind};
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()?;
     rt.block_on(async {
-        let mut term = signal(SignalKind::terminate())?;
-        let mut int = signal(SignalKind::interrupt())?;
-        tokio::select! {
-            _ = term.recv() => {}
-            _ = int.recv() => {}
-        }
+        StopSignals::new()?.next().await;
         Ok(())
     })
 }
