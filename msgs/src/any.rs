@@ -1,6 +1,6 @@
 //! Decoding a payload of any known schema, for tools that print what they see.
 
-use serde::Serialize;
+use serde::{Deserializer, Serialize, Serializer};
 
 use crate::codec::{decode_body, split, DecodeError, Message, Stamped};
 use crate::iface::*;
@@ -32,11 +32,51 @@ macro_rules! any {
             Ok(Stamped { stamp, msg })
         }
 
+        /// Encodes a message of schema `schema` read from any serde format
+        /// (JSON from a command line, a Python dict…), stamped `stamp`.
+        /// `None` when this build knows no such schema.
+        ///
+        /// # Errors
+        ///
+        /// The format's error when the value does not fit the schema.
+        pub fn encode_from<'de, D: Deserializer<'de>>(
+            schema: &str,
+            de: D,
+            stamp: f64,
+        ) -> Result<Option<Vec<u8>>, D::Error> {
+            Ok(match schema {
+                $( <$ty as Message>::SCHEMA => {
+                    let m: $ty = serde::Deserialize::deserialize(de)?;
+                    Some(crate::codec::encode(&m, stamp))
+                } )*
+                _ => None,
+            })
+        }
+
         impl AnyMsg {
             /// The payload of this message stamped `stamp`, as [`crate::encode`] makes it.
             pub fn encode(&self, stamp: f64) -> Vec<u8> {
                 match self {
                     $( AnyMsg::$variant(m) => crate::codec::encode(m, stamp), )*
+                }
+            }
+
+            /// Its schema tag, `laser/scan@1`.
+            pub fn schema(&self) -> &'static str {
+                match self {
+                    $( AnyMsg::$variant(_) => <$ty as Message>::SCHEMA, )*
+                }
+            }
+
+            /// Serializes the message alone, without the variant's name
+            /// around it: `{"ranges": …}` rather than `{"LaserScan": {"ranges": …}}`.
+            ///
+            /// # Errors
+            ///
+            /// The serializer's.
+            pub fn serialize_body<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+                match self {
+                    $( AnyMsg::$variant(m) => m.serialize(s), )*
                 }
             }
         }
@@ -90,6 +130,15 @@ any! {
     LogSetFilename(log::SetFilename),
 }
 
+/// The schema tag of message kind `kind` (`position2d/cmd_vel`), whatever
+/// its version: what tools that take a kind by name send.
+pub fn schema_for(kind: &str) -> Option<&'static str> {
+    SCHEMAS
+        .iter()
+        .copied()
+        .find(|s| s.split_once('@').is_some_and(|(k, _)| k == kind))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -121,6 +170,31 @@ mod tests {
         ));
         let json = serde_json::to_string(&got.msg).unwrap();
         assert!(json.starts_with("{\"MapInfo\":{\"width\":3"), "{json}");
+    }
+
+    #[test]
+    fn encode_from_reads_any_format_and_the_body_serializes_bare() {
+        let schema = schema_for("position2d/cmd_vel").unwrap();
+        assert_eq!(schema, position2d::CmdVel::SCHEMA);
+        let json = r#"{"vel": {"x": 0.5, "y": 0, "yaw": 0.25}, "state": true}"#;
+        let mut de = serde_json::Deserializer::from_str(json);
+        let bytes = encode_from(schema, &mut de, 3.0).unwrap().unwrap();
+        let got = decode_any(&bytes).unwrap();
+        assert_eq!(got.stamp, 3.0);
+        assert_eq!(got.msg.schema(), schema);
+        let mut out = Vec::new();
+        got.msg
+            .serialize_body(&mut serde_json::Serializer::new(&mut out))
+            .unwrap();
+        assert_eq!(
+            String::from_utf8(out).unwrap(),
+            r#"{"vel":{"x":0.5,"y":0.0,"yaw":0.25},"state":true}"#
+        );
+        let mut de = serde_json::Deserializer::from_str(r#"{"vel": 1}"#);
+        assert!(encode_from(schema, &mut de, 0.0).is_err());
+        let mut de = serde_json::Deserializer::from_str("null");
+        assert_eq!(encode_from("nope@1", &mut de, 0.0).unwrap(), None);
+        assert_eq!(schema_for("position2d/cmd"), None);
     }
 
     #[test]

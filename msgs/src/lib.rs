@@ -20,7 +20,7 @@ mod geometry;
 mod iface;
 
 pub use addr::{AddrError, DevAddr, Device, Interface, DEFAULT_ROBOT};
-pub use any::{decode_any, AnyMsg, SCHEMAS};
+pub use any::{decode_any, encode_from, schema_for, AnyMsg, SCHEMAS};
 pub use codec::{decode, encode, Command, DecodeError, Message, Request, Stamped};
 pub use geometry::{Color, Pose2d, Pose3d, Size2d, Size3d};
 pub use iface::*;

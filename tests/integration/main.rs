@@ -15,6 +15,7 @@ mod logs;
 mod nav;
 mod player;
 mod process;
+mod python;
 mod serial;
 mod sessions;
 mod stage;

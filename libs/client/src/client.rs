@@ -21,7 +21,7 @@ pub enum ClientError {
         /// The device.
         device: Device,
         /// The request name.
-        request: &'static str,
+        request: String,
         /// Its reason.
         reason: String,
     },
@@ -31,7 +31,7 @@ pub enum ClientError {
         /// The device.
         device: Device,
         /// The request name.
-        request: &'static str,
+        request: String,
         /// How long we waited.
         waited: Duration,
     },
@@ -174,7 +174,13 @@ impl Client {
 
     /// Calls `on_sample` with every sample of `dev` (and first its latest
     /// sample, if its driver keeps one), then marks data fresh for `read`.
-    pub(crate) fn subscribe(
+    /// The proxies are built on this; so are clients that take samples of
+    /// any kind (the Python package).
+    ///
+    /// # Errors
+    ///
+    /// [`ClientError::Node`] if Zenoh refuses the subscription.
+    pub fn subscribe(
         &self,
         dev: Device,
         on_sample: impl Fn(&[u8]) + Send + Sync + 'static,
@@ -220,31 +226,60 @@ impl Client {
 
     /// Sends command `cmd` to `dev`.
     pub(crate) fn command<C: Command>(&self, dev: Device, cmd: &C) -> Result<()> {
-        let key = keys::cmd(&dev, C::NAME);
+        self.command_payload(dev, C::NAME, codec::encode(cmd, now()))
+    }
+
+    /// Sends an encoded command (`payload`, from [`codec::encode`]) named
+    /// `name` to `dev`.
+    ///
+    /// # Errors
+    ///
+    /// [`ClientError::Node`] if Zenoh refuses to send it.
+    pub fn command_payload(&self, dev: Device, name: &str, payload: Vec<u8>) -> Result<()> {
+        let key = keys::cmd(&dev, name);
         self.0
             .session
-            .put(&key, codec::encode(cmd, now()))
+            .put(&key, payload)
             .wait()
             .map_err(|e| NodeError::zenoh(format!("sending {key}"), e).into())
     }
 
     /// Sends request `req` to `dev` and waits for its answer.
     pub(crate) fn request<R: Request>(&self, dev: Device, req: &R) -> Result<R::Reply> {
-        let key = keys::req(&dev, R::NAME);
-        let replies = troupe_node::ask(&self.0.session, &key, REQUEST_TIMEOUT)
-            .payload(codec::encode(req, now()))
+        let reply =
+            self.request_payload(dev, R::NAME, codec::encode(req, now()), REQUEST_TIMEOUT)?;
+        decode::<R::Reply>(dev, &reply)
+    }
+
+    /// Sends an encoded request named `name` to `dev` and waits at most
+    /// `timeout` for its answer: the reply's payload.
+    ///
+    /// # Errors
+    ///
+    /// [`ClientError::Nack`] with the device's reason when it refuses,
+    /// [`ClientError::NoAnswer`] when none answers in time.
+    pub fn request_payload(
+        &self,
+        dev: Device,
+        name: &str,
+        payload: Vec<u8>,
+        timeout: Duration,
+    ) -> Result<Vec<u8>> {
+        let key = keys::req(&dev, name);
+        let replies = troupe_node::ask(&self.0.session, &key, timeout)
+            .payload(payload)
             .wait()
             .map_err(|e| NodeError::zenoh(format!("sending {key}"), e))?;
         let reply = replies.recv().map_err(|_| ClientError::NoAnswer {
             device: dev,
-            request: R::NAME,
-            waited: REQUEST_TIMEOUT,
+            request: name.to_owned(),
+            waited: timeout,
         })?;
         match reply.into_result() {
-            Ok(s) => decode::<R::Reply>(dev, &s.payload().to_bytes()),
+            Ok(s) => Ok(s.payload().to_bytes().into_owned()),
             Err(e) => Err(ClientError::Nack {
                 device: dev,
-                request: R::NAME,
+                request: name.to_owned(),
                 reason: match codec::decode::<troupe_msgs::common::Nack>(&e.payload().to_bytes()) {
                     Ok(n) => n.msg.reason,
                     Err(_) => String::from_utf8_lossy(&e.payload().to_bytes()).into_owned(),
@@ -264,6 +299,6 @@ pub(crate) fn decode<M: Message>(dev: Device, bytes: &[u8]) -> Result<M> {
 }
 
 /// Client-side stamps are wall time: the client has no simulator clock.
-fn now() -> f64 {
+pub fn now() -> f64 {
     troupe_node::Clock::wall().now()
 }

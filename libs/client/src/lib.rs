@@ -25,7 +25,7 @@ mod client;
 pub mod na;
 mod proxies;
 
-pub use client::{Client, ClientError, Result};
+pub use client::{now, Client, ClientError, Result};
 pub use nalgebra;
 pub use proxies::*;
 pub use troupe_msgs as msgs;

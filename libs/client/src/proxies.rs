@@ -678,6 +678,10 @@ impl MapProxy {
     pub fn origin(&self) -> Pose2d {
         self.info.origin
     }
+    /// Every cell, row by row from row 0 (the row at the origin's y).
+    pub fn cells(&self) -> &[i8] {
+        &self.cells
+    }
     /// Cell (`i` column, `j` row): -1 free, 0 unknown, +1 occupied; `None` outside the map.
     pub fn cell(&self, i: u32, j: u32) -> Option<i8> {
         if i >= self.info.width || j >= self.info.height {

@@ -1,0 +1,87 @@
+"""Stacks for the tests: `troupe launch` of a cfg under worlds/, in a namespace of its own.
+
+The `troupe` binary is $TROUPE_BIN (tests/integration/python.rs sets it to
+the build under test), else target/debug/troupe.
+"""
+
+import os
+import pathlib
+import queue
+import signal
+import subprocess
+import threading
+import uuid
+
+import pytest
+
+import troupe
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+WORLDS = ROOT / "worlds"
+
+
+def troupe_bin() -> str:
+    return os.environ.get("TROUPE_BIN") or str(ROOT / "target" / "debug" / "troupe")
+
+
+class Stack:
+    """A launched cfg: its router's endpoint, its namespace, and a client on it."""
+
+    def __init__(self, cfg: str, devices, speedup=None):
+        self.namespace = f"py-{pathlib.Path(cfg).stem}-{uuid.uuid4().hex[:8]}"
+        args = [troupe_bin(), "--namespace", self.namespace, "launch", str(WORLDS / cfg),
+                "--listen", "tcp/127.0.0.1:0", "--no-bridge"]
+        if speedup is not None:
+            args += ["--speedup", str(speedup)]
+        self.proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        self.lines: "queue.Queue[str]" = queue.Queue()
+        self.errors: list = []
+        threading.Thread(target=self._pump, args=(self.proc.stdout, self.lines.put), daemon=True).start()
+        threading.Thread(target=self._pump, args=(self.proc.stderr, self.errors.append), daemon=True).start()
+        self.endpoint = self._endpoint()
+        self.client = troupe.connect(self.endpoint, namespace=self.namespace)
+        self.client.wait_for(*devices, timeout=30)
+
+    @staticmethod
+    def _pump(stream, sink):
+        for line in stream:
+            sink(line.rstrip("\n"))
+
+    def _endpoint(self) -> str:
+        prefix = "troupe launch: router listening on "
+        while True:
+            try:
+                line = self.lines.get(timeout=30)
+            except queue.Empty:
+                raise AssertionError(f"no router line from the launcher: {self.errors}")
+            if line.startswith(prefix):
+                return line[len(prefix):].split()[0]
+
+    def env(self) -> dict:
+        """The environment a program run against this stack gets."""
+        return dict(os.environ, TROUPE_NAMESPACE=self.namespace)
+
+    def stop(self):
+        self.client.close()
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+
+
+@pytest.fixture
+def launch():
+    """`launch(cfg, devices, speedup=None)`: a Stack, stopped after the test."""
+    stacks = []
+
+    def start(cfg, devices, speedup=None):
+        stack = Stack(cfg, devices, speedup)
+        stacks.append(stack)
+        return stack
+
+    yield start
+    for s in stacks:
+        s.stop()

@@ -1,0 +1,143 @@
+"""`import troupe` against launched stacks: every proxy reads, commands move the robot, errors say why."""
+
+import math
+import threading
+
+import numpy as np
+import pytest
+
+import troupe
+
+
+def test_simple_cfg_reads_every_device_and_drives(launch):
+    stack = launch("simple.cfg", ["6665:position2d:0", "6665:laser:0", "6665:ranger:1", "6665:simulation:0"])
+    client = stack.client
+    names = {str(d): d.driver for d in client.devices(6665)}
+    assert names["6665:laser:0"] == "rangertolaser" and names["6665:position2d:0"] == "stage", names
+
+    robot = client.robot(6665)
+    pos, laser, sonar, lranger, sim = (robot.position2d(0), robot.laser(0), robot.ranger(0),
+                                       robot.ranger(1), robot.simulation(0))
+    fresh = client.read(timeout=10)
+    assert fresh and all(isinstance(p, troupe.Proxy) for p in fresh)
+
+    laser.read(timeout=10)
+    ranges = laser.ranges
+    assert isinstance(ranges, np.ndarray) and ranges.dtype == np.float64
+    beams = len(ranges)
+    assert beams > 100 and 0 < ranges.min() <= ranges.max() <= laser.max_range
+    assert laser.bearings[-1] == pytest.approx(laser.min_angle + (beams - 1) * laser.resolution)
+    assert laser.points.shape == (beams, 2) and laser.stamp > 0
+    assert laser.geometry()["size"]["width"] > 0
+
+    sonar.read(timeout=10)
+    lranger.read(timeout=10)
+    assert len(sonar.ranges) > 0 and len(lranger.ranges) == beams
+    assert len(sonar.geometry()["element_poses"]) == len(sonar.ranges)
+
+    # Drive: the odometry and the simulator both see r0 move forward.
+    start, truth = pos.read().pose, sim.get_pose2d("r0")
+    pos.set_speed(0.4, 0.0)
+    moved = 0.0
+    for sample in pos.stream(timeout=10):
+        assert sample.kind == "position2d/data"
+        p = sample.data["pose"]
+        moved = math.hypot(p["x"] - start.x, p["y"] - start.y)
+        if moved > 0.3:
+            break
+    pos.stop()
+    assert moved > 0.3, f"r0 moved {moved} m"
+    after = sim.get_pose2d("r0")
+    assert math.hypot(after.x - truth.x, after.y - truth.y) > 0.25
+
+    sim.set_pose2d("r0", truth.x, truth.y, 1.0)
+    assert abs(sim.get_pose2d("r0").yaw - 1.0) < 1e-3
+
+
+def test_errors_are_python_exceptions_with_the_reason(launch):
+    stack = launch("simple.cfg", ["6665:simulation:0", "6665:position2d:0"])
+    robot = stack.client.robot(6665)
+    sim = robot.simulation(0)
+    with pytest.raises(troupe.RequestRefused, match="nope"):
+        sim.get_pose2d("nope")
+    ghost = robot.laser(7)
+    with pytest.raises(troupe.NoAnswer, match="6665:laser:7"):
+        ghost.request("geom", "laser/get_geom", timeout=0.3)
+    with pytest.raises(TimeoutError):
+        ghost.read(timeout=0.2)
+    with pytest.raises(troupe.ReadTimeout):
+        stack.client.wait_for("6665:laser:7", timeout=0.2)
+    with pytest.raises(ValueError, match="position2d/cmd_vel"):
+        robot.position2d(0).command("vel", "position2d/cmd_vel", {"vel": 1})
+    with pytest.raises(ValueError, match="interface"):
+        robot.device("nosuch", 0)
+    with pytest.raises(troupe.TroupeError):
+        troupe.connect("tcp/127.0.0.1:1", namespace=stack.namespace)
+
+
+def test_callbacks_and_streams_deliver_every_message(launch):
+    stack = launch("simple.cfg", ["6665:laser:0"])
+    laser = stack.client.robot(6665).laser(0)
+    got, done = [], threading.Event()
+
+    def on_scan(sample):
+        got.append(sample)
+        if len(got) == 5:
+            done.set()
+
+    sub = laser.on_data(on_scan)
+    assert done.wait(10), f"{len(got)} callbacks"
+    sub.stop()
+    stamps = [s.stamp for s in got if s.kind == "laser/scan"]
+    assert stamps == sorted(stamps) and len(stamps) >= 2
+    streamed = [s for _, s in zip(range(4), laser.stream())]
+    assert len(streamed) == 4
+
+
+def test_map_comes_as_an_array(launch):
+    stack = launch("map.cfg", ["6665:map:0"])
+    m = stack.client.robot(6665).map(0).get_map()
+    assert m.cells.shape == (m.height, m.width) and m.cells.dtype == np.int8
+    values = set(np.unique(m.cells).tolist())
+    assert {-1, 1} <= values, values
+    assert m.resolution > 0 and m.cell(m.width, 0) is None
+
+
+def test_nav_stack_localizes_and_plans(launch):
+    stack = launch("nav.cfg", ["6665:planner:0", "6665:localize:0", "6665:simulation:0"], speedup=8)
+    robot = stack.client.robot(6665)
+    loc, planner, sim = robot.localize(0), robot.planner(0), robot.simulation(0)
+    truth = sim.get_pose2d("r0")
+    loc.set_pose(truth.x, truth.y, truth.yaw, cov=(0.05, 0.05, 0.01, 0, 0, 0))
+    est = None
+    for s in loc.stream(timeout=20):
+        if s.data["hypoths"]:
+            est = loc.pose
+            break
+    assert est is not None and math.hypot(est.x - truth.x, est.y - truth.y) < 0.5, (est, truth)
+    assert len(loc.particles()["particles"]) > 0
+
+    planner.set_goal(truth.x + 1.0, truth.y, 0.0)
+    for _ in planner.stream(timeout=20):
+        if planner.valid:
+            break
+    assert planner.valid and planner.waypoint_count >= 1
+    assert len(planner.waypoints()) == planner.waypoint_count
+
+
+def test_gripper_and_blobfinder(launch):
+    stack = launch("gripper.cfg", ["6665:gripper:0"])
+    gripper = stack.client.robot(6665).gripper(0)
+    gripper.read(timeout=10)
+    assert gripper.state == "open"
+    gripper.close()
+    for _ in gripper.stream(timeout=10):
+        if gripper.state in ("closed", "moving"):
+            break
+    assert gripper.state in ("closed", "moving")
+    assert gripper.geometry()["capacity"] >= 0
+
+    bob = launch("bigbob.cfg", ["6665:blobfinder:0"])
+    finder = bob.client.robot(6665).blobfinder(0)
+    finder.read(timeout=10)
+    assert finder.width > 0 and isinstance(finder.blobs, list)
