@@ -141,3 +141,14 @@ def test_gripper_and_blobfinder(launch):
     finder = bob.client.robot(6665).blobfinder(0)
     finder.read(timeout=10)
     assert finder.width > 0 and isinstance(finder.blobs, list)
+
+
+def test_without_numpy_ranges_and_maps_are_lists(launch, monkeypatch):
+    stack = launch("nav.cfg", ["6665:map:0", "6665:laser:0"])
+    monkeypatch.setattr(troupe, "_np", None)
+    robot = stack.client.robot(6665)
+    laser = robot.laser(0).read()
+    assert isinstance(laser.ranges, list) and isinstance(laser.points[0], tuple)
+    m = robot.map(0).get_map()
+    assert isinstance(m.cells, list) and len(m.cells) == m.height and len(m.cells[0]) == m.width
+    assert {-1, 1} <= {c for row in m.cells for c in row}
