@@ -328,6 +328,11 @@ class _Proxy:
     def _refresh(self, tp: Any) -> None:
         """Copies the latest data into the proxy's fields."""
 
+    def _planar_geom(self) -> None:
+        g = self._tp.geometry()
+        self.pose = [g["pose"]["x"], g["pose"]["y"], g["pose"]["yaw"]]
+        self.size = [g["size"]["length"], g["size"]["width"]]
+
     def _request(self, fn, *args: Any) -> int:
         if self._tp is None:
             return _fail(f"{self.interface}:{self.index} is not subscribed")
@@ -378,11 +383,8 @@ class playerc_position2d(_Proxy):
         return self._request(lambda: self._tp.set_odometry(ox, oy, oa))
 
     def get_geom(self) -> int:
-        def get() -> None:
-            g = self._tp.geometry()
-            self.pose = [g["pose"]["x"], g["pose"]["y"], g["pose"]["yaw"]]
-            self.size = [g["size"]["length"], g["size"]["width"]]
-        return self._request(get)
+        """Fills ``pose`` (x, y, yaw on the robot) and ``size`` (length, width)."""
+        return self._request(self._planar_geom)
 
 
 class playerc_laser(_Proxy):
@@ -423,11 +425,8 @@ class playerc_laser(_Proxy):
         self.min_left = min(self.ranges[half:], default=self.max_range)
 
     def get_geom(self) -> int:
-        def get() -> None:
-            g = self._tp.geometry()
-            self.pose = [g["pose"]["x"], g["pose"]["y"], g["pose"]["yaw"]]
-            self.size = [g["size"]["length"], g["size"]["width"]]
-        return self._request(get)
+        """Fills ``pose`` (x, y, yaw on the robot) and ``size`` (length, width)."""
+        return self._request(self._planar_geom)
 
     def get_config(self) -> int:
         def get() -> None:
