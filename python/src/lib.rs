@@ -376,11 +376,7 @@ impl Robot {
     /// Fetches map `index` whole (its info, then its cells in tiles):
     /// `(width, height, resolution, (x, y, yaw) of cell (0, 0), cells)`, the
     /// cells as bytes (int8, row by row from row 0).
-    fn map<'py>(
-        &self,
-        py: Python<'py>,
-        index: u32,
-    ) -> PyResult<WholeMap<'py>> {
+    fn map<'py>(&self, py: Python<'py>, index: u32) -> PyResult<WholeMap<'py>> {
         let mut proxy = troupe_client::MapProxy::new(&self.client, index);
         py.detach(|| proxy.request_map()).map_err(client_error)?;
         let o = proxy.origin();

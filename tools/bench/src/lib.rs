@@ -12,6 +12,7 @@ mod harness;
 pub mod latency;
 pub mod launch;
 pub mod nav;
+pub mod python;
 mod ray;
 pub mod record;
 pub mod serial;
@@ -61,6 +62,10 @@ pub enum BenchCmd {
     #[command(after_help = "Example:
   cargo run --release -- bench slam --seconds 900 --stage-worlds ../shared/compat/stage")]
     Slam(slam::SlamBenchArgs),
+    /// The Python package under load: scans/s in a read() loop and with callbacks, a request's round trip against the Rust client's.
+    #[command(after_help = "Example:
+  pip install ./python && cargo run --release -- bench python --python python3")]
+    Python(python::PythonBenchArgs),
     /// The echo side of `bench latency` (started by it).
     #[command(hide = true)]
     Pong {
@@ -83,5 +88,6 @@ pub fn run(cmd: BenchCmd, z: &ZenohArgs) -> anyhow::Result<()> {
         BenchCmd::Record(a) => record::run(&a),
         BenchCmd::View(a) => view::run(&a),
         BenchCmd::Slam(a) => slam::run(&a),
+        BenchCmd::Python(a) => python::run(&a),
     }
 }
