@@ -36,13 +36,13 @@ def test_goto_arrives(launch):
     stack = launch("simple.cfg", ["6665:position2d:0", "6665:simulation:0"], speedup=5)
     sim = stack.client.robot(6665).simulation(0)
     start = sim.get_pose2d("r0")
-    out = run(stack, "goto.py", "--x", "2", "--y", "1")
-    # (2, 1) in the odometry frame, which starts at r0's start pose.
+    out = run(stack, "goto.py", "--x", "2", "--y", "1", "--yaw", "90")
+    # (2, 1) and 90 degrees in the odometry frame, which starts at r0's start pose.
     s, c = math.sin(start.yaw), math.cos(start.yaw)
-    want = (start.x + 2 * c - s, start.y + 2 * s + c)
+    want = (start.x + 2 * c - s, start.y + 2 * s + c, start.yaw + math.pi / 2)
     end = sim.get_pose2d("r0")
-    assert out.splitlines()[-1].startswith("arrived at"), out
-    assert math.hypot(end.x - want[0], end.y - want[1]) < 0.2, (end, want, out)
+    assert out.splitlines()[-1].startswith("arrived after"), out
+    assert math.hypot(end.x - want[0], end.y - want[1]) < 0.15, (end, want, out)
 
 
 def test_map_draws_the_office(launch):
@@ -62,3 +62,41 @@ def test_planner_and_localize_on_the_nav_stack(launch):
     assert out.startswith("a path of"), out
     end = stack.client.robot(6665).simulation(0).get_pose2d("r0")
     assert math.hypot(end.x - 5.0, end.y) < 0.6, out
+
+
+def wanders_both(launch, cfg, lesson, devices):
+    stack = launch(cfg, devices + ["6665:simulation:0"], speedup=5)
+    sim = stack.client.robot(6665).simulation(0)
+    starts = [sim.get_pose2d(n) for n in ("r0", "r1")]
+    out = run(stack, lesson, "--for", "20")
+    for name, start in zip(("r0", "r1"), starts):
+        end = sim.get_pose2d(name)
+        assert math.hypot(end.x - start.x, end.y - start.y) > 1.0, (name, start, end, out)
+
+
+def test_two_robots_on_two_ports_both_wander(launch):
+    wanders_both(launch, "two_ports.cfg", "two_robots_ports.py", ["6665:position2d:0", "6666:position2d:0"])
+
+
+def test_two_robots_on_one_port_both_wander(launch):
+    wanders_both(launch, "two_index.cfg", "two_robots_index.py", ["6665:position2d:0", "6665:position2d:1"])
+
+
+def test_gripper_drags_the_box_back(launch):
+    stack = launch("gripper.cfg", ["6665:gripper:0", "6665:position2d:0", "6665:simulation:0"], speedup=5)
+    sim = stack.client.robot(6665).simulation(0)
+    before = sim.get_pose2d("box")
+    out = run(stack, "gripper.py", "--back", "1.5")
+    after = sim.get_pose2d("box")
+    assert "holding it: closed" in out, out
+    assert before.x - after.x > 1.3 and abs(after.y - before.y) < 0.1, (before, after, out)
+
+
+def test_bigbob_zaps_the_trash(launch):
+    stack = launch("bigbob.cfg", ["6665:blobfinder:0", "6665:ranger:1", "6665:simulation:0"], speedup=10)
+    out = run(stack, "bigbob.py", "--for", "300", timeout=120)
+    zapped = int(out.splitlines()[-1].split()[1])
+    sim = stack.client.robot(6665).simulation(0)
+    gone = sum(sim.get_pose2d(i).x < -50 for i in
+               ("orange1", "orange2", "orange3", "orange4", "carton1", "carton2", "carton3", "carton4"))
+    assert zapped == gone and gone >= 6, out
