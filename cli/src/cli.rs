@@ -88,11 +88,39 @@ their drivers. `troupe launch` starts one for the robots of its plan.")]
   troupe echo robot/6665/laser/0 --json | jq .msg")]
     Echo(troupe_inspect::EchoArgs),
 
-    /// Measure the rate and jitter of a device's samples.
+    /// Measure the rate and jitter of a device's updates, per message kind.
     #[command(after_help = "Example:
   $ troupe hz laser:0
-  rate: 10.000 Hz  min: 0.0998 s  max: 0.1003 s  std dev: 0.00012 s  window: 10")]
+  rate: 10.000 Hz  min: 0.0998 s  max: 0.1003 s  std dev: 0.00012 s  window: 10  laser/scan (2.0 samples an update, counted once)
+
+Each message kind of the device gets its own line. Samples of one kind that
+carry the same stamp are one update (rangertolaser sends a scan's ranges and
+then its intensities, as Player's does).")]
     Hz(troupe_inspect::HzArgs),
+
+    /// Send a command to a device: drive a base, give a planner a goal.
+    #[command(after_help = "Examples:
+  troupe cmd position2d:0 vel 0.3 0 0.2            # forward 0.3 m/s, turning 0.2 rad/s, until Ctrl-C (then stop)
+  troupe cmd position2d:0 vel 0.3 0 0 --for 2      # for 2 s, then stop
+  troupe cmd planner:0 goal 5 0 0                  # plan to (5, 0), facing 0 rad
+  troupe cmd 6666:gripper:0 close
+  troupe cmd position2d:0 pos --json '{\"pos\": {\"x\": 1, \"y\": 0, \"yaw\": 0}}'
+
+VALUES fill the message's fields in order (SI units, radians); a wrong
+command name lists the ones the device takes. The fleet's access rules hold:
+a viewer's identity cannot command.")]
+    Cmd(troupe_inspect::CmdArgs),
+
+    /// Make a request of a device and print the answer.
+    #[command(after_help = "Examples:
+  troupe call simulation:0 get_pose2d r0           # simulation/pose2d@1 {\"name\":\"r0\",\"pose\":{…}}
+  troupe call simulation:0 set_pose2d r0 -6 -6 0.5
+  troupe call localize:0 set_pose -6 -6 0.5 0.25 0.25 0.07 0 0 0
+  troupe call laser:0 geom
+  troupe call position2d:0 motor_power true
+
+A refused request prints the device's reason and exits 1.")]
+    Call(troupe_inspect::CallArgs),
 
     /// Exit 0 once the given devices are live (a container's health check).
     #[command(after_help = "Examples:

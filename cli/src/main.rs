@@ -46,6 +46,8 @@ fn run(cli: cli::Cli) -> anyhow::Result<()> {
         Command::List(a) => troupe_inspect::list(a, z),
         Command::Echo(a) => troupe_inspect::echo(a, z),
         Command::Hz(a) => troupe_inspect::hz(a, z),
+        Command::Cmd(a) => troupe_inspect::cmd(a, z),
+        Command::Call(a) => troupe_inspect::call(a, z),
         Command::Ready(a) => troupe_inspect::ready(a, z),
         Command::Drivers { all } => troupe_inspect::print_drivers(&drivers::catalog(), all),
         Command::Interfaces => troupe_inspect::print_interfaces(),

@@ -281,12 +281,10 @@ async fn supervise(
             no_multicast: true,
             ..Default::default()
         };
-        let session = rz.open(Mode::Router).with_context(|| {
-            format!(
-                "starting the embedded router on {} (is another `troupe launch` or `troupe router` running? pick another with --listen tcp/127.0.0.1:PORT)",
-                listen.join(", ")
-            )
-        })?;
+        let session = match rz.open(Mode::Router) {
+            Ok(s) => s,
+            Err(e) => return Err(router_not_started(&listen, &z, e)),
+        };
         let locators = troupe_node::locators(&session);
         tracing::info!("embedded router listening on {}", locators.join(" "));
         // A line on stdout for scripts and tests that pass --listen …:0.
@@ -870,6 +868,50 @@ async fn forward<R: tokio::io::AsyncRead + Unpin>(
                 tracing::warn!("log file of `{name}`: {e}");
             }
         }
+    }
+}
+
+/// Why the embedded router did not start, said as what to do: a router
+/// already there is one to join (or to keep apart from), a port another
+/// program holds needs another port.
+fn router_not_started(
+    listen: &[String],
+    z: &ZenohArgs,
+    e: troupe_node::NodeError,
+) -> anyhow::Error {
+    let taken = listen.iter().find(|ep| {
+        ep.strip_prefix("tcp/")
+            .and_then(|addr| addr.parse::<std::net::SocketAddr>().ok())
+            .is_some_and(|addr| {
+                std::net::TcpListener::bind(addr)
+                    .is_err_and(|b| b.kind() == std::io::ErrorKind::AddrInUse)
+            })
+    });
+    let Some(ep) = taken else {
+        return anyhow::Error::new(e).context(format!(
+            "starting the embedded router on {}",
+            listen.join(", ")
+        ));
+    };
+    let router_there = ZenohArgs {
+        connect: vec![ep.clone()],
+        namespace: z.namespace.clone(),
+        no_multicast: true,
+        ..Default::default()
+    }
+    .open(Mode::Client)
+    .is_ok();
+    if router_there {
+        anyhow::anyhow!(
+            "a Zenoh router is already running on {ep} (another `troupe launch` or `troupe router`): \
+             join it with `--connect {ep}` (add `--namespace NS` to keep the two stacks apart), \
+             or start a separate one with `--listen tcp/127.0.0.1:PORT`"
+        )
+    } else {
+        anyhow::anyhow!(
+            "{ep} is taken by another program (not a Zenoh router): start the embedded router \
+             elsewhere with `--listen tcp/127.0.0.1:PORT`"
+        )
     }
 }
 

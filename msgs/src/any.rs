@@ -2,7 +2,7 @@
 
 use serde::{Deserializer, Serialize, Serializer};
 
-use crate::codec::{decode_body, split, DecodeError, Message, Stamped};
+use crate::codec::{decode_body, split, DecodeError, Message, Route, Stamped};
 use crate::iface::*;
 
 macro_rules! any {
@@ -30,6 +30,22 @@ macro_rules! any {
                 other => return Err(DecodeError::UnknownSchema(other.to_owned())),
             };
             Ok(Stamped { stamp, msg })
+        }
+
+        /// Every schema with its route: the commands and requests of each interface.
+        const ROUTES: &[(&str, Option<Route>)] = &[$( (<$ty as Message>::SCHEMA, <$ty as Message>::ROUTE), )*];
+
+        /// Serializes the default value of the message of schema `schema`
+        /// (what a tool fills in from a command line); `None` for an unknown schema.
+        ///
+        /// # Errors
+        ///
+        /// The serializer's.
+        pub fn default_of<S: Serializer>(schema: &str, s: S) -> Option<Result<S::Ok, S::Error>> {
+            match schema {
+                $( <$ty as Message>::SCHEMA => Some(<$ty as Default>::default().serialize(s)), )*
+                _ => None,
+            }
         }
 
         /// Encodes a message of schema `schema` read from any serde format
@@ -130,6 +146,24 @@ any! {
     LogSetFilename(log::SetFilename),
 }
 
+/// The commands and requests a device of `interface` takes: each route with
+/// the schema of its message, the interface's own first, then those every
+/// device may take (`power`).
+pub fn routed(interface: crate::Interface) -> Vec<(Route, &'static str)> {
+    let own = format!("{}/", interface.name());
+    let mut out: Vec<(Route, &'static str)> = Vec::new();
+    for prefix in [own.as_str(), "common/"] {
+        for (schema, route) in ROUTES {
+            if let (true, Some(r)) = (schema.starts_with(prefix), route) {
+                if !out.iter().any(|(seen, _)| seen == r) {
+                    out.push((*r, schema));
+                }
+            }
+        }
+    }
+    out
+}
+
 /// The schema tag of message kind `kind` (`position2d/cmd_vel`), whatever
 /// its version: what tools that take a kind by name send.
 pub fn schema_for(kind: &str) -> Option<&'static str> {
@@ -195,6 +229,19 @@ mod tests {
         let mut de = serde_json::Deserializer::from_str("null");
         assert_eq!(encode_from("nope@1", &mut de, 0.0).unwrap(), None);
         assert_eq!(schema_for("position2d/cmd"), None);
+    }
+
+    #[test]
+    fn every_interface_routes_its_commands_and_requests() {
+        let routes = routed(crate::Interface::Position2d);
+        assert!(routes.contains(&(Route::Command("vel"), position2d::CmdVel::SCHEMA)));
+        assert!(routes.contains(&(Route::Request("geom"), position2d::GetGeom::SCHEMA)));
+        assert!(routes.contains(&(Route::Request("power"), common::Power::SCHEMA)));
+        assert!(!routes.iter().any(|(_, s)| *s == position2d::Data::SCHEMA));
+        let v = default_of(position2d::CmdVel::SCHEMA, serde_json::value::Serializer)
+            .unwrap()
+            .unwrap();
+        assert_eq!(v["vel"]["yaw"], 0.0);
     }
 
     #[test]

@@ -16,6 +16,18 @@ use serde::{de::DeserializeOwned, Serialize};
 pub trait Message: Serialize + DeserializeOwned + Clone + std::fmt::Debug + Send + 'static {
     /// `interface/name@version`; bump the version when the layout changes.
     const SCHEMA: &'static str;
+    /// Where the message is sent when it is a command or a request (see
+    /// [`Command`], [`Request`]); `None` for data and replies.
+    const ROUTE: Option<Route> = None;
+}
+
+/// How a message reaches a device: the last chunk of its key.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Route {
+    /// A command, put on `…/cmd/<name>`.
+    Command(&'static str),
+    /// A request, a get on `…/req/<name>`.
+    Request(&'static str),
 }
 
 /// A message sent to a device as a command (put on `…/cmd/<NAME>`).

@@ -20,8 +20,8 @@ mod geometry;
 mod iface;
 
 pub use addr::{AddrError, DevAddr, Device, Interface, DEFAULT_ROBOT};
-pub use any::{decode_any, encode_from, schema_for, AnyMsg, SCHEMAS};
-pub use codec::{decode, encode, Command, DecodeError, Message, Request, Stamped};
+pub use any::{decode_any, default_of, encode_from, routed, schema_for, AnyMsg, SCHEMAS};
+pub use codec::{decode, encode, Command, DecodeError, Message, Request, Route, Stamped};
 pub use geometry::{Color, Pose2d, Pose3d, Size2d, Size3d};
 pub use iface::*;
 
@@ -33,13 +33,19 @@ macro_rules! message {
         }
     };
     ($ty:ty, $schema:literal, cmd $name:literal) => {
-        $crate::message!($ty, $schema);
+        impl $crate::codec::Message for $ty {
+            const SCHEMA: &'static str = $schema;
+            const ROUTE: Option<$crate::codec::Route> = Some($crate::codec::Route::Command($name));
+        }
         impl $crate::codec::Command for $ty {
             const NAME: &'static str = $name;
         }
     };
     ($ty:ty, $schema:literal, req $name:literal -> $reply:ty) => {
-        $crate::message!($ty, $schema);
+        impl $crate::codec::Message for $ty {
+            const SCHEMA: &'static str = $schema;
+            const ROUTE: Option<$crate::codec::Route> = Some($crate::codec::Route::Request($name));
+        }
         impl $crate::codec::Request for $ty {
             const NAME: &'static str = $name;
             type Reply = $reply;

@@ -343,3 +343,41 @@ fn a_passthrough_relays_a_device_of_another_namespace() {
     assert!(b.terminate().success(), "{}", b.stderr());
     assert!(a.terminate().success(), "{}", a.stderr());
 }
+
+#[test]
+fn a_second_launch_on_a_taken_port_says_what_holds_it_and_what_to_do() {
+    let cfg = temp_cfg("second", STACK);
+    let (mut first, endpoint, ns) = launch(&cfg, &["--no-bridge"]);
+    let second = |listen: &str| {
+        troupe_output(&strings(&[
+            "--namespace",
+            &ns,
+            "launch",
+            cfg.to_str().unwrap(),
+            "--listen",
+            listen,
+            "--no-bridge",
+        ]))
+    };
+    let (st, _, err) = second(&endpoint);
+    assert!(!st.success());
+    assert!(
+        err.contains(&format!("a Zenoh router is already running on {endpoint}"))
+            && err.contains(&format!("join it with `--connect {endpoint}`"))
+            && err.contains("--namespace NS")
+            && !err.contains("no Zenoh router answers"),
+        "{err}"
+    );
+    first.terminate();
+
+    let held = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = held.local_addr().unwrap().port();
+    let (st, _, err) = second(&format!("tcp/127.0.0.1:{port}"));
+    assert!(!st.success());
+    assert!(
+        err.contains(&format!(
+            "tcp/127.0.0.1:{port} is taken by another program (not a Zenoh router)"
+        )),
+        "{err}"
+    );
+}

@@ -5,6 +5,7 @@
 //!
 //! Run with `cargo test -p troupe-tests`.
 
+mod act;
 mod bridge;
 mod bridge_devices;
 mod docker;

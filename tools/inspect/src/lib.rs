@@ -1,7 +1,8 @@
 //! Looking at a running system from any host, as Player's tools did:
 //! `troupe list` (Player's "Available devices"), `echo` (playerprint),
 //! `hz`, `ready` (a container's health check), and what this build knows:
-//! `drivers`, `interfaces`. Each is a Zenoh client; none changes anything.
+//! `drivers`, `interfaces`. Each is a Zenoh client; none changes anything
+//! but `cmd` and `call` (module `act`), which command and ask devices.
 
 use std::io::Write;
 use std::time::{Duration, Instant};
@@ -12,6 +13,9 @@ use troupe_launch::catalog::{self, Catalog};
 use troupe_msgs::{decode_any, keys, AddrError, DevAddr, Interface};
 use troupe_node::zenoh::Wait;
 use troupe_node::{Mode, ZenohArgs};
+
+mod act;
+pub use act::{call, cmd, CallArgs, CmdArgs};
 
 /// Flags of `troupe list`.
 #[derive(Debug, Args)]
@@ -413,38 +417,47 @@ pub fn hz(a: HzArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         .wait()
         .map_err(|e| anyhow::anyhow!("subscribing to {key}: {e}"))?;
     let window = a.window.max(2);
-    let mut gaps = std::collections::VecDeque::with_capacity(window);
-    let mut last: Option<Instant> = None;
-    let mut fresh = 0usize;
+    let mut kinds: std::collections::BTreeMap<String, Updates> = Default::default();
     let mut reports = 0u64;
     let mut next_report = Instant::now() + Duration::from_secs(1);
     let mut out = std::io::stdout().lock();
     loop {
         match sub.recv_deadline(next_report) {
-            Ok(Some(_)) => {
-                let now = Instant::now();
-                if let Some(l) = last {
-                    if gaps.len() == window {
-                        gaps.pop_front();
-                    }
-                    gaps.push_back((now - l).as_secs_f64());
-                }
-                last = Some(now);
-                fresh += 1;
+            Ok(Some(s)) => {
+                let bytes = s.payload().to_bytes();
+                let (kind, stamp) = match troupe_msgs::codec::split(&bytes) {
+                    Ok((tag, stamp, _)) => (tag.split('@').next().unwrap_or(tag).to_owned(), stamp),
+                    Err(_) => ("(malformed)".to_owned(), f64::NAN),
+                };
+                kinds.entry(kind).or_default().sample(stamp, window);
             }
             Ok(None) => {
                 next_report += Duration::from_secs(1);
-                let g: Vec<f64> = gaps.iter().copied().collect();
-                match rate(&g) {
-                    Some(r) if fresh > 0 => writeln!(
-                        out,
-                        "rate: {:.3} Hz  min: {:.4} s  max: {:.4} s  std dev: {:.5} s  window: {}",
-                        r.hz, r.min, r.max, r.std_dev, r.window
-                    )?,
-                    _ => writeln!(out, "no new samples on `{key}`")?,
+                let mut any = false;
+                for (kind, u) in &mut kinds {
+                    let g: Vec<f64> = u.gaps.iter().copied().collect();
+                    if let (Some(r), true) = (rate(&g), u.fresh > 0) {
+                        any = true;
+                        let per = if u.updates > 0 && u.samples > u.updates {
+                            format!(
+                                " ({:.1} samples an update, counted once)",
+                                u.samples as f64 / u.updates as f64
+                            )
+                        } else {
+                            String::new()
+                        };
+                        writeln!(
+                            out,
+                            "rate: {:.3} Hz  min: {:.4} s  max: {:.4} s  std dev: {:.5} s  window: {}  {kind}{per}",
+                            r.hz, r.min, r.max, r.std_dev, r.window
+                        )?;
+                    }
+                    u.fresh = 0;
+                }
+                if !any {
+                    writeln!(out, "no new samples on `{key}`")?;
                 }
                 out.flush()?;
-                fresh = 0;
                 reports += 1;
                 if a.count.is_some_and(|c| reports >= c) {
                     return Ok(());
@@ -452,6 +465,39 @@ pub fn hz(a: HzArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             }
             Err(e) => anyhow::bail!("subscription to {key} ended: {e}"),
         }
+    }
+}
+
+/// The updates of one message kind on a key: samples that carry the same
+/// stamp as the one before (a laser's ranges and then its intensities, as
+/// Player's rangertolaser sends them) are one update.
+#[derive(Default)]
+struct Updates {
+    gaps: std::collections::VecDeque<f64>,
+    last: Option<(Instant, f64)>,
+    fresh: usize,
+    samples: u64,
+    updates: u64,
+}
+
+impl Updates {
+    fn sample(&mut self, stamp: f64, window: usize) {
+        self.samples += 1;
+        let now = Instant::now();
+        if let Some((_, last_stamp)) = self.last {
+            if last_stamp == stamp {
+                return;
+            }
+        }
+        self.updates += 1;
+        if let Some((l, _)) = self.last {
+            if self.gaps.len() == window {
+                self.gaps.pop_front();
+            }
+            self.gaps.push_back((now - l).as_secs_f64());
+        }
+        self.last = Some((now, stamp));
+        self.fresh += 1;
     }
 }
 
