@@ -490,6 +490,38 @@ fn the_view_gives_goals_and_sets_poses() {
             && p["waypoints"].as_array().is_some_and(|w| w.len() > 1)
             && h.as_array().is_some_and(|h| !h.is_empty())
     });
+    // The path the page draws runs from r0 through the waypoint it drives
+    // to, and no stretch of it crosses a wall of the map.
+    let f = frame_where(&base, |f| {
+        f["nav"]["6665:planner:0"]["path"]
+            .as_array()
+            .is_some_and(|p| p.len() > 1)
+    });
+    let path: Vec<[f64; 3]> =
+        serde_json::from_value(f["nav"]["6665:planner:0"]["path"].clone()).unwrap();
+    let mut map = troupe_client::MapProxy::new(
+        &troupe_client::Client::with_session(troupe_tests::client_at(&router, &ns), 6665),
+        0,
+    );
+    map.request_map().unwrap();
+    let res = map.resolution();
+    for leg in path.windows(2) {
+        let (a, b) = (leg[0], leg[1]);
+        let steps = ((b[0] - a[0]).hypot(b[1] - a[1]) / (res / 2.0))
+            .ceil()
+            .max(1.0) as u32;
+        for k in 0..=steps {
+            let t = f64::from(k) / f64::from(steps);
+            let (x, y) = (a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1]));
+            let i = ((x - map.origin().x) / res).floor() as u32;
+            let j = ((y - map.origin().y) / res).floor() as u32;
+            assert_ne!(
+                map.cell(i, j),
+                Some(1),
+                "the drawn path {path:?} crosses a wall at ({x:.2}, {y:.2})"
+            );
+        }
+    }
     if let Some(browser) = chromium() {
         readme_picture(&browser, &base);
     }

@@ -466,12 +466,34 @@ fn take_nav(shared: &Shared, dev: Device, payload: &[u8]) -> Option<Device> {
             entry["pose"] = pose(&st.pose);
             entry["goal"] = pose(&st.goal);
             entry["waypoint_idx"] = json!(st.waypoint_idx);
+            entry["waypoints_count"] = json!(st.waypoints_count);
+            entry["path"] = remaining_path(entry);
         }
         _ => return None,
     }
     drop(l);
     shared.touch();
     ask
+}
+
+/// What is left of a planner's path: from the robot to the waypoint it
+/// drives to, then on to the goal. As Player's wavefront counts, the
+/// waypoint driven to is `waypoint_idx - 1` (it moves on the moment it
+/// takes a waypoint); before the first, the path starts at waypoint 0.
+/// Empty without a valid path, once done, or before the waypoints came.
+fn remaining_path(planner: &Value) -> Value {
+    let waypoints = planner["waypoints"].as_array();
+    let driving = planner["valid"] == true && planner["done"] != true;
+    match (waypoints, driving) {
+        (Some(w), true) if !w.is_empty() => {
+            let idx = planner["waypoint_idx"].as_i64().unwrap_or(0);
+            let from = usize::try_from(idx - 1).unwrap_or(0).min(w.len() - 1);
+            std::iter::once(planner["pose"].clone())
+                .chain(w[from..].iter().cloned())
+                .collect()
+        }
+        _ => json!([]),
+    }
 }
 
 /// Asks `dev` (a planner) for its waypoints, or (a localizer) for its
@@ -494,6 +516,9 @@ async fn ask_nav(session: troupe_node::zenoh::Session, shared: Arc<Shared>, dev:
     let mut l = shared.latest();
     let entry = l.nav.entry(dev).or_insert_with(|| json!({}));
     entry[field] = value;
+    if dev.interface == Interface::Planner {
+        entry["path"] = remaining_path(entry);
+    }
     entry["kind"] = json!(if dev.interface == Interface::Planner {
         "planner"
     } else {
@@ -1129,6 +1154,21 @@ async fn put(session: &troupe_node::zenoh::Session, key: String, payload: Vec<u8
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn the_path_drawn_starts_at_the_waypoint_driven_to() {
+        let mut p = json!({"valid": true, "done": false, "pose": [0.0, 0.0, 0.0],
+            "waypoints": [[1.0, 0.0, 0.0], [2.0, 1.0, 0.0], [3.0, 1.0, 0.0]], "waypoint_idx": 2});
+        // Wavefront drives to waypoints[1] once it reports index 2.
+        assert_eq!(
+            super::remaining_path(&p),
+            json!([[0.0, 0.0, 0.0], [2.0, 1.0, 0.0], [3.0, 1.0, 0.0]])
+        );
+        p["waypoint_idx"] = json!(-1);
+        assert_eq!(super::remaining_path(&p).as_array().map(Vec::len), Some(4));
+        p["done"] = json!(true);
+        assert_eq!(super::remaining_path(&p), json!([]));
+    }
+
     use super::*;
 
     fn shared() -> Shared {

@@ -205,7 +205,8 @@ function drawNav() {
       for (const h of n.hypoths || []) drawEllipse(h);
     } else if (n.kind === "planner" && n.valid) {
       ctx.strokeStyle = "#e07000";
-      const path = [n.pose, ...(n.waypoints || []).slice(Math.max(n.waypoint_idx, 0))];
+      // The server's `path`: from the robot to the waypoint it drives to, then to the goal.
+      const path = n.path || [];
       ctx.beginPath();
       path.forEach((p, k) => {
         const [sx, sy] = toScreen(p[0], p[1]);
@@ -454,7 +455,8 @@ function showPanel() {
   } else if (n && n.kind === "localize") {
     text = (n.hypoths || []).map(h => `${fmt(h.mean[0])} ${fmt(h.mean[1])} m, ${fmt(h.mean[2] * 180 / Math.PI, 1)}° (weight ${fmt(h.weight, 2)})`).join("<br>") || "no hypothesis";
   } else if (n && n.kind === "planner") {
-    text = `goal ${fmt(n.goal[0])} ${fmt(n.goal[1])} m; ${n.valid ? `${(n.waypoints || []).length} waypoints, at ${n.waypoint_idx}` : "no path"}${n.done ? ", done" : ""}`;
+    const heading = n.waypoint_idx > 0 ? `, driving to waypoint ${n.waypoint_idx - 1}` : "";
+    text = `goal ${fmt(n.goal[0])} ${fmt(n.goal[1])} m; ${n.done ? "arrived" : n.valid ? `${n.waypoints_count} waypoints${heading}` : "no path"}`;
   } else if (!["laser", "ranger", "sonar", "position2d", "power", "localize", "planner", "map"].includes(iface)) {
     text = `the view has no panel for ${iface} yet`;
   }
