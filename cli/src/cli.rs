@@ -242,7 +242,16 @@ stack's `requires` (amcl on laser:0) are met by the replay.")]
     Play(troupe_record::PlayArgs),
 
     /// Look into a recording: `info`, or `export` it as JSON lines or a Player log.
-    #[command(subcommand)]
+    #[command(
+        subcommand,
+        after_help = "Examples:
+  troupe log info run.mcap
+  troupe log export run.mcap | jq 'select(.key == \"robot/6665/laser/0\")'
+  troupe log export run.mcap --format player > run.log     # what Player's readlog replays
+
+A Player text log (writelog's) is not MCAP: replay it with the readlog
+driver, or build a map from it with `troupe map build`."
+    )]
     Log(troupe_record::LogCmd),
 
     /// Maps from logs: `build` one with SLAM from a robot's odometry and laser, `show` one.
@@ -251,6 +260,9 @@ stack's `requires` (amcl on laser:0) are met by the replay.")]
 
     /// List the drivers this build can run (`--all`: and the Player drivers
     /// sample files name that it cannot, with what to use instead).
+    #[command(after_help = "Examples:
+  troupe drivers
+  troupe drivers --all | grep -i camera      # is there a camera driver?")]
     Drivers {
         /// Also the Player drivers Troupe does not have.
         #[arg(long)]
@@ -258,9 +270,23 @@ stack's `requires` (amcl on laser:0) are met by the replay.")]
     },
 
     /// List Player's interfaces and their codes.
+    #[command(after_help = "Example:
+  $ troupe interfaces | head -3
+  1  player
+  2  power
+  3  gripper")]
     Interfaces,
 
     /// Benchmarks that print numbers.
-    #[command(subcommand)]
+    #[command(
+        subcommand,
+        after_help = "Examples:
+  cargo run --release -- bench latency
+  cargo run --release -- bench stage --bitmaps ../shared/compat/stage/bitmaps
+  cargo run --release -- bench python --python python3
+
+Each prints its figures beside the originals' where they exist; README.md
+lists what each measured on the development machine."
+    )]
     Bench(troupe_bench::BenchCmd),
 }

@@ -92,10 +92,19 @@ impl Catalog {
                 "driver `{name}`{sections} is not available in Troupe {}",
                 missing_about(about, instead)
             ),
-            None => format!(
-                "driver `{name}`{sections} is not available in Troupe; available: {}",
-                self.names()
-            ),
+            None => {
+                let near = self
+                    .entries
+                    .iter()
+                    .map(|e| (strsim::damerau_levenshtein(name, e.name), e.name))
+                    .filter(|(d, n)| *d <= 2.max(n.len() / 4))
+                    .min();
+                let hint = near.map_or(String::new(), |(_, n)| format!(": did you mean `{n}`?"));
+                format!(
+                    "driver `{name}`{sections} is not available in Troupe{hint}; available: {}",
+                    self.names()
+                )
+            }
         }
     }
 
@@ -177,6 +186,10 @@ pub(crate) mod tests {
         assert_eq!(
             c.unavailable("lazer", ""),
             "driver `lazer` is not available in Troupe; available: dummy, rangertolaser, stage"
+        );
+        assert_eq!(
+            c.unavailable("stagee", ""),
+            "driver `stagee` is not available in Troupe: did you mean `stage`?; available: dummy, rangertolaser, stage"
         );
         assert_eq!(
             c.unavailable("festival", " (2 sections: lines 8, 17)"),

@@ -125,6 +125,16 @@ fn cmd_drives_the_base_and_stops_it_and_call_asks_and_explains_refusals() {
         "laser {l} Hz, base {b} Hz\n{laser}{base}"
     );
 
+    // Waiting in silence says what for; one device is one.
+    let (ok, _, err) = troupe(&endpoint, &ns, &["echo", "laser:7", "--timeout", "0.5"]);
+    assert!(
+        !ok && err.contains("6665:laser:7 is not live; waiting for it"),
+        "{err}"
+    );
+    let (ok, out, err) = troupe(&endpoint, &ns, &["ready", "laser:0"]);
+    assert!(ok, "{err}");
+    assert_eq!(out.trim(), "ready: 6665:laser:0 is live");
+
     let (ok, _, err) = troupe(&endpoint, &ns, &["cmd", "position2d:0", "velo", "1"]);
     assert!(!ok);
     assert!(

@@ -140,10 +140,12 @@ fn watch(robot: Option<u32>, z: &ZenohArgs) -> anyhow::Result<()> {
             troupe_node::zenoh::sample::SampleKind::Put => '+',
             troupe_node::zenoh::sample::SampleKind::Delete => '-',
         };
+        // Fixed columns: the devices to come are not known yet.
         writeln!(
             out,
-            "{sign} robot/{:<5} {}:{}  {driver}",
-            d.robot, d.interface, d.index
+            "{sign} robot/{:<5} {:<16} {driver}",
+            d.robot,
+            format!("{}:{}", d.interface, d.index)
         )?;
         out.flush()?;
     }
@@ -229,7 +231,10 @@ pub fn ready(a: ReadyArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             if want.is_empty() {
                 writeln!(out, "ready: the router answers")?;
             } else {
-                writeln!(out, "ready: all {} devices live", want.len())?;
+                match (want.len(), want.iter().next()) {
+                    (1, Some(d)) => writeln!(out, "ready: {d} is live")?,
+                    (n, _) => writeln!(out, "ready: all {n} devices live")?,
+                }
             }
             return Ok(());
         }
@@ -315,6 +320,28 @@ fn print_sample(
     Ok(true)
 }
 
+/// Before waiting in silence: is the device there at all, or only quiet?
+fn say_what_echo_waits_for(session: &troupe_node::zenoh::Session, key: &str) {
+    let Ok(dev) = keys::parse_data(key) else {
+        return;
+    };
+    let live = session
+        .liveliness()
+        .get(keys::token_any(&dev))
+        .timeout(Duration::from_millis(500))
+        .wait()
+        .map(|replies| replies.recv().is_ok())
+        .unwrap_or(false);
+    let why = if live {
+        format!("{dev} is live but has sent nothing yet (it may publish only on change); waiting")
+    } else {
+        format!(
+            "{dev} is not live; waiting for it to come up (`troupe list` shows the live devices)"
+        )
+    };
+    let _ = writeln!(std::io::stderr(), "troupe echo: {why}");
+}
+
 /// `troupe echo`.
 pub fn echo(a: EchoArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     let key = target_key(&a.target, a.robot)?;
@@ -349,6 +376,9 @@ pub fn echo(a: EchoArgs, z: &ZenohArgs) -> anyhow::Result<()> {
                 }
             }
         }
+    }
+    if printed == 0 {
+        say_what_echo_waits_for(&session, &key);
     }
     let timeout = a.timeout.map(Duration::from_secs_f64);
     while !done(printed) {
