@@ -182,16 +182,19 @@ a router, and a Player bridge on 127.0.0.1 of this machine. Health checks
     Compose(troupe_fleet::docker::ComposeArgs),
 
     /// Make a fleet's certificates and each host's Zenoh config (TLS, mutual authentication).
-    #[command(after_help = "Example:
-  troupe fleet-keys keys --hosts sim,robot1,robot2     # router.json5, sim.json5, …
-  troupe --zenoh-config keys/router.json5 router       # listens on tls/[::]:7447 only
-  troupe --zenoh-config keys/robot1.json5 launch robot1.cfg
+    #[command(
+        after_help = "Example (on one machine; across machines --router names the router's host):
+  troupe fleet-keys keys --router localhost --hosts sim:6665:6666,robot1:6665 --viewers eye
+  troupe --zenoh-config keys/localhost.json5 router    # the router's config is named after it; tls/[::]:7447 only
+  troupe --zenoh-config keys/robot1.json5 launch worlds/laser.cfg --no-bridge
+  troupe --zenoh-config keys/eye.json5 echo 6665:laser:0
 
 One authority (ca.pem; its key ca-key.pem stays where it was made) signs a
 certificate per identity, its common name the identity's name. Each
 identity's .json5 holds its key and certificate and the authority's
 certificate: a host whose certificate another authority signed, or that has
-none, cannot join.")]
+none, cannot join."
+    )]
     FleetKeys(troupe_fleet::keys::KeysArgs),
 
     /// Watch the running world in a browser: walls, robots, their sensors, the live devices.

@@ -524,7 +524,24 @@ fn a_tls_fleet_admits_its_own_certificates_only_and_each_identity_does_only_what
     let plain = endpoint.replace("tls/", "tcp/");
     let (status, _, err) = troupe_output(&strings(&["--connect", &plain, "ready"]));
     assert!(!status.success());
-    assert!(err.contains("no Zenoh router answers"), "{err}");
+    assert!(
+        err.contains(&format!(
+            "something listens at {plain} but does not answer as a plain-TCP Zenoh router"
+        )) && err.contains("takes TLS only"),
+        "{err}"
+    );
+    // A router name that does not resolve here says so, and what to give instead.
+    let (status, _, err) = troupe_output(&strings(&[
+        "--connect",
+        "tls/no-such-router.invalid:7447",
+        "ready",
+    ]));
+    assert!(!status.success());
+    assert!(
+        err.contains("the name `no-such-router.invalid` in tls/no-such-router.invalid:7447 does not resolve on this machine")
+            && err.contains("--connect tls/localhost:7447"),
+        "{err}"
+    );
 
     // A wrong password is refused; so is a member struck from the router's
     // `passwords` (how a lost host is shut out: Zenoh's TLS has no
@@ -598,4 +615,68 @@ fn a_tls_fleet_admits_its_own_certificates_only_and_each_identity_does_only_what
     assert_eq!(mode & 0o077, 0, "{mode:o}");
     assert!(node.terminate().success(), "{}", node.stderr());
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The four lines of the README's "Securing a fleet", run as printed in a
+/// fresh directory (with the repository's `worlds/` beside the keys), but
+/// for two things a test must: the router on a free port (`--listen`, and
+/// `--connect` for the others to it) and `echo --count 1` to end.
+#[test]
+fn the_readme_s_secured_fleet_runs_on_one_machine() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
+    let section = &readme[readme.find("## Securing a fleet").expect("the section")..];
+    let block = &section[section.find("```sh\n").expect("its commands") + 6..];
+    let lines: Vec<Vec<String>> = block[..block.find("```").unwrap()]
+        .lines()
+        .map(|l| {
+            let l = l.split('#').next().unwrap_or("").trim();
+            let words: Vec<&str> = l.split_whitespace().collect();
+            assert_eq!(words.first(), Some(&"troupe"), "{l}");
+            strings(&words[1..])
+        })
+        .collect();
+    assert_eq!(lines.len(), 4, "{lines:?}");
+    let dir = std::env::temp_dir().join(troupe_tests::unique_namespace("readme-keys"));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::os::unix::fs::symlink(
+        root.join("worlds").canonicalize().unwrap(),
+        dir.join("worlds"),
+    )
+    .unwrap();
+    let in_dir = |name: &str, args: Vec<String>| {
+        let mut cmd = std::process::Command::new(troupe_tests::troupe_bin());
+        cmd.args(args).current_dir(&dir);
+        Proc::start(name, &mut cmd)
+    };
+
+    let mut keys = in_dir("fleet-keys", lines[0].clone());
+    assert!(keys.wait().success(), "{}", keys.stderr());
+    let mut router_args = lines[1].clone();
+    router_args.extend(strings(&["--listen", "tls/127.0.0.1:0"]));
+    let mut router = in_dir("router", router_args);
+    let endpoint = router
+        .endpoint("troupe router listening on")
+        .replace("127.0.0.1", "localhost");
+    let joined = |line: &[String]| {
+        let mut v = strings(&["--connect", &endpoint]);
+        v.extend(line.iter().cloned());
+        v
+    };
+    let mut robot1 = in_dir("launch", joined(&lines[2]));
+    let mut echo_args = joined(&lines[3]);
+    echo_args.extend(strings(&["--count", "1"]));
+    let mut eye = in_dir("echo", echo_args);
+    let mut out = eye.child.stdout.take().unwrap();
+    let mut text = String::new();
+    std::io::Read::read_to_string(&mut out, &mut text).unwrap();
+    assert!(
+        eye.wait().success(),
+        "{}\n{}",
+        eye.stderr(),
+        robot1.stderr()
+    );
+    assert!(text.starts_with("robot/6665/laser/0  t="), "{text}");
+    assert!(robot1.terminate().success(), "{}", robot1.stderr());
+    router.terminate();
 }

@@ -89,8 +89,13 @@ impl ZenohArgs {
         let bad = |what: String| NodeError::config("zenoh", what);
         let mut c = match &self.zenoh_config {
             Some(p) => {
-                let mut c = Config::from_file(p)
-                    .map_err(|e| bad(format!("--zenoh-config {}: {e}", p.display())))?;
+                let mut c = Config::from_file(p).map_err(|e| {
+                    bad(format!(
+                        "--zenoh-config {}: {}",
+                        p.display(),
+                        without_location(&e.to_string())
+                    ))
+                })?;
                 beside(&mut c, p)
                     .map_err(|e| bad(format!("--zenoh-config {}: {e}", p.display())))?;
                 check_certificates(&c)
@@ -421,6 +426,39 @@ impl Refused {
         }
     }
 
+    /// What is plainly wrong with the endpoints, seen from this machine: a
+    /// name that does not resolve here, or a plain-TCP endpoint where
+    /// something listens that is no plain Zenoh router (a fleet's TLS one).
+    fn unreachable_why(&self) -> Option<String> {
+        use std::net::ToSocketAddrs;
+        for ep in self.endpoints.split(", ") {
+            let Some((proto, addr)) = ep.split_once('/') else {
+                continue;
+            };
+            let Ok(mut addrs) = addr.to_socket_addrs() else {
+                let host = addr.rsplit_once(':').map_or(addr, |(h, _)| h);
+                return Some(format!(
+                    "the name `{host}` in {ep} does not resolve on this machine: on the router's own \
+                     machine give --connect {proto}/localhost:{port}, elsewhere its address; a fleet's \
+                     configs name the router given to `troupe fleet-keys --router NAME`",
+                    port = addr.rsplit_once(':').map_or("7447", |(_, p)| p)
+                ));
+            };
+            let listening = addrs.next().is_some_and(|a| {
+                std::net::TcpStream::connect_timeout(&a, std::time::Duration::from_millis(300))
+                    .is_ok()
+            });
+            if proto == "tcp" && listening {
+                return Some(format!(
+                    "something listens at {ep} but does not answer as a plain-TCP Zenoh router: a \
+                     secured fleet's router takes TLS only (join with --zenoh-config keys/NAME.json5 \
+                     and --connect tls/{addr})"
+                ));
+            }
+        }
+        None
+    }
+
     /// Zenoh's own words name a source file; say what to do instead.
     fn explain(self, r: zenoh::Result<Session>) -> Result<Session> {
         r.map_err(|e| {
@@ -429,6 +467,9 @@ impl Refused {
             if !text.contains("Unable to connect to any of") && !text.contains("Can not create a new")
             {
                 return NodeError::zenoh("opening the session", e);
+            }
+            if let Some(why) = self.unreachable_why() {
+                return NodeError::Unreachable(why);
             }
             if self.tls {
                 NodeError::TlsRefused {
@@ -445,6 +486,16 @@ impl Refused {
                 }
             }
         })
+    }
+}
+
+/// Zenoh's error text without the place in Zenoh's sources it came from
+/// (` at /…/.cargo/registry/…/lib.rs:1507.`): that path is the build
+/// machine's, and means nothing to the person reading the error.
+pub fn without_location(text: &str) -> String {
+    match text.rfind(" at ") {
+        Some(i) if text[i..].contains(".rs:") => text[..i].trim_end().to_owned(),
+        _ => text.to_owned(),
     }
 }
 
@@ -509,6 +560,15 @@ pub fn viewer_of(metadata: &serde_json::Value) -> Option<String> {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn zenoh_s_source_locations_are_left_out() {
+        assert_eq!(
+            super::without_location("No such file or directory (os error 2) at /root/.cargo/registry/src/x/zenoh-config/src/lib.rs:1507."),
+            "No such file or directory (os error 2)"
+        );
+        assert_eq!(super::without_location("meet at noon"), "meet at noon");
+    }
+
     use super::*;
 
     #[test]

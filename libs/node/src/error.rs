@@ -27,6 +27,10 @@ pub enum NodeError {
         /// The endpoints tried.
         endpoints: String,
     },
+    /// The router's endpoint is wrong from here (a name that does not
+    /// resolve, a TLS router dialled over plain TCP): what to do.
+    #[error("{0}")]
+    Unreachable(String),
     /// A TLS link could not be made: no router, or certificates that do not match.
     #[error(
         "no Zenoh router accepted a TLS link at {endpoints}: none runs there, or it refused \
