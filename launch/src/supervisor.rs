@@ -286,7 +286,6 @@ async fn supervise(
             Err(e) => return Err(router_not_started(&listen, &z, e)),
         };
         let locators = troupe_node::locators(&session);
-        tracing::info!("embedded router listening on {}", locators.join(" "));
         // A line on stdout for scripts and tests that pass --listen …:0.
         let mut out = std::io::stdout().lock();
         writeln!(

@@ -528,14 +528,31 @@ fn json_list(v: &[String]) -> String {
 /// Starts logging to stderr: `filter` (or `RUST_LOG`, or `info`), Zenoh kept quiet.
 pub fn init_logging(filter: Option<&str>) {
     use tracing_subscriber::EnvFilter;
-    let spec = filter
+    let asked = filter
         .map(str::to_owned)
-        .or_else(|| std::env::var("RUST_LOG").ok())
-        .unwrap_or_else(|| "info".to_owned());
+        .or_else(|| std::env::var("RUST_LOG").ok());
+    // Zenoh's own lines (link warnings naming its source files, "Unknown
+    // interest" at start) are for who asks: Troupe says what went wrong in
+    // its own words. A filter given (--log, $RUST_LOG) shows Zenoh's
+    // warnings too, all of it when it names zenoh.
+    let zenoh_level = if asked.is_some() { "warn" } else { "off" };
+    let spec = asked.unwrap_or_else(|| "info".to_owned());
     let spec = if spec.contains("zenoh") {
         spec
     } else {
-        format!("{spec},zenoh=warn,zenoh_transport=warn,zenoh_link_tcp=warn")
+        let crates = [
+            "zenoh",
+            "zenoh_transport",
+            "zenoh_link_tcp",
+            "zenoh_link_tls",
+            "zenoh_link_commons",
+            "zenoh_config",
+        ];
+        let quiet: Vec<String> = crates
+            .iter()
+            .map(|c| format!("{c}={zenoh_level}"))
+            .collect();
+        format!("{spec},{}", quiet.join(","))
     };
     let filter = EnvFilter::try_new(&spec).unwrap_or_else(|_| EnvFilter::new("info"));
     let _ = tracing_subscriber::fmt()

@@ -36,8 +36,8 @@ pub enum NodeError {
         "no Zenoh router accepted a TLS link at {endpoints}: none runs there, or it refused \
          this host (this host's config and the router's must come from the same `troupe \
          fleet-keys` authority, the name connected to must be the router's, and this host's \
-         user and password must be in the router's `passwords`; Zenoh's warning above says \
-         which: a close \"in response to an OpenSyn\" is the password){hint}"
+         user and password must be in the router's `passwords`; with `--log info` Zenoh's \
+         warning says which: a close \"in response to an OpenSyn\" is the password){hint}"
     )]
     TlsRefused {
         /// The endpoints tried.

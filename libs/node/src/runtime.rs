@@ -529,7 +529,14 @@ fn announce<D: Driver>(
             .map_err(z(|| format!("declaring liveliness {key}")))?;
         tokens.push(token);
     }
-    tracing::info!(driver = D::NAME, "ready: provides {}", list());
+    if provided.is_empty() {
+        tracing::info!(
+            driver = D::NAME,
+            "ready, providing no device (give it some with --provides, or `provides [...]` in a cfg)"
+        );
+    } else {
+        tracing::info!(driver = D::NAME, "ready: provides {}", list());
+    }
     Ok(())
 }
 
