@@ -19,21 +19,31 @@ use troupe_client::{Client, ClientError};
 use troupe_msgs::{decode_any, default_of, encode_from, routed, DevAddr, Device, Route};
 use troupe_node::{Mode, ZenohArgs};
 
-/// Flags of `troupe cmd`.
+/// What `cmd` and `call` send, and where.
 #[derive(Debug, Args)]
-pub struct CmdArgs {
+pub struct Message {
     /// The device (`position2d:0`, `6666:planner:0`).
     pub device: String,
-    /// The command, as its key names it (`vel`, `pos`, `goal`…); a wrong
-    /// name lists the device's commands.
+    /// The command or request, as its key names it (`vel`, `goal`,
+    /// `get_pose2d`…); a wrong name lists what the device takes.
     pub name: String,
     /// The message's fields in order (`vel 0.3 0 0.2`: forward, sideways,
-    /// turn); fields left out keep their defaults.
+    /// turn; `get_pose2d r0`); fields left out keep their defaults.
     #[arg(allow_negative_numbers = true)]
     pub values: Vec<String>,
     /// The whole message as JSON instead of VALUES.
     #[arg(long, value_name = "JSON", conflicts_with = "values")]
     pub json: Option<String>,
+    /// Robot (port) for a device that names none.
+    #[arg(short = 'p', long = "robot", value_name = "PORT", default_value_t = troupe_msgs::DEFAULT_ROBOT)]
+    pub robot: u32,
+}
+
+/// Flags of `troupe cmd`.
+#[derive(Debug, Args)]
+pub struct CmdArgs {
+    #[command(flatten)]
+    pub message: Message,
     /// Keep sending it for this many seconds. A motion command (`vel`,
     /// `car`) is repeated until Ctrl-C without it; the base is stopped at the end.
     #[arg(long = "for", value_name = "SECS")]
@@ -41,32 +51,27 @@ pub struct CmdArgs {
     /// How often to send it while it is held, per second.
     #[arg(long, value_name = "HZ", default_value_t = 10.0)]
     pub rate: f64,
-    /// Robot (port) for a device that names none.
-    #[arg(short = 'p', long = "robot", value_name = "PORT", default_value_t = troupe_msgs::DEFAULT_ROBOT)]
-    pub robot: u32,
 }
 
 /// Flags of `troupe call`.
 #[derive(Debug, Args)]
 pub struct CallArgs {
-    /// The device (`simulation:0`, `6666:localize:0`).
-    pub device: String,
-    /// The request, as its key names it (`geom`, `get_pose2d`, `set_pose`…);
-    /// a wrong name lists the device's requests.
-    pub name: String,
-    /// The message's fields in order (`get_pose2d r0`); fields left out
-    /// keep their defaults.
-    #[arg(allow_negative_numbers = true)]
-    pub values: Vec<String>,
-    /// The whole message as JSON instead of VALUES.
-    #[arg(long, value_name = "JSON", conflicts_with = "values")]
-    pub json: Option<String>,
+    #[command(flatten)]
+    pub message: Message,
     /// Seconds to wait for the answer.
     #[arg(long, value_name = "SECS", default_value_t = 5.0)]
     pub timeout: f64,
-    /// Robot (port) for a device that names none.
-    #[arg(short = 'p', long = "robot", value_name = "PORT", default_value_t = troupe_msgs::DEFAULT_ROBOT)]
-    pub robot: u32,
+}
+
+impl Message {
+    /// The device, the schema of the message and its payload.
+    fn resolve(&self, command: bool) -> anyhow::Result<(Device, &'static str, Value, Vec<u8>)> {
+        let dev = device(&self.device, self.robot)?;
+        let schema = schema_of(dev, command, &self.name)?;
+        let msg = message(schema, self.json.as_deref(), &self.values)?;
+        let payload = encode(schema, &msg)?;
+        Ok((dev, schema, msg, payload))
+    }
 }
 
 /// The schema of command (or request) `name` of `dev`, or an error listing
@@ -267,10 +272,8 @@ fn device(text: &str, robot: u32) -> anyhow::Result<Device> {
 
 /// `troupe cmd`.
 pub fn cmd(a: CmdArgs, z: &ZenohArgs) -> anyhow::Result<()> {
-    let dev = device(&a.device, a.robot)?;
-    let schema = schema_of(dev, true, &a.name)?;
-    let msg = message(schema, a.json.as_deref(), &a.values)?;
-    let payload = encode(schema, &msg)?;
+    let (dev, schema, msg, payload) = a.message.resolve(true)?;
+    let name = &a.message.name;
     let motion = matches!(
         schema.split_once('@').map(|(k, _)| k),
         Some("position2d/cmd_vel" | "position2d/cmd_car")
@@ -282,8 +285,8 @@ pub fn cmd(a: CmdArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     let client = Client::connect(z, dev.robot)?;
     let held = a.seconds.is_some() || motion;
     if !held {
-        client.command_payload(dev, &a.name, payload)?;
-        eprintln!("troupe cmd: sent {} {msg} to {dev}", a.name);
+        client.command_payload(dev, name, payload)?;
+        eprintln!("troupe cmd: sent {} {msg} to {dev}", name);
         return Ok(());
     }
     let stop = stop_flag()?;
@@ -292,7 +295,7 @@ pub fn cmd(a: CmdArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         .map(|s| Instant::now() + Duration::from_secs_f64(s.max(0.0)));
     eprintln!(
         "troupe cmd: sending {} {msg} to {dev} {} times a second {}",
-        a.name,
+        name,
         a.rate,
         match a.seconds {
             Some(s) => format!("for {s} s"),
@@ -302,7 +305,7 @@ pub fn cmd(a: CmdArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     let period = Duration::from_secs_f64(1.0 / a.rate);
     let mut next = Instant::now();
     while !stop.load(Ordering::Relaxed) && until.is_none_or(|u| Instant::now() < u) {
-        client.command_payload(dev, &a.name, payload.clone())?;
+        client.command_payload(dev, name, payload.clone())?;
         next += period;
         // Pacing a repeated command, not synchronising: sleep to the next send.
         std::thread::sleep(next.saturating_duration_since(Instant::now()));
@@ -310,7 +313,7 @@ pub fn cmd(a: CmdArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     if motion {
         let zero = default_of(schema, serde_json::value::Serializer)
             .with_context(|| format!("no message `{schema}`"))??;
-        client.command_payload(dev, &a.name, encode(schema, &zero)?)?;
+        client.command_payload(dev, name, encode(schema, &zero)?)?;
         eprintln!("troupe cmd: stopped {dev}");
     }
     Ok(())
@@ -318,22 +321,20 @@ pub fn cmd(a: CmdArgs, z: &ZenohArgs) -> anyhow::Result<()> {
 
 /// `troupe call`.
 pub fn call(a: CallArgs, z: &ZenohArgs) -> anyhow::Result<()> {
-    let dev = device(&a.device, a.robot)?;
-    let schema = schema_of(dev, false, &a.name)?;
-    let msg = message(schema, a.json.as_deref(), &a.values)?;
-    let payload = encode(schema, &msg)?;
+    let (dev, _, _, payload) = a.message.resolve(false)?;
+    let name = &a.message.name;
     let timeout = Duration::try_from_secs_f64(a.timeout)
         .map_err(|_| anyhow::anyhow!("--timeout must be seconds ≥ 0"))?;
     let session = z.open(Mode::Client)?;
     let client = Client::with_session(session, dev.robot);
-    let reply = match client.request_payload(dev, &a.name, payload, timeout) {
+    let reply = match client.request_payload(dev, name, payload, timeout) {
         Ok(r) => r,
         Err(e @ (ClientError::Nack { .. } | ClientError::NoAnswer { .. })) => {
             anyhow::bail!("{e}")
         }
         Err(e) => return Err(e.into()),
     };
-    let got = decode_any(&reply).with_context(|| format!("the answer of {dev} to `{}`", a.name))?;
+    let got = decode_any(&reply).with_context(|| format!("the answer of {dev} to `{}`", name))?;
     let mut body = Vec::new();
     got.msg
         .serialize_body(&mut serde_json::Serializer::new(&mut body))?;
