@@ -275,6 +275,7 @@ fn merge_stage(
             ));
         }
     }
+    let at_section = at.clone();
     let node = stage.get_or_insert_with(|| NodeSpec {
         name: "stage".into(),
         driver: "stage".into(),
@@ -311,10 +312,34 @@ fn merge_stage(
             other => *other = serde_json::Value::Array(vec![entry]),
         }
     }
+    // One simulator: an option given again keeps its first value, and a
+    // different one is said; every place an option is given is kept, so a
+    // warning about it names them all.
     for (k, v) in std::mem::take(options) {
-        node.options.entry(k).or_insert(v);
+        match node.options.get(&k) {
+            Some(first) if *first != v => {
+                let here = option_pos.get(&k).unwrap_or(&at_section);
+                let there = node.option_pos.get(&k).cloned().unwrap_or_default();
+                report.warnings.push(format!(
+                    "{here}: option `{k}` {v} differs from {first} at {there}: all stage \
+                     sections are one simulator, and the first value stands"
+                ));
+            }
+            Some(_) => {}
+            None => {
+                node.options.insert(k, v);
+            }
+        }
     }
-    node.option_pos.extend(option_pos);
+    for (k, pos) in option_pos {
+        node.option_pos
+            .entry(k)
+            .and_modify(|p| {
+                p.push_str(", ");
+                p.push_str(&pos);
+            })
+            .or_insert(pos);
+    }
     node.provides.extend(provides);
     if node.host.is_none() {
         node.host = host;
@@ -879,6 +904,26 @@ mod tests {
             vec![
                 "t.cfg:2:1: `6665:laser:1` in requires is not used by driver `rangertolaser`"
                     .to_owned()
+            ]
+        );
+    }
+
+    #[test]
+    fn options_of_merged_stage_sections_are_warned_about_wherever_given() {
+        let (plan, warnings) = plan_of(
+            "driver( name \"stage\" provides [\"simulation:0\"] worldfile \"../worlds/simple.world\" bogus 1 )\n\
+             driver( name \"stage\" provides [\"position2d:0\"] model \"r0\" bogus 2 )\n",
+        )
+        .unwrap();
+        assert_eq!(plan.nodes.len(), 1);
+        assert_eq!(plan.nodes[0].options["bogus"], 1);
+        assert_eq!(
+            warnings,
+            vec![
+                "t.cfg:2:59: option `bogus` 2 differs from 1 at t.cfg:1:83: all stage sections \
+                 are one simulator, and the first value stands"
+                    .to_owned(),
+                "t.cfg:1:83, t.cfg:2:59: option `bogus` is not used by driver `stage`".to_owned(),
             ]
         );
     }
