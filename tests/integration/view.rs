@@ -998,3 +998,28 @@ fn readme_picture(browser: &Path, base: &str) {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// worlds/slam.cfg: the slam driver's map grows as r0 drives, and the view
+/// draws it anew each time the map says it changed.
+#[test]
+fn the_view_redraws_the_map_slam_builds() {
+    let cfg = Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/slam.cfg");
+    let stack = Viewed::launch("viewslam", &cfg, &["--speedup", "4"]);
+    let base = stack.base.clone();
+    let area = || {
+        let world = json(&base, "/api/world");
+        world["maps"]
+            .as_array()
+            .and_then(|m| m.iter().find(|m| m["device"] == "6665:map:0"))
+            .map_or(0, |m| {
+                m["width"].as_u64().unwrap_or(0) * m["height"].as_u64().unwrap_or(0)
+            })
+    };
+    let first = frame_where(&base, |f| f["map_version"].as_u64().is_some_and(|v| v >= 1));
+    let (v0, a0) = (first["map_version"].as_u64().unwrap_or(0), area());
+    assert!(a0 > 0, "no map drawn at version {v0}");
+    let later = frame_where(&base, |f| {
+        f["map_version"].as_u64().is_some_and(|v| v > v0 + 2) && area() > a0
+    });
+    assert!(later["maps"].as_u64() >= Some(1), "{later}");
+}

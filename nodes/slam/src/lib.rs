@@ -20,7 +20,8 @@
 //! - Every scan is traced into the occupancy grid from its corrected pose;
 //!   after a loop closure the grid is traced anew from the keyframes' scans.
 //! - The map device answers `GET_INFO` and `GET_DATA` as `mapfile` does, from
-//!   the grid as it stood at the last refresh (every `map_every` scans).
+//!   the grid as it stood at the last refresh (every `map_every` scans, and
+//!   after a loop closure), and publishes its info at each refresh.
 //! - The position2d device, if provided, publishes the odometry carried into
 //!   the map's frame (the odometry's own frame at the first scan) by the
 //!   graph, with odometry's velocities.
@@ -87,10 +88,13 @@ impl SlamNode {
         &self.slam
     }
 
-    fn refresh(&mut self, ctx: &mut Ctx) -> Result<()> {
+    /// Serves the grid as it stands, and says so on the map's data key (its
+    /// info, Player's `PLAYER_MAP_DATA_INFO`): a view redraws the map.
+    fn refresh(&mut self, ctx: &mut Ctx, t: f64) -> Result<()> {
         self.map = to_occmap(&self.grid);
         self.since_refresh = 0;
-        ctx.answer_always::<map::GetInfo>(&self.map_dev, &self.map.info)
+        ctx.answer_always::<map::GetInfo>(&self.map_dev, &self.map.info)?;
+        ctx.publish_at(&self.map_dev, &self.map.info, t)
     }
 
     fn scan(&mut self, ctx: &mut Ctx, t: f64, s: &laser::Scan) -> Result<()> {
@@ -119,7 +123,7 @@ impl SlamNode {
                 grid.add_scan(place(sc, *o), sc);
             }
             self.grid = grid;
-            return self.refresh(ctx);
+            return self.refresh(ctx, t);
         }
         if let Some((o, sc)) = self.traced.last() {
             let at = place(sc, *o);
@@ -127,7 +131,7 @@ impl SlamNode {
         }
         self.since_refresh += 1;
         if self.since_refresh >= self.every {
-            self.refresh(ctx)?;
+            self.refresh(ctx, t)?;
         }
         Ok(())
     }

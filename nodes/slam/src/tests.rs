@@ -95,6 +95,12 @@ fn the_map_grows_as_the_robot_drives_and_its_pose_is_corrected() {
     let p = h.request(MAP, &map::GetInfo).unwrap();
     let info: map::Info = h.reply(p).unwrap().unwrap();
     assert!(info.width > 100 && info.height > 80, "{info:?}");
+    // And says it grew: its info on its data key at each refresh (every 5
+    // scans, and after each closure), the last as served.
+    let said: Vec<map::Info> = h.published(MAP);
+    assert!(said.len() >= 3000 / 5, "{} refreshes said", said.len());
+    assert_eq!(said.last(), Some(&info));
+    assert!(said[0].width * said[0].height < info.width * info.height);
     let m = h.driver().map();
     let occupied: Vec<(f64, f64)> = (0..m.cells.len())
         .filter(|&k| m.cells[k] == OCCUPIED)

@@ -133,6 +133,9 @@ struct Latest {
     worlds: BTreeMap<Device, simulation::World>,
     /// Each map device's grid and its picture (PNG).
     maps: BTreeMap<Device, (map::Info, Arc<Vec<u8>>)>,
+    /// Pictures of maps made so far: a page reloads them when it changes
+    /// (a map that grows, as the slam driver's, publishes its info anew).
+    map_version: u64,
     /// Each simulator's newest poses.
     poses: BTreeMap<Device, simulation::Poses>,
     /// The newest readings of each device the page shows: ranges,
@@ -402,6 +405,7 @@ impl Shared {
             "speed": l.pace.speed,
             "devices": l.devices.len(),
             "maps": l.maps.len(),
+            "map_version": l.map_version,
             "poses": poses,
             "readings": readings,
             "nav": nav,
@@ -686,7 +690,10 @@ async fn fetch_map(session: troupe_node::zenoh::Session, shared: Arc<Shared>, de
     match picture.await {
         Ok((info, png)) => {
             tracing::info!("{dev}: a map of {}x{} cells", info.width, info.height);
-            shared.latest().maps.insert(dev, (info, Arc::new(png)));
+            let mut l = shared.latest();
+            l.maps.insert(dev, (info, Arc::new(png)));
+            l.map_version += 1;
+            drop(l);
             shared.touch();
         }
         Err(e) => tracing::warn!("cannot draw map {dev}: {e}"),
@@ -922,6 +929,12 @@ async fn watch_space(
             }
             if DRAWN.contains(&dev.interface) {
                 ingest(&s, &sess, &rt, dev, &bytes);
+            } else if dev.interface == Interface::Map
+                && codec::schema_of(&bytes)
+                    .is_ok_and(|t| t == <map::Info as troupe_msgs::Message>::SCHEMA)
+            {
+                // A map that says it changed: draw it again.
+                rt.spawn(fetch_map(sess.clone(), s.clone(), dev));
             }
         })
         .await

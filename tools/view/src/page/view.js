@@ -29,6 +29,7 @@ let follow = params.get("follow") || "";
 // default): its world is drawn, its devices listed and commanded.
 const ns = parseInt(params.get("ns") || "0", 10) || 0;
 const api = path => `${path}${path.includes("?") ? "&" : "?"}ns=${ns}`;
+let mapVersion = 0;                         // the server's count of map pictures: a new one is loaded
 let chosen = params.get("device") || "";   // the device whose panel is open ("6665:laser:0")
 
 // The world frame to the canvas: x right, y up, `scale` pixels per metre.
@@ -353,7 +354,7 @@ async function loadWorlds() {
   const pictures = await Promise.all(all.maps.map(m => new Promise(done => {
     const image = new Image();
     image.onload = image.onerror = () => done({ ...m, image });
-    image.src = api(`/api/map/${m.device}`);
+    image.src = api(`/api/map/${m.device}?v=${mapVersion}`);
   })));
   // Each robot's first map (a stack's filters serve others from it).
   const robot = m => m.device.split(":")[0];
@@ -396,7 +397,10 @@ function onFrame(f) {
   frame = f;
   takePoses(f);
   const known = new Set(worlds.map(w => w.simulation));
-  if (Object.keys(f.poses).some(s => !known.has(s)) || f.maps !== maps.length) loadWorlds().then(redraw, () => {});
+  if (Object.keys(f.poses).some(s => !known.has(s)) || f.maps !== maps.length || f.map_version !== mapVersion) {
+    mapVersion = f.map_version;
+    loadWorlds().then(redraw, () => {});
+  }
   if (f.devices !== deviceCount) loadDevices().catch(() => {});
   // Each device's updates a second, as `troupe hz` counts them.
   for (const row of deviceTable.rows) {
@@ -425,7 +429,11 @@ function showPanel() {
   const r = frame && frame.readings[chosen];
   const n = frame && frame.nav && frame.nav[chosen];
   if (iface === "map") {
-    if (!panel.querySelector("img")) panel.innerHTML = `<img src="${api(`/api/map/${chosen}`)}" alt="${chosen}">`;
+    // A map that grows (the slam driver's) gets a new picture with each version.
+    const img = panel.querySelector("img");
+    if (!img || img.dataset.version !== String(mapVersion)) {
+      panel.innerHTML = `<img src="${api(`/api/map/${chosen}?v=${mapVersion}`)}" data-version="${mapVersion}" alt="${chosen}">`;
+    }
     return;
   }
   if (r && (r.kind === "laser" || r.kind === "ranger")) {
