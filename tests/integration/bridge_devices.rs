@@ -634,3 +634,51 @@ fn dozens_of_clients_flow_while_one_is_stuck_and_bad_input_closes_only_its_conne
     let _ = stop.send(());
     thread.join().unwrap();
 }
+
+/// A device that published once, before the client came (amcl's localize
+/// at rest): the client that subscribes later gets its latest state at once,
+/// after its subscription's answer, as Player's drivers gave their state to
+/// the client that set them up.
+#[test]
+fn a_late_subscriber_gets_the_latest_sample_of_a_quiet_device() {
+    let net = TestNet::new("bridge-latest");
+    let s = net.peer();
+    let loc = Device::new(ROBOT, Interface::Localize, 0);
+    let state = encode(
+        &localize::Hypoths {
+            pending_count: 0,
+            pending_time: 3.0,
+            hypoths: vec![localize::Hypoth {
+                mean: Pose2d::new(-6.0, -6.0, 0.5),
+                cov: [0.1, 0.1, 0.05, 0.0, 0.0, 0.0],
+                weight: 1.0,
+            }],
+        },
+        3.0,
+    );
+    let _token = s
+        .liveliness()
+        .declare_token(keys::token(&loc, "fake"))
+        .wait()
+        .unwrap();
+    // What a driver's runtime does: keep the latest sample, answer gets for it.
+    let _latest = s
+        .declare_queryable(keys::data(&loc))
+        .callback(move |q| q.reply(q.key_expr().clone(), state.clone()).wait().unwrap())
+        .wait()
+        .unwrap();
+    net.wait_live(&[&loc.to_string()]);
+    let (addr, thread, stop) = bridge(&net);
+    let mut c = Player::connect(addr, ROBOT);
+    c.open(loc);
+    // The first message after the answer: the localize hypotheses (DATA 1).
+    let data = c.recv();
+    assert_eq!(
+        (data.h[2], data.h[3], data.h[4], data.h[5]),
+        (u32::from(Interface::Localize.code()), 0, 1, 1),
+        "{data:?}"
+    );
+    drop(c);
+    let _ = stop.send(());
+    thread.join().unwrap();
+}

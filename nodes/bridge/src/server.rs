@@ -719,10 +719,10 @@ impl Conn {
                     }
                     Some((dev, driver)) => {
                         let granted = match access {
-                            player::OPEN => {
-                                self.subscribe(dev);
-                                player::OPEN
-                            }
+                            // Subscribed after the answer is queued: the
+                            // client hears its ACK, then the device's latest
+                            // samples, then the live ones, as from Player.
+                            player::OPEN => player::OPEN,
                             player::CLOSE if self.subscribed.contains(&dev) => {
                                 if let Some(i) = self.subscribed.iter().position(|d| *d == dev) {
                                     self.subscribed.swap_remove(i);
@@ -736,6 +736,9 @@ impl Conn {
                         };
                         w.u32(granted).string(&driver);
                         self.reply(&h, RESP_ACK, &w.finish());
+                        if granted == player::OPEN {
+                            self.subscribe(dev);
+                        }
                     }
                 }
             }
@@ -796,6 +799,7 @@ impl Conn {
             // Player counts a client's opens of a device; the feed is one.
             return;
         }
+        self.send_latest(dev);
         let mut feeds = lock(&self.shared.feeds);
         if let Some(feed) = feeds.get(&dev) {
             lock(&feed.clients).push((self.id, self.queue.clone()));
@@ -829,6 +833,33 @@ impl Conn {
                 feeds.insert(dev, DeviceFeed { clients, _sub: sub });
             }
             Err(e) => tracing::warn!("subscribing to {dev}: {e}"),
+        }
+    }
+
+    /// The latest samples `dev`'s driver keeps, to this client alone, before
+    /// its live ones: Player set a driver up when its first client
+    /// subscribed, so a client had the device's state at once, even from a
+    /// driver that publishes only on change (amcl's localize at rest).
+    fn send_latest(&self, dev: Device) {
+        let replies = match self
+            .shared
+            .session
+            .get(keys::data(&dev))
+            .timeout(LATEST_WAIT)
+            .wait()
+        {
+            Ok(r) => r,
+            Err(e) => {
+                tracing::debug!("{dev}: asking for its latest samples: {e}");
+                return;
+            }
+        };
+        while let Ok(reply) = replies.recv() {
+            if let Ok(sample) = reply.result() {
+                if let Some(out) = data_message(dev, self.host, &sample.payload().to_bytes()) {
+                    self.queue.push(out);
+                }
+            }
         }
     }
 
@@ -964,6 +995,10 @@ async fn request_loop(
 
 /// Answers above this size are converted off Zenoh's receiving thread.
 const INLINE_ANSWER: usize = 16 * 1024;
+
+/// How long a subscription waits for a device's latest samples (drivers
+/// keep them and answer at once; a device that keeps none answers nothing).
+const LATEST_WAIT: Duration = Duration::from_secs(1);
 
 fn nack(shared: &Shared, p: &Pending) -> Out {
     response(shared, p, (RESP_NACK, Vec::new(), None))
