@@ -219,8 +219,9 @@ struct Shared {
     sim_time: AtomicU64,
     maxlen: usize,
     next_client: AtomicU64,
-    /// Malformed samples dropped, for the logs.
-    bad_samples: AtomicU64,
+    /// Samples no client was sent, by why (malformed, or a kind Player's
+    /// protocol has no message for): said once, with counts, at the end.
+    dropped: Mutex<std::collections::BTreeMap<Dropped, u64>>,
     /// `--allow`: networks clients may connect from (empty: any).
     allow: Vec<IpNetwork>,
     /// Connections refused by `allow`, by address: the first from each is
@@ -331,7 +332,7 @@ impl Bridge {
             sim_time: AtomicU64::new(f64::NAN.to_bits()),
             maxlen: cfg.maxlen,
             next_client: AtomicU64::new(0),
-            bad_samples: AtomicU64::new(0),
+            dropped: Mutex::default(),
             allow: cfg.allow,
             refused: Mutex::new(HashMap::new()),
         });
@@ -426,10 +427,25 @@ impl Bridge {
         }
         shutdown.await;
         tasks.shutdown().await;
-        let bad = self.shared.bad_samples.load(Ordering::Relaxed);
-        if bad > 0 {
-            tracing::warn!("{bad} malformed device samples were dropped");
+        let dropped = lock(&self.shared.dropped);
+        let malformed = dropped.get(&Dropped::Malformed).copied().unwrap_or(0);
+        if malformed > 0 {
+            tracing::warn!("{malformed} malformed device samples were dropped");
         }
+        let unsent: Vec<String> = dropped
+            .iter()
+            .filter_map(|(why, n)| match why {
+                Dropped::NoPlayerForm(kind) => Some(format!("{kind} ×{n}")),
+                Dropped::Malformed => None,
+            })
+            .collect();
+        if !unsent.is_empty() {
+            tracing::info!(
+                "not sent to Player clients, having no Player message: {}",
+                unsent.join(", ")
+            );
+        }
+        drop(dropped);
         let refused = lock(&self.shared.refused);
         if !refused.is_empty() {
             tracing::warn!(
@@ -815,14 +831,14 @@ impl Conn {
             .callback(move |s| {
                 let bytes = s.payload().to_bytes();
                 match data_message(dev, host, &bytes) {
-                    Some(out) => {
+                    Ok(out) => {
                         for (_, q) in lock(&c).iter() {
                             q.push(out.clone());
                         }
                     }
-                    None => {
+                    Err(why) => {
                         if let Some(sh) = shared.upgrade() {
-                            sh.bad_samples.fetch_add(1, Ordering::Relaxed);
+                            *lock(&sh.dropped).entry(why).or_insert(0) += 1;
                         }
                     }
                 }
@@ -856,7 +872,7 @@ impl Conn {
         };
         while let Ok(reply) = replies.recv() {
             if let Ok(sample) = reply.result() {
-                if let Some(out) = data_message(dev, self.host, &sample.payload().to_bytes()) {
+                if let Ok(out) = data_message(dev, self.host, &sample.payload().to_bytes()) {
                     self.queue.push(out);
                 }
             }
@@ -886,20 +902,30 @@ fn read_addr(r: &mut Reader) -> Result<(u32, u32), crate::xdr::XdrError> {
     Ok((r.u32()?, r.u32()?))
 }
 
-/// A device's sample as a Player DATA message, or `None` if it is malformed
-/// or of another interface.
-fn data_message(dev: Device, host: u32, payload: &[u8]) -> Option<Out> {
+/// Why a device's sample was not sent to clients.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
+enum Dropped {
+    /// It did not decode.
+    Malformed,
+    /// A kind Player's protocol has no message for on this device (the
+    /// view's model poses on simulation:0, say).
+    NoPlayerForm(&'static str),
+}
+
+/// A device's sample as a Player DATA message, or why not.
+fn data_message(dev: Device, host: u32, payload: &[u8]) -> Result<Out, Dropped> {
     let m = match decode_any(payload) {
         Ok(m) => m,
         Err(e) => {
             tracing::debug!("{dev}: dropping a sample: {e}");
-            return None;
+            return Err(Dropped::Malformed);
         }
     };
-    let (iface, subtype, body) = to_player(&m.msg)?;
+    let kind = m.msg.schema();
+    let (iface, subtype, body) = to_player(&m.msg).ok_or(Dropped::NoPlayerForm(kind))?;
     if iface != dev.interface {
         tracing::debug!("{dev}: dropping a {iface} sample published on it");
-        return None;
+        return Err(Dropped::NoPlayerForm(kind));
     }
     let h = Header {
         host,
@@ -912,7 +938,7 @@ fn data_message(dev: Device, host: u32, payload: &[u8]) -> Option<Out> {
         seq: 0,
         size: 0,
     };
-    Some(Out::new(h, &body))
+    Ok(Out::new(h, &body))
 }
 
 /// Finishes what a full socket could not take when it was queued, and
@@ -1074,5 +1100,23 @@ mod tests {
             e.contains("`10.1.0.0/33` is not a network like 10.1.0.0/16"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn samples_without_a_player_form_are_told_from_malformed_ones() {
+        use troupe_msgs::{position2d, simulation};
+        let sim = Device::new(6665, Interface::Simulation, 0);
+        let poses = codec::encode(&simulation::Poses::default(), 1.0);
+        assert_eq!(
+            data_message(sim, 0, &poses).err(),
+            Some(Dropped::NoPlayerForm("simulation/poses@1"))
+        );
+        assert_eq!(
+            data_message(sim, 0, b"\x03abc").err(),
+            Some(Dropped::Malformed)
+        );
+        let pos = Device::new(6665, Interface::Position2d, 0);
+        let data = codec::encode(&position2d::Data::default(), 1.0);
+        assert!(data_message(pos, 0, &data).is_ok());
     }
 }
