@@ -350,6 +350,12 @@ fn the_view_draws_the_world_where_the_simulator_has_it() {
     );
     assert_eq!(code, 400);
     assert!(why.contains("a planner takes a goal"), "{why}");
+    // A request no driver answers: 502, saying so.
+    let (code, why) = post(
+        &base,
+        &serde_json::json!({"device": "6665:localize:7", "pose": [1.0, 0.0, 0.0]}),
+    );
+    assert_eq!(code, 502, "{why}");
 
     stack.stop();
     let _ = std::fs::remove_dir_all(&dir);
