@@ -553,6 +553,10 @@ pub fn from_cfg(
         st.options
             .entry("update_rate")
             .or_insert(serde_json::Value::from(100));
+        // Its plugin stopped the clock at quit_time and Player served on.
+        st.options
+            .entry("at_quit_time")
+            .or_insert(serde_json::Value::from("pause"));
         plan.nodes.insert(0, st);
     }
     for (driver, places) in unknown {

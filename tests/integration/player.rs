@@ -13,6 +13,8 @@ pub const DATA: u32 = 1;
 pub const RESP_ACK: u32 = 4;
 /// `PLAYER_MSGTYPE_SYNCH`.
 pub const SYNCH: u32 = 5;
+/// `PLAYER_MSGTYPE_RESP_NACK`.
+pub const RESP_NACK: u32 = 6;
 
 /// One message.
 #[derive(Debug, Clone, Default)]
@@ -83,6 +85,9 @@ pub struct Player {
     /// The connection, for tests that write raw bytes.
     pub s: TcpStream,
     robot: u32,
+    /// The DATA that came while [`Player::reply`] waited, as libplayerc
+    /// hands it to its proxies.
+    pub seen: Vec<Frame>,
 }
 
 impl Player {
@@ -93,7 +98,11 @@ impl Player {
         let mut banner = [0u8; 32];
         s.read_exact(&mut banner).unwrap();
         assert!(banner.starts_with(b"Player v.3"));
-        Player { s, robot }
+        Player {
+            s,
+            robot,
+            seen: Vec::new(),
+        }
     }
 
     /// Sends one message to this robot.
@@ -114,6 +123,7 @@ impl Player {
             if r.kind() != DATA {
                 return r;
             }
+            self.seen.push(r);
         }
     }
 

@@ -68,6 +68,10 @@ pub enum ToDevice {
         /// ACK body from the reply.
         reply: ReplyFn,
     },
+    /// A request Player's driver refuses for its form alone (a property
+    /// asked with a buffer of the wrong size): NACKed here, with the reason
+    /// in the bridge's log, as the driver logged it.
+    Refuse(String),
 }
 
 impl std::fmt::Debug for ToDevice {
@@ -75,6 +79,7 @@ impl std::fmt::Debug for ToDevice {
         match self {
             ToDevice::Command { name, .. } => write!(f, "Command({name})"),
             ToDevice::Request { name, .. } => write!(f, "Request({name})"),
+            ToDevice::Refuse(why) => write!(f, "Refuse({why})"),
         }
     }
 }
@@ -86,7 +91,11 @@ fn command<C: Command>(c: &C, stamp: f64) -> ToDevice {
     }
 }
 
-fn request<Q: Request>(q: &Q, stamp: f64, reply: fn(&Q::Reply, &mut Writer)) -> ToDevice
+fn request<Q: Request>(
+    q: &Q,
+    stamp: f64,
+    reply: impl Fn(&Q::Reply, &mut Writer) + Send + Sync + 'static,
+) -> ToDevice
 where
     Q::Reply: Message,
 {
@@ -406,7 +415,10 @@ fn bumper_geom(g: &bumper::Geom, w: &mut Writer) {
 }
 
 /// Stage's property values are raw host-order bytes (colour = 4 LE floats).
-fn property_bytes(v: &simulation::Value) -> Vec<u8> {
+/// A property's value in the client's buffer of `size` bytes, as Stage's
+/// plugin copies it: in the server's (little-endian) byte order, an
+/// integer as wide as the buffer holds.
+fn property_bytes(v: &simulation::Value, size: usize) -> Vec<u8> {
     match v {
         simulation::Value::Color(c) => [c.r, c.g, c.b, c.a]
             .iter()
@@ -414,8 +426,8 @@ fn property_bytes(v: &simulation::Value) -> Vec<u8> {
             .collect(),
         simulation::Value::Number(x) => x.to_le_bytes().to_vec(),
         simulation::Value::Int(i) => match i32::try_from(*i) {
-            Ok(i) => i.to_le_bytes().to_vec(),
-            Err(_) => i.to_le_bytes().to_vec(),
+            Ok(i) if size == 4 => i.to_le_bytes().to_vec(),
+            _ => i.to_le_bytes().to_vec(),
         },
         simulation::Value::Text(s) => {
             let mut b = s.as_bytes().to_vec();
@@ -670,10 +682,22 @@ fn translate(
             let name = r.string()?;
             let prop = r.string()?;
             let _index = r.u32()?;
-            let _value = r.bytes()?;
-            request(&simulation::GetProperty { name, prop }, t, |p, w| {
+            let buffer = r.bytes()?.len();
+            // Stage's plugin refuses a buffer that cannot hold the value:
+            // a colour is four floats, the time a uint64 of microseconds.
+            let needs = match prop.as_str() {
+                "color" => Some((16, "an array of 4 floats")),
+                "time" => Some((8, "a uint64_t")),
+                _ => None,
+            };
+            if let Some((size, what)) = needs.filter(|(size, _)| *size != buffer) {
+                return Ok(Some(ToDevice::Refuse(format!(
+                    "property \"{prop}\" of \"{name}\" needs {what} ({size} bytes) to store; the request brings {buffer}"
+                ))));
+            }
+            request(&simulation::GetProperty { name, prop }, t, move |p, w| {
                 w.string(&p.name).string(&p.prop).u32(0);
-                w.bytes(&property_bytes(&p.value));
+                w.bytes(&property_bytes(&p.value, buffer));
             })
         }
         (I::Simulation, REQ, 6) => {
@@ -1486,13 +1510,21 @@ mod tests {
             })
         );
         assert_eq!(
-            property_bytes(&simulation::Value::Color(Color {
-                r: 1.0,
-                g: 0.0,
-                b: 0.0,
-                a: 1.0
-            })),
+            property_bytes(
+                &simulation::Value::Color(Color {
+                    r: 1.0,
+                    g: 0.0,
+                    b: 0.0,
+                    a: 1.0
+                }),
+                16
+            ),
             hex("0000803f00000000000000000000803f")
+        );
+        // Stage's time: a uint64 of microseconds, in a buffer of 8 bytes.
+        assert_eq!(
+            property_bytes(&simulation::Value::Int(41_900_000), 8),
+            41_900_000u64.to_le_bytes()
         );
     }
 

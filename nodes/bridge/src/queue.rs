@@ -134,7 +134,14 @@ struct Pace {
     period: f64,
     /// It missed a round's wait: not waited for until it publishes again.
     lagging: bool,
+    /// The client opened the device and it had published once at most:
+    /// its next sample is waited for (see [`Queue::expect`]).
+    expected: bool,
 }
+
+/// The subtype of an opened device's pace before its first sample says
+/// which kinds it publishes.
+const ANY_SUBTYPE: u8 = u8::MAX;
 
 impl Pace {
     /// Whether its sample for `t` should be on its way: its next stamp,
@@ -142,7 +149,15 @@ impl Pace {
     /// another clock) is not waited for.
     fn due(&self, t: f64) -> bool {
         let p = self.period;
-        !self.lagging && p > 0.0 && self.newest + p <= t + 0.05 * p && t - self.newest < 3.0 * p
+        if self.lagging {
+            return false;
+        }
+        if p <= 0.0 {
+            // An opened device with no pace yet: due until its first
+            // sample, then at any newer step until its second.
+            return self.expected && (self.sig.2 == ANY_SUBTYPE || self.newest < t);
+        }
+        self.newest + p <= t + 0.05 * p && t - self.newest < 3.0 * p
     }
 }
 
@@ -203,6 +218,27 @@ impl Queue {
         }
     }
 
+    /// The client opened a device: from the next PULL round on, a round
+    /// waits (at most [`ROUND_WAIT`]) for its data before it ends, its
+    /// first sample and the one after, before the device's own pace is
+    /// known, as Player's rounds after a subscription carried every
+    /// opened device.
+    pub fn expect(&mut self, interf: u32, index: u32) {
+        if !self
+            .paces
+            .iter()
+            .any(|p| (p.sig.0, p.sig.1) == (interf, index))
+        {
+            self.paces.push(Pace {
+                sig: (interf, index, ANY_SUBTYPE),
+                newest: f64::NEG_INFINITY,
+                period: 0.0,
+                lagging: false,
+                expected: true,
+            });
+        }
+    }
+
     /// The client closed a device: its pace no longer holds rounds back.
     pub fn forget(&mut self, interf: u32, index: u32) {
         self.paces.retain(|p| (p.sig.0, p.sig.1) != (interf, index));
@@ -231,8 +267,9 @@ impl Queue {
 
     /// Queues a message under the replace rules and the length limit.
     pub fn push(&mut self, m: Out) {
-        // Paces matter to PULL rounds only.
-        if self.pull && m.kind == wire::DATA {
+        // Paces matter to PULL rounds, and are kept in PUSH mode too for a
+        // client that switches.
+        if m.kind == wire::DATA {
             self.paced(&m);
         }
         let op = self
@@ -271,25 +308,38 @@ impl Queue {
                 }
                 p.lagging = false;
             }
-            None => self.paces.push(Pace {
-                sig,
-                newest: m.stamp,
-                period: 0.0,
-                lagging: false,
-            }),
+            None => {
+                // An opened device's first kind takes its place.
+                let opened = |p: &Pace| p.sig == (m.interf, m.index, ANY_SUBTYPE);
+                let expected = match self.paces.iter().position(opened) {
+                    Some(i) => {
+                        self.paces.swap_remove(i);
+                        true
+                    }
+                    None => false,
+                };
+                self.paces.push(Pace {
+                    sig,
+                    newest: m.stamp,
+                    period: 0.0,
+                    lagging: false,
+                    expected,
+                });
+            }
         }
     }
 
     /// Whether data `m` belongs to a step after the last round's: newer
     /// than it carried, or of a kind whose stamps have not advanced (not
-    /// paced, so nothing to wait for).
+    /// paced, so nothing to wait for; an opened device's first sample is
+    /// judged by its stamp).
     fn new_step(&self, m: &Out) -> bool {
         m.stamp > self.round_stamp
             || self
                 .paces
                 .iter()
                 .find(|p| p.sig == (m.interf, m.index, m.subtype))
-                .is_none_or(|p| p.period <= 0.0)
+                .is_none_or(|p| p.period <= 0.0 && !p.expected)
     }
 
     /// Whether a round must still wait at `now`: for a new step, as long as
@@ -505,6 +555,48 @@ mod tests {
         let synch = out.last().unwrap();
         assert_eq!(synch.subtype, wire::player::SYNCH_OVERFLOW);
         assert_eq!(&synch.bytes[40..], &3u32.to_be_bytes());
+    }
+
+    #[test]
+    fn rounds_after_opening_wait_for_every_opened_device_until_its_pace_is_known() {
+        let mut q = Queue::new(64);
+        q.set_pull(true);
+        q.expect(4, 0);
+        q.expect(6, 0);
+        q.request_data(msg(A, 1, 4));
+        q.push(data(4, 0.1));
+        // The laser has not published yet: the round waits for it.
+        assert_eq!(drain(&mut q), [(A, 1), (D, 4)]);
+        q.push(data(6, 0.1));
+        assert_eq!(drain(&mut q), [(D, 6), (S, 1)]);
+        // One sample of each so far, so no pace: both are due at a newer step.
+        q.request_data(msg(A, 1, 4));
+        q.push(data(4, 0.2));
+        assert_eq!(drain(&mut q), [(A, 1), (D, 4)]);
+        q.push(data(6, 0.2));
+        assert_eq!(drain(&mut q), [(D, 6), (S, 1)]);
+    }
+
+    #[test]
+    fn an_opened_device_that_never_publishes_holds_one_round_back_once() {
+        let mut q = Queue::new(64);
+        q.set_pull(true);
+        q.expect(4, 0);
+        q.expect(6, 0);
+        q.request_data(msg(A, 1, 4));
+        q.push(data(4, 0.1));
+        assert_eq!(drain(&mut q), [(A, 1), (D, 4)]);
+        let late = Instant::now() + ROUND_WAIT;
+        assert_eq!(q.pop(late).map(|m| m.kind), Some(S));
+        q.request_data(msg(A, 1, 4));
+        q.push(data(4, 0.2));
+        assert_eq!(drain(&mut q), [(A, 1), (D, 4), (S, 1)]);
+        // Closed, it is forgotten; opened again, it is expected again.
+        q.forget(6, 0);
+        q.expect(6, 0);
+        q.request_data(msg(A, 1, 4));
+        q.push(data(4, 0.3));
+        assert_eq!(drain(&mut q), [(A, 1), (D, 4)]);
     }
 
     #[test]

@@ -481,7 +481,7 @@ async fn accept_loop(shared: Arc<Shared>, robot: u32, host: u32, listener: TcpLi
                     let _ = stream.set_nodelay(true);
                     let (rd, wr) = stream.into_split();
                     let queue = Arc::new(ClientQueue::new(shared.maxlen, wr));
-                    let conn = Conn { shared: shared.clone(), robot, host, id, queue, subscribed: Vec::new(), ignored_commands: 0 };
+                    let conn = Conn { shared: shared.clone(), robot, host, id, queue, subscribed: Vec::new(), ignored_commands: 0, unanswered: 0 };
                     clients.spawn(conn.serve(rd));
                 }
                 Err(e) => {
@@ -506,6 +506,8 @@ struct Conn {
     subscribed: Vec<Device>,
     /// Commands dropped because their device was not opened.
     ignored_commands: u64,
+    /// Requests left unanswered because no client had opened their device.
+    unanswered: u64,
 }
 
 /// A device request waiting for its turn: Player drivers answer in order.
@@ -567,6 +569,14 @@ impl Conn {
                 self.robot,
                 self.id,
                 self.ignored_commands
+            );
+        }
+        if self.unanswered > 1 {
+            tracing::info!(
+                "robot {}: client {} made {} requests of devices no client had opened (not answered)",
+                self.robot,
+                self.id,
+                self.unanswered
             );
         }
         let dropped = lock(&self.queue.out).queue.dropped_total();
@@ -644,6 +654,23 @@ impl Conn {
             }
             return Ok(());
         }
+        if kind == REQ
+            && !self.subscribed.contains(&dev)
+            && !lock(&self.shared.feeds).contains_key(&dev)
+        {
+            // Player sets a driver up when its first client subscribes; a
+            // request to one no client has opened waits in its queue,
+            // unanswered.
+            self.unanswered += 1;
+            if self.unanswered == 1 {
+                tracing::info!(
+                    "robot {}: client {}: not answering requests to {dev}, which no client has opened (Player's driver would not be set up)",
+                    self.robot,
+                    self.id
+                );
+            }
+            return Ok(());
+        }
         let subtype = u8::try_from(h.subtype).unwrap_or(0);
         match from_player(dev.interface, kind, subtype, body, h.timestamp) {
             Err(e) => Err(e.to_string()),
@@ -654,6 +681,15 @@ impl Conn {
             }
             Ok(None) => {
                 tracing::debug!("{dev}: command subtype {subtype} is not served; dropped");
+                Ok(())
+            }
+            Ok(Some(ToDevice::Refuse(why))) => {
+                tracing::info!(
+                    "robot {}: client {}: {dev} refuses: {why}",
+                    self.robot,
+                    self.id
+                );
+                self.reply(&h, RESP_NACK, &[]);
                 Ok(())
             }
             Ok(Some(ToDevice::Command { name, payload })) => {
@@ -814,6 +850,14 @@ impl Conn {
         if again {
             // Player counts a client's opens of a device; the feed is one.
             return;
+        }
+        // Player clients read no data of these in their rounds.
+        if !matches!(
+            dev.interface,
+            Interface::Simulation | Interface::Log | Interface::Map
+        ) {
+            let code = u32::from(dev.interface.code());
+            self.queue.with(|q| q.expect(code, dev.index));
         }
         self.send_latest(dev);
         let mut feeds = lock(&self.shared.feeds);

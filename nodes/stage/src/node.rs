@@ -77,6 +77,21 @@ pub struct Options {
     pub stage_quirks: Option<Switch>,
     /// Write a PNG of the world here when the node stops.
     pub snapshot: Option<PathBuf>,
+    /// What happens at `quit_time`: `exit` (Stage run alone, the default)
+    /// or `pause` (Player's Stage plugin, which plans from a .cfg ask for:
+    /// the clock stops and every device is still served).
+    pub at_quit_time: Option<AtQuitTime>,
+}
+
+/// What the stage node does when the world's `quit_time` passes.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum AtQuitTime {
+    /// The node stops, as `stage` alone exits.
+    #[default]
+    Exit,
+    /// The clock stops; requests are still answered, as under Player.
+    Pause,
 }
 
 /// What a provided device is served from.
@@ -102,6 +117,9 @@ pub struct Stage {
     period: Option<Duration>,
     steps_per_tick: u32,
     quit_time: f64,
+    at_quit_time: AtQuitTime,
+    /// `quit_time` passed under [`AtQuitTime::Pause`]: no more steps.
+    paused: bool,
     snapshot: Option<PathBuf>,
     /// The simulation devices, model names and models whose pose was asked
     /// for: their answers are kept ready, renewed whenever the model may move.
@@ -290,6 +308,8 @@ impl Driver for Stage {
         let told = o.step_when_told.is_some_and(Switch::on);
         Ok(Stage {
             quit_time: o.quit_time.unwrap_or(sim.world().quit_time),
+            at_quit_time: o.at_quit_time.unwrap_or_default(),
+            paused: false,
             sim,
             devices,
             maps,
@@ -648,8 +668,12 @@ impl Stage {
                         b.origin = g.compose(&pose.inverse());
                     }
                     r.reply(&common::Ack);
-                } else if r.is::<position2d::VelocityMode>() || r.is::<position2d::PositionMode>() {
+                } else if r.is::<position2d::PositionMode>() {
+                    // Stage's plugin acknowledges it and changes nothing.
+                    tracing::warn!("stage: set control mode not yet implemented (as Stage)");
                     r.reply(&common::Ack);
+                } else if r.is::<position2d::VelocityMode>() {
+                    r.nack("Stage's position2d has one velocity controller: it refuses VELOCITY_MODE, as Stage's plugin does");
                 } else {
                     let n = r.name.clone();
                     r.nack(format!("stage position2d does not handle `{n}`"));
@@ -762,6 +786,9 @@ impl Stage {
 
     /// Takes up to `steps` steps, publishing after each; stops at quit_time.
     fn advance(&mut self, ctx: &mut Ctx, steps: u32) -> Result<()> {
+        if self.paused {
+            return Ok(());
+        }
         for _ in 0..steps {
             self.sim.step();
             ctx.set_time(self.sim.time)?;
@@ -776,7 +803,16 @@ impl Stage {
                 if let Some(flags) = self.sim.flags_held() {
                     tracing::info!("flags held: {flags}");
                 }
-                ctx.request_stop();
+                match self.at_quit_time {
+                    AtQuitTime::Exit => ctx.request_stop(),
+                    AtQuitTime::Pause => {
+                        tracing::info!(
+                            "the clock stops here; every device is still served (as under Player)"
+                        );
+                        self.paused = true;
+                        ctx.set_tick(None);
+                    }
+                }
                 break;
             }
         }
@@ -901,7 +937,7 @@ impl Stage {
     fn pose_of(&self, m: usize, name: &str) -> simulation::Pose2dOf {
         simulation::Pose2dOf {
             name: name.to_owned(),
-            pose: self.sim.poses[m].into(),
+            pose: self.sim.reported_pose(m).into(),
         }
     }
 
@@ -985,11 +1021,12 @@ impl Stage {
                     value: simulation::Value::Color(self.sim.colors[m]),
                 }),
                 (Some(_), "time") => {
-                    let t = self.sim.time;
+                    // Stage's SimTimeNow: a uint64 of microseconds.
+                    let usec = (self.sim.time * 1e6).round() as i64;
                     r.reply(&simulation::Property {
                         name: q.name,
                         prop: q.prop,
-                        value: simulation::Value::Number(t),
+                        value: simulation::Value::Int(usec),
                     })
                 }
                 (Some(m), "devices") => {
@@ -1419,7 +1456,7 @@ mod tests {
     }
 
     #[test]
-    fn quit_time_stops_the_node_and_bad_sections_say_why() {
+    fn quit_time_stops_the_node_or_its_clock_and_bad_sections_say_why() {
         let mut h = harness("quit", r#"["simulation:0"]"#);
         for _ in 0..9 {
             h.tick().unwrap();
@@ -1427,6 +1464,22 @@ mod tests {
         }
         h.tick().unwrap();
         assert!(h.stop_requested(), "quit_time 1 s = 10 steps");
+        // As Player's plugin: the clock stops, the node serves on.
+        let w = world_file("pause", WORLD);
+        let mut h = Harness::<Stage>::from_json(&format!(
+            r#"{{"name":"stage","provides":["simulation:0"],"options":{{"worldfile":"{}","model":"r0","at_quit_time":"pause"}}}}"#,
+            w.display()
+        ))
+        .unwrap();
+        for _ in 0..15 {
+            h.tick().unwrap();
+        }
+        assert!(!h.stop_requested());
+        assert!(
+            (h.now() - 1.0).abs() < 1e-9,
+            "the clock ran on to {}",
+            h.now()
+        );
         let w = world_file("bad", WORLD);
         let e = |provides: &str, model: &str| {
             Harness::<Stage>::from_json(&format!(

@@ -73,6 +73,22 @@ pub(super) const PADDLE_STEP: f64 = 0.05;
 pub(super) const GRIPPER_INTERVAL: f64 = 0.1;
 
 impl Sim {
+    /// Model `m`'s pose as Stage's `GET_POSE2D` reports it: on its parent,
+    /// and, while a gripper holds it, on that gripper (Stage makes the
+    /// gripper its parent, at 0 0 0).
+    pub fn reported_pose(&self, m: usize) -> Pose {
+        let held = self
+            .grippers
+            .iter()
+            .flatten()
+            .any(|g| g.held.is_some_and(|(k, _)| k == m));
+        if held {
+            Pose::default()
+        } else {
+            self.poses[m]
+        }
+    }
+
     /// Gives gripper `g` Stage's command: close (`true`) or open. The
     /// paddles move at its next updates.
     pub fn grip(&mut self, g: usize, close: bool) {

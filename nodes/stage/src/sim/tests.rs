@@ -551,6 +551,11 @@ fn a_gripper_picks_up_carries_and_drops_a_box() {
         "held at the centre, across the inner beam"
     );
     assert!((s.global(bx).x - 0.3).abs() < 1e-9, "taken to the centre");
+    assert_eq!(
+        s.reported_pose(bx),
+        Pose::default(),
+        "Stage reports a held box on its gripper"
+    );
     s.bases[0].cmd = Some(Command::Vel(Pose::new(0.5, 0.0, 0.0)));
     for _ in 0..10 {
         s.step();
@@ -568,6 +573,11 @@ fn a_gripper_picks_up_carries_and_drops_a_box() {
         s.step();
     }
     assert!((s.global(bx).x - 0.8).abs() < 0.06, "dropped where it was");
+    assert_eq!(
+        s.reported_pose(bx),
+        s.poses[bx],
+        "dropped: on the world again"
+    );
     assert_eq!(
         st(&s).paddles,
         Paddles::Open,
