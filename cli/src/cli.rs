@@ -43,6 +43,7 @@ another. Ctrl-C stops the nodes in reverse start order.")]
     Launch(troupe_launch::supervisor::LaunchArgs),
 
     /// Translate a Player .cfg into a launch plan (TOML) and print it.
+    #[command(args = offline(&[]))]
     #[command(after_help = "Example:
   troupe plan robot.cfg > plan.toml && $EDITOR plan.toml && troupe launch plan.toml")]
     Plan(troupe_launch::supervisor::PlanArgs),
@@ -160,6 +161,7 @@ what it sends.")]
     Emulate(troupe_emulate::EmulateArgs),
 
     /// Build the Docker image: this binary, the libraries it loads, the sample worlds.
+    #[command(args = offline(&[]))]
     #[command(after_help = "Examples:
   cargo build --release && target/release/troupe image      # troupe:latest
   troupe image --tag troupe:dev --worlds my/worlds
@@ -170,6 +172,7 @@ entrypoint, run as user 10000, with the worlds at /worlds.")]
     Image(troupe_fleet::docker::ImageArgs),
 
     /// Write a Docker Compose file that runs a .cfg or plan as a fleet of containers.
+    #[command(args = offline(&["lease"]))]
     #[command(after_help = "Examples:
   troupe compose worlds/fleet.cfg --in-image /worlds -o docker-compose.yml
   troupe compose robot.cfg -o robot/docker-compose.yml   # mounts robot.cfg's directory at /stack
@@ -182,6 +185,7 @@ a router, and a Player bridge on 127.0.0.1 of this machine. Health checks
     Compose(troupe_fleet::docker::ComposeArgs),
 
     /// Make a fleet's certificates and each host's Zenoh config (TLS, mutual authentication).
+    #[command(args = offline(&["namespace"]))]
     #[command(
         after_help = "Example (on one machine; across machines --router names the router's host):
   troupe fleet-keys keys --router localhost --hosts sim:6665:6666,robot1:6665 --viewers eye
@@ -245,6 +249,7 @@ stack's `requires` (amcl on laser:0) are met by the replay.")]
     Play(troupe_record::PlayArgs),
 
     /// Look into a recording: `info`, or `export` it as JSON lines or a Player log.
+    #[command(args = offline(&[]))]
     #[command(
         subcommand,
         after_help = "Examples:
@@ -258,11 +263,13 @@ driver, or build a map from it with `troupe map build`."
     Log(troupe_record::LogCmd),
 
     /// Maps from logs: `build` one with SLAM from a robot's odometry and laser, `show` one.
+    #[command(args = offline(&[]))]
     #[command(subcommand)]
     Map(troupe_map::MapCmd),
 
     /// List the drivers this build can run (`--all`: and the Player drivers
     /// sample files name that it cannot, with what to use instead).
+    #[command(args = offline(&[]))]
     #[command(after_help = "Examples:
   troupe drivers
   troupe drivers --all | grep -i camera      # is there a camera driver?")]
@@ -273,6 +280,7 @@ driver, or build a map from it with `troupe map build`."
     },
 
     /// List Player's interfaces and their codes.
+    #[command(args = offline(&[]))]
     #[command(after_help = "Example:
   $ troupe interfaces | head -3
   1  player
@@ -288,8 +296,33 @@ driver, or build a map from it with `troupe map build`."
   cargo run --release -- bench stage --bitmaps ../shared/compat/stage/bitmaps
   cargo run --release -- bench python --python python3
 
-Each prints its figures beside the originals' where they exist; README.md
-lists what each measured on the development machine."
+Each prints its figures beside the originals' where they exist;
+docs/measured.md lists what each measured on the development machine."
     )]
     Bench(troupe_bench::BenchCmd),
+}
+
+/// The network flags again, hidden, for the commands that never join the
+/// network: defined on such a command, they keep the global ones out of its
+/// `--help` (and a `log` or `map` subcommand refuses them). `own`: the
+/// flags the command defines for itself (`compose --lease`).
+fn offline(own: &[&str]) -> Vec<clap::Arg> {
+    use clap::{Arg, ArgAction};
+    let valued = [
+        ("connect", "connect"),
+        ("listen", "listen"),
+        ("mode", "mode"),
+        ("namespace", "namespace"),
+        ("zenoh_config", "zenoh-config"),
+        ("lease", "lease"),
+    ];
+    let flags = [("no_multicast", "no-multicast"), ("reconnect", "reconnect")];
+    let valued = valued.map(|(id, long)| Arg::new(id).long(long).action(ArgAction::Append));
+    let flags = flags.map(|(id, long)| Arg::new(id).long(long).action(ArgAction::SetTrue));
+    valued
+        .into_iter()
+        .chain(flags)
+        .filter(|a| !own.contains(&a.get_id().as_str()))
+        .map(|a| a.hide(true))
+        .collect()
 }

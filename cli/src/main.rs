@@ -7,6 +7,8 @@
 //! the command succeeded.
 
 mod cli;
+#[cfg(test)]
+mod docs;
 mod drivers;
 #[cfg(test)]
 mod samples;

@@ -662,7 +662,7 @@ fn mean_error(estimates: &[(f64, f64, f64)], logged: &[Logged], after: f64) -> (
     )
 }
 
-/// README's "drive, record, localize offline": worlds/record.cfg records r0
+/// docs/logs-and-maps.md's "drive, record, localize offline": worlds/record.cfg records r0
 /// wandering (odometry, laser, the live amcl's estimates) with writelog;
 /// worlds/replay.cfg replays the log into amcl with no simulator running,
 /// and amcl localizes as it did live.
@@ -700,7 +700,7 @@ fn a_recorded_run_localizes_offline_as_it_did_live() {
         .fold(0.0, f64::max);
     assert!(moved > 1.0, "r0 wandered only {moved} m");
 
-    // The README's next step: a map from the log, shown in the terminal.
+    // The page's next step: a map from the log, shown in the terminal.
     let log = dir.join("r0.log").display().to_string();
     let yaml = dir.join("office.yaml").display().to_string();
     let (status, out, err) =

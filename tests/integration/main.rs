@@ -9,6 +9,7 @@ mod act;
 mod bridge;
 mod bridge_devices;
 mod docker;
+mod docs;
 mod hosts;
 mod import;
 mod launch;

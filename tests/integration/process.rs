@@ -617,15 +617,15 @@ fn a_tls_fleet_admits_its_own_certificates_only_and_each_identity_does_only_what
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// The four lines of the README's "Securing a fleet", run as printed in a
+/// The four lines of docs/fleets.md's "Securing a fleet", run as printed in a
 /// fresh directory (with the repository's `worlds/` beside the keys), but
 /// for two things a test must: the router on a free port (`--listen`, and
 /// `--connect` for the others to it) and `echo --count 1` to end.
 #[test]
-fn the_readme_s_secured_fleet_runs_on_one_machine() {
+fn the_secured_fleet_of_the_docs_runs_on_one_machine() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
-    let section = &readme[readme.find("## Securing a fleet").expect("the section")..];
+    let page = std::fs::read_to_string(root.join("docs/fleets.md")).unwrap();
+    let section = &page[page.find("## Securing a fleet").expect("the section")..];
     let block = &section[section.find("```sh\n").expect("its commands") + 6..];
     let lines: Vec<Vec<String>> = block[..block.find("```").unwrap()]
         .lines()

@@ -846,9 +846,18 @@ fn info(path: &Path) -> anyhow::Result<()> {
             writeln!(out, "  {topic:<48} liveliness, {n} events")?;
         } else {
             let hz = if secs > 0.0 { n as f64 / secs } else { 0.0 };
-            writeln!(out, "  {topic:<48} {schema:<24} {n:>8} msgs  {hz:>8.1} Hz")?;
+            writeln!(
+                out,
+                "  {topic:<48} {schema:<24} {n:>8} msgs  {hz:>8.1} msgs/s"
+            )?;
         }
     }
+    // What the rate counts: rangertolaser's scan is two messages (ranges,
+    // then intensities, as Player's), so its rate reads twice `hz`'s.
+    writeln!(
+        out,
+        "(msgs/s counts every message; `troupe hz` counts a device's updates, one per stamp and kind)"
+    )?;
     Ok(())
 }
 
