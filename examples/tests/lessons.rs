@@ -486,19 +486,26 @@ fn gripper_drags_the_box_back() {
     let before = sim.get_pose2d("box").unwrap();
     let mut ex = stack.example("gripper", &["--back", "1.5", "--for", "60"]);
     let out = stack.follow(&mut ex, Duration::from_secs(40), || {});
-    let after = sim.get_pose2d("box").unwrap();
     assert!(out.contains("holding it: closed after moving"), "{out}");
-    assert!(
-        before.x - after.x > 1.3 && (after.y - before.y).abs() < 0.1,
-        "the box went from {before:?} to {after:?}\n{out}"
-    );
     stack.client.read().unwrap();
     // As Stage's: closed on the box, which breaks both beams; nothing
-    // counted as stored.
+    // counted as stored; the box held is at 0 0 0 on the gripper.
     assert_eq!(
         (gripper.state(), gripper.beams(), gripper.stored()),
         (troupe_msgs::gripper::State::Closed, 0x0c, 0),
         "{out}"
+    );
+    let held = sim.get_pose2d("box").unwrap();
+    assert_eq!((held.x, held.y, held.yaw), (0.0, 0.0, 0.0), "{held:?}");
+    // Let go: the box is where it was dragged to.
+    gripper.open().unwrap();
+    while gripper.state() == troupe_msgs::gripper::State::Closed {
+        stack.client.read().unwrap();
+    }
+    let after = sim.get_pose2d("box").unwrap();
+    assert!(
+        before.x - after.x > 1.3 && (after.y - before.y).abs() < 0.1,
+        "the box went from {before:?} to {after:?}\n{out}"
     );
     stack.stop("gripper");
 }

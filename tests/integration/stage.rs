@@ -602,3 +602,55 @@ fn after_quit_time_the_clock_stops_and_the_devices_are_still_served() {
     assert!(launcher.terminate().success(), "{}", launcher.stderr());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A position command is driven by Stage's own position controller (issue
+/// 46, item 10): r0 ends within Stage's 2 cm of the goal point, facing the
+/// goal's heading to a milliradian, as Player's Stage leaves it.
+#[test]
+fn a_position_command_stops_where_stage_s_controller_stops() {
+    use crate::player::{Player, DATA};
+    use troupe_msgs::{Device, Interface};
+    let cfg = Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/simple.cfg");
+    let ns = troupe_tests::unique_namespace("goto");
+    let mut launcher = troupe_tests::launch(&ns, &cfg, &["--speedup", "4"]);
+    let (_, addr) = troupe_tests::launch_ports(&mut launcher);
+    let mut player = Player::connect(addr, 6665);
+    let pos = Device::new(6665, Interface::Position2d, 0);
+    player.open(pos);
+    // The goal, in odometry's frame: 0.7 m ahead and 0.7 m to the left of
+    // where r0 starts (it faces 45°, into the open room), facing 0.5 rad.
+    let start = loop {
+        let m = player.recv();
+        if m.kind() == DATA && m.h[2] == 4 {
+            let f = |i: usize| f64::from_be_bytes(m.body[8 * i..8 * i + 8].try_into().unwrap());
+            break [f(0), f(1)];
+        }
+    };
+    let goal = [start[0] + 0.7, start[1] + 0.7, 0.5];
+    // PLAYER_POSITION2D_CMD_POS: the goal, a velocity, the state.
+    let mut body = Vec::new();
+    for v in goal.iter().chain(&[0.0; 3]) {
+        body.extend_from_slice(&f64::to_be_bytes(*v));
+    }
+    body.extend_from_slice(&1u32.to_be_bytes());
+    player.send(4, 0, 2, 2, &body);
+    let deadline = Instant::now() + DEADLINE;
+    loop {
+        let m = player.recv();
+        if m.kind() != DATA || m.h[2] != 4 {
+            continue;
+        }
+        let f = |i: usize| f64::from_be_bytes(m.body[8 * i..8 * i + 8].try_into().unwrap());
+        let last = [f(0), f(1), f(2)];
+        let d = last[2] - goal[2];
+        let yaw_err = d.sin().atan2(d.cos()).abs();
+        if (last[0] - goal[0]).abs() < 0.02 && (last[1] - goal[1]).abs() < 0.02 && yaw_err < 1e-3 {
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "r0 stopped at {last:?}, short of {goal:?}"
+        );
+    }
+    assert!(launcher.terminate().success(), "{}", launcher.stderr());
+}

@@ -105,36 +105,7 @@ impl Sim {
                 Pose::new(speed, 0.0, speed * steer.tan() / cfg.wheelbase.max(1e-6))
             }
             Some(Command::GoTo(goal)) => {
-                let o = self.bases[bi].odom;
-                let (dx, dy) = (goal.x - o.x, goal.y - o.y);
-                let dist = dx.hypot(dy);
-                if dist > 0.05 {
-                    let err = normalize(dy.atan2(dx) - o.yaw);
-                    let (s, c) = o.yaw.sin_cos();
-                    match cfg.drive {
-                        Drive::Omni => Pose::new(
-                            (c * dx + s * dy).clamp(-1.0, 1.0),
-                            (-s * dx + c * dy).clamp(-1.0, 1.0),
-                            (2.0 * normalize(goal.yaw - o.yaw)).clamp(-1.0, 1.0),
-                        ),
-                        _ => Pose::new(
-                            dist.min(1.0) * err.cos().max(0.0),
-                            0.0,
-                            (2.0 * err).clamp(-1.5, 1.5),
-                        ),
-                    }
-                } else {
-                    let err = normalize(goal.yaw - o.yaw);
-                    Pose::new(
-                        0.0,
-                        0.0,
-                        if err.abs() > 0.02 {
-                            (2.0 * err).clamp(-1.0, 1.0)
-                        } else {
-                            0.0
-                        },
-                    )
-                }
+                stage_position_control(cfg.drive, self.bases[bi].odom, goal)
             }
             None => match self.bases[bi].ctrl {
                 Some(c) => self.control(bi, c, &mut plan.mind),
@@ -210,4 +181,32 @@ impl Sim {
             ));
         }
     }
+}
+
+/// Stage's position controller (`ModelPosition::Update`, `CONTROL_POSITION`),
+/// as it is, on the odometric pose `o`: an omni base closes each axis's
+/// error at up to 0.4 m/s and 1 rad/s; a differential one turns toward the
+/// goal point, drives at up to 0.4 m/s once within π/16 of it, and within
+/// 2 cm turns on the spot to the goal's heading. The turn rate is the
+/// error, held above -1 rad/s but not below 1 (Stage clamps it one way
+/// only); the velocity bounds clamp it after.
+pub(super) fn stage_position_control(drive: Drive, o: Pose, goal: Pose) -> Pose {
+    let (dx, dy) = (goal.x - o.x, goal.y - o.y);
+    let heading = normalize(goal.yaw - o.yaw);
+    const MAX_XY: f64 = 0.4;
+    const MAX_A: f64 = 1.0;
+    const CLOSE_ENOUGH: f64 = 0.02;
+    if drive == Drive::Omni {
+        return Pose::new(dx.min(MAX_XY), dy.min(MAX_XY), heading.min(MAX_A));
+    }
+    if dx.abs() < CLOSE_ENOUGH && dy.abs() < CLOSE_ENOUGH {
+        return Pose::new(0.0, 0.0, heading.max(-MAX_A));
+    }
+    let err = normalize(dy.atan2(dx) - o.yaw);
+    let forward = if err.abs() < std::f64::consts::PI / 16.0 {
+        dx.hypot(dy).min(MAX_XY)
+    } else {
+        0.0
+    };
+    Pose::new(forward, 0.0, err.max(-MAX_A))
 }

@@ -617,13 +617,30 @@ fn snapshots_show_walls_robots_and_rays() {
 }
 
 #[test]
-fn goto_reaches_the_goal() {
+fn goto_reaches_the_goal_as_stage_s_controller_does() {
     let mut s = sim("goto", "position ( name \"r\" size [0.4 0.4 0.2] )\n");
     s.bases[0].cmd = Some(Command::GoTo(Pose::new(1.0, 1.0, 0.0)));
-    steps(&mut s, 200);
+    steps(&mut s, 300);
+    // Stage's: within 2 cm of the point, then the heading's error closed
+    // by a tenth a step.
     let o = s.bases[0].odom;
     assert!(
-        (o.x - 1.0).abs() < 0.06 && (o.y - 1.0).abs() < 0.06 && o.yaw.abs() < 0.05,
+        (o.x - 1.0).abs() < 0.02 && (o.y - 1.0).abs() < 0.02 && o.yaw.abs() < 1e-3,
         "{o:?}"
     );
+    // Facing away, it turns before it drives: at most 0.4 m/s, and only
+    // within π/16 of the goal's bearing.
+    let v = motion::stage_position_control(
+        Drive::Diff,
+        Pose::new(0.0, 0.0, 0.0),
+        Pose::new(-2.0, 0.0, 0.0),
+    );
+    assert_eq!((v.x, v.y), (0.0, 0.0), "{v:?}");
+    assert!(v.yaw > 1.0, "Stage does not clamp a positive turn: {v:?}");
+    let v = motion::stage_position_control(
+        Drive::Diff,
+        Pose::new(0.0, 0.0, 0.1),
+        Pose::new(2.0, 0.0, 0.0),
+    );
+    assert_eq!(v.x, 0.4, "{v:?}");
 }
