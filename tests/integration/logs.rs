@@ -665,7 +665,8 @@ fn mean_error(estimates: &[(f64, f64, f64)], logged: &[Logged], after: f64) -> (
 /// docs/logs-and-maps.md's "drive, record, localize offline": worlds/record.cfg records r0
 /// wandering (odometry, laser, the live amcl's estimates) with writelog;
 /// worlds/replay.cfg replays the log into amcl with no simulator running,
-/// and amcl localizes as it did live.
+/// and amcl localizes as it did live; `troupe map build` makes a map of the
+/// log, and amcl localizes on that map as well.
 #[test]
 fn a_recorded_run_localizes_offline_as_it_did_live() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
@@ -731,6 +732,54 @@ fn a_recorded_run_localizes_offline_as_it_did_live() {
     let offline = estimates_until(&est, end);
     assert!(rep.terminate().success(), "{}", rep.stderr());
     offline_as_good_as_live("the Player log", &live, &offline, &logged, 5.0);
+
+    // The loop closed: amcl on the map built from the log (mapfile serves
+    // the YAML), replaying the same log.
+    let replay = std::fs::read_to_string(dir.join("worlds/replay.cfg")).unwrap();
+    // The map's frame is the odometry's at the log's start: r0 starts at
+    // its origin there.
+    let built = replay
+        .replace(
+            "filename \"bitmaps/office.png\" resolution 0.05",
+            "filename \"../office.yaml\"",
+        )
+        .replace("init_pose [-6 -6 45]", "init_pose [0 0 0]");
+    assert_ne!(built, replay, "replay.cfg's mapfile line changed");
+    std::fs::write(dir.join("worlds/replay-built.cfg"), built).unwrap();
+    let ns = troupe_tests::unique_namespace("replay-built");
+    let mut rep = launch_in(&dir, &ns, "worlds/replay-built.cfg", &[]);
+    let (router, addr) = troupe_tests::launch_ports(&mut rep);
+    let session = troupe_tests::client_at(&router, &ns);
+    let est = data_of(&session, Interface::Localize);
+    // A Player client reads the built map: GET_INFO gives the PNG's size
+    // at the YAML's 0.05 m.
+    let png = std::fs::read(dir.join("office.png")).unwrap();
+    let dim = |at: usize| u32::from_be_bytes(png[at..at + 4].try_into().unwrap());
+    let mut player = Player::connect(addr, 6665);
+    let map = Device::new(6665, Interface::Map, 0);
+    player.open(map);
+    let r = player.request(map, 1, &[]);
+    assert_eq!(r.kind(), RESP_ACK, "map GET_INFO: {r:?}");
+    let scale = f32::from_be_bytes(r.body[..4].try_into().unwrap());
+    let size = |at: usize| u32::from_be_bytes(r.body[at..at + 4].try_into().unwrap());
+    assert_eq!((size(4), size(8)), (dim(16), dim(20)), "the map's cells");
+    assert!((scale - 0.05).abs() < 1e-6, "resolution {scale}");
+    // Into the world's frame, as the odometry is carried by `truth`.
+    let on_built: Vec<(f64, f64, f64)> = estimates_until(&est, end)
+        .into_iter()
+        .map(|(t, x, y)| {
+            let (wx, wy) = truth(&[x, y]);
+            (t, wx, wy)
+        })
+        .collect();
+    assert!(rep.terminate().success(), "{}", rep.stderr());
+    offline_as_good_as_live(
+        "the log, on the map built from it",
+        &live,
+        &on_built,
+        &logged,
+        5.0,
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 
