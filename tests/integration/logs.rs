@@ -132,6 +132,8 @@ fn a_real_player_log_replays_through_readlog_and_the_bridge_to_a_player_client()
         Device::new(6665, Interface::Log, 0),
     );
 
+    player.open(pos);
+    player.open(las);
     // The geometry comes from the log's first lines: pose -0.04 0 0, 0.44 x 0.38.
     let g = player.request(pos, 1, &[]);
     assert_eq!(g.kind(), RESP_ACK, "{g:?}");
@@ -140,8 +142,6 @@ fn a_real_player_log_replays_through_readlog_and_the_bridge_to_a_player_client()
     assert_eq!((v[6], v[7]), (0.38, 0.44), "size (width, length) {v:?}");
 
     // Data: each pose and scan is one the log holds, at its logged time.
-    player.open(pos);
-    player.open(las);
     let (mut poses, mut scans) = (0, 0);
     let mut last = 0.0;
     while poses < 5 || scans < 5 {

@@ -429,11 +429,12 @@ fn stage_refuses_what_its_plugin_refuses_and_tells_time_in_microseconds() {
     let sim = Device::new(6665, Interface::Simulation, 0);
     player.open(pos);
     player.open(sim);
-    // A request to a device no client opened goes unanswered, as Player
-    // leaves it in the queue of a driver it has not set up (item 4): the
-    // next answer is the one for the opened position2d.
-    let ranger = Device::new(6665, Interface::Ranger, 0);
-    player.send(u32::from(ranger.interface.code()), 0, 3, 1, &[]);
+    // A request to a driver no client opened a device of (rangertolaser's
+    // laser) goes unanswered, as Player leaves it in the queue of a driver
+    // it has not set up (item 4): the next answer is the one for the
+    // opened position2d.
+    let laser = Device::new(6665, Interface::Laser, 0);
+    player.send(u32::from(laser.interface.code()), 0, 3, 1, &[]);
     let r = player.request(pos, 1, &[]);
     assert_eq!(r.kind(), RESP_ACK, "GET_GEOM: {r:?}");
     let r = player.request(pos, 3, &1u32.to_be_bytes());

@@ -16,10 +16,10 @@
 //! (Stage 4.3's `World::Raytrace` and `World::MapPoly`), so a simulated
 //! scan matches Stage's to the float.
 //!
-//! Moving bodies count here only as Stage counts them in its regions (a
-//! region holding any body is walked cell by cell, an empty one is leapt
-//! over, and the two give different staircases); the simulator tests rays
-//! against moving bodies exactly.
+//! Moving bodies count here as Stage counts them in its regions (a region
+//! holding any body is walked cell by cell, an empty one is leapt over,
+//! and the two give different staircases); drawn into the moving layer
+//! ([`Raster::set_moving`]) they are also met as Stage meets them.
 
 use crate::{Hit, EMPTY};
 
@@ -45,7 +45,23 @@ struct Region {
     clear: Option<Box<[u8; CELLS]>>,
     /// Cells changed since `clear` was worked out.
     stale: bool,
+    /// Ids of the moving bodies drawn in each cell, as Stage draws them
+    /// each step (see [`Raster::set_moving`]); allocated once one is
+    /// drawn here.
+    moving: Option<Box<[Moving; CELLS]>>,
+    /// Ids held in `moving`.
+    moving_ids: u32,
 }
+
+/// The moving bodies drawn in one cell: a robot's base and the laser on
+/// top of it share most of their cells, and a ray at the laser's height
+/// must still meet the laser there.
+type Moving = [u16; MOVING_PER_CELL];
+/// Moving bodies a cell keeps (a fourth replaces the last).
+const MOVING_PER_CELL: usize = 3;
+
+/// A region's cells where nothing static is drawn.
+static NO_CELLS: [u16; CELLS] = [EMPTY; CELLS];
 
 impl Region {
     /// Works out `clear` from the cells anew (two passes of a chamfer
@@ -82,7 +98,7 @@ impl Region {
 
 impl Region {
     fn empty(&self) -> bool {
-        self.statics == 0 && self.movers == 0
+        self.statics == 0 && self.movers == 0 && self.moving_ids == 0
     }
 }
 
@@ -200,6 +216,46 @@ impl Raster {
         }
     }
 
+    /// Draws moving body `id` into cell (x, y) of the moving layer, as
+    /// Stage draws a moving model's outline after each move (ignored
+    /// outside the raster). Rays meet it there, as they meet static cells.
+    pub fn set_moving(&mut self, x: i32, y: i32, id: u16) {
+        let Some(r) = self.region_of(x, y) else {
+            return;
+        };
+        let reg = &mut self.regions[r];
+        let cells = reg
+            .moving
+            .get_or_insert_with(|| Box::new([[EMPTY; MOVING_PER_CELL]; CELLS]));
+        let c = &mut cells[((y & (RW - 1)) * RW + (x & (RW - 1))) as usize];
+        if id == EMPTY || c.contains(&id) {
+            return;
+        }
+        match c.iter_mut().find(|k| **k == EMPTY) {
+            Some(k) => {
+                *k = id;
+                reg.moving_ids += 1;
+            }
+            None => c[MOVING_PER_CELL - 1] = id,
+        }
+    }
+
+    /// Takes moving body `id` out of cell (x, y).
+    pub fn unset_moving(&mut self, x: i32, y: i32, id: u16) {
+        let Some(r) = self.region_of(x, y) else {
+            return;
+        };
+        let reg = &mut self.regions[r];
+        let Some(cells) = reg.moving.as_mut() else {
+            return;
+        };
+        let c = &mut cells[((y & (RW - 1)) * RW + (x & (RW - 1))) as usize];
+        if let Some(k) = c.iter_mut().find(|k| **k == id) {
+            *k = EMPTY;
+            reg.moving_ids -= 1;
+        }
+    }
+
     /// Adds `n` moving bodies' outline cells to region `r` (or takes them
     /// away, for negative `n`).
     pub fn count_movers(&mut self, r: usize, n: i32) {
@@ -273,16 +329,21 @@ impl Raster {
                 crossings = true;
                 let (cx0, cy0) = (ix & (RW - 1), iy & (RW - 1));
                 (w.cx, w.cy) = (cx0, cy0);
-                let hit = match &reg.cells {
-                    // Only moving bodies here: the staircase passes to
-                    // the region's edge at once.
-                    None => {
+                let moving = reg.moving.as_deref().filter(|_| reg.moving_ids > 0);
+                let hit = match (&reg.cells, moving) {
+                    // Only moving bodies here, not drawn: the staircase
+                    // passes to the region's edge at once.
+                    (None, None) => {
                         w.leap();
                         None
                     }
-                    Some(cells) => {
+                    (cells, Some(moving)) => {
+                        let cells = cells.as_deref().unwrap_or(&NO_CELLS);
+                        w.through(cells, None, Some(moving), &mut accept)
+                    }
+                    (Some(cells), None) => {
                         let clear = reg.clear.as_deref().filter(|_| !reg.stale);
-                        w.through(cells, clear, &mut accept)
+                        w.through(cells, clear, None, &mut accept)
                     }
                 };
                 // The staircase moved by whole cells.
@@ -387,6 +448,7 @@ impl Walk {
         &mut self,
         cells: &[u16; CELLS],
         clear: Option<&[u8; CELLS]>,
+        moving: Option<&[Moving; CELLS]>,
         mut accept: impl FnMut(u16) -> bool,
     ) -> Option<u16> {
         let (mut cx, mut cy, mut exy, mut n) = (self.cx, self.cy, self.exy, self.n);
@@ -401,7 +463,16 @@ impl Walk {
                 Some(c) => c[k],
                 None => u8::from(cells[k] == EMPTY),
             };
-            if open == 0 {
+            if let Some(moving) = moving {
+                // Static first, then moving, as the cell's blocks were
+                // drawn; no leaps past open cells (`clear` knows statics only).
+                let hit = std::iter::once(cells[k])
+                    .chain(moving[k])
+                    .find(|&id| id != EMPTY && accept(id));
+                if hit.is_some() {
+                    break hit;
+                }
+            } else if open == 0 {
                 if accept(cells[k]) {
                     break Some(cells[k]);
                 }

@@ -506,7 +506,8 @@ struct Conn {
     subscribed: Vec<Device>,
     /// Commands dropped because their device was not opened.
     ignored_commands: u64,
-    /// Requests left unanswered because no client had opened their device.
+    /// Requests left unanswered because no client had opened a device of
+    /// their driver.
     unanswered: u64,
 }
 
@@ -654,17 +655,14 @@ impl Conn {
             }
             return Ok(());
         }
-        if kind == REQ
-            && !self.subscribed.contains(&dev)
-            && !lock(&self.shared.feeds).contains_key(&dev)
-        {
-            // Player sets a driver up when its first client subscribes; a
-            // request to one no client has opened waits in its queue,
-            // unanswered.
+        if kind == REQ && !self.driver_set_up(&dev) {
+            // Player sets a driver up when its first client subscribes to
+            // one of its devices; a request to a driver no client has
+            // opened waits in its queue, unanswered.
             self.unanswered += 1;
             if self.unanswered == 1 {
                 tracing::info!(
-                    "robot {}: client {}: not answering requests to {dev}, which no client has opened (Player's driver would not be set up)",
+                    "robot {}: client {}: not answering requests to {dev}: no client has opened a device of its driver (Player's driver would not be set up)",
                     self.robot,
                     self.id
                 );
@@ -830,6 +828,19 @@ impl Conn {
             }
         }
         Ok(())
+    }
+
+    /// Whether some client has opened a device of `dev`'s driver on this
+    /// robot: Player sets a driver up at its first subscription and
+    /// answers requests to any of its devices from then on.
+    fn driver_set_up(&self, dev: &Device) -> bool {
+        let Some(driver) = self.shared.driver(dev) else {
+            return false;
+        };
+        let opened: Vec<Device> = lock(&self.shared.feeds).keys().copied().collect();
+        opened
+            .iter()
+            .any(|d| d.robot == dev.robot && self.shared.driver(d).as_deref() == Some(&driver))
     }
 
     /// The device of this robot a header or body names, if its interface exists.

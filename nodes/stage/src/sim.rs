@@ -111,7 +111,8 @@ pub struct Sim {
     /// read as Stage's rather than against the exact bodies
     /// ([`Sim::stage_ranges`]).
     raster: Option<Raster>,
-    /// The raster cells each static model is drawn in now.
+    /// The raster cells each model is drawn in now (a static one in the
+    /// cells, a moving one in the moving layer).
     drawn: Vec<Vec<(i32, i32)>>,
     /// The raster regions each moving model's outline touches now, with
     /// its cells there.

@@ -68,6 +68,26 @@ impl Sim {
         self.drawn[m] = drawn;
     }
 
+    /// Draws moving model `m`'s outline, as placed in `body`, into the
+    /// raster's moving layer where it was drawn before, as Stage redraws a
+    /// model that moved: other robots' rays then meet it on the raster.
+    fn draw_moving(&mut self, m: usize, body: &Placed) {
+        let mut drawn = std::mem::take(&mut self.drawn[m]);
+        if let Some(r) = &mut self.raster {
+            for &(x, y) in &drawn {
+                r.unset_moving(x, y, id(m));
+            }
+            drawn.clear();
+            for pts in body.body.polys() {
+                raster::outline(r.ppm(), pts, |x, y| drawn.push((x, y)));
+            }
+            for &(x, y) in &drawn {
+                r.set_moving(x, y, id(m));
+            }
+        }
+        self.drawn[m] = drawn;
+    }
+
     /// Model `m`'s body at global pose `at`.
     pub(super) fn placed(&self, m: usize, at: Pose) -> Placed {
         let mut body = Placed::default();
@@ -99,6 +119,7 @@ impl Sim {
                 self.count_touches(m, 1);
             }
             self.touched = now;
+            self.draw_moving(m, body);
         }
         let tiles = body
             .cells
@@ -253,6 +274,12 @@ impl Sim {
             self.movers.unfile(m, id(m));
             self.count_touches(m, -1);
             self.touches[m].clear();
+            if let Some(r) = &mut self.raster {
+                for &(x, y) in &self.drawn[m] {
+                    r.unset_moving(x, y, id(m));
+                }
+            }
+            self.drawn[m].clear();
             return;
         }
         if let Some(r) = &mut self.raster {

@@ -132,22 +132,51 @@ fn stage_ranges_match_real_stage_beam_for_beam() {
     let exact = exact.sensor(0);
     sim.stage_ranges(true);
     let ours = &sim.readings[laser].sensor(0);
-    // Beams on r1's laser (a moving body, measured exactly either way)
-    // read intensity 1; the cave returns 0.5, nothing 0.
-    let walls: Vec<usize> = (0..180).filter(|&k| ours.intensities[k] != 1.0).collect();
-    assert_eq!(walls.len(), 176);
-    let off = |r: &Reading| {
-        walls
+    // Beams on r1's laser (a moving body, drawn into the raster as Stage
+    // draws it) read intensity 1; the cave returns 0.5, nothing 0.
+    let on_r1: Vec<usize> = (0..180).filter(|&k| ours.intensities[k] == 1.0).collect();
+    assert_eq!(on_r1.len(), 4, "{on_r1:?}");
+    let walls: Vec<usize> = (0..180).filter(|k| !on_r1.contains(k)).collect();
+    let off = |r: &Reading, beams: &[usize]| {
+        beams
             .iter()
             .map(|&k| (r.ranges[k] - stage[k]).abs())
             .fold(0.0, f64::max)
     };
-    assert!(off(ours) < 1e-4, "worst beam {} m off Stage's", off(ours));
+    assert!(
+        off(ours, &walls) < 1e-4,
+        "worst wall beam {} m off Stage's",
+        off(ours, &walls)
+    );
+    // r1, drawn into the raster as Stage draws it: two of its four beams
+    // read as Stage's to 0.1 mm, and none is further from Stage's than
+    // the exact body's. (The first two still read 2 and 4 cm long: Stage
+    // meets r1 a cell or two sooner there, for a reason not yet found.)
+    let on = |r: &Reading| on_r1.iter().map(|&k| r.ranges[k]).collect::<Vec<_>>();
+    let same = on_r1
+        .iter()
+        .filter(|&&k| (ours.ranges[k] - stage[k]).abs() < 1e-4)
+        .count();
+    assert!(
+        same >= 2,
+        "beams on r1: {:?} against Stage's {:?}",
+        on(ours),
+        on_r1.iter().map(|&k| stage[k]).collect::<Vec<_>>()
+    );
+    for &k in &on_r1 {
+        assert!(
+            (ours.ranges[k] - stage[k]).abs() <= (exact.ranges[k] - stage[k]).abs() + 1e-9,
+            "beam {k}: {} on the raster, {} exact, {} Stage's",
+            ours.ranges[k],
+            exact.ranges[k],
+            stage[k]
+        );
+    }
     // The exact walls: up to a few cells (over the cosine) off.
     assert!(
-        (0.02..0.2).contains(&off(&exact)),
+        (0.02..0.2).contains(&off(&exact, &walls)),
         "exact walls {} m off",
-        off(&exact)
+        off(&exact, &walls)
     );
     // And back.
     sim.stage_ranges(false);

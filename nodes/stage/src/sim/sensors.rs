@@ -276,7 +276,8 @@ impl Sim {
     /// its ray walk; see [`troupe_geom::raster`]) or against the exact
     /// bodies (`false`, the default: the bench worlds run up to 2.5 times
     /// faster).
-    /// Ranges to moving bodies are exact either way.
+    /// With Stage's raster, moving bodies are drawn into it too, as
+    /// Stage draws them after each move.
     pub fn stage_ranges(&mut self, on: bool) {
         if on == self.raster.is_some() {
             return;
@@ -337,22 +338,6 @@ impl Sim {
             Some(h) if best.is_none_or(|b| h.range < b.range) => Some(h),
             _ => best,
         }
-    }
-
-    /// The first moving body whose id `accept`s along the ray from (x, y)
-    /// along the unit vector `d`, within `reach`: the static grid's tiles
-    /// name the bodies to test.
-    pub(super) fn cast_movers(
-        &self,
-        x: f64,
-        y: f64,
-        d: (f64, f64),
-        reach: f64,
-        accept: impl Fn(u16) -> bool,
-    ) -> Option<Hit> {
-        let movers = TileBodies::new(self, (x, y), d, accept, 0);
-        self.statics
-            .cast_with(x, y, d, (0.0, reach), |_| false, movers)
     }
 
     /// The first of the moving `bodies` whose id `accept`s met by the ray
@@ -445,7 +430,8 @@ impl Sim {
             // reach, so that each ray tests only those in its direction,
             // and (against the exact bodies) one look around its origin,
             // so that none of its rays walks the open space there.
-            let fan = s.samples >= FAN;
+            // (On Stage's raster every body is in the cells: no fan.)
+            let fan = s.samples >= FAN && self.raster.is_none();
             let from = if fan {
                 sweep.start(
                     &self.movers,
@@ -458,10 +444,7 @@ impl Sim {
                     },
                     accept,
                 );
-                match self.raster {
-                    Some(_) => 0.0,
-                    None => self.open_around(ox, oy, accept),
-                }
+                self.open_around(ox, oy, accept)
             } else {
                 0.0
             };
@@ -473,26 +456,9 @@ impl Sim {
                     d = turned(fans.turns[i].0, d);
                 }
                 let hit = match (&self.raster, fan) {
-                    // Static bodies as Stage sees them; moving bodies
-                    // exactly, up to the wall.
-                    (Some(r), _) => {
-                        let wall = r.cast(ox, oy, d, s.range.1, accept);
-                        let reach = wall.map_or(s.range.1, |h| h.range);
-                        let body = if fan {
-                            self.nearest_body(
-                                (ox, oy),
-                                d,
-                                sweep.at(k),
-                                |_| true,
-                                0,
-                                &mut Seen::default(),
-                            )
-                            .filter(|h| h.range <= reach)
-                        } else {
-                            self.cast_movers(ox, oy, d, reach, accept)
-                        };
-                        body.or(wall)
-                    }
+                    // Every body as Stage sees it: drawn into its raster,
+                    // the moving ones where they moved to.
+                    (Some(r), _) => r.cast(ox, oy, d, s.range.1, accept),
                     (None, true) => {
                         self.cast_among(ox, oy, d, (from, s.range.1), accept, sweep.at(k))
                     }
