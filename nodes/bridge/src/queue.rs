@@ -468,6 +468,17 @@ mod tests {
         q
     }
 
+    /// A PULL queue whose client opened position2d (4) and laser (6) and
+    /// asked for a round, before either published.
+    fn opened_pull() -> Queue {
+        let mut q = Queue::new(64);
+        q.set_pull(true);
+        q.expect(4, 0);
+        q.expect(6, 0);
+        q.request_data(msg(A, 1, 4));
+        q
+    }
+
     const D: u8 = wire::DATA;
     const A: u8 = wire::RESP_ACK;
     const S: u8 = wire::SYNCH;
@@ -559,11 +570,7 @@ mod tests {
 
     #[test]
     fn rounds_after_opening_wait_for_every_opened_device_until_its_pace_is_known() {
-        let mut q = Queue::new(64);
-        q.set_pull(true);
-        q.expect(4, 0);
-        q.expect(6, 0);
-        q.request_data(msg(A, 1, 4));
+        let mut q = opened_pull();
         q.push(data(4, 0.1));
         // The laser has not published yet: the round waits for it.
         assert_eq!(drain(&mut q), [(A, 1), (D, 4)]);
@@ -579,11 +586,7 @@ mod tests {
 
     #[test]
     fn an_opened_device_that_never_publishes_holds_one_round_back_once() {
-        let mut q = Queue::new(64);
-        q.set_pull(true);
-        q.expect(4, 0);
-        q.expect(6, 0);
-        q.request_data(msg(A, 1, 4));
+        let mut q = opened_pull();
         q.push(data(4, 0.1));
         assert_eq!(drain(&mut q), [(A, 1), (D, 4)]);
         let late = Instant::now() + ROUND_WAIT;
