@@ -146,7 +146,7 @@ pub const MISSING: &[(&str, &str, &str)] = &[
     (
         "cameracompress",
         "compresses a camera's images to JPEG",
-        "Troupe has no camera interface yet",
+        "no Troupe driver produces camera images yet (the interface is carried: writelog logs it, the bridge serves it, readlog and passthrough bring it in)",
     ),
     ("ptu46", "the Directed Perception PTU-46 pan-tilt unit", ""),
     ("linuxwifi", "Linux wireless link statistics", ""),
