@@ -16,10 +16,11 @@
 //! (Stage 4.3's `World::Raytrace` and `World::MapPoly`), so a simulated
 //! scan matches Stage's to the float.
 //!
-//! Moving bodies count here as Stage counts them in its regions (a region
-//! holding any body is walked cell by cell, an empty one is leapt over,
-//! and the two give different staircases); drawn into the moving layer
-//! ([`Raster::set_moving`]) they are also met as Stage meets them.
+//! Moving bodies are drawn into a layer of their own
+//! ([`Raster::set_moving`]), as Stage redraws a model after it moves: a
+//! ray meets them as Stage's does, and a region holding any body is walked
+//! cell by cell where an empty one is leapt over (the two give different
+//! staircases).
 
 use crate::{Hit, EMPTY};
 
@@ -35,8 +36,6 @@ const CELLS: usize = (RW * RW) as usize;
 struct Region {
     /// Cells holding a static body's id.
     statics: u32,
-    /// Outline cells of moving bodies (they make the region non-empty).
-    movers: u32,
     /// Ids by cell, row-major; allocated once a static body is drawn here.
     cells: Option<Box<[u16; CELLS]>>,
     /// Per cell, the Chebyshev distance in cells to the nearest static
@@ -98,12 +97,12 @@ impl Region {
 
 impl Region {
     fn empty(&self) -> bool {
-        self.statics == 0 && self.movers == 0 && self.moving_ids == 0
+        self.statics == 0 && self.moving_ids == 0
     }
 }
 
 /// Stage's cells over a rectangle of the world: static bodies drawn by id,
-/// moving bodies counted per region. Outside the rectangle every region is
+/// moving bodies in a layer of their own. Outside the rectangle every region is
 /// empty.
 #[derive(Debug, Clone)]
 pub struct Raster {
@@ -253,29 +252,6 @@ impl Raster {
         if let Some(k) = c.iter_mut().find(|k| **k == id) {
             *k = EMPTY;
             reg.moving_ids -= 1;
-        }
-    }
-
-    /// Adds `n` moving bodies' outline cells to region `r` (or takes them
-    /// away, for negative `n`).
-    pub fn count_movers(&mut self, r: usize, n: i32) {
-        let m = &mut self.regions[r].movers;
-        *m = m.saturating_add_signed(n);
-    }
-
-    /// The regions the outlines of `polys` cross, each once with its count
-    /// of outline cells, into `out` (cleared first).
-    pub fn regions_of(&self, polys: &[Vec<(f64, f64)>], out: &mut Vec<(usize, i32)>) {
-        out.clear();
-        for pts in polys {
-            outline(self.ppm, pts, |x, y| {
-                if let Some(r) = self.region_of(x, y) {
-                    match out.iter_mut().find(|(k, _)| *k == r) {
-                        Some((_, n)) => *n += 1,
-                        None => out.push((r, 1)),
-                    }
-                }
-            });
         }
     }
 
@@ -721,17 +697,17 @@ mod tests {
         );
         let d = (0.3f64.cos(), 0.3f64.sin());
         let open = base.cast(-2.5, -0.7, d, 8.0, |_| true).unwrap();
+        // (The ray passes the body, which it does not accept.)
+        let sees = |id: u16| id != 2;
         let mut busy = base.clone();
-        let mut regions = Vec::new();
-        busy.regions_of(
-            &[vec![(0.0, 0.0), (0.1, 0.0), (0.1, 0.1), (0.0, 0.1)]],
-            &mut regions,
-        );
-        assert!(!regions.is_empty());
-        for &(r, n) in &regions {
-            busy.count_movers(r, n);
+        let mut body = Vec::new();
+        let square = [(0.0, 0.0), (0.1, 0.0), (0.1, 0.1), (0.0, 0.1)];
+        outline(busy.ppm(), &square, |x, y| body.push((x, y)));
+        assert!(!body.is_empty());
+        for &(x, y) in &body {
+            busy.set_moving(x, y, 2);
         }
-        let walked = busy.cast(-2.5, -0.7, d, 8.0, |_| true).unwrap();
+        let walked = busy.cast(-2.5, -0.7, d, 8.0, sees).unwrap();
         let exact = (2.0 + 2.5) / d.0;
         for h in [open, walked] {
             assert!(
@@ -739,8 +715,8 @@ mod tests {
                 "{h:?} against {exact}"
             );
         }
-        for &(r, n) in &regions {
-            busy.count_movers(r, -n);
+        for &(x, y) in &body {
+            busy.unset_moving(x, y, 2);
         }
         assert_eq!(busy.cast(-2.5, -0.7, d, 8.0, |_| true), Some(open));
     }

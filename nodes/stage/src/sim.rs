@@ -114,11 +114,6 @@ pub struct Sim {
     /// The raster cells each model is drawn in now (a static one in the
     /// cells, a moving one in the moving layer).
     drawn: Vec<Vec<(i32, i32)>>,
-    /// The raster regions each moving model's outline touches now, with
-    /// its cells there.
-    touches: Vec<Vec<(usize, i32)>>,
-    /// Room for a moving model's regions while it is filed.
-    touched: Vec<(usize, i32)>,
     /// Moving bodies, for sensors and collisions.
     movers: Movers,
     /// Each model's sensors' rays.
@@ -440,8 +435,6 @@ impl Sim {
             written_at: vec![None; n],
             raster: None,
             drawn: vec![Vec::new(); n],
-            touches: vec![Vec::new(); n],
-            touched: Vec::new(),
             movers: Movers::new(n, statics.tile_count()),
             statics,
         };

@@ -69,15 +69,12 @@ impl Sim {
     }
 
     /// Draws moving model `m`'s outline, as placed in `body`, into the
-    /// raster's moving layer where it was drawn before, as Stage redraws a
+    /// raster's moving layer in place of where it was, as Stage redraws a
     /// model that moved: other robots' rays then meet it on the raster.
     fn draw_moving(&mut self, m: usize, body: &Placed) {
+        self.undraw_moving(m);
         let mut drawn = std::mem::take(&mut self.drawn[m]);
         if let Some(r) = &mut self.raster {
-            for &(x, y) in &drawn {
-                r.unset_moving(x, y, id(m));
-            }
-            drawn.clear();
             for pts in body.body.polys() {
                 raster::outline(r.ppm(), pts, |x, y| drawn.push((x, y)));
             }
@@ -86,6 +83,16 @@ impl Sim {
             }
         }
         self.drawn[m] = drawn;
+    }
+
+    /// Takes moving model `m`'s outline out of the raster's moving layer.
+    fn undraw_moving(&mut self, m: usize) {
+        if let Some(r) = &mut self.raster {
+            for &(x, y) in &self.drawn[m] {
+                r.unset_moving(x, y, id(m));
+            }
+        }
+        self.drawn[m].clear();
     }
 
     /// Model `m`'s body at global pose `at`.
@@ -109,33 +116,12 @@ impl Sim {
     /// and leaving it buffers to reuse).
     pub(super) fn file(&mut self, body: &mut Placed) {
         let m = body.model;
-        if let Some(r) = &self.raster {
-            // (Most steps a body's outline stays in the same regions.)
-            let mut now = std::mem::take(&mut self.touched);
-            r.regions_of(body.body.polys(), &mut now);
-            if now != self.touches[m] {
-                self.count_touches(m, -1);
-                std::mem::swap(&mut now, &mut self.touches[m]);
-                self.count_touches(m, 1);
-            }
-            self.touched = now;
-            self.draw_moving(m, body);
-        }
+        self.draw_moving(m, body);
         let tiles = body
             .cells
             .into_iter()
             .flat_map(|(lo, hi)| self.statics.tiles_of_box(lo, hi));
         self.movers.file(m, id(m), &mut body.body, tiles);
-    }
-
-    /// Adds (`sign` 1) or takes away (−1) moving model `m`'s outline in
-    /// the raster's regions.
-    pub(super) fn count_touches(&mut self, m: usize, sign: i32) {
-        if let Some(raster) = &mut self.raster {
-            for &(r, n) in &self.touches[m] {
-                raster.count_movers(r, sign * n);
-            }
-        }
     }
 
     /// Moves static model `m`'s body in the grid from where it was to the
@@ -272,14 +258,7 @@ impl Sim {
     pub(super) fn unplace(&mut self, m: usize) {
         if self.movable[m] {
             self.movers.unfile(m, id(m));
-            self.count_touches(m, -1);
-            self.touches[m].clear();
-            if let Some(r) = &mut self.raster {
-                for &(x, y) in &self.drawn[m] {
-                    r.unset_moving(x, y, id(m));
-                }
-            }
-            self.drawn[m].clear();
+            self.undraw_moving(m);
             return;
         }
         if let Some(r) = &mut self.raster {

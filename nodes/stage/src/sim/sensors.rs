@@ -289,7 +289,6 @@ impl Sim {
             on.then(|| Raster::new(x0, y0, x0 + w as f64 * res, y0 + h as f64 * res, res));
         for m in 0..self.world.models.len() {
             self.drawn[m].clear();
-            self.touches[m].clear();
             self.place(m);
         }
         self.sense();
