@@ -267,9 +267,9 @@ impl Queue {
 
     /// Queues a message under the replace rules and the length limit.
     pub fn push(&mut self, m: Out) {
-        // Paces matter to PULL rounds, and are kept in PUSH mode too for a
-        // client that switches.
-        if m.kind == wire::DATA {
+        // Paces matter to PULL rounds only (an opened device stays
+        // expected until a PULL round sees its data).
+        if self.pull && m.kind == wire::DATA {
             self.paced(&m);
         }
         let op = self

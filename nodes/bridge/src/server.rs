@@ -266,6 +266,24 @@ impl Shared {
     fn is_live(&self, d: &Device) -> bool {
         lock(&self.devices).contains_key(d)
     }
+
+    /// Whether some client has opened a device of `dev`'s driver on its
+    /// robot: Player sets a driver up at its first subscription and
+    /// answers requests to any of its devices from then on.
+    fn driver_set_up(&self, dev: &Device) -> bool {
+        // (Locked in this order only.)
+        let feeds = lock(&self.feeds);
+        if feeds.contains_key(dev) {
+            return true;
+        }
+        let devices = lock(&self.devices);
+        let Some(driver) = devices.get(dev) else {
+            return false;
+        };
+        feeds
+            .keys()
+            .any(|d| d.robot == dev.robot && devices.get(d) == Some(driver))
+    }
 }
 
 /// A bound bridge, ready to [`run`](Bridge::run).
@@ -655,7 +673,7 @@ impl Conn {
             }
             return Ok(());
         }
-        if kind == REQ && !self.driver_set_up(&dev) {
+        if kind == REQ && !self.shared.driver_set_up(&dev) {
             // Player sets a driver up when its first client subscribes to
             // one of its devices; a request to a driver no client has
             // opened waits in its queue, unanswered.
@@ -828,19 +846,6 @@ impl Conn {
             }
         }
         Ok(())
-    }
-
-    /// Whether some client has opened a device of `dev`'s driver on this
-    /// robot: Player sets a driver up at its first subscription and
-    /// answers requests to any of its devices from then on.
-    fn driver_set_up(&self, dev: &Device) -> bool {
-        let Some(driver) = self.shared.driver(dev) else {
-            return false;
-        };
-        let opened: Vec<Device> = lock(&self.shared.feeds).keys().copied().collect();
-        opened
-            .iter()
-            .any(|d| d.robot == dev.robot && self.shared.driver(d).as_deref() == Some(&driver))
     }
 
     /// The device of this robot a header or body names, if its interface exists.
