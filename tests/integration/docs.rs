@@ -14,7 +14,7 @@ fn root() -> PathBuf {
 }
 
 /// The first code block of `lang` after `heading` in `page`.
-fn block(page: &str, heading: &str, lang: &str) -> String {
+pub(crate) fn block(page: &str, heading: &str, lang: &str) -> String {
     let text = std::fs::read_to_string(root().join(page)).unwrap();
     let section = &text[text
         .find(heading)
@@ -84,16 +84,7 @@ fn the_first_ten_minutes_run_as_printed() {
         all.extend(args.iter().cloned());
         let mut cmd = std::process::Command::new(troupe_tests::troupe_bin());
         cmd.args(&all).current_dir(&dir);
-        let mut p = Proc::start("troupe", &mut cmd);
-        let mut out = p.child.stdout.take().unwrap();
-        let reader = std::thread::spawn(move || {
-            let mut s = String::new();
-            let _ = out.read_to_string(&mut s);
-            s
-        });
-        let status = p.wait();
-        let out = reader.join().unwrap();
-        let err = p.stderr();
+        let (status, out, err) = Proc::start("troupe", &mut cmd).output();
         assert!(status.success(), "troupe {}: {out}{err}", args.join(" "));
         out
     };

@@ -760,9 +760,12 @@ fn a_recorded_run_localizes_offline_as_it_did_live() {
     player.open(map);
     let r = player.request(map, 1, &[]);
     assert_eq!(r.kind(), RESP_ACK, "map GET_INFO: {r:?}");
-    let scale = f32::from_be_bytes(r.body[..4].try_into().unwrap());
-    let size = |at: usize| u32::from_be_bytes(r.body[at..at + 4].try_into().unwrap());
-    assert_eq!((size(4), size(8)), (dim(16), dim(20)), "the map's cells");
+    let scale = f32::from_bits(r.u32_at(0));
+    assert_eq!(
+        (r.u32_at(4), r.u32_at(8)),
+        (dim(16), dim(20)),
+        "the map's cells"
+    );
     assert!((scale - 0.05).abs() < 1e-6, "resolution {scale}");
     // Into the world's frame, as the odometry is carried by `truth`.
     let on_built: Vec<(f64, f64, f64)> = estimates_until(&est, end)

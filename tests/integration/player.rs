@@ -44,6 +44,16 @@ impl Frame {
         self.h[4]
     }
 
+    /// The body's XDR double at byte `at`.
+    pub fn f64_at(&self, at: usize) -> f64 {
+        f64::from_be_bytes(self.body[at..at + 8].try_into().expect("8 bytes"))
+    }
+
+    /// The body's XDR unsigned int at byte `at`.
+    pub fn u32_at(&self, at: usize) -> u32 {
+        u32::from_be_bytes(self.body[at..at + 4].try_into().expect("4 bytes"))
+    }
+
     /// interf, index, type, subtype.
     pub fn sig(&self) -> (u32, u32, u32, u32) {
         (self.h[2], self.h[3], self.h[4], self.h[5])
@@ -78,6 +88,17 @@ impl Frame {
             body,
         }
     }
+}
+
+/// Appends a byte array as Player's XDR structs carry one (a name, a
+/// property's value): the struct's count, then `xdr_bytes`' count, the
+/// bytes and zero padding.
+pub fn push_bytes(b: &mut Vec<u8>, bytes: &[u8]) {
+    let n = u32::try_from(bytes.len()).expect("a short array");
+    b.extend_from_slice(&n.to_be_bytes());
+    b.extend_from_slice(&n.to_be_bytes());
+    b.extend_from_slice(bytes);
+    b.resize(b.len().div_ceil(4) * 4, 0);
 }
 
 /// A Player client in raw XDR.

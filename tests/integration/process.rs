@@ -624,10 +624,7 @@ fn a_tls_fleet_admits_its_own_certificates_only_and_each_identity_does_only_what
 #[test]
 fn the_secured_fleet_of_the_docs_runs_on_one_machine() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let page = std::fs::read_to_string(root.join("docs/fleets.md")).unwrap();
-    let section = &page[page.find("## Securing a fleet").expect("the section")..];
-    let block = &section[section.find("```sh\n").expect("its commands") + 6..];
-    let lines: Vec<Vec<String>> = block[..block.find("```").unwrap()]
+    let lines: Vec<Vec<String>> = crate::docs::block("docs/fleets.md", "## Securing a fleet", "sh")
         .lines()
         .map(|l| {
             let l = l.split('#').next().unwrap_or("").trim();
@@ -666,16 +663,8 @@ fn the_secured_fleet_of_the_docs_runs_on_one_machine() {
     let mut robot1 = in_dir("launch", joined(&lines[2]));
     let mut echo_args = joined(&lines[3]);
     echo_args.extend(strings(&["--count", "1"]));
-    let mut eye = in_dir("echo", echo_args);
-    let mut out = eye.child.stdout.take().unwrap();
-    let mut text = String::new();
-    std::io::Read::read_to_string(&mut out, &mut text).unwrap();
-    assert!(
-        eye.wait().success(),
-        "{}\n{}",
-        eye.stderr(),
-        robot1.stderr()
-    );
+    let (status, text, err) = in_dir("echo", echo_args).output();
+    assert!(status.success(), "{err}\n{}", robot1.stderr());
     assert!(text.starts_with("robot/6665/laser/0  t="), "{text}");
     assert!(robot1.terminate().success(), "{}", robot1.stderr());
     router.terminate();

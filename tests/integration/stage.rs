@@ -418,7 +418,7 @@ fn bench_stage_runs_one_world_file_and_prints_its_row() {
 /// `time` property is Stage's uint64 of microseconds (item 9).
 #[test]
 fn stage_refuses_what_its_plugin_refuses_and_tells_time_in_microseconds() {
-    use crate::player::{Player, DATA, RESP_ACK, RESP_NACK};
+    use crate::player::{push_bytes, Player, DATA, RESP_ACK, RESP_NACK};
     use troupe_msgs::{Device, Interface};
     let cfg = Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/simple.cfg");
     let ns = troupe_tests::unique_namespace("refusals");
@@ -452,18 +452,10 @@ fn stage_refuses_what_its_plugin_refuses_and_tells_time_in_microseconds() {
     // GET_PROPERTY: r0's "time", into a buffer of `size` bytes.
     let mut ask = |prop: &str, size: usize| {
         let mut b = Vec::new();
-        for s in ["r0\0", &format!("{prop}\0")] {
-            let n = u32::try_from(s.len()).unwrap();
-            b.extend_from_slice(&n.to_be_bytes());
-            b.extend_from_slice(&n.to_be_bytes());
-            b.extend_from_slice(s.as_bytes());
-            b.resize(b.len().div_ceil(4) * 4, 0);
-        }
+        push_bytes(&mut b, b"r0\0");
+        push_bytes(&mut b, format!("{prop}\0").as_bytes());
         b.extend_from_slice(&0u32.to_be_bytes());
-        let n = u32::try_from(size).unwrap();
-        b.extend_from_slice(&n.to_be_bytes());
-        b.extend_from_slice(&n.to_be_bytes());
-        b.resize(b.len() + size.div_ceil(4) * 4, 0);
+        push_bytes(&mut b, &vec![0; size]);
         player.request(sim, 5, &b)
     };
     let r = ask("time", 8);
@@ -529,8 +521,7 @@ fn vfh_passes_its_base_s_odometry_through_from_the_first_read() {
     }
     let mut poses = std::collections::BTreeMap::new();
     for m in got.iter().filter(|m| m.h[2] == 4) {
-        let f = |i: usize| f64::from_be_bytes(m.body[8 * i..8 * i + 8].try_into().unwrap());
-        poses.insert(m.h[3], (f(0), f(1)));
+        poses.insert(m.h[3], (m.f64_at(0), m.f64_at(8)));
     }
     let (Some(vfh), Some(base)) = (poses.get(&1), poses.get(&0)) else {
         panic!("after the first read the client has {poses:?}");
@@ -549,7 +540,7 @@ fn vfh_passes_its_base_s_odometry_through_from_the_first_read() {
 /// is the last step's.
 #[test]
 fn after_quit_time_the_clock_stops_and_the_devices_are_still_served() {
-    use crate::player::{Player, DATA, RESP_ACK};
+    use crate::player::{push_bytes, Player, DATA, RESP_ACK};
     use troupe_msgs::{Device, Interface};
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let dir = std::env::temp_dir().join(troupe_tests::unique_namespace("quit"));
@@ -582,9 +573,7 @@ fn after_quit_time_the_clock_stops_and_the_devices_are_still_served() {
     let mut late = Player::connect(addr, 6665);
     late.open(sim);
     let mut body = Vec::new();
-    body.extend_from_slice(&3u32.to_be_bytes());
-    body.extend_from_slice(&3u32.to_be_bytes());
-    body.extend_from_slice(b"r0\0\0");
+    push_bytes(&mut body, b"r0\0");
     body.extend_from_slice(&[0; 24]);
     let r = late.request(sim, 1, &body);
     assert_eq!(r.kind(), RESP_ACK, "GET_POSE2D after quit_time: {r:?}");
@@ -623,8 +612,7 @@ fn a_position_command_stops_where_stage_s_controller_stops() {
     let start = loop {
         let m = player.recv();
         if m.kind() == DATA && m.h[2] == 4 {
-            let f = |i: usize| f64::from_be_bytes(m.body[8 * i..8 * i + 8].try_into().unwrap());
-            break [f(0), f(1)];
+            break [m.f64_at(0), m.f64_at(8)];
         }
     };
     let goal = [start[0] + 0.7, start[1] + 0.7, 0.5];
@@ -641,8 +629,7 @@ fn a_position_command_stops_where_stage_s_controller_stops() {
         if m.kind() != DATA || m.h[2] != 4 {
             continue;
         }
-        let f = |i: usize| f64::from_be_bytes(m.body[8 * i..8 * i + 8].try_into().unwrap());
-        let last = [f(0), f(1), f(2)];
+        let last = [m.f64_at(0), m.f64_at(8), m.f64_at(16)];
         let d = last[2] - goal[2];
         let yaw_err = d.sin().atan2(d.cos()).abs();
         if (last[0] - goal[0]).abs() < 0.02 && (last[1] - goal[1]).abs() < 0.02 && yaw_err < 1e-3 {

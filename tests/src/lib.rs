@@ -280,6 +280,21 @@ impl Proc {
         status
     }
 
+    /// Waits (within the deadline) for the child to exit: its status,
+    /// everything it wrote on stdout, and on stderr.
+    pub fn output(mut self) -> (std::process::ExitStatus, String, String) {
+        let mut out = self.child.stdout.take().expect("stdout piped");
+        let reader = std::thread::spawn(move || {
+            let mut s = String::new();
+            let _ = std::io::Read::read_to_string(&mut out, &mut s);
+            s
+        });
+        let status = self.wait();
+        let stdout = reader.join().unwrap_or_default();
+        let stderr = self.stderr();
+        (status, stdout, stderr)
+    }
+
     /// Everything the child wrote on stderr. A child still running is
     /// stopped first: its stderr ends only when it exits, so reading it
     /// earlier (in a failing assertion's message) would wait forever.
@@ -306,17 +321,7 @@ impl Drop for Proc {
 
 /// Runs `troupe ARGS…` to completion (within the deadline): status, stdout, stderr.
 pub fn troupe_output(args: &[String]) -> (std::process::ExitStatus, String, String) {
-    let mut p = Proc::troupe("troupe", args);
-    let mut out = p.child.stdout.take().expect("stdout");
-    let reader = std::thread::spawn(move || {
-        let mut s = String::new();
-        let _ = std::io::Read::read_to_string(&mut out, &mut s);
-        s
-    });
-    let status = p.wait();
-    let stdout = reader.join().unwrap_or_default();
-    let stderr = p.stderr();
-    (status, stdout, stderr)
+    Proc::troupe("troupe", args).output()
 }
 
 /// A client session of the router at `endpoint`, in namespace `ns`.
