@@ -3,7 +3,7 @@
 //! stacks they launch with this build's `troupe`.
 //!
 //! The environment is `target/python-env` (made once; pip installs maturin,
-//! pytest and numpy from PyPI), the package is built by `maturin develop` on
+//! pytest, numpy and mcap-ros2-support from PyPI), the package is built by `maturin develop` on
 //! the workspace's own `target/` in the dev profile, so it reuses what
 //! `cargo test` compiled. Where no `python3` answers the test says so and
 //! passes; under CI (`CI=true`) that is a failure.
@@ -47,7 +47,7 @@ fn environment(python3: &str) -> PathBuf {
         );
     }
     run(
-        "pip install maturin pytest numpy",
+        "pip install maturin pytest numpy mcap-ros2-support",
         Command::new(&python).args([
             "-m",
             "pip",
@@ -57,6 +57,7 @@ fn environment(python3: &str) -> PathBuf {
             "maturin>=1.8,<2",
             "pytest",
             "numpy",
+            "mcap-ros2-support",
         ]),
     );
     python

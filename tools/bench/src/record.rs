@@ -13,7 +13,7 @@ use std::sync::Arc;
 use troupe_msgs::{codec, keys};
 use troupe_node::zenoh::Wait;
 use troupe_node::{Mode, ZenohArgs};
-use troupe_record::{each_message, record, Compress, Files, RecordArgs, ENCODING};
+use troupe_record::{each_message, record, Compress, Files, RecordArgs, Schema, ENCODING};
 
 /// Flags of `troupe bench record`.
 #[derive(Debug, Args)]
@@ -88,6 +88,7 @@ pub fn run(a: &RecordBenchArgs) -> anyhow::Result<()> {
                 split_duration: None,
                 compress: Compress::None,
                 queue: 100_000,
+                format: troupe_record::RecordFormat::Troupe,
             },
             &z,
         )?;
@@ -188,7 +189,7 @@ pub fn run(a: &RecordBenchArgs) -> anyhow::Result<()> {
                 each_message(&file, |m| {
                     files.write(
                         m.topic,
-                        m.schema,
+                        Schema::troupe(m.schema, m.encoding),
                         m.encoding,
                         m.data,
                         m.log_time + shift,

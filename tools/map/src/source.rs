@@ -660,7 +660,14 @@ mod tests {
                 ),
             ] {
                 files
-                    .write(key, schema, troupe_record::ENCODING, &data, ns, ns)
+                    .write(
+                        key,
+                        troupe_record::Schema::troupe(schema, troupe_record::ENCODING),
+                        troupe_record::ENCODING,
+                        &data,
+                        ns,
+                        ns,
+                    )
                     .unwrap();
             }
         }

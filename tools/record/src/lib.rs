@@ -23,6 +23,8 @@ use troupe_msgs::{codec, decode_any, keys};
 use troupe_node::zenoh::{sample::SampleKind, Wait};
 use troupe_node::{Mode, ZenohArgs};
 
+pub mod ros2;
+
 /// The message encoding of recorded samples.
 pub const ENCODING: &str = "troupe/postcard";
 /// The message encoding of liveliness events.
@@ -52,6 +54,20 @@ pub struct RecordArgs {
     /// Samples waiting for the disk before the recorder drops (and counts) new ones.
     #[arg(long, value_name = "N", default_value_t = 100_000)]
     pub queue: usize,
+    /// `troupe`: every sample byte for byte (`troupe play` replays it);
+    /// `ros2`: ROS 2 messages (CDR) that ros2 bag, rosbags, PlotJuggler and
+    /// Foxglove read (`troupe log export --format ros2` converts later).
+    #[arg(long, value_enum, default_value_t = RecordFormat::Troupe)]
+    pub format: RecordFormat,
+}
+
+/// What `troupe record` writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum RecordFormat {
+    /// Troupe's samples as they travelled.
+    Troupe,
+    /// ROS 2 messages.
+    Ros2,
 }
 
 /// Chunk compression.
@@ -97,13 +113,18 @@ pub enum LogCmd {
         /// An MCAP file written by `troupe record`.
         file: PathBuf,
     },
-    /// A recording as JSON lines or as a Player text log.
+    /// A recording as JSON lines, a Player text log, or ROS 2 messages.
     Export {
         /// An MCAP file written by `troupe record`.
         file: PathBuf,
-        /// `json`: one object per message; `player`: Player's text log format.
+        /// `json`: one object per message; `player`: Player's text log
+        /// format; `ros2`: MCAP of ROS 2 messages.
         #[arg(long, value_enum, default_value_t = Format::Json)]
         format: Format,
+        /// The file to write (default: standard output; `ros2` is MCAP and
+        /// needs one).
+        #[arg(short = 'o', long, value_name = "FILE")]
+        output: Option<PathBuf>,
     },
 }
 
@@ -114,6 +135,8 @@ pub enum Format {
     Json,
     /// Player's text log (what readlog reads).
     Player,
+    /// MCAP of ROS 2 messages (LaserScan, Odometry, TF…), as rosbag2 writes.
+    Ros2,
 }
 
 fn now_ns() -> u64 {
@@ -124,7 +147,7 @@ fn now_ns() -> u64 {
 
 fn secs_ns(s: f64) -> u64 {
     if s.is_finite() && s > 0.0 {
-        (s * 1e9) as u64
+        (s * 1e9).round() as u64
     } else {
         0
     }
@@ -144,10 +167,33 @@ enum Heard {
     },
 }
 
+/// A channel's schema record: its name, encoding and text.
+#[derive(Debug, Clone, Copy)]
+pub struct Schema<'a> {
+    /// The schema tag (`laser/scan@1`), or the ROS 2 type.
+    pub name: &'a str,
+    /// [`ENCODING`], [`LIVELINESS`], `ros2msg`, `jsonschema`.
+    pub encoding: &'a str,
+    /// The definition (none for Troupe's own: the tag names it).
+    pub data: &'a [u8],
+}
+
+impl Schema<'_> {
+    /// A Troupe schema: named by its tag, of `encoding`, no definition.
+    pub fn troupe<'a>(name: &'a str, encoding: &'a str) -> Schema<'a> {
+        Schema {
+            name,
+            encoding,
+            data: &[],
+        }
+    }
+}
+
 /// The files of one recording and what is in them so far: one MCAP file,
 /// or a series of them (`--split-size`, `--split-duration`).
 pub struct Files {
     base: PathBuf,
+    profile: &'static str,
     split: bool,
     compress: Compress,
     index: usize,
@@ -171,6 +217,7 @@ impl Files {
     pub fn new(base: PathBuf, split: bool, compress: Compress) -> Files {
         Files {
             base,
+            profile: "troupe",
             split,
             compress,
             index: 0,
@@ -182,6 +229,13 @@ impl Files {
             sequence: HashMap::new(),
             written: Vec::new(),
         }
+    }
+
+    /// Files of MCAP profile `profile` (`troupe` unless said: `ros2` for
+    /// a bag of ROS 2 messages).
+    pub fn with_profile(mut self, profile: &'static str) -> Files {
+        self.profile = profile;
+        self
     }
 
     /// Starts the next file, `at` ns since the epoch.
@@ -205,7 +259,7 @@ impl Files {
         let f = std::fs::File::create(&self.path)
             .with_context(|| format!("creating {}", self.path.display()))?;
         let w = mcap::WriteOptions::new()
-            .profile("troupe")
+            .profile(self.profile)
             .compression(match self.compress {
                 Compress::None => None,
                 Compress::Zstd => Some(mcap::Compression::Zstd),
@@ -243,7 +297,7 @@ impl Files {
     pub fn write(
         &mut self,
         key: &str,
-        schema: &str,
+        schema: Schema<'_>,
         encoding: &str,
         data: &[u8],
         log_time: u64,
@@ -263,19 +317,21 @@ impl Files {
         let writing = || format!("writing {}", path.display());
         let known = channels
             .get(key)
-            .and_then(|v| v.iter().find(|(s, _)| s == schema))
+            .and_then(|v| v.iter().find(|(s, _)| s == schema.name))
             .map(|&(_, id)| id);
         let id = match known {
             Some(id) => id,
             None => {
-                let schema_id = w.add_schema(schema, encoding, &[]).with_context(writing)?;
+                let schema_id = w
+                    .add_schema(schema.name, schema.encoding, schema.data)
+                    .with_context(writing)?;
                 let id = w
                     .add_channel(schema_id, key, encoding, &BTreeMap::new())
                     .with_context(writing)?;
                 channels
                     .entry(key.to_owned())
                     .or_default()
-                    .push((schema.to_owned(), id));
+                    .push((schema.name.to_owned(), id));
                 id
             }
         };
@@ -330,6 +386,28 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             .map_err(|err| anyhow::anyhow!("subscribing to {e}: {err}"))?;
         subs.push(sub);
     }
+    // What a Player client asks a device for once, asked as it comes: a
+    // map's grid, a sensor's geometry and configuration. The answers are
+    // recorded as samples of the device: they give a map to show and the
+    // frames of the scans.
+    let (arrived, asking) = std::sync::mpsc::channel::<troupe_msgs::Device>();
+    let asker = {
+        let (tx, dropped, session) = (tx.clone(), dropped.clone(), session.clone());
+        std::thread::spawn(move || {
+            for dev in asking {
+                for payload in ask_once(&session, &dev) {
+                    let h = Heard::Sample {
+                        key: keys::data(&dev),
+                        payload,
+                        at: now_ns(),
+                    };
+                    if tx.try_send(h).is_err() {
+                        dropped.fetch_add(1, Ordering::Relaxed);
+                    }
+                }
+            }
+        })
+    };
     let tokens = {
         let (tx, dropped) = (tx.clone(), dropped.clone());
         session
@@ -337,9 +415,16 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             .declare_subscriber("robot/**")
             .history(true)
             .callback(move |s| {
+                let key = s.key_expr().as_str();
+                let came = s.kind() == SampleKind::Put;
+                if came {
+                    if let Ok((dev, _)) = keys::parse_token(key) {
+                        let _ = arrived.send(dev);
+                    }
+                }
                 let h = Heard::Token {
-                    key: s.key_expr().as_str().to_owned(),
-                    came: s.kind() == SampleKind::Put,
+                    key: key.to_owned(),
+                    came,
                     at: now_ns(),
                 };
                 if tx.try_send(h).is_err() {
@@ -362,6 +447,10 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     )?;
 
     let mut files = Files::new(a.output.clone(), split, a.compress);
+    let mut as_ros2 = (a.format == RecordFormat::Ros2).then(ros2::Ros2::new);
+    if as_ros2.is_some() {
+        files = files.with_profile(ros2::PROFILE);
+    }
     files.open(now_ns())?;
     let split_bytes = a.split_size.map(|mb| (mb * 1e6) as u64);
     let split_ns = a.split_duration.map(secs_ns);
@@ -383,16 +472,34 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
                     continue;
                 }
             }
-            let r = match &h {
-                Heard::Sample { key, payload, at } => {
+            let r = match (&h, as_ros2.as_mut()) {
+                (Heard::Sample { key, payload, at }, Some(w)) => {
+                    bytes += payload.len() as u64;
+                    w.write(&mut files, key, payload, *at)
+                }
+                // ROS 2 has no form for a device's coming and going.
+                (Heard::Token { .. }, Some(_)) => continue,
+                (Heard::Sample { key, payload, at }, None) => {
                     let (schema, stamp) = codec::split(payload)
                         .map_or(("?", 0), |(tag, stamp, _)| (tag, secs_ns(stamp)));
                     bytes += payload.len() as u64;
-                    files.write(key, schema, ENCODING, payload, *at, stamp)
+                    files.write(
+                        key,
+                        Schema::troupe(schema, ENCODING),
+                        ENCODING,
+                        payload,
+                        *at,
+                        stamp,
+                    )
                 }
-                Heard::Token { key, came, at } => {
-                    files.write(key, "liveliness", LIVELINESS, &[u8::from(*came)], *at, *at)
-                }
+                (Heard::Token { key, came, at }, None) => files.write(
+                    key,
+                    Schema::troupe("liveliness", LIVELINESS),
+                    LIVELINESS,
+                    &[u8::from(*came)],
+                    *at,
+                    *at,
+                ),
             };
             match r {
                 Ok(()) => count += 1,
@@ -408,6 +515,9 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             return Err(e);
         }
         files.close()?;
+        if let Some(w) = as_ros2 {
+            eprint!("troupe record: as ROS 2 messages:\n{}", w.summary());
+        }
         Ok((files, count, bytes))
     });
 
@@ -442,6 +552,7 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     }
     drop(subs);
     drop(tokens);
+    let _ = asker.join();
     drop(session);
     let (files, count, bytes) = writer
         .join()
@@ -464,6 +575,73 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         anyhow::bail!("{dropped} samples were dropped: the disk did not keep up (a larger --queue, or --compress none, may)");
     }
     Ok(())
+}
+
+/// The answers (payloads as they travelled) of the requests a Player client
+/// makes once of a device of `dev`'s interface: a map's info and whole grid,
+/// a sensor's geometry (and a ranger's configuration); the latest sample of
+/// a device that publishes on change. A device that does not answer is left
+/// as it is.
+fn ask_once(session: &troupe_node::zenoh::Session, dev: &troupe_msgs::Device) -> Vec<Vec<u8>> {
+    use troupe_msgs::{ir, laser, map, ranger, sonar, Interface, Request};
+    fn ask<R: Request>(
+        session: &troupe_node::zenoh::Session,
+        dev: &troupe_msgs::Device,
+        req: &R,
+    ) -> Option<Vec<u8>> {
+        let key = keys::req(dev, R::NAME);
+        let replies = troupe_node::ask(session, &key, Duration::from_secs(2))
+            .payload(codec::encode(req, 0.0))
+            .wait()
+            .ok()?;
+        let reply = replies.recv().ok()?.into_result().ok()?;
+        Some(reply.payload().to_bytes().into_owned())
+    }
+    let answers = match dev.interface {
+        Interface::Map => {
+            let Some(info) = ask(session, dev, &map::GetInfo) else {
+                return vec![];
+            };
+            let data = codec::decode::<map::Info>(&info).ok().and_then(|i| {
+                let whole = map::GetData {
+                    col: 0,
+                    row: 0,
+                    width: i.msg.width,
+                    height: i.msg.height,
+                };
+                ask(session, dev, &whole)
+            });
+            vec![Some(info), data]
+        }
+        Interface::Laser => vec![ask(session, dev, &laser::GetGeom)],
+        Interface::Ranger => vec![
+            ask(session, dev, &ranger::GetGeom),
+            ask(session, dev, &ranger::GetConfig),
+        ],
+        Interface::Sonar => vec![ask(session, dev, &sonar::GetGeom)],
+        Interface::Ir => vec![ask(session, dev, &ir::GetGeom)],
+        // Devices that publish on change: their latest sample, as the
+        // bridge gives a client that subscribes (a localizer's estimate
+        // while the robot stands still).
+        Interface::Localize | Interface::Planner => {
+            let latest = session
+                .get(keys::data(dev))
+                .timeout(Duration::from_secs(1))
+                .wait();
+            return latest.map_or_else(
+                |_| vec![],
+                |replies| {
+                    replies
+                        .iter()
+                        .filter_map(|r| r.into_result().ok())
+                        .map(|s| s.payload().to_bytes().into_owned())
+                        .collect()
+                },
+            );
+        }
+        _ => vec![],
+    };
+    answers.into_iter().flatten().collect()
 }
 
 /// Receives once on SIGINT or SIGTERM.
@@ -724,9 +902,24 @@ pub fn log(cmd: LogCmd) -> anyhow::Result<()> {
             ensure_mcap(&file)?;
             info(&file)
         }
-        LogCmd::Export { file, format } => {
+        LogCmd::Export {
+            file,
+            format,
+            output,
+        } => {
             ensure_mcap(&file)?;
-            export(&file, format)
+            match (format, output) {
+                (Format::Ros2, Some(out)) => export_ros2(&file, &out),
+                (Format::Ros2, None) => anyhow::bail!(
+                    "--format ros2 writes MCAP, not text: name the file with -o OUT.mcap"
+                ),
+                (_, Some(out)) => {
+                    let f = std::fs::File::create(&out)
+                        .with_context(|| format!("creating {}", out.display()))?;
+                    export(&file, format, f)
+                }
+                (_, None) => export(&file, format, std::io::stdout().lock()),
+            }
         }
     }
 }
@@ -861,8 +1054,8 @@ fn info(path: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn export(path: &Path, format: Format) -> anyhow::Result<()> {
-    let mut out = std::io::BufWriter::new(std::io::stdout().lock());
+fn export(path: &Path, format: Format, out: impl std::io::Write) -> anyhow::Result<()> {
+    let mut out = std::io::BufWriter::new(out);
     if format == Format::Player {
         out.write_all(troupe_log::text::header().as_bytes())?;
     }
@@ -885,6 +1078,7 @@ fn export(path: &Path, format: Format) -> anyhow::Result<()> {
                 });
                 writeln!(out, "{line}")?;
             }
+            Format::Ros2 => unreachable!("ROS 2 is exported by export_ros2"),
             Format::Player => {
                 let line = keys::parse_data(m.topic).ok().and_then(|d| {
                     troupe_log::text::line(s.stamp, d.robot, d.interface, d.index, &s.msg)
@@ -902,6 +1096,39 @@ fn export(path: &Path, format: Format) -> anyhow::Result<()> {
         eprintln!(
             "troupe log export: {skipped} messages have no {format:?} form and were left out"
         );
+    }
+    Ok(())
+}
+
+/// `troupe log export --format ros2`: the recording's samples as ROS 2
+/// messages in `out`, and a summary of what went where on standard error.
+fn export_ros2(path: &Path, out: &Path) -> anyhow::Result<()> {
+    let mut files = Files::new(out.to_owned(), false, Compress::None).with_profile(ros2::PROFILE);
+    files.open(0)?;
+    let mut w = ros2::Ros2::new();
+    let (mut samples, mut events) = (0u64, 0u64);
+    each_message(path, |m| {
+        if m.encoding == ENCODING {
+            samples += 1;
+            w.write(&mut files, m.topic, m.data, m.log_time)?;
+        } else {
+            events += 1;
+        }
+        Ok(true)
+    })?;
+    files.close()?;
+    eprint!(
+        "troupe log export: {samples} samples of {} as ROS 2 messages in {}{}:\n{}",
+        path.display(),
+        out.display(),
+        match w.json_count() {
+            0 => String::new(),
+            n => format!(" ({n} with no ROS 2 form, as JSON)"),
+        },
+        w.summary()
+    );
+    if events > 0 {
+        eprintln!("  ({events} liveliness events: ROS 2 has no form for them, left out)");
     }
     Ok(())
 }

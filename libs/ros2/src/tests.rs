@@ -1,0 +1,384 @@
+use super::*;
+use troupe_msgs::{localize, Interface};
+
+fn dev(interface: Interface, index: u32) -> Device {
+    Device {
+        robot: 6665,
+        interface,
+        index,
+    }
+}
+
+fn key(d: &Device) -> String {
+    keys::data(d)
+}
+
+fn decode<T: serde::de::DeserializeOwned>(o: &Out) -> T {
+    assert_eq!(o.data[..4], [0, 1, 0, 0], "CDR, little-endian");
+    cdr::deserialize(&o.data).unwrap()
+}
+
+#[test]
+fn a_header_is_laid_out_as_cdr_says() {
+    let h = Header {
+        stamp: Time { sec: 1, nanosec: 2 },
+        frame_id: "ab".into(),
+    };
+    // Encapsulation, sec, nanosec, the string's length with its NUL, "ab\0".
+    assert_eq!(
+        cdr(&h),
+        [0, 1, 0, 0, 1, 0, 0, 0, 2, 0, 0, 0, 3, 0, 0, 0, b'a', b'b', 0]
+    );
+}
+
+#[test]
+fn a_scan_keeps_its_ranges_angles_and_stamp() {
+    let laser = dev(Interface::Laser, 0);
+    let scan = laser::Scan {
+        min_angle: -1.5,
+        max_angle: 1.5,
+        resolution: 0.5,
+        max_range: 8.0,
+        ranges: vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0],
+        intensity: vec![0, 1, 0, 0, 0, 0, 2],
+        id: 3,
+    };
+    let outs = Translator::new()
+        .translate(
+            &key(&laser),
+            2_500_000_000,
+            &AnyMsg::LaserScan(scan.clone()),
+        )
+        .unwrap();
+    assert_eq!(outs.len(), 1);
+    assert_eq!(outs[0].topic, "/robot_6665/laser_0");
+    assert_eq!(outs[0].ty, Type::LaserScan);
+    let m: LaserScan = decode(&outs[0]);
+    assert_eq!(
+        m.header.stamp,
+        Time {
+            sec: 2,
+            nanosec: 500_000_000
+        }
+    );
+    assert_eq!(m.header.frame_id, "robot_6665/laser_0");
+    assert_eq!(m.ranges, scan.ranges);
+    assert_eq!(m.intensities, [0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 2.0]);
+    assert_eq!(
+        (m.angle_min, m.angle_max, m.angle_increment, m.range_max),
+        (-1.5, 1.5, 0.5, 8.0)
+    );
+}
+
+#[test]
+fn odometry_and_localization_join_in_one_tree() {
+    let mut t = Translator::new();
+    let odom = position2d::Data {
+        pose: Pose2d {
+            x: 1.0,
+            y: 0.0,
+            yaw: 0.3,
+        },
+        ..Default::default()
+    };
+    let outs = t
+        .translate(
+            &key(&dev(Interface::Position2d, 0)),
+            0,
+            &AnyMsg::Position2dData(odom),
+        )
+        .unwrap();
+    let o: Odometry = decode(&outs[0]);
+    assert_eq!(
+        (o.header.frame_id.as_str(), o.child_frame_id.as_str()),
+        ("robot_6665/odom", "robot_6665/base_link")
+    );
+    assert!((o.pose.pose.orientation.yaw() - 0.3).abs() < 1e-12);
+    assert_eq!(outs[1].topic, TF);
+
+    // amcl puts the robot at (2, 1, pi/2) in the map.
+    let best = localize::Hypoth {
+        mean: Pose2d {
+            x: 2.0,
+            y: 1.0,
+            yaw: std::f64::consts::FRAC_PI_2,
+        },
+        cov: [0.1, 0.2, 0.3, 0.01, 0.02, 0.03],
+        weight: 1.0,
+    };
+    let hs = localize::Hypoths {
+        hypoths: vec![best],
+        ..Default::default()
+    };
+    let outs = t
+        .translate(
+            &key(&dev(Interface::Localize, 0)),
+            0,
+            &AnyMsg::LocalizeHypoths(hs),
+        )
+        .unwrap();
+    let p: PoseWithCovarianceStamped = decode(&outs[0]);
+    assert_eq!(p.header.frame_id, MAP_FRAME);
+    let c = p.pose.covariance.0;
+    assert_eq!(
+        (c[0], c[7], c[35], c[1], c[6], c[11], c[30]),
+        (0.1, 0.2, 0.3, 0.01, 0.01, 0.02, 0.03)
+    );
+    // map -> odom, then odom -> base_link, gives amcl's pose.
+    let tf: TfMessage = decode(&outs[1]);
+    let m2o = &tf.transforms[0];
+    assert_eq!(m2o.child_frame_id, "robot_6665/odom");
+    let m2o = Pose2d {
+        x: m2o.transform.translation.x,
+        y: m2o.transform.translation.y,
+        yaw: m2o.transform.rotation.yaw(),
+    };
+    let got = compose(m2o, odom.pose);
+    assert!(
+        (got.x - 2.0).abs() < 1e-9 && (got.y - 1.0).abs() < 1e-9,
+        "{got:?}"
+    );
+    assert!((got.yaw - best.mean.yaw).abs() < 1e-9);
+}
+
+#[test]
+fn a_map_becomes_a_grid_once_its_info_is_known() {
+    let mut t = Translator::new();
+    let m = dev(Interface::Map, 0);
+    let data = map::Data {
+        col: 0,
+        row: 0,
+        width: 2,
+        height: 2,
+        cells: vec![-1, 0, 1, 1],
+    };
+    assert_eq!(
+        t.translate(&key(&m), 0, &AnyMsg::MapData(data.clone())),
+        None,
+        "no info yet"
+    );
+    let info = map::Info {
+        width: 2,
+        height: 2,
+        resolution: 0.5,
+        origin: Pose2d {
+            x: -1.0,
+            y: -2.0,
+            yaw: 0.0,
+        },
+    };
+    assert_eq!(
+        t.translate(&key(&m), 0, &AnyMsg::MapInfo(info)),
+        Some(vec![])
+    );
+    let outs = t
+        .translate(&key(&m), 0, &AnyMsg::MapData(data.clone()))
+        .unwrap();
+    let g: OccupancyGrid = decode(&outs[0]);
+    assert_eq!(g.data, [0, -1, 100, 100]);
+    assert_eq!(
+        (g.info.width, g.info.height, g.info.resolution),
+        (2, 2, 0.5)
+    );
+    assert_eq!(
+        (g.info.origin.position.x, g.info.origin.position.y),
+        (-1.0, -2.0)
+    );
+    let tile = map::Data {
+        width: 1,
+        cells: vec![-1, 1],
+        ..data
+    };
+    assert_eq!(
+        t.translate(&key(&m), 0, &AnyMsg::MapData(tile)),
+        None,
+        "a tile has no ROS form"
+    );
+}
+
+#[test]
+fn a_sonar_array_is_one_range_per_element_in_its_own_frame() {
+    let s = dev(Interface::Sonar, 0);
+    let mut t = Translator::new();
+    let geom = sonar::Geom {
+        poses: vec![
+            Pose3d {
+                x: 0.1,
+                yaw: 0.5,
+                ..Default::default()
+            },
+            Pose3d::default(),
+        ],
+    };
+    let outs = t.translate(&key(&s), 0, &AnyMsg::SonarGeom(geom)).unwrap();
+    let tf: TfMessage = decode(&outs[0]);
+    assert_eq!(outs[0].topic, TF_STATIC);
+    assert_eq!(tf.transforms[0].child_frame_id, "robot_6665/sonar_0/0");
+    assert_eq!(tf.transforms[0].header.frame_id, "robot_6665/base_link");
+    let outs = t
+        .translate(
+            &key(&s),
+            0,
+            &AnyMsg::SonarRanges(sonar::Ranges {
+                ranges: vec![1.5, 2.5],
+            }),
+        )
+        .unwrap();
+    let r: Vec<Range> = outs.iter().map(decode).collect();
+    assert_eq!((r[0].range, r[1].range), (1.5, 2.5));
+    assert_eq!(r[1].header.frame_id, "robot_6665/sonar_0/1");
+}
+
+#[test]
+fn a_ranger_scans_by_its_configuration_and_without_one_has_no_ros_form() {
+    let r = dev(Interface::Ranger, 1);
+    let mut t = Translator::new();
+    let ranges = AnyMsg::RangerRanges(ranger::Ranges {
+        ranges: vec![1.0, 2.0, 3.0],
+    });
+    assert_eq!(t.translate(&key(&r), 0, &ranges), None);
+    let c = ranger::Config {
+        min_angle: -1.0,
+        max_angle: 1.0,
+        angular_res: 1.0,
+        max_range: 5.0,
+        frequency: 10.0,
+        ..Default::default()
+    };
+    t.translate(&key(&r), 0, &AnyMsg::RangerConfig(c));
+    let s: LaserScan = decode(&t.translate(&key(&r), 0, &ranges).unwrap()[0]);
+    assert_eq!(s.ranges, [1.0, 2.0, 3.0]);
+    assert_eq!(
+        (s.angle_min, s.angle_increment, s.range_max, s.scan_time),
+        (-1.0, 1.0, 5.0, 0.1)
+    );
+}
+
+#[test]
+fn the_clock_is_ros_clock_and_names_are_ros_names() {
+    let outs = Translator::new()
+        .translate(
+            "sim/clock",
+            1_000_000_007,
+            &AnyMsg::SimClock(troupe_msgs::sim::Clock { time: 1.0 }),
+        )
+        .unwrap();
+    let c: Clock = decode(&outs[0]);
+    assert_eq!(
+        (outs[0].topic.as_str(), c.clock),
+        (CLOCK, Time { sec: 1, nanosec: 7 })
+    );
+    assert_eq!(
+        topic_of_key("robot/7000/position2d/1"),
+        "/robot_7000/position2d_1"
+    );
+    assert_eq!(topic_of_key("fleet/2/status-x"), "/fleet/_2/status_x");
+}
+
+#[test]
+fn every_definition_defines_every_type_it_uses() {
+    const PRIMITIVES: &[&str] = &[
+        "bool", "byte", "char", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64",
+        "uint64", "float32", "float64", "string",
+    ];
+    for ty in Type::ALL {
+        let text = ty.definition();
+        let sections: Vec<&str> = text.split(&"=".repeat(80)).collect();
+        let own_package = ty.name().split('/').next().unwrap().to_owned();
+        let defined: Vec<String> = sections[1..]
+            .iter()
+            .map(|s| {
+                s.trim_start()
+                    .lines()
+                    .next()
+                    .unwrap()
+                    .trim_start_matches("MSG: ")
+                    .to_owned()
+            })
+            .collect();
+        let mut packages = vec![own_package];
+        packages.extend(
+            defined
+                .iter()
+                .map(|d| d.split('/').next().unwrap().to_owned()),
+        );
+        for (section, package) in sections.iter().zip(&packages) {
+            for line in section
+                .lines()
+                .filter(|l| !l.is_empty() && !l.starts_with("MSG:"))
+            {
+                let field = line.split_whitespace().next().unwrap();
+                let base = field.split('[').next().unwrap();
+                if PRIMITIVES.contains(&base) || line.contains('=') {
+                    continue;
+                }
+                let full = if base.contains('/') {
+                    base.to_owned()
+                } else {
+                    format!("{package}/{base}")
+                };
+                assert!(
+                    defined.contains(&full),
+                    "{}: {full} is used but not defined",
+                    ty.name()
+                );
+            }
+        }
+        assert_eq!(Type::from_name(ty.name()), Some(ty));
+    }
+}
+
+#[test]
+fn an_estimate_before_any_odometry_is_joined_when_odometry_comes() {
+    let mut t = Translator::new();
+    let fix = localize::Hypoth {
+        mean: Pose2d {
+            x: 3.0,
+            y: 0.0,
+            yaw: 0.0,
+        },
+        ..Default::default()
+    };
+    let hs = localize::Hypoths {
+        hypoths: vec![fix],
+        ..Default::default()
+    };
+    let outs = t
+        .translate(
+            &key(&dev(Interface::Localize, 0)),
+            0,
+            &AnyMsg::LocalizeHypoths(hs),
+        )
+        .unwrap();
+    assert_eq!(outs.len(), 1, "no odometry yet: no map -> odom");
+    let odom = position2d::Data {
+        pose: Pose2d {
+            x: 1.0,
+            y: 0.0,
+            yaw: 0.0,
+        },
+        ..Default::default()
+    };
+    let outs = t
+        .translate(
+            &key(&dev(Interface::Position2d, 0)),
+            0,
+            &AnyMsg::Position2dData(odom),
+        )
+        .unwrap();
+    let joined: Vec<TransformStamped> = outs[1..]
+        .iter()
+        .flat_map(|o| decode::<TfMessage>(o).transforms)
+        .filter(|t| t.child_frame_id == "robot_6665/odom")
+        .collect();
+    assert_eq!(joined.len(), 1);
+    assert_eq!(joined[0].transform.translation.x, 2.0);
+    let again = t
+        .translate(
+            &key(&dev(Interface::Position2d, 0)),
+            0,
+            &AnyMsg::Position2dData(odom),
+        )
+        .unwrap();
+    assert_eq!(again.len(), 2, "joined once");
+}

@@ -1,0 +1,124 @@
+"""Recordings others read: `troupe record --format ros2` and `troupe log export --format ros2`,
+decoded with the ecosystem's own reader (mcap-ros2-support), against what Troupe itself saw."""
+
+import collections
+import json
+import signal
+import subprocess
+
+import mcap.reader as mcap_reader  # mcap-ros2-support, which .ci/run installs
+import mcap_ros2.decoder as ros2_decoder
+import numpy as np
+import pytest
+
+from conftest import troupe_bin
+
+
+def troupe(*args):
+    return subprocess.run([troupe_bin(), *args], capture_output=True, text=True, timeout=120)
+
+
+class Recorder:
+    """`troupe record` against a stack, started once its subscriptions are in place."""
+
+    def __init__(self, stack, path, *flags):
+        self.proc = subprocess.Popen(
+            [troupe_bin(), "--namespace", stack.namespace, "--connect", stack.endpoint, "record", "-o", str(path),
+             *flags], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        first = self.proc.stdout.readline()
+        assert first.startswith("troupe record:"), (first, self.proc.stderr.read())
+
+    def stop(self):
+        self.proc.send_signal(signal.SIGINT)
+        out, err = self.proc.communicate(timeout=60)
+        assert self.proc.returncode == 0, (out, err)
+        return out, err
+
+
+def ros2_messages(path):
+    """(topic, type, decoded message or JSON object, publish_time) of every message, in file order."""
+    factory, decoders, out = ros2_decoder.DecoderFactory(), {}, []
+    with open(path, "rb") as f:
+        reader = mcap_reader.make_reader(f)
+        assert reader.get_header().profile == "ros2"
+        for schema, channel, message in reader.iter_messages(log_time_order=False):
+            if channel.message_encoding == "json":
+                assert schema.encoding == "jsonschema"
+                out.append((channel.topic, schema.name, json.loads(message.data), message.publish_time))
+                continue
+            assert (channel.message_encoding, schema.encoding) == ("cdr", "ros2msg")
+            if schema.id not in decoders:
+                decoders[schema.id] = factory.decoder_for("cdr", schema)
+            out.append((channel.topic, schema.name, decoders[schema.id](message.data), message.publish_time))
+    return out
+
+
+def test_a_recording_reads_as_ros2_in_the_ecosystem_s_reader(launch, tmp_path):
+    stack = launch("nav.cfg", ["6665:laser:0", "6665:position2d:0", "6665:map:0", "6665:localize:0"])
+    robot = stack.client.robot(6665)
+    grid = robot.map(0).get_map()
+
+    # Both at once: Troupe's own format (exported after) and ROS 2 live.
+    own, live = tmp_path / "run.mcap", tmp_path / "live.mcap"
+    recorders = [Recorder(stack, own), Recorder(stack, live, "--format", "ros2")]
+    laser = robot.laser(0)
+    for _ in range(15):
+        laser.read(timeout=10)
+    _, live_summary = recorders[1].stop()
+    recorders[0].stop()
+    assert "sensor_msgs/msg/LaserScan" in live_summary, live_summary
+
+    export = troupe("log", "export", str(own), "--format", "ros2", "-o", str(tmp_path / "bag.mcap"))
+    assert export.returncode == 0, export.stderr
+    assert "-> sensor_msgs/msg/LaserScan" in export.stderr and "-> JSON" in export.stderr, export.stderr
+    samples = [json.loads(line) for line in
+               troupe("log", "export", str(own)).stdout.splitlines()]
+
+    for path in (tmp_path / "bag.mcap", live):
+        msgs = ros2_messages(path)
+        kinds = collections.Counter((t, ty) for t, ty, _, _ in msgs)
+        scans = [m for t, ty, m, _ in msgs if (t, ty) == ("/robot_6665/laser_0", "sensor_msgs/msg/LaserScan")]
+        odoms = [m for t, ty, m, _ in msgs if (t, ty) == ("/robot_6665/position2d_0", "nav_msgs/msg/Odometry")]
+        grids = [m for _, ty, m, _ in msgs if ty == "nav_msgs/msg/OccupancyGrid"]
+        assert len(scans) >= 10 and len(odoms) >= 5, kinds
+        assert kinds[("/clock", "rosgraph_msgs/msg/Clock")] > 0, kinds
+
+        # The map, as ROS has it: 0 free, 100 occupied, -1 unknown, row 0 at the origin.
+        assert len(grids) == 1, kinds
+        g = grids[0]
+        assert (g.info.width, g.info.height) == (grid.width, grid.height)
+        assert g.info.resolution == pytest.approx(grid.resolution)
+        assert (g.info.origin.position.x, g.info.origin.position.y) == pytest.approx((grid.origin.x, grid.origin.y))
+        want = np.select([grid.cells < 0, grid.cells > 0], [0, 100], -1).astype(np.int8).ravel()
+        assert np.array_equal(np.array(g.data, dtype=np.int8), want)
+        assert g.header.frame_id == "map"
+
+        # One TF tree: map -> odom (amcl), odom -> base_link (odometry), base_link -> laser (geometry).
+        edges = {(tf.header.frame_id, tf.child_frame_id)
+                 for t, ty, m, _ in msgs if ty == "tf2_msgs/msg/TFMessage" for tf in m.transforms}
+        assert {("map", "robot_6665/odom"), ("robot_6665/odom", "robot_6665/base_link"),
+                ("robot_6665/base_link", "robot_6665/laser_0")} <= edges, edges
+        assert all(s.header.frame_id == "robot_6665/laser_0" for s in scans)
+
+        # Nothing is dropped in silence: what has no ROS 2 form is JSON, on a topic of its own kind.
+        json_topics = {t for t, _, m, _ in msgs if isinstance(m, dict)}
+        assert "/robot_6665/simulation_0/poses" in json_topics, json_topics
+
+    # The export carries the samples' own values: every scan's ranges, every pose, stamp for stamp.
+    msgs = ros2_messages(tmp_path / "bag.mcap")
+    scans = [m for t, ty, m, _ in msgs if (t, ty) == ("/robot_6665/laser_0", "sensor_msgs/msg/LaserScan")]
+    odoms = [m for t, ty, m, _ in msgs if (t, ty) == ("/robot_6665/position2d_0", "nav_msgs/msg/Odometry")]
+    laser_samples = [s for s in samples if s["key"] == "robot/6665/laser/0" and "LaserScan" in s["msg"]]
+    odom_samples = [s for s in samples if s["key"] == "robot/6665/position2d/0"]
+    assert len(scans) == len(laser_samples) and len(odoms) == len(odom_samples)
+    for scan, sample in zip(scans, laser_samples):
+        want = sample["msg"]["LaserScan"]
+        assert np.array_equal(np.array(scan.ranges, dtype=np.float32), np.array(want["ranges"], dtype=np.float32))
+        assert scan.angle_min == pytest.approx(want["min_angle"])
+        assert scan.header.stamp.sec + scan.header.stamp.nanosec * 1e-9 == pytest.approx(sample["stamp"], abs=1e-9)
+    for odom, sample in zip(odoms, odom_samples):
+        pose = sample["msg"]["Position2dData"]["pose"]
+        q = odom.pose.pose.orientation
+        yaw = np.arctan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
+        assert (odom.pose.pose.position.x, odom.pose.pose.position.y) == pytest.approx((pose["x"], pose["y"]), abs=1e-9)
+        assert abs(np.angle(np.exp(1j * (yaw - pose["yaw"])))) < 1e-9
