@@ -226,6 +226,7 @@ chromium --headless --screenshot URL?still).")]
   troupe record -o run.mcap                       # every device and sim/clock, until Ctrl-C
   troupe record 'robot/6665/**' -o r0.mcap --duration 60
   troupe record -o fleet.mcap --split-size 500 --compress zstd   # fleet_0.mcap, fleet_1.mcap, …
+  troupe record --format ros2 -o run-ros2.mcap    # ROS 2 messages: ros2 bag, rosbags, Foxglove
 
 Each sample is kept byte for byte (schema tag, stamp, body) on an MCAP
 channel named by its key; devices' comings and goings too. A recorder
@@ -242,13 +243,17 @@ directly where it can reach them, so nothing waits in the router's queue
   troupe play run.mcap                            # as recorded, sim/clock included
   troupe play run.mcap --rate 10 --start 5 --end 65
   troupe play run.mcap --remap 6665=7000 --loop
+  troupe play ros.mcap --remap /scan=robot/6665/laser/0 --remap /odom=robot/6665/position2d/0
   troupe --namespace replay play run.mcap         # beside a live fleet
 
 The devices the recording saw live are declared live while it plays, so a
-stack's `requires` (amcl on laser:0) are met by the replay.")]
+stack's `requires` (amcl on laser:0) are met by the replay. A ROS 2 bag's
+MCAP plays too: LaserScan, Odometry, PoseWithCovarianceStamped and Clock,
+onto the devices their topics name (/robot_6665/laser_0, as `--format ros2`
+names them) or their --remap gives.")]
     Play(troupe_record::PlayArgs),
 
-    /// Look into a recording: `info`, or `export` it as JSON lines or a Player log.
+    /// Look into a recording: `info`, or `export` it as JSON lines, a Player log or ROS 2 messages.
     #[command(args = offline(&[]))]
     #[command(
         subcommand,
@@ -256,6 +261,7 @@ stack's `requires` (amcl on laser:0) are met by the replay.")]
   troupe log info run.mcap
   troupe log export run.mcap | jq 'select(.key == \"robot/6665/laser/0\")'
   troupe log export run.mcap --format player > run.log     # what Player's readlog replays
+  troupe log export run.mcap --format ros2 -o run-ros2.mcap  # ROS 2 messages, for ROS tools
 
 A Player text log (writelog's) is not MCAP: replay it with the readlog
 driver, or build a map from it with `troupe map build`."

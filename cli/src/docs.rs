@@ -357,6 +357,22 @@ const RUN_BY: &[(&str, &str)] = &[
         "a_recorded_run_localizes_offline_as_it_did_live",
     ),
     (
+        "troupe record --format ros2",
+        "test_a_recording_reads_as_ros2_in_the_ecosystem_s_reader",
+    ),
+    (
+        "troupe log export run.mcap --format ros2",
+        "test_a_recording_reads_as_ros2_in_the_ecosystem_s_reader",
+    ),
+    (
+        "troupe play ros.mcap",
+        "test_a_ros2_bag_written_by_ros_tools_plays_into_amcl",
+    ),
+    (
+        "troupe launch worlds/nav.cfg",
+        "test_a_recording_reads_as_ros2_in_the_ecosystem_s_reader",
+    ),
+    (
         "troupe record",
         "a_recorded_stage_run_plays_back_in_order_ten_times_faster",
     ),
@@ -407,7 +423,9 @@ fn every_command_of_the_docs_shell_blocks_is_run_by_a_test() {
             continue;
         };
         let named_test = !by.contains(' ');
-        if named_test && !sources.contains(&format!("fn {by}(")) {
+        // A Rust test, or a Python one (pytest's `def test_…(`).
+        let defined = [format!("fn {by}("), format!("def {by}(")];
+        if named_test && !defined.iter().any(|d| sources.contains(d.as_str())) {
             failures.push(format!("{}: `{line}`: test `{by}` does not exist", s.place));
         }
     }

@@ -27,12 +27,14 @@ def troupe_bin() -> str:
 class Stack:
     """A launched cfg: its router's endpoint, its namespace, and a client on it."""
 
-    def __init__(self, cfg: str, devices, speedup=None):
+    def __init__(self, cfg: str, devices, speedup=None, args=()):
         self.namespace = f"py-{pathlib.Path(cfg).stem}-{uuid.uuid4().hex[:8]}"
+        extra = args
         args = [troupe_bin(), "--namespace", self.namespace, "launch", str(WORLDS / cfg),
                 "--listen", "tcp/127.0.0.1:0", "--no-bridge"]
         if speedup is not None:
             args += ["--speedup", str(speedup)]
+        args += list(extra)
         self.proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         self.lines: "queue.Queue[str]" = queue.Queue()
         self.errors: list = []
@@ -74,11 +76,11 @@ class Stack:
 
 @pytest.fixture
 def launch():
-    """`launch(cfg, devices, speedup=None)`: a Stack, stopped after the test."""
+    """`launch(cfg, devices, speedup=None, args=())`: a Stack, stopped after the test."""
     stacks = []
 
-    def start(cfg, devices, speedup=None):
-        stack = Stack(cfg, devices, speedup)
+    def start(cfg, devices, speedup=None, args=()):
+        stack = Stack(cfg, devices, speedup, args)
         stacks.append(stack)
         return stack
 

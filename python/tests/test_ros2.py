@@ -122,3 +122,83 @@ def test_a_recording_reads_as_ros2_in_the_ecosystem_s_reader(launch, tmp_path):
         yaw = np.arctan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
         assert (odom.pose.pose.position.x, odom.pose.pose.position.y) == pytest.approx((pose["x"], pose["y"]), abs=1e-9)
         assert abs(np.angle(np.exp(1j * (yaw - pose["yaw"])))) < 1e-9
+
+
+# What a ROS 2 tool writes: the types' definitions as ROS 2 ships them (comments left out).
+HEADER = "builtin_interfaces/Time stamp\nstring frame_id\n"
+TIME = "int32 sec\nuint32 nanosec\n"
+SEP = "=" * 80 + "\n"
+ROS_DEFS = {
+    "sensor_msgs/msg/LaserScan": (
+        "std_msgs/Header header\nfloat32 angle_min\nfloat32 angle_max\nfloat32 angle_increment\n"
+        "float32 time_increment\nfloat32 scan_time\nfloat32 range_min\nfloat32 range_max\n"
+        "float32[] ranges\nfloat32[] intensities\n"
+        + SEP + "MSG: std_msgs/Header\n" + HEADER + SEP + "MSG: builtin_interfaces/Time\n" + TIME),
+    "nav_msgs/msg/Odometry": (
+        "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/PoseWithCovariance pose\n"
+        "geometry_msgs/TwistWithCovariance twist\n"
+        + SEP + "MSG: std_msgs/Header\n" + HEADER + SEP + "MSG: builtin_interfaces/Time\n" + TIME
+        + SEP + "MSG: geometry_msgs/PoseWithCovariance\nPose pose\nfloat64[36] covariance\n"
+        + SEP + "MSG: geometry_msgs/Pose\nPoint position\nQuaternion orientation\n"
+        + SEP + "MSG: geometry_msgs/Point\nfloat64 x\nfloat64 y\nfloat64 z\n"
+        + SEP + "MSG: geometry_msgs/Quaternion\nfloat64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n"
+        + SEP + "MSG: geometry_msgs/TwistWithCovariance\nTwist twist\nfloat64[36] covariance\n"
+        + SEP + "MSG: geometry_msgs/Twist\nVector3 linear\nVector3 angular\n"
+        + SEP + "MSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z\n"),
+    "rosgraph_msgs/msg/Clock": "builtin_interfaces/Time clock\n" + SEP + "MSG: builtin_interfaces/Time\n" + TIME,
+}
+
+
+def test_a_ros2_bag_written_by_ros_tools_plays_into_amcl(launch, tmp_path):
+    from mcap_ros2.writer import Writer
+
+    # A run to bag: r0 driven through the office while its laser, odometry and clock are recorded.
+    live = launch("nav.cfg", ["6665:position2d:0", "6665:laser:0", "6665:simulation:0"])
+    robot = live.client.robot(6665)
+    pos, sim = robot.position2d(0), robot.simulation(0)
+    start = sim.get_pose2d("r0")
+    recorder = Recorder(live, tmp_path / "run.mcap", "--format", "ros2",
+                        "robot/6665/laser/0", "robot/6665/position2d/0", "sim/clock")
+    pos.set_speed(0.3, 0.12)
+    first = None
+    for sample in pos.stream(timeout=20):
+        p = sample.data["pose"]
+        first = first or p
+        if np.hypot(p["x"] - first["x"], p["y"] - first["y"]) > 1.2:
+            break
+    pos.stop()
+    truth = sim.get_pose2d("r0")
+    recorder.stop()
+    assert np.hypot(truth.x - start.x, truth.y - start.y) > 1.2
+
+    # The same run as a ROS 2 robot would bag it: /scan, /odom, /clock, written by ROS's own writer.
+    bag = tmp_path / "ros.mcap"
+    renamed = {"/robot_6665/laser_0": "/scan", "/robot_6665/position2d_0": "/odom", "/clock": "/clock"}
+    written = collections.Counter()
+    with open(bag, "wb") as f:
+        w = Writer(f)
+        schemas = {name: w.register_msgdef(name, text) for name, text in ROS_DEFS.items()}
+        for topic, ty, msg, stamp in ros2_messages(tmp_path / "run.mcap"):
+            if topic in renamed and ty in schemas:
+                w.write_message(renamed[topic], schemas[ty], msg, log_time=stamp, publish_time=stamp)
+                written[renamed[topic]] += 1
+        w.finish()
+    assert written["/scan"] > 20 and written["/odom"] > 20 and written["/clock"] > 20, written
+
+    # amcl alone, on the same map, fed by nothing but the bag.
+    loc = launch("localize.cfg", ["6665:map:0"],
+                 args=["--external", "position2d:0", "--external", "laser:0", "--sim-time"])
+    play = subprocess.Popen(
+        [troupe_bin(), "--namespace", loc.namespace, "--connect", loc.endpoint, "play", str(bag),
+         "--remap", "/scan=robot/6665/laser/0", "--remap", "/odom=robot/6665/position2d/0"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    loc.client.wait_for("6665:localize:0", timeout=30)
+    est = loc.client.robot(6665).localize(0)
+    out, err = play.communicate(timeout=120)
+    assert play.returncode == 0, err
+    assert "left out" not in err, err
+    assert out.startswith("played "), out
+    # The bag's every scan and pose reached amcl: it followed r0 from where it started to where it stopped.
+    fix = est.pose
+    assert fix is not None
+    assert np.hypot(fix.x - truth.x, fix.y - truth.y) < 0.35, (fix, truth)

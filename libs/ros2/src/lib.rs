@@ -19,6 +19,7 @@
 //! `base_link` to the sensor's frame (one frame per sonar or IR element:
 //! `robot_6665/sonar_0/3`).
 
+pub mod back;
 pub mod msg;
 
 use std::collections::HashMap;

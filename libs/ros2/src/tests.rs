@@ -382,3 +382,85 @@ fn an_estimate_before_any_odometry_is_joined_when_odometry_comes() {
         .unwrap();
     assert_eq!(again.len(), 2, "joined once");
 }
+
+#[test]
+fn what_goes_out_comes_back_on_the_same_keys() {
+    let mut t = Translator::new();
+    let laser = dev(Interface::Laser, 0);
+    let scan = laser::Scan {
+        min_angle: -1.0,
+        max_angle: 1.0,
+        resolution: 1.0,
+        max_range: 8.0,
+        ranges: vec![1.0, 2.0, 3.0],
+        intensity: vec![0, 1, 0],
+        id: 0,
+    };
+    let odom = position2d::Data {
+        pose: Pose2d {
+            x: 1.0,
+            y: 2.0,
+            yaw: -0.5,
+        },
+        vel: Pose2d {
+            x: 0.3,
+            y: 0.0,
+            yaw: 0.1,
+        },
+        stall: false,
+    };
+    let hyp = localize::Hypoths {
+        hypoths: vec![localize::Hypoth {
+            mean: Pose2d {
+                x: 1.0,
+                y: 2.0,
+                yaw: 3.0,
+            },
+            cov: [0.1, 0.2, 0.3, 0.01, 0.02, 0.03],
+            weight: 1.0,
+        }],
+        ..Default::default()
+    };
+    for (d, msg) in [
+        (laser, AnyMsg::LaserScan(scan)),
+        (dev(Interface::Position2d, 0), AnyMsg::Position2dData(odom)),
+        (dev(Interface::Localize, 0), AnyMsg::LocalizeHypoths(hyp)),
+    ] {
+        let o = t
+            .translate(&key(&d), 1_500_000_000, &msg)
+            .unwrap()
+            .remove(0);
+        let k = back::key_of_topic(&o.topic).unwrap();
+        assert_eq!(k, key(&d));
+        let got = troupe_msgs::decode_any(&back::to_sample(o.ty, &k, &o.data).unwrap()).unwrap();
+        assert_eq!(got.stamp, 1.5);
+        match (got.msg, msg) {
+            (AnyMsg::Position2dData(a), AnyMsg::Position2dData(b)) => {
+                assert!((a.pose.yaw - b.pose.yaw).abs() < 1e-12 && a.vel == b.vel);
+            }
+            (AnyMsg::LocalizeHypoths(a), AnyMsg::LocalizeHypoths(b)) => {
+                assert!((a.hypoths[0].mean.yaw - b.hypoths[0].mean.yaw).abs() < 1e-12);
+                assert_eq!(a.hypoths[0].cov, b.hypoths[0].cov);
+            }
+            (a, b) => assert_eq!(a, b),
+        }
+    }
+    assert_eq!(back::key_of_topic("/clock").as_deref(), Some("sim/clock"));
+    assert_eq!(back::key_of_topic("/scan"), None);
+    let clock = t
+        .translate(
+            "sim/clock",
+            2_000_000_000,
+            &AnyMsg::SimClock(troupe_msgs::sim::Clock { time: 2.0 }),
+        )
+        .unwrap()
+        .remove(0);
+    assert!(
+        back::to_sample(clock.ty, "robot/6665/laser/0", &clock.data).is_err(),
+        "a clock is no scan"
+    );
+    assert!(
+        back::to_sample(Type::LaserScan, "robot/6665/laser/0", &[0, 1, 0, 0, 1]).is_err(),
+        "cut short"
+    );
+}

@@ -219,6 +219,35 @@ pub fn run(a: &RecordBenchArgs) -> anyhow::Result<()> {
             size as f64 / 1e6,
             took
         )?;
+
+        // The recording as ROS 2 messages, converted whole.
+        let messages = message_count(&file)?;
+        let ros2 = dir.join("ros2.mcap");
+        let t = Instant::now();
+        let export = std::process::Command::new(std::env::current_exe()?)
+            .args(["log", "export", "--format", "ros2", "-o"])
+            .arg(&ros2)
+            .arg(&file)
+            .output()?;
+        let took = t.elapsed().as_secs_f64().max(1e-9);
+        anyhow::ensure!(
+            export.status.success(),
+            "log export failed: {}",
+            String::from_utf8_lossy(&export.stderr)
+        );
+        let (from, to) = (
+            std::fs::metadata(&file)?.len(),
+            std::fs::metadata(&ros2)?.len(),
+        );
+        writeln!(
+            out,
+            "  log export --format ros2: {messages} messages, {:.1} MB to {:.1} MB in {took:.2} s: \
+             {:.0} messages/s, {:.1} MB/s read (the process's start included)",
+            from as f64 / 1e6,
+            to as f64 / 1e6,
+            messages as f64 / took,
+            from as f64 / 1e6 / took
+        )?;
         Ok(())
     })();
     let _ = nix::sys::signal::kill(
@@ -228,4 +257,14 @@ pub fn run(a: &RecordBenchArgs) -> anyhow::Result<()> {
     let _ = launcher.wait();
     let _ = std::fs::remove_dir_all(&dir);
     result
+}
+
+/// The messages of a recording, counted one by one.
+fn message_count(file: &std::path::Path) -> anyhow::Result<u64> {
+    let mut n = 0;
+    each_message(file, |_| {
+        n += 1;
+        Ok(true)
+    })?;
+    Ok(n)
 }

@@ -82,7 +82,7 @@ pub enum Compress {
 /// Flags of `troupe play`.
 #[derive(Debug, Args)]
 pub struct PlayArgs {
-    /// An MCAP file written by `troupe record`.
+    /// An MCAP file written by `troupe record`, or a ROS 2 bag's MCAP.
     pub file: PathBuf,
     /// Speed: 2 plays twice as fast as recorded; 0 as fast as the network takes it.
     #[arg(long, value_name = "X", default_value_t = 1.0)]
@@ -100,7 +100,9 @@ pub struct PlayArgs {
     /// `robot/6665/laser/0` or `robot/*/position2d/*`; default: all.
     #[arg(long, value_name = "KEYEXPR")]
     pub only: Vec<String>,
-    /// Publish robot FROM's keys as robot TO's (repeatable), e.g. `6665=7000`.
+    /// Publish robot FROM's keys as robot TO's, e.g. `6665=7000`, or a ROS 2
+    /// bag's topic on a device's key, e.g. `/scan=robot/6665/laser/0`
+    /// (repeatable).
     #[arg(long, value_name = "FROM=TO")]
     pub remap: Vec<String>,
 }
@@ -764,30 +766,58 @@ fn summary(path: &Path) -> anyhow::Result<(u64, Option<mcap::Summary>)> {
 }
 
 /// `FROM=TO` robot remappings.
-fn remaps(list: &[String]) -> anyhow::Result<Vec<(String, String)>> {
-    list.iter()
-        .map(|r| {
-            let (from, to) = r
-                .split_once('=')
-                .with_context(|| format!("--remap {r}: expected FROM=TO, e.g. 6665=7000"))?;
-            let from: u32 = from
-                .parse()
-                .with_context(|| format!("--remap {r}: `{from}` is not a robot port"))?;
-            let to: u32 = to
-                .parse()
-                .with_context(|| format!("--remap {r}: `{to}` is not a robot port"))?;
-            Ok((format!("robot/{from}/"), format!("robot/{to}/")))
-        })
-        .collect()
+/// `--remap`s: robot ports (`6665=7000`, as key prefixes) and ROS 2 topics
+/// (`/scan=robot/6665/laser/0`, whole names).
+#[derive(Default)]
+struct Remaps {
+    ports: Vec<(String, String)>,
+    topics: HashMap<String, String>,
 }
 
-fn remap(key: &str, remaps: &[(String, String)]) -> String {
-    for (from, to) in remaps {
+fn remaps(list: &[String]) -> anyhow::Result<Remaps> {
+    let mut r = Remaps::default();
+    for arg in list {
+        let (from, to) = arg.split_once('=').with_context(|| {
+            format!("--remap {arg}: expected FROM=TO, e.g. 6665=7000 or /scan=robot/6665/laser/0")
+        })?;
+        if from.starts_with('/') {
+            if to != keys::SIM_CLOCK && keys::parse_data(to).is_err() {
+                anyhow::bail!(
+                    "--remap {arg}: `{to}` is not a device's key (robot/6665/laser/0) or sim/clock"
+                );
+            }
+            r.topics.insert(from.to_owned(), to.to_owned());
+            continue;
+        }
+        let from: u32 = from.parse().with_context(|| {
+            format!("--remap {arg}: `{from}` is not a robot port or a ROS 2 topic")
+        })?;
+        let to: u32 = to
+            .parse()
+            .with_context(|| format!("--remap {arg}: `{to}` is not a robot port"))?;
+        r.ports
+            .push((format!("robot/{from}/"), format!("robot/{to}/")));
+    }
+    Ok(r)
+}
+
+fn remap(key: &str, remaps: &Remaps) -> String {
+    for (from, to) in &remaps.ports {
         if let Some(rest) = key.strip_prefix(from.as_str()) {
             return format!("{to}{rest}");
         }
     }
     key.to_owned()
+}
+
+/// The key a ROS 2 topic plays on: its `--remap`, or the device its name
+/// names (`/robot_6665/laser_0`), then the port remaps.
+fn ros2_key(topic: &str, remaps: &Remaps) -> Option<String> {
+    let key = match remaps.topics.get(topic) {
+        Some(k) => k.clone(),
+        None => troupe_ros2::back::key_of_topic(topic)?,
+    };
+    Some(remap(&key, remaps))
 }
 
 /// `troupe play`.
@@ -819,6 +849,8 @@ pub fn play(a: PlayArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     let mut live = Vec::new();
     let mut publishers = HashMap::new();
     let mut first: Option<u64> = None;
+    // A ROS 2 topic that names no device, with its messages.
+    let mut unkeyed: BTreeMap<String, u64> = BTreeMap::new();
     each_message(&a.file, |m| {
         first = Some(first.map_or(m.log_time, |f: u64| f.min(m.log_time)));
         let device = m.topic.rsplit_once("/driver/").map_or("", |(d, _)| d);
@@ -828,8 +860,34 @@ pub fn play(a: PlayArgs, z: &ZenohArgs) -> anyhow::Result<()> {
                 live.push(key);
             }
         }
+        // A ROS 2 recording has no liveliness: its devices are live as
+        // the player's.
+        if m.encoding == ros2::CDR {
+            match ros2_key(m.topic, &remaps) {
+                Some(key) if key != keys::SIM_CLOCK && wanted(&key) => {
+                    let token = format!("{key}/driver/play");
+                    if !live.contains(&token) {
+                        live.push(token);
+                    }
+                }
+                Some(_) => {}
+                None => *unkeyed.entry(m.topic.to_owned()).or_default() += 1,
+            }
+        }
         Ok(true)
     })?;
+    if !unkeyed.is_empty() {
+        let topics: Vec<String> = unkeyed.iter().map(|(t, n)| format!("{t} ({n})")).collect();
+        tracing::warn!(
+            "{name}: {} ROS 2 topics name no Troupe device and are left out: {}; \
+             give each a key, e.g. --remap {}=robot/6665/laser/0",
+            unkeyed.len(),
+            topics.join(", "),
+            unkeyed.keys().next().map_or("/scan", String::as_str)
+        );
+    }
+    // What a ROS 2 message could not become, said once per topic at the end.
+    let mut refused: BTreeMap<String, (u64, String)> = BTreeMap::new();
     let first = first.with_context(|| format!("{name} holds no message"))?;
     let tokens: Vec<_> = live
         .iter()
@@ -846,9 +904,32 @@ pub fn play(a: PlayArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     while !stopped {
         let pass = Instant::now();
         each_message(&a.file, |m| {
-            if m.encoding != ENCODING || m.log_time < from || m.log_time > to || !wanted(m.topic) {
+            if m.log_time < from || m.log_time > to {
                 return Ok(true);
             }
+            let ros2_sample;
+            let (key, data) = match m.encoding {
+                ENCODING if wanted(m.topic) => (remap(m.topic, &remaps), m.data),
+                ros2::CDR => {
+                    let Some(key) = ros2_key(m.topic, &remaps).filter(|k| wanted(k)) else {
+                        return Ok(true);
+                    };
+                    let sample = troupe_ros2::Type::from_name(m.schema)
+                        .with_context(|| format!("{} is not a ROS 2 type Troupe reads", m.schema))
+                        .and_then(|ty| Ok(troupe_ros2::back::to_sample(ty, &key, m.data)?));
+                    match sample {
+                        Ok(s) => ros2_sample = s,
+                        Err(e) => {
+                            let r = refused.entry(m.topic.to_owned()).or_default();
+                            r.0 += 1;
+                            r.1 = format!("{e:#}");
+                            return Ok(true);
+                        }
+                    }
+                    (key, ros2_sample.as_slice())
+                }
+                _ => return Ok(true),
+            };
             let wait = if a.rate > 0.0 {
                 let due = pass + Duration::from_secs_f64((m.log_time - from) as f64 / 1e9 / a.rate);
                 due.saturating_duration_since(Instant::now())
@@ -859,7 +940,6 @@ pub fn play(a: PlayArgs, z: &ZenohArgs) -> anyhow::Result<()> {
                 stopped = true;
                 return Ok(false);
             }
-            let key = remap(m.topic, &remaps);
             if !publishers.contains_key(&key) {
                 // Blocking, not dropping, when a subscriber lags: a
                 // replay delivers every message, at worst late.
@@ -871,12 +951,12 @@ pub fn play(a: PlayArgs, z: &ZenohArgs) -> anyhow::Result<()> {
                 publishers.insert(key.clone(), p);
             }
             if let Some(p) = publishers.get(&key) {
-                p.put(m.data.to_vec())
+                p.put(data.to_vec())
                     .wait()
                     .map_err(|e| anyhow::anyhow!("publishing on {key}: {e}"))?;
             }
             count += 1;
-            bytes += m.data.len() as u64;
+            bytes += data.len() as u64;
             Ok(true)
         })?;
         if !a.repeat {
@@ -884,6 +964,9 @@ pub fn play(a: PlayArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         }
     }
     drop(tokens);
+    for (topic, (n, why)) in &refused {
+        tracing::warn!("{name}: {n} messages on {topic} left out: {why}");
+    }
     let secs = started.elapsed().as_secs_f64().max(1e-9);
     writeln!(
         std::io::stdout().lock(),

@@ -13,6 +13,8 @@ use crate::{secs_ns, Files, Schema};
 
 /// The MCAP profile of a bag of ROS 2 messages.
 pub const PROFILE: &str = "ros2";
+/// The message encoding of ROS 2 messages.
+pub const CDR: &str = "cdr";
 
 /// Where a sample went when it was not written as a ROS 2 message.
 const KEPT: &str = "(kept: the shape of later messages)";
@@ -86,7 +88,7 @@ impl Ros2 {
                 encoding: "ros2msg",
                 data: definition.as_bytes(),
             };
-            files.write(&o.topic, schema, "cdr", &o.data, log_time, stamp)?;
+            files.write(&o.topic, schema, CDR, &o.data, log_time, stamp)?;
             *self.counts.entry((tag, o.ty.name())).or_default() += 1;
         }
         Ok(())
