@@ -238,6 +238,20 @@ directly where it can reach them, so nothing waits in the router's queue
 (where a burst of a fast simulation would be dropped).")]
     Record(troupe_record::RecordArgs),
 
+    /// The fleet live in Foxglove: a Foxglove WebSocket server on 127.0.0.1:8765.
+    #[command(after_help = "Examples:
+  troupe foxglove                                 # then in Foxglove: Open connection, ws://127.0.0.1:8765
+  troupe foxglove --port 0                        # any free port, printed
+  troupe --namespace lab foxglove --bind 0.0.0.0  # for another machine: the protocol has no authentication
+
+Every device is a channel named by its key (/robot/6665/laser/0), in
+Foxglove's schemas where one fits (LaserScan, PoseInFrame, PosesInFrame,
+Grid, FrameTransforms on /tf), JSON otherwise; the server's time is the
+simulation's. Foxglove's teleop panel drives a position2d when it publishes
+on /robot/6665/position2d/0/cmd_vel; a pose published on
+/robot/6665/planner/0/goal is a planner goal.")]
+    Foxglove(troupe_foxglove::FoxgloveArgs),
+
     /// Publish a recording back onto its keys, at any speed.
     #[command(after_help = "Examples:
   troupe play run.mcap                            # as recorded, sim/clock included

@@ -357,6 +357,10 @@ const RUN_BY: &[(&str, &str)] = &[
         "a_recorded_run_localizes_offline_as_it_did_live",
     ),
     (
+        "troupe foxglove",
+        "test_foxglove_shows_the_fleet_and_its_teleop_drives_a_robot",
+    ),
+    (
         "troupe record --format ros2",
         "test_a_recording_reads_as_ros2_in_the_ecosystem_s_reader",
     ),

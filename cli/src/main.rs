@@ -54,6 +54,7 @@ fn run(cli: cli::Cli) -> anyhow::Result<()> {
         Command::Drivers { all } => troupe_inspect::print_drivers(&drivers::catalog(), all),
         Command::Interfaces => troupe_inspect::print_interfaces(),
         Command::Record(a) => troupe_record::record(a, z),
+        Command::Foxglove(a) => troupe_foxglove::serve(&a, z),
         Command::Play(a) => troupe_record::play(a, z),
         Command::Log(c) => troupe_record::log(c),
         Command::View(a) => troupe_view::run(a, z),

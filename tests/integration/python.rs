@@ -3,7 +3,8 @@
 //! stacks they launch with this build's `troupe`.
 //!
 //! The environment is `target/python-env` (made once; pip installs maturin,
-//! pytest, numpy and mcap-ros2-support from PyPI), the package is built by `maturin develop` on
+//! pytest, numpy, mcap-ros2-support, websockets and foxglove-schemas-protobuf
+//! from PyPI), the package is built by `maturin develop` on
 //! the workspace's own `target/` in the dev profile, so it reuses what
 //! `cargo test` compiled. Where no `python3` answers the test says so and
 //! passes; under CI (`CI=true`) that is a failure.
@@ -47,7 +48,7 @@ fn environment(python3: &str) -> PathBuf {
         );
     }
     run(
-        "pip install maturin pytest numpy mcap-ros2-support",
+        "pip install maturin pytest numpy mcap-ros2-support websockets foxglove-schemas-protobuf",
         Command::new(&python).args([
             "-m",
             "pip",
@@ -58,6 +59,8 @@ fn environment(python3: &str) -> PathBuf {
             "pytest",
             "numpy",
             "mcap-ros2-support",
+            "websockets",
+            "foxglove-schemas-protobuf",
         ]),
     );
     python

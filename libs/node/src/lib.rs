@@ -26,6 +26,7 @@ mod mapfetch;
 pub mod process;
 mod runtime;
 mod section;
+mod setup;
 pub mod syntax;
 pub mod testing;
 
@@ -38,4 +39,5 @@ pub use event::{Event, Reply, Request, RequestId, Responder, Sample};
 pub use mapfetch::MapFetch;
 pub use runtime::{ask, check, run, spawn, wait_live, NodeConfig, NodeHandle, Stop, Unused};
 pub use section::{NoOptions, Section, Slot, Switch};
+pub use setup::setup_answers;
 pub use zenoh;

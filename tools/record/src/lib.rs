@@ -397,7 +397,7 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         let (tx, dropped, session) = (tx.clone(), dropped.clone(), session.clone());
         std::thread::spawn(move || {
             for dev in asking {
-                for payload in ask_once(&session, &dev) {
+                for payload in troupe_node::setup_answers(&session, &dev) {
                     let h = Heard::Sample {
                         key: keys::data(&dev),
                         payload,
@@ -577,73 +577,6 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         anyhow::bail!("{dropped} samples were dropped: the disk did not keep up (a larger --queue, or --compress none, may)");
     }
     Ok(())
-}
-
-/// The answers (payloads as they travelled) of the requests a Player client
-/// makes once of a device of `dev`'s interface: a map's info and whole grid,
-/// a sensor's geometry (and a ranger's configuration); the latest sample of
-/// a device that publishes on change. A device that does not answer is left
-/// as it is.
-fn ask_once(session: &troupe_node::zenoh::Session, dev: &troupe_msgs::Device) -> Vec<Vec<u8>> {
-    use troupe_msgs::{ir, laser, map, ranger, sonar, Interface, Request};
-    fn ask<R: Request>(
-        session: &troupe_node::zenoh::Session,
-        dev: &troupe_msgs::Device,
-        req: &R,
-    ) -> Option<Vec<u8>> {
-        let key = keys::req(dev, R::NAME);
-        let replies = troupe_node::ask(session, &key, Duration::from_secs(2))
-            .payload(codec::encode(req, 0.0))
-            .wait()
-            .ok()?;
-        let reply = replies.recv().ok()?.into_result().ok()?;
-        Some(reply.payload().to_bytes().into_owned())
-    }
-    let answers = match dev.interface {
-        Interface::Map => {
-            let Some(info) = ask(session, dev, &map::GetInfo) else {
-                return vec![];
-            };
-            let data = codec::decode::<map::Info>(&info).ok().and_then(|i| {
-                let whole = map::GetData {
-                    col: 0,
-                    row: 0,
-                    width: i.msg.width,
-                    height: i.msg.height,
-                };
-                ask(session, dev, &whole)
-            });
-            vec![Some(info), data]
-        }
-        Interface::Laser => vec![ask(session, dev, &laser::GetGeom)],
-        Interface::Ranger => vec![
-            ask(session, dev, &ranger::GetGeom),
-            ask(session, dev, &ranger::GetConfig),
-        ],
-        Interface::Sonar => vec![ask(session, dev, &sonar::GetGeom)],
-        Interface::Ir => vec![ask(session, dev, &ir::GetGeom)],
-        // Devices that publish on change: their latest sample, as the
-        // bridge gives a client that subscribes (a localizer's estimate
-        // while the robot stands still).
-        Interface::Localize | Interface::Planner => {
-            let latest = session
-                .get(keys::data(dev))
-                .timeout(Duration::from_secs(1))
-                .wait();
-            return latest.map_or_else(
-                |_| vec![],
-                |replies| {
-                    replies
-                        .iter()
-                        .filter_map(|r| r.into_result().ok())
-                        .map(|s| s.payload().to_bytes().into_owned())
-                        .collect()
-                },
-            );
-        }
-        _ => vec![],
-    };
-    answers.into_iter().flatten().collect()
 }
 
 /// Receives once on SIGINT or SIGTERM.
