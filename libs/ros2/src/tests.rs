@@ -13,6 +13,30 @@ fn key(d: &Device) -> String {
     keys::data(d)
 }
 
+/// Robot 6665's odometry at `x, y, yaw`, through `t`.
+fn odometry(t: &mut Translator, x: f64, y: f64, yaw: f64) -> Vec<Out> {
+    let d = position2d::Data {
+        pose: Pose2d { x, y, yaw },
+        ..Default::default()
+    };
+    let k = key(&dev(Interface::Position2d, 0));
+    t.translate(&k, 0, &AnyMsg::Position2dData(d)).unwrap()
+}
+
+/// Robot 6665's localizer's one hypothesis, through `t`.
+fn estimate(t: &mut Translator, mean: Pose2d, cov: [f64; 6]) -> Vec<Out> {
+    let hs = localize::Hypoths {
+        hypoths: vec![localize::Hypoth {
+            mean,
+            cov,
+            weight: 1.0,
+        }],
+        ..Default::default()
+    };
+    let k = key(&dev(Interface::Localize, 0));
+    t.translate(&k, 0, &AnyMsg::LocalizeHypoths(hs)).unwrap()
+}
+
 fn decode<T: serde::de::DeserializeOwned>(o: &Out) -> T {
     assert_eq!(o.data[..4], [0, 1, 0, 0], "CDR, little-endian");
     cdr::deserialize(&o.data).unwrap()
@@ -73,21 +97,7 @@ fn a_scan_keeps_its_ranges_angles_and_stamp() {
 #[test]
 fn odometry_and_localization_join_in_one_tree() {
     let mut t = Translator::new();
-    let odom = position2d::Data {
-        pose: Pose2d {
-            x: 1.0,
-            y: 0.0,
-            yaw: 0.3,
-        },
-        ..Default::default()
-    };
-    let outs = t
-        .translate(
-            &key(&dev(Interface::Position2d, 0)),
-            0,
-            &AnyMsg::Position2dData(odom),
-        )
-        .unwrap();
+    let outs = odometry(&mut t, 1.0, 0.0, 0.3);
     let o: Odometry = decode(&outs[0]);
     assert_eq!(
         (o.header.frame_id.as_str(), o.child_frame_id.as_str()),
@@ -97,26 +107,12 @@ fn odometry_and_localization_join_in_one_tree() {
     assert_eq!(outs[1].topic, TF);
 
     // amcl puts the robot at (2, 1, pi/2) in the map.
-    let best = localize::Hypoth {
-        mean: Pose2d {
-            x: 2.0,
-            y: 1.0,
-            yaw: std::f64::consts::FRAC_PI_2,
-        },
-        cov: [0.1, 0.2, 0.3, 0.01, 0.02, 0.03],
-        weight: 1.0,
+    let mean = Pose2d {
+        x: 2.0,
+        y: 1.0,
+        yaw: std::f64::consts::FRAC_PI_2,
     };
-    let hs = localize::Hypoths {
-        hypoths: vec![best],
-        ..Default::default()
-    };
-    let outs = t
-        .translate(
-            &key(&dev(Interface::Localize, 0)),
-            0,
-            &AnyMsg::LocalizeHypoths(hs),
-        )
-        .unwrap();
+    let outs = estimate(&mut t, mean, [0.1, 0.2, 0.3, 0.01, 0.02, 0.03]);
     let p: PoseWithCovarianceStamped = decode(&outs[0]);
     assert_eq!(p.header.frame_id, MAP_FRAME);
     let c = p.pose.covariance.0;
@@ -133,12 +129,19 @@ fn odometry_and_localization_join_in_one_tree() {
         y: m2o.transform.translation.y,
         yaw: m2o.transform.rotation.yaw(),
     };
-    let got = compose(m2o, odom.pose);
+    let got = compose(
+        m2o,
+        Pose2d {
+            x: 1.0,
+            y: 0.0,
+            yaw: 0.3,
+        },
+    );
     assert!(
         (got.x - 2.0).abs() < 1e-9 && (got.y - 1.0).abs() < 1e-9,
         "{got:?}"
     );
-    assert!((got.yaw - best.mean.yaw).abs() < 1e-9);
+    assert!((got.yaw - mean.yaw).abs() < 1e-9);
 }
 
 #[test]
@@ -331,41 +334,14 @@ fn every_definition_defines_every_type_it_uses() {
 #[test]
 fn an_estimate_before_any_odometry_is_joined_when_odometry_comes() {
     let mut t = Translator::new();
-    let fix = localize::Hypoth {
-        mean: Pose2d {
-            x: 3.0,
-            y: 0.0,
-            yaw: 0.0,
-        },
-        ..Default::default()
+    let fix = Pose2d {
+        x: 3.0,
+        y: 0.0,
+        yaw: 0.0,
     };
-    let hs = localize::Hypoths {
-        hypoths: vec![fix],
-        ..Default::default()
-    };
-    let outs = t
-        .translate(
-            &key(&dev(Interface::Localize, 0)),
-            0,
-            &AnyMsg::LocalizeHypoths(hs),
-        )
-        .unwrap();
+    let outs = estimate(&mut t, fix, [0.0; 6]);
     assert_eq!(outs.len(), 1, "no odometry yet: no map -> odom");
-    let odom = position2d::Data {
-        pose: Pose2d {
-            x: 1.0,
-            y: 0.0,
-            yaw: 0.0,
-        },
-        ..Default::default()
-    };
-    let outs = t
-        .translate(
-            &key(&dev(Interface::Position2d, 0)),
-            0,
-            &AnyMsg::Position2dData(odom),
-        )
-        .unwrap();
+    let outs = odometry(&mut t, 1.0, 0.0, 0.0);
     let joined: Vec<TransformStamped> = outs[1..]
         .iter()
         .flat_map(|o| decode::<TfMessage>(o).transforms)
@@ -373,14 +349,7 @@ fn an_estimate_before_any_odometry_is_joined_when_odometry_comes() {
         .collect();
     assert_eq!(joined.len(), 1);
     assert_eq!(joined[0].transform.translation.x, 2.0);
-    let again = t
-        .translate(
-            &key(&dev(Interface::Position2d, 0)),
-            0,
-            &AnyMsg::Position2dData(odom),
-        )
-        .unwrap();
-    assert_eq!(again.len(), 2, "joined once");
+    assert_eq!(odometry(&mut t, 1.0, 0.0, 0.0).len(), 2, "joined once");
 }
 
 #[test]

@@ -319,27 +319,38 @@ impl Live {
         }
     }
 
-    fn log<T: Encode>(&mut self, topic: &str, msg: &T, ns: u64) {
-        let ch = match self.channels.get(topic) {
-            Some(c) => c.clone(),
-            None => {
-                let built = self
-                    .ctx
-                    .channel_builder(topic)
-                    .message_encoding(T::get_message_encoding())
-                    .schema(T::get_schema())
-                    .build_raw();
-                match built {
-                    Ok(c) => {
-                        self.channels.insert(topic.to_owned(), c.clone());
-                        c
-                    }
-                    Err(e) => {
-                        tracing::warn!("{topic}: {e}");
-                        return;
-                    }
-                }
+    /// The channel of `topic`, made (and advertised) with its first
+    /// message, of the encoding and schema `kind` gives.
+    fn channel(
+        &mut self,
+        topic: &str,
+        kind: impl FnOnce() -> (String, Option<Schema>),
+    ) -> Option<Arc<RawChannel>> {
+        if let Some(c) = self.channels.get(topic) {
+            return Some(c.clone());
+        }
+        let (encoding, schema) = kind();
+        let built = self
+            .ctx
+            .channel_builder(topic)
+            .message_encoding(encoding)
+            .schema(schema)
+            .build_raw();
+        match built {
+            Ok(c) => {
+                self.channels.insert(topic.to_owned(), c.clone());
+                Some(c)
             }
+            Err(e) => {
+                tracing::warn!("{topic}: {e}");
+                None
+            }
+        }
+    }
+
+    fn log<T: Encode>(&mut self, topic: &str, msg: &T, ns: u64) {
+        let Some(ch) = self.channel(topic, || (T::get_message_encoding(), T::get_schema())) else {
+            return;
         };
         self.buf.clear();
         if msg.encode(&mut self.buf).is_ok() {
@@ -348,27 +359,13 @@ impl Live {
     }
 
     fn json(&mut self, topic: &str, tag: &'static str, msg: &AnyMsg, ns: u64) {
-        let ch = match self.channels.get(topic) {
-            Some(c) => c.clone(),
-            None => {
-                let schema = serde_json::json!({ "title": tag, "type": "object" }).to_string();
-                let built = self
-                    .ctx
-                    .channel_builder(topic)
-                    .message_encoding("json")
-                    .schema(Schema::new(tag, "jsonschema", schema.into_bytes()))
-                    .build_raw();
-                match built {
-                    Ok(c) => {
-                        self.channels.insert(topic.to_owned(), c.clone());
-                        c
-                    }
-                    Err(e) => {
-                        tracing::warn!("{topic}: {e}");
-                        return;
-                    }
-                }
-            }
+        let kind = || {
+            let text = serde_json::json!({ "title": tag, "type": "object" }).to_string();
+            let schema = Schema::new(tag, "jsonschema", text.into_bytes());
+            ("json".to_owned(), Some(schema))
+        };
+        let Some(ch) = self.channel(topic, kind) else {
+            return;
         };
         self.buf.clear();
         if msg
