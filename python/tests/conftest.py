@@ -29,6 +29,7 @@ class Stack:
 
     def __init__(self, cfg: str, devices, speedup=None, args=()):
         self.namespace = f"py-{pathlib.Path(cfg).stem}-{uuid.uuid4().hex[:8]}"
+        self.bin = troupe_bin()
         extra = args
         args = [troupe_bin(), "--namespace", self.namespace, "launch", str(WORLDS / cfg),
                 "--listen", "tcp/127.0.0.1:0", "--no-bridge"]
@@ -87,3 +88,4 @@ def launch():
     yield start
     for s in stacks:
         s.stop()
+

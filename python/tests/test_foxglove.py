@@ -15,15 +15,13 @@ from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
 from foxglove_schemas_protobuf.Grid_pb2 import Grid
 from foxglove_schemas_protobuf.LaserScan_pb2 import LaserScan
 
-from conftest import troupe_bin
-
 MESSAGE_DATA, TIME = 0x01, 0x02
 
 
 class Server:
     def __init__(self, stack):
         self.proc = subprocess.Popen(
-            [troupe_bin(), "--namespace", stack.namespace, "--connect", stack.endpoint, "foxglove", "--port", "0"],
+            [stack.bin, "--namespace", stack.namespace, "--connect", stack.endpoint, "foxglove", "--port", "0"],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         line = self.proc.stdout.readline()
         found = re.search(r"ws://\S+", line)

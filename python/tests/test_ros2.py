@@ -11,11 +11,10 @@ import mcap_ros2.decoder as ros2_decoder
 import numpy as np
 import pytest
 
-from conftest import troupe_bin
 
-
-def troupe(*args):
-    return subprocess.run([troupe_bin(), *args], capture_output=True, text=True, timeout=120)
+def troupe(stack, *args):
+    """An offline command (`log export`) of the binary `stack` runs."""
+    return subprocess.run([stack.bin, *args], capture_output=True, text=True, timeout=120)
 
 
 class Recorder:
@@ -23,7 +22,7 @@ class Recorder:
 
     def __init__(self, stack, path, *flags):
         self.proc = subprocess.Popen(
-            [troupe_bin(), "--namespace", stack.namespace, "--connect", stack.endpoint, "record", "-o", str(path),
+            [stack.bin, "--namespace", stack.namespace, "--connect", stack.endpoint, "record", "-o", str(path),
              *flags], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         first = self.proc.stdout.readline()
         assert first.startswith("troupe record:"), (first, self.proc.stderr.read())
@@ -68,11 +67,11 @@ def test_a_recording_reads_as_ros2_in_the_ecosystem_s_reader(launch, tmp_path):
     recorders[0].stop()
     assert "sensor_msgs/msg/LaserScan" in live_summary, live_summary
 
-    export = troupe("log", "export", str(own), "--format", "ros2", "-o", str(tmp_path / "bag.mcap"))
+    export = troupe(stack, "log", "export", str(own), "--format", "ros2", "-o", str(tmp_path / "bag.mcap"))
     assert export.returncode == 0, export.stderr
     assert "-> sensor_msgs/msg/LaserScan" in export.stderr and "-> JSON" in export.stderr, export.stderr
     samples = [json.loads(line) for line in
-               troupe("log", "export", str(own)).stdout.splitlines()]
+               troupe(stack, "log", "export", str(own)).stdout.splitlines()]
 
     for path in (tmp_path / "bag.mcap", live):
         msgs = ros2_messages(path)
@@ -189,7 +188,7 @@ def test_a_ros2_bag_written_by_ros_tools_plays_into_amcl(launch, tmp_path):
     loc = launch("localize.cfg", ["6665:map:0"],
                  args=["--external", "position2d:0", "--external", "laser:0", "--sim-time"])
     play = subprocess.Popen(
-        [troupe_bin(), "--namespace", loc.namespace, "--connect", loc.endpoint, "play", str(bag),
+        [loc.bin, "--namespace", loc.namespace, "--connect", loc.endpoint, "play", str(bag),
          "--remap", "/scan=robot/6665/laser/0", "--remap", "/odom=robot/6665/position2d/0"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     loc.client.wait_for("6665:localize:0", timeout=30)
