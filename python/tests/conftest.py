@@ -5,6 +5,7 @@ the build under test), else target/debug/troupe.
 """
 
 import os
+import math
 import pathlib
 import queue
 import signal
@@ -89,3 +90,22 @@ def launch():
     for s in stacks:
         s.stop()
 
+
+def _odometry_moves(pos, metres: float, timeout: float) -> float:
+    """Reads a position2d until its odometry has moved `metres` from the first pose it reads
+    (or no sample came for `timeout` s); returns how far it moved."""
+    first, moved = None, 0.0
+    for sample in pos.stream(timeout=timeout):
+        p = sample.data["pose"]
+        first = first or p
+        moved = math.hypot(p["x"] - first["x"], p["y"] - first["y"])
+        if moved > metres:
+            break
+    return moved
+
+
+@pytest.fixture
+def odometry_moves():
+    """`odometry_moves(pos, metres, timeout)`: a fixture, since a test module cannot import this
+    conftest by name when pytest also collects examples/python."""
+    return _odometry_moves

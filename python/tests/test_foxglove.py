@@ -35,7 +35,7 @@ class Server:
         return err
 
 
-def test_foxglove_shows_the_fleet_and_its_teleop_drives_a_robot(launch):
+def test_foxglove_shows_the_fleet_and_its_teleop_drives_a_robot(launch, odometry_moves):
     stack = launch("nav.cfg", ["6665:laser:0", "6665:position2d:0", "6665:map:0", "6665:simulation:0"])
     robot = stack.client.robot(6665)
     laser, pos, sim = robot.laser(0), robot.position2d(0), robot.simulation(0)
@@ -119,12 +119,7 @@ def test_foxglove_shows_the_fleet_and_its_teleop_drives_a_robot(launch):
             start = sim.get_pose2d("r0")
             twist = {"linear": {"x": 0.3, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.0}}
             c.send(struct.pack("<BI", MESSAGE_DATA, 7) + json.dumps(twist).encode())
-            first = None
-            for sample in pos.stream(timeout=10):
-                p = sample.data["pose"]
-                first = first or p
-                if np.hypot(p["x"] - first["x"], p["y"] - first["y"]) > 0.2:
-                    break
+            odometry_moves(pos, 0.2, timeout=10)
             twist["linear"]["x"] = 0.0
             c.send(struct.pack("<BI", MESSAGE_DATA, 7) + json.dumps(twist).encode())
             moved = sim.get_pose2d("r0")

@@ -148,7 +148,7 @@ ROS_DEFS = {
 }
 
 
-def test_a_ros2_bag_written_by_ros_tools_plays_into_amcl(launch, tmp_path):
+def test_a_ros2_bag_written_by_ros_tools_plays_into_amcl(launch, tmp_path, odometry_moves):
     from mcap_ros2.writer import Writer
 
     # A run to bag: r0 driven through the office while its laser, odometry and clock are recorded.
@@ -159,12 +159,7 @@ def test_a_ros2_bag_written_by_ros_tools_plays_into_amcl(launch, tmp_path):
     recorder = Recorder(live, tmp_path / "run.mcap", "--format", "ros2",
                         "robot/6665/laser/0", "robot/6665/position2d/0", "sim/clock")
     pos.set_speed(0.3, 0.12)
-    first = None
-    for sample in pos.stream(timeout=20):
-        p = sample.data["pose"]
-        first = first or p
-        if np.hypot(p["x"] - first["x"], p["y"] - first["y"]) > 1.2:
-            break
+    odometry_moves(pos, 1.2, timeout=20)
     pos.stop()
     truth = sim.get_pose2d("r0")
     recorder.stop()

@@ -91,6 +91,35 @@ pub fn device_frame(dev: &Device) -> String {
     format!("robot_{}/{}_{}", dev.robot, dev.interface, dev.index)
 }
 
+/// A stamp in seconds as nanoseconds (a negative or non-finite one is 0).
+pub fn stamp_ns(secs: f64) -> u64 {
+    if secs.is_finite() && secs > 0.0 {
+        (secs * 1e9).round() as u64
+    } else {
+        0
+    }
+}
+
+/// Where a message with no ROS 2 type goes, as JSON: its device's topic
+/// and its kind (`/robot_6665/ranger_0/intensities` for
+/// `ranger/intensities@1`), a topic of one type as ROS 2 requires.
+pub fn json_topic(topic: &str, tag: &str) -> String {
+    let kind = tag.split(['/', '@']).nth(1).unwrap_or(tag);
+    format!("{topic}/{kind}")
+}
+
+/// The JSON schema (`jsonschema`) such a message is written with: an
+/// object, titled by its schema tag.
+pub fn json_schema(tag: &str) -> String {
+    format!(r#"{{"title":"{tag}","type":"object"}}"#)
+}
+
+/// The pose of odometry's origin in the map (`map -> odom`), from the
+/// robot's pose in each.
+pub fn odom_in_map(in_map: Pose2d, in_odom: Pose2d) -> Pose2d {
+    compose(in_map, inverse(in_odom))
+}
+
 fn element_frame(dev: &Device, element: usize) -> String {
     format!("{}/{element}", device_frame(dev))
 }
@@ -441,7 +470,7 @@ fn map_to_odom(robot: u32, stamp_ns: u64, in_map: Pose2d, in_odom: Pose2d) -> Ou
     let t = TransformStamped {
         header: header(stamp_ns, MAP_FRAME.to_owned()),
         child_frame_id: robot_frame(robot, "odom"),
-        transform: transform2(compose(in_map, inverse(in_odom))),
+        transform: transform2(odom_in_map(in_map, in_odom)),
     };
     out(
         TF.to_owned(),

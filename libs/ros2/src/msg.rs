@@ -3,6 +3,10 @@
 //! the `ros2msg` form MCAP readers parse: the message's own fields, then
 //! each message it uses after a `MSG:` separator.
 
+// The fields are ROS's, named and documented by its `.msg` files; only
+// what Troupe adds or a name does not say is documented here.
+#![allow(missing_docs)]
+
 use serde::de::{Deserializer, SeqAccess, Visitor};
 use serde::ser::{SerializeTuple, Serializer};
 use serde::{Deserialize, Serialize};
@@ -43,11 +47,8 @@ pub struct Header {
 /// `geometry_msgs/msg/Vector3`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct Vector3 {
-    #[allow(missing_docs)]
     pub x: f64,
-    #[allow(missing_docs)]
     pub y: f64,
-    #[allow(missing_docs)]
     pub z: f64,
 }
 
@@ -57,13 +58,9 @@ pub type Point = Vector3;
 /// `geometry_msgs/msg/Quaternion`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Quaternion {
-    #[allow(missing_docs)]
     pub x: f64,
-    #[allow(missing_docs)]
     pub y: f64,
-    #[allow(missing_docs)]
     pub z: f64,
-    #[allow(missing_docs)]
     pub w: f64,
 }
 
@@ -97,9 +94,7 @@ impl Quaternion {
 /// `geometry_msgs/msg/Pose`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct Pose {
-    #[allow(missing_docs)]
     pub position: Point,
-    #[allow(missing_docs)]
     pub orientation: Quaternion,
 }
 
@@ -149,82 +144,58 @@ impl<'de> Deserialize<'de> for Cov {
 /// `geometry_msgs/msg/PoseWithCovariance`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct PoseWithCovariance {
-    #[allow(missing_docs)]
     pub pose: Pose,
-    #[allow(missing_docs)]
     pub covariance: Cov,
 }
 
 /// `geometry_msgs/msg/Twist`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct Twist {
-    #[allow(missing_docs)]
     pub linear: Vector3,
-    #[allow(missing_docs)]
     pub angular: Vector3,
 }
 
 /// `geometry_msgs/msg/TwistWithCovariance`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct TwistWithCovariance {
-    #[allow(missing_docs)]
     pub twist: Twist,
-    #[allow(missing_docs)]
     pub covariance: Cov,
 }
 
 /// `nav_msgs/msg/Odometry`.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Odometry {
-    #[allow(missing_docs)]
     pub header: Header,
     /// The frame the twist is in (the robot's).
     pub child_frame_id: String,
-    #[allow(missing_docs)]
     pub pose: PoseWithCovariance,
-    #[allow(missing_docs)]
     pub twist: TwistWithCovariance,
 }
 
 /// `sensor_msgs/msg/LaserScan`.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct LaserScan {
-    #[allow(missing_docs)]
     pub header: Header,
-    #[allow(missing_docs)]
     pub angle_min: f32,
-    #[allow(missing_docs)]
     pub angle_max: f32,
-    #[allow(missing_docs)]
     pub angle_increment: f32,
-    #[allow(missing_docs)]
     pub time_increment: f32,
-    #[allow(missing_docs)]
     pub scan_time: f32,
-    #[allow(missing_docs)]
     pub range_min: f32,
-    #[allow(missing_docs)]
     pub range_max: f32,
-    #[allow(missing_docs)]
     pub ranges: Vec<f32>,
-    #[allow(missing_docs)]
     pub intensities: Vec<f32>,
 }
 
 /// `sensor_msgs/msg/Range`.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Range {
-    #[allow(missing_docs)]
     pub header: Header,
     /// [`Range::ULTRASOUND`] or [`Range::INFRARED`].
     pub radiation_type: u8,
-    #[allow(missing_docs)]
     pub field_of_view: f32,
-    #[allow(missing_docs)]
     pub min_range: f32,
-    #[allow(missing_docs)]
     pub max_range: f32,
-    #[allow(missing_docs)]
     pub range: f32,
 }
 
@@ -238,49 +209,38 @@ impl Range {
 /// `geometry_msgs/msg/PoseWithCovarianceStamped`.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct PoseWithCovarianceStamped {
-    #[allow(missing_docs)]
     pub header: Header,
-    #[allow(missing_docs)]
     pub pose: PoseWithCovariance,
 }
 
 /// `geometry_msgs/msg/PoseStamped`.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct PoseStamped {
-    #[allow(missing_docs)]
     pub header: Header,
-    #[allow(missing_docs)]
     pub pose: Pose,
 }
 
 /// `geometry_msgs/msg/PoseArray`.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct PoseArray {
-    #[allow(missing_docs)]
     pub header: Header,
-    #[allow(missing_docs)]
     pub poses: Vec<Pose>,
 }
 
 /// `nav_msgs/msg/Path`.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Path {
-    #[allow(missing_docs)]
     pub header: Header,
-    #[allow(missing_docs)]
     pub poses: Vec<PoseStamped>,
 }
 
 /// `nav_msgs/msg/MapMetaData`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct MapMetaData {
-    #[allow(missing_docs)]
     pub map_load_time: Time,
     /// Metres per cell.
     pub resolution: f32,
-    #[allow(missing_docs)]
     pub width: u32,
-    #[allow(missing_docs)]
     pub height: u32,
     /// Cell (0, 0)'s corner in the map frame.
     pub origin: Pose,
@@ -290,20 +250,15 @@ pub struct MapMetaData {
 /// occupied, -1 unknown.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct OccupancyGrid {
-    #[allow(missing_docs)]
     pub header: Header,
-    #[allow(missing_docs)]
     pub info: MapMetaData,
-    #[allow(missing_docs)]
     pub data: Vec<i8>,
 }
 
 /// `geometry_msgs/msg/Transform`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct Transform {
-    #[allow(missing_docs)]
     pub translation: Vector3,
-    #[allow(missing_docs)]
     pub rotation: Quaternion,
 }
 
@@ -311,25 +266,20 @@ pub struct Transform {
 /// `header.frame_id`.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct TransformStamped {
-    #[allow(missing_docs)]
     pub header: Header,
-    #[allow(missing_docs)]
     pub child_frame_id: String,
-    #[allow(missing_docs)]
     pub transform: Transform,
 }
 
 /// `tf2_msgs/msg/TFMessage`.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct TfMessage {
-    #[allow(missing_docs)]
     pub transforms: Vec<TransformStamped>,
 }
 
 /// `rosgraph_msgs/msg/Clock`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct Clock {
-    #[allow(missing_docs)]
     pub clock: Time,
 }
 

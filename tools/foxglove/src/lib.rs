@@ -43,7 +43,9 @@ use troupe_msgs::{
 };
 use troupe_node::zenoh::{sample::SampleKind, Session, Wait};
 use troupe_node::{Mode, ZenohArgs};
-use troupe_ros2::{device_frame, robot_frame, MAP_FRAME};
+use troupe_ros2::{
+    device_frame, json_schema, json_topic, odom_in_map, robot_frame, stamp_ns, MAP_FRAME,
+};
 
 /// Flags of `troupe foxglove`.
 #[derive(Debug, Args)]
@@ -168,14 +170,6 @@ fn stamp(ns: u64) -> Timestamp {
     )
 }
 
-fn secs_ns(s: f64) -> u64 {
-    if s.is_finite() && s > 0.0 {
-        (s * 1e9).round() as u64
-    } else {
-        0
-    }
-}
-
 fn quaternion(roll: f64, pitch: f64, yaw: f64) -> Quaternion {
     let q = troupe_ros2::msg::Quaternion::from_rpy(roll, pitch, yaw);
     Quaternion {
@@ -220,18 +214,6 @@ fn flat(p: Pose2d) -> Pose3d {
     }
 }
 
-/// `a ∘ b⁻¹`: the pose of `b`'s frame origin in `a`'s frame, when `a` and
-/// `b` are one robot's pose in two frames.
-fn origin_of(a: Pose2d, b: Pose2d) -> Pose2d {
-    let yaw = a.yaw - b.yaw;
-    let (s, c) = yaw.sin_cos();
-    Pose2d {
-        x: a.x - (c * b.x - s * b.y),
-        y: a.y - (s * b.x + c * b.y),
-        yaw,
-    }
-}
-
 /// The channels and what later samples need to know.
 struct Live {
     ctx: Arc<Context>,
@@ -271,7 +253,7 @@ impl Live {
                     let Ok(s) = decode_any(&payload) else {
                         continue;
                     };
-                    let ns = secs_ns(s.stamp);
+                    let ns = stamp_ns(s.stamp);
                     if let AnyMsg::SimClock(_) = s.msg {
                         server.broadcast_time(ns);
                         continue;
@@ -360,8 +342,7 @@ impl Live {
 
     fn json(&mut self, topic: &str, tag: &'static str, msg: &AnyMsg, ns: u64) {
         let kind = || {
-            let text = serde_json::json!({ "title": tag, "type": "object" }).to_string();
-            let schema = Schema::new(tag, "jsonschema", text.into_bytes());
+            let schema = Schema::new(tag, "jsonschema", json_schema(tag).into_bytes());
             ("json".to_owned(), Some(schema))
         };
         let Some(ch) = self.channel(topic, kind) else {
@@ -436,7 +417,7 @@ impl Live {
                         ns,
                         MAP_FRAME.to_owned(),
                         robot_frame(dev.robot, "odom"),
-                        &flat(origin_of(best.mean, odom)),
+                        &flat(odom_in_map(best.mean, odom)),
                     );
                     self.tf(ns, vec![t]);
                 }
@@ -492,8 +473,7 @@ impl Live {
             }
             other => {
                 let tag = other.schema();
-                let kind = tag.split(['/', '@']).nth(1).unwrap_or(tag);
-                self.json(&format!("{topic}/{kind}"), tag, other, ns);
+                self.json(&json_topic(&topic, tag), tag, other, ns);
             }
         }
     }
@@ -664,7 +644,7 @@ mod tests {
             y: -0.2,
             yaw: 0.3,
         };
-        let o = origin_of(in_map, in_odom);
+        let o = odom_in_map(in_map, in_odom);
         // The odom origin composed with the odometric pose is the map pose.
         let (s, c) = o.yaw.sin_cos();
         let x = o.x + c * in_odom.x - s * in_odom.y;

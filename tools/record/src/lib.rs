@@ -147,14 +147,6 @@ fn now_ns() -> u64 {
         .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
 }
 
-fn secs_ns(s: f64) -> u64 {
-    if s.is_finite() && s > 0.0 {
-        (s * 1e9).round() as u64
-    } else {
-        0
-    }
-}
-
 /// What the recorder hears: a sample or a liveliness event.
 enum Heard {
     Sample {
@@ -455,7 +447,7 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     }
     files.open(now_ns())?;
     let split_bytes = a.split_size.map(|mb| (mb * 1e6) as u64);
-    let split_ns = a.split_duration.map(secs_ns);
+    let split_ns = a.split_duration.map(troupe_ros2::stamp_ns);
     let writer = std::thread::spawn(move || -> anyhow::Result<(Files, u64, u64)> {
         let (mut count, mut bytes) = (0u64, 0u64);
         let mut failed: Option<anyhow::Error> = None;
@@ -483,7 +475,9 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
                 (Heard::Token { .. }, Some(_)) => continue,
                 (Heard::Sample { key, payload, at }, None) => {
                     let (schema, stamp) = codec::split(payload)
-                        .map_or(("?", 0), |(tag, stamp, _)| (tag, secs_ns(stamp)));
+                        .map_or(("?", 0), |(tag, stamp, _)| {
+                            (tag, troupe_ros2::stamp_ns(stamp))
+                        });
                     bytes += payload.len() as u64;
                     files.write(
                         key,
@@ -827,8 +821,8 @@ pub fn play(a: PlayArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         .filter_map(|k| session.liveliness().declare_token(k.as_str()).wait().ok())
         .collect();
     let (from, to) = (
-        first + secs_ns(a.start),
-        a.end.map_or(u64::MAX, |e| first + secs_ns(e)),
+        first + troupe_ros2::stamp_ns(a.start),
+        a.end.map_or(u64::MAX, |e| first + troupe_ros2::stamp_ns(e)),
     );
     let stop_rx = stop_signal();
     let started = Instant::now();

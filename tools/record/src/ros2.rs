@@ -7,9 +7,9 @@
 use std::collections::{BTreeMap, HashMap};
 
 use troupe_msgs::decode_any;
-use troupe_ros2::{topic_of_key, Translator, Type};
+use troupe_ros2::{json_schema, json_topic, stamp_ns, topic_of_key, Translator, Type};
 
-use crate::{secs_ns, Files, Schema};
+use crate::{Files, Schema};
 
 /// The MCAP profile of a bag of ROS 2 messages.
 pub const PROFILE: &str = "ros2";
@@ -55,22 +55,21 @@ impl Ros2 {
             return Ok(());
         };
         let tag = s.msg.schema();
-        let stamp = secs_ns(s.stamp);
+        let stamp = stamp_ns(s.stamp);
         let Some(outs) = self.translator.translate(key, stamp, &s.msg) else {
             let mut json = Vec::new();
             s.msg
                 .serialize_body(&mut serde_json::Serializer::new(&mut json))?;
-            let schema = self.json_schemas.entry(tag).or_insert_with(|| {
-                serde_json::json!({ "title": tag, "type": "object" }).to_string()
-            });
+            let schema = self
+                .json_schemas
+                .entry(tag)
+                .or_insert_with(|| json_schema(tag));
             let schema = Schema {
                 name: tag,
                 encoding: "jsonschema",
                 data: schema.as_bytes(),
             };
-            // A topic of its own: a ROS 2 topic has one type.
-            let kind = tag.split(['/', '@']).nth(1).unwrap_or(tag);
-            let topic = format!("{}/{kind}", topic_of_key(key));
+            let topic = json_topic(&topic_of_key(key), tag);
             files.write(&topic, schema, "json", &json, log_time, stamp)?;
             *self.counts.entry((tag, JSON)).or_default() += 1;
             return Ok(());
