@@ -361,6 +361,18 @@ const RUN_BY: &[(&str, &str)] = &[
         "test_foxglove_shows_the_fleet_and_its_teleop_drives_a_robot",
     ),
     (
+        "troupe launch worlds/nav.cfg --foxglove",
+        "test_foxglove_shows_the_fleet_and_its_teleop_drives_a_robot",
+    ),
+    (
+        "troupe record --format foxglove",
+        "test_a_recording_reads_as_foxglove_in_the_ecosystem_s_reader",
+    ),
+    (
+        "troupe log export run.mcap --format foxglove",
+        "test_a_recording_reads_as_foxglove_in_the_ecosystem_s_reader",
+    ),
+    (
         "troupe record --format ros2",
         "test_a_recording_reads_as_ros2_in_the_ecosystem_s_reader",
     ),

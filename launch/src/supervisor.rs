@@ -96,6 +96,17 @@ pub struct LaunchArgs {
         default_missing_value = "127.0.0.1:8080"
     )]
     pub view: Option<std::net::SocketAddr>,
+    /// Also serve `troupe foxglove` (the fleet live in Foxglove) on ADDR:
+    /// `--foxglove` alone serves 127.0.0.1:8765, `--foxglove=127.0.0.1:0`
+    /// any free port. Its address is printed (`troupe foxglove: ws://…`).
+    #[arg(
+        long,
+        value_name = "ADDR",
+        num_args = 0..=1,
+        require_equals = true,
+        default_missing_value = "127.0.0.1:8765"
+    )]
+    pub foxglove: Option<std::net::SocketAddr>,
 }
 
 /// Flags of `troupe plan`.
@@ -365,14 +376,20 @@ async fn supervise(
         })
     };
     let exe = std::env::current_exe().context("finding the troupe binary")?;
-    let view = a.view.map(|at| {
-        // A client of the launch's network (it serves a page, not keys).
-        let mut net = child_net.clone();
-        if let Some(k) = net.iter().position(|f| f == "--listen") {
-            net.drain(k..(k + 2).min(net.len()));
-        }
-        tokio::spawn(run_view(exe.clone(), net, at, stop_rx.clone()))
-    });
+    // The view and the Foxglove server: clients of the launch's network
+    // (they serve a page or a socket, not keys).
+    let mut viewer_net = child_net.clone();
+    if let Some(k) = viewer_net.iter().position(|f| f == "--listen") {
+        viewer_net.drain(k..(k + 2).min(viewer_net.len()));
+    }
+    let viewers: Vec<_> = [(Viewer::VIEW, a.view), (Viewer::FOXGLOVE, a.foxglove)]
+        .into_iter()
+        .filter_map(|(v, at)| {
+            let at = at?;
+            let run = run_viewer(v, exe.clone(), viewer_net.clone(), at, stop_rx.clone());
+            Some((v, tokio::spawn(run)))
+        })
+        .collect();
     let mut tasks = Vec::new();
     for st in &states {
         let ctx = NodeCtx {
@@ -458,11 +475,14 @@ async fn supervise(
     if let Some(b) = bridge {
         let _ = b.await;
     }
-    // The view stops with the stack; one that failed fails the launch.
-    let view_ok = match view {
-        Some(v) => v.await.unwrap_or(false),
-        None => true,
-    };
+    // The view and the Foxglove server stop with the stack; one that
+    // failed fails the launch.
+    let mut viewers_failed = Vec::new();
+    for (v, task) in viewers {
+        if !task.await.unwrap_or(false) {
+            viewers_failed.push(v.failed);
+        }
+    }
     if signalled {
         tracing::info!("stopping {} nodes in reverse start order", states.len());
         let grace = Duration::from_secs_f64(a.grace.max(0.0));
@@ -503,9 +523,7 @@ async fn supervise(
         .filter(|s| s.failed.load(Ordering::SeqCst))
         .map(|s| s.spec.name.as_str())
         .collect();
-    if !view_ok {
-        failed.push("the view (--view)");
-    }
+    failed.extend(viewers_failed);
     if failed.is_empty() {
         tracing::info!("stack stopped cleanly");
         Ok(())
@@ -534,19 +552,42 @@ fn troupe_child(exe: &std::path::Path, net: &[String]) -> Command {
     cmd
 }
 
-/// `launch --view`: runs `troupe view` on `at` until the launch stops
-/// (then SIGTERM, and SIGKILL if it has not gone within 5 s). Its address
-/// line goes to the launcher's stdout, its log to stderr as a node's.
-/// Whether it ran until asked to stop, and then stopped cleanly.
-async fn run_view(
+/// A viewer the launcher may serve beside the stack.
+#[derive(Debug, Clone, Copy)]
+struct Viewer {
+    /// Its command: `view`.
+    command: &'static str,
+    /// How a failure is named: `the view (--view)`.
+    failed: &'static str,
+}
+
+impl Viewer {
+    const VIEW: Viewer = Viewer {
+        command: "view",
+        failed: "the view (--view)",
+    };
+    const FOXGLOVE: Viewer = Viewer {
+        command: "foxglove",
+        failed: "the Foxglove server (--foxglove)",
+    };
+}
+
+/// `launch --view`, `launch --foxglove`: runs `troupe view` (or `troupe
+/// foxglove`) on `at` until the launch stops (then SIGTERM, and SIGKILL if
+/// it has not gone within 5 s). Its address line goes to the launcher's
+/// stdout, its log to stderr as a node's. Whether it ran until asked to
+/// stop, and then stopped cleanly.
+async fn run_viewer(
+    v: Viewer,
     exe: PathBuf,
     net: Vec<String>,
     at: std::net::SocketAddr,
     mut stop_rx: watch::Receiver<bool>,
 ) -> bool {
+    let name = v.command;
     let mut child = match troupe_child(&exe, &net)
         .args([
-            "view",
+            name,
             "--bind",
             &at.ip().to_string(),
             "--port",
@@ -556,7 +597,7 @@ async fn run_view(
     {
         Ok(c) => c,
         Err(e) => {
-            tracing::error!("--view: cannot start `troupe view`: {e}");
+            tracing::error!("--{name}: cannot start `troupe {name}`: {e}");
             return false;
         }
     };
@@ -574,7 +615,7 @@ async fn run_view(
     if let Some(err) = child.stderr.take() {
         forwarders.push(tokio::spawn(forward(
             BufReader::new(err),
-            "view".to_owned(),
+            name.to_owned(),
             None,
         )));
     }
@@ -584,7 +625,7 @@ async fn run_view(
             // It ended on its own (a taken port, a stopped network): the
             // stack runs on without it.
             let how = status.map_or_else(|e| e.to_string(), |s| s.to_string());
-            tracing::error!("`troupe view` ended ({how}); the stack runs on without it");
+            tracing::error!("`troupe {name}` ended ({how}); the stack runs on without it");
             false
         }
         _ = async { stop_rx.wait_for(|&stop| stop).await.map(|_| ()) } => {
@@ -595,11 +636,11 @@ async fn run_view(
                 Ok(Ok(s)) if s.success() => true,
                 Ok(status) => {
                     let how = status.map_or_else(|e| e.to_string(), |s| s.to_string());
-                    tracing::warn!("`troupe view` stopped: {how}");
+                    tracing::warn!("`troupe {name}` stopped: {how}");
                     false
                 }
                 Err(_) => {
-                    tracing::warn!("`troupe view` ignored SIGTERM for 5 s; killing it");
+                    tracing::warn!("`troupe {name}` ignored SIGTERM for 5 s; killing it");
                     let _ = child.kill().await;
                     false
                 }

@@ -39,9 +39,12 @@ class Stack:
         args += list(extra)
         self.proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         self.lines: "queue.Queue[str]" = queue.Queue()
+        self.seen: list = []
         self.errors: list = []
-        threading.Thread(target=self._pump, args=(self.proc.stdout, self.lines.put), daemon=True).start()
-        threading.Thread(target=self._pump, args=(self.proc.stderr, self.errors.append), daemon=True).start()
+        self.pumps = [threading.Thread(target=self._pump, args=(self.proc.stdout, self.lines.put), daemon=True),
+                      threading.Thread(target=self._pump, args=(self.proc.stderr, self.errors.append), daemon=True)]
+        for t in self.pumps:
+            t.start()
         self.endpoint = self._endpoint()
         self.client = troupe.connect(self.endpoint, namespace=self.namespace)
         self.client.wait_for(*devices, timeout=30)
@@ -52,28 +55,65 @@ class Stack:
             sink(line.rstrip("\n"))
 
     def _endpoint(self) -> str:
-        prefix = "troupe launch: router listening on "
+        return self.line("troupe launch: router listening on ").split()[0]
+
+    def line(self, prefix: str, timeout: float = 30) -> str:
+        """The rest of the first line the launcher printed (or prints within `timeout` s) that
+        starts with `prefix`."""
         while True:
+            for line in self.seen:
+                if line.startswith(prefix):
+                    return line[len(prefix):]
             try:
-                line = self.lines.get(timeout=30)
+                self.seen.append(self.lines.get(timeout=timeout))
             except queue.Empty:
-                raise AssertionError(f"no router line from the launcher: {self.errors}")
-            if line.startswith(prefix):
-                return line[len(prefix):].split()[0]
+                raise AssertionError(f"no `{prefix}` line from the launcher: {self.errors}")
 
     def env(self) -> dict:
         """The environment a program run against this stack gets."""
         return dict(os.environ, TROUPE_NAMESPACE=self.namespace)
 
+    def record(self, path, *flags):
+        """`troupe record -o PATH FLAGS…` against this stack, returned once its subscriptions are
+        in place."""
+        return Recorder(self, path, *flags)
+
+    def run(self, *args):
+        """An offline command of this stack's binary (`log export …`)."""
+        return subprocess.run([self.bin, *args], capture_output=True, text=True, timeout=120)
+
     def stop(self):
+        """Stops the stack as Ctrl-C does (once: again is a no-op); then `errors` holds the whole
+        of its log."""
+        if self.proc.poll() is not None:
+            return
         self.client.close()
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
+        self.proc.send_signal(signal.SIGINT)
+        try:
+            self.proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        for t in self.pumps:
+            t.join(timeout=10)
+
+
+class Recorder:
+    """`troupe record` against a stack, started once its subscriptions are in place."""
+
+    def __init__(self, stack, path, *flags):
+        self.proc = subprocess.Popen(
+            [stack.bin, "--namespace", stack.namespace, "--connect", stack.endpoint, "record", "-o", str(path),
+             *flags], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        first = self.proc.stdout.readline()
+        assert first.startswith("troupe record:"), (first, self.proc.stderr.read())
+
+    def stop(self):
+        """Stops it as Ctrl-C does; its (stdout, stderr)."""
+        self.proc.send_signal(signal.SIGINT)
+        out, err = self.proc.communicate(timeout=60)
+        assert self.proc.returncode == 0, (out, err)
+        return out, err
 
 
 @pytest.fixture

@@ -1,6 +1,7 @@
 """`troupe foxglove` as Foxglove meets it: a client speaking the Foxglove WebSocket protocol (its
 published spec, foxglove.websocket.v1, which the Foxglove SDK negotiates under its new name
-foxglove.sdk.v1) over the `websockets` library, decoding with Foxglove's own protobuf schemas."""
+foxglove.sdk.v1) over the `websockets` library, decoding with Foxglove's own protobuf schemas; and
+`--format foxglove` recordings, read with the ecosystem's reader (mcap-protobuf-support)."""
 
 import json
 import re
@@ -9,121 +10,178 @@ import struct
 import subprocess
 import time
 
+import mcap.reader as mcap_reader
+import mcap_protobuf.decoder as protobuf_decoder
 import numpy as np
+import pytest
 import websockets.sync.client as ws
 from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
 from foxglove_schemas_protobuf.Grid_pb2 import Grid
 from foxglove_schemas_protobuf.LaserScan_pb2 import LaserScan
+from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
 
 MESSAGE_DATA, TIME = 0x01, 0x02
 
 
-class Server:
-    def __init__(self, stack):
-        self.proc = subprocess.Popen(
-            [stack.bin, "--namespace", stack.namespace, "--connect", stack.endpoint, "foxglove", "--port", "0"],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        line = self.proc.stdout.readline()
-        found = re.search(r"ws://\S+", line)
-        assert found, (line, self.proc.stderr.read() if self.proc.poll() is not None else "")
-        self.url = found.group(0)
-
-    def stop(self):
-        self.proc.send_signal(signal.SIGINT)
-        _, err = self.proc.communicate(timeout=30)
-        assert self.proc.returncode == 0, err
-        return err
-
-
 def test_foxglove_shows_the_fleet_and_its_teleop_drives_a_robot(launch, odometry_moves):
-    stack = launch("nav.cfg", ["6665:laser:0", "6665:position2d:0", "6665:map:0", "6665:simulation:0"])
+    # The server as `troupe launch --foxglove` runs it beside the stack: `troupe foxglove`.
+    stack = launch("nav.cfg", ["6665:laser:0", "6665:position2d:0", "6665:map:0", "6665:simulation:0"],
+                   args=["--foxglove=127.0.0.1:0"])
     robot = stack.client.robot(6665)
     laser, pos, sim = robot.laser(0), robot.position2d(0), robot.simulation(0)
     grid = robot.map(0).get_map()
-    server = Server(stack)
-    try:
-        with ws.connect(server.url, subprotocols=["foxglove.sdk.v1", "foxglove.websocket.v1"], open_timeout=10) as c:
-            info = json.loads(c.recv(timeout=10))
-            assert info["op"] == "serverInfo", info
-            assert {"clientPublish", "time"} <= set(info["capabilities"]), info
-            assert "json" in info.get("supportedEncodings", []), info
+    url = re.match(r"ws://\S+", stack.line("troupe foxglove: ")).group(0)
+    with ws.connect(url, subprotocols=["foxglove.sdk.v1", "foxglove.websocket.v1"], open_timeout=10) as c:
+        info = json.loads(c.recv(timeout=10))
+        assert info["op"] == "serverInfo", info
+        assert {"clientPublish", "time"} <= set(info["capabilities"]), info
+        assert "json" in info.get("supportedEncodings", []), info
 
-            # Channels are advertised as devices publish; the laser, the map and the transforms.
-            channels, times = {}, 0
-            wanted = {"/robot/6665/laser/0", "/robot/6665/map/0", "/tf", "/tf_static", "/robot/6665/position2d/0"}
-            deadline = time.monotonic() + 30
-            while not wanted <= set(channels):
-                assert time.monotonic() < deadline, f"advertised: {sorted(channels)}"
-                m = c.recv(timeout=10)
-                if isinstance(m, str) and json.loads(m)["op"] == "advertise":
-                    channels.update({ch["topic"]: ch for ch in json.loads(m)["channels"]})
-                elif isinstance(m, bytes) and m[0] == TIME:
-                    times += 1
-            scan_ch, map_ch = channels["/robot/6665/laser/0"], channels["/robot/6665/map/0"]
-            assert (scan_ch["schemaName"], scan_ch["encoding"]) == ("foxglove.LaserScan", "protobuf")
-            assert (map_ch["schemaName"], channels["/robot/6665/position2d/0"]["schemaName"]) == (
-                "foxglove.Grid", "foxglove.PoseInFrame")
-            assert channels["/tf"]["schemaName"] == channels["/tf_static"]["schemaName"] == "foxglove.FrameTransforms"
-            json_topics = [t for t, ch in channels.items() if ch["encoding"] == "json"]
-            assert "/robot/6665/simulation/0/poses" in json_topics, json_topics
+        # Channels are advertised as devices publish; the laser, the map and the transforms.
+        channels, times = {}, 0
+        wanted = {"/robot/6665/laser/0", "/robot/6665/map/0", "/tf", "/tf_static", "/robot/6665/position2d/0",
+                  "/robot/6665/simulation/0/world"}
+        deadline = time.monotonic() + 30
+        while not wanted <= set(channels):
+            assert time.monotonic() < deadline, f"advertised: {sorted(channels)}"
+            m = c.recv(timeout=10)
+            if isinstance(m, str) and json.loads(m)["op"] == "advertise":
+                channels.update({ch["topic"]: ch for ch in json.loads(m)["channels"]})
+            elif isinstance(m, bytes) and m[0] == TIME:
+                times += 1
+        scan_ch, map_ch = channels["/robot/6665/laser/0"], channels["/robot/6665/map/0"]
+        assert (scan_ch["schemaName"], scan_ch["encoding"]) == ("foxglove.LaserScan", "protobuf")
+        assert (map_ch["schemaName"], channels["/robot/6665/position2d/0"]["schemaName"]) == (
+            "foxglove.Grid", "foxglove.PoseInFrame")
+        assert channels["/tf"]["schemaName"] == channels["/tf_static"]["schemaName"] == "foxglove.FrameTransforms"
+        world_ch = channels["/robot/6665/simulation/0/world"]
+        assert world_ch["schemaName"] == "foxglove.SceneUpdate"
+        json_topics = [t for t, ch in channels.items() if ch["encoding"] == "json"]
+        assert any(t.startswith("/robot/6665/ranger/0/") for t in json_topics), json_topics
 
-            # The map and the sensors' places were published before this client came: they are
-            # latched, given to it as it subscribes.
-            subscriptions = {1: scan_ch["id"], 2: map_ch["id"], 3: channels["/tf_static"]["id"]}
-            c.send(json.dumps({"op": "subscribe", "subscriptions": [
-                {"id": i, "channelId": ch} for i, ch in subscriptions.items()]}))
-            got, refused = {}, set()
-            deadline = time.monotonic() + 30
-            while len(got) < 3 or times == 0:
-                assert time.monotonic() < deadline, f"got {sorted(got)}, {times} times"
-                m = c.recv(timeout=10)
-                # The SDK sends a channel's advertisement before it registers the channel for the
-                # client (foxglove 0.30, connected_client.rs): a subscription that follows at once
-                # can be answered "Unknown channel ID", the channel being known a moment later.
-                # A client then subscribes again, once, as this one does.
-                if isinstance(m, str) and json.loads(m).get("op") == "status":
-                    said = json.loads(m)["message"]
-                    unknown = [i for i, ch in subscriptions.items() if said == f"Unknown channel ID: {ch}"]
-                    assert unknown and not refused & set(unknown), said
-                    refused |= set(unknown)
-                    c.send(json.dumps({"op": "subscribe", "subscriptions": [
-                        {"id": i, "channelId": subscriptions[i]} for i in unknown]}))
-                elif isinstance(m, bytes) and m[0] == MESSAGE_DATA:
-                    sub, _ = struct.unpack_from("<IQ", m, 1)
-                    got[sub] = m[13:]
-                elif isinstance(m, bytes) and m[0] == TIME:
-                    times += 1
-            scan = LaserScan()
-            scan.ParseFromString(got[1])
-            laser.read(timeout=10)
-            assert len(scan.ranges) == len(laser.ranges) > 100
-            assert scan.frame_id == "robot_6665/laser_0"
-            assert scan.start_angle == np.float32(laser.min_angle)
-            assert max(scan.ranges) <= laser.max_range + 1e-6
-            g = Grid()
-            g.ParseFromString(got[2])
-            assert (g.column_count, len(g.data)) == (grid.width, grid.width * grid.height)
-            assert g.cell_size.x == np.float32(grid.resolution) and g.frame_id == "map"
-            cells = np.frombuffer(g.data, dtype=np.int8).reshape(grid.height, grid.width)
-            assert np.array_equal(cells == 100, grid.cells > 0) and np.array_equal(cells == 0, grid.cells < 0)
+        # The map, the sensors' places and the world's walls were published before this
+        # client came: they are latched, given to it as it subscribes.
+        subscriptions = {1: scan_ch["id"], 2: map_ch["id"], 3: channels["/tf_static"]["id"], 4: world_ch["id"]}
+        c.send(json.dumps({"op": "subscribe", "subscriptions": [
+            {"id": i, "channelId": ch} for i, ch in subscriptions.items()]}))
+        got, refused = {}, set()
+        deadline = time.monotonic() + 30
+        while len(got) < len(subscriptions) or times == 0:
+            assert time.monotonic() < deadline, f"got {sorted(got)}, {times} times"
+            m = c.recv(timeout=10)
+            # The SDK sends a channel's advertisement before it registers the channel for the
+            # client (foxglove 0.30, connected_client.rs): a subscription that follows at once
+            # can be answered "Unknown channel ID", the channel being known a moment later.
+            # A client then subscribes again, once, as this one does.
+            if isinstance(m, str) and json.loads(m).get("op") == "status":
+                said = json.loads(m)["message"]
+                unknown = [i for i, ch in subscriptions.items() if said == f"Unknown channel ID: {ch}"]
+                assert unknown and not refused & set(unknown), said
+                refused |= set(unknown)
+                c.send(json.dumps({"op": "subscribe", "subscriptions": [
+                    {"id": i, "channelId": subscriptions[i]} for i in unknown]}))
+            elif isinstance(m, bytes) and m[0] == MESSAGE_DATA:
+                sub, _ = struct.unpack_from("<IQ", m, 1)
+                got[sub] = m[13:]
+            elif isinstance(m, bytes) and m[0] == TIME:
+                times += 1
+        scan = LaserScan()
+        scan.ParseFromString(got[1])
+        laser.read(timeout=10)
+        assert len(scan.ranges) == len(laser.ranges) > 100
+        assert scan.frame_id == "robot_6665/laser_0"
+        assert scan.start_angle == np.float32(laser.min_angle)
+        assert max(scan.ranges) <= laser.max_range + 1e-6
+        g = Grid()
+        g.ParseFromString(got[2])
+        assert (g.column_count, len(g.data)) == (grid.width, grid.width * grid.height)
+        assert g.cell_size.x == np.float32(grid.resolution) and g.frame_id == "map"
+        cells = np.frombuffer(g.data, dtype=np.int8).reshape(grid.height, grid.width)
+        assert np.array_equal(cells == 100, grid.cells > 0) and np.array_equal(cells == 0, grid.cells < 0)
 
-            fixed = FrameTransforms()
-            fixed.ParseFromString(got[3])
-            edges = {(t.parent_frame_id, t.child_frame_id) for t in fixed.transforms}
-            assert ("robot_6665/base_link", "robot_6665/laser_0") in edges, edges
+        fixed = FrameTransforms()
+        fixed.ParseFromString(got[3])
+        edges = {(t.parent_frame_id, t.child_frame_id) for t in fixed.transforms}
+        assert ("robot_6665/base_link", "robot_6665/laser_0") in edges, edges
 
-            # The teleop panel's way: advertise a channel, publish a Twist in JSON.
-            c.send(json.dumps({"op": "advertise", "channels": [{
-                "id": 7, "topic": "/robot/6665/position2d/0/cmd_vel", "encoding": "json",
-                "schemaName": "geometry_msgs/msg/Twist"}]}))
-            start = sim.get_pose2d("r0")
-            twist = {"linear": {"x": 0.3, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.0}}
-            c.send(struct.pack("<BI", MESSAGE_DATA, 7) + json.dumps(twist).encode())
-            odometry_moves(pos, 0.2, timeout=10)
-            twist["linear"]["x"] = 0.0
-            c.send(struct.pack("<BI", MESSAGE_DATA, 7) + json.dumps(twist).encode())
-            moved = sim.get_pose2d("r0")
-            assert np.hypot(moved.x - start.x, moved.y - start.y) > 0.2, (start, moved)
-    finally:
-        err = server.stop()
-    assert "left out" not in err, err
+        # The world's still models (walls, furniture) as Foxglove's 3D panel draws them.
+        world = SceneUpdate()
+        world.ParseFromString(got[4])
+        assert world.entities and all(e.frame_id == "map" and e.lines for e in world.entities)
+
+        # The teleop panel's way: advertise a channel, publish a Twist in JSON.
+        c.send(json.dumps({"op": "advertise", "channels": [{
+            "id": 7, "topic": "/robot/6665/position2d/0/cmd_vel", "encoding": "json",
+            "schemaName": "geometry_msgs/msg/Twist"}]}))
+        start = sim.get_pose2d("r0")
+        twist = {"linear": {"x": 0.3, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.0}}
+        c.send(struct.pack("<BI", MESSAGE_DATA, 7) + json.dumps(twist).encode())
+        odometry_moves(pos, 0.2, timeout=10)
+        twist["linear"]["x"] = 0.0
+        c.send(struct.pack("<BI", MESSAGE_DATA, 7) + json.dumps(twist).encode())
+        moved = sim.get_pose2d("r0")
+        assert np.hypot(moved.x - start.x, moved.y - start.y) > 0.2, (start, moved)
+    stack.stop()
+    assert stack.proc.returncode == 0, stack.errors
+    assert not [e for e in stack.errors if "left out" in e], stack.errors
+
+
+def foxglove_messages(path):
+    """(topic, schema name, decoded message or JSON object, log_time) of every message."""
+    factory, out = protobuf_decoder.DecoderFactory(), []
+    with open(path, "rb") as f:
+        for schema, channel, message in mcap_reader.make_reader(f).iter_messages(log_time_order=False):
+            if channel.message_encoding == "json":
+                assert schema.encoding == "jsonschema"
+                out.append((channel.topic, schema.name, json.loads(message.data), message.log_time))
+                continue
+            assert (channel.message_encoding, schema.encoding) == ("protobuf", "protobuf")
+            decoded = factory.decoder_for(channel.message_encoding, schema)(message.data)
+            out.append((channel.topic, schema.name, decoded, message.log_time))
+    return out
+
+
+def test_a_recording_reads_as_foxglove_in_the_ecosystem_s_reader(launch, tmp_path):
+    stack = launch("nav.cfg", ["6665:laser:0", "6665:position2d:0", "6665:map:0", "6665:simulation:0"])
+    robot = stack.client.robot(6665)
+    grid = robot.map(0).get_map()
+    own, live = tmp_path / "run.mcap", tmp_path / "live.mcap"
+    recorders = [stack.record(own), stack.record(live, "--format", "foxglove")]
+    laser = robot.laser(0)
+    for _ in range(15):
+        laser.read(timeout=10)
+    _, live_summary = recorders[1].stop()
+    recorders[0].stop()
+    assert "foxglove.LaserScan" in live_summary, live_summary
+
+    export = stack.run("log", "export", str(own), "--format", "foxglove", "-o", str(tmp_path / "fox.mcap"))
+    assert export.returncode == 0, export.stderr
+    assert "-> foxglove.LaserScan" in export.stderr and "-> JSON" in export.stderr, export.stderr
+    samples = [json.loads(line) for line in stack.run("log", "export", str(own)).stdout.splitlines()]
+
+    for path in (tmp_path / "fox.mcap", live):
+        msgs = foxglove_messages(path)
+        kinds = {(t, ty) for t, ty, _, _ in msgs}
+        assert {("/robot/6665/laser/0", "foxglove.LaserScan"), ("/robot/6665/position2d/0", "foxglove.PoseInFrame"),
+                ("/robot/6665/map/0", "foxglove.Grid"), ("/tf", "foxglove.FrameTransforms"),
+                ("/tf_static", "foxglove.FrameTransforms"),
+                ("/robot/6665/simulation/0/world", "foxglove.SceneUpdate")} <= kinds, kinds
+        g = next(m for _, ty, m, _ in msgs if ty == "foxglove.Grid")
+        cells = np.frombuffer(g.data, dtype=np.int8).reshape(grid.height, grid.width)
+        assert np.array_equal(cells == 100, grid.cells > 0) and np.array_equal(cells == 0, grid.cells < 0)
+        assert g.cell_size.x == pytest.approx(grid.resolution)
+        edges = {(t.parent_frame_id, t.child_frame_id)
+                 for _, ty, m, _ in msgs if ty == "foxglove.FrameTransforms" for t in m.transforms}
+        assert {("robot_6665/odom", "robot_6665/base_link"),
+                ("robot_6665/base_link", "robot_6665/laser_0")} <= edges, edges
+
+    # The export carries the samples' own values: every scan's ranges, stamp for stamp.
+    msgs = foxglove_messages(tmp_path / "fox.mcap")
+    scans = [m for t, ty, m, _ in msgs if (t, ty) == ("/robot/6665/laser/0", "foxglove.LaserScan")]
+    laser_samples = [s for s in samples if s["key"] == "robot/6665/laser/0" and "LaserScan" in s["msg"]]
+    assert len(scans) == len(laser_samples) >= 10
+    for scan, sample in zip(scans, laser_samples):
+        want = sample["msg"]["LaserScan"]
+        assert np.array_equal(np.array(scan.ranges, dtype=np.float32), np.array(want["ranges"], dtype=np.float32))
+        assert scan.start_angle == pytest.approx(want["min_angle"])
+        assert scan.timestamp.seconds + scan.timestamp.nanos * 1e-9 == pytest.approx(sample["stamp"], abs=1e-9)

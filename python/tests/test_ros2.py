@@ -3,35 +3,12 @@ decoded with the ecosystem's own reader (mcap-ros2-support), against what Troupe
 
 import collections
 import json
-import signal
 import subprocess
 
 import mcap.reader as mcap_reader  # mcap-ros2-support, which .ci/run installs
 import mcap_ros2.decoder as ros2_decoder
 import numpy as np
 import pytest
-
-
-def troupe(stack, *args):
-    """An offline command (`log export`) of the binary `stack` runs."""
-    return subprocess.run([stack.bin, *args], capture_output=True, text=True, timeout=120)
-
-
-class Recorder:
-    """`troupe record` against a stack, started once its subscriptions are in place."""
-
-    def __init__(self, stack, path, *flags):
-        self.proc = subprocess.Popen(
-            [stack.bin, "--namespace", stack.namespace, "--connect", stack.endpoint, "record", "-o", str(path),
-             *flags], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        first = self.proc.stdout.readline()
-        assert first.startswith("troupe record:"), (first, self.proc.stderr.read())
-
-    def stop(self):
-        self.proc.send_signal(signal.SIGINT)
-        out, err = self.proc.communicate(timeout=60)
-        assert self.proc.returncode == 0, (out, err)
-        return out, err
 
 
 def ros2_messages(path):
@@ -59,7 +36,7 @@ def test_a_recording_reads_as_ros2_in_the_ecosystem_s_reader(launch, tmp_path):
 
     # Both at once: Troupe's own format (exported after) and ROS 2 live.
     own, live = tmp_path / "run.mcap", tmp_path / "live.mcap"
-    recorders = [Recorder(stack, own), Recorder(stack, live, "--format", "ros2")]
+    recorders = [stack.record(own), stack.record(live, "--format", "ros2")]
     laser = robot.laser(0)
     for _ in range(15):
         laser.read(timeout=10)
@@ -67,11 +44,11 @@ def test_a_recording_reads_as_ros2_in_the_ecosystem_s_reader(launch, tmp_path):
     recorders[0].stop()
     assert "sensor_msgs/msg/LaserScan" in live_summary, live_summary
 
-    export = troupe(stack, "log", "export", str(own), "--format", "ros2", "-o", str(tmp_path / "bag.mcap"))
+    export = stack.run("log", "export", str(own), "--format", "ros2", "-o", str(tmp_path / "bag.mcap"))
     assert export.returncode == 0, export.stderr
     assert "-> sensor_msgs/msg/LaserScan" in export.stderr and "-> JSON" in export.stderr, export.stderr
     samples = [json.loads(line) for line in
-               troupe(stack, "log", "export", str(own)).stdout.splitlines()]
+               stack.run("log", "export", str(own)).stdout.splitlines()]
 
     for path in (tmp_path / "bag.mcap", live):
         msgs = ros2_messages(path)
@@ -156,7 +133,7 @@ def test_a_ros2_bag_written_by_ros_tools_plays_into_amcl(launch, tmp_path, odome
     robot = live.client.robot(6665)
     pos, sim = robot.position2d(0), robot.simulation(0)
     start = sim.get_pose2d("r0")
-    recorder = Recorder(live, tmp_path / "run.mcap", "--format", "ros2",
+    recorder = live.record(tmp_path / "run.mcap", "--format", "ros2",
                         "robot/6665/laser/0", "robot/6665/position2d/0", "sim/clock")
     pos.set_speed(0.3, 0.12)
     odometry_moves(pos, 1.2, timeout=20)

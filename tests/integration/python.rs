@@ -3,9 +3,9 @@
 //! stacks they launch with this build's `troupe`.
 //!
 //! The environment is `target/python-env` (made once; pip installs maturin,
-//! pytest, numpy, mcap-ros2-support, websockets and foxglove-schemas-protobuf
-//! from PyPI), the package is built by `maturin develop` on
-//! the workspace's own `target/` in the dev profile, so it reuses what
+//! pytest, numpy, mcap-ros2-support, mcap-protobuf-support, websockets and
+//! foxglove-schemas-protobuf from PyPI), the package is built by `maturin
+//! develop` on the workspace's own `target/` in the dev profile, so it reuses what
 //! `cargo test` compiled. Where no `python3` answers the test says so and
 //! passes; under CI (`CI=true`) that is a failure.
 
@@ -48,7 +48,7 @@ fn environment(python3: &str) -> PathBuf {
         );
     }
     run(
-        "pip install maturin pytest numpy mcap-ros2-support websockets foxglove-schemas-protobuf",
+        "pip install maturin pytest numpy mcap-ros2-support mcap-protobuf-support websockets foxglove-schemas-protobuf",
         Command::new(&python).args([
             "-m",
             "pip",
@@ -59,6 +59,7 @@ fn environment(python3: &str) -> PathBuf {
             "pytest",
             "numpy",
             "mcap-ros2-support",
+            "mcap-protobuf-support",
             "websockets",
             "foxglove-schemas-protobuf",
         ]),

@@ -9,11 +9,12 @@ use zenoh::Session;
 
 /// The answers (payloads as they travelled) of the requests a Player client
 /// makes once of a device of `dev`'s interface: a map's info and whole grid,
-/// a sensor's geometry (and a ranger's configuration); the latest sample of
+/// a sensor's geometry (and a ranger's configuration), a simulator's world
+/// (a Troupe extension, for viewers); the latest sample of
 /// a device that publishes on change. A device that does not answer is left
 /// as it is.
 pub fn setup_answers(session: &Session, dev: &Device) -> Vec<Vec<u8>> {
-    use troupe_msgs::{ir, laser, map, ranger, sonar, Interface, Request};
+    use troupe_msgs::{ir, laser, map, ranger, simulation, sonar, Interface, Request};
     use zenoh::Wait;
     fn ask<R: Request>(session: &Session, dev: &Device, req: &R) -> Option<Vec<u8>> {
         let key = keys::req(dev, R::NAME);
@@ -47,6 +48,8 @@ pub fn setup_answers(session: &Session, dev: &Device) -> Vec<Vec<u8>> {
         ],
         Interface::Sonar => vec![ask(session, dev, &sonar::GetGeom)],
         Interface::Ir => vec![ask(session, dev, &ir::GetGeom)],
+        // What a viewer draws: every model's body, colour and place.
+        Interface::Simulation => vec![ask(session, dev, &simulation::GetWorld)],
         // Devices that publish on change: their latest sample, as the
         // bridge gives a client that subscribes (a localizer's estimate
         // while the robot stands still).

@@ -2,22 +2,14 @@
 //! protocol, served by the official Foxglove SDK.
 //!
 //! Every device of the namespace is a channel named by its key
-//! (`/robot/6665/laser/0`), with one of Foxglove's schemas where one fits:
-//!
-//! ```text
-//! laser scan                 foxglove.LaserScan       in robot_6665/laser_0
-//! position2d data            foxglove.PoseInFrame     in robot_6665/odom, and /tf odom -> base_link
-//! localize hypotheses        foxglove.PoseInFrame     in map, and /tf map -> odom
-//! localize particles         foxglove.PosesInFrame    /robot/6665/localize/0/particles
-//! a map (asked as it comes)  foxglove.Grid            in map
-//! a sensor's geometry        foxglove.FrameTransforms /tf_static: base_link -> the sensor
-//! anything else              JSON                     /robot/6665/ranger/0/ranges: the key and the kind
-//! ```
-//!
-//! Frames are those of `--format ros2` recordings (troupe-ros2), so a live
-//! view and a recording look alike. What publishes rarely (a map, the fixed
-//! transforms, a localizer's estimate) is given again to each client that
-//! subscribes, as a latched topic. The server's time is the simulation's.
+//! (`/robot/6665/laser/0`), with one of Foxglove's schemas where one fits
+//! (troupe-foxglove-msgs says which: LaserScan, PoseInFrame, PosesInFrame,
+//! Grid, FrameTransforms on `/tf` and `/tf_static`, SceneUpdate for a
+//! simulator's world), JSON otherwise: what `--format foxglove` recordings
+//! hold, so a file plays as the live connection looked. What publishes
+//! rarely (a map, the fixed transforms, a localizer's estimate, the world's
+//! still models) is given again to each client that subscribes, as a
+//! latched topic. The server's time is the simulation's.
 //! Devices that go are unadvertised. A client may publish (JSON) a velocity
 //! on `/robot/6665/position2d/0/cmd_vel` (`{"linear": {"x": …}, "angular":
 //! {"z": …}}`, as Foxglove's teleop panel sends) or a goal on
@@ -31,21 +23,15 @@ use std::sync::{Arc, Mutex};
 
 use anyhow::Context as _;
 use clap::Args;
-use foxglove::schemas::{
-    packed_element_field::NumericType, FrameTransform, FrameTransforms, Grid, LaserScan,
-    PackedElementField, Pose, PoseInFrame, PosesInFrame, Quaternion, Timestamp, Vector2, Vector3,
-};
 use foxglove::websocket::{Capability, Client, ClientChannel, ServerListener};
-use foxglove::{Context, Encode, PartialMetadata, RawChannel, Schema};
+use foxglove::{Context, PartialMetadata, RawChannel};
+use troupe_foxglove_msgs::{Message, Translator};
 use troupe_msgs::{
-    codec, decode_any, keys, localize, map, planner, position2d, AnyMsg, Device, Interface, Pose2d,
-    Pose3d,
+    codec, decode_any, keys, planner, position2d, AnyMsg, Device, Interface, Pose2d,
 };
 use troupe_node::zenoh::{sample::SampleKind, Session, Wait};
 use troupe_node::{Mode, ZenohArgs};
-use troupe_ros2::{
-    device_frame, json_schema, json_topic, odom_in_map, robot_frame, stamp_ns, MAP_FRAME,
-};
+use troupe_ros2::stamp_ns;
 
 /// Flags of `troupe foxglove`.
 #[derive(Debug, Args)]
@@ -58,11 +44,6 @@ pub struct FoxgloveArgs {
     #[arg(long, default_value_t = 8765)]
     pub port: u16,
 }
-
-/// The topic of moving transforms.
-pub const TF: &str = "/tf";
-/// The topic of fixed transforms (sensors on their robot), latched.
-pub const TF_STATIC: &str = "/tf_static";
 
 /// The newest message of each topic that publishes rarely (a map, the fixed
 /// transforms, a localizer's estimate), given again to each client that
@@ -163,69 +144,14 @@ fn println_out(line: &str) {
     println!("{line}");
 }
 
-fn stamp(ns: u64) -> Timestamp {
-    Timestamp::new(
-        u32::try_from(ns / 1_000_000_000).unwrap_or(u32::MAX),
-        (ns % 1_000_000_000) as u32,
-    )
-}
-
-fn quaternion(roll: f64, pitch: f64, yaw: f64) -> Quaternion {
-    let q = troupe_ros2::msg::Quaternion::from_rpy(roll, pitch, yaw);
-    Quaternion {
-        x: q.x,
-        y: q.y,
-        z: q.z,
-        w: q.w,
-    }
-}
-
-fn pose2(p: Pose2d) -> Pose {
-    Pose {
-        position: Some(Vector3 {
-            x: p.x,
-            y: p.y,
-            z: 0.0,
-        }),
-        orientation: Some(quaternion(0.0, 0.0, p.yaw)),
-    }
-}
-
-fn transform(ns: u64, parent: String, child: String, p: &Pose3d) -> FrameTransform {
-    FrameTransform {
-        timestamp: Some(stamp(ns)),
-        parent_frame_id: parent,
-        child_frame_id: child,
-        translation: Some(Vector3 {
-            x: p.x,
-            y: p.y,
-            z: p.z,
-        }),
-        rotation: Some(quaternion(p.roll, p.pitch, p.yaw)),
-    }
-}
-
-fn flat(p: Pose2d) -> Pose3d {
-    Pose3d {
-        x: p.x,
-        y: p.y,
-        yaw: p.yaw,
-        ..Pose3d::default()
-    }
-}
-
 /// The channels and what later samples need to know.
 struct Live {
     ctx: Arc<Context>,
     session: Session,
     tx: SyncSender<Heard>,
     channels: HashMap<String, Arc<RawChannel>>,
-    odom: HashMap<u32, Pose2d>,
-    map_info: HashMap<Device, map::Info>,
-    /// Every sensor's place on its robot, by the sensor's frame.
-    fixed: HashMap<String, FrameTransform>,
+    translator: Translator,
     latched: Latched,
-    buf: Vec<u8>,
 }
 
 impl Live {
@@ -235,11 +161,8 @@ impl Live {
             session,
             tx,
             channels: HashMap::new(),
-            odom: HashMap::new(),
-            map_info: HashMap::new(),
-            fixed: HashMap::new(),
+            translator: Translator::new(),
             latched,
-            buf: Vec::new(),
         }
     }
 
@@ -258,14 +181,17 @@ impl Live {
                         server.broadcast_time(ns);
                         continue;
                     }
-                    self.sample(&key, ns, &s.msg);
+                    for m in self.translator.translate(&key, ns, &s.msg) {
+                        self.log(m, ns);
+                    }
                 }
             }
         }
     }
 
     /// What a Player client asks once (a map's grid, a sensor's
-    /// geometry), asked off this thread; the answers come back as samples.
+    /// geometry, a simulator's world), asked off this thread; the answers
+    /// come back as samples.
     fn ask(&self, dev: Device) {
         let (session, tx) = (self.session.clone(), self.tx.clone());
         std::thread::spawn(move || {
@@ -290,191 +216,37 @@ impl Live {
             !gone(t)
         });
         lock(&self.latched).retain(|t, _| !gone(t));
-        self.map_info.remove(dev);
+        self.translator.forget(dev);
     }
 
-    /// Logs `msg` and keeps it for the clients that subscribe later.
-    fn log_latched<T: Encode>(&mut self, topic: &str, msg: &T, ns: u64) {
-        self.log(topic, msg, ns);
-        if let Some(ch) = self.channels.get(topic) {
-            lock(&self.latched).insert(topic.to_owned(), (ch.clone(), self.buf.clone(), ns));
-        }
-    }
-
-    /// The channel of `topic`, made (and advertised) with its first
-    /// message, of the encoding and schema `kind` gives.
-    fn channel(
-        &mut self,
-        topic: &str,
-        kind: impl FnOnce() -> (String, Option<Schema>),
-    ) -> Option<Arc<RawChannel>> {
-        if let Some(c) = self.channels.get(topic) {
-            return Some(c.clone());
-        }
-        let (encoding, schema) = kind();
-        let built = self
-            .ctx
-            .channel_builder(topic)
-            .message_encoding(encoding)
-            .schema(schema)
-            .build_raw();
-        match built {
-            Ok(c) => {
-                self.channels.insert(topic.to_owned(), c.clone());
-                Some(c)
-            }
-            Err(e) => {
-                tracing::warn!("{topic}: {e}");
-                None
-            }
-        }
-    }
-
-    fn log<T: Encode>(&mut self, topic: &str, msg: &T, ns: u64) {
-        let Some(ch) = self.channel(topic, || (T::get_message_encoding(), T::get_schema())) else {
-            return;
-        };
-        self.buf.clear();
-        if msg.encode(&mut self.buf).is_ok() {
-            ch.log_with_meta(&self.buf, PartialMetadata { log_time: Some(ns) });
-        }
-    }
-
-    fn json(&mut self, topic: &str, tag: &'static str, msg: &AnyMsg, ns: u64) {
-        let kind = || {
-            let schema = Schema::new(tag, "jsonschema", json_schema(tag).into_bytes());
-            ("json".to_owned(), Some(schema))
-        };
-        let Some(ch) = self.channel(topic, kind) else {
-            return;
-        };
-        self.buf.clear();
-        if msg
-            .serialize_body(&mut serde_json::Serializer::new(&mut self.buf))
-            .is_ok()
-        {
-            ch.log_with_meta(&self.buf, PartialMetadata { log_time: Some(ns) });
-        }
-    }
-
-    fn tf(&mut self, ns: u64, transforms: Vec<FrameTransform>) {
-        self.log(TF, &FrameTransforms { transforms }, ns);
-    }
-
-    /// A sensor's place on its robot: the whole set of them, latched.
-    fn fixed(&mut self, ns: u64, t: FrameTransform) {
-        self.fixed.insert(t.child_frame_id.clone(), t);
-        let mut transforms: Vec<FrameTransform> = self.fixed.values().cloned().collect();
-        transforms.sort_by(|a, b| a.child_frame_id.cmp(&b.child_frame_id));
-        self.log_latched(TF_STATIC, &FrameTransforms { transforms }, ns);
-    }
-
-    fn sample(&mut self, key: &str, ns: u64, msg: &AnyMsg) {
-        let Ok(dev) = keys::parse_data(key) else {
-            return;
-        };
-        let topic = format!("/{key}");
-        let base = robot_frame(dev.robot, "base_link");
-        match msg {
-            AnyMsg::LaserScan(s)
-            | AnyMsg::LaserScanPose(troupe_msgs::laser::ScanPose { scan: s, .. }) => {
-                let m = LaserScan {
-                    timestamp: Some(stamp(ns)),
-                    frame_id: device_frame(&dev),
-                    pose: Some(pose2(Pose2d::default())),
-                    start_angle: f64::from(s.min_angle),
-                    end_angle: f64::from(s.max_angle),
-                    ranges: s.ranges.iter().map(|&r| f64::from(r)).collect(),
-                    intensities: s.intensity.iter().map(|&i| f64::from(i)).collect(),
-                };
-                self.log(&topic, &m, ns);
-            }
-            AnyMsg::Position2dData(position2d::Data { pose, .. }) => {
-                let odom = robot_frame(dev.robot, "odom");
-                let m = PoseInFrame {
-                    timestamp: Some(stamp(ns)),
-                    frame_id: odom.clone(),
-                    pose: Some(pose2(*pose)),
-                };
-                self.log(&topic, &m, ns);
-                if dev.index == 0 {
-                    self.odom.insert(dev.robot, *pose);
-                    self.tf(ns, vec![transform(ns, odom, base, &flat(*pose))]);
+    /// Logs `m` on its channel (made, and advertised, with its first
+    /// message), and keeps it for the clients that subscribe later if it
+    /// stands until the next.
+    fn log(&mut self, m: Message, ns: u64) {
+        let ch = match self.channels.get(&m.topic) {
+            Some(c) => c.clone(),
+            None => {
+                let built = self
+                    .ctx
+                    .channel_builder(&m.topic)
+                    .message_encoding(m.kind.encoding())
+                    .schema(m.kind.schema())
+                    .build_raw();
+                match built {
+                    Ok(c) => {
+                        self.channels.insert(m.topic.clone(), c.clone());
+                        c
+                    }
+                    Err(e) => {
+                        tracing::warn!("{}: {e}", m.topic);
+                        return;
+                    }
                 }
             }
-            AnyMsg::LocalizeHypoths(hs) => {
-                let Some(best) = hs.hypoths.first() else {
-                    return;
-                };
-                let m = PoseInFrame {
-                    timestamp: Some(stamp(ns)),
-                    frame_id: MAP_FRAME.to_owned(),
-                    pose: Some(pose2(best.mean)),
-                };
-                self.log_latched(&topic, &m, ns);
-                if let Some(&odom) = self.odom.get(&dev.robot) {
-                    let t = transform(
-                        ns,
-                        MAP_FRAME.to_owned(),
-                        robot_frame(dev.robot, "odom"),
-                        &flat(odom_in_map(best.mean, odom)),
-                    );
-                    self.tf(ns, vec![t]);
-                }
-            }
-            AnyMsg::LocalizeParticles(localize::Particles { particles, .. }) => {
-                let m = PosesInFrame {
-                    timestamp: Some(stamp(ns)),
-                    frame_id: MAP_FRAME.to_owned(),
-                    poses: particles.iter().map(|p| pose2(p.pose)).collect(),
-                };
-                self.log(&format!("{topic}/particles"), &m, ns);
-            }
-            AnyMsg::MapInfo(i) => {
-                self.map_info.insert(dev, *i);
-            }
-            AnyMsg::MapData(d) => {
-                let Some(info) = self.map_info.get(&dev).copied() else {
-                    return;
-                };
-                if d.col != 0 || d.row != 0 || d.width != info.width || d.height != info.height {
-                    return;
-                }
-                // ROS's occupancy values, which Foxglove's map color mode reads.
-                let cells = d.cells.iter().map(|&c| match c.signum() {
-                    -1 => 0u8,
-                    1 => 100,
-                    _ => 0xff,
-                });
-                let m = Grid {
-                    timestamp: Some(stamp(ns)),
-                    frame_id: MAP_FRAME.to_owned(),
-                    pose: Some(pose2(info.origin)),
-                    column_count: info.width,
-                    cell_size: Some(Vector2 {
-                        x: f64::from(info.resolution),
-                        y: f64::from(info.resolution),
-                    }),
-                    row_stride: info.width,
-                    cell_stride: 1,
-                    fields: vec![PackedElementField {
-                        name: "occupancy".into(),
-                        offset: 0,
-                        r#type: NumericType::Int8 as i32,
-                    }],
-                    data: cells.collect::<Vec<u8>>().into(),
-                };
-                self.log_latched(&topic, &m, ns);
-            }
-            AnyMsg::LaserGeom(troupe_msgs::laser::Geom { pose, .. })
-            | AnyMsg::RangerGeom(troupe_msgs::ranger::Geom { pose, .. }) => {
-                let t = transform(ns, base, device_frame(&dev), pose);
-                self.fixed(ns, t);
-            }
-            other => {
-                let tag = other.schema();
-                self.json(&json_topic(&topic, tag), tag, other, ns);
-            }
+        };
+        ch.log_with_meta(&m.data, PartialMetadata { log_time: Some(ns) });
+        if m.latched {
+            lock(&self.latched).insert(m.topic, (ch, m.data, ns));
         }
     }
 }
@@ -630,25 +402,5 @@ mod tests {
         assert!(command_of("/robot/6665/position2d/0/cmd_vel", "json", b"{")
             .unwrap_err()
             .contains("not JSON"));
-    }
-
-    #[test]
-    fn map_to_odom_puts_odometry_s_origin_in_the_map() {
-        let in_map = Pose2d {
-            x: 2.0,
-            y: 1.0,
-            yaw: 1.0,
-        };
-        let in_odom = Pose2d {
-            x: 0.5,
-            y: -0.2,
-            yaw: 0.3,
-        };
-        let o = odom_in_map(in_map, in_odom);
-        // The odom origin composed with the odometric pose is the map pose.
-        let (s, c) = o.yaw.sin_cos();
-        let x = o.x + c * in_odom.x - s * in_odom.y;
-        let y = o.y + s * in_odom.x + c * in_odom.y;
-        assert!((x - 2.0).abs() < 1e-12 && (y - 1.0).abs() < 1e-12);
     }
 }

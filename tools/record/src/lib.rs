@@ -23,6 +23,7 @@ use troupe_msgs::{codec, decode_any, keys};
 use troupe_node::zenoh::{sample::SampleKind, Wait};
 use troupe_node::{Mode, ZenohArgs};
 
+pub mod foxglove;
 pub mod ros2;
 
 /// The message encoding of recorded samples.
@@ -56,7 +57,9 @@ pub struct RecordArgs {
     pub queue: usize,
     /// `troupe`: every sample byte for byte (`troupe play` replays it);
     /// `ros2`: ROS 2 messages (CDR) that ros2 bag, rosbags, PlotJuggler and
-    /// Foxglove read (`troupe log export --format ros2` converts later).
+    /// Foxglove read; `foxglove`: Foxglove's own schemas (protobuf), as
+    /// `troupe foxglove` shows them live (`troupe log export` converts
+    /// later).
     #[arg(long, value_enum, default_value_t = RecordFormat::Troupe)]
     pub format: RecordFormat,
 }
@@ -68,6 +71,8 @@ pub enum RecordFormat {
     Troupe,
     /// ROS 2 messages.
     Ros2,
+    /// Foxglove's messages.
+    Foxglove,
 }
 
 /// Chunk compression.
@@ -120,11 +125,12 @@ pub enum LogCmd {
         /// An MCAP file written by `troupe record`.
         file: PathBuf,
         /// `json`: one object per message; `player`: Player's text log
-        /// format; `ros2`: MCAP of ROS 2 messages.
+        /// format; `ros2`: MCAP of ROS 2 messages; `foxglove`: MCAP of
+        /// Foxglove's messages.
         #[arg(long, value_enum, default_value_t = Format::Json)]
         format: Format,
-        /// The file to write (default: standard output; `ros2` is MCAP and
-        /// needs one).
+        /// The file to write (default: standard output; `ros2` and
+        /// `foxglove` are MCAP and need one).
         #[arg(short = 'o', long, value_name = "FILE")]
         output: Option<PathBuf>,
     },
@@ -139,6 +145,61 @@ pub enum Format {
     Player,
     /// MCAP of ROS 2 messages (LaserScan, Odometry, TF…), as rosbag2 writes.
     Ros2,
+    /// MCAP of Foxglove's messages (LaserScan, Grid, SceneUpdate…), as the
+    /// live server sends them.
+    Foxglove,
+}
+
+/// Samples written as another ecosystem's messages.
+enum Converter {
+    Ros2(ros2::Ros2),
+    Foxglove(foxglove::Foxglove),
+}
+
+impl Converter {
+    fn ros2() -> Converter {
+        Converter::Ros2(ros2::Ros2::new())
+    }
+
+    fn foxglove() -> Converter {
+        Converter::Foxglove(foxglove::Foxglove::new())
+    }
+
+    fn profile(&self) -> &'static str {
+        match self {
+            Converter::Ros2(_) => ros2::PROFILE,
+            Converter::Foxglove(_) => foxglove::PROFILE,
+        }
+    }
+
+    /// "ROS 2", "Foxglove".
+    fn name(&self) -> &'static str {
+        match self {
+            Converter::Ros2(_) => "ROS 2",
+            Converter::Foxglove(_) => "Foxglove",
+        }
+    }
+
+    fn write(&mut self, f: &mut Files, key: &str, payload: &[u8], at: u64) -> anyhow::Result<()> {
+        match self {
+            Converter::Ros2(w) => w.write(f, key, payload, at),
+            Converter::Foxglove(w) => w.write(f, key, payload, at),
+        }
+    }
+
+    fn summary(&self) -> String {
+        match self {
+            Converter::Ros2(w) => w.summary(),
+            Converter::Foxglove(w) => w.summary(),
+        }
+    }
+
+    fn json_count(&self) -> u64 {
+        match self {
+            Converter::Ros2(w) => w.json_count(),
+            Converter::Foxglove(w) => w.json_count(),
+        }
+    }
 }
 
 fn now_ns() -> u64 {
@@ -441,9 +502,13 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     )?;
 
     let mut files = Files::new(a.output.clone(), split, a.compress);
-    let mut as_ros2 = (a.format == RecordFormat::Ros2).then(ros2::Ros2::new);
-    if as_ros2.is_some() {
-        files = files.with_profile(ros2::PROFILE);
+    let mut converter = match a.format {
+        RecordFormat::Troupe => None,
+        RecordFormat::Ros2 => Some(Converter::ros2()),
+        RecordFormat::Foxglove => Some(Converter::foxglove()),
+    };
+    if let Some(c) = &converter {
+        files = files.with_profile(c.profile());
     }
     files.open(now_ns())?;
     let split_bytes = a.split_size.map(|mb| (mb * 1e6) as u64);
@@ -466,12 +531,13 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
                     continue;
                 }
             }
-            let r = match (&h, as_ros2.as_mut()) {
+            let r = match (&h, converter.as_mut()) {
                 (Heard::Sample { key, payload, at }, Some(w)) => {
                     bytes += payload.len() as u64;
                     w.write(&mut files, key, payload, *at)
                 }
-                // ROS 2 has no form for a device's coming and going.
+                // Neither ROS 2 nor Foxglove has a form for a device's
+                // coming and going.
                 (Heard::Token { .. }, Some(_)) => continue,
                 (Heard::Sample { key, payload, at }, None) => {
                     let (schema, stamp) = codec::split(payload)
@@ -511,8 +577,8 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             return Err(e);
         }
         files.close()?;
-        if let Some(w) = as_ros2 {
-            eprint!("troupe record: as ROS 2 messages:\n{}", w.summary());
+        if let Some(c) = converter {
+            eprint!("troupe record: as {} messages:\n{}", c.name(), c.summary());
         }
         Ok((files, count, bytes))
     });
@@ -919,9 +985,11 @@ pub fn log(cmd: LogCmd) -> anyhow::Result<()> {
         } => {
             ensure_mcap(&file)?;
             match (format, output) {
-                (Format::Ros2, Some(out)) => export_ros2(&file, &out),
-                (Format::Ros2, None) => anyhow::bail!(
-                    "--format ros2 writes MCAP, not text: name the file with -o OUT.mcap"
+                (Format::Ros2, Some(out)) => export_as(&file, &out, Converter::ros2()),
+                (Format::Foxglove, Some(out)) => export_as(&file, &out, Converter::foxglove()),
+                (Format::Ros2 | Format::Foxglove, None) => anyhow::bail!(
+                    "--format {} writes MCAP, not text: name the file with -o OUT.mcap",
+                    format!("{format:?}").to_lowercase()
                 ),
                 (_, Some(out)) => {
                     let f = std::fs::File::create(&out)
@@ -1088,7 +1156,7 @@ fn export(path: &Path, format: Format, out: impl std::io::Write) -> anyhow::Resu
                 });
                 writeln!(out, "{line}")?;
             }
-            Format::Ros2 => unreachable!("ROS 2 is exported by export_ros2"),
+            Format::Ros2 | Format::Foxglove => unreachable!("MCAP is exported by export_as"),
             Format::Player => {
                 let line = keys::parse_data(m.topic).ok().and_then(|d| {
                     troupe_log::text::line(s.stamp, d.robot, d.interface, d.index, &s.msg)
@@ -1110,12 +1178,12 @@ fn export(path: &Path, format: Format, out: impl std::io::Write) -> anyhow::Resu
     Ok(())
 }
 
-/// `troupe log export --format ros2`: the recording's samples as ROS 2
-/// messages in `out`, and a summary of what went where on standard error.
-fn export_ros2(path: &Path, out: &Path) -> anyhow::Result<()> {
-    let mut files = Files::new(out.to_owned(), false, Compress::None).with_profile(ros2::PROFILE);
+/// `troupe log export --format ros2|foxglove`: the recording's samples as
+/// ROS 2 or Foxglove messages in `out`, and a summary of what went where on
+/// standard error.
+fn export_as(path: &Path, out: &Path, mut w: Converter) -> anyhow::Result<()> {
+    let mut files = Files::new(out.to_owned(), false, Compress::None).with_profile(w.profile());
     files.open(0)?;
-    let mut w = ros2::Ros2::new();
     let (mut samples, mut events) = (0u64, 0u64);
     each_message(path, |m| {
         if m.encoding == ENCODING {
@@ -1128,17 +1196,21 @@ fn export_ros2(path: &Path, out: &Path) -> anyhow::Result<()> {
     })?;
     files.close()?;
     eprint!(
-        "troupe log export: {samples} samples of {} as ROS 2 messages in {}{}:\n{}",
+        "troupe log export: {samples} samples of {} as {} messages in {}{}:\n{}",
         path.display(),
+        w.name(),
         out.display(),
         match w.json_count() {
             0 => String::new(),
-            n => format!(" ({n} with no ROS 2 form, as JSON)"),
+            n => format!(" ({n} with no {} form, as JSON)", w.name()),
         },
         w.summary()
     );
     if events > 0 {
-        eprintln!("  ({events} liveliness events: ROS 2 has no form for them, left out)");
+        eprintln!(
+            "  ({events} liveliness events: {} has no form for them, left out)",
+            w.name()
+        );
     }
     Ok(())
 }

@@ -96,11 +96,7 @@ impl Ros2 {
     /// What went where, a line per sample kind and what it became:
     /// `laser/scan@1 -> sensor_msgs/msg/LaserScan  1200`.
     pub fn summary(&self) -> String {
-        let mut s = String::new();
-        for ((tag, to), n) in &self.counts {
-            s.push_str(&format!("  {tag:<28} -> {to:<44} {n:>8}\n"));
-        }
-        s
+        lines(self.counts.iter().map(|(&(tag, to), &n)| (tag, to, n)))
     }
 
     /// Messages written as JSON, for want of a ROS 2 form.
@@ -111,4 +107,13 @@ impl Ros2 {
             .map(|(_, n)| n)
             .sum()
     }
+}
+
+/// A summary's lines: `  laser/scan@1 -> sensor_msgs/msg/LaserScan  1200`.
+pub(crate) fn lines<'a>(counts: impl Iterator<Item = (&'a str, &'a str, u64)>) -> String {
+    let mut s = String::new();
+    for (tag, to, n) in counts {
+        s.push_str(&format!("  {tag:<28} -> {to:<44} {n:>8}\n"));
+    }
+    s
 }
