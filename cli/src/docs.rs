@@ -373,6 +373,14 @@ const RUN_BY: &[(&str, &str)] = &[
         "test_a_recording_reads_as_foxglove_in_the_ecosystem_s_reader",
     ),
     (
+        "troupe record --rosbag2",
+        "test_a_recording_reads_as_ros2_in_the_ecosystem_s_reader",
+    ),
+    (
+        "troupe log export run.mcap --rosbag2",
+        "test_a_recording_reads_as_ros2_in_the_ecosystem_s_reader",
+    ),
+    (
         "troupe record --format ros2",
         "test_a_recording_reads_as_ros2_in_the_ecosystem_s_reader",
     ),

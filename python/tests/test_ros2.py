@@ -9,6 +9,10 @@ import mcap.reader as mcap_reader  # mcap-ros2-support, which .ci/run installs
 import mcap_ros2.decoder as ros2_decoder
 import numpy as np
 import pytest
+from rosbags.rosbag2 import Reader as Rosbag2Reader  # rosbags, which .ci/run installs
+from rosbags.typesys import Stores, get_typestore
+
+TYPESTORE = get_typestore(Stores.ROS2_HUMBLE)
 
 
 def ros2_messages(path):
@@ -35,11 +39,12 @@ def test_a_recording_reads_as_ros2_in_the_ecosystem_s_reader(launch, tmp_path):
     grid = robot.map(0).get_map()
 
     # Both at once: Troupe's own format (exported after) and ROS 2 live.
-    own, live = tmp_path / "run.mcap", tmp_path / "live.mcap"
-    recorders = [stack.record(own), stack.record(live, "--format", "ros2")]
+    own, live, live_bag = tmp_path / "run.mcap", tmp_path / "live.mcap", tmp_path / "live_bag"
+    recorders = [stack.record(own), stack.record(live, "--format", "ros2"), stack.record(live_bag, "--rosbag2")]
     laser = robot.laser(0)
     for _ in range(15):
         laser.read(timeout=10)
+    recorders[2].stop()
     _, live_summary = recorders[1].stop()
     recorders[0].stop()
     assert "sensor_msgs/msg/LaserScan" in live_summary, live_summary
@@ -98,6 +103,35 @@ def test_a_recording_reads_as_ros2_in_the_ecosystem_s_reader(launch, tmp_path):
         yaw = np.arctan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
         assert (odom.pose.pose.position.x, odom.pose.pose.position.y) == pytest.approx((pose["x"], pose["y"]), abs=1e-9)
         assert abs(np.angle(np.exp(1j * (yaw - pose["yaw"])))) < 1e-9
+
+    # As a rosbag2 directory (metadata.yaml beside the MCAP), read by rosbags, a reader that
+    # starts from the metadata, as `ros2 bag info` does, and takes CDR only.
+    export = stack.run("log", "export", str(own), "--rosbag2", "-o", str(tmp_path / "bag"))
+    assert export.returncode == 0, export.stderr
+    for bag in (tmp_path / "bag", live_bag):
+        with Rosbag2Reader(bag) as r:
+            types = {c.topic: c.msgtype for c in r.connections}
+            assert types["/robot_6665/laser_0"] == "sensor_msgs/msg/LaserScan", types
+            assert types["/robot_6665/simulation_0/poses"] == "std_msgs/msg/String", types
+            counted = collections.Counter()
+            bag_scans, poses = [], []
+            for c, _, raw in r.messages():
+                counted[c.topic] += 1
+                m = TYPESTORE.deserialize_cdr(raw, c.msgtype)
+                if c.topic == "/robot_6665/laser_0":
+                    bag_scans.append(m)
+                elif c.topic == "/robot_6665/simulation_0/poses":
+                    poses.append(json.loads(m.data))
+            assert counted == {c.topic: c.msgcount for c in r.connections}
+            assert r.message_count == sum(counted.values())
+            assert len(bag_scans) >= 10 and poses and "poses" in poses[0], poses[:1]
+    # The export's scans are the samples'.
+    with Rosbag2Reader(tmp_path / "bag") as r:
+        laser = [c for c in r.connections if c.topic == "/robot_6665/laser_0"]
+        bag_scans = [TYPESTORE.deserialize_cdr(raw, c.msgtype) for c, _, raw in r.messages(connections=laser)]
+    assert len(bag_scans) == len(laser_samples)
+    for scan, sample in zip(bag_scans, laser_samples):
+        assert np.array_equal(scan.ranges, np.array(sample["msg"]["LaserScan"]["ranges"], dtype=np.float32))
 
 
 # What a ROS 2 tool writes: the types' definitions as ROS 2 ships them (comments left out).

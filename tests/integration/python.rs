@@ -3,7 +3,7 @@
 //! stacks they launch with this build's `troupe`.
 //!
 //! The environment is `target/python-env` (made once; pip installs maturin,
-//! pytest, numpy, mcap-ros2-support, mcap-protobuf-support, websockets and
+//! pytest, numpy, mcap-ros2-support, mcap-protobuf-support, rosbags, websockets and
 //! foxglove-schemas-protobuf from PyPI), the package is built by `maturin
 //! develop` on the workspace's own `target/` in the dev profile, so it reuses what
 //! `cargo test` compiled. Where no `python3` answers the test says so and
@@ -48,7 +48,7 @@ fn environment(python3: &str) -> PathBuf {
         );
     }
     run(
-        "pip install maturin pytest numpy mcap-ros2-support mcap-protobuf-support websockets foxglove-schemas-protobuf",
+        "pip install maturin pytest numpy mcap-ros2-support mcap-protobuf-support rosbags websockets foxglove-schemas-protobuf",
         Command::new(&python).args([
             "-m",
             "pip",
@@ -60,6 +60,7 @@ fn environment(python3: &str) -> PathBuf {
             "numpy",
             "mcap-ros2-support",
             "mcap-protobuf-support",
+            "rosbags",
             "websockets",
             "foxglove-schemas-protobuf",
         ]),

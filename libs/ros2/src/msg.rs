@@ -283,6 +283,12 @@ pub struct Clock {
     pub clock: Time,
 }
 
+/// `std_msgs/msg/String`.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Text {
+    pub data: String,
+}
+
 /// The ROS 2 message types Troupe writes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Type {
@@ -304,6 +310,9 @@ pub enum Type {
     TfMessage,
     /// `rosgraph_msgs/msg/Clock`.
     Clock,
+    /// `std_msgs/msg/String`: what has no ROS 2 form, as its JSON, in a
+    /// rosbag2 directory (whose readers take CDR only).
+    String,
 }
 
 // The definitions, one per message, without the comments of ROS's files.
@@ -323,7 +332,7 @@ const TRANSFORM_STAMPED: &str =
 
 impl Type {
     /// Every type.
-    pub const ALL: [Type; 9] = [
+    pub const ALL: [Type; 10] = [
         Type::LaserScan,
         Type::Range,
         Type::Odometry,
@@ -333,6 +342,7 @@ impl Type {
         Type::PoseArray,
         Type::TfMessage,
         Type::Clock,
+        Type::String,
     ];
 
     /// Its full name, `sensor_msgs/msg/LaserScan`.
@@ -347,6 +357,7 @@ impl Type {
             Type::PoseArray => "geometry_msgs/msg/PoseArray",
             Type::TfMessage => "tf2_msgs/msg/TFMessage",
             Type::Clock => "rosgraph_msgs/msg/Clock",
+            Type::String => "std_msgs/msg/String",
         }
     }
 
@@ -442,6 +453,7 @@ impl Type {
                 "builtin_interfaces/Time clock\n",
                 &[("builtin_interfaces/Time", TIME)],
             ),
+            Type::String => ("string data\n", &[]),
         };
         let mut text = own.to_owned();
         for (name, fields) in uses {

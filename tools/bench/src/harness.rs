@@ -3,7 +3,8 @@
 //! child's announced address, and the statistics they print.
 
 use std::process::Command;
-use std::time::Duration;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use troupe_node::ZenohArgs;
@@ -202,4 +203,71 @@ pub(crate) fn bench_world(
 pub(crate) fn cpu_time() -> Duration {
     use nix::time::{clock_gettime, ClockId};
     clock_gettime(ClockId::CLOCK_PROCESS_CPUTIME_ID).map_or(Duration::ZERO, Duration::from)
+}
+
+/// Robots in the 100-Pioneer world.
+pub(crate) const ROBOTS: u32 = 100;
+
+/// A process killed when dropped.
+pub(crate) struct Kid(pub(crate) std::process::Child);
+
+impl Drop for Kid {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// CPU time of process `pid` so far.
+pub(crate) fn cpu_of(pid: u32) -> Duration {
+    use nix::time::{clock_getcpuclockid, clock_gettime};
+    let pid = nix::unistd::Pid::from_raw(i32::try_from(pid).unwrap_or(0));
+    clock_getcpuclockid(pid)
+        .and_then(clock_gettime)
+        .map_or(Duration::ZERO, Duration::from)
+}
+
+/// What a row measures, from its start: the view server's CPU and the
+/// robots' data.
+pub(crate) struct Window {
+    pid: Option<u32>,
+    cpu: Duration,
+    odometry: u64,
+    ranges: u64,
+    t: Instant,
+}
+
+/// A row's figures: the server's share of a core, odometry Hz per robot,
+/// ranger samples a second; and the wall seconds they cover.
+pub(crate) struct Figures {
+    pub(crate) cpu: f64,
+    pub(crate) odometry: f64,
+    pub(crate) ranges: f64,
+    pub(crate) wall: f64,
+}
+
+impl Window {
+    pub(crate) fn start(pid: Option<u32>, odometry: &AtomicU64, ranges: &AtomicU64) -> Window {
+        Window {
+            pid,
+            cpu: pid.map_or(Duration::ZERO, cpu_of),
+            odometry: odometry.load(Ordering::Relaxed),
+            ranges: ranges.load(Ordering::Relaxed),
+            t: Instant::now(),
+        }
+    }
+
+    pub(crate) fn end(&self, odometry: &AtomicU64, ranges: &AtomicU64) -> Figures {
+        let wall = self.t.elapsed().as_secs_f64();
+        Figures {
+            cpu: self
+                .pid
+                .map_or(0.0, |p| (cpu_of(p) - self.cpu).as_secs_f64() / wall),
+            odometry: (odometry.load(Ordering::Relaxed) - self.odometry) as f64
+                / wall
+                / f64::from(ROBOTS),
+            ranges: (ranges.load(Ordering::Relaxed) - self.ranges) as f64 / wall,
+            wall,
+        }
+    }
 }

@@ -8,6 +8,7 @@
 //! the benchmarks are one crate at the top of the tree.
 
 pub mod bridge;
+pub mod foxglove;
 mod harness;
 pub mod latency;
 pub mod launch;
@@ -58,6 +59,10 @@ pub enum BenchCmd {
     #[command(after_help = "Example:
   cargo run --release -- bench view --browsers 0,1,20 --bitmaps ../shared/compat/stage/bitmaps")]
     View(crate::view::ViewBenchArgs),
+    /// `troupe foxglove` under load: 100 Pioneers in real time, one client subscribed to every channel: the server's CPU, the robots' data rates with and without it.
+    #[command(after_help = "Example:
+  cargo run --release -- bench foxglove --seconds 10 --bitmaps ../shared/compat/stage/bitmaps")]
+    Foxglove(crate::foxglove::FoxgloveBenchArgs),
     /// Maps built from simulated wanders (office, Stage's cave and autolab): accuracy, coverage, speed.
     #[command(after_help = "Example:
   cargo run --release -- bench slam --seconds 900 --stage-worlds ../shared/compat/stage")]
@@ -87,6 +92,7 @@ pub fn run(cmd: BenchCmd, z: &ZenohArgs) -> anyhow::Result<()> {
         BenchCmd::Serial(a) => serial::run(&a),
         BenchCmd::Record(a) => record::run(&a),
         BenchCmd::View(a) => view::run(&a),
+        BenchCmd::Foxglove(a) => foxglove::run(&a),
         BenchCmd::Slam(a) => slam::run(&a),
         BenchCmd::Python(a) => python::run(&a),
     }

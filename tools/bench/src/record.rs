@@ -89,6 +89,7 @@ pub fn run(a: &RecordBenchArgs) -> anyhow::Result<()> {
                 compress: Compress::None,
                 queue: 100_000,
                 format: troupe_record::RecordFormat::Troupe,
+                rosbag2: false,
             },
             &z,
         )?;

@@ -8,12 +8,14 @@
 use std::io::{BufRead, Read, Write};
 use std::net::TcpStream;
 use std::path::PathBuf;
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
+
+use crate::harness::{Figures, Kid, Window, ROBOTS};
 use troupe_msgs::{keys, Interface};
 use troupe_node::zenoh::Wait;
 use troupe_node::{Mode, ZenohArgs};
@@ -49,28 +51,6 @@ pub struct ViewBenchArgs {
     pub idle_browsers: bool,
 }
 
-/// Robots in the world.
-const ROBOTS: u32 = 100;
-
-/// A process killed when dropped.
-struct Kid(Child);
-
-impl Drop for Kid {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-/// CPU time of process `pid` so far.
-fn cpu_of(pid: u32) -> Duration {
-    use nix::time::{clock_getcpuclockid, clock_gettime};
-    let pid = nix::unistd::Pid::from_raw(i32::try_from(pid).unwrap_or(0));
-    clock_getcpuclockid(pid)
-        .and_then(clock_gettime)
-        .map_or(Duration::ZERO, Duration::from)
-}
-
 /// GET `path` from the view at `host` (`127.0.0.1:PORT`): the body.
 fn get(host: &str, path: &str) -> anyhow::Result<String> {
     let mut s = TcpStream::connect(host)?;
@@ -82,49 +62,6 @@ fn get(host: &str, path: &str) -> anyhow::Result<String> {
         .split_once("\r\n\r\n")
         .map(|(_, b)| b.to_owned())
         .unwrap_or_default())
-}
-
-/// What a row measures, from its start: the view server's CPU and the
-/// robots' data.
-struct Window {
-    pid: u32,
-    cpu: Duration,
-    odometry: u64,
-    ranges: u64,
-    t: Instant,
-}
-
-/// A row's figures: the server's share of a core, odometry Hz per robot,
-/// ranger samples a second; and the wall seconds they cover.
-struct Figures {
-    cpu: f64,
-    odometry: f64,
-    ranges: f64,
-    wall: f64,
-}
-
-impl Window {
-    fn start(pid: u32, odometry: &AtomicU64, ranges: &AtomicU64) -> Window {
-        Window {
-            pid,
-            cpu: cpu_of(pid),
-            odometry: odometry.load(Ordering::Relaxed),
-            ranges: ranges.load(Ordering::Relaxed),
-            t: Instant::now(),
-        }
-    }
-
-    fn end(&self, odometry: &AtomicU64, ranges: &AtomicU64) -> Figures {
-        let wall = self.t.elapsed().as_secs_f64();
-        Figures {
-            cpu: (cpu_of(self.pid) - self.cpu).as_secs_f64() / wall,
-            odometry: (odometry.load(Ordering::Relaxed) - self.odometry) as f64
-                / wall
-                / f64::from(ROBOTS),
-            ranges: (ranges.load(Ordering::Relaxed) - self.ranges) as f64 / wall,
-            wall,
-        }
-    }
 }
 
 /// "lo-hi" of `values`, or "-" for none.
@@ -295,7 +232,7 @@ fn measure(
             std::thread::sleep(Duration::from_millis(200));
         }
         std::thread::sleep(Duration::from_secs(if n > 0 { 4 } else { 0 }));
-        let window = Window::start(view.0.id(), &odometry, &ranges);
+        let window = Window::start(Some(view.0.id()), &odometry, &ranges);
         std::thread::sleep(Duration::from_secs_f64(a.seconds));
         let figures = window.end(&odometry, &ranges);
         let reports: Vec<[f64; 2]> = serde_json::from_str::<
@@ -314,7 +251,7 @@ fn measure(
         drop(pages);
     }
     if a.streams > 0 {
-        let window = Window::start(view.0.id(), &odometry, &ranges);
+        let window = Window::start(Some(view.0.id()), &odometry, &ranges);
         // One stuck reader: asks for the stream, never reads it.
         let mut stuck = TcpStream::connect(&host)?;
         write!(stuck, "GET /api/stream HTTP/1.1\r\nHost: {host}\r\n\r\n")?;

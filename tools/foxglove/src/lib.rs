@@ -30,7 +30,7 @@ use troupe_msgs::{
     codec, decode_any, keys, planner, position2d, AnyMsg, Device, Interface, Pose2d,
 };
 use troupe_node::zenoh::{sample::SampleKind, Session, Wait};
-use troupe_node::{Mode, ZenohArgs};
+use troupe_node::ZenohArgs;
 use troupe_ros2::stamp_ns;
 
 /// Flags of `troupe foxglove`.
@@ -68,7 +68,9 @@ enum Heard {
 ///
 /// The network cannot be joined or the port cannot be bound.
 pub fn serve(a: &FoxgloveArgs, z: &ZenohArgs) -> anyhow::Result<()> {
-    let session = z.open(Mode::Client)?;
+    // A peer, as `troupe record` is: it takes the whole fleet's data, from
+    // the publishers directly where it can reach them.
+    let session = z.open_peer()?;
     let ctx = Context::new();
     let latched = Latched::default();
     let server = ctx

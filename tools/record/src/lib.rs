@@ -62,6 +62,13 @@ pub struct RecordArgs {
     /// later).
     #[arg(long, value_enum, default_value_t = RecordFormat::Troupe)]
     pub format: RecordFormat,
+    /// Write a rosbag2 directory instead of one file: `-o` names the
+    /// directory (made; it must not hold anything), which gets the MCAP
+    /// file(s) and the `metadata.yaml` `ros2 bag info` reads. ROS 2
+    /// messages (implies `--format ros2`); what has no ROS 2 form goes as
+    /// its JSON in a `std_msgs/msg/String`.
+    #[arg(long)]
+    pub rosbag2: bool,
 }
 
 /// What `troupe record` writes.
@@ -133,6 +140,10 @@ pub enum LogCmd {
         /// `foxglove` are MCAP and need one).
         #[arg(short = 'o', long, value_name = "FILE")]
         output: Option<PathBuf>,
+        /// Write a rosbag2 directory (`-o DIR`: the MCAP file and the
+        /// `metadata.yaml` `ros2 bag info` reads); implies `--format ros2`.
+        #[arg(long)]
+        rosbag2: bool,
     },
 }
 
@@ -159,6 +170,10 @@ enum Converter {
 impl Converter {
     fn ros2() -> Converter {
         Converter::Ros2(ros2::Ros2::new())
+    }
+
+    fn rosbag2() -> Converter {
+        Converter::Ros2(ros2::Ros2::for_rosbag2())
     }
 
     fn foxglove() -> Converter {
@@ -192,6 +207,19 @@ impl Converter {
             Converter::Ros2(w) => w.summary(),
             Converter::Foxglove(w) => w.summary(),
         }
+    }
+
+    /// A rosbag2 directory's metadata for `files` (ROS 2 only).
+    fn metadata(&self, files: &[PathBuf]) -> Option<String> {
+        let Converter::Ros2(w) = self else {
+            return None;
+        };
+        let names: Vec<String> = files
+            .iter()
+            .filter_map(|f| f.file_name())
+            .map(|f| f.to_string_lossy().into_owned())
+            .collect();
+        Some(w.metadata(&names))
     }
 
     fn json_count(&self) -> u64 {
@@ -266,6 +294,11 @@ impl Files {
     /// Bytes written to the current file so far.
     pub fn bytes(&self) -> u64 {
         self.bytes
+    }
+
+    /// Every file started so far.
+    pub fn written(&self) -> &[PathBuf] {
+        &self.written
     }
 
     /// Nothing open yet: [`Files::open`] starts the first file.
@@ -501,11 +534,20 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         if split { " (split)" } else { "" }
     )?;
 
-    let mut files = Files::new(a.output.clone(), split, a.compress);
-    let mut converter = match a.format {
-        RecordFormat::Troupe => None,
-        RecordFormat::Ros2 => Some(Converter::ros2()),
-        RecordFormat::Foxglove => Some(Converter::foxglove()),
+    let bag = a.rosbag2.then(|| a.output.clone());
+    let base = match &bag {
+        Some(dir) => rosbag2_base(dir, split)?,
+        None => a.output.clone(),
+    };
+    let mut files = Files::new(base, split, a.compress);
+    let mut converter = match (a.format, a.rosbag2) {
+        (RecordFormat::Troupe | RecordFormat::Ros2, true) => Some(Converter::rosbag2()),
+        (RecordFormat::Foxglove, true) => {
+            anyhow::bail!("--rosbag2 is a directory of ROS 2 messages: not --format foxglove")
+        }
+        (RecordFormat::Troupe, false) => None,
+        (RecordFormat::Ros2, false) => Some(Converter::ros2()),
+        (RecordFormat::Foxglove, false) => Some(Converter::foxglove()),
     };
     if let Some(c) = &converter {
         files = files.with_profile(c.profile());
@@ -578,6 +620,9 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         }
         files.close()?;
         if let Some(c) = converter {
+            if let Some(dir) = &bag {
+                write_metadata(dir, &files, &c)?;
+            }
             eprint!("troupe record: as {} messages:\n{}", c.name(), c.summary());
         }
         Ok((files, count, bytes))
@@ -982,11 +1027,23 @@ pub fn log(cmd: LogCmd) -> anyhow::Result<()> {
             file,
             format,
             output,
+            rosbag2,
         } => {
             ensure_mcap(&file)?;
+            if rosbag2 {
+                let dir = output.context("--rosbag2 writes a directory: name it with -o DIR")?;
+                anyhow::ensure!(
+                    matches!(format, Format::Json | Format::Ros2),
+                    "--rosbag2 is a directory of ROS 2 messages: not --format {}",
+                    format!("{format:?}").to_lowercase()
+                );
+                return export_as(&file, &dir, Converter::rosbag2(), true);
+            }
             match (format, output) {
-                (Format::Ros2, Some(out)) => export_as(&file, &out, Converter::ros2()),
-                (Format::Foxglove, Some(out)) => export_as(&file, &out, Converter::foxglove()),
+                (Format::Ros2, Some(out)) => export_as(&file, &out, Converter::ros2(), false),
+                (Format::Foxglove, Some(out)) => {
+                    export_as(&file, &out, Converter::foxglove(), false)
+                }
                 (Format::Ros2 | Format::Foxglove, None) => anyhow::bail!(
                     "--format {} writes MCAP, not text: name the file with -o OUT.mcap",
                     format!("{format:?}").to_lowercase()
@@ -1000,6 +1057,38 @@ pub fn log(cmd: LogCmd) -> anyhow::Result<()> {
             }
         }
     }
+}
+
+/// Makes the rosbag2 directory `dir` (which must not hold anything yet:
+/// `ros2 bag record` refuses one that exists) and says where its MCAP
+/// file goes: `dir/NAME_0.mcap` (split: `dir/NAME.mcap`, which the files
+/// are numbered after).
+fn rosbag2_base(dir: &Path, split: bool) -> anyhow::Result<PathBuf> {
+    if let Ok(mut entries) = std::fs::read_dir(dir) {
+        anyhow::ensure!(
+            entries.next().is_none(),
+            "{} exists and is not empty: a rosbag2 directory is written whole, into a new one",
+            dir.display()
+        );
+    }
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let name = dir
+        .file_name()
+        .map_or_else(|| "bag".into(), |n| n.to_string_lossy().into_owned());
+    Ok(dir.join(if split {
+        format!("{name}.mcap")
+    } else {
+        format!("{name}_0.mcap")
+    }))
+}
+
+/// Writes `dir/metadata.yaml` for what `w` wrote into `files`.
+fn write_metadata(dir: &Path, files: &Files, w: &Converter) -> anyhow::Result<()> {
+    if let Some(yaml) = w.metadata(files.written()) {
+        let path = dir.join("metadata.yaml");
+        std::fs::write(&path, yaml).with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
 }
 
 /// The first bytes of the file at `path` (64 at most).
@@ -1181,8 +1270,13 @@ fn export(path: &Path, format: Format, out: impl std::io::Write) -> anyhow::Resu
 /// `troupe log export --format ros2|foxglove`: the recording's samples as
 /// ROS 2 or Foxglove messages in `out`, and a summary of what went where on
 /// standard error.
-fn export_as(path: &Path, out: &Path, mut w: Converter) -> anyhow::Result<()> {
-    let mut files = Files::new(out.to_owned(), false, Compress::None).with_profile(w.profile());
+fn export_as(path: &Path, out: &Path, mut w: Converter, bag: bool) -> anyhow::Result<()> {
+    let base = if bag {
+        rosbag2_base(out, false)?
+    } else {
+        out.to_owned()
+    };
+    let mut files = Files::new(base, false, Compress::None).with_profile(w.profile());
     files.open(0)?;
     let (mut samples, mut events) = (0u64, 0u64);
     each_message(path, |m| {
@@ -1195,6 +1289,9 @@ fn export_as(path: &Path, out: &Path, mut w: Converter) -> anyhow::Result<()> {
         Ok(true)
     })?;
     files.close()?;
+    if bag {
+        write_metadata(out, &files, &w)?;
+    }
     eprint!(
         "troupe log export: {samples} samples of {} as {} messages in {}{}:\n{}",
         path.display(),

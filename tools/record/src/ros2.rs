@@ -29,12 +29,68 @@ pub struct Ros2 {
     json_schemas: HashMap<&'static str, String>,
     /// (schema tag, what it became) -> messages.
     counts: BTreeMap<(&'static str, &'static str), u64>,
+    /// JSON as `std_msgs/msg/String`, for a rosbag2 directory (whose
+    /// readers take CDR only).
+    strings: bool,
+    /// Each topic's type, encoding and messages (a rosbag2 directory's
+    /// metadata).
+    topics: BTreeMap<String, (&'static str, &'static str, u64)>,
+    /// The first and last log times.
+    span: Option<(u64, u64)>,
 }
 
 impl Ros2 {
     /// A writer that has seen nothing yet.
     pub fn new() -> Ros2 {
         Ros2::default()
+    }
+
+    /// A writer for a rosbag2 directory: what has no ROS 2 form goes as
+    /// its JSON in a `std_msgs/msg/String`, CDR like the rest.
+    pub fn for_rosbag2() -> Ros2 {
+        Ros2 {
+            strings: true,
+            ..Ros2::default()
+        }
+    }
+
+    /// Counts one message on `topic` for the metadata.
+    fn count(&mut self, topic: &str, ty: &'static str, encoding: &'static str, log_time: u64) {
+        match self.topics.get_mut(topic) {
+            Some(t) => t.2 += 1,
+            None => {
+                self.topics.insert(topic.to_owned(), (ty, encoding, 1));
+            }
+        }
+        let (lo, hi) = self.span.unwrap_or((log_time, log_time));
+        self.span = Some((lo.min(log_time), hi.max(log_time)));
+    }
+
+    /// A rosbag2 directory's `metadata.yaml` (version 4, storage `mcap`)
+    /// for what was written, in `files` (names relative to the directory).
+    pub fn metadata(&self, files: &[String]) -> String {
+        let (start, end) = self.span.unwrap_or((0, 0));
+        let total: u64 = self.topics.values().map(|t| t.2).sum();
+        let mut y = format!(
+            "rosbag2_bagfile_information:\n  version: 4\n  storage_identifier: mcap\n  \
+             duration:\n    nanoseconds: {}\n  starting_time:\n    nanoseconds_since_epoch: {start}\n  \
+             message_count: {total}\n  topics_with_message_count:\n",
+            end - start
+        );
+        for (name, (ty, encoding, n)) in &self.topics {
+            y.push_str(&format!(
+                "    - topic_metadata:\n        name: {name}\n        type: {ty}\n        \
+                 serialization_format: {encoding}\n        offered_qos_profiles: \"\"\n      \
+                 message_count: {n}\n"
+            ));
+        }
+        y.push_str(
+            "  compression_format: \"\"\n  compression_mode: \"\"\n  relative_file_paths:\n",
+        );
+        for f in files {
+            y.push_str(&format!("    - {f}\n"));
+        }
+        y
     }
 
     /// Writes the ROS 2 messages of one recorded sample, `payload` on
@@ -60,6 +116,22 @@ impl Ros2 {
             let mut json = Vec::new();
             s.msg
                 .serialize_body(&mut serde_json::Serializer::new(&mut json))?;
+            let topic = json_topic(&topic_of_key(key), tag);
+            if self.strings {
+                let text = troupe_ros2::msg::Text {
+                    data: String::from_utf8_lossy(&json).into_owned(),
+                };
+                let ty = Type::String;
+                return self.put(
+                    files,
+                    tag,
+                    &topic,
+                    ty,
+                    &troupe_ros2::cdr(&text),
+                    log_time,
+                    stamp,
+                );
+            }
             let schema = self
                 .json_schemas
                 .entry(tag)
@@ -69,8 +141,8 @@ impl Ros2 {
                 encoding: "jsonschema",
                 data: schema.as_bytes(),
             };
-            let topic = json_topic(&topic_of_key(key), tag);
             files.write(&topic, schema, "json", &json, log_time, stamp)?;
+            self.count(&topic, tag, "json", log_time);
             *self.counts.entry((tag, JSON)).or_default() += 1;
             return Ok(());
         };
@@ -78,18 +150,35 @@ impl Ros2 {
             *self.counts.entry((tag, KEPT)).or_default() += 1;
         }
         for o in outs {
-            let definition = self
-                .definitions
-                .entry(o.ty)
-                .or_insert_with(|| o.ty.definition());
-            let schema = Schema {
-                name: o.ty.name(),
-                encoding: "ros2msg",
-                data: definition.as_bytes(),
-            };
-            files.write(&o.topic, schema, CDR, &o.data, log_time, stamp)?;
-            *self.counts.entry((tag, o.ty.name())).or_default() += 1;
+            self.put(files, tag, &o.topic, o.ty, &o.data, log_time, stamp)?;
         }
+        Ok(())
+    }
+
+    /// Writes one ROS 2 message, made of a sample of kind `tag`.
+    #[allow(clippy::too_many_arguments)]
+    fn put(
+        &mut self,
+        files: &mut Files,
+        tag: &'static str,
+        topic: &str,
+        ty: Type,
+        data: &[u8],
+        log_time: u64,
+        stamp: u64,
+    ) -> anyhow::Result<()> {
+        let definition = self
+            .definitions
+            .entry(ty)
+            .or_insert_with(|| ty.definition());
+        let schema = Schema {
+            name: ty.name(),
+            encoding: "ros2msg",
+            data: definition.as_bytes(),
+        };
+        files.write(topic, schema, CDR, data, log_time, stamp)?;
+        self.count(topic, ty.name(), CDR, log_time);
+        *self.counts.entry((tag, ty.name())).or_default() += 1;
         Ok(())
     }
 
