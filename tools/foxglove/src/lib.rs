@@ -18,7 +18,7 @@
 //! decide whether they pass.
 
 use std::collections::HashMap;
-use std::sync::mpsc::{Receiver, SyncSender};
+use std::sync::mpsc::SyncSender;
 use std::sync::{Arc, Mutex};
 
 use anyhow::Context as _;
@@ -26,9 +26,7 @@ use clap::Args;
 use foxglove::websocket::{Capability, Client, ClientChannel, ServerListener};
 use foxglove::{Context, PartialMetadata, RawChannel};
 use troupe_foxglove_msgs::{Message, Translator};
-use troupe_msgs::{
-    codec, decode_any, keys, planner, position2d, AnyMsg, Device, Interface, Pose2d,
-};
+use troupe_msgs::{codec, decode_any, keys, planner, position2d, Device, Interface, Pose2d};
 use troupe_node::zenoh::{sample::SampleKind, Session, Wait};
 use troupe_node::ZenohArgs;
 use troupe_ros2::stamp_ns;
@@ -84,22 +82,40 @@ pub fn serve(a: &FoxgloveArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         .with_context(|| format!("serving Foxglove on {}:{}", a.bind, a.port))?;
 
     let (tx, rx) = std::sync::mpsc::sync_channel::<Heard>(10_000);
-    let mut subs = Vec::new();
-    for e in ["robot/*/*/*", keys::SIM_CLOCK] {
-        let tx = tx.clone();
-        let sub = session
-            .declare_subscriber(e)
+    let live = Arc::new(Mutex::new(Live::new(
+        ctx,
+        session.clone(),
+        tx.clone(),
+        latched,
+    )));
+    // The devices' samples are translated and sent on the thread that
+    // receives them (a hop to another thread per sample cost more than the
+    // work: a quarter of the server's time went to waking it); the clock
+    // goes to this thread, which holds the server.
+    let data = {
+        let live = live.clone();
+        session
+            .declare_subscriber("robot/*/*/*")
             .callback(move |s| {
-                // A full queue drops the newest: live data, the next one comes.
+                lock(&live).heard(s.key_expr().as_str(), &s.payload().to_bytes());
+            })
+            .wait()
+            .map_err(|err| anyhow::anyhow!("subscribing to robot/*/*/*: {err}"))?
+    };
+    let clock = {
+        let tx = tx.clone();
+        session
+            .declare_subscriber(keys::SIM_CLOCK)
+            .callback(move |s| {
+                // A full queue drops the newest: the next one comes.
                 let _ = tx.try_send(Heard::Sample {
                     key: s.key_expr().as_str().to_owned(),
                     payload: s.payload().to_bytes().into_owned(),
                 });
             })
             .wait()
-            .map_err(|err| anyhow::anyhow!("subscribing to {e}: {err}"))?;
-        subs.push(sub);
-    }
+            .map_err(|err| anyhow::anyhow!("subscribing to {}: {err}", keys::SIM_CLOCK))?
+    };
     let tokens = {
         let tx = tx.clone();
         session
@@ -133,10 +149,21 @@ pub fn serve(a: &FoxgloveArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         a.bind,
         server.port()
     ));
-    let mut live = Live::new(ctx, session.clone(), tx, latched);
-    live.run(&rx, &server);
-    drop(subs);
-    drop(tokens);
+    drop(tx);
+    for h in rx {
+        match h {
+            Heard::Stop => break,
+            Heard::Came(dev) => lock(&live).ask(dev),
+            Heard::Went(dev) => lock(&live).close(&dev),
+            Heard::Sample { key, payload } if key == keys::SIM_CLOCK => {
+                if let Ok(s) = decode_any(&payload) {
+                    server.broadcast_time(stamp_ns(s.stamp));
+                }
+            }
+            Heard::Sample { key, payload } => lock(&live).heard(&key, &payload),
+        }
+    }
+    drop((data, clock, tokens));
     let _ = server.stop();
     Ok(())
 }
@@ -168,26 +195,14 @@ impl Live {
         }
     }
 
-    fn run(&mut self, rx: &Receiver<Heard>, server: &foxglove::WebSocketServerHandle) {
-        for h in rx {
-            match h {
-                Heard::Stop => return,
-                Heard::Came(dev) => self.ask(dev),
-                Heard::Went(dev) => self.close(&dev),
-                Heard::Sample { key, payload } => {
-                    let Ok(s) = decode_any(&payload) else {
-                        continue;
-                    };
-                    let ns = stamp_ns(s.stamp);
-                    if let AnyMsg::SimClock(_) = s.msg {
-                        server.broadcast_time(ns);
-                        continue;
-                    }
-                    for m in self.translator.translate(&key, ns, &s.msg) {
-                        self.log(m, ns);
-                    }
-                }
-            }
+    /// A device's sample, `payload` on `key`: translated and sent.
+    fn heard(&mut self, key: &str, payload: &[u8]) {
+        let Ok(s) = decode_any(payload) else {
+            return;
+        };
+        let ns = stamp_ns(s.stamp);
+        for m in self.translator.translate(key, ns, &s.msg) {
+            self.log(m, ns);
         }
     }
 
