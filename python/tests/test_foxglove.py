@@ -25,8 +25,8 @@ MESSAGE_DATA, TIME = 0x01, 0x02
 
 def test_foxglove_shows_the_fleet_and_its_teleop_drives_a_robot(launch, odometry_moves):
     # The server as `troupe launch --foxglove` runs it beside the stack: `troupe foxglove`.
-    stack = launch("nav.cfg", ["6665:laser:0", "6665:position2d:0", "6665:map:0", "6665:simulation:0"],
-                   args=["--foxglove=127.0.0.1:0"])
+    stack = launch("nav.cfg", ["6665:laser:0", "6665:position2d:0", "6665:map:0", "6665:simulation:0",
+                               "6665:localize:0"], args=["--foxglove=127.0.0.1:0"])
     robot = stack.client.robot(6665)
     laser, pos, sim = robot.laser(0), robot.position2d(0), robot.simulation(0)
     grid = robot.map(0).get_map()
@@ -121,6 +121,23 @@ def test_foxglove_shows_the_fleet_and_its_teleop_drives_a_robot(launch, odometry
         c.send(struct.pack("<BI", MESSAGE_DATA, 7) + json.dumps(twist).encode())
         moved = sim.get_pose2d("r0")
         assert np.hypot(moved.x - start.x, moved.y - start.y) > 0.2, (start, moved)
+
+        # The 3D panel's pose estimate (a PoseWithCovarianceStamped) re-initialises amcl there.
+        c.send(json.dumps({"op": "advertise", "channels": [{
+            "id": 8, "topic": "/robot/6665/localize/0/set_pose", "encoding": "json",
+            "schemaName": "geometry_msgs/msg/PoseWithCovarianceStamped"}]}))
+        there = (moved.x + 1.5, moved.y)
+        estimates = robot.localize(0).stream(timeout=10)
+        c.send(struct.pack("<BI", MESSAGE_DATA, 8) + json.dumps({"header": {"frame_id": "map"}, "pose": {
+            "pose": {"position": {"x": there[0], "y": there[1], "z": 0}, "orientation": {"w": 1}},
+            "covariance": [0] * 36}}).encode())
+        near = None
+        for sample in estimates:
+            mean = sample.data["hypoths"][0]["mean"] if sample.data.get("hypoths") else None
+            if mean and np.hypot(mean["x"] - there[0], mean["y"] - there[1]) < 0.5:
+                near = mean
+                break
+        assert near is not None, f"no estimate near {there}"
     stack.stop()
     assert stack.proc.returncode == 0, stack.errors
     assert not [e for e in stack.errors if "left out" in e], stack.errors

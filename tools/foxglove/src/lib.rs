@@ -14,7 +14,8 @@
 //! on `/robot/6665/position2d/0/cmd_vel` (`{"linear": {"x": …}, "angular":
 //! {"z": …}}`, as Foxglove's teleop panel sends) or a goal on
 //! `/robot/6665/planner/0/goal` (`{"pose": {"position": …, "orientation":
-//! …}}`); they go out as this process's commands, so a fleet's access rules
+//! …}}`), or a pose estimate on `/robot/6665/localize/0/set_pose` (a
+//! `PoseWithCovarianceStamped`: amcl starts again there); they go out as this process's commands, so a fleet's access rules
 //! decide whether they pass.
 
 use std::collections::HashMap;
@@ -26,7 +27,9 @@ use clap::Args;
 use foxglove::websocket::{Capability, Client, ClientChannel, ServerListener};
 use foxglove::{Context, PartialMetadata, RawChannel};
 use troupe_foxglove_msgs::{Message, Translator};
-use troupe_msgs::{codec, decode_any, keys, planner, position2d, Device, Interface, Pose2d};
+use troupe_msgs::{
+    codec, decode_any, keys, localize, planner, position2d, Device, Interface, Pose2d, Request,
+};
 use troupe_node::zenoh::{sample::SampleKind, Session, Wait};
 use troupe_node::ZenohArgs;
 use troupe_ros2::stamp_ns;
@@ -300,11 +303,18 @@ impl ServerListener for Commands {
     }
 
     fn on_message_data(&self, _client: Client, channel: &ClientChannel, payload: &[u8]) {
-        let sent = command_of(&channel.topic, &channel.encoding, payload).and_then(|(key, cmd)| {
-            self.session
-                .put(&key, cmd)
-                .wait()
-                .map_err(|e| format!("sending on {key}: {e}"))
+        let sent = command_of(&channel.topic, &channel.encoding, payload).and_then(|c| {
+            let sent = if c.request {
+                // Its answer (an Ack) is not awaited: the estimate shows it.
+                self.session
+                    .get(&c.key)
+                    .payload(c.payload)
+                    .callback(|_| {})
+                    .wait()
+            } else {
+                self.session.put(&c.key, c.payload).wait()
+            };
+            sent.map_err(|e| format!("sending on {}: {e}", c.key))
         });
         if let Err(why) = sent {
             let mut refused = lock(&self.refused);
@@ -321,23 +331,58 @@ impl ServerListener for Commands {
     }
 }
 
-/// The command key and payload a client's message on `topic` makes.
+/// What a client's message becomes: a command put on a key, or a request.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Command {
+    /// The key: `robot/6665/position2d/0/cmd/vel`.
+    pub key: String,
+    /// The encoded message.
+    pub payload: Vec<u8>,
+    /// Whether it is a request (a query), not a command (a put).
+    pub request: bool,
+}
+
+/// A pose a client publishes, in map coordinates: a ROS `PoseStamped`
+/// (`{"pose": {"position", "orientation"}}`), a `PoseWithCovarianceStamped`
+/// (`{"pose": {"pose": …}}`) or a Foxglove `PoseInFrame`, all read alike.
+fn published_pose(v: &serde_json::Value) -> Pose2d {
+    let pose = v
+        .pointer("/pose/pose")
+        .or_else(|| v.get("pose"))
+        .unwrap_or(v);
+    let f = |p: &str| pose.pointer(p).and_then(serde_json::Value::as_f64);
+    let q = troupe_ros2::msg::Quaternion {
+        x: f("/orientation/x").unwrap_or(0.0),
+        y: f("/orientation/y").unwrap_or(0.0),
+        z: f("/orientation/z").unwrap_or(0.0),
+        w: f("/orientation/w").unwrap_or(1.0),
+    };
+    Pose2d {
+        x: f("/position/x").unwrap_or(0.0),
+        y: f("/position/y").unwrap_or(0.0),
+        yaw: q.yaw(),
+    }
+}
+
+/// The spread a pose estimate set from a client gets (RViz's and
+/// Foxglove's "pose estimate": 0.5 m, 15 degrees), in Player's order.
+const SET_POSE_COV: [f64; 6] = [0.25, 0.25, 0.068_538_923_266_547_87, 0.0, 0.0, 0.0];
+
+/// The command a client's message on `topic` makes.
 ///
 /// # Errors
 ///
 /// Why it makes none, said for the client's user.
-pub fn command_of(
-    topic: &str,
-    encoding: &str,
-    payload: &[u8],
-) -> Result<(String, Vec<u8>), String> {
+pub fn command_of(topic: &str, encoding: &str, payload: &[u8]) -> Result<Command, String> {
     if encoding != "json" {
         return Err(format!("`{encoding}` messages are not read: publish JSON"));
     }
     let (device, what) = topic
         .trim_start_matches('/')
         .rsplit_once('/')
-        .ok_or_else(|| "expected /robot/PORT/INTERFACE/INDEX/cmd_vel or …/goal".to_owned())?;
+        .ok_or_else(|| {
+            "expected /robot/PORT/INTERFACE/INDEX/cmd_vel, …/goal or …/set_pose".to_owned()
+        })?;
     let dev = keys::parse_data(device).map_err(|e| format!("{device}: {e}"))?;
     let v: serde_json::Value =
         serde_json::from_slice(payload).map_err(|e| format!("not JSON: {e}"))?;
@@ -348,6 +393,11 @@ pub fn command_of(
             .unwrap_or(0.0)
     };
     let now = troupe_node::Clock::wall().now();
+    let put = |name: &str, payload| Command {
+        key: keys::cmd(&dev, name),
+        payload,
+        request: false,
+    };
     match (dev.interface, what) {
         (Interface::Position2d, "cmd_vel") => {
             let cmd = position2d::CmdVel {
@@ -358,28 +408,27 @@ pub fn command_of(
                 },
                 state: true,
             };
-            Ok((keys::cmd(&dev, "vel"), codec::encode(&cmd, now)))
+            Ok(put("vel", codec::encode(&cmd, now)))
         }
         (Interface::Planner, "goal") => {
-            let q = troupe_ros2::msg::Quaternion {
-                x: f(&["pose", "orientation", "x"]),
-                y: f(&["pose", "orientation", "y"]),
-                z: f(&["pose", "orientation", "z"]),
-                w: v.pointer("/pose/orientation/w")
-                    .and_then(serde_json::Value::as_f64)
-                    .unwrap_or(1.0),
-            };
             let goal = planner::Goal {
-                goal: Pose2d {
-                    x: f(&["pose", "position", "x"]),
-                    y: f(&["pose", "position", "y"]),
-                    yaw: q.yaw(),
-                },
+                goal: published_pose(&v),
             };
-            Ok((keys::cmd(&dev, "goal"), codec::encode(&goal, now)))
+            Ok(put("goal", codec::encode(&goal, now)))
+        }
+        (Interface::Localize, "set_pose") => {
+            let set = localize::SetPose {
+                mean: published_pose(&v),
+                cov: SET_POSE_COV,
+            };
+            Ok(Command {
+                key: keys::req(&dev, localize::SetPose::NAME),
+                payload: codec::encode(&set, now),
+                request: true,
+            })
         }
         _ => Err(format!(
-            "{topic}: only a position2d's …/cmd_vel and a planner's …/goal take commands"
+            "{topic}: only a position2d's …/cmd_vel, a planner's …/goal and a localizer's …/set_pose take commands"
         )),
     }
 }
@@ -390,7 +439,9 @@ mod tests {
 
     #[test]
     fn a_teleop_twist_is_a_velocity_command() {
-        let (key, cmd) = command_of(
+        let Command {
+            key, payload: cmd, ..
+        } = command_of(
             "/robot/6665/position2d/0/cmd_vel",
             "json",
             br#"{"linear": {"x": 0.3, "y": 0, "z": 0}, "angular": {"x": 0, "y": 0, "z": 0.2}}"#,
@@ -403,7 +454,9 @@ mod tests {
 
     #[test]
     fn a_published_pose_is_a_goal_and_nothing_else_commands() {
-        let (key, cmd) = command_of(
+        let Command {
+            key, payload: cmd, ..
+        } = command_of(
             "/robot/6665/planner/0/goal",
             "json",
             br#"{"pose": {"position": {"x": 5, "y": -1}, "orientation": {"z": 0.7071067811865476, "w": 0.7071067811865476}}}"#,
@@ -413,6 +466,18 @@ mod tests {
         let g: planner::Goal = codec::decode(&cmd).unwrap().msg;
         assert_eq!((g.goal.x, g.goal.y), (5.0, -1.0));
         assert!((g.goal.yaw - std::f64::consts::FRAC_PI_2).abs() < 1e-9);
+        let set = command_of(
+            "/robot/6665/localize/0/set_pose",
+            "json",
+            br#"{"header": {}, "pose": {"pose": {"position": {"x": -6, "y": -6}, "orientation": {"w": 1}}, "covariance": []}}"#,
+        )
+        .unwrap();
+        assert_eq!(
+            (set.key.as_str(), set.request),
+            ("robot/6665/localize/0/req/set_pose", true)
+        );
+        let s: localize::SetPose = codec::decode(&set.payload).unwrap().msg;
+        assert_eq!((s.mean.x, s.mean.y, s.mean.yaw), (-6.0, -6.0, 0.0));
         let refused = command_of("/robot/6665/laser/0/cmd_vel", "json", b"{}").unwrap_err();
         assert!(refused.contains("only a position2d"), "{refused}");
         assert!(command_of("/robot/6665/position2d/0/cmd_vel", "cdr", b"").is_err());
