@@ -509,6 +509,26 @@ fn a_tls_fleet_admits_its_own_certificates_only_and_each_identity_does_only_what
     assert_eq!(code, 403, "{why}");
     assert!(why.contains("viewer `eye`"), "{why}");
     assert!(view.terminate().success(), "{}", view.stderr());
+    // So is `troupe foxglove`: joined as the viewer, it offers its clients
+    // no publishing; as an operator, it does.
+    for (who, publishes) in [("eye", false), ("ops", true)] {
+        let mut fox = Proc::troupe(
+            "foxglove",
+            &with_net(&net(Some(cfg(&ours, who))), &["foxglove", "--port", "0"]),
+        );
+        let line = fox.first_line();
+        let url = line
+            .split_whitespace()
+            .find(|w| w.starts_with("ws://"))
+            .unwrap_or_else(|| panic!("no address in {line:?}"));
+        let capabilities = foxglove_capabilities(url);
+        assert_eq!(
+            capabilities.iter().any(|c| c == "clientPublish"),
+            publishes,
+            "{who}: {capabilities:?}"
+        );
+        assert!(fox.terminate().success(), "{}", fox.stderr());
+    }
 
     // Another authority's certificate, none, or plain TCP: refused, and told why.
     let (status, _, err) = troupe_output(&with_net(
@@ -668,4 +688,28 @@ fn the_secured_fleet_of_the_docs_runs_on_one_machine() {
     assert!(text.starts_with("robot/6665/laser/0  t="), "{text}");
     assert!(robot1.terminate().success(), "{}", robot1.stderr());
     router.terminate();
+}
+
+/// The capabilities a Foxglove server offers, from the serverInfo it sends
+/// first (protocol `foxglove.sdk.v1`).
+fn foxglove_capabilities(url: &str) -> Vec<String> {
+    use tungstenite::client::IntoClientRequest;
+    let mut req = url.into_client_request().unwrap();
+    req.headers_mut().insert(
+        "Sec-WebSocket-Protocol",
+        tungstenite::http::HeaderValue::from_static("foxglove.sdk.v1"),
+    );
+    let (mut ws, _) = tungstenite::connect(req).unwrap();
+    let info: serde_json::Value = match ws.read().unwrap() {
+        tungstenite::Message::Text(t) => serde_json::from_str(&t).unwrap(),
+        other => panic!("expected serverInfo, got {other:?}"),
+    };
+    assert_eq!(info["op"], "serverInfo", "{info}");
+    let _ = ws.close(None);
+    info["capabilities"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|c| c.as_str().map(str::to_owned))
+        .collect()
 }

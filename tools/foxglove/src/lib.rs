@@ -74,11 +74,27 @@ pub fn serve(a: &FoxgloveArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     let session = z.open_peer()?;
     let ctx = Context::new();
     let latched = Latched::default();
+    // A fleet's viewer may look, not command: its clients are not offered
+    // publishing (the router would drop the commands unseen).
+    let looking_only = session
+        .config()
+        .get_typed::<serde_json::Value>("metadata")
+        .ok()
+        .and_then(|m| troupe_node::viewer_of(&m));
+    let capabilities = match &looking_only {
+        Some(me) => {
+            tracing::info!(
+                "joined as the viewer `{me}`: Foxglove clients may look, not command (no client publishing)"
+            );
+            vec![Capability::Time]
+        }
+        None => vec![Capability::ClientPublish, Capability::Time],
+    };
     let server = ctx
         .websocket_server()
         .name("troupe")
         .bind(a.bind.clone(), a.port)
-        .capabilities([Capability::ClientPublish, Capability::Time])
+        .capabilities(capabilities)
         .supported_encodings(["json"])
         .listener(Arc::new(Commands::new(session.clone(), latched.clone())))
         .start_blocking()
