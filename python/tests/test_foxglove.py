@@ -18,6 +18,7 @@ import websockets.sync.client as ws
 from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
 from foxglove_schemas_protobuf.Grid_pb2 import Grid
 from foxglove_schemas_protobuf.LaserScan_pb2 import LaserScan
+from foxglove_schemas_protobuf.PosesInFrame_pb2 import PosesInFrame
 from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
 
 MESSAGE_DATA, TIME = 0x01, 0x02
@@ -26,7 +27,7 @@ MESSAGE_DATA, TIME = 0x01, 0x02
 def test_foxglove_shows_the_fleet_and_its_teleop_drives_a_robot(launch, odometry_moves):
     # The server as `troupe launch --foxglove` runs it beside the stack: `troupe foxglove`.
     stack = launch("nav.cfg", ["6665:laser:0", "6665:position2d:0", "6665:map:0", "6665:simulation:0",
-                               "6665:localize:0"], args=["--foxglove=127.0.0.1:0"])
+                               "6665:localize:0", "6665:planner:0"], args=["--foxglove=127.0.0.1:0"])
     robot = stack.client.robot(6665)
     laser, pos, sim = robot.laser(0), robot.position2d(0), robot.simulation(0)
     grid = robot.map(0).get_map()
@@ -121,6 +122,39 @@ def test_foxglove_shows_the_fleet_and_its_teleop_drives_a_robot(launch, odometry
         c.send(struct.pack("<BI", MESSAGE_DATA, 7) + json.dumps(twist).encode())
         moved = sim.get_pose2d("r0")
         assert np.hypot(moved.x - start.x, moved.y - start.y) > 0.2, (start, moved)
+
+        # A goal published from the 3D panel: wavefront plans, and its path is drawn.
+        c.send(json.dumps({"op": "advertise", "channels": [{
+            "id": 9, "topic": "/robot/6665/planner/0/goal", "encoding": "json",
+            "schemaName": "geometry_msgs/msg/PoseStamped"}]}))
+        goal = (5.0, 0.0)
+        c.send(struct.pack("<BI", MESSAGE_DATA, 9) + json.dumps({"header": {"frame_id": "map"}, "pose": {
+            "position": {"x": goal[0], "y": goal[1], "z": 0}, "orientation": {"w": 1}}}).encode())
+        path, near_goal = None, False
+        if "/robot/6665/planner/0/path" in channels:
+            c.send(json.dumps({"op": "subscribe", "subscriptions": [
+                {"id": 10, "channelId": channels["/robot/6665/planner/0/path"]["id"]}]}))
+        deadline = time.monotonic() + 30
+        while not near_goal:
+            assert time.monotonic() < deadline, f"no path to {goal}: advertised {sorted(channels)}"
+            m = c.recv(timeout=10)
+            if isinstance(m, str) and json.loads(m)["op"] == "advertise":
+                for ch in json.loads(m)["channels"]:
+                    channels[ch["topic"]] = ch
+                    if ch["topic"] == "/robot/6665/planner/0/path":
+                        assert ch["schemaName"] == "foxglove.PosesInFrame"
+                        c.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": 10, "channelId": ch["id"]}]}))
+            elif isinstance(m, str) and json.loads(m).get("op") == "status":
+                # Subscribed before the channel was registered (see above): again.
+                c.send(json.dumps({"op": "subscribe", "subscriptions": [
+                    {"id": 10, "channelId": channels["/robot/6665/planner/0/path"]["id"]}]}))
+            elif isinstance(m, bytes) and m[0] == MESSAGE_DATA and struct.unpack_from("<I", m, 1)[0] == 10:
+                # The path before the goal comes first (latched), then the new one.
+                path = PosesInFrame()
+                path.ParseFromString(m[13:])
+                last = path.poses[-1].position if path.poses else None
+                near_goal = last is not None and np.hypot(last.x - goal[0], last.y - goal[1]) < 0.5
+        assert path.frame_id == "map" and len(path.poses) > 1, path
 
         # The 3D panel's pose estimate (a PoseWithCovarianceStamped) re-initialises amcl there.
         c.send(json.dumps({"op": "advertise", "channels": [{

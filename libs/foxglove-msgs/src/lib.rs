@@ -9,6 +9,7 @@
 //! position2d data              foxglove.PoseInFrame     in robot_6665/odom, and /tf odom -> base_link
 //! localize hypotheses          foxglove.PoseInFrame     in map, and /tf map -> odom
 //! localize particles           foxglove.PosesInFrame    /robot/6665/localize/0/particles
+//! planner waypoints            foxglove.PosesInFrame    /robot/6665/planner/0/path, in map
 //! a map (info, then its cells) foxglove.Grid            in map
 //! a sensor's geometry          foxglove.FrameTransforms /tf_static: base_link -> the sensor
 //! a simulator's world, poses   foxglove.SceneUpdate     in map: /robot/6665/simulation/0/world (still), …/scene (moving)
@@ -283,6 +284,14 @@ impl Translator {
                     poses: particles.iter().map(|p| pose2(p.pose)).collect(),
                 };
                 vec![Message::new(format!("{topic}/particles"), &m)]
+            }
+            AnyMsg::PlannerWaypoints(w) => {
+                let m = PosesInFrame {
+                    timestamp: Some(stamp(ns)),
+                    frame_id: MAP_FRAME.to_owned(),
+                    poses: w.waypoints.iter().map(|&p| pose2(p)).collect(),
+                };
+                vec![Message::new(format!("{topic}/path"), &m).latched()]
             }
             AnyMsg::MapInfo(i) => {
                 self.map_info.insert(dev, *i);

@@ -170,3 +170,17 @@ fn a_world_is_a_still_scene_and_its_poses_move_the_rest() {
     let at = moving.entities[0].lines[0].pose.as_ref().unwrap();
     assert_eq!(at.position.as_ref().unwrap().x, 5.0);
 }
+
+#[test]
+fn a_planner_s_waypoints_are_its_latched_path_in_the_map() {
+    let w = troupe_msgs::planner::Waypoints {
+        waypoints: vec![Pose2d::default(), Pose2d::new(5.0, 0.0, 0.0)],
+    };
+    let out =
+        Translator::new().translate(&key(Interface::Planner), 0, &AnyMsg::PlannerWaypoints(w));
+    assert_eq!(out[0].topic, "/robot/6665/planner/0/path");
+    assert!(out[0].latched);
+    let p: PosesInFrame = decode(&out[0]);
+    assert_eq!((p.frame_id.as_str(), p.poses.len()), (MAP_FRAME, 2));
+    assert_eq!(p.poses[1].position.as_ref().unwrap().x, 5.0);
+}

@@ -21,6 +21,7 @@
 use std::collections::HashMap;
 use std::sync::mpsc::SyncSender;
 use std::sync::{Arc, Mutex};
+use std::time::Duration;
 
 use anyhow::Context as _;
 use clap::Args;
@@ -28,7 +29,8 @@ use foxglove::websocket::{Capability, Client, ClientChannel, ServerListener};
 use foxglove::{Context, PartialMetadata, RawChannel};
 use troupe_foxglove_msgs::{Message, Translator};
 use troupe_msgs::{
-    codec, decode_any, keys, localize, planner, position2d, Device, Interface, Pose2d, Request,
+    codec, decode_any, keys, localize, planner, position2d, AnyMsg, Device, Interface, Pose2d,
+    Request,
 };
 use troupe_node::zenoh::{sample::SampleKind, Session, Wait};
 use troupe_node::ZenohArgs;
@@ -200,6 +202,8 @@ struct Live {
     channels: HashMap<String, Arc<RawChannel>>,
     translator: Translator,
     latched: Latched,
+    /// Each planner's last path: valid, goal, waypoints.
+    paths: HashMap<Device, (bool, [f64; 3], u32)>,
 }
 
 impl Live {
@@ -211,6 +215,7 @@ impl Live {
             channels: HashMap::new(),
             translator: Translator::new(),
             latched,
+            paths: HashMap::new(),
         }
     }
 
@@ -220,6 +225,9 @@ impl Live {
             return;
         };
         let ns = stamp_ns(s.stamp);
+        if let AnyMsg::PlannerState(st) = &s.msg {
+            self.planned(key, st);
+        }
         for m in self.translator.translate(key, ns, &s.msg) {
             self.log(m, ns);
         }
@@ -240,6 +248,39 @@ impl Live {
         });
     }
 
+    /// A planner's state: a new goal, validity or count of waypoints is a
+    /// new path, asked for off this thread (its waypoints come back as a
+    /// sample, drawn as the planner's path).
+    fn planned(&mut self, key: &str, st: &planner::State) {
+        let Ok(dev) = keys::parse_data(key) else {
+            return;
+        };
+        let path = (
+            st.valid,
+            [st.goal.x, st.goal.y, st.goal.yaw],
+            st.waypoints_count,
+        );
+        if self.paths.insert(dev, path) == Some(path) {
+            return;
+        }
+        let (session, tx) = (self.session.clone(), self.tx.clone());
+        std::thread::spawn(move || {
+            let key = keys::req(&dev, planner::GetWaypoints::NAME);
+            let asked = troupe_node::ask(&session, &key, Duration::from_secs(2))
+                .payload(codec::encode(&planner::GetWaypoints, 0.0))
+                .wait();
+            let Some(reply) = asked.ok().and_then(|r| r.recv().ok()) else {
+                return;
+            };
+            if let Ok(answer) = reply.into_result() {
+                let _ = tx.send(Heard::Sample {
+                    key: keys::data(&dev),
+                    payload: answer.payload().to_bytes().into_owned(),
+                });
+            }
+        });
+    }
+
     /// Unadvertises every channel of a device that went.
     fn close(&mut self, dev: &Device) {
         let topic = format!("/{}", keys::data(dev));
@@ -253,6 +294,7 @@ impl Live {
         });
         lock(&self.latched).retain(|t, _| !gone(t));
         self.translator.forget(dev);
+        self.paths.remove(dev);
     }
 
     /// Logs `m` on its channel (made, and advertised, with its first
