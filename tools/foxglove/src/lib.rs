@@ -92,8 +92,20 @@ pub fn serve(a: &FoxgloveArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         }
         None => vec![Capability::ClientPublish, Capability::Time],
     };
+    // The SDK's sockets on one thread of their own: its default runtime
+    // (a worker per core) woke another thread for nearly every message.
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("starting the WebSocket server's thread")?;
+    let sockets = rt.handle().clone();
+    std::thread::Builder::new()
+        .name("foxglove-ws".into())
+        .spawn(move || rt.block_on(std::future::pending::<()>()))
+        .context("starting the WebSocket server's thread")?;
     let server = ctx
         .websocket_server()
+        .tokio_runtime(&sockets)
         .name("troupe")
         .bind(a.bind.clone(), a.port)
         .capabilities(capabilities)
