@@ -40,6 +40,7 @@ class Stack:
         self.proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         self.lines: "queue.Queue[str]" = queue.Queue()
         self.seen: list = []
+        self.recorders: list = []
         self.errors: list = []
         self.pumps = [threading.Thread(target=self._pump, args=(self.proc.stdout, self.lines.put), daemon=True),
                       threading.Thread(target=self._pump, args=(self.proc.stderr, self.errors.append), daemon=True)]
@@ -76,7 +77,9 @@ class Stack:
     def record(self, path, *flags):
         """`troupe record -o PATH FLAGS…` against this stack, returned once its subscriptions are
         in place."""
-        return Recorder(self, path, *flags)
+        recorder = Recorder(self, path, *flags)
+        self.recorders.append(recorder)
+        return recorder
 
     def run(self, *args):
         """An offline command of this stack's binary (`log export …`)."""
@@ -85,6 +88,11 @@ class Stack:
     def stop(self):
         """Stops the stack as Ctrl-C does (once: again is a no-op); then `errors` holds the whole
         of its log."""
+        for r in self.recorders:
+            # One a failed test left running.
+            if r.proc.poll() is None:
+                r.proc.kill()
+                r.proc.communicate()
         if self.proc.poll() is not None:
             return
         self.client.close()
@@ -106,7 +114,10 @@ class Recorder:
             [stack.bin, "--namespace", stack.namespace, "--connect", stack.endpoint, "record", "-o", str(path),
              *flags], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         first = self.proc.stdout.readline()
-        assert first.startswith("troupe record:"), (first, self.proc.stderr.read())
+        if not first.startswith("troupe record:"):
+            self.proc.kill()
+            _, err = self.proc.communicate()
+            raise AssertionError(f"troupe record did not start: {first!r} {err}")
 
     def stop(self):
         """Stops it as Ctrl-C does; its (stdout, stderr)."""

@@ -221,34 +221,36 @@ pub fn run(a: &RecordBenchArgs) -> anyhow::Result<()> {
             took
         )?;
 
-        // The recording as ROS 2 messages, converted whole.
+        // The recording as ROS 2 and as Foxglove messages, converted whole.
         let messages = message_count(&file)?;
-        let ros2 = dir.join("ros2.mcap");
-        let t = Instant::now();
-        let export = std::process::Command::new(std::env::current_exe()?)
-            .args(["log", "export", "--format", "ros2", "-o"])
-            .arg(&ros2)
-            .arg(&file)
-            .output()?;
-        let took = t.elapsed().as_secs_f64().max(1e-9);
-        anyhow::ensure!(
-            export.status.success(),
-            "log export failed: {}",
-            String::from_utf8_lossy(&export.stderr)
-        );
-        let (from, to) = (
-            std::fs::metadata(&file)?.len(),
-            std::fs::metadata(&ros2)?.len(),
-        );
-        writeln!(
-            out,
-            "  log export --format ros2: {messages} messages, {:.1} MB to {:.1} MB in {took:.2} s: \
-             {:.0} messages/s, {:.1} MB/s read (the process's start included)",
-            from as f64 / 1e6,
-            to as f64 / 1e6,
-            messages as f64 / took,
-            from as f64 / 1e6 / took
-        )?;
+        for format in ["ros2", "foxglove"] {
+            let to_file = dir.join(format!("{format}.mcap"));
+            let t = Instant::now();
+            let export = std::process::Command::new(std::env::current_exe()?)
+                .args(["log", "export", "--format", format, "-o"])
+                .arg(&to_file)
+                .arg(&file)
+                .output()?;
+            let took = t.elapsed().as_secs_f64().max(1e-9);
+            anyhow::ensure!(
+                export.status.success(),
+                "log export --format {format} failed: {}",
+                String::from_utf8_lossy(&export.stderr)
+            );
+            let (from, to) = (
+                std::fs::metadata(&file)?.len(),
+                std::fs::metadata(&to_file)?.len(),
+            );
+            writeln!(
+                out,
+                "  log export --format {format}: {messages} messages, {:.1} MB to {:.1} MB in {took:.2} s: \
+                 {:.0} messages/s, {:.1} MB/s read (the process's start included)",
+                from as f64 / 1e6,
+                to as f64 / 1e6,
+                messages as f64 / took,
+                from as f64 / 1e6 / took
+            )?;
+        }
         Ok(())
     })();
     let _ = nix::sys::signal::kill(
