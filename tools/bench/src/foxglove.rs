@@ -13,8 +13,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
-use troupe_msgs::{keys, Interface};
-use troupe_node::zenoh::Wait;
+use troupe_msgs::Interface;
 use troupe_node::{Mode, ZenohArgs};
 use tungstenite::client::IntoClientRequest;
 use tungstenite::Message;
@@ -159,20 +158,8 @@ fn measure(
     };
     // The robots' data, counted.
     let session = z.open(Mode::Client)?;
-    let count = |i: Interface| -> anyhow::Result<_> {
-        let n = Arc::new(AtomicU64::new(0));
-        let c = n.clone();
-        let sub = session
-            .declare_subscriber(keys::data_of(i))
-            .callback(move |_| {
-                c.fetch_add(1, Ordering::Relaxed);
-            })
-            .wait()
-            .map_err(|e| anyhow::anyhow!("subscribing to {i}: {e}"))?;
-        Ok((sub, n))
-    };
-    let (_odo, odometry) = count(Interface::Position2d)?;
-    let (_rng, ranges) = count(Interface::Ranger)?;
+    let (_odo, odometry) = crate::harness::count(&session, Interface::Position2d)?;
+    let (_rng, ranges) = crate::harness::count(&session, Interface::Ranger)?;
     let window = || Duration::from_secs_f64(a.seconds);
 
     let mut out = std::io::stdout().lock();

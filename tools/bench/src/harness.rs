@@ -271,3 +271,25 @@ impl Window {
         }
     }
 }
+
+/// Counts the samples of every device of interface `i`, while the
+/// subscriber lives.
+pub(crate) fn count(
+    session: &troupe_node::zenoh::Session,
+    i: troupe_msgs::Interface,
+) -> anyhow::Result<(
+    troupe_node::zenoh::pubsub::Subscriber<()>,
+    std::sync::Arc<AtomicU64>,
+)> {
+    use troupe_node::zenoh::Wait;
+    let n = std::sync::Arc::new(AtomicU64::new(0));
+    let c = n.clone();
+    let sub = session
+        .declare_subscriber(troupe_msgs::keys::data_of(i))
+        .callback(move |_| {
+            c.fetch_add(1, Ordering::Relaxed);
+        })
+        .wait()
+        .map_err(|e| anyhow::anyhow!("subscribing to {i}: {e}"))?;
+    Ok((sub, n))
+}

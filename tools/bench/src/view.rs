@@ -9,15 +9,14 @@ use std::io::{BufRead, Read, Write};
 use std::net::TcpStream;
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
 
 use crate::harness::{Figures, Kid, Window, ROBOTS};
-use troupe_msgs::{keys, Interface};
-use troupe_node::zenoh::Wait;
+use troupe_msgs::Interface;
 use troupe_node::{Mode, ZenohArgs};
 
 /// `troupe bench view` options.
@@ -154,20 +153,8 @@ fn measure(
 
     // The robots' data, counted.
     let session = z.open(Mode::Client)?;
-    let count = |i: Interface| -> anyhow::Result<_> {
-        let n = Arc::new(AtomicU64::new(0));
-        let c = n.clone();
-        let sub = session
-            .declare_subscriber(keys::data_of(i))
-            .callback(move |_| {
-                c.fetch_add(1, Ordering::Relaxed);
-            })
-            .wait()
-            .map_err(|e| anyhow::anyhow!("subscribing to {i}: {e}"))?;
-        Ok((sub, n))
-    };
-    let (_odo, odometry) = count(Interface::Position2d)?;
-    let (_rng, ranges) = count(Interface::Ranger)?;
+    let (_odo, odometry) = crate::harness::count(&session, Interface::Position2d)?;
+    let (_rng, ranges) = crate::harness::count(&session, Interface::Ranger)?;
 
     let mut out = std::io::stdout().lock();
     writeln!(
