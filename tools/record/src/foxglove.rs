@@ -11,14 +11,12 @@ use troupe_foxglove_msgs::Translator;
 use troupe_msgs::decode_any;
 use troupe_ros2::stamp_ns;
 
+use crate::ros2::{lines, JSON, KEPT, UNREADABLE};
 use crate::{Files, Schema};
 
 /// The MCAP profile of Foxglove's files (none: any channel may hold any
 /// schema).
 pub const PROFILE: &str = "";
-
-const UNREADABLE: &str = "(unreadable: left out)";
-const KEPT: &str = "(kept: the shape of later messages)";
 
 /// A topic's schema, and how many messages of each kind of sample it took.
 struct Topic {
@@ -106,7 +104,7 @@ impl Foxglove {
         let mut counts: BTreeMap<(&str, &str), u64> = BTreeMap::new();
         for t in self.topics.values() {
             let to = match &t.schema {
-                Some(s) if s.encoding == "jsonschema" => "JSON",
+                Some(s) if s.encoding == "jsonschema" => JSON,
                 Some(s) => s.name.as_str(),
                 None => "?",
             };
@@ -117,7 +115,7 @@ impl Foxglove {
         for (&(tag, why), &n) in &self.kept {
             *counts.entry((tag, why)).or_default() += n;
         }
-        crate::ros2::lines(counts.iter().map(|(&(tag, to), &n)| (tag, to, n)))
+        lines(counts.iter().map(|(&(tag, to), &n)| (tag, to, n)))
     }
 }
 

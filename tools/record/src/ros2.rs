@@ -16,10 +16,11 @@ pub const PROFILE: &str = "ros2";
 /// The message encoding of ROS 2 messages.
 pub const CDR: &str = "cdr";
 
-/// Where a sample went when it was not written as a ROS 2 message.
-const KEPT: &str = "(kept: the shape of later messages)";
-const JSON: &str = "JSON";
-const UNREADABLE: &str = "(unreadable: left out)";
+/// Where a sample went when it was not written as a ROS 2 (or Foxglove)
+/// message; the Foxglove writer's summary says the same.
+pub(crate) const KEPT: &str = "(kept: the shape of later messages)";
+pub(crate) const JSON: &str = "JSON";
+pub(crate) const UNREADABLE: &str = "(unreadable: left out)";
 
 /// Writes samples as ROS 2 messages, and counts what went where.
 #[derive(Default)]
