@@ -109,6 +109,8 @@ fn player_req(sub: u8) -> [u32; 6] {
 /// A client past the banner, in PULL mode as libplayerc puts itself.
 fn connect(addr: SocketAddr) -> anyhow::Result<TcpStream> {
     let mut s = TcpStream::connect(addr)?;
+    // A request the bridge leaves unanswered fails the bench, not hangs it.
+    s.set_read_timeout(Some(Duration::from_secs(10)))?;
     let mut banner = [0u8; wire::BANNER_LEN];
     s.read_exact(&mut banner)?;
     request(
@@ -449,7 +451,11 @@ fn measure(a: &BridgeBenchArgs, router: &troupe_node::zenoh::Session) -> anyhow:
     }));
 
     let mut s = connect(addr)?;
-    open(&mut s, Interface::Position2d)?;
+    // As Player, the bridge answers a device's requests once a client has
+    // opened it.
+    for i in [Interface::Position2d, Interface::Map, Interface::Simulation] {
+        open(&mut s, i)?;
+    }
     let (info, geom) = (req(Interface::Map, 1), req(Interface::Position2d, 1));
     // r0's pose: Stage's thread answers the first ask, then keeps the
     // answer ready, renewed after every step.
@@ -479,12 +485,21 @@ fn measure(a: &BridgeBenchArgs, router: &troupe_node::zenoh::Session) -> anyhow:
         anyhow::ensure!(reply.result().is_ok(), "{info_key} refused");
         Ok(())
     };
-    let [idle, busy, live, moved, raw] = rounds(a.samples, |kind| match kind {
+    // The floor: a request crosses two processes' sockets (client to
+    // bridge, bridge to driver), each a round trip at least; a Player
+    // request and its reply are some tens of bytes.
+    let mut echo = crate::harness::TcpEcho::start(64)?;
+    let mut two_tcp = || -> anyhow::Result<()> {
+        echo.round_trip()?;
+        echo.round_trip().map(drop)
+    };
+    let [idle, busy, live, moved, raw, two_tcp] = rounds(a.samples, |kind| match kind {
         0 => request(&mut s, info, &[]).map(drop),
         1 => request(&mut s, geom, &[]).map(drop),
         2 => request(&mut s, get_pose, &pose).map(drop),
         3 => request(&mut s, set_pose, &set).map(drop),
-        _ => bare(),
+        4 => bare(),
+        _ => two_tcp(),
     })?;
     let mut fetches = Vec::with_capacity(a.fetches);
     let mut size = (0, 0);
@@ -613,6 +628,22 @@ fn measure(a: &BridgeBenchArgs, router: &troupe_node::zenoh::Session) -> anyhow:
         "for scale: the GET_INFO as a bare Zenoh get",
         &raw,
         "Zenoh alone, no bridge, no TCP client",
+    )?;
+    row(
+        &mut out,
+        "the floor: two plain TCP round trips",
+        &two_tcp,
+        "client -> bridge -> driver over bare sockets",
+    )?;
+    let floor = percentile(&two_tcp, 0.5).as_secs_f64().max(1e-9);
+    let times = |v: &[Duration]| percentile(v, 0.5).as_secs_f64() / floor;
+    writeln!(
+        out,
+        "  p50 against the floor: GET_INFO {:.2}x, GET_GEOM {:.2}x, GET_POSE2D {:.2}x, SET_POSE2D {:.2}x (target <= 1.3x)",
+        times(&idle),
+        times(&busy),
+        times(&live),
+        times(&moved),
     )?;
     Ok(())
 }

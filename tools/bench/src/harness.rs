@@ -293,3 +293,77 @@ pub(crate) fn count(
         .map_err(|e| anyhow::anyhow!("subscribing to {i}: {e}"))?;
     Ok((sub, n))
 }
+
+/// Plain loopback TCP between this process and a child of its own (`troupe
+/// bench echo`, which sends each message back): the floor any middleware
+/// between two processes stands on. A bench times its round trips in turn
+/// with what it compares with them, so both meet the machine alike (an
+/// idle core wakes slower than a busy one: alone, the same round trip
+/// measured 20-60 µs from run to run). `TCP_NODELAY` on both ends.
+pub(crate) struct TcpEcho {
+    child: std::process::Child,
+    stream: std::net::TcpStream,
+    msg: Vec<u8>,
+    sent: u8,
+}
+
+impl TcpEcho {
+    /// Starts the child, echoing messages of `size` bytes.
+    pub(crate) fn start(size: usize) -> anyhow::Result<TcpEcho> {
+        let listener =
+            std::net::TcpListener::bind("127.0.0.1:0").context("binding the TCP floor")?;
+        let addr = listener.local_addr()?;
+        let child = Command::new(std::env::current_exe()?)
+            .args(["bench", "echo", "--to", &addr.to_string(), "--size"])
+            .arg(size.to_string())
+            .spawn()
+            .context("starting `troupe bench echo`")?;
+        let (stream, _) = listener.accept().context("accepting `troupe bench echo`")?;
+        stream.set_nodelay(true)?;
+        stream.set_read_timeout(Some(Duration::from_secs(5)))?;
+        Ok(TcpEcho {
+            child,
+            stream,
+            msg: vec![0; size.max(1)],
+            sent: 0,
+        })
+    }
+
+    /// One message there and back.
+    pub(crate) fn round_trip(&mut self) -> anyhow::Result<Duration> {
+        use std::io::{Read, Write};
+        self.sent = self.sent.wrapping_add(1);
+        self.msg[0] = self.sent;
+        let t0 = Instant::now();
+        self.stream.write_all(&self.msg)?;
+        self.stream
+            .read_exact(&mut self.msg)
+            .context("no TCP echo within 5 s")?;
+        let took = t0.elapsed();
+        anyhow::ensure!(
+            self.msg[0] == self.sent,
+            "the TCP echo sent back another message"
+        );
+        Ok(took)
+    }
+}
+
+impl Drop for TcpEcho {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// `troupe bench echo`: sends back every `size`-byte message it reads
+/// from `to`, until the socket closes.
+pub(crate) fn echo(to: &str, size: usize) -> anyhow::Result<()> {
+    use std::io::{Read, Write};
+    let mut s = std::net::TcpStream::connect(to).with_context(|| format!("connecting to {to}"))?;
+    s.set_nodelay(true)?;
+    let mut msg = vec![0u8; size.max(1)];
+    while s.read_exact(&mut msg).is_ok() {
+        s.write_all(&msg)?;
+    }
+    Ok(())
+}

@@ -3,7 +3,9 @@
 //! This process runs a router on an ephemeral loopback port (as `troupe
 //! launch` embeds one), starts `troupe bench pong` as a child peer, and
 //! times laser-scan-sized messages through the full codec (encode, put,
-//! decode, re-encode, put back, decode) and through a request/reply.
+//! decode, re-encode, put back, decode) and through a request/reply,
+//! beside the floor they stand on: the same bytes echoed over plain TCP
+//! between two processes, in the same run.
 
 use std::io::{Read, Write};
 use std::process::{Command, Stdio};
@@ -139,6 +141,10 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
         let size = codec::encode(&msg, 0.0).len();
         let total = a.warmup + a.samples;
 
+        // The floor: the same bytes between two processes over plain TCP,
+        // a round trip after each of Zenoh's.
+        let mut echo = crate::harness::TcpEcho::start(size)?;
+        let mut tcp = Vec::with_capacity(a.samples);
         let mut pubsub = Vec::with_capacity(a.samples);
         for i in 0..total {
             let payload = codec::encode(&msg, i as f64);
@@ -159,6 +165,7 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
             }
             if i >= a.warmup {
                 pubsub.push(t0.elapsed());
+                tcp.push(echo.round_trip()?);
             }
         }
 
@@ -183,6 +190,7 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
         }
         pubsub.sort();
         getreply.sort();
+        tcp.sort();
         let mut out = std::io::stdout().lock();
         let over = if keys.is_some() {
             "tls/127.0.0.1, mutual authentication and access control"
@@ -201,9 +209,18 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
                 us(f(percentile(v, 1.0)))
             )
         };
+        row(&mut out, "TCP round trip (the floor)", &tcp, false)?;
         row(&mut out, "put/sub round trip", &pubsub, false)?;
         row(&mut out, "one sample (round trip/2)", &pubsub, true)?;
         row(&mut out, "get/reply round trip", &getreply, false)?;
+        let floor = percentile(&tcp, 0.5).as_secs_f64().max(1e-9);
+        let times = |v: &[Duration]| percentile(v, 0.5).as_secs_f64() / floor;
+        writeln!(
+            out,
+            "  p50 against TCP: one sample {:.2}x a TCP one way, get/reply {:.2}x a TCP round trip (target <= 1.3x each)",
+            times(&pubsub),
+            times(&getreply),
+        )?;
         Ok(())
     })();
     // Closing the child's stdin tells it to exit; kill it if it does not.

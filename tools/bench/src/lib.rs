@@ -78,6 +78,16 @@ pub enum BenchCmd {
         #[arg(long, default_value = "bench")]
         prefix: String,
     },
+    /// The plain TCP echo the latency benches measure their floor with (started by them).
+    #[command(hide = true)]
+    Echo {
+        /// The address to connect to.
+        #[arg(long)]
+        to: String,
+        /// The size of each message in bytes.
+        #[arg(long)]
+        size: usize,
+    },
 }
 
 /// Runs a `troupe bench` subcommand.
@@ -85,6 +95,7 @@ pub fn run(cmd: BenchCmd, z: &ZenohArgs) -> anyhow::Result<()> {
     match cmd {
         BenchCmd::Latency(a) => latency::run(&a),
         BenchCmd::Pong { prefix } => latency::pong(z, &prefix),
+        BenchCmd::Echo { to, size } => harness::echo(&to, size),
         BenchCmd::Launch(a) => launch::run(&a),
         BenchCmd::Stage(a) => stage::run(&a),
         BenchCmd::Bridge(a) => bridge::run(&a),
