@@ -87,6 +87,11 @@ pub struct Body {
     /// The body as a rectangle, when it is one (most are: a model's
     /// default body is its box): rays test it in its own frame.
     rect: Option<Rect>,
+    /// A circle around each polygon, as [`Body::circle`] is around them
+    /// all, when there are several: a ray tests the edges only of those
+    /// its line meets (Stage's fancy Pioneer is 13 polygons, a ray from a
+    /// neighbour meets one or two).
+    poly_circles: Vec<(f64, f64, f64)>,
 }
 
 impl Default for Body {
@@ -96,6 +101,7 @@ impl Default for Body {
             bounds: None,
             circle: (0.0, 0.0, -1.0),
             rect: None,
+            poly_circles: Vec::new(),
         }
     }
 }
@@ -121,6 +127,14 @@ impl Body {
             Some(r) => (r.c.0, r.c.1, pad(r.half.0.hypot(r.half.1))),
             None => circle_around(&self.polys, self.bounds),
         };
+        self.poly_circles.clear();
+        if self.polys.len() > 1 {
+            self.poly_circles.extend(
+                self.polys
+                    .iter()
+                    .map(|p| circle_around(std::slice::from_ref(p), bounds(p.iter().copied()))),
+            );
+        }
     }
 
     /// The polygons, in world coordinates.
@@ -339,7 +353,18 @@ impl Movers {
     #[inline(never)]
     fn hit_edges(&self, m: usize, id: u16, o: (f64, f64), d: (f64, f64)) -> Option<Hit> {
         let mut best = f64::INFINITY;
-        for poly in &self.bodies[m].polys {
+        let body = &self.bodies[m];
+        for (k, poly) in body.polys.iter().enumerate() {
+            if let Some(&(cx, cy, r)) = body.poly_circles.get(k) {
+                // A polygon whose circle the ray misses, or meets only
+                // beyond the nearest crossing yet, is neither crossed
+                // first nor around the ray's start.
+                let w = (cx - o.0, cy - o.1);
+                let along = w.0 * d.0 + w.1 * d.1;
+                if (w.0 * d.1 - w.1 * d.0).abs() > r || along < -r || along - r > best {
+                    continue;
+                }
+            }
             let mut crossings = 0;
             for (a, b) in edges(poly) {
                 // The ray o + t·d meets the edge a + u·e where t = tn/den and
