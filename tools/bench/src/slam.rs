@@ -2,7 +2,10 @@
 //! robot wandering with odometry that reads its turns wrong: the map's
 //! accuracy and coverage against the world's own walls (beside what
 //! odometry alone gives), and how much faster than the log's own pace it
-//! is built, on one core.
+//! is built, on one core; and the online `slam` driver fed the same log
+//! scan by scan (through the node harness, as a launched stack feeds it
+//! less the network): how many scans a second it takes on one core, and
+//! its slowest.
 //!
 //! The worlds: Troupe's office (worlds/wander.world, its robot driven by
 //! the map crate's explorer: Stage's `wander` wedges itself in the
@@ -12,13 +15,15 @@
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use clap::Args;
 use troupe_map::eval;
 use troupe_map::simulate::{simulate, Driver, Setup};
 use troupe_map::slam::Params;
-use troupe_map::source::{self, Select};
+use troupe_map::source::{self, Recording, Select};
+use troupe_msgs::{laser, position2d, Device, Interface, Pose2d};
+use troupe_node::testing::Harness;
 
 /// Flags of `troupe bench slam`.
 #[derive(Debug, Args)]
@@ -115,15 +120,10 @@ pub fn run(a: &SlamBenchArgs) -> anyhow::Result<()> {
         let odometry = troupe_map::odometry_map(&rec, 0.05);
         let raw = eval::score(&odometry.occupied(), &run.obstacles, &run.seen, frame, 0.1);
         let span = rec.scans.last().map_or(0.0, |l| l.t) - t_first;
-        let walls = eval::Near::new(&run.obstacles, 0.1);
-        let on_walls = run
-            .seen
-            .iter()
-            .filter(|&&(x, y)| walls.within(x, y, 0.1))
-            .count();
+        let live = online(&rec)?;
         writeln!(
             out,
-            "  {name:<8} accuracy {:>5.1}% (odometry alone {:>5.1}%)  coverage {:>5.1}% ({:>5.1}%)  built {:>5.0}x the log's pace ({span:.0} s of log in {took:.2} s)  {} keyframes, {} loop closures, {:.0} m driven (simulated in {sim_s:.1} s; truth check: {:.0}% of the beams' ends on the world's raster)",
+            "  {name:<8} accuracy {:>5.1}% (odometry alone {:>5.1}%)  coverage {:>5.1}% ({:>5.1}%)  built {:>5.0}x the log's pace ({span:.0} s of log in {took:.2} s)  {} keyframes, {} loop closures, {:.0} m driven (simulated in {sim_s:.1} s; {} beam ends on walls, {} on other robots left out)",
             100.0 * s.accuracy,
             100.0 * raw.accuracy,
             100.0 * s.coverage,
@@ -132,7 +132,19 @@ pub fn run(a: &SlamBenchArgs) -> anyhow::Result<()> {
             built.slam.keyframes.len(),
             built.slam.closures,
             run.driven,
-            100.0 * on_walls as f64 / run.seen.len().max(1) as f64,
+            run.seen.len(),
+            run.on_movers,
+        )?;
+        let rate = live.scans as f64 / live.busy.as_secs_f64().max(1e-9);
+        let pace = live.scans as f64 / span.max(1e-9);
+        writeln!(
+            out,
+            "  {:<8} online: the slam driver took {} scans at {rate:.0} a second on one core ({:.0}x the log's {pace:.1} Hz; 10 Hz at 10x real time needs 100), the slowest {:.1} ms, p99 {:.1} ms",
+            "",
+            live.scans,
+            rate / pace.max(1e-9),
+            live.worst.as_secs_f64() * 1e3,
+            live.p99.as_secs_f64() * 1e3,
         )?;
     }
     if a.keep.is_none() {
@@ -141,4 +153,55 @@ pub fn run(a: &SlamBenchArgs) -> anyhow::Result<()> {
         writeln!(out, "  logs and maps kept in {}", dir.display())?;
     }
     Ok(())
+}
+
+/// What the online driver made of a log.
+struct Online {
+    scans: usize,
+    /// Its time in the scans and odometry it was given.
+    busy: Duration,
+    worst: Duration,
+    p99: Duration,
+}
+
+/// The online `slam` driver fed `rec` as a launched stack feeds it: each
+/// scan after the odometry that places it, on this thread.
+fn online(rec: &Recording) -> anyhow::Result<Online> {
+    const ODOM: Device = Device::new(6665, Interface::Position2d, 0);
+    const LASER: Device = Device::new(6665, Interface::Laser, 0);
+    let o = rec.sensor;
+    let mut h = Harness::<troupe_slam_node::SlamNode>::from_json(&format!(
+        r#"{{"name":"slam","requires":["odometry:::position2d:0","laser:0"],"provides":["map:0"],"options":{{"laser_pose":[{},{},{}]}}}}"#,
+        o.x, o.y, o.yaw
+    ))?;
+    let mut times = Vec::with_capacity(rec.scans.len());
+    for (odom, s) in rec.placed() {
+        let beams = s.ranges.len().max(1) as f64;
+        let scan = laser::Scan {
+            min_angle: s.min_angle as f32,
+            max_angle: (s.min_angle + s.step * (beams - 1.0)) as f32,
+            resolution: s.step as f32,
+            max_range: s.max_range as f32,
+            ranges: s.ranges.clone(),
+            ..Default::default()
+        };
+        let data = position2d::Data {
+            pose: odom.into(),
+            vel: Pose2d::default(),
+            stall: false,
+        };
+        h.set_time(s.t);
+        let t0 = Instant::now();
+        h.input(ODOM, &data)?;
+        h.input(LASER, &scan)?;
+        times.push(t0.elapsed());
+    }
+    let busy = times.iter().sum();
+    times.sort();
+    Ok(Online {
+        scans: times.len(),
+        busy,
+        worst: times.last().copied().unwrap_or_default(),
+        p99: crate::harness::percentile(&times, 0.99),
+    })
 }

@@ -21,8 +21,12 @@ pub struct Run {
     pub log: String,
     /// The robot's true pose at each logged scan.
     pub truth: Vec<(f64, Pose)>,
-    /// Where the true beams ended, one point per 5 cm.
+    /// Where the true beams ended on a static obstacle (the walls the
+    /// robot saw), one point per 5 cm.
     pub seen: Vec<(f64, f64)>,
+    /// Beam ends (one per 5 cm) on what moves (another robot): no wall,
+    /// and not in [`Run::seen`].
+    pub on_movers: usize,
     /// The static obstacles, one point per cell of the world's raster.
     pub obstacles: Vec<(f64, f64)>,
     /// Metres the robot truly drove.
@@ -187,6 +191,7 @@ pub fn simulate(mut world: World, setup: &Setup) -> Result<Run, String> {
         log: String::new(),
         truth: Vec::new(),
         seen: Vec::new(),
+        on_movers: 0,
         obstacles,
         driven: 0.0,
     };
@@ -243,6 +248,13 @@ pub fn simulate(mut world: World, setup: &Setup) -> Result<Run, String> {
         run.truth.push((t, truth));
     }
     run.log = log;
+    // The walls seen: a beam's end within a cell of an obstacle. Another
+    // robot wandering by leaves a trail of new ends wherever it goes (in
+    // Stage's cave, r1's outnumbered the walls' two to one).
+    let walls = crate::eval::Near::new(&run.obstacles, 0.1);
+    let before = run.seen.len();
+    run.seen.retain(|&(x, y)| walls.within(x, y, 0.1));
+    run.on_movers = before - run.seen.len();
     Ok(run)
 }
 
