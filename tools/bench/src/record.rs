@@ -78,6 +78,8 @@ pub fn run(a: &RecordBenchArgs) -> anyhow::Result<()> {
             }
         };
         let file = dir.join("p100.mcap");
+        // The launcher holds the router: what it forwards, it pays for.
+        let router_cpu0 = crate::harness::cpu_of(launcher.id());
         let (cpu0, t0) = (crate::harness::cpu_time(), Instant::now());
         record(
             RecordArgs {
@@ -99,6 +101,9 @@ pub fn run(a: &RecordBenchArgs) -> anyhow::Result<()> {
                 .as_secs_f64(),
             t0.elapsed().as_secs_f64(),
         );
+        let router_cpu = crate::harness::cpu_of(launcher.id())
+            .saturating_sub(router_cpu0)
+            .as_secs_f64();
 
         // What was lost: each device publishes once per step, so between its
         // first and last stamp it owes one message per 100 ms. (Not the
@@ -138,13 +143,14 @@ pub fn run(a: &RecordBenchArgs) -> anyhow::Result<()> {
         }
         writeln!(
             out,
-            "  record: {count} messages, {:.1} MB in {wall:.1} s ({:.0} messages/s, {:.1} MB/s); the world ran {:.1}x real time ({alone:.1}x before the recorder joined); lost {} of {owed}; recorder CPU {cpu:.1} s = {:.0}% of one core",
+            "  record: {count} messages, {:.1} MB in {wall:.1} s ({:.0} messages/s, {:.1} MB/s); the world ran {:.1}x real time ({alone:.1}x before the recorder joined); lost {} of {owed}; recorder CPU {cpu:.1} s = {:.0}% of one core; the launcher (its router) meanwhile {router_cpu:.2} s = {:.1}%",
             bytes as f64 / 1e6,
             count as f64 / wall,
             bytes as f64 / 1e6 / wall,
             sim / wall,
             owed.saturating_sub(count),
-            100.0 * cpu / wall
+            100.0 * cpu / wall,
+            100.0 * router_cpu / wall
         )?;
         for (kind, (owed, got)) in &by_kind {
             writeln!(out, "    {kind:<24} {got:>8} of {owed:>8}")?;
