@@ -89,7 +89,7 @@ pub struct Body {
     rect: Option<Rect>,
     /// A circle around each polygon, as [`Body::circle`] is around them
     /// all, when there are several: a ray tests the edges only of those
-    /// its line meets (Stage's fancy Pioneer is 13 polygons, a ray from a
+    /// its line meets (Stage's fancy Pioneer is seven polygons, a ray from a
     /// neighbour meets one or two).
     poly_circles: Vec<(f64, f64, f64)>,
 }
