@@ -439,9 +439,10 @@ fn a_tls_fleet_admits_its_own_certificates_only_and_each_identity_does_only_what
             .iter()
             .count();
     };
-    let first = |key: &str, tries: &[(&troupe_node::zenoh::Session, &str)]| -> String {
+    type Tries<'a> = [(&'a troupe_node::zenoh::Session, &'a str)];
+    let first_at = |tap: &troupe_node::zenoh::Session, key: &str, tries: &Tries| -> String {
         let sub = tap.declare_subscriber(key).wait().unwrap();
-        sync(&tap);
+        sync(tap);
         for (s, text) in tries {
             s.put(key, *text).wait().unwrap();
             sync(s);
@@ -452,6 +453,7 @@ fn a_tls_fleet_admits_its_own_certificates_only_and_each_identity_does_only_what
             .expect("a message");
         String::from_utf8_lossy(&got.payload().to_bytes()).into_owned()
     };
+    let first = |key: &str, tries: &Tries| first_at(&tap, key, tries);
     // A viewer's command does not reach the robot; an operator's does.
     let cmd = "robot/6665/position2d/0/cmd/vel";
     assert_eq!(first(cmd, &[(&eye, "eye"), (&ops, "ops")]), "ops");
@@ -464,6 +466,34 @@ fn a_tls_fleet_admits_its_own_certificates_only_and_each_identity_does_only_what
     // An operator granted robot 6665 cannot command 6666; that robot's host can.
     let cmd6 = "robot/6666/position2d/0/cmd/vel";
     assert_eq!(first(cmd6, &[(&ops, "ops"), (&hostb, "hostb")]), "hostb");
+    // Members joined as peers that listen (`--mode peer --listen …`), a
+    // viewer's and a host's, still meet the others only through the
+    // router, whose rules so hold on every path: the fleet's configs turn
+    // gossip off (the router tells no one where the others listen) and
+    // give members no certificate to serve TLS with. (Two members that are
+    // both peers hear nothing of each other: the router does not broker
+    // between peers it has no link state of, so a fleet's processes are
+    // its clients.)
+    let peer = |who: &str| {
+        troupe_node::ZenohArgs {
+            connect: vec![at.clone()],
+            listen: vec!["tcp/127.0.0.1:0".into()],
+            zenoh_config: Some(cfg(&ours, who).into()),
+            mode: Some(troupe_node::Mode::Peer),
+            ..Default::default()
+        }
+        .open(troupe_node::Mode::Peer)
+        .unwrap_or_else(|e| panic!("{who} as a peer: {e}"))
+    };
+    let (host_peer, eye_peer, ops_peer) = (peer("hosta"), peer("eye"), peer("ops"));
+    assert_eq!(
+        first_at(&tap, cmd, &[(&eye_peer, "eye"), (&ops_peer, "ops")]),
+        "ops"
+    );
+    assert_eq!(
+        first_at(&host_peer, cmd, &[(&eye, "eye"), (&ops, "ops")]),
+        "ops"
+    );
     // A viewer may ask a simulator for its world (`troupe view`), not
     // move its models: the router drops the second query, which so gets
     // no answer before its timeout.
