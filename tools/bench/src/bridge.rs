@@ -635,8 +635,7 @@ fn measure(a: &BridgeBenchArgs, router: &troupe_node::zenoh::Session) -> anyhow:
         &two_tcp,
         "client -> bridge -> driver over bare sockets",
     )?;
-    let floor = percentile(&two_tcp, 0.5).as_secs_f64().max(1e-9);
-    let times = |v: &[Duration]| percentile(v, 0.5).as_secs_f64() / floor;
+    let times = |v: &[Duration]| crate::harness::times_floor(v, &two_tcp);
     writeln!(
         out,
         "  p50 against the floor: GET_INFO {:.2}x, GET_GEOM {:.2}x, GET_POSE2D {:.2}x, SET_POSE2D {:.2}x (target <= 1.3x)",

@@ -8,7 +8,6 @@
 
 use std::collections::HashMap;
 use std::io::Write;
-use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
@@ -184,20 +183,8 @@ fn measure(
     std::thread::sleep(window());
     row(&mut out, "no server", &w.end(&odometry, &ranges), None)?;
 
-    let exe = std::env::current_exe()?;
-    let mut server = Kid(Command::new(&exe)
-        .args([
-            "--no-multicast",
-            "--connect",
-            &router,
-            "foxglove",
-            "--port",
-            "0",
-        ])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()?);
-    let url = crate::harness::line_after(&mut server.0, "troupe foxglove: ")?;
+    let (server, url) =
+        crate::harness::server(&router, &["foxglove", "--port", "0"], "troupe foxglove: ")?;
     let url = url.split_whitespace().next().unwrap_or_default().to_owned();
     // Its devices found and their setup asked (maps, geometry, the world).
     std::thread::sleep(Duration::from_secs(3));

@@ -301,7 +301,8 @@ pub(crate) fn count(
 /// idle core wakes slower than a busy one: alone, the same round trip
 /// measured 20-60 µs from run to run). `TCP_NODELAY` on both ends.
 pub(crate) struct TcpEcho {
-    child: std::process::Child,
+    /// Held to be killed with the echo.
+    _child: Kid,
     stream: std::net::TcpStream,
     msg: Vec<u8>,
     sent: u8,
@@ -313,16 +314,16 @@ impl TcpEcho {
         let listener =
             std::net::TcpListener::bind("127.0.0.1:0").context("binding the TCP floor")?;
         let addr = listener.local_addr()?;
-        let child = Command::new(std::env::current_exe()?)
+        let child = Kid(Command::new(std::env::current_exe()?)
             .args(["bench", "echo", "--to", &addr.to_string(), "--size"])
             .arg(size.to_string())
             .spawn()
-            .context("starting `troupe bench echo`")?;
+            .context("starting `troupe bench echo`")?);
         let (stream, _) = listener.accept().context("accepting `troupe bench echo`")?;
         stream.set_nodelay(true)?;
         stream.set_read_timeout(Some(Duration::from_secs(5)))?;
         Ok(TcpEcho {
-            child,
+            _child: child,
             stream,
             msg: vec![0; size.max(1)],
             sent: 0,
@@ -348,11 +349,24 @@ impl TcpEcho {
     }
 }
 
-impl Drop for TcpEcho {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
+/// `v`'s median over `floor`'s, as a ratio (both sorted).
+pub(crate) fn times_floor(v: &[Duration], floor: &[Duration]) -> f64 {
+    percentile(v, 0.5).as_secs_f64() / percentile(floor, 0.5).as_secs_f64().max(1e-9)
+}
+
+/// A server of the 100-Pioneer world's (`troupe view`, `troupe foxglove`)
+/// started as a client of `router` with `args`, and what follows
+/// `announce` on the first line of its standard output that starts so.
+pub(crate) fn server(router: &str, args: &[&str], announce: &str) -> anyhow::Result<(Kid, String)> {
+    let mut kid = Kid(Command::new(std::env::current_exe()?)
+        .args(["--no-multicast", "--connect", router])
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .with_context(|| format!("starting `troupe {}`", args.join(" ")))?);
+    let line = line_after(&mut kid.0, announce)?;
+    Ok((kid, line))
 }
 
 /// `troupe bench echo`: sends back every `size`-byte message it reads

@@ -213,13 +213,11 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
         row(&mut out, "put/sub round trip", &pubsub, false)?;
         row(&mut out, "one sample (round trip/2)", &pubsub, true)?;
         row(&mut out, "get/reply round trip", &getreply, false)?;
-        let floor = percentile(&tcp, 0.5).as_secs_f64().max(1e-9);
-        let times = |v: &[Duration]| percentile(v, 0.5).as_secs_f64() / floor;
         writeln!(
             out,
             "  p50 against TCP: one sample {:.2}x a TCP one way, get/reply {:.2}x a TCP round trip (target <= 1.3x each)",
-            times(&pubsub),
-            times(&getreply),
+            crate::harness::times_floor(&pubsub, &tcp),
+            crate::harness::times_floor(&getreply, &tcp),
         )?;
         Ok(())
     })();

@@ -229,6 +229,7 @@ pub fn run(a: &RecordBenchArgs) -> anyhow::Result<()> {
 
         // The recording as ROS 2 and as Foxglove messages, converted whole.
         let messages = message_count(&file)?;
+        let from = std::fs::metadata(&file)?.len();
         for format in ["ros2", "foxglove"] {
             let to_file = dir.join(format!("{format}.mcap"));
             let t = Instant::now();
@@ -243,10 +244,7 @@ pub fn run(a: &RecordBenchArgs) -> anyhow::Result<()> {
                 "log export --format {format} failed: {}",
                 String::from_utf8_lossy(&export.stderr)
             );
-            let (from, to) = (
-                std::fs::metadata(&file)?.len(),
-                std::fs::metadata(&to_file)?.len(),
-            );
+            let to = std::fs::metadata(&to_file)?.len();
             writeln!(
                 out,
                 "  log export --format {format}: {messages} messages, {:.1} MB to {:.1} MB in {took:.2} s: \

@@ -132,20 +132,7 @@ fn measure(
         no_multicast: true,
         ..Default::default()
     };
-    let exe = std::env::current_exe()?;
-    let mut view = Kid(Command::new(&exe)
-        .args([
-            "--no-multicast",
-            "--connect",
-            &router,
-            "view",
-            "--port",
-            "0",
-        ])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()?);
-    let url = crate::harness::line_after(&mut view.0, "troupe view: ")?;
+    let (view, url) = crate::harness::server(&router, &["view", "--port", "0"], "troupe view: ")?;
     let host = url
         .trim_start_matches("http://")
         .trim_end_matches('/')
