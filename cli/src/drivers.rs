@@ -8,6 +8,7 @@ pub fn catalog() -> Catalog {
     Catalog::new(vec![
         Entry::of::<troupe_dummy::Dummy>("fixed data at a fixed rate on many interfaces (testing)"),
         Entry::of::<troupe_rangertolaser::RangerToLaser>("republishes a ranger as a laser"),
+        Entry::of::<troupe_cameracompress::CameraCompress>("a camera's images compressed to JPEG"),
         Entry::of::<troupe_amcl::Amcl>(
             "adaptive Monte Carlo localization on a map (odometry + laser)",
         ),

@@ -143,11 +143,6 @@ pub const MISSING: &[(&str, &str, &str)] = &[
         "",
     ),
     ("wbr914", "White Box Robotics' 914 PC-Bot", ""),
-    (
-        "cameracompress",
-        "compresses a camera's images to JPEG",
-        "no Troupe driver produces camera images yet (the interface is carried: writelog logs it, the bridge serves it, readlog and passthrough bring it in)",
-    ),
     ("ptu46", "the Directed Perception PTU-46 pan-tilt unit", ""),
     ("linuxwifi", "Linux wireless link statistics", ""),
     ("festival", "speech through the Festival synthesizer", ""),

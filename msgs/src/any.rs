@@ -137,6 +137,7 @@ any! {
     PowerData(power::Data),
     GpsData(gps::Data),
     CameraData(camera::Data),
+    WsnData(wsn::Data),
     BumperData(bumper::Data), BumperGeom(bumper::Geom), BumperGetGeom(bumper::GetGeom),
     IrData(ir::Data), IrGeom(ir::Geom), IrGetGeom(ir::GetGeom),
     AioData(aio::Data), AioCmd(aio::Cmd),

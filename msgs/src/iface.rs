@@ -22,3 +22,4 @@ pub mod ranger;
 pub mod sim;
 pub mod simulation;
 pub mod sonar;
+pub mod wsn;

@@ -642,3 +642,97 @@ fn a_position_command_stops_where_stage_s_controller_stops() {
     }
     assert!(launcher.terminate().success(), "{}", launcher.stderr());
 }
+
+/// Stage's camera through the bridge (issue 46, item 13): camera.cfg from
+/// Stage's own samples serves r0's camera as Stage's plugin does, 100 x 100
+/// RGB888 uncompressed, top row first, every 100 ms of simulated time: the
+/// cave's floor along the bottom row, Stage's background along the top.
+#[test]
+fn stage_s_camera_cfg_serves_r0_s_camera_as_player_does() {
+    use crate::player::{Player, DATA};
+    use troupe_msgs::{Device, Interface};
+    let cfg = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/compat/stage/camera.cfg");
+    if !cfg.exists() {
+        eprintln!("skipping: ../shared/compat is absent");
+        return;
+    }
+    let ns = troupe_tests::unique_namespace("camera");
+    let mut launcher = troupe_tests::launch(&ns, &cfg, &[]);
+    let (_, addr) = troupe_tests::launch_ports(&mut launcher);
+    let mut player = Player::connect(addr, 6665);
+    let cam = Device::new(6665, Interface::Camera, 0);
+    player.open(cam);
+    let mut stamps = Vec::new();
+    let mut last = None;
+    while stamps.len() < 3 {
+        let m = player.recv();
+        if m.sig() == (40, 0, DATA, 1) {
+            stamps.push(m.timestamp);
+            last = Some(m);
+        }
+    }
+    let m = last.unwrap();
+    // width height bpp format fdiv compression image_count, the bytes' count.
+    let head: Vec<u32> = (0..8).map(|i| m.u32_at(4 * i)).collect();
+    assert_eq!(head, [100, 100, 24, 5, 0, 0, 30_000, 30_000]);
+    let px = |col: usize, row: usize| {
+        let i = 32 + (row * 100 + col) * 3;
+        [m.body[i], m.body[i + 1], m.body[i + 2]]
+    };
+    assert_eq!(px(50, 99), [255, 255, 255], "the floor");
+    assert_eq!(px(50, 0), [179, 179, 204], "Stage's background");
+    for w in stamps.windows(2) {
+        assert!((w[1] - w[0] - 0.1).abs() < 1e-6, "{stamps:?}");
+    }
+    assert!(launcher.terminate().success(), "{}", launcher.stderr());
+}
+
+/// Player's dummy.cfg (issue 46, item 13): its camera through
+/// `cameracompress` reaches a client as a JPEG of the dummy's 320 x 240
+/// grey image, and its `wsn` device serves Player's fixed packet.
+#[test]
+fn dummy_cfg_s_compressed_camera_and_wsn_reach_a_player_client() {
+    use crate::player::{Player, DATA};
+    use troupe_msgs::{Device, Interface};
+    let cfg =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/compat/player-cfg/dummy.cfg");
+    if !cfg.exists() {
+        eprintln!("skipping: ../shared/compat is absent");
+        return;
+    }
+    let ns = troupe_tests::unique_namespace("dummycfg");
+    let mut launcher = troupe_tests::launch(&ns, &cfg, &[]);
+    let (_, addr) = troupe_tests::launch_ports(&mut launcher);
+    let mut player = Player::connect(addr, 6665);
+    player.open(Device::new(6665, Interface::Camera, 1));
+    let m = loop {
+        let m = player.recv();
+        if m.sig() == (40, 1, DATA, 1) {
+            break m;
+        }
+    };
+    let head: Vec<u32> = (0..7).map(|i| m.u32_at(4 * i)).collect();
+    assert_eq!(&head[..6], [320, 240, 24, 5, 0, 1], "a JPEG, RGB888");
+    let n = head[6] as usize;
+    assert_eq!(m.u32_at(28) as usize, n);
+    let img = image::load_from_memory_with_format(&m.body[32..32 + n], image::ImageFormat::Jpeg)
+        .unwrap()
+        .to_rgb8();
+    assert_eq!(img.dimensions(), (320, 240));
+    let grey = img.get_pixel(160, 120).0;
+    assert!(
+        img.pixels().all(|p| p.0 == grey),
+        "one grey all over, as the dummy sends"
+    );
+    player.open(Device::new(6665, Interface::Wsn, 0));
+    let m = loop {
+        let m = player.recv();
+        if m.sig() == (57, 0, DATA, 1) {
+            break m;
+        }
+    };
+    assert_eq!((m.u32_at(0), m.u32_at(4), m.u32_at(8)), (132, 1, 125));
+    let f = |i: usize| f32::from_be_bytes(m.body[12 + 4 * i..16 + 4 * i].try_into().unwrap());
+    assert_eq!((f(0), f(9)), (779.0, 489.0), "light and battery");
+    assert!(launcher.terminate().success(), "{}", launcher.stderr());
+}

@@ -302,6 +302,25 @@ pub fn to_player(msg: &AnyMsg) -> Option<(Interface, u8, Vec<u8>)> {
                 .bytes(&c.image);
             (I::Camera, 1)
         }
+        AnyMsg::WsnData(d) => {
+            let p = &d.readings;
+            w.u32(d.node_type).u32(d.node_id).u32(d.node_parent_id);
+            for v in [
+                p.light,
+                p.mic,
+                p.accel_x,
+                p.accel_y,
+                p.accel_z,
+                p.magn_x,
+                p.magn_y,
+                p.magn_z,
+                p.temperature,
+                p.battery,
+            ] {
+                w.f32(v);
+            }
+            (I::Wsn, 1)
+        }
         AnyMsg::BumperData(b) => {
             let bits: Vec<u8> = b.bumpers.iter().map(|&x| u8::from(x)).collect();
             w.bytes(&bits);
@@ -876,6 +895,26 @@ pub fn data_from_player(
                 },
                 stamp,
             ),
+            (I::Wsn, 1) => encode(
+                &troupe_msgs::wsn::Data {
+                    node_type: r.u32()?,
+                    node_id: r.u32()?,
+                    node_parent_id: r.u32()?,
+                    readings: troupe_msgs::wsn::Readings {
+                        light: r.f32()?,
+                        mic: r.f32()?,
+                        accel_x: r.f32()?,
+                        accel_y: r.f32()?,
+                        accel_z: r.f32()?,
+                        magn_x: r.f32()?,
+                        magn_y: r.f32()?,
+                        magn_z: r.f32()?,
+                        temperature: r.f32()?,
+                        battery: r.f32()?,
+                    },
+                },
+                stamp,
+            ),
             (I::Ir, 1) => encode(
                 &ir::Data {
                     voltages: r_f32s(r)?,
@@ -1210,6 +1249,16 @@ mod tests {
                 fdiv: 0,
                 compression: troupe_msgs::camera::COMPRESS_RAW,
                 image: vec![0, 128, 255],
+            }),
+            AnyMsg::WsnData(troupe_msgs::wsn::Data {
+                node_type: 132,
+                node_id: 1,
+                node_parent_id: 125,
+                readings: troupe_msgs::wsn::Readings {
+                    light: 779.0,
+                    battery: 489.0,
+                    ..Default::default()
+                },
             }),
         ];
         for m in samples {

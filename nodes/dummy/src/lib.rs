@@ -7,18 +7,22 @@
 //!
 //! | | |
 //! |---|---|
-//! | provides | any number of `laser`, `ranger`, `position2d`, `ptz`, `blobfinder`, `power`, `fiducial`, `dio`, `aio` devices |
+//! | provides | any number of `laser`, `ranger`, `position2d`, `ptz`, `blobfinder`, `power`, `fiducial`, `dio`, `aio`, `camera`, `wsn` devices |
 //! | requires | nothing |
 //! | option `rate` | float, Hz, default 10 |
 //!
 //! The data are Player's: a 361-beam laser scan at 8 m over ±90°, 361 ranger
-//! ranges of 8 m, a position2d at (1, 1, 1) moving at (1, 1, 1), and so on.
+//! ranges of 8 m, a position2d at (1, 1, 1) moving at (1, 1, 1), a 320 x 240
+//! RGB image whose every byte is the count of images sent before it (modulo
+//! 256: it fades from black to white and again), and so on.
 //! Useful to test clients, tools and pipelines without a robot.
 
 use std::time::Duration;
 
 use serde::Deserialize;
-use troupe_msgs::{aio, blobfinder, dio, fiducial, laser, position2d, power, ptz, ranger};
+use troupe_msgs::{
+    aio, blobfinder, camera, dio, fiducial, laser, position2d, power, ptz, ranger, wsn,
+};
 use troupe_msgs::{Device, Interface, Pose2d, Pose3d};
 use troupe_node::{Ctx, Driver, Event, NodeError, Result, Section};
 
@@ -33,6 +37,8 @@ pub const INTERFACES: &[Interface] = &[
     Interface::Fiducial,
     Interface::Dio,
     Interface::Aio,
+    Interface::Camera,
+    Interface::Wsn,
 ];
 
 /// Options of the dummy driver.
@@ -53,6 +59,8 @@ impl Default for Options {
 pub struct Dummy {
     devices: Vec<Device>,
     period: Duration,
+    /// Ticks so far, modulo 256: the grey of the next camera image.
+    ticks: u8,
 }
 
 impl Driver for Dummy {
@@ -83,6 +91,7 @@ impl Driver for Dummy {
         Ok(Dummy {
             devices,
             period: Duration::from_secs_f64(1.0 / options.rate),
+            ticks: 0,
         })
     }
 
@@ -95,8 +104,9 @@ impl Driver for Dummy {
         match event {
             Event::Tick => {
                 for d in &self.devices {
-                    publish(ctx, d)?;
+                    publish(ctx, d, self.ticks)?;
                 }
+                self.ticks = self.ticks.wrapping_add(1);
                 Ok(())
             }
             Event::Request(r) => {
@@ -108,7 +118,7 @@ impl Driver for Dummy {
     }
 }
 
-fn publish(ctx: &mut Ctx, d: &Device) -> Result<()> {
+fn publish(ctx: &mut Ctx, d: &Device, tick: u8) -> Result<()> {
     match d.interface {
         Interface::Laser => ctx.publish(
             d,
@@ -214,6 +224,38 @@ fn publish(ctx: &mut Ctx, d: &Device) -> Result<()> {
                 voltages: (0..5).map(|i| i as f32).collect(),
             },
         ),
+        Interface::Camera => ctx.publish(
+            d,
+            &camera::Data {
+                width: 320,
+                height: 240,
+                bpp: 24,
+                format: camera::FORMAT_RGB888,
+                fdiv: 0,
+                compression: camera::COMPRESS_RAW,
+                image: vec![tick; 320 * 240 * 3],
+            },
+        ),
+        Interface::Wsn => ctx.publish(
+            d,
+            &wsn::Data {
+                node_type: 132,
+                node_id: 1,
+                node_parent_id: 125,
+                readings: wsn::Readings {
+                    light: 779.0,
+                    mic: 495.0,
+                    accel_x: 500.0,
+                    accel_y: 500.0,
+                    accel_z: 500.0,
+                    magn_x: 224.0,
+                    magn_y: 224.0,
+                    magn_z: 224.0,
+                    temperature: 500.0,
+                    battery: 489.0,
+                },
+            },
+        ),
         // INVARIANT: `new` only accepts devices of INTERFACES.
         other => Err(NodeError::config(
             Dummy::NAME,
@@ -241,6 +283,28 @@ mod tests {
         assert_eq!(r[0].ranges, vec![8.0; 361]);
         let p = h.published::<position2d::Data>(Device::new(6665, Interface::Position2d, 1));
         assert_eq!(p[1].pose, Pose2d::new(1.0, 1.0, 1.0));
+    }
+
+    #[test]
+    fn camera_images_count_the_ticks_as_players_do() {
+        let mut h = Harness::<Dummy>::from_json(
+            r#"{"name":"dummy","provides":["camera:0","wsn:0"],"options":{"rate":5}}"#,
+        )
+        .unwrap();
+        for _ in 0..3 {
+            h.tick().unwrap();
+        }
+        let images = h.published::<camera::Data>(Device::new(6665, Interface::Camera, 0));
+        assert_eq!(images.len(), 3);
+        assert_eq!(
+            (images[0].width, images[0].height, images[0].bpp),
+            (320, 240, 24)
+        );
+        assert_eq!(images[2].image.len(), 320 * 240 * 3);
+        assert!(images[2].image.iter().all(|&b| b == 2));
+        let w = h.published::<wsn::Data>(Device::new(6665, Interface::Wsn, 0));
+        assert_eq!((w[0].node_type, w[0].node_parent_id), (132, 125));
+        assert_eq!(w[0].readings.battery, 489.0);
     }
 
     #[test]

@@ -28,8 +28,8 @@ use std::time::Duration;
 use serde::Deserialize;
 use troupe_geom::{OccMap, Pose};
 use troupe_msgs::{
-    common, fiducial, gripper, laser, position2d, ranger, simulation, sonar, DevAddr, Device,
-    Interface, Pose3d, Size3d,
+    camera, common, fiducial, gripper, laser, position2d, ranger, simulation, sonar, DevAddr,
+    Device, Interface, Pose3d, Size3d,
 };
 use troupe_node::{Ctx, Driver, Event, NodeError, Result, Section, Switch};
 
@@ -105,6 +105,7 @@ enum Source {
     Blobfinder { model: usize },
     Fiducial { model: usize },
     Gripper { model: usize },
+    Camera { model: usize },
     Map { model: usize },
 }
 
@@ -163,9 +164,10 @@ fn resolve(
         Interface::Blobfinder => free(&|m| w.models[m].kind == Kind::Blobfinder, used),
         Interface::Fiducial => free(&|m| w.models[m].kind == Kind::Fiducial, used),
         Interface::Gripper => free(&|m| w.models[m].kind == Kind::Gripper, used),
+        Interface::Camera => free(&|m| w.models[m].kind == Kind::Camera, used),
         // The named model itself: `provides ["map:0"] model "cave"`.
         Interface::Map => free(&|m| m == base, used),
-        other => return Err(format!("{dev}: Troupe's stage does not simulate {other} devices yet (it serves position2d, ranger, laser, sonar, blobfinder, fiducial, gripper, map and simulation)")),
+        other => return Err(format!("{dev}: Troupe's stage does not simulate {other} devices yet (it serves position2d, ranger, laser, sonar, blobfinder, fiducial, gripper, camera, map and simulation)")),
     };
     let Some(m) = pick else {
         return Err(format!(
@@ -183,6 +185,7 @@ fn resolve(
         Interface::Blobfinder => Source::Blobfinder { model: m },
         Interface::Fiducial => Source::Fiducial { model: m },
         Interface::Gripper => Source::Gripper { model: m },
+        Interface::Camera => Source::Camera { model: m },
         Interface::Map => Source::Map { model: m },
         _ => Source::Sonar { model: m },
     })
@@ -489,6 +492,24 @@ impl Stage {
                     ctx.publish(&dev, &sonar::Ranges { ranges })?;
                 }
                 Source::Blobfinder { model } => ctx.publish(&dev, &self.sim.blobs(model))?,
+                Source::Camera { model } if !self.sim.updated(model) => {}
+                Source::Camera { model } => {
+                    // As Stage's plugin: 24-bit RGB, top row first; the
+                    // depth Stage reads back is not sent.
+                    let f = self.sim.camera(model);
+                    ctx.publish(
+                        &dev,
+                        &camera::Data {
+                            width: f.width,
+                            height: f.height,
+                            bpp: 24,
+                            format: camera::FORMAT_RGB888,
+                            fdiv: 0,
+                            compression: camera::COMPRESS_RAW,
+                            image: f.rgb,
+                        },
+                    )?;
+                }
                 Source::Fiducial { model } => ctx.publish(&dev, &self.sim.fiducials(model))?,
                 Source::Gripper { model } => {
                     let st = self.sim.grippers[model].clone().unwrap_or_default();
@@ -772,6 +793,10 @@ impl Stage {
                 let n = r.name.clone();
                 r.nack(format!("stage blobfinder does not handle `{n}`"));
             }
+            Source::Camera { .. } => {
+                let n = r.name.clone();
+                r.nack(format!("stage camera does not handle `{n}`"));
+            }
             Source::Simulation => self.simulation(ctx, r)?,
             Source::Map { model } => {
                 let dev = r.sample.device;
@@ -843,6 +868,7 @@ impl Stage {
             | Source::Blobfinder { model }
             | Source::Fiducial { model }
             | Source::Gripper { model }
+            | Source::Camera { model }
             | Source::Map { model } => Some(model),
             Source::Simulation => None,
         }

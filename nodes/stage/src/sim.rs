@@ -18,6 +18,7 @@
 //! - [`gripper`]: Stage's gripper, and what it carries;
 //! - [`finders`]: blobfinders and fiducial finders;
 //! - [`energy`]: power packs and chargers;
+//! - [`camera`]: Stage's camera, drawn by rays;
 //! - [`ctrl`] and [`fasr2`]: Stage's built-in controllers;
 //! - [`snapshot`]: the world as a picture, a model as a map.
 
@@ -34,6 +35,7 @@ use crate::movers::{Body, Fan, Movers, Sweep};
 use crate::world::{Drive, Kind, Localization, Sensor, World};
 
 mod bodies;
+mod camera;
 mod ctrl;
 mod energy;
 mod fasr2;
@@ -42,6 +44,7 @@ mod gripper;
 mod motion;
 mod sensors;
 mod snapshot;
+pub use camera::Image;
 pub use ctrl::{Charger, Ctrl, Mind, Mode};
 pub use energy::Pack;
 pub use gripper::{GripperState, Paddles};
@@ -106,6 +109,9 @@ pub struct Sim {
     /// their list cost 16 bytes each (1.6 GB for Stage's large.world).
     written_at: Vec<Option<Pose>>,
     statics: Grid,
+    /// The floor: the box around every body at start (Stage draws its
+    /// floor under the world's extent).
+    extent: [f64; 4],
     /// The bodies as Stage draws them for its rays (the static ones by
     /// id, the moving ones counted in the regions they touch), when rays
     /// read as Stage's rather than against the exact bodies
@@ -242,7 +248,7 @@ impl Sim {
             }
         }
         // The grids cover every body, with a margin for robots that wander off.
-        let [x0, y0, x1, y1] = bounds((0..n).flat_map(|m| {
+        let extent = bounds((0..n).flat_map(|m| {
             let apply = world.global(&poses, m).0.applier();
             world.models[m]
                 .blocks
@@ -251,6 +257,7 @@ impl Sim {
                 .map(move |&(x, y)| apply(x, y))
         }))
         .unwrap_or([-1.0, -1.0, 1.0, 1.0]);
+        let [x0, y0, x1, y1] = extent;
         let margin = 2.0;
         let res = world.resolution;
         let mut statics = Grid::new(x0 - margin, y0 - margin, x1 + margin, y1 + margin, res);
@@ -329,15 +336,6 @@ impl Sim {
             } else {
                 tracing::warn!("{pos}: {why}; {count} models stay idle (the first: `{model}`)");
             }
-        }
-        // What Troupe does not simulate, once per world.
-        let mut cameras = (0..n).filter(|&m| world.models[m].kind == Kind::Camera);
-        if let Some(first) = cameras.next() {
-            let (pos, model) = (&world.models[first].pos, &world.models[first].name);
-            tracing::warn!(
-                "{pos}: camera models are not simulated (Stage renders them with OpenGL); {} in this world (the first: `{model}`)",
-                1 + cameras.count()
-            );
         }
         let bases = (0..n)
             .filter(|&m| world.models[m].kind == Kind::Position)
@@ -437,6 +435,7 @@ impl Sim {
             drawn: vec![Vec::new(); n],
             movers: Movers::new(n, statics.tile_count()),
             statics,
+            extent,
         };
         for m in 0..n {
             sim.place(m);
@@ -544,6 +543,15 @@ impl Sim {
         let every = self.frames[m].every;
         let k = |t: f64| (t / every + 1e-9).floor();
         k(self.time + self.world.interval_sim) > k(self.time)
+    }
+
+    /// Whether model `m` updated in the last step (or the world has not
+    /// stepped yet): what Stage's models that update on their own clock
+    /// (a camera draws every `update_interval`) publish after.
+    pub fn updated(&self, m: usize) -> bool {
+        let every = self.frames[m].every;
+        let k = |t: f64| (t / every + 1e-9).floor();
+        self.steps == 0 || k(self.time) > k(self.time - self.world.interval_sim)
     }
 
     /// What is done in series once the bases have moved and the rangers

@@ -112,6 +112,20 @@ pub struct BlobfinderCfg {
     pub pan: f64,
 }
 
+/// A camera's settings (Stage's defaults). Stage reads `fov` and
+/// `pantilt` in degrees whatever the world's angle unit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CameraCfg {
+    /// Image width and height, pixels.
+    pub resolution: (u32, u32),
+    /// Nearest and farthest depth drawn (the view's clip planes), metres.
+    pub range: (f64, f64),
+    /// Horizontal and vertical field of view, whole angles, radians.
+    pub fov: (f64, f64),
+    /// Pan (positive turns right) and tilt (positive looks down), radians.
+    pub pantilt: (f64, f64),
+}
+
 /// A fiducial detector's settings (Stage's defaults).
 #[derive(Debug, Clone, PartialEq)]
 pub struct FiducialCfg {
@@ -198,6 +212,8 @@ pub struct ModelDef {
     pub blobfinder: Option<BlobfinderCfg>,
     /// Fiducial detector settings, for fiducial models.
     pub fiducial: Option<FiducialCfg>,
+    /// Camera settings, for cameras.
+    pub camera: Option<CameraCfg>,
     /// Where it was written.
     pub pos: Pos,
 }
@@ -691,6 +707,27 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
             range_max_id: r.length(e, "range_max_id", 5.0),
             fov: r.angle(e, "fov", PI),
         });
+        let camera = if kind == Kind::Camera {
+            let pair = |name: &str, default: (f64, f64), what: &str| match e.props.get(name) {
+                Some(p) if p.values.len() >= 2 => Ok((p.values[0].num(), p.values[1].num())),
+                Some(p) => Err(short(p, name, 2, what)),
+                None => Ok(default),
+            };
+            let (w, h) = pair("resolution", (32.0, 32.0), "[width height]")?;
+            let (near, far) = pair("range", (0.2, 8.0), "[min max]")?;
+            let (hfov, vfov) = pair("fov", (70.0, 40.0), "[horizontal vertical]")?;
+            let (pan, tilt) = pair("pantilt", (0.0, 0.0), "[pan tilt]")?;
+            let pixels = |v: f64| v.clamp(1.0, 4096.0) as u32;
+            let fov = |v: f64| v.clamp(1.0, 179.0).to_radians();
+            Some(CameraCfg {
+                resolution: (pixels(w), pixels(h)),
+                range: (near.max(1e-3), far.max(near.max(1e-3) + 1e-3)),
+                fov: (fov(hfov), fov(vfov)),
+                pantilt: (pan.to_radians(), tilt.to_radians()),
+            })
+        } else {
+            None
+        };
         let ctrl = match e.props.get("ctrl") {
             Some(p) => p.values.iter().map(|v| v.text().to_owned()).collect(),
             None => Vec::new(),
@@ -825,6 +862,7 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
             energy: r.energy(e),
             blobfinder,
             fiducial,
+            camera,
             pos: e.pos.clone(),
         });
         raw_blocks.push(blocks);
@@ -880,6 +918,7 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
                 ctrl: Vec::new(),
                 blobfinder: None,
                 fiducial: None,
+                camera: None,
                 energy: Energy::default(),
                 update_interval: 0.1,
                 obstacle_return: true,

@@ -249,3 +249,38 @@ fn robot1_of_everything_world_sees_what_player_saw() {
         ]
     );
 }
+
+#[test]
+fn the_camera_of_stages_camera_world_sees_the_cave_floor_and_sky() {
+    let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/compat/stage/camera.world");
+    if !p.exists() {
+        eprintln!("skipping: ../shared/compat is absent");
+        return;
+    }
+    let s = Sim::new(crate::world::load(&p).unwrap()).unwrap();
+    let cam = s.world.names["r0.camera:0"];
+    let im = s.camera(cam);
+    assert_eq!((im.width, im.height), (100, 100));
+    let cave = s.colors[s.world.names["cave"]];
+    let byte = |v: f32| (v * 255.0).round() as u8;
+    let wall = [byte(cave.r), byte(cave.g), byte(cave.b)];
+    let px = |col: usize, row: usize| {
+        let i = (row * 100 + col) * 3;
+        [im.rgb[i], im.rgb[i + 1], im.rgb[i + 2]]
+    };
+    let count = |c: [u8; 3]| im.rgb.chunks(3).filter(|p| *p == c).count();
+    // From its corner the robot looks across the cave: floor below,
+    // the cave's walls around the horizon, the background above them.
+    assert!((0..100).all(|c| px(c, 99) == camera::FLOOR));
+    assert!((0..100).all(|c| px(c, 0) == camera::SKY));
+    assert!(count(wall) > 1000, "{} wall pixels", count(wall));
+    assert_eq!(
+        count(wall) + count(camera::FLOOR) + count(camera::SKY),
+        100 * 100,
+        "nothing else is in view"
+    );
+    if let Some(out) = std::env::var_os("TROUPE_CAMERA_PNG") {
+        image::save_buffer(out, &im.rgb, 100, 100, image::ExtendedColorType::Rgb8).unwrap();
+    }
+}

@@ -644,3 +644,74 @@ fn goto_reaches_the_goal_as_stage_s_controller_does() {
     );
     assert_eq!(v.x, 0.4, "{v:?}");
 }
+
+/// A robot whose camera (41 x 31 pixels, 60° x 40°) stands 0.3 m above
+/// the floor, a low green box 1.5 m ahead and a red wall 3 m ahead.
+fn camera_world(camera: &str) -> Sim {
+    sim(
+        &format!("camera{}", camera.len()),
+        &format!(
+            "resolution 0.02\n\
+             model ( name \"wall\" pose [3 0 0 0] size [0.2 10 1] color \"red\" )\n\
+             model ( name \"box\" pose [1.5 0 0 0] size [0.2 0.2 0.1] color \"green\" )\n\
+             model ( name \"aside\" pose [0 -2 0 0] size [0.4 0.4 2] color \"blue\" )\n\
+             position ( name \"r0\" size [0.4 0.4 0.2] color \"yellow\"\n\
+               camera ( pose [0 0 0.1 0] resolution [41 31] fov [60 40] range [0.2 8] {camera} ) )\n"
+        ),
+    )
+}
+
+/// The colour and depth of pixel (col, row) of an image.
+fn pixel(im: &Image, col: usize, row: usize) -> ([u8; 3], f32) {
+    let i = row * im.width as usize + col;
+    let mut c = [0; 3];
+    c.copy_from_slice(&im.rgb[i * 3..i * 3 + 3]);
+    (c, im.depth[i])
+}
+
+#[test]
+fn a_camera_draws_sides_tops_floor_and_sky_as_stage_does() {
+    let s = camera_world("");
+    let cam = s.world().names["r0.camera:0"];
+    let im = s.camera(cam);
+    assert_eq!((im.width, im.height, im.rgb.len()), (41, 31, 41 * 31 * 3));
+    let (red, green) = ([255, 0, 0], [0, 255, 0]);
+    // The centre pixel passes over the box and meets the wall's face.
+    let (c, d) = pixel(&im, 20, 15);
+    assert_eq!(c, red);
+    assert!((d - 2.9).abs() < 0.03, "{d}");
+    // The top row passes over the 1 m wall: the background.
+    assert_eq!(pixel(&im, 20, 0), (camera::SKY, 8.0));
+    // The bottom row meets the floor 0.3 / tan 20° ahead.
+    let v = (20f64.to_radians()).tan() * (1.0 - 61.0 / 31.0);
+    let (c, d) = pixel(&im, 20, 30);
+    assert_eq!(c, camera::FLOOR);
+    assert!((f64::from(d) - 0.3 / -v).abs() < 1e-3, "{d}");
+    // Lower rows meet the box's face at 1.4 m; one above passes the face
+    // and comes down on its top.
+    let (c, d) = pixel(&im, 20, 22);
+    assert_eq!(c, green);
+    assert!((d - 1.4).abs() < 0.03, "{d}");
+    let v = (20f64.to_radians()).tan() * (1.0 - 43.0 / 31.0);
+    let (c, d) = pixel(&im, 20, 21);
+    assert_eq!(c, green, "the box's top");
+    assert!((f64::from(d) - 0.2 / -v).abs() < 0.02, "{d}");
+    // Its own robot is not drawn: nothing yellow.
+    assert!(!im.rgb.chunks(3).any(|p| p == [255, 255, 0]));
+    // The image's left is the robot's left: the wall fills both edges,
+    // the blue pillar on the right (-y) is outside a 60° view.
+    assert!(!im.rgb.chunks(3).any(|p| p == [0, 0, 255]));
+}
+
+#[test]
+fn a_camera_pans_right_and_tilts_down() {
+    let s = camera_world("pantilt [90 0]");
+    let cam = s.world().names["r0.camera:0"];
+    let (c, d) = pixel(&s.camera(cam), 20, 15);
+    assert_eq!(c, [0, 0, 255], "panned 90°, it faces the pillar at -y");
+    assert!((d - 1.8).abs() < 0.03, "{d}");
+    let s = camera_world("pantilt [0 30]");
+    let (c, d) = pixel(&s.camera(cam), 20, 15);
+    assert_eq!(c, camera::FLOOR);
+    assert!((d - 0.6).abs() < 1e-3, "tilted 30° down from 0.3 m: {d}");
+}
