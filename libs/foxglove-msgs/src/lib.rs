@@ -12,6 +12,7 @@
 //! planner waypoints            foxglove.PosesInFrame    /robot/6665/planner/0/path, in map
 //! a map (info, then its cells) foxglove.Grid            in map
 //! a sensor's geometry          foxglove.FrameTransforms /tf_static: base_link -> the sensor
+//! a camera's image             foxglove.RawImage, or foxglove.CompressedImage (JPEG)
 //! a simulator's world, poses   foxglove.SceneUpdate     in map: /robot/6665/simulation/0/world (still), …/scene (moving)
 //! anything else                JSON                     /robot/6665/ranger/0/intensities: the key and the kind
 //! ```
@@ -25,14 +26,15 @@
 use std::collections::{BTreeMap, HashMap};
 
 use foxglove::schemas::{
-    line_primitive, packed_element_field::NumericType, Color, FrameTransform, FrameTransforms,
-    Grid, LaserScan, LinePrimitive, PackedElementField, Point3, Pose, PoseInFrame, PosesInFrame,
-    Quaternion, SceneEntity, SceneUpdate, Timestamp, Vector2, Vector3,
+    line_primitive, packed_element_field::NumericType, Color, CompressedImage, FrameTransform,
+    FrameTransforms, Grid, LaserScan, LinePrimitive, PackedElementField, Point3, Pose, PoseInFrame,
+    PosesInFrame, Quaternion, RawImage, SceneEntity, SceneUpdate, Timestamp, Vector2, Vector3,
 };
 use foxglove::{Encode, Schema};
 use troupe_msgs::{keys, localize, map, position2d, ranger, simulation, AnyMsg, Device};
 use troupe_msgs::{Pose2d, Pose3d};
-use troupe_ros2::{device_frame, json_schema, json_topic, odom_in_map, robot_frame, MAP_FRAME};
+use troupe_ros2::{camera_pixels, device_frame, json_schema, json_topic, odom_in_map, Pixels};
+use troupe_ros2::{robot_frame, MAP_FRAME};
 
 pub use foxglove;
 
@@ -241,6 +243,34 @@ impl Translator {
                     vec![Message::new(topic, &m)]
                 }
                 _ => vec![json(topic, msg)],
+            },
+            AnyMsg::CameraData(c) => match camera_pixels(c) {
+                Some(Pixels::Raw {
+                    encoding,
+                    step,
+                    data,
+                }) => {
+                    let m = RawImage {
+                        timestamp: Some(stamp(ns)),
+                        frame_id: device_frame(&dev),
+                        width: c.width,
+                        height: c.height,
+                        encoding: encoding.to_owned(),
+                        step,
+                        data: data.into_owned().into(),
+                    };
+                    vec![Message::new(topic, &m)]
+                }
+                Some(Pixels::Jpeg(data)) => {
+                    let m = CompressedImage {
+                        timestamp: Some(stamp(ns)),
+                        frame_id: device_frame(&dev),
+                        data: data.to_vec().into(),
+                        format: "jpeg".to_owned(),
+                    };
+                    vec![Message::new(topic, &m)]
+                }
+                None => vec![json(topic, msg)],
             },
             AnyMsg::Position2dData(position2d::Data { pose, .. }) => {
                 let odom = robot_frame(dev.robot, "odom");

@@ -184,3 +184,46 @@ fn a_planner_s_waypoints_are_its_latched_path_in_the_map() {
     assert_eq!((p.frame_id.as_str(), p.poses.len()), (MAP_FRAME, 2));
     assert_eq!(p.poses[1].position.as_ref().unwrap().x, 5.0);
 }
+
+#[test]
+fn camera_images_are_raw_or_compressed_images() {
+    use troupe_msgs::camera;
+    let k = key(Interface::Camera);
+    let mut t = Translator::new();
+    let raw = camera::Data {
+        width: 2,
+        height: 1,
+        bpp: 8,
+        format: camera::FORMAT_MONO8,
+        fdiv: 0,
+        compression: camera::COMPRESS_RAW,
+        image: vec![10, 20],
+    };
+    let out = t.translate(&k, 0, &AnyMsg::CameraData(raw.clone()));
+    assert_eq!(schema_name(&out[0]), "foxglove.RawImage");
+    let m: RawImage = decode(&out[0]);
+    assert_eq!(
+        (m.encoding.as_str(), m.step, m.frame_id.as_str()),
+        ("mono8", 2, "robot_6665/camera_0")
+    );
+    assert_eq!(&m.data[..], [10, 20]);
+    let jpeg = camera::Data {
+        compression: camera::COMPRESS_JPEG,
+        image: vec![0xFF, 0xD8],
+        ..raw.clone()
+    };
+    let out = t.translate(&k, 0, &AnyMsg::CameraData(jpeg));
+    assert_eq!(schema_name(&out[0]), "foxglove.CompressedImage");
+    let m: CompressedImage = decode(&out[0]);
+    assert_eq!(
+        (m.format.as_str(), &m.data[..]),
+        ("jpeg", &[0xFF, 0xD8][..])
+    );
+    // Bytes too few for the size: JSON, as anything without a schema.
+    let short = camera::Data {
+        image: vec![1],
+        ..raw
+    };
+    let out = t.translate(&k, 0, &AnyMsg::CameraData(short));
+    assert_eq!(out[0].kind.encoding(), JSON);
+}

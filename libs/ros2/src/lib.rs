@@ -11,6 +11,7 @@
 //! robot/6665/position2d/0   /robot_6665/position2d_0       robot_6665/odom -> robot_6665/base_link
 //! robot/6665/localize/0     /robot_6665/localize_0         map -> robot_6665/odom
 //!                           /robot_6665/localize_0/particles
+//! robot/6665/camera/0       /robot_6665/camera_0           Image, or CompressedImage (JPEG)
 //! sim/clock                 /clock
 //! ```
 //!
@@ -25,7 +26,7 @@ pub mod msg;
 use std::collections::HashMap;
 
 use serde::Serialize;
-use troupe_msgs::{ir, keys, laser, map, position2d, ranger, sonar};
+use troupe_msgs::{camera, ir, keys, laser, map, position2d, ranger, sonar};
 use troupe_msgs::{AnyMsg, Device, Pose2d, Pose3d};
 
 pub use msg::Type;
@@ -89,6 +90,73 @@ pub fn robot_frame(robot: u32, name: &str) -> String {
 /// A device's own frame: `robot_6665/laser_0`.
 pub fn device_frame(dev: &Device) -> String {
     format!("robot_{}/{}_{}", dev.robot, dev.interface, dev.index)
+}
+
+/// A camera image's pixels as ROS and Foxglove carry them.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Pixels<'a> {
+    /// Raw rows, top first: `rgb8`, `mono8` or `mono16` (little-endian).
+    Raw {
+        encoding: &'static str,
+        /// Bytes per row.
+        step: u32,
+        data: std::borrow::Cow<'a, [u8]>,
+    },
+    /// A JPEG file's bytes.
+    Jpeg(&'a [u8]),
+}
+
+/// The pixels of Player camera image `c`: RGB888 and MONO8 as they are,
+/// 32-bit RGB without its fourth byte, RGB565 (16-bit values, low byte
+/// first) widened to `rgb8`, MONO16 (network byte order) turned
+/// little-endian; `None` for a format Player does not define or bytes too
+/// few for the size.
+pub fn camera_pixels(c: &camera::Data) -> Option<Pixels<'_>> {
+    use std::borrow::Cow;
+    if c.compression == camera::COMPRESS_JPEG {
+        return Some(Pixels::Jpeg(&c.image));
+    }
+    let n = c.width as usize * c.height as usize;
+    let bytes = |per: usize| c.image.get(..n * per);
+    let raw = |encoding, per: u32, data| Pixels::Raw {
+        encoding,
+        step: c.width * per,
+        data,
+    };
+    Some(match (c.format, c.bpp) {
+        (camera::FORMAT_MONO8, _) => raw("mono8", 1, Cow::Borrowed(bytes(1)?)),
+        (camera::FORMAT_MONO16, _) => {
+            let swapped = bytes(2)?
+                .chunks_exact(2)
+                .flat_map(|b| [b[1], b[0]])
+                .collect();
+            raw("mono16", 2, Cow::Owned(swapped))
+        }
+        (camera::FORMAT_RGB565, _) => {
+            let rgb = bytes(2)?
+                .chunks_exact(2)
+                .flat_map(|b| {
+                    let v = u16::from_le_bytes([b[0], b[1]]);
+                    let (r, g, b) = ((v >> 11) & 0x1f, (v >> 5) & 0x3f, v & 0x1f);
+                    [
+                        (r << 3 | r >> 2) as u8,
+                        (g << 2 | g >> 4) as u8,
+                        (b << 3 | b >> 2) as u8,
+                    ]
+                })
+                .collect();
+            raw("rgb8", 3, Cow::Owned(rgb))
+        }
+        (camera::FORMAT_RGB888, 32) => {
+            let rgb = bytes(4)?
+                .chunks_exact(4)
+                .flat_map(|p| [p[0], p[1], p[2]])
+                .collect();
+            raw("rgb8", 3, Cow::Owned(rgb))
+        }
+        (camera::FORMAT_RGB888, _) => raw("rgb8", 3, Cow::Borrowed(bytes(3)?)),
+        _ => return None,
+    })
 }
 
 /// A stamp in seconds as nanoseconds (a negative or non-finite one is 0).
@@ -253,6 +321,32 @@ impl Translator {
         let h = |frame: String| header(stamp_ns, frame);
         Some(match msg {
             AnyMsg::Position2dData(d) => self.odometry(&dev, stamp_ns, d),
+            AnyMsg::CameraData(c) => match camera_pixels(c)? {
+                Pixels::Raw {
+                    encoding,
+                    step,
+                    data,
+                } => {
+                    let m = Image {
+                        header: h(device_frame(&dev)),
+                        height: c.height,
+                        width: c.width,
+                        encoding: encoding.to_owned(),
+                        is_bigendian: 0,
+                        step,
+                        data: data.into_owned(),
+                    };
+                    vec![out(topic(&dev), Type::Image, &m)]
+                }
+                Pixels::Jpeg(data) => {
+                    let m = CompressedImage {
+                        header: h(device_frame(&dev)),
+                        format: "jpeg".to_owned(),
+                        data: data.to_vec(),
+                    };
+                    vec![out(topic(&dev), Type::CompressedImage, &m)]
+                }
+            },
             AnyMsg::LaserScan(s) | AnyMsg::LaserScanPose(laser::ScanPose { scan: s, .. }) => {
                 let m = LaserScan {
                     header: h(device_frame(&dev)),

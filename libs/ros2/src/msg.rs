@@ -283,6 +283,29 @@ pub struct Clock {
     pub clock: Time,
 }
 
+/// `sensor_msgs/msg/Image`.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Image {
+    pub header: Header,
+    pub height: u32,
+    pub width: u32,
+    /// `rgb8`, `mono8`, `mono16`.
+    pub encoding: String,
+    pub is_bigendian: u8,
+    /// Bytes per row.
+    pub step: u32,
+    pub data: Vec<u8>,
+}
+
+/// `sensor_msgs/msg/CompressedImage`.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct CompressedImage {
+    pub header: Header,
+    /// `jpeg`.
+    pub format: String,
+    pub data: Vec<u8>,
+}
+
 /// `std_msgs/msg/String`.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Text {
@@ -310,6 +333,10 @@ pub enum Type {
     TfMessage,
     /// `rosgraph_msgs/msg/Clock`.
     Clock,
+    /// `sensor_msgs/msg/Image`.
+    Image,
+    /// `sensor_msgs/msg/CompressedImage`.
+    CompressedImage,
     /// `std_msgs/msg/String`: what has no ROS 2 form, as its JSON, in a
     /// rosbag2 directory (whose readers take CDR only).
     String,
@@ -332,7 +359,7 @@ const TRANSFORM_STAMPED: &str =
 
 impl Type {
     /// Every type.
-    pub const ALL: [Type; 10] = [
+    pub const ALL: [Type; 12] = [
         Type::LaserScan,
         Type::Range,
         Type::Odometry,
@@ -342,6 +369,8 @@ impl Type {
         Type::PoseArray,
         Type::TfMessage,
         Type::Clock,
+        Type::Image,
+        Type::CompressedImage,
         Type::String,
     ];
 
@@ -357,6 +386,8 @@ impl Type {
             Type::PoseArray => "geometry_msgs/msg/PoseArray",
             Type::TfMessage => "tf2_msgs/msg/TFMessage",
             Type::Clock => "rosgraph_msgs/msg/Clock",
+            Type::Image => "sensor_msgs/msg/Image",
+            Type::CompressedImage => "sensor_msgs/msg/CompressedImage",
             Type::String => "std_msgs/msg/String",
         }
     }
@@ -452,6 +483,15 @@ impl Type {
             Type::Clock => (
                 "builtin_interfaces/Time clock\n",
                 &[("builtin_interfaces/Time", TIME)],
+            ),
+            Type::Image => (
+                "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\n\
+                 uint8 is_bigendian\nuint32 step\nuint8[] data\n",
+                &[("std_msgs/Header", HEADER), ("builtin_interfaces/Time", TIME)],
+            ),
+            Type::CompressedImage => (
+                "std_msgs/Header header\nstring format\nuint8[] data\n",
+                &[("std_msgs/Header", HEADER), ("builtin_interfaces/Time", TIME)],
             ),
             Type::String => ("string data\n", &[]),
         };

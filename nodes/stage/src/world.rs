@@ -34,7 +34,7 @@ pub enum Kind {
     Gripper,
     /// Contact bumpers.
     Bumper,
-    /// A camera (not simulated headless).
+    /// A camera (drawn by rays: see `sim::camera`).
     Camera,
     /// Other Stage 4 types, loaded as plain models.
     Other,
