@@ -135,6 +135,34 @@ fn open_at(s: &mut TcpStream, interf: Interface, index: u32) -> anyhow::Result<(
     request(s, player_req(player::DEV), &body.finish()).map(drop)
 }
 
+/// A Player client in PUSH mode (Player's default) with `devices` of
+/// robot port `addr` open, reading on a thread of its own until `stop`:
+/// the data messages it read.
+pub(crate) fn push_reader(
+    addr: SocketAddr,
+    devices: &[(Interface, u32)],
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+) -> anyhow::Result<std::thread::JoinHandle<u64>> {
+    let mut s = TcpStream::connect(addr)?;
+    s.set_read_timeout(Some(Duration::from_secs(10)))?;
+    let mut banner = [0u8; wire::BANNER_LEN];
+    s.read_exact(&mut banner)?;
+    for &(i, index) in devices {
+        open_at(&mut s, i, index)?;
+    }
+    Ok(std::thread::spawn(move || {
+        let mut n = 0;
+        while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+            match next(&mut s) {
+                Ok((h, _)) if h.kind == u32::from(wire::DATA) => n += 1,
+                Ok(_) => {}
+                Err(_) => break,
+            }
+        }
+        n
+    }))
+}
+
 /// `n` timed runs of each of `K` kinds of round trip (`run(k)` makes one
 /// of kind `k`), taken in turn so that the machine's drift touches every
 /// kind alike, after `n / 10` untimed rounds. Each kind's times, sorted.

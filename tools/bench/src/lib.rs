@@ -51,7 +51,7 @@ pub enum BenchCmd {
     #[command(after_help = "Example:
   cargo run --release -- bench serial --seconds 5")]
     Serial(crate::serial::SerialBenchArgs),
-    /// Recording the 100-Pioneer world flat out (loss, CPU, bytes/s), playing it back, `log info` on a large file.
+    /// Recording the 100-Pioneer world flat out (loss, CPU, bytes/s), alone and with the view and a bridge client attached; playing it back, `log info` on a large file.
     #[command(after_help = "Example:
   cargo run --release -- bench record --seconds 20")]
     Record(crate::record::RecordBenchArgs),

@@ -41,7 +41,7 @@ pub fn run(a: &RecordBenchArgs) -> anyhow::Result<()> {
     writeln!(out, "troupe bench record: 100 Pioneers (16 sonars, 180-beam laser, odometry) flat out, recorded for {} s", a.seconds)?;
     let (mut launcher, router) = crate::harness::p100_stack(&dir, &bitmaps, -1.0)?;
     let z = ZenohArgs {
-        connect: vec![router],
+        connect: vec![router.clone()],
         no_multicast: true,
         ..Default::default()
     };
@@ -78,82 +78,53 @@ pub fn run(a: &RecordBenchArgs) -> anyhow::Result<()> {
             }
         };
         let file = dir.join("p100.mcap");
-        // The launcher holds the router: what it forwards, it pays for.
-        let router_cpu0 = crate::harness::cpu_of(launcher.id());
-        let (cpu0, t0) = (crate::harness::cpu_time(), Instant::now());
-        record(
-            RecordArgs {
-                keys: Vec::new(),
-                output: file.clone(),
-                duration: Some(a.seconds),
-                split_size: None,
-                split_duration: None,
-                compress: Compress::None,
-                queue: 100_000,
-                format: troupe_record::RecordFormat::Troupe,
-                rosbag2: false,
-            },
+        let wall = recorded(
+            &mut out,
             &z,
+            launcher.id(),
+            a.seconds,
+            &file,
+            alone,
+            "record",
         )?;
-        let (cpu, wall) = (
-            crate::harness::cpu_time()
-                .saturating_sub(cpu0)
-                .as_secs_f64(),
-            t0.elapsed().as_secs_f64(),
-        );
-        let router_cpu = crate::harness::cpu_of(launcher.id())
-            .saturating_sub(router_cpu0)
-            .as_secs_f64();
-
-        // What was lost: each device publishes once per step, so between its
-        // first and last stamp it owes one message per 100 ms. (Not the
-        // simulator's poses for viewers: it sends those at most 30 times a
-        // wall second by design.)
-        let mut stamps: HashMap<String, (f64, f64, u64)> = HashMap::new();
-        let (mut count, mut bytes) = (0u64, 0u64);
-        each_message(&file, |m| {
-            if m.encoding != ENCODING || m.schema == "simulation/poses@1" {
-                return Ok(true);
-            }
-            count += 1;
-            bytes += m.data.len() as u64;
-            let t = m.publish_time as f64 / 1e9;
-            let e = stamps
-                .entry(format!("{}#{}", m.topic, m.schema))
-                .or_insert((t, t, 0));
-            e.0 = e.0.min(t);
-            e.1 = e.1.max(t);
-            e.2 += 1;
-            Ok(true)
-        })?;
-        let owed: u64 = stamps
-            .values()
-            .map(|(first, last, _)| ((last - first) / 0.1).round() as u64 + 1)
-            .sum();
-        let sim = stamps
-            .get("sim/clock#sim/clock@1")
-            .map_or(0.0, |(f, l, _)| l - f);
-        // Where the losses are, by message kind.
-        let mut by_kind: BTreeMap<&str, (u64, u64)> = BTreeMap::new();
-        for (key, (first, last, n)) in &stamps {
-            let kind = key.rsplit_once('#').map_or("?", |(_, k)| k);
-            let e = by_kind.entry(kind).or_default();
-            e.0 += ((last - first) / 0.1).round() as u64 + 1;
-            e.1 += n;
-        }
-        writeln!(
-            out,
-            "  record: {count} messages, {:.1} MB in {wall:.1} s ({:.0} messages/s, {:.1} MB/s); the world ran {:.1}x real time ({alone:.1}x before the recorder joined); lost {} of {owed}; recorder CPU {cpu:.1} s = {:.0}% of one core; the launcher (its router) meanwhile {router_cpu:.2} s = {:.1}%",
-            bytes as f64 / 1e6,
-            count as f64 / wall,
-            bytes as f64 / 1e6 / wall,
-            sim / wall,
-            owed.saturating_sub(count),
-            100.0 * cpu / wall,
-            100.0 * router_cpu / wall
-        )?;
-        for (kind, (owed, got)) in &by_kind {
-            writeln!(out, "    {kind:<24} {got:>8} of {owed:>8}")?;
+        // Again with a live view and a Player client through the bridge:
+        // what they take goes out of the simulator beside the recorder's.
+        {
+            let (_view, _) =
+                crate::harness::server(&router, &["view", "--port", "0"], "troupe view: ")?;
+            let (_bridge, addr) = crate::harness::server(
+                &router,
+                &["bridge", "--port", "6665=127.0.0.1:0"],
+                "troupe bridge: robot 6665 on ",
+            )?;
+            let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+            let reader = crate::bridge::push_reader(
+                addr.parse()?,
+                &[
+                    (troupe_msgs::Interface::Position2d, 0),
+                    (troupe_msgs::Interface::Ranger, 0),
+                    (troupe_msgs::Interface::Ranger, 1),
+                ],
+                stop.clone(),
+            )?;
+            let attached = dir.join("p100-attached.mcap");
+            let took = recorded(
+                &mut out,
+                &z,
+                launcher.id(),
+                a.seconds,
+                &attached,
+                alone,
+                "record, view and bridge",
+            )?;
+            stop.store(true, std::sync::atomic::Ordering::Relaxed);
+            let got = reader.join().unwrap_or(0);
+            writeln!(
+                out,
+                "    meanwhile a Player client (PUSH, robot 6665's position2d and two rangers) read {got} messages through the bridge ({:.0}/s), and `troupe view` served its page",
+                got as f64 / took
+            )?;
+            std::fs::remove_file(&attached)?;
         }
 
         // Played back as fast as a subscriber takes it.
@@ -264,6 +235,99 @@ pub fn run(a: &RecordBenchArgs) -> anyhow::Result<()> {
     let _ = launcher.wait();
     let _ = std::fs::remove_dir_all(&dir);
     result
+}
+
+/// Records the running 100-Pioneer world to `file` for `seconds` and prints
+/// its row under `label`: messages, bytes, what was lost, the recorder's
+/// CPU and the launcher's (the router). Returns the wall seconds taken.
+fn recorded(
+    out: &mut impl Write,
+    z: &ZenohArgs,
+    launcher: u32,
+    seconds: f64,
+    file: &std::path::Path,
+    alone: f64,
+    label: &str,
+) -> anyhow::Result<f64> {
+    // The launcher holds the router: what it forwards, it pays for.
+    let router_cpu0 = crate::harness::cpu_of(launcher);
+    let (cpu0, t0) = (crate::harness::cpu_time(), Instant::now());
+    record(
+        RecordArgs {
+            keys: Vec::new(),
+            output: file.to_path_buf(),
+            duration: Some(seconds),
+            split_size: None,
+            split_duration: None,
+            compress: Compress::None,
+            queue: 100_000,
+            format: troupe_record::RecordFormat::Troupe,
+            rosbag2: false,
+        },
+        z,
+    )?;
+    let (cpu, wall) = (
+        crate::harness::cpu_time()
+            .saturating_sub(cpu0)
+            .as_secs_f64(),
+        t0.elapsed().as_secs_f64(),
+    );
+    let router_cpu = crate::harness::cpu_of(launcher)
+        .saturating_sub(router_cpu0)
+        .as_secs_f64();
+
+    // What was lost: each device publishes once per step, so between its
+    // first and last stamp it owes one message per 100 ms. (Not the
+    // simulator's poses for viewers: it sends those at most 30 times a
+    // wall second by design.)
+    let mut stamps: HashMap<String, (f64, f64, u64)> = HashMap::new();
+    let (mut count, mut bytes) = (0u64, 0u64);
+    each_message(file, |m| {
+        if m.encoding != ENCODING || m.schema == "simulation/poses@1" {
+            return Ok(true);
+        }
+        count += 1;
+        bytes += m.data.len() as u64;
+        let t = m.publish_time as f64 / 1e9;
+        let e = stamps
+            .entry(format!("{}#{}", m.topic, m.schema))
+            .or_insert((t, t, 0));
+        e.0 = e.0.min(t);
+        e.1 = e.1.max(t);
+        e.2 += 1;
+        Ok(true)
+    })?;
+    let owed: u64 = stamps
+        .values()
+        .map(|(first, last, _)| ((last - first) / 0.1).round() as u64 + 1)
+        .sum();
+    let sim = stamps
+        .get("sim/clock#sim/clock@1")
+        .map_or(0.0, |(f, l, _)| l - f);
+    // Where the losses are, by message kind.
+    let mut by_kind: BTreeMap<&str, (u64, u64)> = BTreeMap::new();
+    for (key, (first, last, n)) in &stamps {
+        let kind = key.rsplit_once('#').map_or("?", |(_, k)| k);
+        let e = by_kind.entry(kind).or_default();
+        e.0 += ((last - first) / 0.1).round() as u64 + 1;
+        e.1 += n;
+    }
+    writeln!(
+        out,
+        "  {label}: {count} messages, {:.1} MB in {wall:.1} s ({:.0} messages/s, {:.1} MB/s); the world ran {:.1}x real time ({alone:.1}x before the recorder joined); lost {} of {owed}; recorder CPU {cpu:.1} s = {:.0}% of one core; the launcher (its router) meanwhile {router_cpu:.2} s = {:.1}%",
+        bytes as f64 / 1e6,
+        count as f64 / wall,
+        bytes as f64 / 1e6 / wall,
+        sim / wall,
+        owed.saturating_sub(count),
+        100.0 * cpu / wall,
+        100.0 * router_cpu / wall
+    )?;
+    for (kind, (owed, got)) in &by_kind {
+        writeln!(out, "    {kind:<24} {got:>8} of {owed:>8}")?;
+    }
+
+    Ok(wall)
 }
 
 /// The messages of a recording, counted one by one.

@@ -37,7 +37,8 @@ pub struct StageBenchArgs {
     pub stage_worlds: Option<std::path::PathBuf>,
     /// Run just this world file instead, as its authors wrote it, models
     /// and controllers included (e.g. Stage's worlds/large.world), and
-    /// print its row: time to load, time to run, peak memory.
+    /// print its row: time to load, time to run, peak memory (and, for a
+    /// world with cameras, the time each takes to draw an image).
     #[arg(long, value_name = "FILE")]
     pub world: Option<std::path::PathBuf>,
     /// Then cast the same rays on the cave's and the hospital's walls with
@@ -185,5 +186,26 @@ fn run_world(
         load.as_secs_f64(),
         sim.bases.len()
     )?;
+    // Its cameras, each drawn as its device would draw it, where the
+    // robots ended up.
+    for m in 0..sim.world().models.len() {
+        let Some(cfg) = sim.world().models[m].camera else {
+            continue;
+        };
+        let runs = 50;
+        let t0 = Instant::now();
+        for _ in 0..runs {
+            std::hint::black_box(sim.camera(m));
+        }
+        let each = t0.elapsed().as_secs_f64() / f64::from(runs);
+        let (w, h) = cfg.resolution;
+        writeln!(
+            std::io::stdout().lock(),
+            "  camera `{}`: {w} x {h} pixels in {:.2} ms ({:.0} images/s on one core; Stage's default update_interval asks 10 a simulated second)",
+            sim.world().models[m].name,
+            each * 1e3,
+            1.0 / each
+        )?;
+    }
     Ok(())
 }
