@@ -573,6 +573,21 @@ fn interfaces() -> Vec<(&'static str, u16)> {
 }
 
 /// The module: `troupe._native`.
+/// A JPEG file's pixels, as `playerc_camera_decompress` gives them:
+/// `(width, height, channels, pixels)`, the pixels row by row from the
+/// top, 3 channels (R, G, B) or 1 (grey).
+#[pyfunction]
+fn jpeg_decode<'py>(py: Python<'py>, data: &[u8]) -> PyResult<(u32, u32, u8, Bound<'py, PyBytes>)> {
+    let img = py
+        .detach(|| image::load_from_memory_with_format(data, image::ImageFormat::Jpeg))
+        .map_err(|e| PyValueError::new_err(format!("not a JPEG this can decode: {e}")))?;
+    let (w, h) = (img.width(), img.height());
+    Ok(match img {
+        image::DynamicImage::ImageLuma8(g) => (w, h, 1, PyBytes::new(py, g.as_raw())),
+        other => (w, h, 3, PyBytes::new(py, other.to_rgb8().as_raw())),
+    })
+}
+
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
@@ -580,6 +595,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Robot>()?;
     m.add_class::<Feed>()?;
     m.add_function(wrap_pyfunction!(interfaces, m)?)?;
+    m.add_function(wrap_pyfunction!(jpeg_decode, m)?)?;
     m.add("TroupeError", py.get_type::<TroupeError>())?;
     m.add("RequestRefused", py.get_type::<RequestRefused>())?;
     m.add("NoAnswer", py.get_type::<NoAnswer>())?;

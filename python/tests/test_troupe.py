@@ -152,3 +152,23 @@ def test_without_numpy_ranges_and_maps_are_lists(launch, monkeypatch):
     m = robot.map(0).get_map()
     assert isinstance(m.cells, list) and len(m.cells) == m.height and len(m.cells[0]) == m.width
     assert {-1, 1} <= {c for row in m.cells for c in row}
+
+
+def test_camera_images_raw_and_jpeg_are_arrays(launch):
+    stack = launch("camera.cfg", ["6665:camera:0", "6665:camera:1"])
+    robot = stack.client.robot(6665)
+    raw, jpeg = robot.camera(0), robot.camera(1)
+    raw.read(timeout=10)
+    jpeg.read(timeout=10)
+    assert (raw.width, raw.height, raw.bpp, raw.format) == (160, 120, 24, troupe.Camera.FORMAT_RGB888)
+    assert raw.compression == troupe.Camera.COMPRESS_RAW and len(raw.image) == 160 * 120 * 3
+    assert jpeg.compression == troupe.Camera.COMPRESS_JPEG and jpeg.image[:2] == b"\xff\xd8"
+    a, b = raw.pixels, jpeg.pixels
+    assert a.shape == b.shape == (120, 160, 3) and a.dtype == np.uint8
+    # Row 0 is the top: Stage's background above, its white floor below.
+    assert tuple(a[0, 80]) == (179, 179, 204) and tuple(a[119, 80]) == (255, 255, 255)
+    # Straight ahead and below the horizon, the low green box; to the right, the tall blue one.
+    assert tuple(a[70, 80]) == (0, 255, 0)
+    assert tuple(a[60, 140]) == (0, 0, 255)
+    # The JPEG of an image close to it (quality 0.9; they may be a step apart).
+    assert np.abs(a.astype(int) - b.astype(int)).mean() < 12

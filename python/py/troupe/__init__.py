@@ -40,7 +40,7 @@ __all__ = [
     "connect", "Client", "Robot", "Proxy", "Sample", "DeviceInfo", "Pose",
     "Position2d", "Laser", "Ranger", "Sonar", "Map", "Localize", "Planner",
     "Simulation", "Blobfinder", "Fiducial", "Gripper", "Bumper", "Ir", "Gps", "Ptz",
-    "TroupeError", "RequestRefused", "NoAnswer", "ReadTimeout",
+    "Camera", "TroupeError", "RequestRefused", "NoAnswer", "ReadTimeout",
 ]
 
 #: How long ``read()`` waits by default, in seconds (libplayerc++'s Read gives up after 10 s too).
@@ -224,6 +224,9 @@ class Robot:
 
     def gps(self, index: int = 0) -> "Gps":
         return Gps(self, index)
+
+    def camera(self, index: int = 0) -> "Camera":
+        return Camera(self, index)
 
     def ptz(self, index: int = 0) -> "Ptz":
         return Ptz(self, index)
@@ -839,6 +842,77 @@ class Ptz(Proxy):
         return self.latest("ptz/data")
 
 
+class Camera(Proxy):
+    """A camera: the latest image's fields (``width``, ``height``, ``bpp``, ``format``,
+    ``compression``, ``image`` as bytes) and its ``pixels``, decompressed."""
+
+    interface = "camera"
+
+    #: ``format``: 8-bit grey, 16-bit grey (network byte order), RGB 5-6-5, RGB 8-8-8.
+    FORMAT_MONO8, FORMAT_MONO16, FORMAT_RGB565, FORMAT_RGB888 = 1, 2, 4, 5
+    #: ``compression``: raw pixels, or a JPEG file.
+    COMPRESS_RAW, COMPRESS_JPEG = 0, 1
+
+    def _d(self) -> Dict[str, Any]:
+        return self.latest("camera/data") or {}
+
+    @property
+    def width(self) -> int:
+        return int(self._d().get("width", 0))
+
+    @property
+    def height(self) -> int:
+        return int(self._d().get("height", 0))
+
+    @property
+    def bpp(self) -> int:
+        return int(self._d().get("bpp", 0))
+
+    @property
+    def format(self) -> int:
+        return int(self._d().get("format", 0))
+
+    @property
+    def compression(self) -> int:
+        return int(self._d().get("compression", 0))
+
+    @property
+    def image(self) -> bytes:
+        """The image's bytes as they came: pixels, or a JPEG file."""
+        return bytes(self._d().get("image", ()))
+
+    @property
+    def pixels(self):
+        """The latest image as rows from the top: a (height, width, 3) uint8 array for colour,
+        (height, width) for grey (uint16 for MONO16), a JPEG decompressed first, as
+        ``playerc_camera_decompress`` does. Without numpy: ``(width, height, channels,
+        bytes)``. None before the first image."""
+        d = self._d()
+        if not d:
+            return None
+        w, h, data = int(d["width"]), int(d["height"]), bytes(d["image"])
+        if d["compression"] == self.COMPRESS_JPEG:
+            w, h, channels, data = _native.jpeg_decode(data)
+            fmt, bpp = (self.FORMAT_RGB888, 24) if channels == 3 else (self.FORMAT_MONO8, 8)
+        else:
+            fmt, bpp = int(d["format"]), int(d["bpp"])
+        if fmt == self.FORMAT_MONO16:
+            channels, dtype = 1, ">u2"
+        elif fmt == self.FORMAT_MONO8:
+            channels, dtype = 1, "u1"
+        elif fmt == self.FORMAT_RGB888:
+            channels, dtype = bpp // 8, "u1"
+        else:
+            raise TroupeError(f"{self.device}: format {fmt} ({bpp} bits) is not converted")
+        if _np is None:
+            return (w, h, channels, data)
+        a = _np.frombuffer(data, dtype=_np.dtype(dtype), count=w * h * channels)
+        if dtype == ">u2":
+            return a.astype(_np.uint16).reshape(h, w)
+        a = a.reshape(h, w, channels) if channels > 1 else a.reshape(h, w)
+        return a[:, :, :3] if channels == 4 else a
+
+
 _PROXIES = {cls.interface: cls for cls in (
     Position2d, Laser, Ranger, Sonar, Map, Localize, Planner, Simulation,
-    Blobfinder, Fiducial, Gripper, Bumper, Ir, Gps, Ptz)}
+    Blobfinder, Fiducial, Gripper, Bumper, Ir, Gps, Ptz, Camera)}
