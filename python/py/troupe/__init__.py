@@ -842,6 +842,11 @@ class Ptz(Proxy):
         return self.latest("ptz/data")
 
 
+def _int_field(kind: str, name: str, doc: str) -> Any:
+    """A read-only attribute: field `name` of the latest `kind` message, as an int (0 before one)."""
+    return property(lambda self: int((self.latest(kind) or {}).get(name, 0)), doc=doc)
+
+
 class Camera(Proxy):
     """A camera: the latest image's fields (``width``, ``height``, ``bpp``, ``format``,
     ``compression``, ``image`` as bytes) and its ``pixels``, decompressed."""
@@ -856,25 +861,11 @@ class Camera(Proxy):
     def _d(self) -> Dict[str, Any]:
         return self.latest("camera/data") or {}
 
-    @property
-    def width(self) -> int:
-        return int(self._d().get("width", 0))
-
-    @property
-    def height(self) -> int:
-        return int(self._d().get("height", 0))
-
-    @property
-    def bpp(self) -> int:
-        return int(self._d().get("bpp", 0))
-
-    @property
-    def format(self) -> int:
-        return int(self._d().get("format", 0))
-
-    @property
-    def compression(self) -> int:
-        return int(self._d().get("compression", 0))
+    width = _int_field("camera/data", "width", "Pixels across.")
+    height = _int_field("camera/data", "height", "Pixels down.")
+    bpp = _int_field("camera/data", "bpp", "Bits per pixel.")
+    format = _int_field("camera/data", "format", "One of the FORMAT_ values.")
+    compression = _int_field("camera/data", "compression", "COMPRESS_RAW or COMPRESS_JPEG.")
 
     @property
     def image(self) -> bytes:
