@@ -83,3 +83,11 @@ pub struct Color {
     /// Alpha (1 = opaque).
     pub a: f32,
 }
+
+impl Color {
+    /// Red, green and blue as bytes (each channel clamped, rounded).
+    pub fn rgb8(&self) -> [u8; 3] {
+        let b = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+        [b(self.r), b(self.g), b(self.b)]
+    }
+}

@@ -540,18 +540,22 @@ impl Sim {
     /// Whether model `m` updates in the step from `self.time`: Stage
     /// updates a model every `update_interval`, at its multiples.
     fn due(&self, m: usize) -> bool {
+        self.crosses(m, self.time, self.time + self.world.interval_sim)
+    }
+
+    /// Whether a multiple of model `m`'s `update_interval` lies in
+    /// `(from, to]` (Stage updates a model at those multiples).
+    fn crosses(&self, m: usize, from: f64, to: f64) -> bool {
         let every = self.frames[m].every;
         let k = |t: f64| (t / every + 1e-9).floor();
-        k(self.time + self.world.interval_sim) > k(self.time)
+        k(to) > k(from)
     }
 
     /// Whether model `m` updated in the last step (or the world has not
     /// stepped yet): what Stage's models that update on their own clock
     /// (a camera draws every `update_interval`) publish after.
     pub fn updated(&self, m: usize) -> bool {
-        let every = self.frames[m].every;
-        let k = |t: f64| (t / every + 1e-9).floor();
-        self.steps == 0 || k(self.time) > k(self.time - self.world.interval_sim)
+        self.steps == 0 || self.crosses(m, self.time - self.world.interval_sim, self.time)
     }
 
     /// What is done in series once the bases have moved and the rangers

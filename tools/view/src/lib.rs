@@ -420,8 +420,8 @@ fn addr(d: &Device) -> String {
 
 /// A colour as CSS writes it.
 fn css(c: troupe_msgs::Color) -> String {
-    let b = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
-    format!("#{:02x}{:02x}{:02x}", b(c.r), b(c.g), b(c.b))
+    let [r, g, b] = c.rgb8();
+    format!("#{r:02x}{g:02x}{b:02x}")
 }
 
 /// Millimetres are enough on screen, and keep frames small.

@@ -10,7 +10,7 @@ pub const SKY: [u8; 3] = [179, 179, 204];
 pub const FLOOR: [u8; 3] = [255, 255, 255];
 
 /// One image of a camera.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct Image {
     /// Pixels across.
     pub width: u32,
@@ -96,12 +96,7 @@ impl Sim {
     /// drawn, beyond the far clip, or climbing above the highest body.
     pub fn camera(&self, m: usize) -> Image {
         let Some(cfg) = self.world.models[m].camera else {
-            return Image {
-                width: 0,
-                height: 0,
-                rgb: Vec::new(),
-                depth: Vec::new(),
-            };
+            return Image::default();
         };
         let (w, h) = cfg.resolution;
         let (wn, hn) = (w as usize, h as usize);
@@ -154,12 +149,10 @@ impl Sim {
             };
             if level {
                 // Every pixel of a column heads the same way.
-                pixels.clear();
                 pixels.extend((0..hn).map(|row| (row, ray(col, row))));
                 self.trace(&view, &mut pixels, &mut paint);
             } else {
                 for row in 0..hn {
-                    pixels.clear();
                     pixels.push((row, ray(col, row)));
                     self.trace(&view, &mut pixels, &mut paint);
                 }
@@ -168,7 +161,8 @@ impl Sim {
         frame
     }
 
-    /// Draws `pixels`, whose rays share a heading (see [`Sim::camera`]).
+    /// Draws `pixels`, whose rays share a heading, and empties it (see
+    /// [`Sim::camera`]).
     fn trace(
         &self,
         view: &View,
@@ -196,9 +190,7 @@ impl Sim {
             let d = from + hit.range;
             let k = usize::from(hit.id) - 1;
             let look = &self.looks[k];
-            let c = self.colors[k];
-            let byte = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
-            let color = [byte(c.r), byte(c.g), byte(c.b)];
+            let color = self.colors[k].rgb8();
             pixels.retain(|&(row, ray)| {
                 if let Some(drawn) = view.floor(&ray, d) {
                     paint(row, drawn);

@@ -262,9 +262,7 @@ fn the_camera_of_stages_camera_world_sees_the_cave_floor_and_sky() {
     let cam = s.world.names["r0.camera:0"];
     let im = s.camera(cam);
     assert_eq!((im.width, im.height), (100, 100));
-    let cave = s.colors[s.world.names["cave"]];
-    let byte = |v: f32| (v * 255.0).round() as u8;
-    let wall = [byte(cave.r), byte(cave.g), byte(cave.b)];
+    let wall = s.colors[s.world.names["cave"]].rgb8();
     let px = |col: usize, row: usize| {
         let i = (row * 100 + col) * 3;
         [im.rgb[i], im.rgb[i + 1], im.rgb[i + 2]]
