@@ -147,6 +147,7 @@ in exec form: [\"CMD\", \"/troupe\", \"--connect\", \"tcp/router:7447\", \"ready
   troupe emulate urglaser --link /tmp/urg --usb   # a URG on USB: use_serial 0, SCIP 2.0
   troupe emulate p2os --link /tmp/pioneer --subclass p3at
   troupe emulate erratic --link /tmp/erratic --revision \"Rev G\"
+  troupe emulate wbr914 --link /tmp/914           # then: port \"/tmp/914\" in Player's wbr914.cfg
   troupe --connect tcp/127.0.0.1:7447 emulate sicklms200 --link /tmp/laser --stage-laser 6665:laser:1
   troupe --connect tcp/127.0.0.1:7447 emulate p2os --link /tmp/pioneer --stage-model r0 --stage-sim 6666:simulation:0
   troupe --connect tcp/127.0.0.1:7447 emulate sicklms200 --link /tmp/laser --stage-model r0 --stage-sim 6666:simulation:0

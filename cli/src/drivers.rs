@@ -32,6 +32,9 @@ pub fn catalog() -> Catalog {
         ),
         Entry::of::<troupe_p2os::P2os>("Pioneer robots (P2OS/ARCOS) over a serial line"),
         Entry::of::<troupe_erratic::Erratic>("the Videre Erratic robot over a serial line"),
+        Entry::of::<troupe_wbr914::Wbr914>(
+            "White Box Robotics' 914 PC-Bot over its M3 board's serial line",
+        ),
         Entry::of::<troupe_log::WriteLog>("writes its required devices' data to a Player text log"),
         Entry::of::<troupe_log::ReadLog>(
             "replays a Player text log as live devices, and is its stack's clock",

@@ -142,7 +142,6 @@ pub const MISSING: &[(&str, &str, &str)] = &[
         "RWI and iRobot robots on the rFLEX controller (B21r, ATRV, Magellan)",
         "",
     ),
-    ("wbr914", "White Box Robotics' 914 PC-Bot", ""),
     ("ptu46", "the Directed Perception PTU-46 pan-tilt unit", ""),
     ("linuxwifi", "Linux wireless link statistics", ""),
     ("festival", "speech through the Festival synthesizer", ""),

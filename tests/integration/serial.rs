@@ -693,3 +693,89 @@ fn an_emulated_pioneer_backed_by_stage_drives_the_simulated_robot() {
     emu.terminate();
     laser_emu.terminate();
 }
+
+/// Player's own wbr914.cfg, its port pointed at `troupe emulate wbr914`: a
+/// Player client through the bridge reads the IR, analog and digital
+/// inputs, enables the motors and drives, and sets digital outputs that
+/// the emulated board's loopback brings back.
+#[test]
+fn players_wbr914_cfg_drives_the_emulated_914_through_the_bridge() {
+    use crate::player::{Frame, Player, DATA, RESP_ACK};
+    use troupe_msgs::{Device, Interface};
+    let sample =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/compat/player-cfg/wbr914.cfg");
+    if !sample.exists() {
+        eprintln!("skipping: ../shared/compat is absent");
+        return;
+    }
+    let rig = Rig::new("wbr914");
+    let (mut robot, link) = rig.emulate("wbr914", &[]);
+    let text = std::fs::read_to_string(&sample).unwrap();
+    let text = text.replace("/dev/ttyUSB0", link.to_str().unwrap());
+    assert!(text.contains(link.to_str().unwrap()), "{text}");
+    let cfg = rig.cfg(&text);
+    let ns = troupe_tests::unique_namespace("wbr914");
+    let mut launcher = troupe_tests::launch(&ns, &cfg, &[]);
+    let (_, addr) = troupe_tests::launch_ports(&mut launcher);
+    let mut p = Player::connect(addr, 6665);
+    let dev = |i: Interface| Device::new(6665, i, 0);
+    let code = |i: Interface| u32::from(i.code());
+    for i in [
+        Interface::Position2d,
+        Interface::Ir,
+        Interface::Aio,
+        Interface::Dio,
+    ] {
+        p.open(dev(i));
+    }
+    let next_data = |p: &mut Player, i: Interface, want: &dyn Fn(&Frame) -> bool| loop {
+        let m = if p.seen.is_empty() {
+            p.recv()
+        } else {
+            p.seen.remove(0)
+        };
+        if m.sig() == (code(i), 0, DATA, 1) && want(&m) {
+            return m;
+        }
+    };
+    let f32_at = |m: &Frame, at: usize| f32::from_be_bytes(m.body[at..at + 4].try_into().unwrap());
+    // IR: 8 volts then 8 ranges; sensor 2 looks at a wall out of its reach.
+    let ir = next_data(&mut p, Interface::Ir, &|_| true);
+    assert_eq!((ir.u32_at(0), ir.u32_at(40)), (8, 8), "{ir:?}");
+    let range2 = f32_at(&ir, 48 + 2 * 4);
+    assert!((0.75..0.85).contains(&range2), "{range2}");
+    let aio = next_data(&mut p, Interface::Aio, &|_| true);
+    assert_eq!(aio.u32_at(0), 8);
+    assert!((f32_at(&aio, 8 + 4) - 128.0 * 5.0 / 1023.0).abs() < 1e-4);
+
+    // Motors on, then forward at 0.2 m/s.
+    let r = p.request(dev(Interface::Position2d), 2, &1u32.to_be_bytes());
+    assert_eq!(r.kind(), RESP_ACK, "motor power: {r:?}");
+    let mut vel = Vec::new();
+    for v in [0.2f64, 0.0, 0.0] {
+        vel.extend_from_slice(&v.to_be_bytes());
+    }
+    vel.extend_from_slice(&1u32.to_be_bytes());
+    p.send(code(Interface::Position2d), 0, 2, 1, &vel);
+    let pos = next_data(&mut p, Interface::Position2d, &|m| m.f64_at(0) > 0.1);
+    assert!(
+        (pos.f64_at(24) - 0.2).abs() < 0.01,
+        "speed {}",
+        pos.f64_at(24)
+    );
+
+    // Digital outputs 0–7 to 0x5A; the loopback brings them back as inputs.
+    let mut bits = 8u32.to_be_bytes().to_vec();
+    bits.extend_from_slice(&0x5Au32.to_be_bytes());
+    p.send(code(Interface::Dio), 0, 2, 1, &bits);
+    next_data(&mut p, Interface::Dio, &|m| {
+        (m.u32_at(0), m.u32_at(4)) == (16, 0x5A)
+    });
+
+    assert!(launcher.terminate().success(), "{}", launcher.stderr());
+    let log = launcher.stderr();
+    assert!(log.contains("robot stopped, motors off"), "{log}");
+    robot.terminate();
+    let log = robot.stderr();
+    assert!(log.contains("motors_on=false"), "{log}");
+}

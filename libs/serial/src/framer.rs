@@ -76,6 +76,11 @@ impl<C: Codec> Framer<C> {
         self.buf.extend_from_slice(bytes);
     }
 
+    /// The codec, for protocols whose replies are framed by what was asked.
+    pub fn codec_mut(&mut self) -> &mut C {
+        &mut self.codec
+    }
+
     /// Forgets buffered bytes (after a flush of the line, or a reconnect).
     pub fn clear(&mut self) {
         self.buf.clear();

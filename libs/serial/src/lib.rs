@@ -1,7 +1,7 @@
 //! Serial lines for Troupe's hardware drivers and their device emulators.
 //!
 //! - [`Port`]: a serial device (`/dev/ttyUSB0`, or a pseudo-terminal's
-//!   slave) in raw 8N1 mode at a chosen baud rate, with reads that time out
+//!   slave) in raw 8N1 (or 8N2) mode at any baud rate the line takes, with reads that time out
 //!   and a clear [`LineError::Lost`] when the device goes away.
 //! - [`Framer`] and [`Codec`]: check-then-parse framing over a byte stream
 //!   that resynchronises on noise and counts what it skipped.
@@ -36,7 +36,7 @@ pub use emu::{EmuLine, LineEvent, LineOptions};
 pub use faults::{Faults, Injected};
 pub use framer::{Codec, Decoded, FrameStats, Framer, Skipped};
 pub use link::{Link, LinkError, SessionError};
-pub use port::{baud_supported, LineError, Port, BAUD_RATES};
+pub use port::{LineError, Port, StopBits, BAUD_RATES};
 pub use pty::{Pacer, Pty};
 pub use thread::{
     end_session, recv_where, run_sessions, Emulator, Ended, LineThread, Linked, Reports,

@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 
 use nix::fcntl::OFlag;
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
-use nix::sys::termios::{self, BaudRate, ControlFlags, FlushArg, SetArg};
+use nix::sys::termios::{self, FlushArg};
 
 /// Why a line could not be used.
 #[derive(Debug, thiserror::Error)]
@@ -22,8 +22,8 @@ pub enum LineError {
         /// What the system said.
         source: std::io::Error,
     },
-    /// The baud rate is not one a serial line can be set to.
-    #[error("baud rate {0} is not supported (try one of 9600, 19200, 38400, 57600, 115200, 230400, 500000)")]
+    /// The baud rate is not one the line can be set to.
+    #[error("the line cannot be set to {0} baud")]
     Baud(u32),
     /// The device went away (unplugged, or the emulator closed its end).
     #[error("{path}: device lost: {reason}")]
@@ -35,50 +35,50 @@ pub enum LineError {
     },
 }
 
-/// The baud rates a [`Port`] accepts.
+/// The standard rates: what drivers that try several rates choose among.
+/// A [`Port`] also takes any other rate the line supports (Linux sets it
+/// exactly on a pseudo-terminal, and as near as its divisor allows on a
+/// UART): the White Box 914's 416666 baud, say.
 pub const BAUD_RATES: [u32; 10] = [
     2400, 4800, 9600, 19200, 38400, 57600, 115200, 230400, 460800, 500000,
 ];
 
-/// True when `baud` is one of [`BAUD_RATES`].
-pub fn baud_supported(baud: u32) -> bool {
-    BAUD_RATES.contains(&baud)
+/// Stop bits per character.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum StopBits {
+    /// 8N1, what almost every device speaks.
+    #[default]
+    One,
+    /// 8N2.
+    Two,
 }
 
-fn baud_rate(baud: u32) -> Option<BaudRate> {
-    Some(match baud {
-        2400 => BaudRate::B2400,
-        4800 => BaudRate::B4800,
-        9600 => BaudRate::B9600,
-        19200 => BaudRate::B19200,
-        38400 => BaudRate::B38400,
-        57600 => BaudRate::B57600,
-        115200 => BaudRate::B115200,
-        230400 => BaudRate::B230400,
-        460800 => BaudRate::B460800,
-        500000 => BaudRate::B500000,
-        _ => return None,
-    })
-}
-
-pub(crate) fn baud_of(speed: BaudRate) -> u32 {
-    BAUD_RATES
-        .iter()
-        .copied()
-        .find(|&b| baud_rate(b) == Some(speed))
-        .unwrap_or(0)
-}
-
-/// Puts `fd` in raw 8N1 mode at `baud`, receiver on, modem lines ignored.
-pub(crate) fn configure(fd: impl AsFd, baud: u32) -> Result<(), std::io::Error> {
-    let speed = baud_rate(baud).ok_or_else(|| std::io::Error::other(LineError::Baud(baud)))?;
+/// Puts `fd` in raw 8-bit, no-parity mode at `baud` with `stop` stop bits,
+/// receiver on, modem lines ignored.
+pub(crate) fn configure(fd: impl AsFd, baud: u32, stop: StopBits) -> Result<(), std::io::Error> {
+    use rustix::termios::{self, ControlModes, OptionalActions};
+    let bad = || std::io::Error::other(LineError::Baud(baud));
+    if baud == 0 {
+        return Err(bad());
+    }
     let mut t = termios::tcgetattr(fd.as_fd())?;
-    termios::cfmakeraw(&mut t);
-    t.control_flags |= ControlFlags::CLOCAL | ControlFlags::CREAD;
-    t.control_flags &= !(ControlFlags::CSTOPB | ControlFlags::PARENB | ControlFlags::CRTSCTS);
-    termios::cfsetspeed(&mut t, speed)?;
-    termios::tcsetattr(fd.as_fd(), SetArg::TCSANOW, &t)?;
+    t.make_raw();
+    t.control_modes |= ControlModes::CLOCAL | ControlModes::CREAD;
+    t.control_modes &= !(ControlModes::CSTOPB | ControlModes::PARENB | ControlModes::CRTSCTS);
+    if stop == StopBits::Two {
+        t.control_modes |= ControlModes::CSTOPB;
+    }
+    t.set_speed(baud).map_err(|_| bad())?;
+    termios::tcsetattr(fd.as_fd(), OptionalActions::Now, &t).map_err(|e| match e {
+        rustix::io::Errno::INVAL => bad(),
+        e => e.into(),
+    })?;
     Ok(())
+}
+
+/// The output rate `fd` is set to (0 if it cannot be read).
+pub(crate) fn baud_of(fd: impl AsFd) -> u32 {
+    rustix::termios::tcgetattr(fd.as_fd()).map_or(0, |t| t.output_speed())
 }
 
 /// A serial device (a real one or a pseudo-terminal's slave), raw 8N1.
@@ -87,6 +87,7 @@ pub struct Port {
     file: File,
     path: PathBuf,
     baud: u32,
+    stop: StopBits,
 }
 
 impl Port {
@@ -97,9 +98,6 @@ impl Port {
     /// [`LineError::Open`] when the device is missing, busy or not a
     /// terminal; [`LineError::Baud`] for a rate the line cannot take.
     pub fn open(path: &Path, baud: u32) -> Result<Port, LineError> {
-        if !baud_supported(baud) {
-            return Err(LineError::Baud(baud));
-        }
         let open = |source| LineError::Open {
             path: path.to_owned(),
             source,
@@ -110,11 +108,15 @@ impl Port {
             .custom_flags(OFlag::O_NOCTTY.bits())
             .open(path)
             .map_err(open)?;
-        configure(&file, baud).map_err(open)?;
+        configure(&file, baud, StopBits::One).map_err(|e| match e.downcast::<LineError>() {
+            Ok(baud) => baud,
+            Err(e) => open(e),
+        })?;
         let port = Port {
             file,
             path: path.to_owned(),
             baud,
+            stop: StopBits::One,
         };
         port.discard_input();
         Ok(port)
@@ -134,14 +136,28 @@ impl Port {
     ///
     /// # Errors
     ///
-    /// [`LineError::Baud`] for an unknown rate, [`LineError::Lost`] if the
+    /// [`LineError::Baud`] for a rate the line cannot take, [`LineError::Lost`] if the
     /// device refused.
     pub fn set_baud(&mut self, baud: u32) -> Result<(), LineError> {
-        if !baud_supported(baud) {
-            return Err(LineError::Baud(baud));
-        }
-        configure(&self.file, baud).map_err(|e| self.lost(e))?;
+        self.reconfigure(baud, self.stop)
+    }
+
+    /// Changes the line's stop bits.
+    ///
+    /// # Errors
+    ///
+    /// [`LineError::Lost`] if the device refused.
+    pub fn set_stop_bits(&mut self, stop: StopBits) -> Result<(), LineError> {
+        self.reconfigure(self.baud, stop)
+    }
+
+    fn reconfigure(&mut self, baud: u32, stop: StopBits) -> Result<(), LineError> {
+        configure(&self.file, baud, stop).map_err(|e| match e.downcast::<LineError>() {
+            Ok(baud) => baud,
+            Err(e) => self.lost(e),
+        })?;
         self.baud = baud;
+        self.stop = stop;
         Ok(())
     }
 

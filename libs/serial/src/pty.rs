@@ -8,9 +8,8 @@ use std::time::{Duration, Instant};
 
 use nix::fcntl::{fcntl, FcntlArg, OFlag};
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
-use nix::sys::termios;
 
-use crate::port::{baud_of, configure};
+use crate::port::{baud_of, configure, StopBits};
 
 /// A pseudo-terminal: the emulator holds the master, a driver opens the
 /// slave (through [`Pty::link`]'s symlink) as it would a serial port.
@@ -36,7 +35,7 @@ impl Pty {
     /// What the system says when no pseudo-terminal can be had.
     pub fn open() -> std::io::Result<Pty> {
         let pair = nix::pty::openpty(None, None)?;
-        configure(&pair.slave, 9600)?;
+        configure(&pair.slave, 9600, StopBits::One)?;
         let slave_path = nix::unistd::ttyname(&pair.slave)?;
         // A device writes whether or not anyone listens: never block on a
         // full buffer, drop instead (see `dropped`).
@@ -82,9 +81,7 @@ impl Pty {
 
     /// The baud rate the other end last set on the line.
     pub fn line_baud(&self) -> u32 {
-        termios::tcgetattr(self.slave.as_fd())
-            .map(|t| baud_of(termios::cfgetospeed(&t)))
-            .unwrap_or(0)
+        baud_of(self.slave.as_fd())
     }
 
     /// Reads what the driver wrote, waiting up to `timeout`; `Ok(0)` when
@@ -221,6 +218,11 @@ mod tests {
         assert_eq!(pty.line_baud(), 38400);
         port.set_baud(500000).unwrap();
         assert_eq!(pty.line_baud(), 500000);
+        // A rate off the standard list (the White Box 914's), 8N2.
+        port.set_baud(416_666).unwrap();
+        port.set_stop_bits(crate::StopBits::Two).unwrap();
+        assert_eq!((pty.line_baud(), port.baud()), (416_666, 416_666));
+        assert!(matches!(port.set_baud(0), Err(crate::LineError::Baud(0))));
 
         port.send(b"hello").unwrap();
         let mut buf = [0u8; 16];

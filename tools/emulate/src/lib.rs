@@ -20,6 +20,8 @@ pub enum Emulated {
     P2os,
     /// A Videre Erratic with sonars, floor IR and servos, in an 8 m × 6 m room.
     Erratic,
+    /// White Box Robotics' 914: its M3 board's motion chips, IR and I/O, in the same room.
+    Wbr914,
 }
 
 #[derive(Debug, Args)]
@@ -71,9 +73,9 @@ pub struct EmulateArgs {
     #[arg(long, value_name = "ADDR")]
     pub stage_laser: Option<troupe_msgs::DevAddr>,
     /// Be part of this model of a running Stage simulation instead of the
-    /// built-in room. p2os, erratic: wheel commands drive the model's
-    /// position2d, odometry and stall come from it, and the sonars read its
-    /// sonar (or first ranger) device. sicklms200: the ranges are the
+    /// built-in room. p2os, erratic, wbr914: wheel commands drive the model's
+    /// position2d, odometry and stall come from it, and the sonars (the
+    /// 914's IR) read its sonar (or first ranger) device. sicklms200: the ranges are the
     /// model's laser (or its widest ranger); urglaser: the same. The model's devices are found
     /// through --stage-sim. Reached through the global --connect/--namespace flags.
     #[arg(long, value_name = "MODEL", conflicts_with = "stage_laser")]
@@ -498,6 +500,16 @@ pub fn run(a: EmulateArgs, z: &troupe_node::ZenohArgs) -> anyhow::Result<()> {
                 tracing::info!("an Erratic {} emulated; Ctrl-C stops it", a.revision);
             })
             .with_context(|| format!("emulating an erratic at {}", a.link.display()))?;
+        }
+        Emulated::Wbr914 => {
+            use troupe_wbr914::emulator;
+            let opts = emulator::EmulatorOptions { line };
+            let mut body = body(&a, z, emulator::room())?;
+            emulator::run_with(&opts, body.as_mut(), &stop, || {
+                banner("wbr914", &a.link);
+                tracing::info!("a White Box 914 emulated (416666 baud, 8N2); Ctrl-C stops it");
+            })
+            .with_context(|| format!("emulating a wbr914 at {}", a.link.display()))?;
         }
     }
     Ok(())
