@@ -635,6 +635,57 @@ fn dozens_of_clients_flow_while_one_is_stuck_and_bad_input_closes_only_its_conne
     thread.join().unwrap();
 }
 
+/// A PULL client that closes a device after a round: Player answers the
+/// close once its driver has run again, with the data on its way ahead of
+/// the answer, so the client's next read returns at once (libplayerc keeps
+/// what came while it waited for the answer) instead of waiting for a
+/// round no device will fill.
+#[test]
+fn closing_in_pull_mode_brings_the_data_on_its_way_before_the_answer() {
+    use crate::player::{DATA, RESP_ACK, SYNCH};
+    let net = TestNet::new("bridge-close-pull");
+    let s = net.peer();
+    let pos = Device::new(ROBOT, Interface::Position2d, 0);
+    let state = encode(
+        &position2d::Data {
+            pose: Pose2d::new(1.0, 2.0, 0.5),
+            ..Default::default()
+        },
+        4.0,
+    );
+    let _token = s
+        .liveliness()
+        .declare_token(keys::token(&pos, "fake"))
+        .wait()
+        .unwrap();
+    let _latest = s
+        .declare_queryable(keys::data(&pos))
+        .callback(move |q| q.reply(q.key_expr().clone(), state.clone()).wait().unwrap())
+        .wait()
+        .unwrap();
+    net.wait_live(&[&pos.to_string()]);
+    let (addr, thread, stop) = bridge(&net);
+    let mut c = Player::connect(addr, ROBOT);
+    // PLAYER_PLAYER_REQ_DATAMODE, PLAYER_DATAMODE_PULL.
+    c.send(1, 0, 3, 5, &2u32.to_be_bytes());
+    assert_eq!(c.reply().kind(), RESP_ACK);
+    c.open(pos);
+    // One round: ACK, the state, SYNCH.
+    c.send(1, 0, 3, 4, &[]);
+    let kinds: Vec<u32> = (0..3).map(|_| c.recv().kind()).collect();
+    assert_eq!(kinds, [RESP_ACK, DATA, SYNCH]);
+    c.close(pos);
+    assert_eq!(c.seen.len(), 1, "the state came before the close's answer");
+    let d = &c.seen[0];
+    assert_eq!(
+        (d.h[2], d.h[4], d.f64_at(0), d.f64_at(8)),
+        (u32::from(Interface::Position2d.code()), DATA, 1.0, 2.0)
+    );
+    drop(c);
+    let _ = stop.send(());
+    thread.join().unwrap();
+}
+
 /// A device that published once, before the client came (amcl's localize
 /// at rest): the client that subscribes later gets its latest state at once,
 /// after its subscription's answer, as Player's drivers gave their state to

@@ -206,6 +206,11 @@ impl Queue {
         self.pull = pull;
     }
 
+    /// Whether the client reads in PULL mode.
+    pub fn pull(&self) -> bool {
+        self.pull
+    }
+
     /// Adds a rule, or changes the action of an existing rule with the same fields.
     pub fn add_rule(&mut self, rule: Rule) {
         let same = |r: &&mut Rule| {

@@ -797,6 +797,14 @@ impl Conn {
                                 }
                                 if !self.subscribed.contains(&dev) {
                                     self.unsubscribe(dev);
+                                    // Player answers a close once its driver has
+                                    // run again, and the data on its way comes
+                                    // ahead of the answer: a PULL client's next
+                                    // read returns it instead of waiting for a
+                                    // round no device will fill.
+                                    if self.queue.with(|q| q.pull()) && reads_rounds(dev) {
+                                        self.send_latest(dev);
+                                    }
                                 }
                                 player::CLOSE
                             }
@@ -867,11 +875,7 @@ impl Conn {
             // Player counts a client's opens of a device; the feed is one.
             return;
         }
-        // Player clients read no data of these in their rounds.
-        if !matches!(
-            dev.interface,
-            Interface::Simulation | Interface::Log | Interface::Map
-        ) {
+        if reads_rounds(dev) {
             let code = u32::from(dev.interface.code());
             self.queue.with(|q| q.expect(code, dev.index));
         }
@@ -954,6 +958,15 @@ impl Conn {
         self.queue
             .with(|q| q.forget(u32::from(dev.interface.code()), dev.index));
     }
+}
+
+/// Whether a client's PULL rounds carry `dev`'s data: Player clients read
+/// none of a simulation, log or map device's in them.
+fn reads_rounds(dev: Device) -> bool {
+    !matches!(
+        dev.interface,
+        Interface::Simulation | Interface::Log | Interface::Map
+    )
 }
 
 fn read_addr(r: &mut Reader) -> Result<(u32, u32), crate::xdr::XdrError> {
