@@ -234,9 +234,10 @@ impl ZenohArgs {
         self.open_config(config)
     }
 
-    /// [`ZenohArgs::open`] on a thread of its own, as a future: with
-    /// `--reconnect` a client's open blocks until its router answers, and a
-    /// caller can race this against a signal (the thread is left behind).
+    /// [`ZenohArgs::open`] (or, for `Mode::Peer`, [`ZenohArgs::open_peer`])
+    /// on a thread of its own, as a future: with `--reconnect` an open
+    /// blocks until its router answers, and a caller can race this against
+    /// a signal (the thread is left behind).
     pub fn open_in_background(
         &self,
         default_mode: Mode,
@@ -244,7 +245,10 @@ impl ZenohArgs {
         let (tx, rx) = tokio::sync::oneshot::channel();
         let me = self.clone();
         std::thread::spawn(move || {
-            let _ = tx.send(me.open(default_mode));
+            let _ = tx.send(match default_mode {
+                Mode::Peer => me.open_peer(),
+                mode => me.open(mode),
+            });
         });
         async move {
             rx.await.unwrap_or_else(|_| {

@@ -103,14 +103,16 @@ impl StopSignals {
     }
 }
 
-/// A runtime, the stop signals caught on it, and a client session.
+/// A runtime, the stop signals caught on it, and a session.
 pub type ClientRuntime = (tokio::runtime::Runtime, StopSignals, zenoh::Session);
 
-/// How a long-running client (the bridge, a passthrough) starts: a
+/// How a long-running tool (the bridge, the view, a passthrough) starts: a
 /// runtime of `threads` workers, SIGTERM and SIGINT caught before the
 /// session opens (with `--reconnect` the open waits for its router, and a
-/// container's PID 1 must still stop), then the client session; `None`
-/// when a signal came first.
+/// container's PID 1 must still stop), then the session, joining as `mode`
+/// unless `--mode` or the config says otherwise (a peer takes data from its
+/// publishers directly, not through the router); `None` when a signal came
+/// first.
 ///
 /// # Errors
 ///
@@ -118,6 +120,7 @@ pub type ClientRuntime = (tokio::runtime::Runtime, StopSignals, zenoh::Session);
 pub fn client_runtime(
     z: &ZenohArgs,
     threads: usize,
+    mode: Mode,
 ) -> Result<Option<ClientRuntime>, ProcessError> {
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(threads)
@@ -127,7 +130,7 @@ pub fn client_runtime(
     let mut signals = rt
         .block_on(async { StopSignals::new() })
         .map_err(ProcessError::Signals)?;
-    let session = rt.block_on(signals.unless_stopped(z.open_in_background(Mode::Client)))?;
+    let session = rt.block_on(signals.unless_stopped(z.open_in_background(mode)))?;
     Ok(session.map(|s| (rt, signals, s)))
 }
 

@@ -81,9 +81,9 @@ fn port(spec: &str, bind: IpAddr) -> anyhow::Result<Port> {
 }
 
 /// `troupe bridge`: serves robot ports, or with `--import` brings a Player
-/// server's devices in. Either way a client of the router, like the tools:
-/// its device listing at start is complete (a peer's first query can run
-/// before its routes exist).
+/// server's devices in. Either way a Zenoh peer, as the recorder is: the
+/// router introduces it to the drivers, and their data and answers come
+/// from them directly, not through the router's process.
 pub fn run(a: BridgeArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     let ports = match a.import {
         Some(_) => Vec::new(),
@@ -94,7 +94,9 @@ pub fn run(a: BridgeArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             .collect::<anyhow::Result<Vec<_>>>()?,
     };
     troupe_node::process::supervised()?;
-    let Some((rt, mut signals, session)) = troupe_node::process::client_runtime(z, 2)? else {
+    let Some((rt, mut signals, session)) =
+        troupe_node::process::client_runtime(z, 2, troupe_node::Mode::Peer)?
+    else {
         return Ok(());
     };
     let stop = async move { signals.recv().await };

@@ -355,13 +355,16 @@ impl Bridge {
             refused: Mutex::new(HashMap::new()),
         });
         // Changes first, then the current list: no token is missed, and the
-        // port opens only once DEVLIST would be complete.
+        // port opens only once DEVLIST would be complete. The subscriber
+        // takes history too: a peer's first query can run before its routes
+        // to every publisher exist, and what it missed comes then.
         let s = Arc::downgrade(&shared);
         let touched = Arc::new(Mutex::new(std::collections::HashSet::new()));
         let t = touched.clone();
         let watch = session
             .liveliness()
             .declare_subscriber(keys::tokens(None))
+            .history(true)
             .callback(move |sample| {
                 let Some(shared) = s.upgrade() else { return };
                 let Ok((dev, driver)) = keys::parse_token(sample.key_expr().as_str()) else {

@@ -738,7 +738,7 @@ pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         ..z.clone()
     };
     let Some((rt, mut signals, session)) =
-        troupe_node::process::client_runtime(&joining(&namespaces[0]), 2)?
+        troupe_node::process::client_runtime(&joining(&namespaces[0]), 2, troupe_node::Mode::Peer)?
     else {
         return Ok(());
     };
@@ -748,7 +748,7 @@ pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         let mut sessions = vec![session];
         for ns in &namespaces[1..] {
             let Some(s) = signals
-                .unless_stopped(joining(ns).open_in_background(troupe_node::Mode::Client))
+                .unless_stopped(joining(ns).open_in_background(troupe_node::Mode::Peer))
                 .await?
             else {
                 return Ok(());
