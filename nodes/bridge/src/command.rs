@@ -111,11 +111,14 @@ pub fn run(a: BridgeArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         ))?;
         return Ok(());
     }
+    // The first listing is a client's: whole at once (see Config::lister).
+    let lister = rt.block_on(z.open_in_background(troupe_node::Mode::Client))?;
     rt.block_on(async move {
         let cfg = Config {
             ports,
             maxlen: a.queue_len.max(1),
             allow: a.allow,
+            lister: Some(lister),
             ..Config::default()
         };
         let bridge = Bridge::bind(session, cfg).await?;

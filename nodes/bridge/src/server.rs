@@ -74,6 +74,12 @@ pub struct Config {
     /// Networks clients may connect from; empty = any. Others are refused
     /// before the banner.
     pub allow: Vec<IpNetwork>,
+    /// For a bridge on a peer session: a client session of the same router,
+    /// whose listing of live devices is whole at once (a peer's first query
+    /// reaches only the peers it has links to yet). The ports open once
+    /// the peer session has heard of every device it lists, its routes to
+    /// them made; then it is dropped.
+    pub lister: Option<Session>,
 }
 
 impl Default for Config {
@@ -83,6 +89,7 @@ impl Default for Config {
             order: Vec::new(),
             maxlen: DEFAULT_MAXLEN,
             allow: Vec::new(),
+            lister: None,
         }
     }
 }
@@ -361,6 +368,8 @@ impl Bridge {
         let s = Arc::downgrade(&shared);
         let touched = Arc::new(Mutex::new(std::collections::HashSet::new()));
         let t = touched.clone();
+        let heard = Arc::new(tokio::sync::Notify::new());
+        let h = heard.clone();
         let watch = session
             .liveliness()
             .declare_subscriber(keys::tokens(None))
@@ -382,13 +391,17 @@ impl Bridge {
                         devices.remove(&dev);
                     }
                 }
+                h.notify_waiters();
             })
             .await
             .map_err(|source| BridgeError::Zenoh {
                 what: "watching device tokens".into(),
                 source,
             })?;
-        let current = session
+        let current = cfg
+            .lister
+            .as_ref()
+            .unwrap_or(&session)
             .liveliness()
             .get(keys::tokens(None))
             .timeout(REQUEST_TIMEOUT)
@@ -397,14 +410,21 @@ impl Bridge {
                 what: "listing live devices".into(),
                 source,
             })?;
+        let mut listed = HashMap::new();
         while let Ok(reply) = current.recv_async().await {
             let Ok(sample) = reply.into_result() else {
                 continue;
             };
             if let Ok((dev, driver)) = keys::parse_token(sample.key_expr().as_str()) {
-                if !lock(&touched).contains(&dev) {
-                    lock(&shared.devices).insert(dev, driver);
-                }
+                listed.insert(dev, driver);
+            }
+        }
+        if cfg.lister.is_some() {
+            wait_to_hear(&touched, &listed, &heard).await;
+        }
+        for (dev, driver) in listed {
+            if !lock(&touched).contains(&dev) {
+                lock(&shared.devices).insert(dev, driver);
             }
         }
         let s = Arc::downgrade(&shared);
@@ -960,6 +980,44 @@ impl Conn {
         }
         self.queue
             .with(|q| q.forget(u32::from(dev.interface.code()), dev.index));
+    }
+}
+
+/// Waits, at most [`REQUEST_TIMEOUT`], until the peer session has heard of
+/// every device in `listed` (or of its end): its routes to their drivers
+/// exist then. Those it has not heard of by then are listed all the same,
+/// and said once.
+async fn wait_to_hear(
+    touched: &Mutex<std::collections::HashSet<Device>>,
+    listed: &HashMap<Device, String>,
+    heard: &tokio::sync::Notify,
+) {
+    let deadline = tokio::time::Instant::now() + REQUEST_TIMEOUT;
+    loop {
+        let next = heard.notified();
+        tokio::pin!(next);
+        next.as_mut().enable();
+        let missing: Vec<String> = {
+            let touched = lock(touched);
+            listed
+                .keys()
+                .filter(|d| !touched.contains(d))
+                .map(ToString::to_string)
+                .collect()
+        };
+        if missing.is_empty() {
+            return;
+        }
+        if tokio::time::timeout_at(deadline, next).await.is_err() {
+            tracing::warn!(
+                "{} of {} devices not reached directly within {} s ({}): listed all the same; their data may come late",
+                missing.len(),
+                listed.len(),
+                REQUEST_TIMEOUT.as_secs_f64(),
+                missing.join(" ")
+            );
+            return;
+        }
     }
 }
 
