@@ -99,6 +99,19 @@ pub fn run(a: BridgeArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     else {
         return Ok(());
     };
+    // The first listing of the ports is a client's: whole at once (see
+    // Config::lister); with --reconnect it waits for the router too, and a
+    // signal still stops it.
+    let lister = match a.import {
+        Some(_) => None,
+        None => {
+            let open = z.open_in_background(troupe_node::Mode::Client);
+            match rt.block_on(signals.unless_stopped(open))? {
+                Some(s) => Some(s),
+                None => return Ok(()),
+            }
+        }
+    };
     let stop = async move { signals.recv().await };
     if let Some(server) = &a.import {
         rt.block_on(crate::import::run(
@@ -111,14 +124,12 @@ pub fn run(a: BridgeArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         ))?;
         return Ok(());
     }
-    // The first listing is a client's: whole at once (see Config::lister).
-    let lister = rt.block_on(z.open_in_background(troupe_node::Mode::Client))?;
     rt.block_on(async move {
         let cfg = Config {
             ports,
             maxlen: a.queue_len.max(1),
             allow: a.allow,
-            lister: Some(lister),
+            lister,
             ..Config::default()
         };
         let bridge = Bridge::bind(session, cfg).await?;
