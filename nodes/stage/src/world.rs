@@ -432,6 +432,44 @@ fn kind_of(e: &Entity) -> Result<Option<Kind>, WorldError> {
 }
 
 /// Scales polygons so their bounding box is `size` (x, y), centred on (0, 0).
+/// Stage's `canonicalize_winding`: a block's points are reversed unless
+/// their turns sum to a positive angle (counter-clockwise, as OpenGL
+/// wants). The order decides which side of each edge Stage's 4-connected
+/// outline steps to, so a ray meets a clockwise block's cells one cell
+/// sooner or later than the file's order would draw them.
+fn canonicalize_winding(pts: &mut [(f64, f64)]) {
+    use std::f64::consts::{PI, TAU};
+    let n = pts.len();
+    let v: Vec<(f64, f64)> = (0..n)
+        .map(|i| {
+            let (a, b) = (pts[i], pts[(i + 1) % n]);
+            (b.0 - a.0, b.1 - a.1)
+        })
+        .collect();
+    let heading = |p: (f64, f64)| {
+        let a = p.1.atan2(p.0);
+        if a < 0.0 {
+            a + TAU
+        } else {
+            a
+        }
+    };
+    let mut sum = 0.0;
+    for i in 0..n {
+        let mut turn = heading(v[(i + 1) % n]) - heading(v[i]);
+        while turn < -PI {
+            turn += TAU;
+        }
+        while PI < turn {
+            turn -= TAU;
+        }
+        sum += turn;
+    }
+    if sum <= 0.0 {
+        pts.reverse();
+    }
+}
+
 fn stretch(blocks: &mut [Vec<(f64, f64)>], sx: f64, sy: f64) {
     let Some([x0, y0, x1, y1]) = bounds(blocks.iter().flatten().copied()) else {
         return;
@@ -542,6 +580,7 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
                         raw_blocks[m].clear();
                         has_default_block[m] = false;
                     }
+                    canonicalize_winding(&mut pts);
                     raw_blocks[m].push(pts);
                 }
                 continue;
@@ -1005,6 +1044,18 @@ impl World {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn blocks_wind_counter_clockwise_as_stage_makes_them() {
+        // Stage's sick.inc lists its box clockwise; Stage reverses it.
+        let mut cw = vec![(0.0, 0.0), (0.0, 1.0), (1.0, 1.0), (1.0, 0.0)];
+        canonicalize_winding(&mut cw);
+        assert_eq!(cw, [(1.0, 0.0), (1.0, 1.0), (0.0, 1.0), (0.0, 0.0)]);
+        let ccw = vec![(0.0, 0.0), (1.0, 0.0), (1.0, 1.0)];
+        let mut same = ccw.clone();
+        canonicalize_winding(&mut same);
+        assert_eq!(same, ccw);
+    }
 
     fn load_text(name: &str, text: &str) -> Result<World, WorldError> {
         let dir = std::env::temp_dir().join(format!("troupe-world-{}-{name}", std::process::id()));
