@@ -144,6 +144,16 @@ impl Request {
     pub fn nack(self, reason: impl Into<String>) {
         self.responder.nack(reason)
     }
+
+    /// Refuses a request `driver` has no answer to, saying which and where
+    /// (Player NACKs an unknown request too).
+    pub fn unhandled(self, driver: &str) {
+        let why = format!(
+            "{driver} does not handle request `{}` on {}",
+            self.name, self.sample.device
+        );
+        self.nack(why);
+    }
 }
 
 /// Where a reply is sent.

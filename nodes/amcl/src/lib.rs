@@ -821,8 +821,7 @@ impl Driver for Amcl {
                 Ok(())
             }
             Event::Request(r) => {
-                let why = format!("amcl does not handle request `{}`", r.name);
-                r.nack(why);
+                r.unhandled(Self::NAME);
                 Ok(())
             }
             Event::Command(c) => {

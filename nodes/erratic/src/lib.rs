@@ -366,11 +366,7 @@ impl Driver for Erratic {
                 Ok(())
             }
             Event::Request(r) => {
-                let why = format!(
-                    "erratic does not handle request `{}` on {}",
-                    r.name, r.sample.device
-                );
-                r.nack(why);
+                r.unhandled(Self::NAME);
                 Ok(())
             }
             Event::Data(_) | Event::Reply(_) => Ok(()),

@@ -259,8 +259,7 @@ impl Driver for WriteLog {
                 Ok(())
             }
             Event::Request(r) => {
-                let why = format!("writelog does not handle request `{}`", r.name);
-                r.nack(why);
+                r.unhandled(Self::NAME);
                 Ok(())
             }
             Event::Command(c) => {

@@ -348,11 +348,7 @@ impl Driver for P2os {
                 Ok(())
             }
             Event::Request(r) => {
-                let why = format!(
-                    "p2os does not handle request `{}` on {}",
-                    r.name, r.sample.device
-                );
-                r.nack(why);
+                r.unhandled(Self::NAME);
                 Ok(())
             }
             Event::Data(_) | Event::Reply(_) => Ok(()),

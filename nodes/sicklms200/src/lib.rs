@@ -195,8 +195,7 @@ impl Driver for SickLms200 {
                 Ok(())
             }
             Event::Request(r) => {
-                let why = format!("sicklms200 does not handle request `{}`", r.name);
-                r.nack(why);
+                r.unhandled(Self::NAME);
                 Ok(())
             }
             Event::Command(c) => Err(c.unexpected()),

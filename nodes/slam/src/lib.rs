@@ -262,8 +262,7 @@ impl Driver for SlamNode {
                 troupe_mapfile::serve(&self.map, &self.map_dev, r)
             }
             Event::Request(r) => {
-                let why = format!("slam does not handle request `{}`", r.name);
-                r.nack(why);
+                r.unhandled(Self::NAME);
                 Ok(())
             }
             Event::Command(c) => {

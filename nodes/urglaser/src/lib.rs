@@ -263,8 +263,7 @@ impl Driver for UrgLaser {
                 Ok(())
             }
             Event::Request(r) => {
-                let why = format!("urglaser does not handle request `{}`", r.name);
-                r.nack(why);
+                r.unhandled(Self::NAME);
                 Ok(())
             }
             Event::Command(c) => Err(c.unexpected()),

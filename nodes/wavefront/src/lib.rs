@@ -275,8 +275,7 @@ impl Driver for Wavefront {
                 self.cycle(ctx)
             }
             Event::Request(r) => {
-                let why = format!("wavefront does not handle request `{}`", r.name);
-                r.nack(why);
+                r.unhandled(Self::NAME);
                 Ok(())
             }
             Event::Reply(r) => self.on_reply(ctx, r),

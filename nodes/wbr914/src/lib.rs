@@ -223,11 +223,7 @@ impl Driver for Wbr914 {
                 Ok(())
             }
             Event::Request(r) => {
-                let why = format!(
-                    "wbr914 does not handle request `{}` on {}",
-                    r.name, r.sample.device
-                );
-                r.nack(why);
+                r.unhandled(Self::NAME);
                 Ok(())
             }
             Event::Data(_) | Event::Reply(_) => Ok(()),
