@@ -8,7 +8,7 @@
 use std::collections::{HashMap, HashSet};
 use std::io::{Read, Write};
 use std::net::TcpStream;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Instant;
 
 use troupe_tests::{Proc, DEADLINE};
@@ -37,13 +37,6 @@ fn hex(s: &str) -> Vec<u8> {
         .step_by(2)
         .map(|i| u8::from_str_radix(&s[i..i + 2], 16).unwrap())
         .collect()
-}
-
-fn compat(dir: &str) -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/compat/player-tcp")
-        .join(dir);
-    p.exists().then_some(p)
 }
 
 /// The banner and the messages of a transcript.
@@ -217,8 +210,7 @@ fn replay(addr: &str, banner: &[u8], msgs: &[Msg]) {
 }
 
 fn scenario(dir: &str, cfg: &str) {
-    let Some(d) = compat(dir) else {
-        eprintln!("skipping: ../shared/compat/player-tcp/{dir} is absent");
+    let Some(d) = troupe_tests::compat(&format!("player-tcp/{dir}")) else {
         return;
     };
     let (banner, msgs) = load(&d);
@@ -266,8 +258,7 @@ fn cpp_blob_fiducial_gripper() {
 
 #[test]
 fn c_errors_on_two_ports() {
-    let Some(d) = compat("c-errors") else {
-        eprintln!("skipping: ../shared/compat/player-tcp/c-errors is absent");
+    let Some(d) = troupe_tests::compat("player-tcp/c-errors") else {
         return;
     };
     let (banner, msgs) = load(&d);

@@ -635,6 +635,29 @@ fn dozens_of_clients_flow_while_one_is_stuck_and_bad_input_closes_only_its_conne
     thread.join().unwrap();
 }
 
+/// A device live on `s` that publishes nothing now: what a driver's runtime
+/// does for it, its token and the latest sample `state` answered to gets.
+fn quiet_device(
+    s: &Session,
+    dev: Device,
+    state: Vec<u8>,
+) -> (
+    troupe_node::zenoh::liveliness::LivelinessToken,
+    troupe_node::zenoh::query::Queryable<()>,
+) {
+    let token = s
+        .liveliness()
+        .declare_token(keys::token(&dev, "fake"))
+        .wait()
+        .unwrap();
+    let latest = s
+        .declare_queryable(keys::data(&dev))
+        .callback(move |q| q.reply(q.key_expr().clone(), state.clone()).wait().unwrap())
+        .wait()
+        .unwrap();
+    (token, latest)
+}
+
 /// A PULL client that closes a device after a round: Player answers the
 /// close once its driver has run again, with the data on its way ahead of
 /// the answer, so the client's next read returns at once (libplayerc keeps
@@ -653,16 +676,7 @@ fn closing_in_pull_mode_brings_the_data_on_its_way_before_the_answer() {
         },
         4.0,
     );
-    let _token = s
-        .liveliness()
-        .declare_token(keys::token(&pos, "fake"))
-        .wait()
-        .unwrap();
-    let _latest = s
-        .declare_queryable(keys::data(&pos))
-        .callback(move |q| q.reply(q.key_expr().clone(), state.clone()).wait().unwrap())
-        .wait()
-        .unwrap();
+    let _driver = quiet_device(&s, pos, state);
     net.wait_live(&[&pos.to_string()]);
     let (addr, thread, stop) = bridge(&net);
     let mut c = Player::connect(addr, ROBOT);
@@ -707,17 +721,7 @@ fn a_late_subscriber_gets_the_latest_sample_of_a_quiet_device() {
         },
         3.0,
     );
-    let _token = s
-        .liveliness()
-        .declare_token(keys::token(&loc, "fake"))
-        .wait()
-        .unwrap();
-    // What a driver's runtime does: keep the latest sample, answer gets for it.
-    let _latest = s
-        .declare_queryable(keys::data(&loc))
-        .callback(move |q| q.reply(q.key_expr().clone(), state.clone()).wait().unwrap())
-        .wait()
-        .unwrap();
+    let _driver = quiet_device(&s, loc, state);
     net.wait_live(&[&loc.to_string()]);
     let (addr, thread, stop) = bridge(&net);
     let mut c = Player::connect(addr, ROBOT);

@@ -4,26 +4,14 @@
 //! here from Player's format description; a damaged log replays what it can.
 
 use std::io::Read as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Instant;
 
 use troupe_msgs::{keys, laser, localize, position2d, Device, Interface};
 use troupe_node::zenoh::Wait;
-use troupe_tests::{Proc, DEADLINE};
+use troupe_tests::{compat, Proc, DEADLINE};
 
 use crate::player::{Player, DATA, RESP_ACK};
-
-fn compat(rel: &str) -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/compat")
-        .join(rel);
-    if p.exists() {
-        Some(p)
-    } else {
-        eprintln!("skipping: {} is absent", p.display());
-        None
-    }
-}
 
 /// One message line, read as Player's `readlog.cc` reads it: whitespace
 /// separated, `time host robot interface index type subtype`, then the payload.

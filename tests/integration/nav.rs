@@ -25,14 +25,7 @@ const DISTANCE_EPSILON: f64 = 0.5;
 const COAST: f64 = 0.05;
 
 fn compat_cfg() -> Option<PathBuf> {
-    let cfg = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/compat/player-tcp/cpp-planner-localize/nav_headless.cfg");
-    if cfg.exists() {
-        Some(cfg)
-    } else {
-        eprintln!("skipping: ../shared/compat is absent");
-        None
-    }
+    troupe_tests::compat("player-tcp/cpp-planner-localize/nav_headless.cfg")
 }
 
 #[test]
@@ -257,11 +250,9 @@ fn drive_to_goal(cfg: &Path) {
 /// the simulator says r0 is.
 #[test]
 fn amcl_localizes_a_sonar_only_robot_in_the_cave() {
-    let stage = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/compat/stage");
-    if !stage.exists() {
-        eprintln!("skipping: ../shared/compat is absent");
+    let Some(stage) = troupe_tests::compat("stage") else {
         return;
-    }
+    };
     let stage = stage.canonicalize().unwrap();
     let text = format!(
         "driver ( name \"stage\" provides [\"simulation:0\"] worldfile \"{w}\" )\n\

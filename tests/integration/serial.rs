@@ -702,12 +702,9 @@ fn an_emulated_pioneer_backed_by_stage_drives_the_simulated_robot() {
 fn players_wbr914_cfg_drives_the_emulated_914_through_the_bridge() {
     use crate::player::{Frame, Player, DATA, RESP_ACK};
     use troupe_msgs::{Device, Interface};
-    let sample =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/compat/player-cfg/wbr914.cfg");
-    if !sample.exists() {
-        eprintln!("skipping: ../shared/compat is absent");
+    let Some(sample) = troupe_tests::compat("player-cfg/wbr914.cfg") else {
         return;
-    }
+    };
     let rig = Rig::new("wbr914");
     let (mut robot, link) = rig.emulate("wbr914", &[]);
     let text = std::fs::read_to_string(&sample).unwrap();

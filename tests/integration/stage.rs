@@ -10,11 +10,9 @@ use troupe_tests::DEADLINE;
 
 #[test]
 fn simple_cfg_serves_r0_and_the_laser_sees_the_wall_approach() {
-    let cfg = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/compat/stage/simple.cfg");
-    if !cfg.exists() {
-        eprintln!("skipping: ../shared/compat is absent");
+    let Some(cfg) = troupe_tests::compat("stage/simple.cfg") else {
         return;
-    }
+    };
     let ns = troupe_tests::unique_namespace("stage");
     let mut launcher = troupe_tests::launch(&ns, &cfg, &[]);
     let endpoint = launcher.endpoint("troupe launch: router listening on");
@@ -127,12 +125,9 @@ fn simulation_pose3d_requests_answer_as_stage_s_and_headings_wrap() {
 #[test]
 fn fiducial_ids_are_read_and_set_as_stage_does() {
     use crate::player::{Player, RESP_ACK};
-    let cfg =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/compat/stage/everything.cfg");
-    if !cfg.exists() {
-        eprintln!("skipping: ../shared/compat is absent");
+    let Some(cfg) = troupe_tests::compat("stage/everything.cfg") else {
         return;
-    }
+    };
     let ns = troupe_tests::unique_namespace("fidid");
     let mut launcher = troupe_tests::launch(&ns, &cfg, &[]);
     let (_, addr) = troupe_tests::launch_ports(&mut launcher);
@@ -239,12 +234,9 @@ fn a_pull_read_carries_every_subscribed_device_at_one_step() {
 #[test]
 fn the_gripper_moves_its_paddles_in_stage_s_time() {
     use crate::player::{Player, DATA};
-    let cfg =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/compat/stage/everything.cfg");
-    if !cfg.exists() {
-        eprintln!("skipping: ../shared/compat is absent");
+    let Some(cfg) = troupe_tests::compat("stage/everything.cfg") else {
         return;
-    }
+    };
     let ns = troupe_tests::unique_namespace("gripper");
     let mut launcher = troupe_tests::launch(&ns, &cfg, &[]);
     let (_, addr) = troupe_tests::launch_ports(&mut launcher);
@@ -307,13 +299,12 @@ fn the_gripper_moves_its_paddles_in_stage_s_time() {
 fn with_stage_quirks_the_laser_reads_as_real_stage_s() {
     use crate::player::{Player, DATA};
     use troupe_msgs::{Device, Interface};
-    let compat = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/compat");
-    let transcript = compat.join("player-tcp/c-pull-position-laser/messages.jsonl");
-    let world = compat.join("stage/simple_noctrl.world");
-    if !transcript.exists() || !world.exists() {
-        eprintln!("skipping: ../shared/compat is absent");
+    let (Some(transcript), Some(world)) = (
+        troupe_tests::compat("player-tcp/c-pull-position-laser/messages.jsonl"),
+        troupe_tests::compat("stage/simple_noctrl.world"),
+    ) else {
         return;
-    }
+    };
     let text = std::fs::read_to_string(&transcript).unwrap();
     let line = text
         .lines()
@@ -484,11 +475,9 @@ fn vfh_passes_its_base_s_odometry_through_from_the_first_read() {
     use crate::player::{Player, DATA, RESP_ACK, SYNCH};
     use troupe_msgs::{Device, Interface};
     use troupe_node::zenoh::Wait;
-    let cfg = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/compat/stage/vfh.cfg");
-    if !cfg.exists() {
-        eprintln!("skipping: ../shared/compat is absent");
+    let Some(cfg) = troupe_tests::compat("stage/vfh.cfg") else {
         return;
-    }
+    };
     let ns = troupe_tests::unique_namespace("vfh-odom");
     let mut launcher = troupe_tests::launch(&ns, &cfg, &[]);
     let (router, addr) = troupe_tests::launch_ports(&mut launcher);
@@ -651,11 +640,9 @@ fn a_position_command_stops_where_stage_s_controller_stops() {
 fn stage_s_camera_cfg_serves_r0_s_camera_as_player_does() {
     use crate::player::{Player, DATA};
     use troupe_msgs::{Device, Interface};
-    let cfg = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/compat/stage/camera.cfg");
-    if !cfg.exists() {
-        eprintln!("skipping: ../shared/compat is absent");
+    let Some(cfg) = troupe_tests::compat("stage/camera.cfg") else {
         return;
-    }
+    };
     let ns = troupe_tests::unique_namespace("camera");
     let mut launcher = troupe_tests::launch(&ns, &cfg, &[]);
     let (_, addr) = troupe_tests::launch_ports(&mut launcher);
@@ -694,12 +681,9 @@ fn stage_s_camera_cfg_serves_r0_s_camera_as_player_does() {
 fn dummy_cfg_s_compressed_camera_and_wsn_reach_a_player_client() {
     use crate::player::{Player, DATA};
     use troupe_msgs::{Device, Interface};
-    let cfg =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/compat/player-cfg/dummy.cfg");
-    if !cfg.exists() {
-        eprintln!("skipping: ../shared/compat is absent");
+    let Some(cfg) = troupe_tests::compat("player-cfg/dummy.cfg") else {
         return;
-    }
+    };
     let ns = troupe_tests::unique_namespace("dummycfg");
     let mut launcher = troupe_tests::launch(&ns, &cfg, &[]);
     let (_, addr) = troupe_tests::launch_ports(&mut launcher);
