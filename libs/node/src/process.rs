@@ -104,7 +104,7 @@ impl StopSignals {
 }
 
 /// A runtime, the stop signals caught on it, and a session.
-pub type ClientRuntime = (tokio::runtime::Runtime, StopSignals, zenoh::Session);
+pub type SessionRuntime = (tokio::runtime::Runtime, StopSignals, zenoh::Session);
 
 /// How a long-running tool (the bridge, the view, a passthrough) starts: a
 /// runtime of `threads` workers, SIGTERM and SIGINT caught before the
@@ -117,11 +117,11 @@ pub type ClientRuntime = (tokio::runtime::Runtime, StopSignals, zenoh::Session);
 /// # Errors
 ///
 /// The runtime, the handlers or the session cannot start.
-pub fn client_runtime(
+pub fn session_runtime(
     z: &ZenohArgs,
     threads: usize,
     mode: Mode,
-) -> Result<Option<ClientRuntime>, ProcessError> {
+) -> Result<Option<SessionRuntime>, ProcessError> {
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(threads)
         .enable_all()

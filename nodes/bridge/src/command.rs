@@ -95,22 +95,27 @@ pub fn run(a: BridgeArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     };
     troupe_node::process::supervised()?;
     let Some((rt, mut signals, session)) =
-        troupe_node::process::client_runtime(z, 2, troupe_node::Mode::Peer)?
+        troupe_node::process::session_runtime(z, 2, troupe_node::Mode::Peer)?
     else {
         return Ok(());
     };
-    // The first listing of the ports is a client's: whole at once (see
+    // A peer's first listing of the ports is a client's: whole at once (see
     // Config::lister); with --reconnect it waits for the router too, and a
-    // signal still stops it.
-    let lister = match a.import {
-        Some(_) => None,
-        None => {
-            let open = z.open_in_background(troupe_node::Mode::Client);
-            match rt.block_on(signals.unless_stopped(open))? {
-                Some(s) => Some(s),
-                None => return Ok(()),
-            }
+    // signal still stops it. A bridge joined as a client (`--mode client`,
+    // as in containers) lists on its own session.
+    let peer = session
+        .config()
+        .get_typed::<Option<String>>("mode")
+        .is_ok_and(|m| m.as_deref() == Some("peer"));
+    let lister = if peer && a.import.is_none() {
+        tracing::debug!("joined as a peer: the first listing goes through a client session");
+        let open = z.open_in_background(troupe_node::Mode::Client);
+        match rt.block_on(signals.unless_stopped(open))? {
+            Some(s) => Some(s),
+            None => return Ok(()),
         }
+    } else {
+        None
     };
     let stop = async move { signals.recv().await };
     if let Some(server) = &a.import {

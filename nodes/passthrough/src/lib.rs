@@ -214,7 +214,7 @@ pub fn run(section: Section, z: &ZenohArgs, _: &NodeConfig) -> Result<()> {
     for o in unused {
         tracing::warn!("option `{o}` is not used by driver `{NAME}`");
     }
-    let started = troupe_node::process::client_runtime(z, 1, troupe_node::Mode::Client);
+    let started = troupe_node::process::session_runtime(z, 1, troupe_node::Mode::Client);
     let Some((rt, mut signals, session)) = started.map_err(|e| NodeError::Driver(e.into()))? else {
         return Ok(());
     };

@@ -737,8 +737,11 @@ pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         namespace: ns.clone(),
         ..z.clone()
     };
-    let Some((rt, mut signals, session)) =
-        troupe_node::process::client_runtime(&joining(&namespaces[0]), 2, troupe_node::Mode::Peer)?
+    let Some((rt, mut signals, session)) = troupe_node::process::session_runtime(
+        &joining(&namespaces[0]),
+        2,
+        troupe_node::Mode::Peer,
+    )?
     else {
         return Ok(());
     };
