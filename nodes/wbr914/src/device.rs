@@ -338,7 +338,7 @@ impl Session<'_> {
                 Ok(())
             }
             Order::Dio(count, bits) => {
-                let out = digital_out(self.digital_out, count, bits);
+                let out = robot::digital_out(self.digital_out, count, bits);
                 self.digital_out = out;
                 self.ask(RIGHT, op::WRITEDIGITAL, i32::from(out.swap_bytes()))?;
                 Ok(())
@@ -452,35 +452,5 @@ impl Session<'_> {
             Ok(()) => tracing::info!("robot stopped, motors off"),
             Err(e) => tracing::warn!("stopping the robot: {e}"),
         }
-    }
-}
-
-/// Player's `SetDigitalData`: the 16 outputs after setting the low `count`
-/// of them to `bits`, the rest as they were.
-pub fn digital_out(last: u16, count: u32, bits: u32) -> u16 {
-    let data = (bits & 0xFFFF) as u16;
-    if count >= 16 {
-        return data;
-    }
-    let keep = 0xFFFFu16 << count;
-    (last & keep) | (data & !keep)
-}
-
-/// Player's `GetDigitalData`: the board's inputs with its bytes swapped,
-/// so the second I/O board's inputs are the upper byte.
-pub fn digital_in(board: u16) -> u32 {
-    u32::from(board.swap_bytes())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn digital_outputs_keep_the_bits_not_set() {
-        assert_eq!(digital_out(0xABCD, 16, 0x1234), 0x1234);
-        assert_eq!(digital_out(0xABCD, 4, 0x0002), 0xABC2);
-        assert_eq!(digital_out(0xABCD, 0, 0xFFFF), 0xABCD);
-        assert_eq!(digital_in(0x0102), 0x0201);
     }
 }

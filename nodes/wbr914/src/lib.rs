@@ -145,12 +145,6 @@ impl Driver for Wbr914 {
                 o.torque
             );
         }
-        if o.watchdog < 0.0 || !o.watchdog.is_finite() {
-            return Err(bad(format!(
-                "watchdog {}: give seconds ≥ 0 (0 turns it off)",
-                o.watchdog
-            )));
-        }
         Ok(Wbr914 {
             settings: Settings {
                 port: o.port,
@@ -304,7 +298,7 @@ impl Wbr914 {
                 &d,
                 &dio::Data {
                     count: 16,
-                    bits: device::digital_in(board),
+                    bits: robot::digital_in(board),
                 },
             )?;
         }

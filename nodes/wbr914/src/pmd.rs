@@ -102,11 +102,8 @@ fn value(data: &[u8]) -> i32 {
     }
 }
 
-/// A command to chip `axis`, its argument `arg` cut to the opcode's width.
-///
-/// # Panics
-///
-/// Never for the opcodes of [`op`]; an unknown one is sent without an argument.
+/// A command to chip `axis`, its argument `arg` cut to the opcode's width
+/// (none for an opcode the chips do not know).
 pub fn command(axis: u8, opcode: u8, arg: i32) -> Vec<u8> {
     let mut out = vec![axis, 0, 0, opcode];
     out.extend(be(arg, arg_len(opcode).unwrap_or(0)));

@@ -1,6 +1,7 @@
 //! The 914's body in numbers: its wheels and motors, how wheel counts
-//! become odometry, and how its Sharp IR sensors' voltages become ranges
-//! (Player's constants and formulas).
+//! become odometry, how its Sharp IR sensors' voltages become ranges, and
+//! how its I/O boards' digital bits are laid out (Player's constants and
+//! formulas).
 
 use std::f64::consts::{PI, TAU};
 
@@ -169,6 +170,23 @@ pub fn ir_counts(index: usize, metres: f64) -> u16 {
     counts.round().clamp(0.0, 1023.0) as u16
 }
 
+/// Player's `SetDigitalData`: the 16 outputs after setting the low `count`
+/// of them to `bits`, the rest as they were.
+pub fn digital_out(last: u16, count: u32, bits: u32) -> u16 {
+    let data = (bits & 0xFFFF) as u16;
+    if count >= 16 {
+        return data;
+    }
+    let keep = 0xFFFFu16 << count;
+    (last & keep) | (data & !keep)
+}
+
+/// Player's `GetDigitalData`: the board's inputs with its bytes swapped,
+/// so the second I/O board's inputs are the upper byte.
+pub fn digital_in(board: u16) -> u32 {
+    u32::from(board.swap_bytes())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -220,5 +238,13 @@ mod tests {
         assert!((ir_range(0, 10) - 0.8414).abs() < 1e-3);
         assert_eq!(analog(0x7FC0), 0x1FF);
         assert!((volts(1023) - 5.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn digital_outputs_keep_the_bits_not_set() {
+        assert_eq!(digital_out(0xABCD, 16, 0x1234), 0x1234);
+        assert_eq!(digital_out(0xABCD, 4, 0x0002), 0xABC2);
+        assert_eq!(digital_out(0xABCD, 0, 0xFFFF), 0xABCD);
+        assert_eq!(digital_in(0x0102), 0x0201);
     }
 }
