@@ -92,6 +92,11 @@ pub struct Body {
     /// its line meets (Stage's fancy Pioneer is seven polygons, a ray from a
     /// neighbour meets one or two).
     poly_circles: Vec<(f64, f64, f64)>,
+    /// Each polygon's base and top above the floor, when there are several
+    /// (see [`Body::lift`]): a ray passes under or over those it does not
+    /// meet in height, as Stage tests each block (the fancy Pioneer's
+    /// wheels and lid are below and above its sonars).
+    heights: Vec<(f64, f64)>,
 }
 
 impl Default for Body {
@@ -102,6 +107,7 @@ impl Default for Body {
             circle: (0.0, 0.0, -1.0),
             rect: None,
             poly_circles: Vec::new(),
+            heights: Vec::new(),
         }
     }
 }
@@ -111,6 +117,7 @@ impl Body {
     /// reusing its buffers.
     pub fn place(&mut self, blocks: &[Vec<(f64, f64)>], at: Pose) {
         self.polys.resize_with(blocks.len(), Vec::new);
+        self.heights.clear();
         let apply = at.applier();
         for (poly, b) in self.polys.iter_mut().zip(blocks) {
             poly.clear();
@@ -134,6 +141,17 @@ impl Body {
                     .iter()
                     .map(|p| circle_around(std::slice::from_ref(p), bounds(p.iter().copied()))),
             );
+        }
+    }
+
+    /// Gives its polygons (when several) the heights `z` above `base`, one
+    /// per polygon in order; a body of one polygon is seen at every height
+    /// its model spans, which its model's rays test.
+    pub fn lift(&mut self, z: &[(f64, f64)], base: f64) {
+        self.heights.clear();
+        if self.polys.len() > 1 && z.len() == self.polys.len() {
+            self.heights
+                .extend(z.iter().map(|&(lo, hi)| (base + lo, base + hi)));
         }
     }
 
@@ -318,17 +336,18 @@ impl Movers {
         self.bodies[m].overlaps(body)
     }
 
-    /// Where the ray from `o` along the unit vector `d` first meets model
-    /// `m`'s body (id `id`), if it `accept`s that id: metres, 0 when `o` is
+    /// Where the ray from `o` along the unit vector `d`, at height `z`
+    /// above the floor (`None`: at every height), first meets model `m`'s
+    /// body (id `id`), if it `accept`s that id: metres, 0 when `o` is
     /// inside it. A body that is not a rectangle is tested edge by edge
-    /// only if `once(id)` (false: this ray has tested it already).
+    /// only if `once(id)` (false: this ray has tested it already), and
+    /// only its polygons that span `z`.
     #[inline(always)]
     pub fn hit(
         &self,
         m: usize,
         id: u16,
-        o: (f64, f64),
-        d: (f64, f64),
+        (o, d, z): ((f64, f64), (f64, f64), Option<f64>),
         accept: impl Fn(u16) -> bool,
         once: impl FnOnce(u16) -> bool,
     ) -> Option<Hit> {
@@ -346,15 +365,27 @@ impl Movers {
         if !once(id) {
             return None;
         }
-        self.hit_edges(m, id, o, d)
+        self.hit_edges(m, id, o, d, z)
     }
 
     /// [`Movers::hit`] by testing the ray against every edge.
     #[inline(never)]
-    fn hit_edges(&self, m: usize, id: u16, o: (f64, f64), d: (f64, f64)) -> Option<Hit> {
+    fn hit_edges(
+        &self,
+        m: usize,
+        id: u16,
+        o: (f64, f64),
+        d: (f64, f64),
+        z: Option<f64>,
+    ) -> Option<Hit> {
         let mut best = f64::INFINITY;
         let body = &self.bodies[m];
         for (k, poly) in body.polys.iter().enumerate() {
+            if let (Some(z), Some(&(lo, hi))) = (z, body.heights.get(k)) {
+                if z < lo || z > hi {
+                    continue;
+                }
+            }
             if let Some(&(cx, cy, r)) = body.poly_circles.get(k) {
                 // A polygon whose circle the ray misses, or meets only
                 // beyond the nearest crossing yet, is neither crossed
@@ -684,7 +715,7 @@ mod tests {
     /// [`Movers::hit`] for a ray that stops at every body and tests each
     /// afresh.
     fn hit(m: &Movers, k: usize, id: u16, o: (f64, f64), d: (f64, f64)) -> Option<Hit> {
-        m.hit(k, id, o, d, |_| true, |_| true)
+        m.hit(k, id, (o, d, None), |_| true, |_| true)
     }
 
     fn square(cx: f64, cy: f64, h: f64) -> Vec<(f64, f64)> {
@@ -770,7 +801,7 @@ mod tests {
         assert!((h.range - 1.5).abs() < 1e-12 && h.id == 2);
         // A ray that does not stop at the body passes through it.
         assert!(m
-            .hit(1, 2, (0.0, 0.0), (1.0, 0.0), |id| id != 2, |_| true)
+            .hit(1, 2, ((0.0, 0.0), (1.0, 0.0), None), |id| id != 2, |_| true)
             .is_none());
         // Diagonal: enters the square's lower left corner region.
         let s = std::f64::consts::FRAC_1_SQRT_2;

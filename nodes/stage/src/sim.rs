@@ -186,11 +186,25 @@ impl Frame {
     }
 }
 
-/// Model `m`'s body from its base to its top, above the floor (where its
-/// parents' poses and stacking put it).
+/// Model `m`'s body from its lowest block's base to its highest block's
+/// top, above the floor (where its parents' poses and stacking put it).
 fn height(world: &World, poses: &[Pose], m: usize) -> (f64, f64) {
     let (_, z) = world.global(poses, m);
-    (z, z + world.models[m].size[2])
+    let model = &world.models[m];
+    if model.block_z.is_empty() {
+        return (z, z + model.size[2]);
+    }
+    let lo = model
+        .block_z
+        .iter()
+        .map(|b| b.0)
+        .fold(f64::INFINITY, f64::min);
+    let hi = model
+        .block_z
+        .iter()
+        .map(|b| b.1)
+        .fold(f64::NEG_INFINITY, f64::max);
+    (z + lo, z + hi)
 }
 
 /// Locks `m`, through a panic elsewhere.

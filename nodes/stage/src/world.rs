@@ -183,6 +183,10 @@ pub struct ModelDef {
     pub color: Color,
     /// Body polygons in the model's frame (origin applied), metres.
     pub blocks: Vec<Vec<(f64, f64)>>,
+    /// Each block's base and top above the model's base, metres: a
+    /// `block`'s `z` (0 to 1 unless given) scaled as Stage scales it, by
+    /// the model's height over the highest block top less the lowest base.
+    pub block_z: Vec<(f64, f64)>,
     /// Robots collide with it.
     pub obstacle_return: bool,
     /// Seen by rangers (≥ 0), with this intensity.
@@ -482,6 +486,19 @@ fn stretch(blocks: &mut [Vec<(f64, f64)>], sx: f64, sy: f64) {
     }
 }
 
+/// Blocks' heights scaled to a model `sz` high, as Stage's
+/// `BlockGroup::CalcSize` scales them: by `sz` over their extent, from 0
+/// (not from the lowest base: blocks from 0.5 to 1 of a model 1 m high
+/// span 1 to 2 m, in Stage as here).
+fn stretch_z(z: &mut [(f64, f64)], sz: f64) {
+    let lo = z.iter().map(|b| b.0).fold(f64::INFINITY, f64::min);
+    let hi = z.iter().map(|b| b.1).fold(f64::NEG_INFINITY, f64::max);
+    let k = sz / (hi - lo).max(f64::EPSILON);
+    for b in z {
+        *b = (b.0 * k, b.1 * k);
+    }
+}
+
 fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Vec<(f64, f64)> {
     vec![(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
 }
@@ -544,6 +561,8 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
     };
     let mut model_of: HashMap<usize, usize> = HashMap::new();
     let mut raw_blocks: Vec<Vec<Vec<(f64, f64)>>> = Vec::new();
+    // Each raw block's `z`, in the same order.
+    let mut raw_z: Vec<Vec<(f64, f64)>> = Vec::new();
     let mut has_default_block: Vec<bool> = Vec::new();
     let mut boundaries: Vec<bool> = Vec::new();
     // Stage's world makes its ground, a top-level `model`, before the
@@ -575,13 +594,20 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
                     };
                     pts.push((x, y));
                 }
+                let z = match e.props.get("z") {
+                    Some(p) if p.values.len() >= 2 => (p.values[0].num(), p.values[1].num()),
+                    Some(p) => return Err(short(p, "z", 2, "[min max]")),
+                    None => (0.0, 1.0),
+                };
                 if pts.len() >= 2 {
                     if has_default_block[m] {
                         raw_blocks[m].clear();
+                        raw_z[m].clear();
                         has_default_block[m] = false;
                     }
                     canonicalize_winding(&mut pts);
                     raw_blocks[m].push(pts);
+                    raw_z[m].push(z);
                 }
                 continue;
             }
@@ -887,6 +913,7 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
             origin,
             color: r.color(e, default_color),
             blocks: Vec::new(),
+            block_z: Vec::new(),
             obstacle_return: r.int(e, "obstacle_return", 1) != 0,
             ranger_return: r.float(e, "ranger_return", 1.0),
             blob_return: r.int(e, "blob_return", 1) != 0,
@@ -904,6 +931,7 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
             camera,
             pos: e.pos.clone(),
         });
+        raw_z.push(vec![(0.0, 1.0); blocks.len()]);
         raw_blocks.push(blocks);
         has_default_block.push(default_block);
         boundaries.push(boundary);
@@ -952,6 +980,7 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
                 origin: Pose::default(),
                 color: blue,
                 blocks: Vec::new(),
+                block_z: Vec::new(),
                 position: None,
                 sensors: Vec::new(),
                 ctrl: Vec::new(),
@@ -972,21 +1001,24 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
             world.models.push(child);
             world.models[m].children.push(idx);
             raw_blocks.push(vec![rect(-0.5, -0.5, 0.5, 0.5)]);
+            raw_z.push(vec![(0.0, 1.0)]);
             has_default_block.push(true);
             boundaries.push(false);
             world.names.insert(name, idx);
         }
     }
     // Bodies: stretch to size, add boundary walls, apply the origin.
-    for (m, mut blocks) in raw_blocks.into_iter().enumerate() {
-        let (sx, sy) = (world.models[m].size[0], world.models[m].size[1]);
+    for (m, (mut blocks, mut z)) in raw_blocks.into_iter().zip(raw_z).enumerate() {
+        let [sx, sy, sz] = world.models[m].size;
         stretch(&mut blocks, sx, sy);
+        stretch_z(&mut z, sz);
         if boundaries[m] {
             let (hx, hy, t) = (sx / 2.0, sy / 2.0, 0.01);
             blocks.push(rect(-hx, -hy, -hx + t, hy));
             blocks.push(rect(-hx, -hy, hx, -hy + t));
             blocks.push(rect(-hx, hy - t, hx, hy));
             blocks.push(rect(hx - t, -hy, hx, hy));
+            z.extend([(0.0, sz); 4]);
         }
         let o = world.models[m].origin;
         for b in &mut blocks {
@@ -995,6 +1027,7 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
             }
         }
         world.models[m].blocks = blocks;
+        world.models[m].block_z = z;
     }
     for line in summarize(&r.notes.borrow()) {
         tracing::warn!("{line}");

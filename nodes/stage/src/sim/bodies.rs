@@ -105,7 +105,18 @@ impl Sim {
     /// [`Sim::placed`] into `body`, reusing its buffers.
     pub(super) fn place_into(&self, m: usize, at: Pose, body: &mut Placed) {
         body.model = m;
-        body.body.place(&self.world.models[m].blocks, at);
+        let model = &self.world.models[m];
+        body.body.place(&model.blocks, at);
+        if model.block_z.len() > 1 {
+            // The heights are above the model's base: its look's lowest
+            // less its lowest block's.
+            let lowest = model
+                .block_z
+                .iter()
+                .map(|b| b.0)
+                .fold(f64::INFINITY, f64::min);
+            body.body.lift(&model.block_z, self.looks[m].lo - lowest);
+        }
         body.cells = body
             .body
             .bounds()

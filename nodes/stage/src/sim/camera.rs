@@ -184,7 +184,7 @@ impl Sim {
         let mut from = 0.0;
         while !pixels.is_empty() && from < reach {
             let o = (view.eye.0 + d2.0 * from, view.eye.1 + d2.1 * from);
-            let Some(hit) = self.cast(o.0, o.1, d2, (0.0, reach - from), accept, 0) else {
+            let Some(hit) = self.cast(o, d2, (0.0, reach - from), None, accept, 0) else {
                 break;
             };
             let d = from + hit.range;

@@ -32,7 +32,7 @@ impl Sim {
         let samples: Vec<Option<(Color, f64)>> = (0..n)
             .map(|s| {
                 let a = eye.yaw + cfg.pan - cfg.fov / 2.0 + s as f64 * step;
-                self.cast(eye.x, eye.y, unit(a), (0.0, cfg.range), accept, 0)
+                self.cast((eye.x, eye.y), unit(a), (0.0, cfg.range), None, accept, 0)
                     .map(|hit| (self.colors[usize::from(hit.id) - 1], hit.range))
             })
             .collect();
@@ -117,10 +117,10 @@ impl Sim {
                 self.root(o) != root && self.spans(o, z)
             };
             let first = self.cast(
-                eye.x,
-                eye.y,
+                (eye.x, eye.y),
                 unit(eye.yaw + bearing),
                 (0.0, cfg.range_max),
+                Some(z),
                 accept,
                 0,
             );

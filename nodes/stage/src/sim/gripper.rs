@@ -116,7 +116,7 @@ impl Sim {
             k != g && self.world.models[k].gripper_return && self.spans(k, z)
         };
         let d = unit(at.yaw + yaw);
-        self.cast(o.0, o.1, d, (0.0, len), accept, 0)
+        self.cast(o, d, (0.0, len), Some(z), accept, 0)
             .map(|h| usize::from(h.id) - 1)
     }
 

@@ -137,17 +137,25 @@ pub(super) struct TileBodies<'a, A> {
     pub(super) sim: &'a Sim,
     pub(super) o: (f64, f64),
     pub(super) d: (f64, f64),
+    /// The ray's height (`None`: every height).
+    pub(super) z: Option<f64>,
     pub(super) accept: A,
     pub(super) own: u16,
     pub(super) tested: Seen,
 }
 
 impl<'a, A> TileBodies<'a, A> {
-    pub(super) fn new(sim: &'a Sim, o: (f64, f64), d: (f64, f64), accept: A, own: u16) -> Self {
+    pub(super) fn new(
+        sim: &'a Sim,
+        (o, d, z): ((f64, f64), (f64, f64), Option<f64>),
+        accept: A,
+        own: u16,
+    ) -> Self {
         TileBodies {
             sim,
             o,
             d,
+            z,
             accept,
             own,
             tested: Seen::default(),
@@ -161,7 +169,7 @@ impl<A: Fn(u16) -> bool> InTile for TileBodies<'_, A> {
         let ids = self.sim.movers.in_tile(t).iter().copied();
         let (o, d, own) = (self.o, self.d, self.own);
         self.sim
-            .nearest_body(o, d, ids, &self.accept, own, &mut self.tested)
+            .nearest_body((o, d, self.z), ids, &self.accept, own, &mut self.tested)
     }
 }
 
@@ -297,40 +305,47 @@ impl Sim {
     /// The first body along the ray from (x, y) along the unit vector
     /// `(dx, dy)`, within `range`, whose id `accept`s: walls and other static
     /// bodies from the static grid, moving bodies tested exactly as the ray
-    /// passes their tiles. The ray is looked at from `range.0` on: the
-    /// caller knows nothing it accepts lies nearer. Body `own` (0 for
-    /// none), which `accept` refuses, is passed over untested: a ranger's
-    /// rays start in their own robot.
+    /// passes their tiles (at height `z`, when given, only the blocks
+    /// spanning it: `accept` tests the model's span). The ray is looked at
+    /// from `range.0` on: the caller knows nothing it accepts lies nearer.
+    /// Body `own` (0 for none), which `accept` refuses, is passed over
+    /// untested: a ranger's rays start in their own robot.
     pub(super) fn cast(
         &self,
-        x: f64,
-        y: f64,
+        (x, y): (f64, f64),
         (dx, dy): (f64, f64),
         range: (f64, f64),
+        z: Option<f64>,
         accept: impl Fn(u16) -> bool,
         own: u16,
     ) -> Option<Hit> {
         // A body filed in several tiles the ray crosses is met in each: its
         // circle and a rectangle cost less to test again than to look up
         // among those tested, but a body of many edges is tested once.
-        let movers = TileBodies::new(self, (x, y), (dx, dy), &accept, own);
+        let movers = TileBodies::new(self, ((x, y), (dx, dy), z), &accept, own);
         self.statics
             .cast_with(x, y, (dx, dy), range, &accept, movers)
     }
 
-    /// [`Sim::cast`] when the moving bodies the ray may meet are known: the
-    /// nearest of them, and the static grid up to it.
+    /// [`Sim::cast`] of a ray from (x, y) at height z when the moving bodies
+    /// it may meet are known: the nearest of them, and the static grid up
+    /// to it.
     pub(super) fn cast_among(
         &self,
-        x: f64,
-        y: f64,
+        (x, y, z): (f64, f64, f64),
         d: (f64, f64),
         (from, max_range): (f64, f64),
         accept: impl Fn(u16) -> bool,
         bodies: impl Iterator<Item = u16>,
     ) -> Option<Hit> {
         let best = self
-            .nearest_body((x, y), d, bodies, |_| true, 0, &mut Seen::default())
+            .nearest_body(
+                ((x, y), d, Some(z)),
+                bodies,
+                |_| true,
+                0,
+                &mut Seen::default(),
+            )
             .filter(|h| h.range <= max_range);
         let reach = best.map_or(max_range, |b| b.range);
         match self.statics.cast_open(x, y, d, (from, reach), &accept) {
@@ -340,14 +355,13 @@ impl Sim {
     }
 
     /// The first of the moving `bodies` whose id `accept`s met by the ray
-    /// from `o` along the unit vector `d` (the earliest of those met
-    /// equally near); bodies of many edges in `tested` are not tested
-    /// again, nor body `own`.
+    /// from `o` along the unit vector `d` at height `z` (the earliest of
+    /// those met equally near); bodies of many edges in `tested` are not
+    /// tested again, nor body `own`.
     #[inline(always)]
     pub(super) fn nearest_body(
         &self,
-        o: (f64, f64),
-        d: (f64, f64),
+        (o, d, z): ((f64, f64), (f64, f64), Option<f64>),
         bodies: impl Iterator<Item = u16>,
         accept: impl Fn(u16) -> bool,
         own: u16,
@@ -356,7 +370,10 @@ impl Sim {
         let mut best: Option<Hit> = None;
         for k in bodies.filter(|&k| k != own) {
             let once = |k| tested.first(k);
-            if let Some(h) = self.movers.hit(usize::from(k) - 1, k, o, d, &accept, once) {
+            if let Some(h) = self
+                .movers
+                .hit(usize::from(k) - 1, k, (o, d, z), &accept, once)
+            {
                 if best.is_none_or(|b| h.range < b.range) {
                     best = Some(h);
                 }
@@ -422,7 +439,8 @@ impl Sim {
         let own = u16::try_from(self.looks[r].root + 1).unwrap_or(0);
         for (i, s) in fans.rays.iter().enumerate() {
             let (ranges, intensities) = out.sensor_mut(i);
-            let accept = self.ranger_sees(r, gz + s.z);
+            let z = gz + s.z;
+            let accept = self.ranger_sees(r, z);
             let (ox, oy) = turned(turn, s.at);
             let (ox, oy) = (base.0 + ox, base.1 + oy);
             // A fan of rays shares one look at the moving bodies within
@@ -459,9 +477,11 @@ impl Sim {
                     // the moving ones where they moved to.
                     (Some(r), _) => r.cast(ox, oy, d, s.range.1, accept),
                     (None, true) => {
-                        self.cast_among(ox, oy, d, (from, s.range.1), accept, sweep.at(k))
+                        self.cast_among((ox, oy, z), d, (from, s.range.1), accept, sweep.at(k))
                     }
-                    (None, false) => self.cast(ox, oy, d, (from, s.range.1), accept, own),
+                    (None, false) => {
+                        self.cast((ox, oy), d, (from, s.range.1), Some(z), accept, own)
+                    }
                 };
                 let (range, intensity) = match hit {
                     Some(h) => (

@@ -96,13 +96,21 @@ fn fans_read_as_rays_walked_from_their_origin() {
         for &r in &rangers {
             let (g, z) = s.world.global(&s.poses, r);
             let sensor = &s.world.models[r].sensors[0];
-            let accept = s.ranger_sees(r, z + sensor.z + sensor.size[2] / 2.0);
+            let rz = z + sensor.z + sensor.size[2] / 2.0;
+            let accept = s.ranger_sees(r, rz);
             let o = g.compose(&s.world.models[r].origin).compose(&sensor.pose);
             skipped += s.open_around(o.x, o.y, accept);
             for (k, &got) in s.readings[r].sensor(0).ranges.iter().enumerate() {
                 let a = o.yaw - sensor.fov / 2.0 + sensor.fov * k as f64 / 270.0;
                 let want = s
-                    .cast(o.x, o.y, unit(a), (0.0, sensor.range.1), accept, 0)
+                    .cast(
+                        (o.x, o.y),
+                        unit(a),
+                        (0.0, sensor.range.1),
+                        Some(rz),
+                        accept,
+                        0,
+                    )
                     .map_or(sensor.range.1, |h| h.range.max(sensor.range.0));
                 assert!(
                     (got - want).abs() < 1e-9,
@@ -410,6 +418,44 @@ fn a_rangers_rays_leave_from_its_turned_origin() {
     let r = s.world.names["a.ranger:0"];
     let got = s.readings[r].sensor(0).ranges[0];
     assert!((got - 0.9).abs() < 0.03, "read {got}, not the post's 0.9");
+}
+
+/// Stage tests each block of a body at its own height: a ray passes
+/// over a robot's low block (a wheel) and meets the block above it, and
+/// with the robot lifted, meets the wheel; the rays of a fan (a laser's
+/// 180) read as one ray cast alone does.
+#[test]
+fn rays_meet_the_blocks_of_a_moving_body_at_their_heights() {
+    let wheeled = "position ( name \"b\" pose [2 0 0 0] size [0.6 0.2 0.5]\n\
+          block ( points 4 point[0] [-0.3 -0.1] point[1] [-0.1 -0.1] point[2] [-0.1 0.1] point[3] [-0.3 0.1] z [0 0.1] )\n\
+          block ( points 4 point[0] [-0.1 -0.1] point[1] [0.3 -0.1] point[2] [0.3 0.1] point[3] [-0.1 0.1] z [0.1 0.5] ) )\n";
+    let one = |samples: usize| {
+        let mut s = sim(
+            &format!("blockz{samples}"),
+            &format!(
+                "{ROOM}position ( name \"a\" pose [0 0 0 0] size [0.4 0.4 0.2]\n\
+                   ranger ( sensor ( range [0 8] samples {samples} fov 10 ) ) )\n{wheeled}"
+            ),
+        );
+        let b = s.world.names["b"];
+        assert_eq!(s.world.models[b].block_z, [(0.0, 0.1), (0.1, 0.5)]);
+        s.step();
+        let r = s.world.names["a.ranger:0"];
+        // The ray at 0.2 m + half the sensor's 0.02: over the wheel (its
+        // face at 1.7 m), onto the body's at 1.9 m.
+        let middle = s.readings[r].sensor(0).ranges[samples / 2];
+        assert!((middle - 1.9).abs() < 1e-6, "{samples} rays: {middle}");
+        s.set_z(b, 0.15);
+        s.set_pose(b, Pose::new(2.0, 0.0, 0.0));
+        steps(&mut s, 1);
+        let middle = s.readings[r].sensor(0).ranges[samples / 2];
+        assert!(
+            (middle - 1.7).abs() < 1e-6,
+            "{samples} rays, lifted: {middle}"
+        );
+    };
+    one(1);
+    one(181);
 }
 
 /// Stage is 2.5D: a ray at a sensor's height passes over what is
