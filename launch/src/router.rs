@@ -23,6 +23,10 @@ pub fn run(_: RouterArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         z.listen.push("tcp/[::]:7447".into());
     }
     let session = z.open(Mode::Router)?;
+    let (stop_tx, stop) = std::sync::mpsc::channel();
+    troupe_node::process::on_stop_signal(move || {
+        let _ = stop_tx.send(());
+    })?;
     let list = troupe_node::locators(&session);
     // The first line on stdout is the contract for scripts and tests.
     let mut out = std::io::stdout().lock();
@@ -30,7 +34,7 @@ pub fn run(_: RouterArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     out.flush()?;
     drop(out);
     tracing::info!(zid = %session.zid(), "router up");
-    troupe_node::process::wait_for_signal()?;
+    let _ = stop.recv();
     tracing::info!("router stopping");
     session
         .close()

@@ -144,17 +144,43 @@ pub async fn wait_signal() -> std::io::Result<()> {
     Ok(())
 }
 
-/// Blocks until SIGINT or SIGTERM (not logged).
+/// Calls `then` on a thread of its own at the first SIGINT or SIGTERM
+/// (logged). The handlers are installed when this returns: a signal sent
+/// from then on (say, by a script that saw the process's first line) stops
+/// the process, where one sent before a handler was up would kill it.
 ///
 /// # Errors
 ///
-/// The runtime or the handlers cannot start.
-pub fn wait_for_signal() -> std::io::Result<()> {
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()?;
-    rt.block_on(async {
-        StopSignals::new()?.next().await;
-        Ok(())
-    })
+/// The thread, its runtime or the handlers cannot start.
+pub fn on_stop_signal(then: impl FnOnce() + Send + 'static) -> std::io::Result<()> {
+    let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+    std::thread::Builder::new()
+        .name("signals".into())
+        .spawn(move || {
+            let rt = match tokio::runtime::Builder::new_current_thread()
+                .enable_all()
+                .build()
+            {
+                Ok(rt) => rt,
+                Err(e) => {
+                    let _ = ready_tx.send(Err(e));
+                    return;
+                }
+            };
+            rt.block_on(async {
+                match StopSignals::new() {
+                    Ok(mut signals) => {
+                        let _ = ready_tx.send(Ok(()));
+                        signals.recv().await;
+                        then();
+                    }
+                    Err(e) => {
+                        let _ = ready_tx.send(Err(e));
+                    }
+                }
+            });
+        })?;
+    ready_rx
+        .recv()
+        .unwrap_or_else(|_| Err(std::io::Error::other("the signal thread died")))
 }

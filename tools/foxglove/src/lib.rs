@@ -171,10 +171,10 @@ pub fn serve(a: &FoxgloveArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     };
     {
         let tx = tx.clone();
-        std::thread::spawn(move || {
-            let _ = troupe_node::process::wait_for_signal();
+        troupe_node::process::on_stop_signal(move || {
             let _ = tx.send(Heard::Stop);
-        });
+        })
+        .context("catching Ctrl-C and SIGTERM")?;
     }
     // On stdout once the port is bound: a script may connect when it appears.
     println_out(&format!(

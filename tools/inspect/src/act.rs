@@ -352,35 +352,8 @@ pub fn call(a: CallArgs, z: &ZenohArgs) -> anyhow::Result<()> {
 /// A flag raised by SIGINT or SIGTERM, the handlers installed before it returns.
 fn stop_flag() -> anyhow::Result<Arc<AtomicBool>> {
     let flag = Arc::new(AtomicBool::new(false));
-    let (ready_tx, ready_rx) = std::sync::mpsc::channel();
     let f = flag.clone();
-    std::thread::spawn(move || {
-        let rt = match tokio::runtime::Builder::new_current_thread()
-            .enable_all()
-            .build()
-        {
-            Ok(rt) => rt,
-            Err(e) => {
-                let _ = ready_tx.send(Err(e));
-                return;
-            }
-        };
-        rt.block_on(async {
-            match troupe_node::process::StopSignals::new() {
-                Ok(mut signals) => {
-                    let _ = ready_tx.send(Ok(()));
-                    signals.recv().await;
-                    f.store(true, Ordering::Relaxed);
-                }
-                Err(e) => {
-                    let _ = ready_tx.send(Err(e));
-                }
-            }
-        });
-    });
-    ready_rx
-        .recv()
-        .context("the signal thread died")?
+    troupe_node::process::on_stop_signal(move || f.store(true, Ordering::Relaxed))
         .context("catching Ctrl-C")?;
     Ok(flag)
 }

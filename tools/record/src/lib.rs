@@ -448,6 +448,8 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     } else {
         a.keys.clone()
     };
+    // Caught from the start: a signal during set-up stops it cleanly too.
+    let stop_rx = stop_signal()?;
     // A peer: the publishers' data comes straight from them where they
     // can be reached, not through the router's queue, where a simulator's
     // step bursts were dropped (a client lost 0.4-8% of the 100-Pioneer
@@ -629,7 +631,6 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     });
 
     // Until a signal or the duration; the drop count is said as it grows.
-    let stop_rx = stop_signal();
     let started = Instant::now();
     let deadline = a
         .duration
@@ -684,14 +685,15 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Receives once on SIGINT or SIGTERM.
-fn stop_signal() -> std::sync::mpsc::Receiver<()> {
+/// Receives once on SIGINT or SIGTERM, the handlers installed when it
+/// returns.
+fn stop_signal() -> anyhow::Result<std::sync::mpsc::Receiver<()>> {
     let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        let _ = troupe_node::process::wait_for_signal();
+    troupe_node::process::on_stop_signal(move || {
         let _ = tx.send(());
-    });
-    rx
+    })
+    .context("catching Ctrl-C and SIGTERM")?;
+    Ok(rx)
 }
 
 /// One message of a recording, as [`each_message`] hands it over.
@@ -935,7 +937,7 @@ pub fn play(a: PlayArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         first + troupe_ros2::stamp_ns(a.start),
         a.end.map_or(u64::MAX, |e| first + troupe_ros2::stamp_ns(e)),
     );
-    let stop_rx = stop_signal();
+    let stop_rx = stop_signal()?;
     let started = Instant::now();
     let (mut count, mut bytes) = (0u64, 0u64);
     let mut stopped = false;
