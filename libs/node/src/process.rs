@@ -134,16 +134,6 @@ pub fn session_runtime(
     Ok(session.map(|s| (rt, signals, s)))
 }
 
-/// SIGTERM or SIGINT (Ctrl-C), logged.
-///
-/// # Errors
-///
-/// The handlers cannot be installed.
-pub async fn wait_signal() -> std::io::Result<()> {
-    StopSignals::new()?.recv().await;
-    Ok(())
-}
-
 /// Calls `then` on a thread of its own at the first SIGINT or SIGTERM
 /// (logged). The handlers are installed when this returns: a signal sent
 /// from then on (say, by a script that saw the process's first line) stops

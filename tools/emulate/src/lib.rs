@@ -438,15 +438,8 @@ pub fn run(a: EmulateArgs, z: &troupe_node::ZenohArgs) -> anyhow::Result<()> {
     }
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()?;
-    std::thread::Builder::new()
-        .name("signals".into())
-        .spawn(move || {
-            let _ = rt.block_on(troupe_node::process::wait_signal());
-            flag.store(true, Ordering::Relaxed);
-        })?;
+    troupe_node::process::on_stop_signal(move || flag.store(true, Ordering::Relaxed))
+        .context("catching Ctrl-C and SIGTERM")?;
     match a.device {
         Emulated::Sicklms200 => {
             use troupe_sicklms200::emulator;
