@@ -17,20 +17,7 @@ pub const DEADLINE: Duration = Duration::from_secs(20);
 
 static COUNTER: AtomicU32 = AtomicU32::new(0);
 
-/// The file `rel` of the Player and Stage projects' samples, read in place
-/// from ../shared/compat (`stage/simple.cfg`); `None`, said on stderr, when
-/// it is absent, for the test to skip.
-pub fn compat(rel: &str) -> Option<PathBuf> {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/compat")
-        .join(rel);
-    if path.exists() {
-        Some(path)
-    } else {
-        eprintln!("skipping: {} is absent", path.display());
-        None
-    }
-}
+pub use troupe_node::testing::compat;
 
 /// A namespace no other test (or test run) uses.
 pub fn unique_namespace(name: &str) -> String {

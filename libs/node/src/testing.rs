@@ -33,6 +33,23 @@ use crate::section::Section;
 
 type Answer = std::result::Result<Vec<u8>, Vec<u8>>;
 
+/// The file `rel` of the Player and Stage projects' samples, read in place
+/// from the workspace's sibling `../shared/compat` (`stage/simple.cfg`);
+/// `None`, said on stderr, when it is absent, for the test to skip.
+pub fn compat(rel: &str) -> Option<std::path::PathBuf> {
+    // This crate is libs/node in the workspace: any crate's tests find the
+    // samples from here.
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/compat")
+        .join(rel);
+    if path.exists() {
+        Some(path)
+    } else {
+        eprintln!("skipping: {} is absent", path.display());
+        None
+    }
+}
+
 #[derive(Default)]
 struct Recorder {
     published: Vec<(Device, Vec<u8>)>,

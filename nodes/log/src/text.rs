@@ -1062,15 +1062,8 @@ mod tests {
 
     /// The log a real Player 3.1 wrote, from ../shared/compat.
     fn player_log() -> Option<String> {
-        let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../../shared/compat/player-log/simple-r0.log");
-        match std::fs::read_to_string(&p) {
-            Ok(t) => Some(t),
-            Err(_) => {
-                eprintln!("skipping: {} is absent", p.display());
-                None
-            }
-        }
+        let p = troupe_node::testing::compat("player-log/simple-r0.log")?;
+        Some(std::fs::read_to_string(p).expect("the Player log"))
     }
 
     /// Every line a real Player wrote reads, and writes back byte for

@@ -285,21 +285,9 @@ impl Driver for MapFile {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use troupe_node::testing::Harness;
+    use troupe_node::testing::{compat, Harness};
 
     const MAP: Device = Device::new(6665, Interface::Map, 0);
-
-    fn compat(rel: &str) -> Option<PathBuf> {
-        let p = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../../shared/compat")
-            .join(rel);
-        if p.exists() {
-            Some(p)
-        } else {
-            eprintln!("skipped: {} is absent", p.display());
-            None
-        }
-    }
 
     fn write_pgm(dir: &Path, name: &str, w: u32, h: u32, px: &[u8]) -> PathBuf {
         let mut bytes = format!("P5\n{w} {h}\n255\n").into_bytes();

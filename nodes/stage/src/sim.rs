@@ -190,20 +190,7 @@ impl Frame {
 /// top, above the floor (where its parents' poses and stacking put it).
 fn height(world: &World, poses: &[Pose], m: usize) -> (f64, f64) {
     let (_, z) = world.global(poses, m);
-    let model = &world.models[m];
-    if model.block_z.is_empty() {
-        return (z, z + model.size[2]);
-    }
-    let lo = model
-        .block_z
-        .iter()
-        .map(|b| b.0)
-        .fold(f64::INFINITY, f64::min);
-    let hi = model
-        .block_z
-        .iter()
-        .map(|b| b.1)
-        .fold(f64::NEG_INFINITY, f64::max);
+    let (lo, hi) = world.models[m].body_span();
     (z + lo, z + hi)
 }
 

@@ -107,16 +107,10 @@ impl Sim {
         body.model = m;
         let model = &self.world.models[m];
         body.body.place(&model.blocks, at);
-        if model.block_z.len() > 1 {
-            // The heights are above the model's base: its look's lowest
-            // less its lowest block's.
-            let lowest = model
-                .block_z
-                .iter()
-                .map(|b| b.0)
-                .fold(f64::INFINITY, f64::min);
-            body.body.lift(&model.block_z, self.looks[m].lo - lowest);
-        }
+        // The blocks' heights are above the model's base: its look's
+        // lowest less its lowest block's.
+        let base = self.looks[m].lo - model.body_span().0;
+        body.body.lift(&model.block_z, base);
         body.cells = body
             .body
             .bounds()

@@ -1,15 +1,13 @@
 //! Stage's own worlds, from ../shared/compat.
 
 use super::*;
+use troupe_node::testing::compat;
 
 #[test]
 fn ctrl_wander_roams_simple_world_without_leaving_the_cave() {
-    let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/compat/stage/simple.world");
-    if !p.exists() {
-        eprintln!("skipping: ../shared/compat is absent");
+    let Some(p) = compat("stage/simple.world") else {
         return;
-    }
+    };
     let mut s = Sim::new(crate::world::load(&p).unwrap()).unwrap();
     assert!(
         s.bases
@@ -35,12 +33,9 @@ fn ctrl_wander_roams_simple_world_without_leaving_the_cave() {
 
 #[test]
 fn the_cave_map_agrees_with_the_simulated_cave() {
-    let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/compat/stage/simple.world");
-    if !p.exists() {
-        eprintln!("skipping: ../shared/compat is absent");
+    let Some(p) = compat("stage/simple.world") else {
         return;
-    }
+    };
     let s = Sim::new(crate::world::load(&p).unwrap()).unwrap();
     let cave = s.world.names["cave"];
     let map = s.model_map(cave).unwrap();
@@ -76,12 +71,9 @@ fn the_cave_map_agrees_with_the_simulated_cave() {
 /// `ranger_return` 1 as their intensity; the cave's walls return 0.5.
 #[test]
 fn r0_s_laser_meets_r1_s_laser_above_its_body_as_in_stage() {
-    let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/compat/stage/simple_noctrl.world");
-    if !p.exists() {
-        eprintln!("skipping: ../shared/compat is absent");
+    let Some(p) = compat("stage/simple_noctrl.world") else {
         return;
-    }
+    };
     let s = Sim::new(crate::world::load(&p).unwrap()).unwrap();
     let r = &s.readings[s.world.names["r0.ranger:1"]].sensor(0);
     let on_r1: Vec<usize> = (0..r.ranges.len())
@@ -103,13 +95,12 @@ fn r0_s_laser_meets_r1_s_laser_above_its_body_as_in_stage() {
 /// Against the exact walls (the default) they differ by centimetres.
 #[test]
 fn stage_ranges_match_real_stage_beam_for_beam() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/compat");
-    let world = dir.join("stage/simple_noctrl.world");
-    let transcript = dir.join("player-tcp/c-pull-position-laser/messages.jsonl");
-    if !world.exists() || !transcript.exists() {
-        eprintln!("skipping: ../shared/compat is absent");
+    let (Some(world), Some(transcript)) = (
+        compat("stage/simple_noctrl.world"),
+        compat("player-tcp/c-pull-position-laser/messages.jsonl"),
+    ) else {
         return;
-    }
+    };
     // The first laser DATA message's ranges.
     let text = std::fs::read_to_string(&transcript).unwrap();
     let line = text
