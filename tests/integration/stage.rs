@@ -403,6 +403,78 @@ fn bench_stage_runs_one_world_file_and_prints_its_row() {
     assert!(!status.success() && err.contains("no/such.world"), "{err}");
 }
 
+/// `troupe bench stage --world FILE --stage BIN` runs Stage on a copy of
+/// the world set to run flat out for the bench's seconds, in turn with
+/// Troupe, prints both and their ratio, and removes the copy; a Stage that
+/// fails is named, with what it said. (A stand-in plays Stage: it checks
+/// the copy it is given.)
+#[test]
+fn bench_stage_runs_stage_in_turn_and_prints_the_ratio() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = std::env::temp_dir().join(troupe_tests::unique_namespace("vs-stage"));
+    std::fs::create_dir_all(&dir).unwrap();
+    let world = dir.join("tiny.world");
+    std::fs::write(
+        &world,
+        "paused 1\nspeedup 1\ndefine bot position ( size [0.4 0.4 0.2] drive \"diff\" )\n\
+         bot ( name \"r0\" pose [0 0 0 0] )\n",
+    )
+    .unwrap();
+    let fake = |name: &str, body: &str| {
+        let path = dir.join(name);
+        std::fs::write(&path, format!("#!/bin/sh\n{body}\n")).unwrap();
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755)).unwrap();
+        path
+    };
+    let good = fake(
+        "stage",
+        r#"[ "$1" = -g ] && grep -qx 'quit_time 2' "$2" && grep -qx 'threads 1' "$2" \
+  && grep -qx 'speedup -1' "$2" && grep -qx 'paused 0' "$2" && ! grep -qx 'paused 1' "$2" \
+  || { echo "not set up: $2" >&2; exit 3; }"#,
+    );
+    let bad = fake("broken-stage", "echo 'libtool error #2' >&2; exit 255");
+    let bench = |stage: &std::path::Path| {
+        troupe_tests::troupe_output(&troupe_tests::strings(&[
+            "bench",
+            "stage",
+            "--seconds",
+            "2",
+            "--pairs",
+            "2",
+            "--world",
+            world.to_str().unwrap(),
+            "--stage",
+            stage.to_str().unwrap(),
+        ]))
+    };
+    let (status, text, err) = bench(&good);
+    assert!(status.success(), "{text}{err}");
+    let row = text.lines().find(|l| l.contains("vs Stage:")).unwrap_or("");
+    for part in [
+        "Stage ",
+        "MB peak; Troupe ",
+        "x as fast",
+        "pair by pair",
+        "2 pairs",
+    ] {
+        assert!(row.contains(part), "no {part:?} in {text:?}");
+    }
+    assert!(text.contains("2 simulated s in"), "Troupe's row: {text:?}");
+    let (status, _, err) = bench(&bad);
+    assert!(
+        !status.success() && err.contains("broken-stage") && err.contains("libtool error #2"),
+        "{err}"
+    );
+    let left: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with(".troupe-bench"))
+        .collect();
+    assert!(left.is_empty(), "copies left behind: {left:?}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// What Player and Stage's plugin refuse is refused (issue 46, items 4 and 11): position2d's
 /// VELOCITY_MODE (POSITION_MODE it acknowledges and ignores), and a
 /// property asked with a buffer that cannot hold it. The simulation's

@@ -20,6 +20,7 @@ pub mod serial;
 pub mod slam;
 pub mod stage;
 pub mod view;
+mod vs_stage;
 
 use clap::Subcommand;
 use troupe_node::ZenohArgs;
@@ -78,6 +79,13 @@ pub enum BenchCmd {
         #[arg(long, default_value = "bench")]
         prefix: String,
     },
+    /// Runs a command and prints its wall time, CPU and peak memory (started by `bench stage --stage`).
+    #[command(hide = true)]
+    Measure {
+        /// The command and its arguments.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true, required = true)]
+        cmd: Vec<std::ffi::OsString>,
+    },
     /// The plain TCP echo the latency benches measure their floor with (started by them).
     #[command(hide = true)]
     Echo {
@@ -96,6 +104,7 @@ pub fn run(cmd: BenchCmd, z: &ZenohArgs) -> anyhow::Result<()> {
         BenchCmd::Latency(a) => latency::run(&a),
         BenchCmd::Pong { prefix } => latency::pong(z, &prefix),
         BenchCmd::Echo { to, size } => harness::echo(&to, size),
+        BenchCmd::Measure { cmd } => vs_stage::measure(&cmd),
         BenchCmd::Launch(a) => launch::run(&a),
         BenchCmd::Stage(a) => stage::run(&a),
         BenchCmd::Bridge(a) => bridge::run(&a),

@@ -41,6 +41,16 @@ pub struct StageBenchArgs {
     /// world with cameras, the time each takes to draw an image).
     #[arg(long, value_name = "FILE")]
     pub world: Option<std::path::PathBuf>,
+    /// Stage's own `stage` program: run each world of `--world` or
+    /// `--stage-worlds` with it too, in turn with Troupe, and print both
+    /// and their ratio (Stage's copy of the world runs flat out, unpaused,
+    /// on `--threads`, until `quit_time` = `--seconds`). Its controllers
+    /// need LD_LIBRARY_PATH on Stage's lib/ and STAGEPATH on its plugins.
+    #[arg(long, value_name = "BIN")]
+    pub stage: Option<std::path::PathBuf>,
+    /// With `--stage`: how many pairs of runs (Stage, then Troupe).
+    #[arg(long, default_value_t = 3)]
+    pub pairs: usize,
     /// Then cast the same rays on the cave's and the hospital's walls with
     /// the simulator's grid walk and with parry2d, and print both.
     #[arg(long)]
@@ -73,6 +83,13 @@ fn status_mb(field: &str) -> f64 {
 
 /// `troupe bench stage`: simulated seconds per wall second and peak memory.
 pub fn run(a: &StageBenchArgs) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        a.stage.is_none() || a.world.is_some() || a.stage_worlds.is_some(),
+        "--stage runs Stage on --world FILE or on --stage-worlds DIR: give one"
+    );
+    if let (Some(path), Some(stage)) = (&a.world, &a.stage) {
+        return crate::vs_stage::compare(a, stage, path);
+    }
     if let Some(path) = &a.world {
         let name = path.file_name().unwrap_or_default().to_string_lossy();
         let t_load = Instant::now();
@@ -139,7 +156,10 @@ pub fn run(a: &StageBenchArgs) -> anyhow::Result<()> {
                 )
             })?;
         for file in ["benchmark/cave.world", "benchmark/hospital.world"] {
-            run(&["--world".as_ref(), worlds.join(file).as_os_str()])?;
+            match &a.stage {
+                Some(stage) => crate::vs_stage::compare(a, stage, &worlds.join(file))?,
+                None => run(&["--world".as_ref(), worlds.join(file).as_os_str()])?,
+            }
         }
     }
     if a.parry {
