@@ -50,18 +50,31 @@ impl Bitmap {
             path: path.display().to_string(),
             reason: e.to_string(),
         })?;
+        let (width, height) = (img.width(), img.height());
         // Transparent pixels count as white, as Stage reads them.
-        let rgba = img.to_rgba8();
-        let (width, height) = rgba.dimensions();
-        let luma = rgba
-            .pixels()
-            .map(|p| {
-                let [r, g, b, a] = p.0;
-                let l = (u32::from(r) * 299 + u32::from(g) * 587 + u32::from(b) * 114) / 1000;
-                let a = u32::from(a);
-                ((l * a + 255 * (255 - a)) / 255) as u8
-            })
-            .collect();
+        let over_white = |l: u32, a: u8| {
+            let a = u32::from(a);
+            ((l * a + 255 * (255 - a)) / 255) as u8
+        };
+        // Grey images (Stage's bitmaps are) are read as they are: through
+        // `to_rgba8`, whose colour conversion works in floats, Stage's
+        // hospital.png (3117 × 1189) took 31 ms of a 170 ms load.
+        let luma = match img {
+            image::DynamicImage::ImageLuma8(grey) => grey.into_raw(),
+            image::DynamicImage::ImageLumaA8(grey) => grey
+                .pixels()
+                .map(|p| over_white(u32::from(p.0[0]), p.0[1]))
+                .collect(),
+            img => img
+                .to_rgba8()
+                .pixels()
+                .map(|p| {
+                    let [r, g, b, a] = p.0;
+                    let l = (u32::from(r) * 299 + u32::from(g) * 587 + u32::from(b) * 114) / 1000;
+                    over_white(l, a)
+                })
+                .collect(),
+        };
         Ok(Bitmap {
             width,
             height,
@@ -115,6 +128,51 @@ impl Bitmap {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A grey PNG, grey with alpha, and the same greys as RGB read alike
+    /// (the grey ones straight, the RGB through the colour conversion); a
+    /// transparent pixel reads white.
+    #[test]
+    fn grey_and_colour_images_read_alike() {
+        let dir = std::env::temp_dir().join(format!("troupe-bitmap-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let greys: Vec<u8> = (0..=255).collect();
+        let save = |name: &str, img: image::DynamicImage| {
+            let path = dir.join(name);
+            img.save(&path).unwrap();
+            Bitmap::load(&path).unwrap()
+        };
+        let grey = save(
+            "grey.png",
+            image::GrayImage::from_raw(16, 16, greys.clone())
+                .unwrap()
+                .into(),
+        );
+        let rgb: Vec<u8> = greys.iter().flat_map(|&v| [v, v, v]).collect();
+        let colour = save(
+            "rgb.png",
+            image::RgbImage::from_raw(16, 16, rgb).unwrap().into(),
+        );
+        assert_eq!(grey.luma, greys);
+        assert_eq!(colour.luma, greys);
+        // Half the pixels fully transparent, half opaque.
+        let ga: Vec<u8> = greys
+            .iter()
+            .enumerate()
+            .flat_map(|(i, &v)| [v, if i % 2 == 0 { 0 } else { 255 }])
+            .collect();
+        let alpha = save(
+            "grey-alpha.png",
+            image::GrayAlphaImage::from_raw(16, 16, ga).unwrap().into(),
+        );
+        let want: Vec<u8> = greys
+            .iter()
+            .enumerate()
+            .map(|(i, &v)| if i % 2 == 0 { 255 } else { v })
+            .collect();
+        assert_eq!(alpha.luma, want);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 
     #[test]
     fn runs_merge_into_rectangles() {

@@ -6,13 +6,15 @@
 //! Line ends are tokens: both languages put a value on its name's line.
 
 use std::fmt;
-use std::path::{Path, PathBuf};
+use std::path::Path;
+use std::sync::Arc;
 
 /// A place in a source file.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Pos {
-    /// The file.
-    pub file: PathBuf,
+    /// The file (shared by every place in it: a world of a thousand
+    /// models holds a place for each of their properties).
+    pub file: Arc<Path>,
     /// 1-based line.
     pub line: u32,
     /// 1-based column.
@@ -23,7 +25,7 @@ impl Pos {
     /// The start of `file`.
     pub fn start(file: &Path) -> Pos {
         Pos {
-            file: file.to_owned(),
+            file: Arc::from(file),
             line: 1,
             col: 1,
         }
@@ -97,6 +99,7 @@ const UNTERMINATED: &str = "unterminated string: a string ends with `\"` on its 
 /// An unterminated string or a character the grammar has no place for.
 pub fn lex(text: &str, file: &Path, word_extra: &str) -> Result<Vec<Token>, SyntaxError> {
     let chars: Vec<char> = text.chars().collect();
+    let file: Arc<Path> = Arc::from(file);
     let mut out = Vec::new();
     let (mut i, mut line, mut col) = (0usize, 1u32, 1u32);
     // Advances past the run of characters matching `pred`, returning it.
@@ -111,7 +114,7 @@ pub fn lex(text: &str, file: &Path, word_extra: &str) -> Result<Vec<Token>, Synt
     while i < chars.len() {
         let c = chars[i];
         let pos = Pos {
-            file: file.to_owned(),
+            file: file.clone(),
             line,
             col,
         };
@@ -176,11 +179,7 @@ pub fn lex(text: &str, file: &Path, word_extra: &str) -> Result<Vec<Token>, Synt
     }
     out.push(Token {
         tok: Tok::Eol,
-        pos: Pos {
-            file: file.to_owned(),
-            line,
-            col,
-        },
+        pos: Pos { file, line, col },
     });
     Ok(out)
 }

@@ -174,11 +174,10 @@ impl Parser {
 
     fn tok(&self, i: usize) -> Result<&Token, WorldError> {
         self.toks.get(i).ok_or_else(|| {
-            let last = self.toks.last().map(|t| t.pos.clone()).unwrap_or(Pos {
-                file: PathBuf::new(),
-                line: 1,
-                col: 1,
-            });
+            let last = self
+                .toks
+                .last()
+                .map_or_else(|| Pos::start(Path::new("")), |t| t.pos.clone());
             err(&last, "unexpected end of file")
         })
     }
@@ -376,11 +375,7 @@ pub fn parse(path: &Path) -> Result<WorldFile, WorldError> {
             parent: None,
             children: Vec::new(),
             props: HashMap::new(),
-            pos: Pos {
-                file: path.to_owned(),
-                line: 1,
-                col: 1,
-            },
+            pos: Pos::start(path),
         }],
     };
     p.file()?;
