@@ -31,7 +31,7 @@ use troupe_geom::{bounds, normalize, Grid, Hit, InTile, Lattice, OccMap, Pose, E
 use troupe_msgs::{map, Color};
 
 use crate::crew::{spin_until, Crew, Job};
-use crate::movers::{Body, Fan, Movers, Sweep};
+use crate::movers::{Body, Fan, Movers, Outline, Sweep};
 use crate::world::{Drive, Kind, Localization, Sensor, World};
 
 mod bodies;
@@ -84,6 +84,9 @@ pub struct Sim {
     /// to its top above the floor (Stage is 2.5D: a sensor sees only what
     /// spans the height of its rays).
     looks: Vec<Look>,
+    /// Each model's circles in its own frame, when its body is several
+    /// polygons (see [`crate::movers::Outline`]).
+    outlines: Vec<Option<Outline>>,
     /// What a step reads of each model's place in its tree (see [`Frame`]).
     frames: Vec<Frame>,
     /// The threads that plan moves and cast rays, and the models with
@@ -409,6 +412,11 @@ impl Sim {
                 fans
             })
             .collect();
+        let world_outlines = world
+            .models
+            .iter()
+            .map(|m| Outline::of(&m.blocks))
+            .collect();
         let mut sim = Sim {
             fans,
             plans: Vec::new(),
@@ -429,6 +437,7 @@ impl Sim {
             fasr2: fasr2.and_then(Result::ok),
             crew: Crew::default(),
             looks,
+            outlines: world_outlines,
             frames,
             movable,
             written_at: vec![None; n],

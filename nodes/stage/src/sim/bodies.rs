@@ -106,7 +106,8 @@ impl Sim {
     pub(super) fn place_into(&self, m: usize, at: Pose, body: &mut Placed) {
         body.model = m;
         let model = &self.world.models[m];
-        body.body.place(&model.blocks, at);
+        body.body
+            .place_outlined(&model.blocks, at, self.outlines[m].as_ref());
         // The blocks' heights are above the model's base: its look's
         // lowest less its lowest block's.
         let base = self.looks[m].lo - model.body_span().0;
