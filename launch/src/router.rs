@@ -23,10 +23,7 @@ pub fn run(_: RouterArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         z.listen.push("tcp/[::]:7447".into());
     }
     let session = z.open(Mode::Router)?;
-    let (stop_tx, stop) = std::sync::mpsc::channel();
-    troupe_node::process::on_stop_signal(move || {
-        let _ = stop_tx.send(());
-    })?;
+    let stop = troupe_node::process::stop_receiver()?;
     let list = troupe_node::locators(&session);
     // The first line on stdout is the contract for scripts and tests.
     let mut out = std::io::stdout().lock();

@@ -174,3 +174,31 @@ pub fn on_stop_signal(then: impl FnOnce() + Send + 'static) -> std::io::Result<(
         .recv()
         .unwrap_or_else(|_| Err(std::io::Error::other("the signal thread died")))
 }
+
+/// A flag raised at the first SIGINT or SIGTERM (see [`on_stop_signal`]),
+/// for a loop that checks it between rounds.
+///
+/// # Errors
+///
+/// As [`on_stop_signal`].
+pub fn stop_flag() -> std::io::Result<std::sync::Arc<std::sync::atomic::AtomicBool>> {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let flag = std::sync::Arc::new(AtomicBool::new(false));
+    let raised = flag.clone();
+    on_stop_signal(move || raised.store(true, Ordering::Relaxed))?;
+    Ok(flag)
+}
+
+/// A channel that receives once at the first SIGINT or SIGTERM (see
+/// [`on_stop_signal`]), for a thread that waits on it.
+///
+/// # Errors
+///
+/// As [`on_stop_signal`].
+pub fn stop_receiver() -> std::io::Result<std::sync::mpsc::Receiver<()>> {
+    let (tx, rx) = std::sync::mpsc::channel();
+    on_stop_signal(move || {
+        let _ = tx.send(());
+    })?;
+    Ok(rx)
+}

@@ -116,18 +116,13 @@ impl Body {
     /// Becomes `blocks` (polygons in a model's frame) placed at pose `at`,
     /// reusing its buffers.
     pub fn place(&mut self, blocks: &[Vec<(f64, f64)>], at: Pose) {
-        self.place_outlined(blocks, at, None);
+        self.place_outlined(blocks, at, &Outline::of(blocks));
     }
 
-    /// [`Body::place`] for a body whose circles in its own frame are
-    /// `outline` (see [`Outline`]): they are carried to `at` instead of
-    /// worked out again from its points.
-    pub fn place_outlined(
-        &mut self,
-        blocks: &[Vec<(f64, f64)>],
-        at: Pose,
-        outline: Option<&Outline>,
-    ) {
+    /// [`Body::place`] for `blocks` whose circles in their own frame are
+    /// `outline` (`Outline::of(blocks)`, kept): the circles are carried to
+    /// `at`, not worked out again from the placed points.
+    pub fn place_outlined(&mut self, blocks: &[Vec<(f64, f64)>], at: Pose, outline: &Outline) {
         self.polys.resize_with(blocks.len(), Vec::new);
         self.heights.clear();
         let apply = at.applier();
@@ -140,29 +135,18 @@ impl Body {
             [one] => Rect::of(one),
             _ => None,
         };
-        self.poly_circles.clear();
-        let outline = outline.filter(|o| o.polys.len() == self.polys.len());
-        self.circle = match (self.rect, outline) {
+        let carry = |&(x, y, r): &(f64, f64, f64)| {
+            let (x, y) = apply(x, y);
+            (x, y, r)
+        };
+        self.circle = match self.rect {
             // Centred on the rectangle, so that rays read both from one
             // centre (see [`Shape`]).
-            (Some(r), _) => (r.c.0, r.c.1, pad(r.half.0.hypot(r.half.1))),
-            (None, Some(o)) => {
-                let carry = |&(x, y, r): &(f64, f64, f64)| {
-                    let (x, y) = apply(x, y);
-                    (x, y, r)
-                };
-                self.poly_circles.extend(o.polys.iter().map(carry));
-                carry(&o.circle)
-            }
-            (None, None) => circle_around(&self.polys, self.bounds),
+            Some(r) => (r.c.0, r.c.1, pad(r.half.0.hypot(r.half.1))),
+            None => carry(&outline.circle),
         };
-        if self.polys.len() > 1 && outline.is_none() {
-            self.poly_circles.extend(
-                self.polys
-                    .iter()
-                    .map(|p| circle_around(std::slice::from_ref(p), bounds(p.iter().copied()))),
-            );
-        }
+        self.poly_circles.clear();
+        self.poly_circles.extend(outline.polys.iter().map(carry));
     }
 
     /// Gives its polygons (when several) the heights `z` above `base`, one
@@ -216,28 +200,34 @@ impl Body {
     }
 }
 
-/// The circles around a body of several polygons, in its own frame (around
-/// them all, and around each): placed with the body, they are carried to
-/// where it is, not worked out again from its points every step (which was
-/// most of placing Stage's fancy Pioneer, seven polygons of 60 points).
-/// A distance kept by a turn and a shift, each still holds what it held.
-#[derive(Debug, Clone, Default)]
+/// The circles around a model's blocks in its own frame: around them all,
+/// and around each when there are several. Turns and shifts keep
+/// distances, so a placed body carries them to where it is rather than
+/// working them out from its points every step (most of placing Stage's
+/// fancy Pioneer, seven polygons of 60 points).
+#[derive(Debug, Clone)]
 pub struct Outline {
+    /// Around them all (negative radius when there are no points).
     circle: (f64, f64, f64),
+    /// Around each, when there are several (none otherwise).
     polys: Vec<(f64, f64, f64)>,
 }
 
 impl Outline {
-    /// The outline of `blocks` (`None` for fewer than two: one polygon is a
-    /// rectangle or has no circles of its own).
-    pub fn of(blocks: &[Vec<(f64, f64)>]) -> Option<Outline> {
-        (blocks.len() > 1).then(|| Outline {
-            circle: circle_around(blocks, bounds(blocks.iter().flatten().copied())),
-            polys: blocks
+    /// The outline of `blocks`.
+    pub fn of(blocks: &[Vec<(f64, f64)>]) -> Outline {
+        let polys = if blocks.len() > 1 {
+            blocks
                 .iter()
                 .map(|p| circle_around(std::slice::from_ref(p), bounds(p.iter().copied())))
-                .collect(),
-        })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        Outline {
+            circle: circle_around(blocks, bounds(blocks.iter().flatten().copied())),
+            polys,
+        }
     }
 }
 
@@ -784,14 +774,14 @@ mod tests {
             vec![(0.0, 0.0), (0.5, 0.1), (0.2, 0.4)],
             square(-0.2, -0.3, 0.1),
         ];
-        let outline = Outline::of(&blocks).unwrap();
+        let outline = Outline::of(&blocks);
         let inside = |(x, y): (f64, f64), (cx, cy, r): (f64, f64, f64)| (x - cx).hypot(y - cy) <= r;
         let (mut met, mut rays) = (0, 0);
         for k in 0..12 {
             let at = Pose::new(1.0 + 0.1 * f64::from(k), -0.5, 0.7 * f64::from(k));
             let (mut a, mut b) = (Body::default(), Body::default());
             a.place(&blocks, at);
-            b.place_outlined(&blocks, at, Some(&outline));
+            b.place_outlined(&blocks, at, &outline);
             assert_eq!(a.polys(), b.polys());
             for (poly, &c) in b.polys().iter().zip(&b.poly_circles) {
                 assert!(poly.iter().all(|&p| inside(p, c) && inside(p, b.circle())));

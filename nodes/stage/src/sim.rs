@@ -84,9 +84,8 @@ pub struct Sim {
     /// to its top above the floor (Stage is 2.5D: a sensor sees only what
     /// spans the height of its rays).
     looks: Vec<Look>,
-    /// Each model's circles in its own frame, when its body is several
-    /// polygons (see [`crate::movers::Outline`]).
-    outlines: Vec<Option<Outline>>,
+    /// Each model's circles in its own frame (see [`Outline`]).
+    outlines: Vec<Outline>,
     /// What a step reads of each model's place in its tree (see [`Frame`]).
     frames: Vec<Frame>,
     /// The threads that plan moves and cast rays, and the models with
@@ -412,7 +411,7 @@ impl Sim {
                 fans
             })
             .collect();
-        let world_outlines = world
+        let outlines = world
             .models
             .iter()
             .map(|m| Outline::of(&m.blocks))
@@ -437,7 +436,7 @@ impl Sim {
             fasr2: fasr2.and_then(Result::ok),
             crew: Crew::default(),
             looks,
-            outlines: world_outlines,
+            outlines,
             frames,
             movable,
             written_at: vec![None; n],

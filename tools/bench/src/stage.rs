@@ -49,8 +49,8 @@ pub struct StageBenchArgs {
     #[arg(long, value_name = "BIN")]
     pub stage: Option<std::path::PathBuf>,
     /// With `--stage`: how many pairs of runs (Stage, then Troupe).
-    #[arg(long, default_value_t = 3)]
-    pub pairs: usize,
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..))]
+    pub pairs: u32,
     /// Then cast the same rays on the cave's and the hospital's walls with
     /// the simulator's grid walk and with parry2d, and print both.
     #[arg(long)]

@@ -71,8 +71,8 @@ fn measured(me: &Path, cmd: &[&OsStr], what: &str) -> anyhow::Result<Run> {
         .with_context(|| format!("cannot run {what}"))?;
     let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
     let stderr = String::from_utf8_lossy(&out.stderr);
-    let tail: Vec<&str> = stderr.lines().rev().take(8).collect();
-    let tail: Vec<&str> = tail.into_iter().rev().collect();
+    let lines: Vec<&str> = stderr.lines().collect();
+    let tail = &lines[lines.len().saturating_sub(8)..];
     anyhow::ensure!(
         out.status.success(),
         "{what} failed ({}); its last words:\n{}",
@@ -195,7 +195,7 @@ pub fn compare(a: &StageBenchArgs, stage: &Path, world: &Path) -> anyhow::Result
         copy.0.display()
     );
     let (mut ours, mut theirs) = (Vec::new(), Vec::new());
-    for _ in 0..a.pairs.max(1) {
+    for _ in 0..a.pairs {
         theirs.push(measured(&me, &stage_cmd, &stage_what)?);
         ours.push(measured(&me, &troupe, "troupe bench stage --world")?);
     }

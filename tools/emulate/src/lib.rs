@@ -1,8 +1,6 @@
 //! `troupe emulate`: a device emulator on a pseudo-terminal.
 
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::Context;
@@ -436,10 +434,7 @@ pub fn run(a: EmulateArgs, z: &troupe_node::ZenohArgs) -> anyhow::Result<()> {
     if a.usb && a.device != Emulated::Urglaser {
         anyhow::bail!("--usb is for a urglaser: the other devices are on RS-232");
     }
-    let stop = Arc::new(AtomicBool::new(false));
-    let flag = stop.clone();
-    troupe_node::process::on_stop_signal(move || flag.store(true, Ordering::Relaxed))
-        .context("catching Ctrl-C and SIGTERM")?;
+    let stop = troupe_node::process::stop_flag().context("catching Ctrl-C and SIGTERM")?;
     match a.device {
         Emulated::Sicklms200 => {
             use troupe_sicklms200::emulator;

@@ -8,8 +8,7 @@
 //! the session's identity, so a fleet's access rules hold here as anywhere.
 
 use std::io::Write;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
+use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
@@ -289,7 +288,7 @@ pub fn cmd(a: CmdArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         eprintln!("troupe cmd: sent {} {msg} to {dev}", name);
         return Ok(());
     }
-    let stop = stop_flag()?;
+    let stop = troupe_node::process::stop_flag().context("catching Ctrl-C")?;
     let until = a
         .seconds
         .map(|s| Instant::now() + Duration::from_secs_f64(s.max(0.0)));
@@ -347,15 +346,6 @@ pub fn call(a: CallArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         writeln!(out, "{kind} {text}")?;
     }
     Ok(())
-}
-
-/// A flag raised by SIGINT or SIGTERM, the handlers installed before it returns.
-fn stop_flag() -> anyhow::Result<Arc<AtomicBool>> {
-    let flag = Arc::new(AtomicBool::new(false));
-    let f = flag.clone();
-    troupe_node::process::on_stop_signal(move || f.store(true, Ordering::Relaxed))
-        .context("catching Ctrl-C")?;
-    Ok(flag)
 }
 
 #[cfg(test)]

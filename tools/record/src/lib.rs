@@ -449,7 +449,7 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         a.keys.clone()
     };
     // Caught from the start: a signal during set-up stops it cleanly too.
-    let stop_rx = stop_signal()?;
+    let stop_rx = troupe_node::process::stop_receiver().context("catching Ctrl-C and SIGTERM")?;
     // A peer: the publishers' data comes straight from them where they
     // can be reached, not through the router's queue, where a simulator's
     // step bursts were dropped (a client lost 0.4-8% of the 100-Pioneer
@@ -683,17 +683,6 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         anyhow::bail!("{dropped} samples were dropped: the disk did not keep up (a larger --queue, or --compress none, may)");
     }
     Ok(())
-}
-
-/// Receives once on SIGINT or SIGTERM, the handlers installed when it
-/// returns.
-fn stop_signal() -> anyhow::Result<std::sync::mpsc::Receiver<()>> {
-    let (tx, rx) = std::sync::mpsc::channel();
-    troupe_node::process::on_stop_signal(move || {
-        let _ = tx.send(());
-    })
-    .context("catching Ctrl-C and SIGTERM")?;
-    Ok(rx)
 }
 
 /// One message of a recording, as [`each_message`] hands it over.
@@ -937,7 +926,7 @@ pub fn play(a: PlayArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         first + troupe_ros2::stamp_ns(a.start),
         a.end.map_or(u64::MAX, |e| first + troupe_ros2::stamp_ns(e)),
     );
-    let stop_rx = stop_signal()?;
+    let stop_rx = troupe_node::process::stop_receiver().context("catching Ctrl-C and SIGTERM")?;
     let started = Instant::now();
     let (mut count, mut bytes) = (0u64, 0u64);
     let mut stopped = false;

@@ -107,7 +107,7 @@ impl Sim {
         body.model = m;
         let model = &self.world.models[m];
         body.body
-            .place_outlined(&model.blocks, at, self.outlines[m].as_ref());
+            .place_outlined(&model.blocks, at, &self.outlines[m]);
         // The blocks' heights are above the model's base: its look's
         // lowest less its lowest block's.
         let base = self.looks[m].lo - model.body_span().0;
