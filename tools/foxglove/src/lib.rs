@@ -59,7 +59,12 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 
 /// What the server hears from the network.
 enum Heard {
-    Sample { key: String, payload: Vec<u8> },
+    Sample {
+        key: String,
+        payload: Vec<u8>,
+    },
+    /// A planner's waypoints, asked for this state of it, did not come.
+    Unanswered(Device, PathState),
     Came(Device),
     Went(Device),
     Stop,
@@ -188,6 +193,7 @@ pub fn serve(a: &FoxgloveArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             Heard::Stop => break,
             Heard::Came(dev) => lock(&live).ask(dev),
             Heard::Went(dev) => lock(&live).close(&dev),
+            Heard::Unanswered(dev, path) => lock(&live).unanswered(dev, path),
             Heard::Sample { key, payload } if key == keys::SIM_CLOCK => {
                 if let Ok(s) = decode_any(&payload) {
                     server.broadcast_time(stamp_ns(s.stamp));
@@ -214,9 +220,12 @@ struct Live {
     channels: HashMap<String, Arc<RawChannel>>,
     translator: Translator,
     latched: Latched,
-    /// Each planner's last path: valid, goal, waypoints.
-    paths: HashMap<Device, (bool, [f64; 3], u32)>,
+    /// Each planner's last path, asked for.
+    paths: HashMap<Device, PathState>,
 }
+
+/// A planner's path as its state tells it: valid, goal, waypoints.
+type PathState = (bool, [f64; 3], u32);
 
 impl Live {
     fn new(ctx: Arc<Context>, session: Session, tx: SyncSender<Heard>, latched: Latched) -> Live {
@@ -281,16 +290,28 @@ impl Live {
             let asked = troupe_node::ask(&session, &key, Duration::from_secs(2))
                 .payload(codec::encode(&planner::GetWaypoints, 0.0))
                 .wait();
-            let Some(reply) = asked.ok().and_then(|r| r.recv().ok()) else {
-                return;
-            };
-            if let Ok(answer) = reply.into_result() {
-                let _ = tx.send(Heard::Sample {
+            let answer = asked
+                .ok()
+                .and_then(|r| r.recv().ok())
+                .and_then(|reply| reply.into_result().ok());
+            let _ = tx.send(match answer {
+                Some(answer) => Heard::Sample {
                     key: keys::data(&dev),
                     payload: answer.payload().to_bytes().into_owned(),
-                });
-            }
+                },
+                None => Heard::Unanswered(dev, path),
+            });
         });
+    }
+
+    /// The waypoints asked for at `path` did not come (the planner's
+    /// queryable not yet known here, a timeout): forgotten, so that the
+    /// planner's next state (four a second) asks again, where the path
+    /// would otherwise stay undrawn until the planner's state changed.
+    fn unanswered(&mut self, dev: Device, path: PathState) {
+        if self.paths.get(&dev) == Some(&path) {
+            self.paths.remove(&dev);
+        }
     }
 
     /// Unadvertises every channel of a device that went.
