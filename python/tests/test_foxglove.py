@@ -74,7 +74,10 @@ def test_foxglove_shows_the_fleet_and_its_teleop_drives_a_robot(launch, odometry
             # client (foxglove 0.30, connected_client.rs): a subscription that follows at once
             # can be answered "Unknown channel ID", the channel being known a moment later.
             # A client then subscribes again, once, as this one does.
-            if isinstance(m, str) and json.loads(m).get("op") == "status":
+            if isinstance(m, str) and json.loads(m)["op"] == "advertise":
+                # Channels that come meanwhile (the planner's path) are kept for later.
+                channels.update({ch["topic"]: ch for ch in json.loads(m)["channels"]})
+            elif isinstance(m, str) and json.loads(m).get("op") == "status":
                 said = json.loads(m)["message"]
                 unknown = [i for i, ch in subscriptions.items() if said == f"Unknown channel ID: {ch}"]
                 assert unknown and not refused & set(unknown), said

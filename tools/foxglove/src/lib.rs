@@ -355,9 +355,20 @@ impl Live {
                 }
             }
         };
-        ch.log_with_meta(&m.data, PartialMetadata { log_time: Some(ns) });
+        let meta = PartialMetadata { log_time: Some(ns) };
         if m.latched {
-            lock(&self.latched).insert(m.topic, (ch, m.data, ns));
+            // Logged and kept under one lock, the one a subscription's
+            // `on_subscribe` takes to give the kept message. A client that
+            // subscribes meanwhile gets this message from one or the other
+            // (at worst twice). Logged first and kept after, a subscription
+            // that came between got the message before this one only: a
+            // planner's new path, sent at the moment Foxglove subscribed,
+            // never drawn.
+            let mut latched = lock(&self.latched);
+            ch.log_with_meta(&m.data, meta);
+            latched.insert(m.topic, (ch, m.data, ns));
+        } else {
+            ch.log_with_meta(&m.data, meta);
         }
     }
 }
