@@ -376,17 +376,14 @@ async fn supervise(
         })
     };
     let exe = std::env::current_exe().context("finding the troupe binary")?;
-    // The view and the Foxglove server: clients of the launch's network
-    // (they serve a page or a socket, not keys).
-    let mut viewer_net = child_net.clone();
-    if let Some(k) = viewer_net.iter().position(|f| f == "--listen") {
-        viewer_net.drain(k..(k + 2).min(viewer_net.len()));
-    }
+    // The view and the Foxglove server join as peers, on the nodes' network
+    // flags, their listener on loopback as the nodes' (without --listen a
+    // peer listens on every interface).
     let viewers: Vec<_> = [(Viewer::VIEW, a.view), (Viewer::FOXGLOVE, a.foxglove)]
         .into_iter()
         .filter_map(|(v, at)| {
             let at = at?;
-            let run = run_viewer(v, exe.clone(), viewer_net.clone(), at, stop_rx.clone());
+            let run = run_viewer(v, exe.clone(), child_net.clone(), at, stop_rx.clone());
             Some((v, tokio::spawn(run)))
         })
         .collect();

@@ -381,3 +381,108 @@ fn a_second_launch_on_a_taken_port_says_what_holds_it_and_what_to_do() {
         "{err}"
     );
 }
+
+/// The inodes of the sockets `pid` holds.
+fn socket_inodes(pid: u32) -> std::collections::BTreeSet<u64> {
+    let Ok(fds) = std::fs::read_dir(format!("/proc/{pid}/fd")) else {
+        return Default::default();
+    };
+    fds.flatten()
+        .filter_map(|fd| std::fs::read_link(fd.path()).ok())
+        .filter_map(|l| {
+            let l = l.to_string_lossy().into_owned();
+            l.strip_prefix("socket:[")?.strip_suffix(']')?.parse().ok()
+        })
+        .collect()
+}
+
+/// Every listening TCP socket of this network namespace: (inode, address),
+/// the address as /proc/net/tcp{,6} spells it (hex, in host byte order).
+fn listening() -> Vec<(u64, String)> {
+    let mut out = Vec::new();
+    for table in ["/proc/net/tcp", "/proc/net/tcp6"] {
+        let text = std::fs::read_to_string(table).unwrap();
+        for row in text.lines().skip(1) {
+            let f: Vec<&str> = row.split_whitespace().collect();
+            // sl, local address, remote address, state (0A: LISTEN), …, inode
+            if f.len() > 9 && f[3] == "0A" {
+                let addr = f[1].split(':').next().unwrap_or_default().to_owned();
+                out.push((f[9].parse().unwrap_or(0), addr));
+            }
+        }
+    }
+    out
+}
+
+/// 127.0.0.0/8 or ::1 (or ::ffff:127.x), as /proc/net spells them.
+fn loopback(hex: &str) -> bool {
+    match hex.len() {
+        8 => hex.ends_with("7F"),
+        32 => {
+            hex == "00000000000000000000000001000000"
+                || (hex.starts_with("0000000000000000FFFF0000") && hex.ends_with("7F"))
+        }
+        _ => false,
+    }
+}
+
+#[test]
+fn a_launch_and_its_viewers_listen_on_this_host_only() {
+    // Nothing may be reached from the LAN that the user did not ask for: the
+    // nodes', the view's and the Foxglove server's Zenoh sessions listen on
+    // loopback, as the router, the bridge and the two pages were asked to.
+    let cfg = temp_cfg("loopback", STACK);
+    let ns = troupe_tests::unique_namespace("loopback");
+    let mut launcher =
+        troupe_tests::launch(&ns, &cfg, &["--view=127.0.0.1:0", "--foxglove=127.0.0.1:0"]);
+    let lines = launcher.lines();
+    let (mut router, mut viewers) = (None, 0);
+    let deadline = Instant::now() + DEADLINE;
+    while router.is_none() || viewers < 2 {
+        let left = deadline.saturating_duration_since(Instant::now());
+        let line = lines.recv_timeout(left).expect("the launcher's lines");
+        if let Some(rest) = line.strip_prefix("troupe launch: router listening on ") {
+            router = rest.split_whitespace().next().map(str::to_owned);
+        } else if line.starts_with("troupe view: ") || line.starts_with("troupe foxglove: ") {
+            viewers += 1;
+        }
+    }
+    let s = client_at(&router.unwrap(), &ns);
+    let tokens = token_events(&s);
+    let mut up = std::collections::BTreeSet::new();
+    while up.len() < 2 {
+        let t = tokens
+            .recv_deadline(deadline)
+            .unwrap()
+            .expect("both devices up");
+        up.insert(t.key_expr().to_string());
+    }
+
+    let pid = launcher.child.id();
+    let mut pids = children(pid, "troupe");
+    assert_eq!(pids.len(), 4, "dummy, rangertolaser, view and foxglove");
+    pids.push(pid);
+    let open = listening();
+    let mut seen = Vec::new();
+    for p in &pids {
+        let cmd = std::fs::read_to_string(format!("/proc/{p}/cmdline"))
+            .unwrap_or_default()
+            .replace('\0', " ");
+        let inodes = socket_inodes(*p);
+        let ours: Vec<&String> = open
+            .iter()
+            .filter(|(i, _)| inodes.contains(i))
+            .map(|(_, a)| a)
+            .collect();
+        assert!(!ours.is_empty(), "{cmd}: listens on nothing");
+        for a in ours {
+            assert!(loopback(a), "{cmd}: listens on {a} (not this host only)");
+        }
+        seen.push(cmd);
+    }
+    assert!(
+        seen.iter().any(|c| c.contains(" foxglove ")) && seen.iter().any(|c| c.contains(" view ")),
+        "{seen:?}"
+    );
+    assert!(launcher.terminate().success(), "{}", launcher.stderr());
+}
