@@ -432,27 +432,26 @@ impl Movers {
                     continue;
                 }
             }
-            let mut crossings = 0;
-            for (a, b) in edges(poly) {
-                // The ray o + t·d meets the edge a + u·e where t = tn/den and
-                // u = un/den: compared as products, so that only a crossing
-                // pays a division.
+            // Branch-free: whether the ray crosses an edge is a coin toss
+            // a predictor loses, and a miss costs more than the division.
+            let mut crossings = 0u32;
+            let Some(&last) = poly.last() else { continue };
+            let mut a = last;
+            for &b in poly {
+                // The ray o + t·d meets the edge a + u·e where t = tn/den
+                // and u = un/den (den turned positive, signs with it).
                 let e = (b.0 - a.0, b.1 - a.1);
                 let den = d.0 * e.1 - d.1 * e.0;
-                if den.abs() < 1e-15 {
-                    continue;
-                }
                 let w = (a.0 - o.0, a.1 - o.1);
-                let (tn, un) = (w.0 * e.1 - w.1 * e.0, w.0 * d.1 - w.1 * d.0);
-                let (tn, un, den) = if den > 0.0 {
-                    (tn, un, den)
-                } else {
-                    (-tn, -un, -den)
-                };
-                if un >= 0.0 && un < den && tn >= 0.0 {
-                    crossings += 1;
-                    best = best.min(tn / den);
-                }
+                let sign = 1.0f64.copysign(den);
+                let tn = (w.0 * e.1 - w.1 * e.0) * sign;
+                let un = (w.0 * d.1 - w.1 * d.0) * sign;
+                let den = den.abs();
+                let cross = (un >= 0.0) & (un < den) & (tn >= 0.0) & (den >= 1e-15);
+                crossings += u32::from(cross);
+                let t = tn / den;
+                best = if cross { best.min(t) } else { best };
+                a = b;
             }
             if crossings % 2 == 1 {
                 // The ray starts inside this polygon.
