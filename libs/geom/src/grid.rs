@@ -158,6 +158,24 @@ impl Lattice {
             }
             return;
         }
+        if let Some([x0, y0, x1, y1]) = upright_rect(pts) {
+            // (Most static bodies: a bitmap's dark runs.) The cells its
+            // outline crosses and those whose centres it holds are then
+            // the box of cells its corners are in, each reported once.
+            let cell = |v: f64, o: f64| ((v - o) / self.res).floor();
+            let (i0, i1) = (cell(x0, self.x0), cell(x1, self.x0));
+            let (j0, j1) = (cell(y0, self.y0), cell(y1, self.y0));
+            if i1 < 0.0 || j1 < 0.0 || i0 >= self.w as f64 || j0 >= self.h as f64 {
+                return;
+            }
+            let (i1, j1) = ((i1 as usize).min(self.w - 1), (j1 as usize).min(self.h - 1));
+            for j in (j0.max(0.0) as usize)..=j1 {
+                for i in (i0.max(0.0) as usize)..=i1 {
+                    f(i, j);
+                }
+            }
+            return;
+        }
         self.polygon_centres(pts, &mut f);
         // The outline too, so walls thinner than a cell still block rays.
         for k in 0..pts.len() {
@@ -235,6 +253,19 @@ impl Lattice {
             }
         }
     }
+}
+
+/// The box `[x0, y0, x1, y1]` of `pts` when they are the four corners of
+/// a rectangle with sides along the axes, in either turning order.
+fn upright_rect(pts: &[(f64, f64)]) -> Option<[f64; 4]> {
+    let &[a, b, c, d] = pts else {
+        return None;
+    };
+    let turns = |a: (f64, f64), b: (f64, f64), c: (f64, f64), d: (f64, f64)| {
+        a.0 == b.0 && b.1 == c.1 && c.0 == d.0 && d.1 == a.1
+    };
+    (turns(a, b, c, d) || turns(b, c, d, a))
+        .then(|| [a.0.min(c.0), a.1.min(c.1), a.0.max(c.0), a.1.max(c.1)])
 }
 
 impl Grid {
@@ -1127,6 +1158,35 @@ mod tests {
         );
         assert_eq!(lat.cells_of_box([2.5, 0.0, 3.0, 1.0]), None, "beyond x");
         assert_eq!(lat.cells_of_box([0.0, -2.0, 1.0, -0.1]), None, "below");
+    }
+
+    #[test]
+    fn upright_rectangles_mark_the_cells_any_polygon_would() {
+        use std::collections::BTreeSet;
+        let lat = Lattice::new(0.0, 0.0, 4.0, 3.0, 0.1);
+        let mut rnd = uniform(7);
+        let cells = |pts: &[(f64, f64)]| {
+            let mut set = BTreeSet::new();
+            lat.polygon_cells(pts, |i, j| {
+                set.insert((i, j));
+            });
+            set
+        };
+        for k in 0..500 {
+            // Corners on cell boundaries, off the grid, or anywhere.
+            let mut v = |n: f64| match k % 3 {
+                0 => (rnd() * n * 10.0).round() / 10.0,
+                1 => rnd() * (n + 2.0) - 1.0,
+                _ => rnd() * n,
+            };
+            let (x0, x1, y0, y1) = (v(4.0), v(4.0), v(3.0), v(3.0));
+            let rect = [(x0, y0), (x0, y1), (x1, y1), (x1, y0)];
+            let turned = [rect[1], rect[2], rect[3], rect[0]];
+            // A fifth, repeated corner makes it a polygon like any other.
+            let general = cells(&[rect[0], rect[1], rect[2], rect[3], rect[0]]);
+            assert_eq!(cells(&rect), general, "{rect:?}");
+            assert_eq!(cells(&turned), general, "{turned:?}");
+        }
     }
 
     #[test]

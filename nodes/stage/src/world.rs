@@ -600,7 +600,7 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
                 let mut pts = Vec::with_capacity(n);
                 for i in 0..n {
                     let name = format!("point[{i}]");
-                    let (x, y) = match e.props.get(&name) {
+                    let (x, y) = match e.props.get(name.as_str()) {
                         Some(p) if p.values.len() >= 2 => {
                             (p.values[0].num() * r.len, p.values[1].num() * r.len)
                         }
@@ -829,7 +829,7 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
         if kind == Kind::Ranger {
             let n = r.int(e, "scount", 0).max(0) as usize;
             for i in 0..n {
-                let sp = e.props.get(&format!("spose[{i}]"));
+                let sp = e.props.get(format!("spose[{i}]").as_str());
                 let pose = match sp {
                     Some(p) if p.values.len() >= 3 => Pose::new(
                         p.values[0].num() * r.len,
@@ -841,7 +841,7 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
                 };
                 let view = e
                     .props
-                    .get(&format!("sview[{i}]"))
+                    .get(format!("sview[{i}]").as_str())
                     .or_else(|| e.props.get("sview"));
                 let (range, fov) = match view {
                     Some(p) if p.values.len() >= 3 => (
@@ -876,7 +876,7 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
             let mut poly = Vec::new();
             for j in 0..pts {
                 let key = format!("polygon[{i}].point[{j}]");
-                match e.props.get(&key) {
+                match e.props.get(key.as_str()) {
                     Some(p) if p.values.len() >= 2 => {
                         poly.push((p.values[0].num() * r.len, p.values[1].num() * r.len))
                     }
