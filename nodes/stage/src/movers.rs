@@ -125,16 +125,23 @@ impl Body {
     pub fn place_outlined(&mut self, blocks: &[Vec<(f64, f64)>], at: Pose, outline: &Outline) {
         self.polys.resize_with(blocks.len(), Vec::new);
         self.heights.clear();
-        let apply = at.applier();
+        // (As `Pose::applier`, with its sine and cosine kept for the turn.)
+        let (sin, cos) = at.yaw.sin_cos();
+        let apply = |x: f64, y: f64| (at.x + cos * x - sin * y, at.y + sin * x + cos * y);
+        let turn = |x: f64, y: f64| (cos * x - sin * y, sin * x + cos * y);
         for (poly, b) in self.polys.iter_mut().zip(blocks) {
             poly.clear();
             poly.extend(b.iter().map(|&(x, y)| apply(x, y)));
         }
         self.bounds = bounds(self.polys.iter().flatten().copied());
-        self.rect = match &self.polys[..] {
-            [one] => Rect::of(one),
-            _ => None,
-        };
+        // Turns and shifts keep right angles and lengths: the rectangle,
+        // like the circles, is carried from the model's frame.
+        self.rect = outline.rect.map(|r| Rect {
+            c: apply(r.c.0, r.c.1),
+            u: turn(r.u.0, r.u.1),
+            half: r.half,
+            radius: r.radius,
+        });
         let carry = |&(x, y, r): &(f64, f64, f64)| {
             let (x, y) = apply(x, y);
             (x, y, r)
@@ -142,7 +149,7 @@ impl Body {
         self.circle = match self.rect {
             // Centred on the rectangle, so that rays read both from one
             // centre (see [`Shape`]).
-            Some(r) => (r.c.0, r.c.1, pad(r.half.0.hypot(r.half.1))),
+            Some(r) => (r.c.0, r.c.1, r.radius),
             None => carry(&outline.circle),
         };
         self.poly_circles.clear();
@@ -211,6 +218,8 @@ pub struct Outline {
     circle: (f64, f64, f64),
     /// Around each, when there are several (none otherwise).
     polys: Vec<(f64, f64, f64)>,
+    /// The one block as a rectangle, when it is one.
+    rect: Option<Rect>,
 }
 
 impl Outline {
@@ -227,6 +236,10 @@ impl Outline {
         Outline {
             circle: circle_around(blocks, bounds(blocks.iter().flatten().copied())),
             polys,
+            rect: match blocks {
+                [one] => Rect::of(one),
+                _ => None,
+            },
         }
     }
 }
@@ -602,13 +615,15 @@ fn atan2(y: f64, x: f64) -> f64 {
     }
 }
 
-/// A rectangle in the world: its centre, the unit vector along its first
+/// A rectangle (in the world, or in a model's frame): its centre, the unit vector along its first
 /// side, and its half extents along that side and across it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Rect {
     c: (f64, f64),
     u: (f64, f64),
     half: (f64, f64),
+    /// The radius of the circle about `c` through its corners (padded).
+    radius: f64,
 }
 
 impl Rect {
@@ -629,6 +644,7 @@ impl Rect {
             c: ((p0.0 + p2.0) / 2.0, (p0.1 + p2.1) / 2.0),
             u: (a.0 / la, a.1 / la),
             half: (la / 2.0, lb / 2.0),
+            radius: pad((la / 2.0).hypot(lb / 2.0)),
         })
     }
 }
@@ -811,6 +827,35 @@ mod tests {
         }
         // Both hits and misses were tried.
         assert!(met > rays / 4 && met < rays, "{met} of {rays} met");
+    }
+
+    #[test]
+    fn a_rectangle_carried_from_its_frame_is_the_one_its_placed_corners_make() {
+        let blocks = vec![vec![(-0.05, -0.1), (0.35, -0.1), (0.35, 0.1), (-0.05, 0.1)]];
+        let outline = Outline::of(&blocks);
+        assert!(outline.rect.is_some());
+        for k in 0..12 {
+            let at = Pose::new(
+                60.0 - 9.0 * f64::from(k),
+                0.3 * f64::from(k),
+                0.55 * f64::from(k),
+            );
+            let mut b = Body::default();
+            b.place_outlined(&blocks, at, &outline);
+            let (Some(carried), Some(made)) = (b.rect, Rect::of(&b.polys()[0])) else {
+                panic!("no rectangle at {at:?}");
+            };
+            let near = |a: (f64, f64), b: (f64, f64)| (a.0 - b.0).abs() + (a.1 - b.1).abs() < 1e-12;
+            assert!(near(carried.c, made.c) && near(carried.u, made.u), "{at:?}");
+            assert!(near(carried.half, made.half), "{at:?}");
+            let (cx, cy, r) = b.circle();
+            assert!(
+                near((cx, cy), carried.c) && (r - made.radius).abs() < 1e-12,
+                "{at:?}"
+            );
+            // The padded circle still holds every corner placed.
+            assert!(b.polys()[0].iter().all(|p| (p.0 - cx).hypot(p.1 - cy) <= r));
+        }
     }
 
     #[test]
