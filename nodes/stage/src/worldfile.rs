@@ -32,8 +32,9 @@ pub type WorldError = SyntaxError;
 
 /// One value of a property. Its text is shared with the token it was
 /// read from: a macro's body is read again for every model made with it
-/// (Stage's hospital.world: 1000 robots of 13 sections each), and copies
-/// of each word and number were most of the time taken to load.
+/// (Stage's hospital.world: 1000 robots of 13 sections each); copying
+/// each word and number there, and each token read, made its load take
+/// 115 ms where it takes 89.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Val {
     /// A number, as written.
