@@ -158,20 +158,15 @@ impl Lattice {
             }
             return;
         }
-        if let Some([x0, y0, x1, y1]) = upright_rect(pts) {
+        if let Some(rect) = upright_rect(pts) {
             // (Most static bodies: a bitmap's dark runs.) The cells its
             // outline crosses and those whose centres it holds are then
             // the box of cells its corners are in, each reported once.
-            let cell = |v: f64, o: f64| ((v - o) / self.res).floor();
-            let (i0, i1) = (cell(x0, self.x0), cell(x1, self.x0));
-            let (j0, j1) = (cell(y0, self.y0), cell(y1, self.y0));
-            if i1 < 0.0 || j1 < 0.0 || i0 >= self.w as f64 || j0 >= self.h as f64 {
-                return;
-            }
-            let (i1, j1) = ((i1 as usize).min(self.w - 1), (j1 as usize).min(self.h - 1));
-            for j in (j0.max(0.0) as usize)..=j1 {
-                for i in (i0.max(0.0) as usize)..=i1 {
-                    f(i, j);
+            if let Some(((i0, j0), (i1, j1))) = self.cells_of_box(rect) {
+                for j in j0..=j1 {
+                    for i in i0..=i1 {
+                        f(i, j);
+                    }
                 }
             }
             return;

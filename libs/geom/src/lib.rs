@@ -28,5 +28,5 @@ pub use drive::{Body, DiffDrive};
 pub use grid::{Grid, Hit, InTile, Lattice, EMPTY};
 pub use occmap::OccMap;
 pub use odometry::Odometry;
-pub use pose::{bounds, normalize, ray_to_box, Pose};
+pub use pose::{bounds, normalize, ray_to_box, Pose, Transform};
 pub use scene::{Room, Scene};

@@ -68,9 +68,45 @@ impl Pose {
     /// [`Pose::apply`] for many points: the sine and cosine worked out
     /// once.
     pub fn applier(&self) -> impl Fn(f64, f64) -> (f64, f64) + Copy {
+        let t = self.transform();
+        move |x, y| t.point(x, y)
+    }
+
+    /// This pose as a turn and a shift, its sine and cosine worked out
+    /// once: for points ([`Transform::point`], as [`Pose::apply`]) and
+    /// directions, which a shift leaves as they are ([`Transform::turn`]).
+    pub fn transform(&self) -> Transform {
         let (s, c) = self.yaw.sin_cos();
-        let (x0, y0) = (self.x, self.y);
-        move |x, y| (x0 + c * x - s * y, y0 + s * x + c * y)
+        Transform {
+            x0: self.x,
+            y0: self.y,
+            s,
+            c,
+        }
+    }
+}
+
+/// A pose's turn and shift (see [`Pose::transform`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Transform {
+    x0: f64,
+    y0: f64,
+    s: f64,
+    c: f64,
+}
+
+impl Transform {
+    /// A point given in the pose's frame, in the outer frame.
+    #[inline]
+    pub fn point(&self, x: f64, y: f64) -> (f64, f64) {
+        let (s, c) = (self.s, self.c);
+        (self.x0 + c * x - s * y, self.y0 + s * x + c * y)
+    }
+
+    /// A direction given in the pose's frame, in the outer frame.
+    #[inline]
+    pub fn turn(&self, x: f64, y: f64) -> (f64, f64) {
+        (self.c * x - self.s * y, self.s * x + self.c * y)
     }
 }
 

@@ -125,10 +125,8 @@ impl Body {
     pub fn place_outlined(&mut self, blocks: &[Vec<(f64, f64)>], at: Pose, outline: &Outline) {
         self.polys.resize_with(blocks.len(), Vec::new);
         self.heights.clear();
-        // (As `Pose::applier`, with its sine and cosine kept for the turn.)
-        let (sin, cos) = at.yaw.sin_cos();
-        let apply = |x: f64, y: f64| (at.x + cos * x - sin * y, at.y + sin * x + cos * y);
-        let turn = |x: f64, y: f64| (cos * x - sin * y, sin * x + cos * y);
+        let t = at.transform();
+        let apply = |x, y| t.point(x, y);
         for (poly, b) in self.polys.iter_mut().zip(blocks) {
             poly.clear();
             poly.extend(b.iter().map(|&(x, y)| apply(x, y)));
@@ -138,7 +136,7 @@ impl Body {
         // like the circles, is carried from the model's frame.
         self.rect = outline.rect.map(|r| Rect {
             c: apply(r.c.0, r.c.1),
-            u: turn(r.u.0, r.u.1),
+            u: t.turn(r.u.0, r.u.1),
             half: r.half,
             radius: r.radius,
         });
@@ -448,9 +446,7 @@ impl Movers {
             // Branch-free: whether the ray crosses an edge is a coin toss
             // a predictor loses, and a miss costs more than the division.
             let mut crossings = 0u32;
-            let Some(&last) = poly.last() else { continue };
-            let mut a = last;
-            for &b in poly {
+            for (a, b) in edges(poly) {
                 // The ray o + t·d meets the edge a + u·e where t = tn/den
                 // and u = un/den (den turned positive, signs with it).
                 let e = (b.0 - a.0, b.1 - a.1);
@@ -464,7 +460,6 @@ impl Movers {
                 crossings += u32::from(cross);
                 let t = tn / den;
                 best = if cross { best.min(t) } else { best };
-                a = b;
             }
             if crossings % 2 == 1 {
                 // The ray starts inside this polygon.

@@ -372,11 +372,12 @@ pub fn parse(path: &Path) -> Result<WorldFile, WorldError> {
     let world_dir = path.parent().unwrap_or(Path::new(".")).to_owned();
     let mut toks = Vec::new();
     lex_file(path, &world_dir, &mut toks, 0, None)?;
+    let none: Arc<str> = Arc::from("");
     let texts = toks
         .iter()
         .map(|t| match &t.tok {
             Tok::Word(s) | Tok::Num(s) | Tok::Str(s) => Arc::from(s.as_str()),
-            _ => Arc::from(""),
+            _ => none.clone(),
         })
         .collect();
     let mut p = Parser {
