@@ -518,9 +518,22 @@ impl Grid {
         lo: (usize, usize),
         hi: (usize, usize),
     ) -> impl Iterator<Item = usize> + Clone + '_ {
-        let (c0, r0) = (lo.0 / TILE, lo.1 / TILE);
-        let (c1, r1) = (hi.0 / TILE, hi.1 / TILE);
-        (r0..=r1).flat_map(move |r| (c0..=c1).map(move |c| r * self.tw + c))
+        self.tile_box(lo, hi).tiles(self.tw)
+    }
+
+    /// The box of tiles holding the cells of the box from `lo` to `hi`
+    /// (corners included).
+    pub fn tile_box(&self, lo: (usize, usize), hi: (usize, usize)) -> TileBox {
+        TileBox {
+            lo: (lo.0 / TILE, lo.1 / TILE),
+            hi: (hi.0 / TILE, hi.1 / TILE),
+        }
+    }
+
+    /// How many tiles a row of the grid has: [`TileBox::tiles`] numbers
+    /// tiles by it.
+    pub fn tiles_wide(&self) -> usize {
+        self.tw
     }
 
     /// How many tiles the grid has.
@@ -787,6 +800,26 @@ impl Grid {
             hi,
             v_in0: (((gv + dv * t0) * ONE) as i64).clamp(0, top),
         })
+    }
+}
+
+/// A box of tiles (columns and rows, both corners included), as
+/// [`Grid::tile_box`] finds it: what a body's cells span, which changes far
+/// less often than the cells.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TileBox {
+    /// The first column and row.
+    pub lo: (usize, usize),
+    /// The last column and row.
+    pub hi: (usize, usize),
+}
+
+impl TileBox {
+    /// Its tiles' numbers (as [`Grid::cast_with`] names tiles) in a grid
+    /// `tw` tiles wide, row by row.
+    pub fn tiles(self, tw: usize) -> impl Iterator<Item = usize> + Clone {
+        let TileBox { lo, hi } = self;
+        (lo.1..=hi.1).flat_map(move |r| (lo.0..=hi.0).map(move |c| r * tw + c))
     }
 }
 

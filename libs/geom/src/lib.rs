@@ -25,7 +25,7 @@ pub mod raster;
 mod scene;
 
 pub use drive::{Body, DiffDrive};
-pub use grid::{Grid, Hit, InTile, Lattice, EMPTY};
+pub use grid::{Grid, Hit, InTile, Lattice, TileBox, EMPTY};
 pub use occmap::OccMap;
 pub use odometry::Odometry;
 pub use pose::{bounds, normalize, ray_to_box, Pose, Transform};

@@ -14,7 +14,7 @@
 //! bodies of its runs. The ray then walks the static grid only up to the
 //! nearest, and without stopping at every tile to ask what is filed there.
 
-use troupe_geom::{bounds, Hit, Pose};
+use troupe_geom::{bounds, Hit, Pose, TileBox};
 
 /// The polygons of every moving body, filed by tile.
 #[derive(Debug, Clone, Default)]
@@ -24,8 +24,10 @@ pub struct Movers {
     /// What rays read of each body (see [`Shape`]), side by side: a cache
     /// line a body where a `Body` spans four.
     shapes: Vec<Shape>,
-    /// The tiles each model is filed under.
-    tiles_of: Vec<Vec<usize>>,
+    /// The box of tiles each model is filed under.
+    boxes: Vec<Option<TileBox>>,
+    /// How many tiles a row has ([`TileBox::tiles`] numbers them by it).
+    tw: usize,
     /// Model ids (index + 1) filed under each tile.
     filed: Vec<Filed>,
     /// The ids of tiles that hold more than [`INLINE`] (see [`Filed`]).
@@ -244,11 +246,13 @@ impl Outline {
 
 impl Movers {
     /// Room for `models` models over a grid of `tiles` tiles.
-    pub fn new(models: usize, tiles: usize) -> Self {
+    /// Room for `models` models, in `tiles` tiles in rows `tw` wide.
+    pub fn new(models: usize, tw: usize, tiles: usize) -> Self {
         Movers {
             bodies: vec![Body::default(); models],
             shapes: vec![Shape::of(&Body::default()); models],
-            tiles_of: vec![Vec::new(); models],
+            boxes: vec![None; models],
+            tw: tw.max(1),
             filed: vec![Filed::default(); tiles],
             spilled: Vec::new(),
             free: Vec::new(),
@@ -256,27 +260,24 @@ impl Movers {
         }
     }
 
-    /// Files model `m` (id `id`), whose body is `body`, under `tiles` (each
-    /// once), replacing where it was. The body is swapped in, not copied: `body` gets the last
-    /// filing's buffers back for the next, so a body that moves every step
-    /// allocates nothing, and whoever placed it worked out its circle.
-    pub fn file<T>(&mut self, m: usize, id: u16, body: &mut Body, tiles: T)
-    where
-        T: IntoIterator<Item = usize>,
-        T::IntoIter: Clone,
-    {
-        let tiles = tiles.into_iter();
-        if !tiles.clone().eq(self.tiles_of[m].iter().copied()) {
+    /// Files model `m` (id `id`), whose body is `body`, under the box of
+    /// `tiles` (none: under no tile), replacing where it was. The body is
+    /// swapped in, not copied: `body` gets the last filing's buffers back
+    /// for the next, so a body that moves every step allocates nothing, and
+    /// whoever placed it worked out its circle.
+    pub fn file(&mut self, m: usize, id: u16, body: &mut Body, tiles: Option<TileBox>) {
+        // Most steps a body stays in its tiles: only its shape moved.
+        if tiles != self.boxes[m] {
             self.untile(m, id);
-            for t in tiles {
+            let tw = self.tw;
+            for t in tiles.into_iter().flat_map(|b| b.tiles(tw)) {
                 if t < self.filed.len() {
                     self.push(t, id);
                     self.busy[t / 64] |= 1 << (t % 64);
                 }
-                self.tiles_of[m].push(t);
             }
+            self.boxes[m] = tiles;
         }
-        // (Most steps a body stays in its tiles: only its shape moved.)
         std::mem::swap(&mut self.bodies[m], body);
         self.shapes[m] = Shape::of(&self.bodies[m]);
     }
@@ -295,15 +296,12 @@ impl Movers {
 
     /// Takes model `m` (id `id`) out of every tile, keeping its shape.
     fn untile(&mut self, m: usize, id: u16) {
-        // (Taken out while `remove` borrows the rest; its buffer goes back.)
-        let mut tiles = std::mem::take(&mut self.tiles_of[m]);
-        for &t in &tiles {
+        let tw = self.tw;
+        for t in self.boxes[m].take().into_iter().flat_map(|b| b.tiles(tw)) {
             if t < self.filed.len() && self.remove(t, id) {
                 self.busy[t / 64] &= !(1 << (t % 64));
             }
         }
-        tiles.clear();
-        self.tiles_of[m] = tiles;
     }
 
     /// Files `id` under tile `t`, after those there.
@@ -752,6 +750,14 @@ fn inside(poly: &[(f64, f64)], p: (f64, f64)) -> bool {
 mod tests {
     use super::*;
 
+    /// Tile `t` of a row of tiles.
+    fn one(t: usize) -> Option<TileBox> {
+        Some(TileBox {
+            lo: (t, 0),
+            hi: (t, 0),
+        })
+    }
+
     fn shape(polys: Vec<Vec<(f64, f64)>>) -> Body {
         let mut b = Body::default();
         b.place(&polys, Pose::default());
@@ -796,9 +802,9 @@ mod tests {
             for (poly, &c) in b.polys().iter().zip(&b.poly_circles) {
                 assert!(poly.iter().all(|&p| inside(p, c) && inside(p, b.circle())));
             }
-            let mut m = Movers::new(2, 1);
-            m.file(0, 1, &mut a, vec![0]);
-            m.file(1, 2, &mut b, vec![0]);
+            let mut m = Movers::new(2, 1, 1);
+            m.file(0, 1, &mut a, one(0));
+            m.file(1, 2, &mut b, one(0));
             for j in 0..72 {
                 // From a ring of points 2 m out, aimed past the body's
                 // middle by up to 0.45 m either side.
@@ -856,10 +862,10 @@ mod tests {
     #[test]
     fn a_crowded_tile_keeps_its_ids_in_order_in_a_list_and_back_in_place() {
         let n = INLINE + 3;
-        let mut m = Movers::new(n, 2);
+        let mut m = Movers::new(n, 2, 2);
         for k in 0..n {
             let id = k as u16 + 1;
-            m.file(k, id, &mut shape(vec![square(k as f64, 0.0, 0.4)]), vec![1]);
+            m.file(k, id, &mut shape(vec![square(k as f64, 0.0, 0.4)]), one(1));
         }
         let all: Vec<u16> = (1..=n as u16).collect();
         assert_eq!(m.in_tile(1), all.as_slice());
@@ -878,7 +884,7 @@ mod tests {
                 k,
                 k as u16 + 1,
                 &mut shape(vec![square(0.0, 0.0, 0.1)]),
-                vec![1],
+                one(1),
             );
         }
         assert_eq!(m.in_tile(1).len(), 10);
@@ -891,8 +897,8 @@ mod tests {
 
     #[test]
     fn bodies_overlap_when_they_cross_or_contain() {
-        let mut m = Movers::new(2, 1);
-        m.file(0, 1, &mut shape(vec![square(0.0, 0.0, 0.5)]), vec![0]);
+        let mut m = Movers::new(2, 1, 1);
+        m.file(0, 1, &mut shape(vec![square(0.0, 0.0, 0.5)]), one(0));
         assert!(
             m.overlaps(0, &shape(vec![square(0.9, 0.0, 0.5)])),
             "edges cross"
@@ -918,10 +924,15 @@ mod tests {
 
     #[test]
     fn rays_meet_filed_bodies_exactly() {
-        let mut m = Movers::new(3, 4);
-        m.file(1, 2, &mut shape(vec![square(2.0, 0.0, 0.5)]), vec![3, 1]);
-        assert_eq!(m.in_tile(3), &[2]);
-        assert_eq!(m.in_tile(1), &[2]);
+        let mut m = Movers::new(3, 4, 4);
+        let tiles = TileBox {
+            lo: (1, 0),
+            hi: (3, 0),
+        };
+        m.file(1, 2, &mut shape(vec![square(2.0, 0.0, 0.5)]), Some(tiles));
+        for t in 1..=3 {
+            assert_eq!(m.in_tile(t), &[2]);
+        }
         assert!(m.in_tile(0).is_empty() && m.in_tile(99).is_empty());
         let h = hit(&m, 1, 2, (0.0, 0.0), (1.0, 0.0)).unwrap();
         assert!((h.range - 1.5).abs() < 1e-12 && h.id == 2);
@@ -936,8 +947,12 @@ mod tests {
         assert!(hit(&m, 1, 2, (0.0, 0.0), (-1.0, 0.0)).is_none(), "behind");
         assert!(hit(&m, 1, 2, (0.0, 0.0), (0.0, 1.0)).is_none(), "beside");
         assert_eq!(hit(&m, 1, 2, (2.1, 0.2), (1.0, 0.0)).unwrap().range, 0.0);
+        // Moved within its box of tiles: filed where it was, met where it is.
+        m.file(1, 2, &mut shape(vec![square(2.5, 0.0, 0.5)]), Some(tiles));
+        assert!((1..=3).all(|t| m.in_tile(t) == [2]) && m.in_tile(0).is_empty());
+        assert!((hit(&m, 1, 2, (0.0, 0.0), (1.0, 0.0)).unwrap().range - 2.0).abs() < 1e-12);
         // Moving re-files; unfiling empties the tiles.
-        m.file(1, 2, &mut shape(vec![square(5.0, 0.0, 0.5)]), vec![0]);
+        m.file(1, 2, &mut shape(vec![square(5.0, 0.0, 0.5)]), one(0));
         assert!(m.in_tile(3).is_empty() && m.in_tile(0) == [2]);
         assert!((hit(&m, 1, 2, (0.0, 0.0), (1.0, 0.0)).unwrap().range - 4.5).abs() < 1e-12);
         m.unfile(1, 2);
@@ -954,8 +969,8 @@ mod tests {
         clockwise.reverse();
         let kite = vec![(1.0, 0.2), (1.9, 0.5), (1.5, 1.2), (0.7, 0.8)];
         for (body, is_rect) in [(rect, true), (clockwise, true), (kite, false)] {
-            let mut m = Movers::new(1, 1);
-            m.file(0, 1, &mut shape(vec![body.clone()]), vec![0]);
+            let mut m = Movers::new(1, 1, 1);
+            m.file(0, 1, &mut shape(vec![body.clone()]), one(0));
             assert_eq!(m.bodies[0].rect.is_some(), is_rect, "{body:?}");
             let mut x: u32 = 3;
             let mut rnd = || {
@@ -996,8 +1011,8 @@ mod tests {
 
     #[test]
     fn a_ray_along_a_rectangles_side_line_is_judged_by_its_offset() {
-        let mut m = Movers::new(1, 1);
-        m.file(0, 1, &mut shape(vec![square(2.0, 0.0, 0.5)]), vec![0]);
+        let mut m = Movers::new(1, 1, 1);
+        m.file(0, 1, &mut shape(vec![square(2.0, 0.0, 0.5)]), one(0));
         assert!(m.bodies[0].rect.is_some());
         // Parallel to the sides: through the middle, just inside and just
         // outside the side at y = 0.5.
@@ -1043,14 +1058,14 @@ mod tests {
         let mut sweep = Sweep::default();
         let (mut offered, mut needed) = (0, 0);
         for round in 0..300 {
-            let mut m = Movers::new(40, 1);
+            let mut m = Movers::new(40, 1, 1);
             for k in 0..40 {
                 let (cx, cy) = (rnd() * 12.0 - 6.0, rnd() * 12.0 - 6.0);
                 m.file(
                     k,
                     k as u16 + 1,
                     &mut shape(vec![square(cx, cy, 0.05 + rnd() * 0.4)]),
-                    vec![0],
+                    one(0),
                 );
             }
             let n = 2 + (rnd() * 200.0) as usize;

@@ -442,7 +442,7 @@ impl Sim {
             written_at: vec![None; n],
             raster: None,
             drawn: vec![Vec::new(); n],
-            movers: Movers::new(n, statics.tile_count()),
+            movers: Movers::new(n, statics.tiles_wide(), statics.tile_count()),
             statics,
             extent,
         };

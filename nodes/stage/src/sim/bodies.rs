@@ -123,10 +123,7 @@ impl Sim {
     pub(super) fn file(&mut self, body: &mut Placed) {
         let m = body.model;
         self.draw_moving(m, body);
-        let tiles = body
-            .cells
-            .into_iter()
-            .flat_map(|(lo, hi)| self.statics.tiles_of_box(lo, hi));
+        let tiles = body.cells.map(|(lo, hi)| self.statics.tile_box(lo, hi));
         self.movers.file(m, id(m), &mut body.body, tiles);
     }
 
