@@ -89,10 +89,15 @@ pub struct Entity {
     /// Children in file order (base macros' children first).
     pub children: Vec<usize>,
     /// Properties by name.
-    pub props: HashMap<Arc<str>, Prop>,
+    pub props: Props,
     /// Where the instance was written.
     pub pos: Pos,
 }
+
+/// An entity's properties by name. Hashed with foldhash rather than std's
+/// SipHash: a world file is the user's own, not an attacker's, and the
+/// hospital's thousand robots insert some fifteen properties each.
+pub type Props = HashMap<Arc<str>, Prop, foldhash::fast::RandomState>;
 
 /// A parsed world file: entities in pre-order, 0 being the global section.
 #[derive(Debug, Clone)]
@@ -281,7 +286,7 @@ impl Parser {
             macro_name: (seen.len() > 1).then(|| word.to_owned()),
             parent,
             children: Vec::new(),
-            props: HashMap::new(),
+            props: Props::default(),
             pos: at.clone(),
         });
         if let Some(p) = parent {
@@ -389,7 +394,7 @@ pub fn parse(path: &Path) -> Result<WorldFile, WorldError> {
             macro_name: None,
             parent: None,
             children: Vec::new(),
-            props: HashMap::new(),
+            props: Props::default(),
             pos: Pos::start(path),
         }],
     };
