@@ -11,6 +11,33 @@ use crate::error::{NodeError, Result};
 /// router of `troupe launch`, or `troupe router` on this host.
 pub const DEFAULT_ROUTER: &str = "tcp/127.0.0.1:7447";
 
+/// Where a peer listens when its router is on this host and nothing else
+/// is said: loopback, on a port of the system's choosing.
+const LOOPBACK_ANY: &str = "tcp/127.0.0.1:0";
+
+/// Whether a Zenoh endpoint (`tcp/127.0.0.1:7447`, `tls/localhost:7447`,
+/// `tcp/[::1]:7447`, `unixsock-stream/…`) is on this host: a loopback
+/// address, `localhost`, or a Unix socket.
+fn on_this_host(endpoint: &str) -> bool {
+    let Some((proto, rest)) = endpoint.split_once('/') else {
+        return false;
+    };
+    if proto.starts_with("unixsock") {
+        return true;
+    }
+    // The address, without Zenoh's `?metadata` or `#config`.
+    let addr = rest.split(['?', '#']).next().unwrap_or(rest);
+    let host = match addr.rsplit_once(':') {
+        Some((host, _port)) => host,
+        None => addr,
+    };
+    let host = host.trim_start_matches('[').trim_end_matches(']');
+    host.eq_ignore_ascii_case("localhost")
+        || host
+            .parse::<std::net::IpAddr>()
+            .is_ok_and(|ip| ip.is_loopback())
+}
+
 /// Zenoh's session modes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum Mode {
@@ -57,9 +84,17 @@ pub struct ZenohArgs {
     #[arg(long, value_name = "FILE", global = true)]
     pub zenoh_config: Option<PathBuf>,
 
-    /// Turn off multicast scouting: find others only through --connect.
-    #[arg(long, global = true)]
+    /// Turn off multicast scouting: find others only through --connect
+    /// (the default unless a --zenoh-config file turns it on; kept for
+    /// scripts and compose files that say it).
+    #[arg(long, global = true, conflicts_with = "multicast")]
     pub no_multicast: bool,
+
+    /// Scout for Zenoh peers and routers by UDP multicast on the LAN, as
+    /// Zenoh does by default. Off unless asked: the router answers for
+    /// every process of a stack, and nothing of it leaks onto the LAN.
+    #[arg(long, global = true)]
+    pub multicast: bool,
 
     /// Keep trying the --connect endpoints until they answer, at start-up and
     /// whenever a link drops (every 0.25 s, backing off to 1 s), instead of
@@ -118,18 +153,40 @@ impl ZenohArgs {
             } else {
                 self.connect.clone()
             };
+        // Multicast scouting: off unless asked for (or a config file turns
+        // it on), so that a stack on this host stays off the LAN.
+        let multicast = match (self.multicast, self.no_multicast) {
+            (true, _) => Some(true),
+            (false, true) => Some(false),
+            (false, false) if self.zenoh_config.is_none() => Some(false),
+            (false, false) => None,
+        };
         if !connect.is_empty() {
             set(&mut c, "connect/endpoints", json_list(&connect))?;
-        } else if self.no_multicast && self.zenoh_config.is_none() {
+        } else if multicast == Some(false) && self.zenoh_config.is_none() {
             // Nobody to scout for or connect to: Zenoh's start-up wait
             // (500 ms for a router) would only delay the first node.
             set(&mut c, "scouting/delay", "0".into())?;
         }
         if !self.listen.is_empty() {
             set(&mut c, "listen/endpoints", json_list(&self.listen))?;
+        } else if mode == Mode::Peer
+            && self.zenoh_config.is_none()
+            && connect.iter().all(|e| on_this_host(e))
+        {
+            // A peer listens for the peers its router tells it of (Zenoh's
+            // default: on every interface); when that router is on this
+            // host, so are they, and loopback will do.
+            set(
+                &mut c,
+                "listen/endpoints",
+                json_list(&[LOOPBACK_ANY.into()]),
+            )?;
         }
-        if self.no_multicast {
-            set(&mut c, "scouting/multicast/enabled", "false".into())?;
+        if let Some(on) = multicast {
+            set(&mut c, "scouting/multicast/enabled", on.to_string())?;
+        }
+        if multicast == Some(false) {
             // Without multicast there is nothing to scout: don't wait for it.
             set(
                 &mut c,
@@ -274,6 +331,9 @@ impl ZenohArgs {
         }
         if self.no_multicast {
             v.push("--no-multicast".to_owned());
+        }
+        if self.multicast {
+            v.push("--multicast".to_owned());
         }
         if let Some(m) = self.mode {
             v.extend(["--mode".to_owned(), m.as_str().to_owned()]);
@@ -611,6 +671,77 @@ mod tests {
         assert_eq!(
             d.get_json("connect/endpoints").unwrap(),
             format!("[\"{DEFAULT_ROUTER}\"]")
+        );
+    }
+
+    #[test]
+    fn nothing_scouts_the_lan_and_a_peer_of_a_local_router_listens_on_loopback() {
+        let listen = |c: &Config| c.get_json("listen/endpoints").unwrap();
+        let multicast = |c: &Config| c.get_json("scouting/multicast/enabled").unwrap();
+        // No flags: the default router, on this host.
+        let d = ZenohArgs::default().config(Mode::Peer).unwrap();
+        assert_eq!(multicast(&d), "false");
+        assert_eq!(listen(&d), r#"["tcp/127.0.0.1:0"]"#);
+        let client = ZenohArgs::default().config(Mode::Client).unwrap();
+        assert_eq!(multicast(&client), "false");
+        assert_ne!(
+            listen(&client),
+            listen(&d),
+            "a client is left as Zenoh has it"
+        );
+        // A router elsewhere: its other peers must reach this one.
+        let remote = ZenohArgs {
+            connect: vec!["tcp/10.1.2.3:7447".into()],
+            ..Default::default()
+        };
+        let r = remote.config(Mode::Peer).unwrap();
+        assert_ne!(listen(&r), listen(&d));
+        assert_eq!(multicast(&r), "false");
+        // Asked for: multicast; said: the listener.
+        let asked = ZenohArgs {
+            multicast: true,
+            listen: vec!["tcp/127.0.0.1:7000".into()],
+            ..Default::default()
+        };
+        let a = asked.config(Mode::Peer).unwrap();
+        assert_eq!(multicast(&a), "true");
+        assert_eq!(listen(&a), r#"["tcp/127.0.0.1:7000"]"#);
+        assert!(asked.to_child_args().contains(&"--multicast".to_owned()));
+        for (endpoint, here) in [
+            ("tcp/127.0.0.1:7447", true),
+            ("tcp/localhost:7447", true),
+            ("tls/LOCALHOST:7447", true),
+            ("tcp/[::1]:7447", true),
+            ("tcp/127.0.0.1:7447#iface=lo", true),
+            ("unixsock-stream//tmp/zenoh.sock", true),
+            ("tcp/10.1.2.3:7447", false),
+            ("tcp/router:7447", false),
+            ("tcp/[::]:7447", false),
+            ("tcp", false),
+        ] {
+            assert_eq!(on_this_host(endpoint), here, "{endpoint}");
+        }
+    }
+
+    #[test]
+    fn a_peer_beside_a_router_on_this_host_is_reachable_on_loopback_only() {
+        let router = ZenohArgs {
+            listen: vec![LOOPBACK_ANY.into()],
+            ..Default::default()
+        }
+        .open(Mode::Router)
+        .unwrap();
+        let endpoint = locators(&router).into_iter().next().unwrap();
+        let peer = ZenohArgs {
+            connect: vec![endpoint],
+            ..Default::default()
+        }
+        .open(Mode::Peer)
+        .unwrap();
+        let at = locators(&peer);
+        assert!(
+            !at.is_empty() && at.iter().all(|l| l.starts_with("tcp/127.0.0.1:")),
+            "{at:?}"
         );
     }
 
