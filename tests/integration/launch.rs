@@ -50,6 +50,25 @@ fn children(parent: u32, word: &str) -> Vec<u32> {
     out
 }
 
+/// Waits until the tokens of `n` distinct devices have come on `tokens`
+/// (from [`token_events`]), by `deadline`.
+fn until_up(
+    tokens: &troupe_node::zenoh::pubsub::Subscriber<
+        troupe_node::zenoh::handlers::FifoChannelHandler<troupe_node::zenoh::sample::Sample>,
+    >,
+    n: usize,
+    deadline: Instant,
+) {
+    let mut up = std::collections::BTreeSet::new();
+    while up.len() < n {
+        let t = tokens
+            .recv_deadline(deadline)
+            .unwrap()
+            .unwrap_or_else(|| panic!("{n} devices up (only {up:?})"));
+        up.insert(t.key_expr().to_string());
+    }
+}
+
 /// True once `pid` is gone (or a zombie), within the deadline.
 fn gone(pid: u32) -> bool {
     let deadline = Instant::now() + DEADLINE;
@@ -71,14 +90,7 @@ fn launch_runs_the_stack_restarts_a_killed_node_and_stops_cleanly() {
     let s = client_at(&endpoint, &ns);
     let tokens = token_events(&s);
     let deadline = Instant::now() + DEADLINE;
-    let mut up = std::collections::BTreeSet::new();
-    while up.len() < 2 {
-        let t = tokens
-            .recv_deadline(deadline)
-            .unwrap()
-            .expect("both devices come up");
-        up.insert(t.key_expr().to_string());
-    }
+    until_up(&tokens, 2, deadline);
 
     let net = strings(&["--connect", &endpoint, "--namespace", &ns, "--no-multicast"]);
     let mut list = net.clone();
@@ -449,14 +461,7 @@ fn a_launch_and_its_viewers_listen_on_this_host_only() {
     }
     let s = client_at(&router.unwrap(), &ns);
     let tokens = token_events(&s);
-    let mut up = std::collections::BTreeSet::new();
-    while up.len() < 2 {
-        let t = tokens
-            .recv_deadline(deadline)
-            .unwrap()
-            .expect("both devices up");
-        up.insert(t.key_expr().to_string());
-    }
+    until_up(&tokens, 2, deadline);
 
     let pid = launcher.child.id();
     let mut pids = children(pid, "troupe");

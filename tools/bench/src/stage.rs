@@ -101,17 +101,7 @@ pub fn run(a: &StageBenchArgs) -> anyhow::Result<()> {
         );
         return run_world(a, &name, world, t_load, &what, false);
     }
-    let bitmaps = a
-        .bitmaps
-        .clone()
-        .unwrap_or_else(|| std::path::PathBuf::from("../shared/compat/stage/bitmaps"));
-    let bitmaps = match bitmaps.canonicalize() {
-        Ok(b) if b.join("cave.png").exists() => b,
-        _ => anyhow::bail!(
-            "no Stage bitmaps at {} (cave.png, hospital_section.png); pass --bitmaps DIR",
-            bitmaps.display()
-        ),
-    };
+    let bitmaps = crate::harness::stage_bitmaps(a.bitmaps.as_deref())?;
     if let Some(name) = &a.only {
         let (text, what) = bench_world(name, &bitmaps, a.threads)?;
         let dir = std::env::temp_dir().join(format!("troupe-bench-stage-{}", std::process::id()));
