@@ -24,7 +24,8 @@ pub struct Crew {
     pool: Option<rayon::ThreadPool>,
     /// Where each thread's bases start, then the number of bases.
     bases: Vec<usize>,
-    /// The rangers, each thread's together, most rays first within each.
+    /// The rangers, each thread's together, fewest rays first within each
+    /// (a thread senses its own from the last: the most rays first).
     rangers: Vec<usize>,
     /// Where each thread's rangers start in `rangers`, then their number.
     ranger_starts: Vec<usize>,
@@ -86,7 +87,7 @@ impl Crew {
             .map(|t| owners.partition_point(|&o| o < t))
             .collect();
         let mut order: Vec<usize> = (0..jobs.len()).collect();
-        order.sort_by_key(|&k| (owners[unit[k]], std::cmp::Reverse(jobs[k].rays)));
+        order.sort_by_key(|&k| (owners[unit[k]], jobs[k].rays));
         let mut ranger_starts = vec![0; threads + 1];
         for &u in &unit {
             ranger_starts[owners[u] + 1] += 1;
@@ -112,14 +113,17 @@ impl Crew {
         &self.rangers
     }
 
-    /// The bases to plan this step, dealt.
+    /// The bases to plan this step, dealt: each thread's from its first.
     pub fn bases_to_plan(&self) -> Shares<'_> {
-        Shares::new(self, &self.bases)
+        Shares::new(self, &self.bases, false)
     }
 
-    /// Positions in [`Crew::rangers`] to sense this step, dealt.
+    /// Positions in [`Crew::rangers`] to sense this step, dealt: each
+    /// thread's from its last, so that the robots its plans take first
+    /// next step are the ones it sensed last, still in its caches (and
+    /// the first it senses are the last moved).
     pub fn rangers_to_sense(&self) -> Shares<'_> {
-        Shares::new(self, &self.ranger_starts)
+        Shares::new(self, &self.ranger_starts, true)
     }
 
     /// Runs `main` on the calling thread and `helper` on each other thread
@@ -183,22 +187,28 @@ impl Drop for Done<'_> {
 }
 
 /// Items dealt in shares, one per thread of a [`Crew`]: a thread takes its
-/// own from the front, then the others' from the back.
+/// own from one end (the front, or the back when `backward`), then the
+/// others' from the other end.
 pub struct Shares<'a> {
     crew: &'a Crew,
     /// Per share, its front and back packed in one word.
     left: Vec<AtomicU64>,
+    backward: bool,
 }
 
 impl<'a> Shares<'a> {
     /// Share `t` is `starts[t]..starts[t + 1]`.
-    fn new(crew: &'a Crew, starts: &[usize]) -> Shares<'a> {
+    fn new(crew: &'a Crew, starts: &[usize], backward: bool) -> Shares<'a> {
         let pack = |front: usize, back: usize| ((front as u64) << 32) | back as u64;
         let left = starts
             .windows(2)
             .map(|s| AtomicU64::new(pack(s[0], s[1])))
             .collect();
-        Shares { crew, left }
+        Shares {
+            crew,
+            left,
+            backward,
+        }
     }
 
     /// The next item for the calling thread, or `None` when all are taken.
@@ -213,7 +223,7 @@ impl<'a> Shares<'a> {
                 if front >= back {
                     return None;
                 }
-                let (next, item) = if k == 0 {
+                let (next, item) = if (k == 0) != self.backward {
                     (now + (1 << 32), front)
                 } else {
                     (now - 1, back - 1)
@@ -248,7 +258,7 @@ mod tests {
         assert_eq!(crew.threads(), 2);
         assert_eq!(crew.bases, [0, 2, 4]);
         // Thread 0: robots 0 and 1; thread 1: robots 2 and 3, then the loose one.
-        assert_eq!(crew.rangers, [20, 21, 10, 11, 22, 23, 30, 12, 13]);
+        assert_eq!(crew.rangers, [10, 11, 20, 21, 12, 13, 30, 22, 23]);
         assert_eq!(crew.ranger_starts, [0, 4, 9]);
     }
 
@@ -264,19 +274,22 @@ mod tests {
         );
         let sense = crew.rangers_to_sense();
         let got: Vec<usize> = std::iter::from_fn(|| sense.take()).collect();
-        assert_eq!(got, [0, 1, 2, 3, 4]);
-        assert_eq!(crew.rangers, [4, 3, 2, 1, 0], "most rays first");
+        assert_eq!(got, [4, 3, 2, 1, 0], "its own from the last");
+        assert_eq!(crew.rangers, [0, 1, 2, 3, 4], "fewest rays first");
     }
 
     #[test]
-    fn a_thread_done_with_its_share_takes_the_others_from_the_back() {
+    fn a_thread_done_with_its_share_takes_the_others_from_the_other_end() {
         // The calling thread counts as thread 0.
         let crew = Crew::default();
-        let shares = Shares::new(&crew, &[0, 2, 5]);
+        let shares = Shares::new(&crew, &[0, 2, 5], false);
         let got: Vec<usize> = std::iter::from_fn(|| shares.take()).collect();
         assert_eq!(got, [0, 1, 4, 3, 2]);
-        assert_eq!(Shares::new(&crew, &[]).take(), None);
-        assert_eq!(Shares::new(&crew, &[3, 3]).take(), None);
+        let shares = Shares::new(&crew, &[0, 2, 5], true);
+        let got: Vec<usize> = std::iter::from_fn(|| shares.take()).collect();
+        assert_eq!(got, [1, 0, 2, 3, 4]);
+        assert_eq!(Shares::new(&crew, &[], false).take(), None);
+        assert_eq!(Shares::new(&crew, &[3, 3], true).take(), None);
     }
 
     #[test]
