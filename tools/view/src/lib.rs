@@ -619,15 +619,34 @@ fn take(shared: &Shared, dev: Device, payload: &[u8]) {
     }
 }
 
-/// Asks the simulator of `sim` for its world and keeps it.
+/// How many times the view asks a simulator for its world, a second
+/// apart, before it gives up.
+const WORLD_ASKS: u32 = 5;
+
+/// Asks the simulator of `sim` for its world and keeps it. A simulator's
+/// token can reach this session before its queryable does (declarations
+/// travel apart), and an ask that finds no queryable gets nothing: it asks
+/// again, while the simulator is listed.
 async fn fetch_world(session: troupe_node::zenoh::Session, shared: Arc<Shared>, sim: Device) {
-    match request(&session, sim, &simulation::GetWorld).await {
-        Ok(w) => {
-            tracing::info!("{sim}: a world of {} models", w.models.len());
-            shared.latest().worlds.insert(sim, w);
-            shared.touch();
+    for ask in 1..=WORLD_ASKS {
+        match request(&session, sim, &simulation::GetWorld).await {
+            Ok(w) => {
+                tracing::info!("{sim}: a world of {} models", w.models.len());
+                shared.latest().worlds.insert(sim, w);
+                shared.touch();
+                return;
+            }
+            Err(e) if ask == WORLD_ASKS => {
+                tracing::warn!("no world from {sim} (not a Troupe simulator?): {e}");
+            }
+            Err(e) => {
+                tracing::debug!("no world from {sim} yet ({e}); asking again");
+                tokio::time::sleep(Duration::from_secs(1)).await;
+                if !shared.latest().devices.contains_key(&sim) {
+                    return;
+                }
+            }
         }
-        Err(e) => tracing::warn!("no world from {sim} (not a Troupe simulator?): {e}"),
     }
 }
 
