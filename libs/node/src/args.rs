@@ -155,11 +155,13 @@ impl ZenohArgs {
             };
         // Multicast scouting: off unless asked for (or a config file turns
         // it on), so that a stack on this host stays off the LAN.
-        let multicast = match (self.multicast, self.no_multicast) {
-            (true, _) => Some(true),
-            (false, true) => Some(false),
-            (false, false) if self.zenoh_config.is_none() => Some(false),
-            (false, false) => None,
+        // (`None`: as the file has it.)
+        let multicast = if self.multicast {
+            Some(true)
+        } else if self.no_multicast || self.zenoh_config.is_none() {
+            Some(false)
+        } else {
+            None
         };
         if !connect.is_empty() {
             set(&mut c, "connect/endpoints", json_list(&connect))?;

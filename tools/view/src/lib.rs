@@ -619,36 +619,21 @@ fn take(shared: &Shared, dev: Device, payload: &[u8]) {
     }
 }
 
-/// How many times the view asks a simulator for its world, a second
-/// apart, before it gives up.
-const WORLD_ASKS: u32 = 5;
-
-/// Asks the simulator of `sim` for its world and keeps it. A simulator's
-/// token can reach this session before its queryable does (declarations
-/// travel apart), and an ask that finds no queryable gets nothing: it asks
-/// again, while the simulator is listed.
+/// Asks the simulator of `sim` for its world and keeps it.
 async fn fetch_world(session: troupe_node::zenoh::Session, shared: Arc<Shared>, sim: Device) {
-    for ask in 1..=WORLD_ASKS {
-        match request(&session, sim, &simulation::GetWorld).await {
-            Ok(w) => {
-                tracing::info!("{sim}: a world of {} models", w.models.len());
-                shared.latest().worlds.insert(sim, w);
-                shared.touch();
-                return;
-            }
-            Err(e) if ask == WORLD_ASKS => {
-                tracing::warn!("no world from {sim} (not a Troupe simulator?): {e}");
-            }
-            Err(e) => {
-                tracing::debug!("no world from {sim} yet ({e}); asking again");
-                tokio::time::sleep(Duration::from_secs(1)).await;
-                if !shared.latest().devices.contains_key(&sim) {
-                    return;
-                }
-            }
+    match request_on_arrival(&session, sim, &simulation::GetWorld).await {
+        Ok(w) => {
+            tracing::info!("{sim}: a world of {} models", w.models.len());
+            shared.latest().worlds.insert(sim, w);
+            shared.touch();
         }
+        Err(e) => tracing::warn!("no world from {sim} (not a Troupe simulator?): {e}"),
     }
 }
+
+/// How many times a device just come is asked before it counts as not
+/// answering, a second apart (see [`request_on_arrival`]).
+const ARRIVAL_ASKS: u32 = 5;
 
 /// Sends request `req` to `dev` and waits (at most [`WORLD_TIMEOUT`]) for
 /// its answer; the error says what went wrong, naming the device.
@@ -657,25 +642,52 @@ async fn request<R: troupe_msgs::Request>(
     dev: Device,
     req: &R,
 ) -> Result<R::Reply, String> {
+    ask_once(session, dev, req).await?.ok_or_else(|| {
+        format!("{dev} did not answer (no such device, or this identity may not ask it)")
+    })
+}
+
+/// [`request`] of a device whose token has just come: the token can reach
+/// this session before the device's queryable does (declarations travel
+/// apart), and an ask then finds no one to answer. Asked again, a second
+/// apart, up to [`ARRIVAL_ASKS`] times, while nothing answers.
+async fn request_on_arrival<R: troupe_msgs::Request>(
+    session: &troupe_node::zenoh::Session,
+    dev: Device,
+    req: &R,
+) -> Result<R::Reply, String> {
+    for _ in 1..ARRIVAL_ASKS {
+        if let Some(reply) = ask_once(session, dev, req).await? {
+            return Ok(reply);
+        }
+        tracing::debug!("{dev} did not answer yet; asking again");
+        tokio::time::sleep(Duration::from_secs(1)).await;
+    }
+    request(session, dev, req).await
+}
+
+/// Sends request `req` to `dev` once: its answer, `None` when no one
+/// answered (within [`WORLD_TIMEOUT`]), or what went wrong.
+async fn ask_once<R: troupe_msgs::Request>(
+    session: &troupe_node::zenoh::Session,
+    dev: Device,
+    req: &R,
+) -> Result<Option<R::Reply>, String> {
     let key = keys::req(&dev, R::NAME);
     let replies = troupe_node::ask(session, &key, WORLD_TIMEOUT)
         .payload(codec::encode(req, troupe_node::Clock::wall().now()))
         .await
         .map_err(|e| format!("asking {key}: {e}"))?;
-    let reply = replies
-        .recv_async()
-        .await
-        .map_err(|_| {
-            format!("{dev} did not answer (no such device, or this identity may not ask it)")
-        })?
-        .into_result()
-        .map_err(|e| {
-            let reason = codec::decode::<troupe_msgs::common::Nack>(&e.payload().to_bytes())
-                .map_or_else(|_| "no reason given".to_owned(), |n| n.msg.reason);
-            format!("{dev} refused: {reason}")
-        })?;
+    let Ok(reply) = replies.recv_async().await else {
+        return Ok(None);
+    };
+    let reply = reply.into_result().map_err(|e| {
+        let reason = codec::decode::<troupe_msgs::common::Nack>(&e.payload().to_bytes())
+            .map_or_else(|_| "no reason given".to_owned(), |n| n.msg.reason);
+        format!("{dev} refused: {reason}")
+    })?;
     codec::decode::<R::Reply>(&reply.payload().to_bytes())
-        .map(|s| s.msg)
+        .map(|s| Some(s.msg))
         .map_err(|e| format!("{dev}'s answer does not decode: {e}"))
 }
 
@@ -683,7 +695,7 @@ async fn request<R: troupe_msgs::Request>(
 /// picture: free cells white, unknown grey, occupied black, north up.
 async fn fetch_map(session: troupe_node::zenoh::Session, shared: Arc<Shared>, dev: Device) {
     let picture = async {
-        let info = request(&session, dev, &map::GetInfo).await?;
+        let info = request_on_arrival(&session, dev, &map::GetInfo).await?;
         let whole = map::GetData {
             col: 0,
             row: 0,
