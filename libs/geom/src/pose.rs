@@ -76,7 +76,12 @@ impl Pose {
     /// once: for points ([`Transform::point`], as [`Pose::apply`]) and
     /// directions, which a shift leaves as they are ([`Transform::turn`]).
     pub fn transform(&self) -> Transform {
-        let (s, c) = self.yaw.sin_cos();
+        self.transform_by(self.yaw.sin_cos())
+    }
+
+    /// [`Pose::transform`] where the yaw's sine and cosine are known
+    /// (`self.yaw.sin_cos()`, kept from an earlier step).
+    pub fn transform_by(&self, (s, c): (f64, f64)) -> Transform {
         Transform {
             x0: self.x,
             y0: self.y,
@@ -96,6 +101,11 @@ pub struct Transform {
 }
 
 impl Transform {
+    /// The sine and cosine of the pose's yaw.
+    pub fn sin_cos(&self) -> (f64, f64) {
+        (self.s, self.c)
+    }
+
     /// A point given in the pose's frame, in the outer frame.
     #[inline]
     pub fn point(&self, x: f64, y: f64) -> (f64, f64) {

@@ -14,7 +14,7 @@
 //! bodies of its runs. The ray then walks the static grid only up to the
 //! nearest, and without stopping at every tile to ask what is filed there.
 
-use troupe_geom::{bounds, Hit, Pose, TileBox};
+use troupe_geom::{bounds, Hit, Pose, TileBox, Transform};
 
 /// The polygons of every moving body, filed by tile.
 #[derive(Debug, Clone, Default)]
@@ -118,16 +118,16 @@ impl Body {
     /// Becomes `blocks` (polygons in a model's frame) placed at pose `at`,
     /// reusing its buffers.
     pub fn place(&mut self, blocks: &[Vec<(f64, f64)>], at: Pose) {
-        self.place_outlined(blocks, at, &Outline::of(blocks));
+        self.place_outlined(blocks, at.transform(), &Outline::of(blocks));
     }
 
-    /// [`Body::place`] for `blocks` whose circles in their own frame are
-    /// `outline` (`Outline::of(blocks)`, kept): the circles are carried to
-    /// `at`, not worked out again from the placed points.
-    pub fn place_outlined(&mut self, blocks: &[Vec<(f64, f64)>], at: Pose, outline: &Outline) {
+    /// [`Body::place`] at the pose whose transform is `t`, for `blocks`
+    /// whose circles in their own frame are `outline`
+    /// (`Outline::of(blocks)`, kept): the circles are carried there, not
+    /// worked out again from the placed points.
+    pub fn place_outlined(&mut self, blocks: &[Vec<(f64, f64)>], t: Transform, outline: &Outline) {
         self.polys.resize_with(blocks.len(), Vec::new);
         self.heights.clear();
-        let t = at.transform();
         let apply = |x, y| t.point(x, y);
         for (poly, b) in self.polys.iter_mut().zip(blocks) {
             poly.clear();
@@ -797,7 +797,7 @@ mod tests {
             let at = Pose::new(1.0 + 0.1 * f64::from(k), -0.5, 0.7 * f64::from(k));
             let (mut a, mut b) = (Body::default(), Body::default());
             a.place(&blocks, at);
-            b.place_outlined(&blocks, at, &outline);
+            b.place_outlined(&blocks, at.transform(), &outline);
             assert_eq!(a.polys(), b.polys());
             for (poly, &c) in b.polys().iter().zip(&b.poly_circles) {
                 assert!(poly.iter().all(|&p| inside(p, c) && inside(p, b.circle())));
@@ -842,7 +842,7 @@ mod tests {
                 0.55 * f64::from(k),
             );
             let mut b = Body::default();
-            b.place_outlined(&blocks, at, &outline);
+            b.place_outlined(&blocks, at.transform(), &outline);
             let (Some(carried), Some(made)) = (b.rect, Rect::of(&b.polys()[0])) else {
                 panic!("no rectangle at {at:?}");
             };

@@ -27,7 +27,7 @@ use std::sync::{Mutex, PoisonError, RwLock};
 
 use troupe_geom::occmap::{FREE, OCCUPIED};
 use troupe_geom::raster::{self, Raster};
-use troupe_geom::{bounds, normalize, Grid, Hit, InTile, Lattice, OccMap, Pose, EMPTY};
+use troupe_geom::{bounds, normalize, Grid, Hit, InTile, Lattice, OccMap, Pose, Transform, EMPTY};
 use troupe_msgs::{map, Color};
 
 use crate::crew::{spin_until, Crew, Job};
@@ -720,6 +720,36 @@ impl Sim {
                 let p = p as usize;
                 let (gp, gz) = self.global_z(p);
                 (gp.compose(&self.poses[m]), gz + f.z + self.frames[p].stack)
+            }
+        }
+    }
+
+    /// [`Sim::global_z`] with the sine and cosine of the global yaw,
+    /// worked out once down the tree: a model not turned on its parent (a
+    /// ranger on its robot, most often) shares its parent's.
+    pub(super) fn global_turned(&self, m: usize) -> (Pose, f64, (f64, f64)) {
+        let f = &self.frames[m];
+        match f.parent {
+            Frame::ROOT => {
+                let g = self.poses[m];
+                (g, f.z, g.yaw.sin_cos())
+            }
+            p => {
+                let p = p as usize;
+                let (gp, gz, (s, c)) = self.global_turned(p);
+                let local = self.poses[m];
+                // As `Pose::compose`, with the parent's sine and cosine.
+                let g = Pose::new(
+                    gp.x + c * local.x - s * local.y,
+                    gp.y + s * local.x + c * local.y,
+                    normalize(gp.yaw + local.yaw),
+                );
+                let turn = if g.yaw == gp.yaw {
+                    (s, c)
+                } else {
+                    g.yaw.sin_cos()
+                };
+                (g, gz + f.z + self.frames[p].stack, turn)
             }
         }
     }

@@ -94,10 +94,43 @@ pub struct Entity {
     pub pos: Pos,
 }
 
-/// An entity's properties by name. Hashed with foldhash rather than std's
-/// SipHash: a world file is the user's own, not an attacker's, and the
-/// hospital's thousand robots insert some fifteen properties each.
-pub type Props = HashMap<Arc<str>, Prop, foldhash::fast::RandomState>;
+/// An entity's properties by name, in the order first set: a list
+/// searched from the front. An entity has a few (a Pioneer's sections
+/// fifteen at most), and the hospital's 14 000 sections each built,
+/// grew and freed a hash table: a list is one allocation, and comparing
+/// a few short names costs less than hashing one.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Props(Vec<(Arc<str>, Prop)>);
+
+impl Props {
+    /// The property `name`, if set.
+    pub fn get(&self, name: &str) -> Option<&Prop> {
+        self.0.iter().find(|(k, _)| **k == *name).map(|(_, p)| p)
+    }
+
+    /// Whether `name` is set.
+    pub fn contains_key(&self, name: &str) -> bool {
+        self.get(name).is_some()
+    }
+
+    /// Sets `name` to `prop`, replacing what it was.
+    pub fn insert(&mut self, name: Arc<str>, prop: Prop) {
+        match self.0.iter_mut().find(|(k, _)| *k == name) {
+            Some((_, p)) => *p = prop,
+            None => self.0.push((name, prop)),
+        }
+    }
+}
+
+impl std::ops::Index<&str> for Props {
+    type Output = Prop;
+
+    /// The property `name`; panics when it is not set.
+    fn index(&self, name: &str) -> &Prop {
+        self.get(name)
+            .unwrap_or_else(|| panic!("property `{name}` is not set"))
+    }
+}
 
 /// A parsed world file: entities in pre-order, 0 being the global section.
 #[derive(Debug, Clone)]

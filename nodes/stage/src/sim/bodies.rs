@@ -98,12 +98,13 @@ impl Sim {
     /// Model `m`'s body at global pose `at`.
     pub(super) fn placed(&self, m: usize, at: Pose) -> Placed {
         let mut body = Placed::default();
-        self.place_into(m, at, &mut body);
+        self.place_into(m, at.transform(), &mut body);
         body
     }
 
-    /// [`Sim::placed`] into `body`, reusing its buffers.
-    pub(super) fn place_into(&self, m: usize, at: Pose, body: &mut Placed) {
+    /// [`Sim::placed`] at the pose whose transform is `at`, into `body`,
+    /// reusing its buffers.
+    pub(super) fn place_into(&self, m: usize, at: Transform, body: &mut Placed) {
         body.model = m;
         let model = &self.world.models[m];
         body.body
@@ -136,9 +137,14 @@ impl Sim {
     }
 
     /// Every body in the tree of `m` (itself and what it carries) as it
-    /// would be if `m` were at the global pose `at`, into `bodies` (whose
-    /// buffers are reused).
-    pub(super) fn tree_at(&self, m: usize, at: Pose, bodies: &mut Vec<Placed>) {
+    /// would be if `m` were at the global pose `at`, whose yaw's sine and
+    /// cosine are `turn`, into `bodies` (whose buffers are reused).
+    pub(super) fn tree_at(
+        &self,
+        m: usize,
+        (at, turn): (Pose, (f64, f64)),
+        bodies: &mut Vec<Placed>,
+    ) {
         // The move from where the tree is to `at`, worked out for the
         // tree's other bodies (most trees have one: `m`, which goes to `at`).
         let mut shift = None;
@@ -151,11 +157,12 @@ impl Sim {
                 bodies.push(Placed::default());
             }
             let to = if k == m {
-                at
+                at.transform_by(turn)
             } else {
                 shift
                     .get_or_insert_with(|| at.compose(&self.global(m).inverse()))
                     .compose(&self.global(k))
+                    .transform()
             };
             self.place_into(k, to, &mut bodies[n]);
             n += 1;

@@ -78,6 +78,9 @@ pub(super) struct Plan {
     /// meet a static obstacle.
     pub(super) bodies: Vec<Placed>,
     pub(super) walled: bool,
+    /// A yaw and its sine and cosine: the last `next`'s, which the next
+    /// step's plan starts from (one `sin_cos` a step where there were two).
+    pub(super) turn: Option<(f64, (f64, f64))>,
 }
 
 impl Sim {
@@ -125,19 +128,33 @@ impl Sim {
             v.y = 0.0;
         }
         let here = self.poses[m];
-        let next = here.compose(&Pose::new(v.x * dt, v.y * dt, v.yaw * dt));
+        let step = Pose::new(v.x * dt, v.y * dt, v.yaw * dt);
+        // `here.compose(&step)`, with the sine and cosine the last plan
+        // worked out for where it moved to.
+        let (s, c) = match plan.turn {
+            Some((yaw, turn)) if yaw == here.yaw => turn,
+            _ => here.yaw.sin_cos(),
+        };
+        let next = Pose::new(
+            here.x + c * step.x - s * step.y,
+            here.y + s * step.x + c * step.y,
+            normalize(here.yaw + step.yaw),
+        );
         let root_parent = self.frames[m].parent == Frame::ROOT;
         let g_next = if root_parent {
             next
         } else {
-            self.global(m)
-                .compose(&Pose::new(v.x * dt, v.y * dt, v.yaw * dt))
+            self.global(m).compose(&step)
         };
         plan.v = v;
         plan.next = next;
         plan.moving = v.x != 0.0 || v.y != 0.0 || v.yaw != 0.0;
         if plan.moving {
-            self.tree_at(m, g_next, &mut plan.bodies);
+            let turn = g_next.yaw.sin_cos();
+            if root_parent {
+                plan.turn = Some((next.yaw, turn));
+            }
+            self.tree_at(m, (g_next, turn), &mut plan.bodies);
             plan.walled = self.hits_statics(self.root(m), &plan.bodies);
         }
     }

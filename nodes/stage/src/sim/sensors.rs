@@ -422,13 +422,12 @@ impl Sim {
     /// Ranger `r`'s readings into `out`; `sweep` is room for its fans' look
     /// at the moving bodies, kept from ranger to ranger.
     pub(super) fn sense_one(&self, r: usize, out: &mut Readings, sweep: &mut Sweep) {
-        let (g, gz) = self.global_z(r);
+        // One sine and cosine per ranger, its robot's when it is not
+        // turned on it: its sensors' poses and first rays are turned by it
+        // (or by a second, when its origin is turned).
+        let (g, gz, (sin, cos)) = self.global_turned(r);
         let fans = &self.fans[r];
-        // One sine and cosine per ranger: it is placed on its parent by
-        // it, and its sensors' poses and first rays are turned by it (or
-        // by a second, when its origin is turned).
         let o = &fans.origin;
-        let (sin, cos) = g.yaw.sin_cos();
         let base = (g.x + cos * o.x - sin * o.y, g.y + sin * o.x + cos * o.y);
         let turn = if o.yaw == 0.0 {
             (cos, sin)
