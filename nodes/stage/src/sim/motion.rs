@@ -68,9 +68,12 @@ impl Motion {
 /// for its buffers.
 #[derive(Default)]
 pub(super) struct Plan {
-    /// Its velocity this step, and its pose at the end of it.
+    /// Its velocity this step, its pose at the end of it, and the pose it
+    /// then reports (worked out here, on every thread, rather than while
+    /// the bases move one by one).
     pub(super) v: Pose,
     pub(super) next: Pose,
+    pub(super) odom: Pose,
     /// Whether it moves, and what its controller keeps after this step.
     pub(super) moving: bool,
     pub(super) mind: Mind,
@@ -149,6 +152,21 @@ impl Sim {
         plan.v = v;
         plan.next = next;
         plan.moving = v.x != 0.0 || v.y != 0.0 || v.yaw != 0.0;
+        let b = &self.bases[bi];
+        plan.odom = match cfg.localization {
+            // Where a base on another's back ends up is known only once
+            // that one has moved: `apply` works it out then.
+            Localization::Gps if root_parent => b.origin.inverse().compose(&next),
+            Localization::Gps => b.odom,
+            Localization::Odom => {
+                let e = cfg.odom_error;
+                b.odom.compose(&Pose::new(
+                    step.x * (1.0 + e[0]),
+                    step.y * (1.0 + e[1]),
+                    step.yaw * (1.0 + e[2]),
+                ))
+            }
+        };
         if plan.moving {
             let turn = g_next.yaw.sin_cos();
             if root_parent {
@@ -169,7 +187,8 @@ impl Sim {
         let Some(cfg) = &self.motions[bi] else {
             return;
         };
-        let (localization, e) = (cfg.localization, cfg.odom_error);
+        let localization = cfg.localization;
+        let root_parent = self.frames[m].parent == Frame::ROOT;
         let v = plan.v;
         self.bases[bi].mind = plan.mind;
         if plan.moving {
@@ -182,20 +201,19 @@ impl Sim {
             self.poses[m] = plan.next;
             self.commit(&mut plan.bodies);
             if localization == Localization::Gps {
-                let g = self.global(m);
-                let b = &mut self.bases[bi];
-                b.odom = b.origin.inverse().compose(&g);
+                let b = &self.bases[bi];
+                let odom = if root_parent {
+                    plan.odom
+                } else {
+                    b.origin.inverse().compose(&self.global(m))
+                };
+                self.bases[bi].odom = odom;
             }
         }
         self.bases[bi].stall = false;
         self.bases[bi].vel = v;
         if localization == Localization::Odom {
-            let b = &mut self.bases[bi];
-            b.odom = b.odom.compose(&Pose::new(
-                v.x * dt * (1.0 + e[0]),
-                v.y * dt * (1.0 + e[1]),
-                v.yaw * dt * (1.0 + e[2]),
-            ));
+            self.bases[bi].odom = plan.odom;
         }
     }
 }

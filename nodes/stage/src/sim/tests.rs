@@ -170,6 +170,57 @@ fn velocity_bounds_hold_and_speeds_are_taken_at_once() {
     assert!((s.bases[0].vel.x - 0.1).abs() < 1e-9, "slowed at once");
 }
 
+/// What a base reports as its pose: under `gps`, its true pose in the
+/// frame of `localization_origin`; under `odom`, its commanded moves with
+/// their `odom_error`, summed while it moves and frozen while it stalls.
+#[test]
+fn odometry_reports_each_localization_as_stage_does() {
+    let bot = |name: &str, y: f64, settings: &str| {
+        format!("position ( name \"{name}\" pose [3 {y} 0 0] size [0.4 0.4 0.2] {settings} )\n")
+    };
+    let world = format!(
+        "{ROOM}{}{}",
+        bot(
+            "gps",
+            0.0,
+            "localization \"gps\" localization_origin [1 2 0 90]"
+        ),
+        bot("odom", 2.0, "localization \"odom\" odom_error [0.1 0 0.2]"),
+    );
+    let mut s = sim("odometry", &world);
+    for b in &mut s.bases {
+        b.cmd = Some(Command::Vel(Pose::new(1.0, 0.0, 0.1)));
+    }
+    s.step();
+    let origin = Pose::new(1.0, 2.0, FRAC_PI_2);
+    let truth = s.global(s.bases[0].model);
+    let want = origin.inverse().compose(&truth);
+    let got = s.bases[0].odom;
+    assert!(
+        (got.x - want.x).abs() < 1e-12 && (got.y - want.y).abs() < 1e-12,
+        "gps: {got:?}, not {want:?}"
+    );
+    assert!((got.yaw - want.yaw).abs() < 1e-12);
+    // From (0, 0, 0) in its own frame: 0.1 m forward at 110%, and 0.01
+    // rad turned with the error on turns, which is read as an angle (0.2°).
+    let odom = s.bases[1].odom;
+    assert!(
+        (odom.x - 0.11).abs() < 1e-12 && odom.y.abs() < 1e-12,
+        "{odom:?}"
+    );
+    let turned = 0.01 * (1.0 + 0.2f64.to_radians());
+    assert!((odom.yaw - turned).abs() < 1e-12, "{odom:?}");
+    // Into the wall at x = 4.9: the odometry stops where the robot stalls.
+    steps(&mut s, 40);
+    assert!(s.bases[1].stall, "stalled");
+    let stalled = s.bases[1].odom;
+    s.step();
+    assert_eq!(s.bases[1].odom, stalled, "a stalled base reports no move");
+    let gps = s.bases[0].odom;
+    let want = origin.inverse().compose(&s.global(s.bases[0].model));
+    assert!((gps.x - want.x).abs() < 1e-12 && (gps.y - want.y).abs() < 1e-12);
+}
+
 #[test]
 fn a_robot_stops_and_stalls_at_a_wall() {
     let mut s = sim("stall", &format!("{ROOM}position ( name \"r\" pose [3 0 0 0] size [0.4 0.4 0.2] acceleration_bounds [-9 9 -9 9 -9 9 -900 900] )\n"));
