@@ -189,21 +189,28 @@ impl Body {
         if (ax - bx).powi(2) + (ay - by).powi(2) > (ar + br).powi(2) || ar < 0.0 || br < 0.0 {
             return false;
         }
-        let bbox = |ps: &[(f64, f64)]| bounds(ps.iter().copied());
-        // Boxes that do not meet (or polygons with no points) are apart.
-        let apart = |a: Option<[f64; 4]>, b: Option<[f64; 4]>| match (a, b) {
-            (Some(a), Some(b)) => a[2] < b[0] || b[2] < a[0] || a[3] < b[1] || b[3] < a[1],
-            _ => true,
+        // Polygons whose circles do not meet are apart: only the pairs
+        // left are tested edge by edge (of two fancy Pioneers' seven
+        // polygons each, a few pairs).
+        let apart = |(ax, ay, ar): (f64, f64, f64), (bx, by, br): (f64, f64, f64)| {
+            (ax - bx).powi(2) + (ay - by).powi(2) > (ar + br).powi(2)
         };
-        self.polys.iter().any(|a| {
-            let ba = bbox(a);
-            other.polys.iter().any(|b| {
-                !apart(ba, bbox(b))
-                    && (edges_cross(a, b)
-                        || a.first().is_some_and(|&p| inside(b, p))
-                        || b.first().is_some_and(|&p| inside(a, p)))
-            })
+        self.polys.iter().enumerate().any(|(ka, a)| {
+            let ca = self.poly_circle(ka);
+            !apart(ca, other.circle)
+                && other.polys.iter().enumerate().any(|(kb, b)| {
+                    !apart(ca, other.poly_circle(kb))
+                        && (edges_cross(a, b)
+                            || a.first().is_some_and(|&p| inside(b, p))
+                            || b.first().is_some_and(|&p| inside(a, p)))
+                })
         })
+    }
+
+    /// The circle around polygon `k` (around them all when it is the only
+    /// one).
+    fn poly_circle(&self, k: usize) -> (f64, f64, f64) {
+        self.poly_circles.get(k).copied().unwrap_or(self.circle)
     }
 }
 
@@ -915,6 +922,16 @@ mod tests {
         // Diagonal neighbours whose boxes overlap but bodies do not.
         let diamond = vec![(1.0, 0.4), (1.5, 0.9), (1.0, 1.4), (0.5, 0.9)];
         assert!(!m.overlaps(0, &shape(vec![diamond])));
+        // Bodies of several polygons: tested pair by pair, whatever the
+        // circles around the whole bodies say.
+        let mut two = shape(vec![square(10.0, 0.0, 0.5), square(13.0, 0.0, 0.5)]);
+        m.file(1, 2, &mut two, one(0));
+        let near = shape(vec![square(13.8, 0.0, 0.5), square(20.0, 0.0, 0.5)]);
+        assert!(m.overlaps(1, &near), "second polygons cross");
+        let far = shape(vec![square(14.2, 0.0, 0.5), square(20.0, 0.0, 0.5)]);
+        assert!(!m.overlaps(1, &far), "every pair apart");
+        let held = shape(vec![square(20.0, 0.0, 0.5), square(13.0, 0.1, 0.1)]);
+        assert!(m.overlaps(1, &held), "a polygon inside another");
         m.unfile(0, 1);
         assert!(
             !m.overlaps(0, &shape(vec![square(0.0, 0.0, 3.0)])),
