@@ -185,7 +185,11 @@ fn odometry_reports_each_localization_as_stage_does() {
             0.0,
             "localization \"gps\" localization_origin [1 2 0 90]"
         ),
-        bot("odom", 2.0, "localization \"odom\" odom_error [0.1 0 0.2]"),
+        bot(
+            "odom",
+            2.0,
+            "localization \"odom\" odom_error [0.1 0 0 0.2]"
+        ),
     );
     let mut s = sim("odometry", &world);
     for b in &mut s.bases {
@@ -202,7 +206,8 @@ fn odometry_reports_each_localization_as_stage_does() {
     );
     assert!((got.yaw - want.yaw).abs() < 1e-12);
     // From (0, 0, 0) in its own frame: 0.1 m forward at 110%, and 0.01
-    // rad turned with the error on turns, which is read as an angle (0.2°).
+    // rad turned with the error on turns, which Stage reads as an angle
+    // (`Pose::Load`'s "llla": 0.2 is 0.2°).
     let odom = s.bases[1].odom;
     assert!(
         (odom.x - 0.11).abs() < 1e-12 && odom.y.abs() < 1e-12,
