@@ -361,7 +361,10 @@ impl Sim {
             .collect::<Vec<Base>>();
         let motions = bases
             .iter()
-            .map(|b| world.models[b.model].position.as_ref().map(Motion::of))
+            .map(|b| {
+                let cfg = world.models[b.model].position.as_ref();
+                cfg.map(|c| Motion::of(c, b.model))
+            })
             .collect();
         let readings = world
             .models

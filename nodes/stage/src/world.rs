@@ -74,8 +74,10 @@ pub struct PositionCfg {
     pub localization: Localization,
     /// Frame of the reported pose (default: the model's pose at load).
     pub localization_origin: Option<Pose>,
-    /// Proportional odometry errors (x, y, yaw).
-    pub odom_error: [f64; 3],
+    /// Proportional odometry errors (x, y, yaw); `None` when the world
+    /// sets none, for Stage's default: drawn per robot (see
+    /// `Motion::of`).
+    pub odom_error: Option<[f64; 3]>,
     /// Metres, for car drive.
     pub wheelbase: f64,
 }
@@ -716,19 +718,21 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
                     Localization::Gps
                 }
             };
+            // As Stage's `Pose::Load` ("llla"): the turn's error is read
+            // as an angle.
             let odom = match e.props.get("odom_error") {
-                Some(p) if p.values.len() >= 4 => [
+                Some(p) if p.values.len() >= 4 => Some([
                     p.values[0].num(),
                     p.values[1].num(),
                     p.values[3].num() * r.ang,
-                ],
-                Some(p) if p.values.len() == 3 => [
+                ]),
+                Some(p) if p.values.len() == 3 => Some([
                     p.values[0].num(),
                     p.values[1].num(),
                     p.values[2].num() * r.ang,
-                ],
+                ]),
                 Some(p) => return Err(short(p, "odom_error", 4, "[x y z a]")),
-                None => [0.03, 0.03, 0.05],
+                None => None,
             };
             let half = PI / 2.0;
             Some(PositionCfg {

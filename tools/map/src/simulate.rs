@@ -143,7 +143,7 @@ pub fn simulate(mut world: World, setup: &Setup) -> Result<Run, String> {
         return Err(format!("`{}` is not a position model", setup.robot));
     };
     pos.localization = Localization::Odom;
-    pos.odom_error = setup.odom_error;
+    pos.odom_error = Some(setup.odom_error);
     match &setup.driver {
         Driver::Own => {}
         Driver::Ctrl(c) => world.models[robot].ctrl = vec![c.clone()],

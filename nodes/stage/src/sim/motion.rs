@@ -3,6 +3,7 @@
 //! applied in model order (Stage's kinematics, odometry error, stalls).
 
 use super::*;
+use crate::colors::unit_draw;
 
 /// What a position model was last told to do.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -52,14 +53,21 @@ pub(super) struct Motion {
 }
 
 impl Motion {
-    pub(super) fn of(c: &crate::world::PositionCfg) -> Motion {
+    /// Model `m`'s motion under `c`. Without an `odom_error`, its errors
+    /// are drawn as Stage draws each robot's at its start: uniform within
+    /// ±0.015 on x and y, ±0.025 on turns (half of `INTEGRATION_ERROR_MAX_X`
+    /// 0.03 and `_A` 0.05), the same on every run.
+    pub(super) fn of(c: &crate::world::PositionCfg, m: usize) -> Motion {
         let vb = &c.velocity_bounds;
+        let draw = |k: u64, max: f64| (unit_draw([m as u64, k]) - 0.5) * max;
         Motion {
             drive: c.drive,
             localization: c.localization,
             wheelbase: c.wheelbase,
             bounds: [vb[0], vb[1], vb[2], vb[3], vb[6], vb[7]],
-            odom_error: c.odom_error,
+            odom_error: c
+                .odom_error
+                .unwrap_or_else(|| [draw(0, 0.03), draw(1, 0.03), draw(2, 0.05)]),
         }
     }
 }

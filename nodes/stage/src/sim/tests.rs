@@ -179,7 +179,7 @@ fn odometry_reports_each_localization_as_stage_does() {
         format!("position ( name \"{name}\" pose [3 {y} 0 0] size [0.4 0.4 0.2] {settings} )\n")
     };
     let world = format!(
-        "{ROOM}{}{}",
+        "{ROOM}{}{}{}{}",
         bot(
             "gps",
             0.0,
@@ -190,6 +190,8 @@ fn odometry_reports_each_localization_as_stage_does() {
             2.0,
             "localization \"odom\" odom_error [0.1 0 0 0.2]"
         ),
+        bot("d1", -2.0, "localization \"odom\""),
+        bot("d2", -4.0, "localization \"odom\""),
     );
     let mut s = sim("odometry", &world);
     for b in &mut s.bases {
@@ -215,6 +217,20 @@ fn odometry_reports_each_localization_as_stage_does() {
     );
     let turned = 0.01 * (1.0 + 0.2f64.to_radians());
     assert!((odom.yaw - turned).abs() < 1e-12, "{odom:?}");
+    // Without `odom_error`, each robot's is drawn as Stage draws it:
+    // within ±1.5% on distances and ±2.5% on turns, robot by robot.
+    let (d1, d2) = (s.bases[2].odom, s.bases[3].odom);
+    for d in [d1, d2] {
+        assert!((d.x / 0.1 - 1.0).abs() <= 0.015, "{d:?}");
+        assert!((d.yaw / 0.01 - 1.0).abs() <= 0.025, "{d:?}");
+    }
+    assert_ne!(d1.x, d2.x, "each robot draws its own error");
+    let again = sim("odometry-again", &world);
+    assert_eq!(
+        again.motions[2].map(|m| m.odom_error),
+        s.motions[2].map(|m| m.odom_error),
+        "the same on every load"
+    );
     // Into the wall at x = 4.9: the odometry stops where the robot stalls.
     steps(&mut s, 40);
     assert!(s.bases[1].stall, "stalled");
