@@ -41,7 +41,13 @@ impl Pose {
     /// assert!((sensor.x - 1.0).abs() < 1e-12 && (sensor.y - 0.5).abs() < 1e-12);
     /// ```
     pub fn compose(&self, local: &Pose) -> Pose {
-        let (s, c) = self.yaw.sin_cos();
+        self.compose_by(self.yaw.sin_cos(), local)
+    }
+
+    /// [`Pose::compose`] where this pose's yaw's sine and cosine are
+    /// known (`self.yaw.sin_cos()`, kept from an earlier step or shared
+    /// with a parent).
+    pub fn compose_by(&self, (s, c): (f64, f64), local: &Pose) -> Pose {
         Pose {
             x: self.x + c * local.x - s * local.y,
             y: self.y + s * local.x + c * local.y,
@@ -101,11 +107,6 @@ pub struct Transform {
 }
 
 impl Transform {
-    /// The sine and cosine of the pose's yaw.
-    pub fn sin_cos(&self) -> (f64, f64) {
-        (self.s, self.c)
-    }
-
     /// A point given in the pose's frame, in the outer frame.
     #[inline]
     pub fn point(&self, x: f64, y: f64) -> (f64, f64) {

@@ -718,11 +718,11 @@ impl Sim {
     fn global_z(&self, m: usize) -> (Pose, f64) {
         let f = &self.frames[m];
         match f.parent {
+            // (A root needs no sine and cosine to be placed.)
             Frame::ROOT => (self.poses[m], f.z),
-            p => {
-                let p = p as usize;
-                let (gp, gz) = self.global_z(p);
-                (gp.compose(&self.poses[m]), gz + f.z + self.frames[p].stack)
+            _ => {
+                let (g, z, _) = self.global_turned(m);
+                (g, z)
             }
         }
     }
@@ -739,16 +739,10 @@ impl Sim {
             }
             p => {
                 let p = p as usize;
-                let (gp, gz, (s, c)) = self.global_turned(p);
-                let local = self.poses[m];
-                // As `Pose::compose`, with the parent's sine and cosine.
-                let g = Pose::new(
-                    gp.x + c * local.x - s * local.y,
-                    gp.y + s * local.x + c * local.y,
-                    normalize(gp.yaw + local.yaw),
-                );
+                let (gp, gz, turn_p) = self.global_turned(p);
+                let g = gp.compose_by(turn_p, &self.poses[m]);
                 let turn = if g.yaw == gp.yaw {
-                    (s, c)
+                    turn_p
                 } else {
                     g.yaw.sin_cos()
                 };

@@ -78,10 +78,10 @@ impl Motion {
 pub(super) struct Plan {
     /// Its velocity this step, its pose at the end of it, and the pose it
     /// then reports (worked out here, on every thread, rather than while
-    /// the bases move one by one).
+    /// the bases move one by one; `None`: only once it has moved).
     pub(super) v: Pose,
     pub(super) next: Pose,
-    pub(super) odom: Pose,
+    pub(super) odom: Option<Pose>,
     /// Whether it moves, and what its controller keeps after this step.
     pub(super) moving: bool,
     pub(super) mind: Mind,
@@ -89,8 +89,9 @@ pub(super) struct Plan {
     /// meet a static obstacle.
     pub(super) bodies: Vec<Placed>,
     pub(super) walled: bool,
-    /// A yaw and its sine and cosine: the last `next`'s, which the next
-    /// step's plan starts from (one `sin_cos` a step where there were two).
+    /// A yaw and its sine and cosine: where the last plan moved to, which
+    /// the next plan starts from (one `sin_cos` a step where there were
+    /// two).
     pub(super) turn: Option<(f64, (f64, f64))>,
 }
 
@@ -140,17 +141,11 @@ impl Sim {
         }
         let here = self.poses[m];
         let step = Pose::new(v.x * dt, v.y * dt, v.yaw * dt);
-        // `here.compose(&step)`, with the sine and cosine the last plan
-        // worked out for where it moved to.
-        let (s, c) = match plan.turn {
+        let turn = match plan.turn {
             Some((yaw, turn)) if yaw == here.yaw => turn,
             _ => here.yaw.sin_cos(),
         };
-        let next = Pose::new(
-            here.x + c * step.x - s * step.y,
-            here.y + s * step.x + c * step.y,
-            normalize(here.yaw + step.yaw),
-        );
+        let next = here.compose_by(turn, &step);
         let root_parent = self.frames[m].parent == Frame::ROOT;
         let g_next = if root_parent {
             next
@@ -164,22 +159,20 @@ impl Sim {
         plan.odom = match cfg.localization {
             // Where a base on another's back ends up is known only once
             // that one has moved: `apply` works it out then.
-            Localization::Gps if root_parent => b.origin.inverse().compose(&next),
-            Localization::Gps => b.odom,
+            Localization::Gps if root_parent => Some(b.origin.inverse().compose(&next)),
+            Localization::Gps => None,
             Localization::Odom => {
                 let e = cfg.odom_error;
-                b.odom.compose(&Pose::new(
+                Some(b.odom.compose(&Pose::new(
                     step.x * (1.0 + e[0]),
                     step.y * (1.0 + e[1]),
                     step.yaw * (1.0 + e[2]),
-                ))
+                )))
             }
         };
         if plan.moving {
             let turn = g_next.yaw.sin_cos();
-            if root_parent {
-                plan.turn = Some((next.yaw, turn));
-            }
+            plan.turn = Some((g_next.yaw, turn));
             self.tree_at(m, (g_next, turn), &mut plan.bodies);
             plan.walled = self.hits_statics(self.root(m), &plan.bodies);
         }
@@ -195,8 +188,8 @@ impl Sim {
         let Some(cfg) = &self.motions[bi] else {
             return;
         };
-        let localization = cfg.localization;
-        let root_parent = self.frames[m].parent == Frame::ROOT;
+        // `gps` reports where a base moved to, `odom` integrates every step.
+        let reports = plan.moving || cfg.localization == Localization::Odom;
         let v = plan.v;
         self.bases[bi].mind = plan.mind;
         if plan.moving {
@@ -208,21 +201,16 @@ impl Sim {
             }
             self.poses[m] = plan.next;
             self.commit(&mut plan.bodies);
-            if localization == Localization::Gps {
-                let b = &self.bases[bi];
-                let odom = if root_parent {
-                    plan.odom
-                } else {
-                    b.origin.inverse().compose(&self.global(m))
-                };
-                self.bases[bi].odom = odom;
-            }
+        }
+        if reports {
+            let b = &self.bases[bi];
+            let odom = plan
+                .odom
+                .unwrap_or_else(|| b.origin.inverse().compose(&self.global(m)));
+            self.bases[bi].odom = odom;
         }
         self.bases[bi].stall = false;
         self.bases[bi].vel = v;
-        if localization == Localization::Odom {
-            self.bases[bi].odom = plan.odom;
-        }
     }
 }
 
