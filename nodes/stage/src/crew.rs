@@ -18,18 +18,38 @@ use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 /// The threads of a simulation and the shares of its work.
+///
+/// The work is dealt in runs of neighbouring items, not item by item:
+/// each item taken and each slot locked is an atomic operation on a cache
+/// line the other thread may hold. hospital.world (a thousand bases and a
+/// thousand rangers of a dozen rays each) went 6% faster on two threads
+/// and 1% on one when dealt in runs.
 #[derive(Default)]
 pub struct Crew {
     /// The helpers (none for one thread).
     pool: Option<rayon::ThreadPool>,
-    /// Where each thread's bases start, then the number of bases.
-    bases: Vec<usize>,
+    /// Where each run of bases starts, then the number of bases.
+    base_cuts: Vec<usize>,
+    /// Where each thread's runs of bases start in `base_cuts`, then their number.
+    base_starts: Vec<usize>,
     /// The rangers, each thread's together, fewest rays first within each
     /// (a thread senses its own from the last: the most rays first).
     rangers: Vec<usize>,
-    /// Where each thread's rangers start in `rangers`, then their number.
+    /// Where each run of rangers starts in `rangers`, then their number.
+    ranger_cuts: Vec<usize>,
+    /// Where each thread's runs of rangers start in `ranger_cuts`, then
+    /// their number.
     ranger_starts: Vec<usize>,
 }
+
+/// How many bases a run holds at most (a base's plan takes a microsecond
+/// or two).
+const BASE_RUN: usize = 8;
+
+/// How many rays a run of rangers casts at most, unless one ranger casts
+/// more alone: a tenth of a millisecond a run at most, so that the threads
+/// still finish together.
+const RAY_RUN: usize = 64;
 
 /// A ranger as the crew deals it: its model, its rays per step, and the
 /// base it rides on (if any).
@@ -84,44 +104,63 @@ impl Crew {
             })
             .collect();
         let starts: Vec<usize> = (0..=threads)
-            .map(|t| owners.partition_point(|&o| o < t))
+            .map(|t| owners.partition_point(|&o| o < t).min(bases))
             .collect();
         let mut order: Vec<usize> = (0..jobs.len()).collect();
         order.sort_by_key(|&k| (owners[unit[k]], jobs[k].rays));
-        let mut ranger_starts = vec![0; threads + 1];
+        let mut ranger_ends = vec![0; threads + 1];
         for &u in &unit {
-            ranger_starts[owners[u] + 1] += 1;
+            ranger_ends[owners[u] + 1] += 1;
         }
         for t in 0..threads {
-            ranger_starts[t + 1] += ranger_starts[t];
+            ranger_ends[t + 1] += ranger_ends[t];
         }
+        let rays: Vec<usize> = order.iter().map(|&k| jobs[k].rays).collect();
+        let (base_cuts, base_starts) = runs(&starts, |_| 1, BASE_RUN);
+        let (ranger_cuts, ranger_starts) = runs(&ranger_ends, |k| rays[k].max(1), RAY_RUN);
         Crew {
             pool,
-            bases: starts.iter().map(|&s| s.min(bases)).collect(),
+            base_cuts,
+            base_starts,
             rangers: order.iter().map(|&k| jobs[k].ranger).collect(),
+            ranger_cuts,
             ranger_starts,
         }
     }
 
     /// How many threads.
     pub fn threads(&self) -> usize {
-        self.bases.len().saturating_sub(1).max(1)
+        self.base_starts.len().saturating_sub(1).max(1)
     }
 
     /// The rangers in the order their shares take them (see [`Crew::rangers_to_sense`]).
+    #[cfg(test)]
     pub fn rangers(&self) -> &[usize] {
         &self.rangers
     }
 
-    /// The bases to plan this step, dealt: each thread's from its first.
-    pub fn bases_to_plan(&self) -> Shares<'_> {
-        Shares::new(self, &self.bases, false)
+    /// Where each run of bases starts, then the number of bases: run `k`
+    /// is bases `base_cuts()[k]..base_cuts()[k + 1]`.
+    pub fn base_cuts(&self) -> &[usize] {
+        &self.base_cuts
     }
 
-    /// Positions in [`Crew::rangers`] to sense this step, dealt: each
-    /// thread's from its last, so that the robots its plans take first
-    /// next step are the ones it sensed last, still in its caches (and
-    /// the first it senses are the last moved).
+    /// The rangers of each run, in [`Crew::rangers`].
+    pub fn ranger_runs(&self) -> impl Iterator<Item = &[usize]> {
+        self.ranger_cuts
+            .windows(2)
+            .map(|w| &self.rangers[w[0]..w[1]])
+    }
+
+    /// The runs of bases to plan this step, dealt: each thread's from its first.
+    pub fn bases_to_plan(&self) -> Shares<'_> {
+        Shares::new(self, &self.base_starts, false)
+    }
+
+    /// The runs of rangers (see [`Crew::ranger_runs`]) to sense this step,
+    /// dealt: each thread's from its last, so that the robots its plans
+    /// take first next step are the ones it sensed last, still in its
+    /// caches (and the first it senses are the last moved).
     pub fn rangers_to_sense(&self) -> Shares<'_> {
         Shares::new(self, &self.ranger_starts, true)
     }
@@ -135,8 +174,13 @@ impl Crew {
                 pool.in_place_scope(|s| {
                     for _ in 1..self.threads() {
                         s.spawn(|_| {
-                            let _done = Done(&running);
-                            helper();
+                            {
+                                let _done = Done(&running);
+                                helper();
+                            }
+                            // Stays awake for the next step's share: a
+                            // sleeping helper takes tens of microseconds to wake.
+                            rayon::spawn(stay_awake);
                         });
                     }
                     main();
@@ -175,6 +219,45 @@ pub fn spin_until(ready: impl Fn() -> bool) {
             std::thread::park_timeout(NAP);
         }
     }
+}
+
+/// Runs the pool's next job if one comes within [`SPIN`].
+fn stay_awake() {
+    let start = Instant::now();
+    while start.elapsed() < SPIN {
+        match rayon::yield_now() {
+            Some(rayon::Yield::Executed) => return,
+            _ => std::hint::spin_loop(),
+        }
+    }
+}
+
+/// Cuts each share `starts[t]..starts[t + 1]` into runs of items in a
+/// row, each weighing at most `most` (by `weight`) unless one item alone
+/// weighs more: where each run starts (then the number of items), and
+/// where each share's runs start among them (then the number of runs).
+fn runs(
+    starts: &[usize],
+    weight: impl Fn(usize) -> usize,
+    most: usize,
+) -> (Vec<usize>, Vec<usize>) {
+    let mut cuts = Vec::new();
+    let mut run_starts = Vec::with_capacity(starts.len());
+    for w in starts.windows(2) {
+        run_starts.push(cuts.len());
+        let mut load = 0;
+        for k in w[0]..w[1] {
+            let wk = weight(k);
+            if k == w[0] || load + wk > most {
+                cuts.push(k);
+                load = 0;
+            }
+            load += wk;
+        }
+    }
+    run_starts.push(cuts.len());
+    cuts.push(starts.last().copied().unwrap_or(0));
+    (cuts, run_starts)
 }
 
 /// Counts a helper out when dropped (when it returns or panics).
@@ -256,26 +339,38 @@ mod tests {
         jobs.push(job(30, 50, None));
         let crew = Crew::new(2, 4, &jobs);
         assert_eq!(crew.threads(), 2);
-        assert_eq!(crew.bases, [0, 2, 4]);
+        assert_eq!(crew.base_cuts(), [0, 2, 4]);
+        assert_eq!(crew.base_starts, [0, 1, 2]);
         // Thread 0: robots 0 and 1; thread 1: robots 2 and 3, then the loose one.
         assert_eq!(crew.rangers, [10, 11, 20, 21, 12, 13, 30, 22, 23]);
-        assert_eq!(crew.ranger_starts, [0, 4, 9]);
+        // Runs of up to 64 rays, or one ranger: the sonars go in pairs.
+        let runs: Vec<&[usize]> = crew.ranger_runs().collect();
+        assert_eq!(
+            runs,
+            [&[10, 11][..], &[20], &[21], &[12, 13], &[30], &[22], &[23]]
+        );
+        assert_eq!(crew.ranger_starts, [0, 3, 7]);
     }
 
     #[test]
     fn one_thread_takes_everything_once_in_order() {
         let jobs: Vec<Job> = (0..5).map(|k| job(k, k + 1, None)).collect();
-        let crew = Crew::new(1, 3, &jobs);
+        let crew = Crew::new(1, 20, &jobs);
         assert_eq!(crew.threads(), 1);
         let plan = crew.bases_to_plan();
         assert_eq!(
             std::iter::from_fn(|| plan.take()).collect::<Vec<_>>(),
             [0, 1, 2]
         );
+        assert_eq!(crew.base_cuts(), [0, 8, 16, 20], "runs of eight bases");
+        let jobs: Vec<Job> = (0..5).map(|k| job(k, 30 - 10 * (k % 3), None)).collect();
+        let crew = Crew::new(1, 0, &jobs);
+        assert_eq!(crew.rangers, [2, 1, 4, 0, 3], "fewest rays first");
         let sense = crew.rangers_to_sense();
         let got: Vec<usize> = std::iter::from_fn(|| sense.take()).collect();
-        assert_eq!(got, [4, 3, 2, 1, 0], "its own from the last");
-        assert_eq!(crew.rangers, [0, 1, 2, 3, 4], "fewest rays first");
+        assert_eq!(got, [1, 0], "its own from the last");
+        let runs: Vec<&[usize]> = crew.ranger_runs().collect();
+        assert_eq!(runs, [&[2, 1, 4][..], &[0, 3]], "at most 64 rays a run");
     }
 
     #[test]
@@ -297,19 +392,14 @@ mod tests {
         let jobs: Vec<Job> = (0..200).map(|k| job(k, 1 + k % 7, Some(k / 2))).collect();
         let crew = Crew::new(2, 100, &jobs);
         let sense = crew.rangers_to_sense();
+        let runs: Vec<&[usize]> = crew.ranger_runs().collect();
         let taken = std::sync::Mutex::new(Vec::new());
-        crew.run(
-            || {
-                while let Some(k) = sense.take() {
-                    taken.lock().unwrap().push(k);
-                }
-            },
-            || {
-                while let Some(k) = sense.take() {
-                    taken.lock().unwrap().push(k);
-                }
-            },
-        );
+        let take = || {
+            while let Some(k) = sense.take() {
+                taken.lock().unwrap().extend_from_slice(runs[k]);
+            }
+        };
+        crew.run(take, take);
         let mut taken = taken.into_inner().unwrap();
         taken.sort_unstable();
         assert_eq!(taken, (0..200).collect::<Vec<_>>());

@@ -127,7 +127,7 @@ pub struct Sim {
     /// Each model's sensors' rays.
     fans: Vec<Fans>,
     /// Each base's plan for the step, kept for its buffers.
-    plans: Vec<Mutex<Plan>>,
+    plans: Vec<Plan>,
 }
 
 /// Stage's `rasterize` controller: model `m`'s outline drawn into 40×20
@@ -160,6 +160,8 @@ struct Frame {
     body: bool,
     /// Its `obstacle_return`.
     obstacle: bool,
+    /// Whether obstacles or rangers meet its body (see [`Sim::in_grid`]).
+    met: bool,
     /// Its height above its parent's top (`ModelDef::z`).
     z: f64,
     /// How far above its base its children stand: its height when it
@@ -181,6 +183,7 @@ impl Frame {
                 .unwrap_or(Frame::ROOT),
             body: !d.blocks.is_empty(),
             obstacle: d.obstacle_return,
+            met: !d.blocks.is_empty() && (d.obstacle_return || d.ranger_return >= 0.0),
             z: d.z,
             stack: if d.stack_children { d.size[2] } else { 0.0 },
             every: d.update_interval,
@@ -194,6 +197,18 @@ fn height(world: &World, poses: &[Pose], m: usize) -> (f64, f64) {
     let (_, z) = world.global(poses, m);
     let (lo, hi) = world.models[m].body_span();
     (z + lo, z + hi)
+}
+
+/// `items` cut at `cuts` (where each run starts, then the end), each run
+/// behind a lock of its own.
+fn cut<'a, T>(mut items: &'a mut [T], cuts: &[usize]) -> Vec<Mutex<&'a mut [T]>> {
+    cuts.windows(2)
+        .map(|w| {
+            let (run, rest) = std::mem::take(&mut items).split_at_mut(w[1] - w[0]);
+            items = rest;
+            Mutex::new(run)
+        })
+        .collect()
 }
 
 /// Locks `m`, through a panic elsewhere.
@@ -621,38 +636,42 @@ impl Sim {
     fn run(&mut self, dt: Option<f64>) {
         let crew = std::mem::take(&mut self.crew);
         let mut kept = std::mem::take(&mut self.plans);
-        kept.resize_with(self.bases.len(), Mutex::default);
+        kept.resize_with(self.bases.len(), Plan::default);
         let moves = dt.is_some();
         let dt = dt.unwrap_or(0.0);
-        // Each ranger's readings, moved out of the simulator while its rays
-        // are cast.
-        let work: Vec<Mutex<(usize, Readings)>> = crew
-            .rangers()
-            .iter()
-            .map(|&r| Mutex::new((r, Readings::default())))
+        // The plans and each ranger's readings (moved out of the simulator
+        // while its rays are cast), in the crew's runs.
+        let cuts = crew.base_cuts();
+        let plans = cut(&mut kept, cuts);
+        let work: Vec<Mutex<Vec<(usize, Readings)>>> = crew
+            .ranger_runs()
+            .map(|run| Mutex::new(run.iter().map(|&r| (r, Readings::default())).collect()))
             .collect();
         let (to_plan, to_sense) = (crew.bases_to_plan(), crew.rangers_to_sense());
         let sensing = AtomicBool::new(false);
         let over = AtomicBool::new(false);
         let plan = |me: &Sim| {
-            while let Some(bi) = to_plan.take().filter(|_| moves) {
-                me.plan(bi, dt, &mut lock(&kept[bi]));
+            while let Some(k) = to_plan.take().filter(|_| moves) {
+                for (bi, plan) in (cuts[k]..).zip(lock(&plans[k]).iter_mut()) {
+                    me.plan(bi, dt, plan);
+                }
             }
         };
         let sense = |me: &Sim| {
             let mut sweep = Sweep::default();
             while let Some(k) = to_sense.take() {
-                let mut slot = lock(&work[k]);
-                let (r, out) = &mut *slot;
-                // As Stage, a ranger senses every `update_interval` (100
-                // ms), however short the steps; in between it keeps its
-                // readings.
-                if moves && !me.due(*r) {
-                    continue;
-                }
-                me.sense_one(*r, out, &mut sweep);
-                if me.noisy[*r] {
-                    me.add_noise(*r, out.sensor_mut(0).0);
+                // The most rays first, as the runs are taken.
+                for (r, out) in lock(&work[k]).iter_mut().rev() {
+                    // As Stage, a ranger senses every `update_interval`
+                    // (100 ms), however short the steps; in between it
+                    // keeps its readings.
+                    if moves && !me.due(*r) {
+                        continue;
+                    }
+                    me.sense_one(*r, out, &mut sweep);
+                    if me.noisy[*r] {
+                        me.add_noise(*r, out.sensor_mut(0).0);
+                    }
                 }
             }
         };
@@ -676,8 +695,10 @@ impl Sim {
                 let mut me = sim.write().unwrap_or_else(PoisonError::into_inner);
                 let me: &mut Sim = &mut me;
                 if moves {
-                    for (bi, slot) in kept.iter().enumerate() {
-                        me.apply(bi, dt, &mut lock(slot));
+                    for (k, run) in plans.iter().enumerate() {
+                        for (bi, plan) in (cuts[k]..).zip(lock(run).iter_mut()) {
+                            me.apply(bi, dt, plan);
+                        }
                     }
                     me.carry(dt);
                 }
@@ -685,19 +706,22 @@ impl Sim {
                 if let Some(r) = &mut me.raster {
                     r.refresh();
                 }
-                for slot in &work {
-                    let mut slot = lock(slot);
-                    slot.1 = std::mem::take(&mut me.readings[slot.0]);
+                for run in &work {
+                    for (r, out) in lock(run).iter_mut() {
+                        *out = std::mem::take(&mut me.readings[*r]);
+                    }
                 }
             }
             sensing.store(true, Ordering::Release);
             sense(&read());
         };
         crew.run(helper, main);
-        for slot in work {
-            let (r, out) = slot.into_inner().unwrap_or_else(PoisonError::into_inner);
-            self.readings[r] = out;
+        for run in work {
+            for (r, out) in run.into_inner().unwrap_or_else(PoisonError::into_inner) {
+                self.readings[r] = out;
+            }
         }
+        drop(plans);
         self.plans = kept;
         self.crew = crew;
     }

@@ -15,9 +15,11 @@ pub(super) struct Placed {
 }
 
 impl Sim {
+    /// Whether model `m`'s body is written into the static grid or filed
+    /// with the moving bodies: it has blocks, and obstacles or rangers meet
+    /// them.
     pub(super) fn in_grid(&self, m: usize) -> bool {
-        let d = &self.world.models[m];
-        !d.blocks.is_empty() && (d.obstacle_return || d.ranger_return >= 0.0)
+        self.frames[m].met
     }
 
     /// Calls `f(grid, i, j)` with the static grid for each cell model
