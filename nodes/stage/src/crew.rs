@@ -43,8 +43,12 @@ pub struct Crew {
 }
 
 /// How many bases a run holds at most (a base's plan takes a microsecond
-/// or two).
+/// or two, a fancy Pioneer's three), and how many runs a thread's share is
+/// cut into at least: the thread that finishes first waits for the
+/// other's last run before the moves, and in cave.world (50 bases a
+/// thread) runs of eight made that wait a fifth of the moves' time.
 const BASE_RUN: usize = 8;
+const BASE_RUNS: usize = 32;
 
 /// How many rays a run of rangers casts at most, unless one ranger casts
 /// more alone: a tenth of a millisecond a run at most, so that the threads
@@ -116,7 +120,8 @@ impl Crew {
             ranger_ends[t + 1] += ranger_ends[t];
         }
         let rays: Vec<usize> = order.iter().map(|&k| jobs[k].rays).collect();
-        let (base_cuts, base_starts) = runs(&starts, |_| 1, BASE_RUN);
+        let most = (bases / threads / BASE_RUNS).clamp(1, BASE_RUN);
+        let (base_cuts, base_starts) = runs(&starts, |_| 1, most);
         let (ranger_cuts, ranger_starts) = runs(&ranger_ends, |k| rays[k].max(1), RAY_RUN);
         Crew {
             pool,
@@ -339,8 +344,8 @@ mod tests {
         jobs.push(job(30, 50, None));
         let crew = Crew::new(2, 4, &jobs);
         assert_eq!(crew.threads(), 2);
-        assert_eq!(crew.base_cuts(), [0, 2, 4]);
-        assert_eq!(crew.base_starts, [0, 1, 2]);
+        assert_eq!(crew.base_cuts(), [0, 1, 2, 3, 4]);
+        assert_eq!(crew.base_starts, [0, 2, 4]);
         // Thread 0: robots 0 and 1; thread 1: robots 2 and 3, then the loose one.
         assert_eq!(crew.rangers, [10, 11, 20, 21, 12, 13, 30, 22, 23]);
         // Runs of up to 64 rays, or one ranger: the sonars go in pairs.
@@ -355,14 +360,26 @@ mod tests {
     #[test]
     fn one_thread_takes_everything_once_in_order() {
         let jobs: Vec<Job> = (0..5).map(|k| job(k, k + 1, None)).collect();
-        let crew = Crew::new(1, 20, &jobs);
+        let crew = Crew::new(1, 3, &jobs);
         assert_eq!(crew.threads(), 1);
         let plan = crew.bases_to_plan();
         assert_eq!(
             std::iter::from_fn(|| plan.take()).collect::<Vec<_>>(),
             [0, 1, 2]
         );
-        assert_eq!(crew.base_cuts(), [0, 8, 16, 20], "runs of eight bases");
+        assert_eq!(crew.base_cuts(), [0, 1, 2, 3], "few bases: one a run");
+        let crew = Crew::new(1, 300, &jobs);
+        let cuts = crew.base_cuts();
+        assert_eq!(
+            (cuts.len(), cuts[1], cuts[37]),
+            (39, 8, 296),
+            "runs of eight"
+        );
+        assert_eq!(
+            Crew::new(1, 100, &jobs).base_cuts()[1],
+            3,
+            "32 runs or more"
+        );
         let jobs: Vec<Job> = (0..5).map(|k| job(k, 30 - 10 * (k % 3), None)).collect();
         let crew = Crew::new(1, 0, &jobs);
         assert_eq!(crew.rangers, [2, 1, 4, 0, 3], "fewest rays first");
