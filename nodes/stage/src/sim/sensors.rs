@@ -436,8 +436,20 @@ impl Sim {
         };
         // The body the rays start in, which they never stop at.
         let own = u16::try_from(self.looks[r].root + 1).unwrap_or(0);
+        // Each sensor's readings follow the last's (`Readings::new` laid
+        // them out from these sensors): taken in turn, without looking up
+        // where each starts (a cache miss a sensor, for a swarmbot's
+        // twelve IRs of one ray each).
+        debug_assert!(fans
+            .rays
+            .iter()
+            .enumerate()
+            .all(|(i, s)| out.span(i).map(|span| span.len()) == Some(s.samples)));
+        let (mut rest, mut rest_i) = (&mut out.ranges[..], &mut out.intensities[..]);
         for (i, s) in fans.rays.iter().enumerate() {
-            let (ranges, intensities) = out.sensor_mut(i);
+            let (ranges, r_rest) = std::mem::take(&mut rest).split_at_mut(s.samples);
+            let (intensities, i_rest) = std::mem::take(&mut rest_i).split_at_mut(s.samples);
+            (rest, rest_i) = (r_rest, i_rest);
             let z = gz + s.z;
             let accept = self.ranger_sees(r, z);
             let (ox, oy) = turned(turn, s.at);
