@@ -43,11 +43,13 @@ pub struct Crew {
 }
 
 /// How many bases a run holds at most (a base's plan takes a microsecond
-/// or two, a fancy Pioneer's three), and how many runs a thread's share is
-/// cut into at least: the thread that finishes first waits for the
-/// other's last run before the moves, and in cave.world (50 bases a
-/// thread) runs of eight made that wait a fifth of the moves' time.
+/// or two, a fancy Pioneer's three).
 const BASE_RUN: usize = 8;
+
+/// How many runs a thread's share of bases is cut into at least: the
+/// thread that finishes first waits for the other's last run before the
+/// moves, and in cave.world (50 bases a thread) runs of eight made that
+/// wait a fifth of the moves' time.
 const BASE_RUNS: usize = 32;
 
 /// How many rays a run of rangers casts at most, unless one ranger casts

@@ -176,14 +176,15 @@ impl Frame {
     const ROOT: u32 = u32::MAX;
 
     fn of(d: &crate::world::ModelDef) -> Frame {
+        let body = !d.blocks.is_empty();
         Frame {
             parent: d
                 .parent
                 .and_then(|p| u32::try_from(p).ok())
                 .unwrap_or(Frame::ROOT),
-            body: !d.blocks.is_empty(),
+            body,
             obstacle: d.obstacle_return,
-            met: !d.blocks.is_empty() && (d.obstacle_return || d.ranger_return >= 0.0),
+            met: body && (d.obstacle_return || d.ranger_return >= 0.0),
             z: d.z,
             stack: if d.stack_children { d.size[2] } else { 0.0 },
             every: d.update_interval,
