@@ -743,3 +743,45 @@ fn foxglove_capabilities(url: &str) -> Vec<String> {
         .filter_map(|c| c.as_str().map(str::to_owned))
         .collect()
 }
+
+/// The p50 of the row `name` in `bench latency`'s output, in µs, from
+/// the line after `after`.
+fn p50_of(out: &str, after: &str, name: &str) -> f64 {
+    let rest = &out[out
+        .find(after)
+        .unwrap_or_else(|| panic!("no {after:?} in:\n{out}"))..];
+    let line = rest
+        .lines()
+        .find(|l| l.trim_start().starts_with(name))
+        .unwrap_or_else(|| panic!("no {name:?} row after {after:?} in:\n{out}"));
+    let p50 = line.split("p50").nth(1).expect("a p50");
+    p50.split_whitespace().next().unwrap().parse().unwrap()
+}
+
+#[test]
+fn bench_latency_prints_its_floor_and_zenoh_at_its_fastest_beside_the_figures() {
+    let (status, out, err) = troupe_output(&strings(&[
+        "bench",
+        "latency",
+        "--samples",
+        "50",
+        "--warmup",
+        "10",
+    ]));
+    assert!(status.success(), "bench latency failed:\n{out}\n{err}");
+    for (after, name) in [
+        ("troupe bench latency", "TCP round trip (the floor)"),
+        ("troupe bench latency", "put/sub round trip"),
+        ("troupe bench latency", "get/reply round trip"),
+        ("Zenoh at its fastest", "TCP round trip, in turn"),
+        ("Zenoh at its fastest", "put/sub round trip"),
+    ] {
+        let p50 = p50_of(&out, after, name);
+        assert!(p50 > 0.0, "{name} after {after}: p50 {p50} µs in:\n{out}");
+    }
+    assert_eq!(
+        out.matches("p50 against TCP").count(),
+        2,
+        "both ratios, the figures' and the fastest path's:\n{out}"
+    );
+}

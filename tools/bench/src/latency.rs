@@ -5,16 +5,20 @@
 //! times laser-scan-sized messages through the full codec (encode, put,
 //! decode, re-encode, put back, decode) and through a request/reply,
 //! beside the floor they stand on: the same bytes echoed over plain TCP
-//! between two processes, in the same run.
+//! between two processes, in the same run. It then times Zenoh at its
+//! fastest between the same two kinds of process (see [`fastest`]): what
+//! no configuration of Troupe's sessions could beat.
 
 use std::io::{Read, Write};
-use std::process::{Command, Stdio};
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use clap::Args;
 use troupe_msgs::{codec, keys, laser};
-use troupe_node::zenoh::Wait;
+use troupe_node::zenoh::{Config, Session, Wait};
 use troupe_node::{Mode, ZenohArgs};
 
 use crate::harness::{percentile, us};
@@ -68,6 +72,74 @@ fn scan_of_size(size: usize) -> laser::Scan {
 }
 
 /// Plain TCP with a namespace, or (`keys`: a directory for them) TLS with
+/// Zenoh's settings for its fastest path: the `lowlatency` transport
+/// writes each message from the caller's thread (the default queues it
+/// for the link's transmit task), which needs QoS off. Troupe's sessions
+/// cannot run so: that transport carries no message larger than one batch
+/// (64 KB; a 500×500 map is 250 KB) and closes the link on one.
+const FASTEST: [(&str, &str); 2] = [
+    ("transport/unicast/lowlatency", "true"),
+    ("transport/unicast/qos/enabled", "false"),
+];
+
+fn set_fastest(c: &mut Config) -> anyhow::Result<()> {
+    for (key, value) in FASTEST {
+        c.insert_json5(key, value)
+            .map_err(|e| anyhow::anyhow!("{key}: {e}"))?;
+    }
+    Ok(())
+}
+
+/// A `troupe bench pong` child, told to exit (its stdin closed) when dropped.
+struct Pong(Child);
+
+impl Pong {
+    /// Starts one against `session` (listening on `locator`), joined with
+    /// `net`, and waits until it is ready.
+    fn start(
+        session: &Session,
+        locator: &str,
+        net: &[String],
+        prefix: &str,
+        fastest: bool,
+    ) -> anyhow::Result<Pong> {
+        let [_, _, _, ready_key] = bench_keys(prefix);
+        let ready = session
+            .liveliness()
+            .declare_subscriber(&ready_key)
+            .history(true)
+            .wait()
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        let mut cmd = Command::new(std::env::current_exe()?);
+        cmd.args(["--connect", locator])
+            .args(net)
+            .args(["bench", "pong", "--prefix", prefix]);
+        if fastest {
+            cmd.arg("--fastest");
+        }
+        let pong = Pong(
+            cmd.stdin(Stdio::piped())
+                .spawn()
+                .context("starting `troupe bench pong`")?,
+        );
+        ready
+            .recv_timeout(Duration::from_secs(20))
+            .map_err(|e| anyhow::anyhow!("{e}"))?
+            .context("`troupe bench pong` did not come up within 20 s")?;
+        Ok(pong)
+    }
+}
+
+impl Drop for Pong {
+    fn drop(&mut self) {
+        drop(self.0.stdin.take());
+        if let Err(e) = self.0.wait_timeout_or_kill(Duration::from_secs(5)) {
+            tracing::warn!("bench pong: {e}");
+        }
+    }
+}
+
+/// Plain TCP with a namespace, or (`keys`: a directory for them) TLS with
 /// mutual authentication and access control, the pong a host of robot
 /// `SECURE_ROBOT` whose keys the bench uses.
 fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()> {
@@ -100,7 +172,7 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
             )
         }
     };
-    let [ping_key, pong_key, req_key, ready_key] = bench_keys(&prefix);
+    let [ping_key, pong_key, req_key, _] = bench_keys(&prefix);
     let session = zr.open(Mode::Router)?;
     let locator = troupe_node::locators(&session)
         .into_iter()
@@ -108,126 +180,194 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
         .context("the bench router has no locator")?;
     // Certificates name `localhost`, not the address.
     let locator = locator.replace("tls/127.0.0.1", "tls/localhost");
+    let pong = Pong::start(&session, &locator, &pong_net, &prefix, false)?;
 
-    let ready = session
-        .liveliness()
-        .declare_subscriber(&ready_key)
-        .history(true)
+    let replies = session
+        .declare_subscriber(&pong_key)
         .wait()
         .map_err(|e| anyhow::anyhow!("{e}"))?;
-    let mut child = Command::new(std::env::current_exe()?)
-        .args(["--connect", &locator])
-        .args(&pong_net)
-        .args(["bench", "pong", "--prefix", &prefix])
-        .stdin(Stdio::piped())
-        .spawn()
-        .context("starting `troupe bench pong`")?;
-    let result = (|| {
-        ready
-            .recv_timeout(Duration::from_secs(20))
-            .map_err(|e| anyhow::anyhow!("{e}"))?
-            .context("`troupe bench pong` did not come up within 20 s")?;
+    let publisher = session
+        .declare_publisher(&ping_key)
+        .express(true)
+        .wait()
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let msg = scan_of_size(a.size);
+    let size = codec::encode(&msg, 0.0).len();
+    let total = a.warmup + a.samples;
 
-        let replies = session
-            .declare_subscriber(&pong_key)
+    // The floor: the same bytes between two processes over plain TCP,
+    // a round trip after each of Zenoh's.
+    let mut echo = crate::harness::TcpEcho::start(size)?;
+    let mut tcp = Vec::with_capacity(a.samples);
+    let mut pubsub = Vec::with_capacity(a.samples);
+    for i in 0..total {
+        let payload = codec::encode(&msg, i as f64);
+        let t0 = Instant::now();
+        publisher
+            .put(payload)
             .wait()
             .map_err(|e| anyhow::anyhow!("{e}"))?;
-        let publisher = session
-            .declare_publisher(&ping_key)
-            .express(true)
+        loop {
+            let s = replies
+                .recv_timeout(Duration::from_secs(5))
+                .map_err(|e| anyhow::anyhow!("{e}"))?
+                .context("no echo within 5 s")?;
+            let back = codec::decode::<laser::Scan>(&s.payload().to_bytes())?;
+            if back.stamp == i as f64 {
+                break;
+            }
+        }
+        if i >= a.warmup {
+            pubsub.push(t0.elapsed());
+            tcp.push(echo.round_trip()?);
+        }
+    }
+
+    let mut getreply = Vec::with_capacity(a.samples);
+    for i in 0..total {
+        let payload = codec::encode(&msg, i as f64);
+        let t0 = Instant::now();
+        let rx = session
+            .get(&req_key)
+            .payload(payload)
+            .timeout(Duration::from_secs(5))
             .wait()
             .map_err(|e| anyhow::anyhow!("{e}"))?;
-        let msg = scan_of_size(a.size);
-        let size = codec::encode(&msg, 0.0).len();
-        let total = a.warmup + a.samples;
-
-        // The floor: the same bytes between two processes over plain TCP,
-        // a round trip after each of Zenoh's.
-        let mut echo = crate::harness::TcpEcho::start(size)?;
-        let mut tcp = Vec::with_capacity(a.samples);
-        let mut pubsub = Vec::with_capacity(a.samples);
-        for i in 0..total {
-            let payload = codec::encode(&msg, i as f64);
-            let t0 = Instant::now();
-            publisher
-                .put(payload)
-                .wait()
-                .map_err(|e| anyhow::anyhow!("{e}"))?;
-            loop {
-                let s = replies
-                    .recv_timeout(Duration::from_secs(5))
-                    .map_err(|e| anyhow::anyhow!("{e}"))?
-                    .context("no echo within 5 s")?;
-                let back = codec::decode::<laser::Scan>(&s.payload().to_bytes())?;
-                if back.stamp == i as f64 {
-                    break;
-                }
-            }
-            if i >= a.warmup {
-                pubsub.push(t0.elapsed());
-                tcp.push(echo.round_trip()?);
-            }
+        let r = rx.recv().map_err(|e| anyhow::anyhow!("no reply: {e}"))?;
+        let s = r
+            .into_result()
+            .map_err(|e| anyhow::anyhow!("refused: {e:?}"))?;
+        codec::decode::<laser::Scan>(&s.payload().to_bytes())?;
+        if i >= a.warmup {
+            getreply.push(t0.elapsed());
         }
-
-        let mut getreply = Vec::with_capacity(a.samples);
-        for i in 0..total {
-            let payload = codec::encode(&msg, i as f64);
-            let t0 = Instant::now();
-            let rx = session
-                .get(&req_key)
-                .payload(payload)
-                .timeout(Duration::from_secs(5))
-                .wait()
-                .map_err(|e| anyhow::anyhow!("{e}"))?;
-            let r = rx.recv().map_err(|e| anyhow::anyhow!("no reply: {e}"))?;
-            let s = r
-                .into_result()
-                .map_err(|e| anyhow::anyhow!("refused: {e:?}"))?;
-            codec::decode::<laser::Scan>(&s.payload().to_bytes())?;
-            if i >= a.warmup {
-                getreply.push(t0.elapsed());
-            }
-        }
-        pubsub.sort();
-        getreply.sort();
-        tcp.sort();
-        let mut out = std::io::stdout().lock();
-        let over = if keys.is_some() {
-            "tls/127.0.0.1, mutual authentication and access control"
-        } else {
-            "tcp/127.0.0.1"
-        };
-        writeln!(out, "troupe bench latency: {size}-byte laser/scan@1 payload, {} samples (+{} warm-up), two processes, Zenoh over {over}", a.samples, a.warmup)?;
-        let row = |out: &mut std::io::StdoutLock, name: &str, v: &[Duration], half: bool| {
-            let f = |d: Duration| if half { d / 2 } else { d };
-            writeln!(
-                out,
-                "  {name:<26} p50 {:>7}  p90 {:>7}  p99 {:>7}  max {:>7}",
-                us(f(percentile(v, 0.5))),
-                us(f(percentile(v, 0.9))),
-                us(f(percentile(v, 0.99))),
-                us(f(percentile(v, 1.0)))
-            )
-        };
-        row(&mut out, "TCP round trip (the floor)", &tcp, false)?;
-        row(&mut out, "put/sub round trip", &pubsub, false)?;
-        row(&mut out, "one sample (round trip/2)", &pubsub, true)?;
-        row(&mut out, "get/reply round trip", &getreply, false)?;
+    }
+    drop(pong);
+    // Zenoh at its fastest, over plain TCP only (the secure run compares
+    // with the plain one).
+    let best = match keys {
+        None => Some(fastest(a, &ns, &prefix, &pong_net, &msg, &mut echo)?),
+        Some(_) => None,
+    };
+    pubsub.sort();
+    getreply.sort();
+    tcp.sort();
+    let mut out = std::io::stdout().lock();
+    let over = if keys.is_some() {
+        "tls/127.0.0.1, mutual authentication and access control"
+    } else {
+        "tcp/127.0.0.1"
+    };
+    writeln!(out, "troupe bench latency: {size}-byte laser/scan@1 payload, {} samples (+{} warm-up), two processes, Zenoh over {over}", a.samples, a.warmup)?;
+    let row = |out: &mut std::io::StdoutLock, name: &str, v: &[Duration], half: bool| {
+        let f = |d: Duration| if half { d / 2 } else { d };
         writeln!(
             out,
-            "  p50 against TCP: one sample {:.2}x a TCP one way, get/reply {:.2}x a TCP round trip (target <= 1.3x each)",
-            crate::harness::times_floor(&pubsub, &tcp),
-            crate::harness::times_floor(&getreply, &tcp),
+            "  {name:<26} p50 {:>7}  p90 {:>7}  p99 {:>7}  max {:>7}",
+            us(f(percentile(v, 0.5))),
+            us(f(percentile(v, 0.9))),
+            us(f(percentile(v, 0.99))),
+            us(f(percentile(v, 1.0)))
+        )
+    };
+    row(&mut out, "TCP round trip (the floor)", &tcp, false)?;
+    row(&mut out, "put/sub round trip", &pubsub, false)?;
+    row(&mut out, "one sample (round trip/2)", &pubsub, true)?;
+    row(&mut out, "get/reply round trip", &getreply, false)?;
+    writeln!(
+        out,
+        "  p50 against TCP: one sample {:.2}x a TCP one way, get/reply {:.2}x a TCP round trip (target <= 1.3x each)",
+        crate::harness::times_floor(&pubsub, &tcp),
+        crate::harness::times_floor(&getreply, &tcp),
+    )?;
+    if let Some((mut best, mut beside)) = best {
+        best.sort();
+        beside.sort();
+        writeln!(
+            out,
+            "  Zenoh at its fastest: the lowlatency transport (writes from the caller's thread; QoS off), callbacks on both sides, the reader spinning on a core"
         )?;
-        Ok(())
-    })();
-    // Closing the child's stdin tells it to exit; kill it if it does not.
-    drop(child.stdin.take());
-    match child.wait_timeout_or_kill(Duration::from_secs(5)) {
-        Ok(()) => {}
-        Err(e) => tracing::warn!("bench pong: {e}"),
+        row(&mut out, "TCP round trip, in turn", &beside, false)?;
+        row(&mut out, "put/sub round trip", &best, false)?;
+        writeln!(
+            out,
+            "  p50 against TCP: one sample {:.2}x a TCP one way in turn with it, {:.2}x the floor above (no session of Troupe's can do better: see ARCHITECTURE.md, \"What a hop costs\")",
+            crate::harness::times_floor(&best, &beside),
+            crate::harness::times_floor(&best, &tcp),
+        )?;
     }
-    result
+    Ok(())
+}
+
+/// Put/sub round trips at Zenoh's fastest between two processes, each
+/// followed by a TCP round trip on `echo`: both sessions on the
+/// lowlatency transport ([`FASTEST`]), the echo answered from its
+/// subscriber's callback, and the reply taken by a callback that this
+/// thread spins on, so that no thread wakes on this side (Troupe's
+/// nodes take data on a thread that sleeps until it comes). A bound
+/// for what configuration can reach, not a way to run.
+fn fastest(
+    a: &LatencyArgs,
+    ns: &str,
+    prefix: &str,
+    pong_net: &[String],
+    msg: &laser::Scan,
+    echo: &mut crate::harness::TcpEcho,
+) -> anyhow::Result<(Vec<Duration>, Vec<Duration>)> {
+    let [ping_key, pong_key, ..] = bench_keys(prefix);
+    let mut config = ZenohArgs {
+        listen: vec!["tcp/127.0.0.1:0".into()],
+        no_multicast: true,
+        namespace: Some(ns.to_owned()),
+        ..Default::default()
+    }
+    .config(Mode::Router)?;
+    set_fastest(&mut config)?;
+    let session = troupe_node::zenoh::open(config)
+        .wait()
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let locator = troupe_node::locators(&session)
+        .into_iter()
+        .next()
+        .context("the bench router has no locator")?;
+    let _pong = Pong::start(&session, &locator, pong_net, prefix, true)?;
+    let echoed = Arc::new(AtomicU64::new(0));
+    let count = echoed.clone();
+    let _replies = session
+        .declare_subscriber(&pong_key)
+        .callback(move |_| {
+            count.fetch_add(1, Ordering::Release);
+        })
+        .wait()
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let publisher = session
+        .declare_publisher(&ping_key)
+        .express(true)
+        .wait()
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let (mut best, mut tcp) = (Vec::with_capacity(a.samples), Vec::with_capacity(a.samples));
+    for i in 0..(a.warmup + a.samples) as u64 {
+        let payload = codec::encode(msg, i as f64);
+        let t0 = Instant::now();
+        publisher
+            .put(payload)
+            .wait()
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        let mut spins = 0u32;
+        while echoed.load(Ordering::Acquire) <= i {
+            std::hint::spin_loop();
+            spins = spins.wrapping_add(1);
+            if spins % 4096 == 0 && t0.elapsed() > Duration::from_secs(5) {
+                anyhow::bail!("no echo within 5 s on the lowlatency transport");
+            }
+        }
+        let took = t0.elapsed();
+        if i >= a.warmup as u64 {
+            best.push(took);
+            tcp.push(echo.round_trip()?);
+        }
+    }
+    Ok((best, tcp))
 }
 
 trait WaitOrKill {
@@ -248,10 +388,20 @@ impl WaitOrKill for std::process::Child {
     }
 }
 
-/// The echo side: decodes each ping as a node would, re-encodes it and sends it back.
-pub fn pong(z: &ZenohArgs, prefix: &str) -> anyhow::Result<()> {
+/// The echo side: decodes each ping as a node would, re-encodes it and
+/// sends it back; with `fastest`, on Zenoh's fastest transport
+/// ([`FASTEST`]), as [`fastest`] times it.
+pub fn pong(z: &ZenohArgs, prefix: &str, fastest: bool) -> anyhow::Result<()> {
     let [ping_key, pong_key, req_key, ready_key] = bench_keys(prefix);
-    let session = z.open(Mode::Peer)?;
+    let session = if fastest {
+        let mut config = z.config(Mode::Peer)?;
+        set_fastest(&mut config)?;
+        troupe_node::zenoh::open(config)
+            .wait()
+            .map_err(|e| anyhow::anyhow!("{e}"))?
+    } else {
+        z.open(Mode::Peer)?
+    };
     let back = session
         .declare_publisher(pong_key)
         .express(true)

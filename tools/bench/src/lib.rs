@@ -78,6 +78,9 @@ pub enum BenchCmd {
         /// Where its keys live (`bench`, or a robot's keys under access control).
         #[arg(long, default_value = "bench")]
         prefix: String,
+        /// On Zenoh's fastest transport (lowlatency, QoS off).
+        #[arg(long)]
+        fastest: bool,
     },
     /// Runs a command and prints its wall time, CPU and peak memory (started by `bench stage --stage`).
     #[command(hide = true)]
@@ -102,7 +105,7 @@ pub enum BenchCmd {
 pub fn run(cmd: BenchCmd, z: &ZenohArgs) -> anyhow::Result<()> {
     match cmd {
         BenchCmd::Latency(a) => latency::run(&a),
-        BenchCmd::Pong { prefix } => latency::pong(z, &prefix),
+        BenchCmd::Pong { prefix, fastest } => latency::pong(z, &prefix, fastest),
         BenchCmd::Echo { to, size } => harness::echo(&to, size),
         BenchCmd::Measure { cmd } => vs_stage::measure(&cmd),
         BenchCmd::Launch(a) => launch::run(&a),
