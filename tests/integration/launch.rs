@@ -408,22 +408,46 @@ fn socket_inodes(pid: u32) -> std::collections::BTreeSet<u64> {
         .collect()
 }
 
-/// Every listening TCP socket of this network namespace: (inode, address),
-/// the address as /proc/net/tcp{,6} spells it (hex, in host byte order).
-fn listening() -> Vec<(u64, String)> {
+/// A TCP socket of this network namespace as /proc/net/tcp{,6} lists it:
+/// its inode, and its local and remote addresses and ports (addresses in
+/// hex, in host byte order, as /proc spells them).
+struct Socket {
+    inode: u64,
+    local: (String, u16),
+    remote: (String, u16),
+}
+
+/// Every TCP socket of this network namespace in `state` (as /proc
+/// spells it: `0A` listening, `01` established).
+fn sockets(state: &str) -> Vec<Socket> {
+    let end = |a: &str| {
+        let (addr, port) = a.split_once(':').unwrap_or_default();
+        (addr.to_owned(), u16::from_str_radix(port, 16).unwrap_or(0))
+    };
     let mut out = Vec::new();
     for table in ["/proc/net/tcp", "/proc/net/tcp6"] {
         let text = std::fs::read_to_string(table).unwrap();
         for row in text.lines().skip(1) {
             let f: Vec<&str> = row.split_whitespace().collect();
-            // sl, local address, remote address, state (0A: LISTEN), …, inode
-            if f.len() > 9 && f[3] == "0A" {
-                let addr = f[1].split(':').next().unwrap_or_default().to_owned();
-                out.push((f[9].parse().unwrap_or(0), addr));
+            // sl, local address, remote address, state, …, inode
+            if f.len() > 9 && f[3] == state {
+                out.push(Socket {
+                    inode: f[9].parse().unwrap_or(0),
+                    local: end(f[1]),
+                    remote: end(f[2]),
+                });
             }
         }
     }
     out
+}
+
+/// Every listening TCP socket of this network namespace: (inode, address).
+fn listening() -> Vec<(u64, String)> {
+    sockets("0A")
+        .into_iter()
+        .map(|s| (s.inode, s.local.0))
+        .collect()
 }
 
 /// 127.0.0.0/8 or ::1 (or ::ffff:127.x), as /proc/net spells them.
@@ -489,5 +513,50 @@ fn a_launch_and_its_viewers_listen_on_this_host_only() {
         seen.iter().any(|c| c.contains(" foxglove ")) && seen.iter().any(|c| c.contains(" view ")),
         "{seen:?}"
     );
+    assert!(launcher.terminate().success(), "{}", launcher.stderr());
+}
+
+/// Whether process `a` holds a TCP link to a port process `b` listens on.
+fn linked(a: u32, b: u32) -> bool {
+    let listens: Vec<u16> = {
+        let mine = socket_inodes(b);
+        sockets("0A")
+            .into_iter()
+            .filter(|s| mine.contains(&s.inode))
+            .map(|s| s.local.1)
+            .collect()
+    };
+    let mine = socket_inodes(a);
+    sockets("01")
+        .into_iter()
+        .any(|s| mine.contains(&s.inode) && loopback(&s.remote.0) && listens.contains(&s.remote.1))
+}
+
+#[test]
+fn a_launch_s_nodes_link_to_each_other_and_to_the_router() {
+    // Data takes the shortest path: each node is a peer that learns of the
+    // others through the launcher's router (gossip) and links to them, so
+    // that rangertolaser takes dummy's ranger over one link, not two.
+    let cfg = temp_cfg("direct", STACK);
+    let (mut launcher, endpoint, ns) = launch(&cfg, &[]);
+    let s = client_at(&endpoint, &ns);
+    let tokens = token_events(&s);
+    let deadline = Instant::now() + DEADLINE;
+    until_up(&tokens, 2, deadline);
+    let router = launcher.child.id();
+    let nodes = children(router, "troupe");
+    assert_eq!(nodes.len(), 2, "dummy and rangertolaser: {nodes:?}");
+    let direct = |(a, b): (u32, u32)| linked(a, b) || linked(b, a);
+    // The link between the nodes comes once gossip has named one to the other.
+    while !direct((nodes[0], nodes[1])) {
+        assert!(
+            Instant::now() < deadline,
+            "no link between the nodes {nodes:?} within {DEADLINE:?}"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    for n in &nodes {
+        assert!(linked(*n, router), "node {n} has no link to the router");
+    }
     assert!(launcher.terminate().success(), "{}", launcher.stderr());
 }
