@@ -516,20 +516,40 @@ fn a_launch_and_its_viewers_listen_on_this_host_only() {
     assert!(launcher.terminate().success(), "{}", launcher.stderr());
 }
 
-/// Whether process `a` holds a TCP link to a port process `b` listens on.
-fn linked(a: u32, b: u32) -> bool {
-    let listens: Vec<u16> = {
-        let mine = socket_inodes(b);
-        sockets("0A")
-            .into_iter()
-            .filter(|s| mine.contains(&s.inode))
+/// This network namespace's TCP links, listening and established, as
+/// one read of /proc sees them.
+struct Links {
+    listening: Vec<Socket>,
+    established: Vec<Socket>,
+}
+
+impl Links {
+    fn now() -> Links {
+        Links {
+            listening: sockets("0A"),
+            established: sockets("01"),
+        }
+    }
+
+    /// Whether process `a` holds a link to a port process `b` listens on.
+    fn one_way(&self, a: u32, b: u32) -> bool {
+        let theirs = socket_inodes(b);
+        let ports: Vec<u16> = self
+            .listening
+            .iter()
+            .filter(|s| theirs.contains(&s.inode))
             .map(|s| s.local.1)
-            .collect()
-    };
-    let mine = socket_inodes(a);
-    sockets("01")
-        .into_iter()
-        .any(|s| mine.contains(&s.inode) && loopback(&s.remote.0) && listens.contains(&s.remote.1))
+            .collect();
+        let mine = socket_inodes(a);
+        self.established.iter().any(|s| {
+            mine.contains(&s.inode) && loopback(&s.remote.0) && ports.contains(&s.remote.1)
+        })
+    }
+
+    /// Whether either of `a` and `b` holds a link to the other.
+    fn between(&self, a: u32, b: u32) -> bool {
+        self.one_way(a, b) || self.one_way(b, a)
+    }
 }
 
 #[test]
@@ -546,17 +566,23 @@ fn a_launch_s_nodes_link_to_each_other_and_to_the_router() {
     let router = launcher.child.id();
     let nodes = children(router, "troupe");
     assert_eq!(nodes.len(), 2, "dummy and rangertolaser: {nodes:?}");
-    let direct = |(a, b): (u32, u32)| linked(a, b) || linked(b, a);
     // The link between the nodes comes once gossip has named one to the other.
-    while !direct((nodes[0], nodes[1])) {
+    let links = loop {
+        let links = Links::now();
+        if links.between(nodes[0], nodes[1]) {
+            break links;
+        }
         assert!(
             Instant::now() < deadline,
             "no link between the nodes {nodes:?} within {DEADLINE:?}"
         );
         std::thread::sleep(std::time::Duration::from_millis(20));
-    }
+    };
     for n in &nodes {
-        assert!(linked(*n, router), "node {n} has no link to the router");
+        assert!(
+            links.one_way(*n, router),
+            "node {n} has no link to the router"
+        );
     }
     assert!(launcher.terminate().success(), "{}", launcher.stderr());
 }

@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use clap::Args;
 use troupe_msgs::{codec, keys, laser};
-use troupe_node::zenoh::{Config, Session, Wait};
+use troupe_node::zenoh::{Session, Wait};
 use troupe_node::{Mode, ZenohArgs};
 
 use crate::harness::{percentile, us};
@@ -81,13 +81,24 @@ const FASTEST: [(&str, &str); 2] = [
     ("transport/unicast/qos/enabled", "false"),
 ];
 
-/// Puts [`FASTEST`] into `c`.
-fn set_fastest(c: &mut Config) -> anyhow::Result<()> {
+/// A session of `z`'s in `mode`, with [`FASTEST`] set.
+fn open_fastest(z: &ZenohArgs, mode: Mode) -> anyhow::Result<Session> {
+    let mut c = z.config(mode)?;
     for (key, value) in FASTEST {
         c.insert_json5(key, value)
             .map_err(|e| anyhow::anyhow!("{key}: {e}"))?;
     }
-    Ok(())
+    troupe_node::zenoh::open(c)
+        .wait()
+        .map_err(|e| anyhow::anyhow!("{e}"))
+}
+
+/// The first address the bench's router listens on.
+fn locator_of(session: &Session) -> anyhow::Result<String> {
+    troupe_node::locators(session)
+        .into_iter()
+        .next()
+        .context("the bench router has no locator")
 }
 
 /// A `troupe bench pong` child, told to exit (its stdin closed) when dropped.
@@ -174,12 +185,8 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
     };
     let [ping_key, pong_key, req_key, _] = bench_keys(&prefix);
     let session = zr.open(Mode::Router)?;
-    let locator = troupe_node::locators(&session)
-        .into_iter()
-        .next()
-        .context("the bench router has no locator")?;
     // Certificates name `localhost`, not the address.
-    let locator = locator.replace("tls/127.0.0.1", "tls/localhost");
+    let locator = locator_of(&session)?.replace("tls/127.0.0.1", "tls/localhost");
     let pong = Pong::start(&session, &locator, &pong_net, &prefix, false)?;
 
     let replies = session
@@ -246,7 +253,7 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
     // Zenoh at its fastest, over plain TCP only (the secure run compares
     // with the plain one).
     let best = match keys {
-        None => Some(fastest(a, &ns, &prefix, &pong_net, &msg, &mut echo)?),
+        None => Some(fastest(a, &zr, &prefix, &pong_net, &msg, &mut echo)?),
         Some(_) => None,
     };
     pubsub.sort();
@@ -280,9 +287,7 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
         crate::harness::times_floor(&pubsub, &tcp),
         crate::harness::times_floor(&getreply, &tcp),
     )?;
-    if let Some((mut best, mut beside)) = best {
-        best.sort();
-        beside.sort();
+    if let Some((best, beside)) = best {
         writeln!(
             out,
             "  Zenoh at its fastest: the lowlatency transport (writes from the caller's thread; QoS off), callbacks on both sides, the reader spinning on a core"
@@ -300,7 +305,8 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
 }
 
 /// Put/sub round trips at Zenoh's fastest between two processes, each
-/// followed by a TCP round trip on `echo`: both sessions on the
+/// followed by a TCP round trip on `echo` (both sorted), between a
+/// router of `zr`'s and a pong joined with `pong_net`: both sessions on the
 /// lowlatency transport ([`FASTEST`]), the echo answered from its
 /// subscriber's callback, and the reply decoded by a callback that this
 /// thread spins on, so that no thread wakes on this side (Troupe's
@@ -308,29 +314,15 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
 /// for what configuration can reach, not a way to run.
 fn fastest(
     a: &LatencyArgs,
-    ns: &str,
+    zr: &ZenohArgs,
     prefix: &str,
     pong_net: &[String],
     msg: &laser::Scan,
     echo: &mut crate::harness::TcpEcho,
 ) -> anyhow::Result<(Vec<Duration>, Vec<Duration>)> {
     let [ping_key, pong_key, ..] = bench_keys(prefix);
-    let mut config = ZenohArgs {
-        listen: vec!["tcp/127.0.0.1:0".into()],
-        no_multicast: true,
-        namespace: Some(ns.to_owned()),
-        ..Default::default()
-    }
-    .config(Mode::Router)?;
-    set_fastest(&mut config)?;
-    let session = troupe_node::zenoh::open(config)
-        .wait()
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
-    let locator = troupe_node::locators(&session)
-        .into_iter()
-        .next()
-        .context("the bench router has no locator")?;
-    let _pong = Pong::start(&session, &locator, pong_net, prefix, true)?;
+    let session = open_fastest(zr, Mode::Router)?;
+    let _pong = Pong::start(&session, &locator_of(&session)?, pong_net, prefix, true)?;
     let echoed = Arc::new(AtomicU64::new(0));
     let count = echoed.clone();
     let _replies = session
@@ -370,6 +362,8 @@ fn fastest(
             tcp.push(echo.round_trip()?);
         }
     }
+    best.sort();
+    tcp.sort();
     Ok((best, tcp))
 }
 
@@ -397,11 +391,7 @@ impl WaitOrKill for std::process::Child {
 pub fn pong(z: &ZenohArgs, prefix: &str, fastest: bool) -> anyhow::Result<()> {
     let [ping_key, pong_key, req_key, ready_key] = bench_keys(prefix);
     let session = if fastest {
-        let mut config = z.config(Mode::Peer)?;
-        set_fastest(&mut config)?;
-        troupe_node::zenoh::open(config)
-            .wait()
-            .map_err(|e| anyhow::anyhow!("{e}"))?
+        open_fastest(z, Mode::Peer)?
     } else {
         z.open(Mode::Peer)?
     };
