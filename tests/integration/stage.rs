@@ -157,7 +157,8 @@ fn a_pull_read_carries_every_subscribed_device_at_one_step() {
     use troupe_msgs::{Device, Interface};
     let cfg = Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/simple.cfg");
     let ns = troupe_tests::unique_namespace("pull");
-    let mut launcher = troupe_tests::launch(&ns, &cfg, &[]);
+    // The bridge says which rounds went without what: a failure shows it.
+    let mut launcher = troupe_tests::launch(&ns, &cfg, &["--log", "info,troupe_bridge=debug"]);
     let (_, addr) = troupe_tests::launch_ports(&mut launcher);
     let mut player = Player::connect(addr, 6665);
     // PLAYER_PLAYER_REQ_DATAMODE, PLAYER_DATAMODE_PULL.
@@ -199,7 +200,11 @@ fn a_pull_read_carries_every_subscribed_device_at_one_step() {
     let mut last = loop {
         let (got, stamp) = read();
         first += 1;
-        assert!(first <= 2, "read {first} carried only {got:?}");
+        assert!(
+            first <= 2,
+            "read {first} carried only {got:?}\n{}",
+            launcher.stderr()
+        );
         if carries_all(&got) {
             break stamp.expect("position2d data");
         }
@@ -210,7 +215,8 @@ fn a_pull_read_carries_every_subscribed_device_at_one_step() {
         let (got, stamp) = read();
         assert!(
             carries_all(&got),
-            "read {i} after the first whole one brought {got:?}"
+            "read {i} after the first whole one brought {got:?}\n{}",
+            launcher.stderr()
         );
         let stamp = stamp.expect("position2d data");
         assert!(

@@ -12,7 +12,8 @@
 //!   goes out with it), then, at most [`ROUND_WAIT`], for all
 //!   data due at the newest stamp by the pace of its own stamps (a ranger's
 //!   ranges and intensities each). Data that misses the wait is not waited
-//!   for again until it comes.
+//!   for again until it comes. A device just opened is waited for longer,
+//!   up to [`OPEN_WAIT`] from its opening, until its live samples come.
 //! - Replace rules (first match wins, -1 = any): ACCEPT, REPLACE the older
 //!   message of the same device/type/subtype, or IGNORE. Default: accept.
 //! - Bounded: DATA and CMD beyond `maxlen` are dropped and counted; in PULL
@@ -34,6 +35,15 @@ pub const DEFAULT_MAXLEN: usize = 1024;
 /// them, such as rangertolaser's laser); the margin is for a loaded
 /// machine. A device that stops publishing costs one round this wait.
 pub const ROUND_WAIT: Duration = Duration::from_millis(100);
+
+/// The longest a PULL round waits for a device the client has just opened
+/// until its live samples start, counted from the opening. The bridge
+/// subscribes at the opening, and a new subscription reaches the driver
+/// in milliseconds on a quiet machine but can take hundreds on a loaded
+/// one (CI's, with a compiler beside it); without the margin the rounds
+/// after an opening would give the device up and go without it. A device
+/// opened that never publishes again costs its first round this once.
+pub const OPEN_WAIT: Duration = Duration::from_secs(2);
 
 /// An encoded message with the header fields the queue looks at.
 #[derive(Debug, Clone)]
@@ -137,6 +147,10 @@ struct Pace {
     /// The client opened the device and it had published once at most:
     /// its next sample is waited for (see [`Queue::expect`]).
     expected: bool,
+    /// When the client opened the device, until this kind's second sample
+    /// (its live feed has begun then): its wait runs to [`OPEN_WAIT`]
+    /// after this.
+    opened: Option<Instant>,
 }
 
 /// The subtype of an opened device's pace before its first sample says
@@ -176,6 +190,8 @@ pub struct Queue {
     /// This round delivered data of a new step (see [`Queue::new_step`]):
     /// it may end.
     fresh: bool,
+    /// When this round began waiting for due data (it had a new step).
+    waiting_since: Option<Instant>,
     /// Until when a round waits for a new step or for due data.
     waiting: Option<Instant>,
     dropped: u32,
@@ -195,6 +211,7 @@ impl Queue {
             paces: Vec::new(),
             round_stamp: f64::NEG_INFINITY,
             fresh: false,
+            waiting_since: None,
             waiting: None,
             dropped: 0,
             dropped_total: 0,
@@ -223,12 +240,13 @@ impl Queue {
         }
     }
 
-    /// The client opened a device: from the next PULL round on, a round
-    /// waits (at most [`ROUND_WAIT`]) for its data before it ends, its
-    /// first sample and the one after, before the device's own pace is
-    /// known, as Player's rounds after a subscription carried every
-    /// opened device.
-    pub fn expect(&mut self, interf: u32, index: u32) {
+    /// The client opened a device at `now`: from the next PULL round on, a
+    /// round waits for its data before it ends, its first sample and the
+    /// one after, before the device's own pace is known, as Player's rounds
+    /// after a subscription carried every opened device. It waits up to
+    /// [`OPEN_WAIT`] from `now` (or [`ROUND_WAIT`], if longer), while the
+    /// new subscription reaches the device's driver.
+    pub fn expect(&mut self, interf: u32, index: u32, now: Instant) {
         if !self
             .paces
             .iter()
@@ -240,6 +258,7 @@ impl Queue {
                 period: 0.0,
                 lagging: false,
                 expected: true,
+                opened: Some(now),
             });
         }
     }
@@ -310,18 +329,25 @@ impl Queue {
                 if m.stamp > p.newest {
                     p.period = m.stamp - p.newest;
                     p.newest = m.stamp;
+                    p.opened = None;
                 }
                 p.lagging = false;
             }
             None => {
-                // An opened device's first kind takes its place.
-                let opened = |p: &Pace| p.sig == (m.interf, m.index, ANY_SUBTYPE);
-                let expected = match self.paces.iter().position(opened) {
-                    Some(i) => {
-                        self.paces.swap_remove(i);
-                        true
-                    }
-                    None => false,
+                // An opened device's first kind takes its place; the other
+                // kinds of its first samples (a ranger's intensities after
+                // its ranges) are expected as the first is.
+                let any = |p: &Pace| p.sig == (m.interf, m.index, ANY_SUBTYPE);
+                let sibling = |p: &&Pace| {
+                    (p.sig.0, p.sig.1) == (m.interf, m.index) && p.expected && p.period <= 0.0
+                };
+                let (expected, opened) = match self.paces.iter().position(any) {
+                    Some(i) => (true, self.paces.swap_remove(i).opened),
+                    None => self
+                        .paces
+                        .iter()
+                        .find(sibling)
+                        .map_or((false, None), |p| (true, p.opened)),
                 };
                 self.paces.push(Pace {
                     sig,
@@ -329,6 +355,7 @@ impl Queue {
                     period: 0.0,
                     lagging: false,
                     expected,
+                    opened,
                 });
             }
         }
@@ -349,20 +376,37 @@ impl Queue {
 
     /// Whether a round must still wait at `now`: for a new step, as long as
     /// it takes, while it has delivered no data or only late parts of the
-    /// last round's (as a Player round with no data stays open); then, at most [`ROUND_WAIT`], for all data due at the
-    /// newest stamp. Data still due when that runs out is marked lagging.
+    /// last round's (as a Player round with no data stays open); then, at
+    /// most [`ROUND_WAIT`] (for a device just opened, up to [`OPEN_WAIT`]
+    /// after its opening), for all data due at the newest stamp. Data still
+    /// due when that runs out is marked lagging.
     fn must_wait(&mut self, now: Instant) -> bool {
         if !self.fresh {
             return true;
         }
         let t = self.paces.iter().map(|p| p.newest).fold(f64::MIN, f64::max);
-        let due = self.paces.iter().any(|p| p.due(t));
-        if due {
-            let until = *self.waiting.get_or_insert(now + ROUND_WAIT);
+        let round = *self.waiting_since.get_or_insert(now) + ROUND_WAIT;
+        let until = self
+            .paces
+            .iter()
+            .filter(|p| p.due(t))
+            .map(|p| p.opened.map_or(round, |o| round.max(o + OPEN_WAIT)))
+            .max();
+        self.waiting = until;
+        if let Some(until) = until {
             if now < until {
                 return true;
             }
             for p in self.paces.iter_mut().filter(|p| p.due(t)) {
+                tracing::debug!(
+                    "a PULL round at {t:.3} s went without interface {} index {} subtype {}: \
+                     its sample was due (newest {:.3} s, every {:.3} s) and did not come in time",
+                    p.sig.0,
+                    p.sig.1,
+                    p.sig.2,
+                    p.newest,
+                    p.period
+                );
                 p.lagging = true;
             }
         }
@@ -375,6 +419,7 @@ impl Queue {
         self.items.push_front(ack);
         self.data_requested = true;
         self.fresh = false;
+        self.waiting_since = None;
         self.waiting = None;
     }
 
@@ -388,6 +433,7 @@ impl Queue {
             if self.data_requested && m.kind == wire::DATA && !self.fresh && self.new_step(&m) {
                 // Its wait starts now.
                 self.fresh = true;
+                self.waiting_since = None;
                 self.waiting = None;
             }
             return Some(m);
@@ -395,6 +441,7 @@ impl Queue {
         // SYNCH once a new step went out (see `must_wait`).
         if self.pull && self.data_requested && !self.must_wait(now) {
             self.data_requested = false;
+            self.waiting_since = None;
             self.waiting = None;
             let h = Header {
                 interf: u32::from(PLAYER_CODE),
@@ -478,10 +525,25 @@ mod tests {
     fn opened_pull() -> Queue {
         let mut q = Queue::new(64);
         q.set_pull(true);
-        q.expect(4, 0);
-        q.expect(6, 0);
+        q.expect(4, 0, Instant::now());
+        q.expect(6, 0, Instant::now());
         q.request_data(msg(A, 1, 4));
         q
+    }
+
+    /// Data of one kind (`subtype`) of device `interf`:`index`.
+    fn data_of(interf: u32, index: u32, subtype: u8, stamp: f64) -> Out {
+        Out::new(
+            Header {
+                interf,
+                index,
+                kind: u32::from(D),
+                subtype: u32::from(subtype),
+                timestamp: stamp,
+                ..Header::default()
+            },
+            &[],
+        )
     }
 
     const D: u8 = wire::DATA;
@@ -591,20 +653,67 @@ mod tests {
 
     #[test]
     fn an_opened_device_that_never_publishes_holds_one_round_back_once() {
+        let opened = Instant::now();
         let mut q = opened_pull();
         q.push(data(4, 0.1));
         assert_eq!(drain(&mut q), [(A, 1), (D, 4)]);
+        // Its subscription may still be on its way: a round's wait is not
+        // enough to give it up.
         let late = Instant::now() + ROUND_WAIT;
-        assert_eq!(q.pop(late).map(|m| m.kind), Some(S));
+        assert!(
+            q.pop(late).is_none(),
+            "a device just opened is given longer"
+        );
+        let until = q.deadline().expect("waiting for the laser");
+        assert!(until >= opened + OPEN_WAIT, "{:?}", until - opened);
+        assert_eq!(q.pop(until).map(|m| m.kind), Some(S));
         q.request_data(msg(A, 1, 4));
         q.push(data(4, 0.2));
         assert_eq!(drain(&mut q), [(A, 1), (D, 4), (S, 1)]);
-        // Closed, it is forgotten; opened again, it is expected again.
+        // Closed, it is forgotten; opened again, it is expected again,
+        // and long after its opening a round waits a round's wait for it.
         q.forget(6, 0);
-        q.expect(6, 0);
+        let long_ago = Instant::now().checked_sub(2 * OPEN_WAIT).expect("uptime");
+        q.expect(6, 0, long_ago);
         q.request_data(msg(A, 1, 4));
         q.push(data(4, 0.3));
+        let start = Instant::now();
         assert_eq!(drain(&mut q), [(A, 1), (D, 4)]);
+        let until = q.deadline().expect("waiting for the laser");
+        assert!(until <= Instant::now() + ROUND_WAIT, "{:?}", until - start);
+        assert_eq!(q.pop(until).map(|m| m.kind), Some(S));
+    }
+
+    #[test]
+    fn the_late_first_samples_of_an_opened_ranger_make_no_round_of_their_own() {
+        // A ranger publishes two kinds a step, ranges (1) and intensities
+        // (3). The client opens it and position2d, which has a latest
+        // sample; the ranger's feed starts late, after two rounds.
+        let mut q = Queue::new(64);
+        q.set_pull(true);
+        q.expect(4, 0, Instant::now());
+        q.expect(62, 1, Instant::now());
+        q.push(data_of(4, 0, 1, 0.0));
+        q.request_data(msg(A, 1, 4));
+        assert_eq!(drain(&mut q), [(A, 1), (D, 4)]);
+        let until = q.deadline().expect("waiting for the ranger");
+        assert_eq!(q.pop(until).map(|m| m.kind), Some(S));
+        // Given up, it is not waited for until it publishes.
+        q.request_data(msg(A, 1, 4));
+        q.push(data_of(4, 0, 1, 0.1));
+        assert_eq!(drain(&mut q), [(A, 1), (D, 4), (S, 1)]);
+        // Its first samples, of 0.1, are late parts of the last round, both
+        // kinds: the round waits for the next step.
+        q.request_data(msg(A, 1, 4));
+        q.push(data_of(62, 1, 1, 0.1));
+        q.push(data_of(62, 1, 3, 0.1));
+        assert_eq!(drain(&mut q), [(A, 1), (D, 62), (D, 62)]);
+        for m in [data_of(4, 0, 1, 0.2), data_of(62, 1, 1, 0.2)] {
+            q.push(m);
+        }
+        assert_eq!(drain(&mut q), [(D, 4), (D, 62)], "the intensities are due");
+        q.push(data_of(62, 1, 3, 0.2));
+        assert_eq!(drain(&mut q), [(D, 62), (S, 1)]);
     }
 
     #[test]

@@ -900,7 +900,8 @@ impl Conn {
         }
         if reads_rounds(dev) {
             let code = u32::from(dev.interface.code());
-            self.queue.with(|q| q.expect(code, dev.index));
+            self.queue
+                .with(|q| q.expect(code, dev.index, Instant::now()));
         }
         self.send_latest(dev);
         let mut feeds = lock(&self.shared.feeds);
