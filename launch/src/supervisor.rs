@@ -289,7 +289,8 @@ async fn supervise(
         let rz = ZenohArgs {
             listen: listen.clone(),
             namespace: z.namespace.clone(),
-            no_multicast: true,
+            no_multicast: !z.multicast,
+            multicast: z.multicast,
             ..Default::default()
         };
         let session = match rz.open(Mode::Router) {
@@ -306,14 +307,22 @@ async fn supervise(
         )?;
         out.flush()?;
         drop(out);
+        // The nodes take the launch's --mode, --lease and --multicast; the
+        // router is theirs to connect to, and peers listen on loopback.
         let mut child = ZenohArgs {
             connect: locators,
-            no_multicast: true,
+            no_multicast: !z.multicast,
+            multicast: z.multicast,
             namespace: z.namespace.clone(),
+            mode: z.mode,
+            lease: z.lease,
             ..Default::default()
         }
         .to_child_args();
-        child.extend(["--listen".into(), "tcp/127.0.0.1:0".into()]);
+        // A client listens on nothing: its data goes through the router.
+        if z.mode != Some(Mode::Client) {
+            child.extend(["--listen".into(), "tcp/127.0.0.1:0".into()]);
+        }
         (session, child)
     } else {
         let Some(session) = signals

@@ -516,6 +516,51 @@ fn a_launch_and_its_viewers_listen_on_this_host_only() {
     assert!(launcher.terminate().success(), "{}", launcher.stderr());
 }
 
+#[test]
+fn with_mode_client_a_launch_s_nodes_listen_on_nothing_and_send_through_the_router() {
+    // `--mode client` reaches the nodes of a launch on its embedded router:
+    // each links to the router alone and listens on nothing, and
+    // rangertolaser still takes dummy's ranger, through the router.
+    use troupe_msgs::{keys, laser, Device, Interface};
+    use troupe_node::zenoh::Wait;
+    let cfg = temp_cfg("clients", STACK);
+    let (mut launcher, endpoint, ns) = launch(&cfg, &["--mode", "client"]);
+    let s = client_at(&endpoint, &ns);
+    let tokens = token_events(&s);
+    let deadline = Instant::now() + DEADLINE;
+    until_up(&tokens, 2, deadline);
+    let scans = s
+        .declare_subscriber(keys::data(&Device::new(6665, Interface::Laser, 0)))
+        .wait()
+        .unwrap();
+    let scan = scans
+        .recv_deadline(deadline)
+        .unwrap()
+        .expect("a laser scan from rangertolaser");
+    troupe_msgs::decode::<laser::Scan>(&scan.payload().to_bytes()).expect("a scan");
+    let router = launcher.child.id();
+    let nodes = children(router, "troupe");
+    assert_eq!(nodes.len(), 2, "dummy and rangertolaser: {nodes:?}");
+    let links = Links::now();
+    for n in &nodes {
+        let cmd = std::fs::read_to_string(format!("/proc/{n}/cmdline"))
+            .unwrap_or_default()
+            .replace('\0', " ");
+        assert!(cmd.contains(" --mode client "), "{cmd}");
+        assert!(links.one_way(*n, router), "{cmd}: no link to the router");
+        let mine = socket_inodes(*n);
+        let listens: Vec<_> = links
+            .listening
+            .iter()
+            .filter(|s| mine.contains(&s.inode))
+            .map(|s| s.local.clone())
+            .collect();
+        assert!(listens.is_empty(), "{cmd}: a client listens on {listens:?}");
+    }
+    assert!(!links.between(nodes[0], nodes[1]), "the clients linked");
+    assert!(launcher.terminate().success(), "{}", launcher.stderr());
+}
+
 /// This network namespace's TCP links, listening and established, as
 /// one read of /proc sees them.
 struct Links {
