@@ -518,13 +518,14 @@ fn a_launch_and_its_viewers_listen_on_this_host_only() {
 
 #[test]
 fn with_mode_client_a_launch_s_nodes_listen_on_nothing_and_send_through_the_router() {
-    // `--mode client` reaches the nodes of a launch on its embedded router:
-    // each links to the router alone and listens on nothing, and
-    // rangertolaser still takes dummy's ranger, through the router.
+    // `--mode client` (and `--lease`) reach the nodes of a launch on its
+    // embedded router: each links to the router alone and listens on
+    // nothing, and rangertolaser still takes dummy's ranger, through the
+    // router.
     use troupe_msgs::{keys, laser, Device, Interface};
     use troupe_node::zenoh::Wait;
     let cfg = temp_cfg("clients", STACK);
-    let (mut launcher, endpoint, ns) = launch(&cfg, &["--mode", "client"]);
+    let (mut launcher, endpoint, ns) = launch(&cfg, &["--mode", "client", "--lease", "7"]);
     let s = client_at(&endpoint, &ns);
     let tokens = token_events(&s);
     let deadline = Instant::now() + DEADLINE;
@@ -546,7 +547,7 @@ fn with_mode_client_a_launch_s_nodes_listen_on_nothing_and_send_through_the_rout
         let cmd = std::fs::read_to_string(format!("/proc/{n}/cmdline"))
             .unwrap_or_default()
             .replace('\0', " ");
-        assert!(cmd.contains(" --mode client "), "{cmd}");
+        assert!(cmd.contains(" --mode client --lease 7 "), "{cmd}");
         assert!(links.one_way(*n, router), "{cmd}: no link to the router");
         let mine = socket_inodes(*n);
         let listens: Vec<_> = links
