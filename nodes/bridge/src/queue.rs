@@ -39,10 +39,11 @@ pub const ROUND_WAIT: Duration = Duration::from_millis(100);
 /// The longest a PULL round waits for a device the client has just opened
 /// until its live samples start, counted from the opening. The bridge
 /// subscribes at the opening, and a new subscription reaches the driver
-/// in milliseconds on a quiet machine but can take hundreds on a loaded
-/// one (CI's, with a compiler beside it); without the margin the rounds
-/// after an opening would give the device up and go without it. A device
-/// opened that never publishes again costs its first round this once.
+/// in milliseconds on a quiet machine but took longer than three rounds
+/// once in a loaded CI run, whose rounds after the opening then went
+/// without the devices (a driver just started, as rangertolaser, has no
+/// latest sample to give either). A device opened that never publishes
+/// again costs its first round this once.
 pub const OPEN_WAIT: Duration = Duration::from_secs(2);
 
 /// An encoded message with the header fields the queue looks at.
