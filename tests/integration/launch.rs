@@ -26,6 +26,13 @@ fn launch(cfg: &std::path::Path, extra: &[&str]) -> (Proc, String, String) {
     (p, endpoint, ns)
 }
 
+/// Process `pid`'s command line, its arguments joined by spaces.
+fn cmdline(pid: u32) -> String {
+    std::fs::read_to_string(format!("/proc/{pid}/cmdline"))
+        .unwrap_or_default()
+        .replace('\0', " ")
+}
+
 /// Children of `parent` whose command line mentions `word`.
 fn children(parent: u32, word: &str) -> Vec<u32> {
     let mut out = Vec::new();
@@ -42,8 +49,7 @@ fn children(parent: u32, word: &str) -> Vec<u32> {
         };
         let mut f = rest.split(' ');
         let (state, ppid) = (f.next(), f.next().and_then(|p| p.parse::<u32>().ok()));
-        let cmd = std::fs::read_to_string(format!("/proc/{pid}/cmdline")).unwrap_or_default();
-        if ppid == Some(parent) && state != Some("Z") && cmd.contains(word) {
+        if ppid == Some(parent) && state != Some("Z") && cmdline(pid).contains(word) {
             out.push(pid);
         }
     }
@@ -442,14 +448,6 @@ fn sockets(state: &str) -> Vec<Socket> {
     out
 }
 
-/// Every listening TCP socket of this network namespace: (inode, address).
-fn listening() -> Vec<(u64, String)> {
-    sockets("0A")
-        .into_iter()
-        .map(|s| (s.inode, s.local.0))
-        .collect()
-}
-
 /// 127.0.0.0/8 or ::1 (or ::ffff:127.x), as /proc/net spells them.
 fn loopback(hex: &str) -> bool {
     match hex.len() {
@@ -491,20 +489,14 @@ fn a_launch_and_its_viewers_listen_on_this_host_only() {
     let mut pids = children(pid, "troupe");
     assert_eq!(pids.len(), 4, "dummy, rangertolaser, view and foxglove");
     pids.push(pid);
-    let open = listening();
+    let links = Links::now();
     let mut seen = Vec::new();
     for p in &pids {
-        let cmd = std::fs::read_to_string(format!("/proc/{p}/cmdline"))
-            .unwrap_or_default()
-            .replace('\0', " ");
-        let inodes = socket_inodes(*p);
-        let ours: Vec<&String> = open
-            .iter()
-            .filter(|(i, _)| inodes.contains(i))
-            .map(|(_, a)| a)
-            .collect();
+        let cmd = cmdline(*p);
+        let ours = links.listening_of(*p);
         assert!(!ours.is_empty(), "{cmd}: listens on nothing");
-        for a in ours {
+        for s in ours {
+            let a = &s.local.0;
             assert!(loopback(a), "{cmd}: listens on {a} (not this host only)");
         }
         seen.push(cmd);
@@ -544,18 +536,10 @@ fn with_mode_client_a_launch_s_nodes_listen_on_nothing_and_send_through_the_rout
     assert_eq!(nodes.len(), 2, "dummy and rangertolaser: {nodes:?}");
     let links = Links::now();
     for n in &nodes {
-        let cmd = std::fs::read_to_string(format!("/proc/{n}/cmdline"))
-            .unwrap_or_default()
-            .replace('\0', " ");
+        let cmd = cmdline(*n);
         assert!(cmd.contains(" --mode client --lease 7 "), "{cmd}");
         assert!(links.one_way(*n, router), "{cmd}: no link to the router");
-        let mine = socket_inodes(*n);
-        let listens: Vec<_> = links
-            .listening
-            .iter()
-            .filter(|s| mine.contains(&s.inode))
-            .map(|s| s.local.clone())
-            .collect();
+        let listens: Vec<_> = links.listening_of(*n).iter().map(|s| &s.local).collect();
         assert!(listens.is_empty(), "{cmd}: a client listens on {listens:?}");
     }
     assert!(!links.between(nodes[0], nodes[1]), "the clients linked");
@@ -577,15 +561,18 @@ impl Links {
         }
     }
 
+    /// The sockets process `pid` listens on.
+    fn listening_of(&self, pid: u32) -> Vec<&Socket> {
+        let mine = socket_inodes(pid);
+        self.listening
+            .iter()
+            .filter(|s| mine.contains(&s.inode))
+            .collect()
+    }
+
     /// Whether process `a` holds a link to a port process `b` listens on.
     fn one_way(&self, a: u32, b: u32) -> bool {
-        let theirs = socket_inodes(b);
-        let ports: Vec<u16> = self
-            .listening
-            .iter()
-            .filter(|s| theirs.contains(&s.inode))
-            .map(|s| s.local.1)
-            .collect();
+        let ports: Vec<u16> = self.listening_of(b).iter().map(|s| s.local.1).collect();
         let mine = socket_inodes(a);
         self.established.iter().any(|s| {
             mine.contains(&s.inode) && loopback(&s.remote.0) && ports.contains(&s.remote.1)
