@@ -307,16 +307,13 @@ async fn supervise(
         )?;
         out.flush()?;
         drop(out);
-        // The nodes take the launch's --mode, --lease and --multicast; the
-        // router is theirs to connect to, and peers listen on loopback.
+        // The nodes take the launch's flags (--mode, --lease, --multicast…),
+        // but connect to this router, and peers listen on loopback.
         let mut child = ZenohArgs {
             connect: locators,
+            listen: Vec::new(),
             no_multicast: !z.multicast,
-            multicast: z.multicast,
-            namespace: z.namespace.clone(),
-            mode: z.mode,
-            lease: z.lease,
-            ..Default::default()
+            ..z.clone()
         }
         .to_child_args();
         // A client listens on nothing: its data goes through the router.
