@@ -432,10 +432,9 @@ impl Queue {
         if !self.items.is_empty() && may_go {
             let m = self.items.pop_front()?;
             if self.data_requested && m.kind == wire::DATA && !self.fresh && self.new_step(&m) {
-                // Its wait starts now.
+                // Its wait for due data starts at the next `must_wait`
+                // (nothing has set one since the request).
                 self.fresh = true;
-                self.waiting_since = None;
-                self.waiting = None;
             }
             return Some(m);
         }
