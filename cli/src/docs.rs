@@ -241,6 +241,20 @@ fn every_troupe_command_the_docs_and_the_help_show_parses() {
 /// its function, which must exist), or the reason none does. The first
 /// entry whose words begin the command's words decides.
 const RUN_BY: &[(&str, &str)] = &[
+    // docs/ros2.md: ROS 2's own tools are not installed here; the test's
+    // ROS 2 peer (hiroz) does what each does.
+    (
+        "troupe launch worlds/nav.cfg --ros2",
+        "a_ros2_peer_sees_drives_and_maps_a_troupe_robot",
+    ),
+    (
+        "ros2",
+        "no ROS 2 install here: a_ros2_peer_sees_drives_and_maps_a_troupe_robot lists the graph, echoes the scan, drives by cmd_vel and calls GetMap as a ROS 2 peer",
+    ),
+    (
+        "rviz2",
+        "no ROS 2 install here: a_ros2_peer_sees_drives_and_maps_a_troupe_robot subscribes to the map late and transient-local, as rviz2's Map display does",
+    ),
     // README: the two commands, and the first ten minutes.
     ("cargo test", "CI: .ci/run is this command"),
     ("cargo build --release", "CI: .ci/run builds the workspace"),

@@ -52,6 +52,9 @@ pub struct NodeArgs {
     /// Seconds to wait for each required device.
     #[arg(long, value_name = "SECS", default_value_t = 30.0)]
     pub requires_timeout: f64,
+
+    #[command(flatten)]
+    pub ros2: troupe_node::Ros2Args,
 }
 
 /// `troupe node`: builds the section from flags and runs the driver.
@@ -104,6 +107,7 @@ pub fn run(a: NodeArgs, z: &ZenohArgs, catalog: &Catalog) -> anyhow::Result<()> 
     let cfg = NodeConfig {
         sim_time: a.sim_time,
         requires_timeout: Duration::from_secs_f64(a.requires_timeout),
+        ros2: a.ros2.config(None)?,
     };
     catalog.run(&a.driver, section, z, &cfg)
 }

@@ -156,6 +156,9 @@ pub struct Meta {
     /// Devices provided outside this plan (another host, another launch).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub external: Vec<String>,
+    /// ROS 2 on for every node (a cfg's `ros2 ( … )` section).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ros2: Option<troupe_node::Ros2Settings>,
 }
 
 /// A launch plan.
@@ -194,6 +197,40 @@ fn num(text: &str) -> serde_json::Value {
     // INVARIANT: the parser only keeps numbers that parse as f64.
     serde_json::Number::from_f64(text.parse::<f64>().unwrap_or(0.0))
         .map_or(serde_json::Value::Null, serde_json::Value::Number)
+}
+
+/// A cfg's `ros2 ( domain 0 distro "jazzy" namespace "/robot_{robot}"
+/// cmd_vel_timeout 0.5 )`: ROS 2 on for the launch, with these settings.
+fn ros2_section(s: &cfg::Section) -> Result<troupe_node::Ros2Settings, String> {
+    let mut r = troupe_node::Ros2Settings::default();
+    for f in &s.fields {
+        let text = match &f.value {
+            Value::Num(t) | Value::Str(t) | Value::Word(t) => t.clone(),
+            _ => return Err(format!("{}: `{}` takes one value", f.pos, f.name)),
+        };
+        let number = |what: &str| format!("{}: `{}` must be {what}, not `{text}`", f.pos, f.name);
+        match f.name.as_str() {
+            "domain" => r.domain = Some(text.parse().map_err(|_| number("a ROS domain (0-232)"))?),
+            "distro" => r.distro = Some(text),
+            "namespace" => r.namespace = Some(text),
+            "cmd_vel_timeout" => {
+                r.cmd_vel_timeout = Some(text.parse().map_err(|_| number("seconds"))?)
+            }
+            other => {
+                return Err(format!(
+                    "{}: `{other}` is no ros2 setting (domain, distro, namespace, cmd_vel_timeout)",
+                    f.pos
+                ))
+            }
+        }
+    }
+    if let Some(c) = s.children.first() {
+        return Err(format!(
+            "{}: section `{}` inside the ros2 section",
+            c.pos, c.kind
+        ));
+    }
+    Ok(r)
 }
 
 /// The directory that relative file names in `file` are read against,
@@ -359,6 +396,7 @@ pub fn from_cfg(
         launch: Meta {
             source: Some(source.display().to_string()),
             external: Vec::new(),
+            ros2: None,
         },
         nodes: Vec::new(),
     };
@@ -377,6 +415,13 @@ pub fn from_cfg(
     let mut unknown: BTreeMap<String, Vec<cfg::Pos>> = BTreeMap::new();
     let mut stage: Option<NodeSpec> = None;
     for s in &file.sections {
+        if s.kind == "ros2" {
+            match ros2_section(s) {
+                Ok(r) => plan.launch.ros2 = Some(r),
+                Err(e) => report.errors.push(e),
+            }
+            continue;
+        }
         if s.kind != "driver" {
             report.errors.push(format!(
                 "{}: unknown section type `{}`: a Player .cfg holds `driver ( … )` sections",
@@ -841,6 +886,18 @@ pub fn to_toml(plan: &Plan) -> String {
         "# Devices provided elsewhere (another host or launch), e.g. \"robot/6665/laser/0\"."
     );
     let _ = writeln!(s, "external = [{}]", ext.join(", "));
+    if let Some(r) = &plan.launch.ros2 {
+        let _ = writeln!(
+            s,
+            "\n# Every node also shows its devices to ROS 2 (docs/ros2.md)."
+        );
+        match toml::to_string(r) {
+            Ok(t) => {
+                let _ = write!(s, "[launch.ros2]\n{t}");
+            }
+            Err(e) => tracing::error!("writing the plan's ros2 settings: {e}"),
+        }
+    }
     for n in &plan.nodes {
         let _ = writeln!(s, "\n[[node]]");
         let _ = writeln!(s, "name = {}", toml_str(&n.name));
@@ -895,6 +952,28 @@ mod tests {
 
     const STACK: &str = "driver( name \"dummy\" provides [\"ranger:0\"] rate 20 colour \"red\" )\n\
                          driver( name \"rangertolaser\" requires [\"ranger:0\"] provides [\"laser:0\"] )\n";
+
+    #[test]
+    fn a_ros2_section_turns_ros2_on_and_round_trips_through_toml() {
+        let (plan, _) = plan_of(
+            "ros2 ( domain 3 distro \"humble\" namespace \"/fleet/r{robot}\" cmd_vel_timeout 0.25 )\n\
+             driver( name \"dummy\" provides [\"ranger:0\"] )\n",
+        )
+        .unwrap();
+        let want = troupe_node::Ros2Settings {
+            domain: Some(3),
+            distro: Some("humble".into()),
+            namespace: Some("/fleet/r{robot}".into()),
+            cmd_vel_timeout: Some(0.25),
+        };
+        assert_eq!(plan.launch.ros2.as_ref(), Some(&want));
+        let back: Plan = toml::from_str(&to_toml(&plan)).unwrap();
+        assert_eq!(back.launch.ros2, Some(want));
+        let e = plan_of("ros2 ( domian 3 )\n").unwrap_err().to_string();
+        assert!(e.contains("1:8: `domian` is no ros2 setting"), "{e}");
+        let e = plan_of("ros2 ( domain \"x\" )\n").unwrap_err().to_string();
+        assert!(e.contains("`domain` must be a ROS domain"), "{e}");
+    }
 
     #[test]
     fn requires_a_driver_does_not_use_are_warned_about() {

@@ -107,6 +107,9 @@ pub struct LaunchArgs {
         default_missing_value = "127.0.0.1:8765"
     )]
     pub foxglove: Option<std::net::SocketAddr>,
+    /// ROS 2: every node of the launch shows its devices to ROS 2 nodes.
+    #[command(flatten)]
+    pub ros2: troupe_node::Ros2Args,
 }
 
 /// Flags of `troupe plan`.
@@ -190,11 +193,21 @@ pub fn launch(a: LaunchArgs, z: &ZenohArgs, catalog: &Catalog) -> anyhow::Result
         .filter(|n| catalog.find(&n.driver).is_some_and(|e| e.clock_source))
         .map(|n| n.driver.clone())
         .collect();
+    let ros2 = a.ros2.config(plan.launch.ros2.as_ref())?;
+    if let Some(r) = &ros2 {
+        tracing::info!(
+            "ROS 2: every node shows its devices on domain {} ({:?}), robots in {}",
+            r.domain,
+            r.distro,
+            r.namespace
+        );
+    }
+    let ros2_args = ros2.map(|r| r.to_args()).unwrap_or_default();
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
         .build()?;
-    rt.block_on(supervise(a, z.clone(), nodes, sim_time, clocks))
+    rt.block_on(supervise(a, z.clone(), nodes, sim_time, clocks, ros2_args))
 }
 
 /// Overrides the `speedup` of every simulator in the plan (`--speedup`).
@@ -273,6 +286,7 @@ async fn supervise(
     specs: Vec<NodeSpec>,
     sim_time: bool,
     clocks: BTreeSet<String>,
+    ros2_args: Vec<String>,
 ) -> anyhow::Result<()> {
     let started = Instant::now();
     let mut signals = StopSignals::new().context("catching SIGTERM and SIGINT")?;
@@ -404,6 +418,7 @@ async fn supervise(
             stop_rx: stop_rx.clone(),
             local: local.clone(),
             sim_time: sim_time && !clocks.contains(&st.spec.driver),
+            ros2: ros2_args.clone(),
         };
         tasks.push(tokio::spawn(run_node(st.clone(), ctx)));
     }
@@ -673,6 +688,8 @@ struct NodeCtx {
     stop_rx: watch::Receiver<bool>,
     local: BTreeSet<Device>,
     sim_time: bool,
+    /// `--ros2` and its settings, for every node.
+    ros2: Vec<String>,
 }
 
 /// Runs one node: waits for its requirements, starts it, forwards its
@@ -730,6 +747,7 @@ async fn run_node(st: Arc<NodeState>, mut ctx: NodeCtx) {
         if ctx.sim_time {
             cmd.arg("--sim-time");
         }
+        cmd.args(&ctx.ros2);
         let t0 = Instant::now();
         let mut child = match cmd.spawn() {
             Ok(c) => c,

@@ -18,6 +18,7 @@ mod nav;
 mod player;
 mod process;
 mod python;
+mod ros2;
 mod serial;
 mod sessions;
 mod stage;

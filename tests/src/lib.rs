@@ -232,6 +232,20 @@ impl Proc {
         rx
     }
 
+    /// The child's stderr (its log), line by line, read on a thread.
+    pub fn err_lines(&mut self) -> mpsc::Receiver<String> {
+        let err = self.child.stderr.take().expect("stderr piped");
+        let (tx, rx) = mpsc::channel();
+        std::thread::spawn(move || {
+            for line in BufReader::new(err).lines().map_while(Result::ok) {
+                if tx.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+        rx
+    }
+
     /// The first line the child prints on stdout, within the deadline.
     pub fn first_line(&mut self) -> String {
         let out = self.child.stdout.take().expect("stdout piped");

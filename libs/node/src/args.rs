@@ -266,6 +266,19 @@ impl ZenohArgs {
         refused.explain(zenoh::open(config).wait())
     }
 
+    /// [`ZenohArgs::open`], its samples stamped by the session's clock (HLC
+    /// timestamps): what rmw_zenoh's sessions do, and what its subscribers
+    /// of transient-local topics order the samples they recover by.
+    ///
+    /// # Errors
+    ///
+    /// As [`ZenohArgs::open`].
+    pub fn open_timestamped(&self, default_mode: Mode) -> Result<Session> {
+        let mut config = self.config(default_mode)?;
+        set(&mut config, "timestamping/enabled", "true".into())?;
+        self.open_config(config)
+    }
+
     /// A session that is a peer unless `--mode` says otherwise, but needs
     /// its router as a client does: without `--reconnect`, opening fails
     /// when no `--connect` endpoint answers (a peer's would go on alone,

@@ -36,6 +36,7 @@ use crate::driver::Driver;
 use crate::error::{NodeError, RequestError, Result};
 use crate::event::{nack_reason, Event, Reply, ReplySink, Request, RequestId, Responder, Sample};
 use crate::inbox::{Inbox, Popped};
+use crate::ros2::{Face, Ros2};
 use crate::section::Section;
 
 /// How a node runs, beyond its section.
@@ -45,6 +46,8 @@ pub struct NodeConfig {
     pub sim_time: bool,
     /// How long to wait for each required device before giving up.
     pub requires_timeout: Duration,
+    /// Also show the devices to ROS 2 nodes (rmw_zenoh), as this says.
+    pub ros2: Option<Ros2>,
 }
 
 impl Default for NodeConfig {
@@ -52,6 +55,7 @@ impl Default for NodeConfig {
         NodeConfig {
             sim_time: false,
             requires_timeout: Duration::from_secs(30),
+            ros2: None,
         }
     }
 }
@@ -66,7 +70,11 @@ fn z(what: impl FnOnce() -> String) -> impl FnOnce(zenoh::Error) -> NodeError {
 ///
 /// Any error of [`spawn`], or the fatal error that stopped the driver.
 pub fn run<D: Driver>(section: Section, zargs: &ZenohArgs, cfg: &NodeConfig) -> Result<()> {
-    let session = zargs.open(Mode::Peer)?;
+    let session = if cfg.ros2.is_some() {
+        zargs.open_timestamped(Mode::Peer)?
+    } else {
+        zargs.open(Mode::Peer)?
+    };
     let stop = Stop::default();
     install_signal_handlers(stop.clone())?;
     let handle = spawn::<D>(session.clone(), section, cfg, stop)?;
@@ -206,9 +214,20 @@ pub fn spawn<D: Driver>(
         subscribers: Vec::new(),
         queryables: Vec::new(),
         clock_pub: None,
+        ros2: None,
     };
     for dev in &provided {
         bus.provide(dev, &clock, D::NAME)?;
+    }
+    if let Some(ros) = &cfg.ros2 {
+        bus.ros2 = Some(Face::new(
+            &session,
+            ros,
+            D::NAME,
+            &provided,
+            &inbox,
+            &clock,
+        )?);
     }
     let ctx = Ctx::new(
         D::NAME,
@@ -663,6 +682,8 @@ struct ZenohBus {
     /// Answered from the receiving thread, without waking the driver.
     ready: Arc<ReadyAnswers>,
     clock_pub: Option<Publisher<'static>>,
+    /// The devices as ROS 2 topics (`--ros2`).
+    ros2: Option<Face>,
 }
 
 struct ZenohSink(Query);
@@ -779,10 +800,15 @@ impl Bus for ZenohBus {
             .publishers
             .get(dev)
             .ok_or_else(|| NodeError::config("?", format!("{dev} is not provided")))?;
+        let ros2 = self.ros2.as_ref().map(|_| bytes.clone());
         publisher
             .put(bytes)
             .wait()
-            .map_err(z(|| format!("publishing on {dev}")))
+            .map_err(z(|| format!("publishing on {dev}")))?;
+        if let (Some(face), Some(b)) = (&mut self.ros2, ros2) {
+            face.publish(Some(dev), &b.to_bytes());
+        }
+        Ok(())
     }
 
     fn publish_clock(&mut self, payload: Vec<u8>) -> Result<()> {
@@ -794,6 +820,9 @@ impl Bus for ZenohBus {
                 .wait()
                 .map_err(z(|| "declaring the sim/clock publisher".into()))?;
             self.clock_pub = Some(p);
+        }
+        if let Some(face) = &mut self.ros2 {
+            face.publish(None, &payload);
         }
         match &self.clock_pub {
             Some(p) => p

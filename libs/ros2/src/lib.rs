@@ -21,7 +21,9 @@
 //! `robot_6665/sonar_0/3`).
 
 pub mod back;
+pub mod live;
 pub mod msg;
+pub mod rmw;
 
 use std::collections::HashMap;
 
@@ -603,6 +605,7 @@ fn ranges_out(
                 min_range: min,
                 max_range: max,
                 range: r as f32,
+                variance: 0.0,
             };
             out(topic(dev), Type::Range, &m)
         })

@@ -197,6 +197,8 @@ pub struct Range {
     pub min_range: f32,
     pub max_range: f32,
     pub range: f32,
+    /// Jazzy's: 0, unknown (Humble's `Range` ends before it).
+    pub variance: f32,
 }
 
 impl Range {
@@ -408,7 +410,8 @@ impl Type {
             ),
             Type::Range => (
                 "uint8 ULTRASOUND=0\nuint8 INFRARED=1\nstd_msgs/Header header\nuint8 radiation_type\n\
-                 float32 field_of_view\nfloat32 min_range\nfloat32 max_range\nfloat32 range\n",
+                 float32 field_of_view\nfloat32 min_range\nfloat32 max_range\nfloat32 range\n\
+                 float32 variance\n",
                 &[("std_msgs/Header", HEADER), ("builtin_interfaces/Time", TIME)],
             ),
             Type::Odometry => (
