@@ -31,6 +31,7 @@ use zenoh::{Session, Wait};
 use zenoh_ext::{AdvancedPublisher, AdvancedPublisherBuilderExt, CacheConfig, MissDetectionConfig};
 
 use crate::clock::Clock;
+use crate::ctx::ReadyAnswers;
 use crate::error::{NodeError, Result};
 use crate::event::{Event, ReplySink, Request, Responder, Sample};
 use crate::inbox::Inbox;
@@ -291,6 +292,12 @@ pub(crate) struct Face {
     failed: Counted,
     /// Map publishers, filled by the threads that fetch the maps.
     maps: Vec<Arc<Mutex<RosPub>>>,
+    /// What the driver keeps ready to answer: a ranger's configuration
+    /// and a sensor's geometry, which the translator needs before its
+    /// first sample (the shape of a scan, `/tf_static`).
+    answers: Arc<ReadyAnswers>,
+    /// Devices whose kept answers were read.
+    primed: Vec<Device>,
     _node_token: LivelinessToken,
     _subscribers: Vec<Subscriber<()>>,
     _queryables: Vec<Queryable<()>>,
@@ -308,6 +315,7 @@ impl Face {
         provided: &[Device],
         inbox: &Arc<Inbox>,
         clock: &Clock,
+        answers: &Arc<ReadyAnswers>,
     ) -> Result<Face> {
         let robots: std::collections::BTreeSet<u32> = provided.iter().map(|d| d.robot).collect();
         let namespace = match robots.iter().collect::<Vec<_>>()[..] {
@@ -341,6 +349,8 @@ impl Face {
             routes: HashMap::new(),
             failed: Counted::default(),
             maps: Vec::new(),
+            answers: answers.clone(),
+            primed: Vec::new(),
             _node_token,
             _subscribers: Vec::new(),
             _queryables: Vec::new(),
@@ -368,6 +378,14 @@ impl Face {
     /// if anyone listens there.
     /// `dev`: the device, or `None` for the clock.
     pub(crate) fn publish(&mut self, dev: Option<&Device>, payload: &[u8]) {
+        if let Some(d) = dev {
+            if !self.primed.contains(d) {
+                self.primed.push(*d);
+                for kept in self.kept_answers(d) {
+                    self.publish(Some(d), &kept);
+                }
+            }
+        }
         let tag = codec::schema_of(payload).unwrap_or("?");
         let known = self
             .routes
@@ -431,6 +449,28 @@ impl Face {
                 routes[at].1.push(i);
             }
         }
+    }
+
+    /// The answers `dev`'s driver keeps ready that say how to read its
+    /// samples: a ranger's configuration, a sensor's geometry.
+    fn kept_answers(&self, dev: &Device) -> Vec<Vec<u8>> {
+        use troupe_msgs::{ir, laser, ranger, sonar, Request as R};
+        let asks: Vec<(&str, Vec<u8>)> = match dev.interface {
+            Interface::Ranger => vec![
+                (
+                    ranger::GetConfig::NAME,
+                    codec::encode(&ranger::GetConfig, 0.0),
+                ),
+                (ranger::GetGeom::NAME, codec::encode(&ranger::GetGeom, 0.0)),
+            ],
+            Interface::Laser => vec![(laser::GetGeom::NAME, codec::encode(&laser::GetGeom, 0.0))],
+            Interface::Sonar => vec![(sonar::GetGeom::NAME, codec::encode(&sonar::GetGeom, 0.0))],
+            Interface::Ir => vec![(ir::GetGeom::NAME, codec::encode(&ir::GetGeom, 0.0))],
+            _ => Vec::new(),
+        };
+        asks.into_iter()
+            .filter_map(|(name, asked)| self.answers.get(dev, name, &asked, 0.0))
+            .collect()
     }
 
     /// The publisher of `topic`, declared on first use.

@@ -227,6 +227,7 @@ pub fn spawn<D: Driver>(
             &provided,
             &inbox,
             &clock,
+            &ready,
         )?);
     }
     let ctx = Ctx::new(

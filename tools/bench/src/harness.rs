@@ -80,6 +80,16 @@ pub(crate) fn p100_stack(
     bitmaps: &std::path::Path,
     speedup: f64,
 ) -> anyhow::Result<(std::process::Child, String)> {
+    p100_stack_with(dir, bitmaps, speedup, &[])
+}
+
+/// [`p100_stack`], launched with `extra` flags (`--ros2`).
+pub(crate) fn p100_stack_with(
+    dir: &std::path::Path,
+    bitmaps: &std::path::Path,
+    speedup: f64,
+    extra: &[&str],
+) -> anyhow::Result<(std::process::Child, String)> {
     let (mut world, _) = bench_world("pioneers100", bitmaps, 1)?;
     world.push_str(&format!("speedup {speedup}\n"));
     std::fs::write(dir.join("p100.world"), world)?;
@@ -97,6 +107,7 @@ pub(crate) fn p100_stack(
         .args(["--no-multicast", "launch"])
         .arg(dir.join("p100.cfg"))
         .args(["--no-bridge", "--listen", "tcp/127.0.0.1:0"])
+        .args(extra)
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::null())
         .spawn()?;

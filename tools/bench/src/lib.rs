@@ -16,6 +16,7 @@ pub mod nav;
 pub mod python;
 mod ray;
 pub mod record;
+pub mod ros2;
 pub mod serial;
 pub mod slam;
 pub mod stage;
@@ -72,6 +73,10 @@ pub enum BenchCmd {
     #[command(after_help = "Example:
   pip install ./python && cargo run --release -- bench python --python python3")]
     Python(python::PythonBenchArgs),
+    /// ROS 2 (`--ros2`): a laser's latency and throughput to a ROS 2 subscriber against Troupe's own key; 100 Pioneers flat out with and without ROS 2: speed and samples lost.
+    #[command(after_help = "Example:
+  cargo run --release -- bench ros2 --seconds 3 --bitmaps ../shared/compat/stage/bitmaps")]
+    Ros2(ros2::Ros2BenchArgs),
     /// The echo side of `bench latency` (started by it).
     #[command(hide = true)]
     Pong {
@@ -118,5 +123,6 @@ pub fn run(cmd: BenchCmd, z: &ZenohArgs) -> anyhow::Result<()> {
         BenchCmd::Foxglove(a) => foxglove::run(&a),
         BenchCmd::Slam(a) => slam::run(&a),
         BenchCmd::Python(a) => python::run(&a),
+        BenchCmd::Ros2(a) => ros2::run(&a),
     }
 }
