@@ -12,7 +12,8 @@ import pytest
 from rosbags.rosbag2 import Reader as Rosbag2Reader  # rosbags, which .ci/run installs
 from rosbags.typesys import Stores, get_typestore
 
-TYPESTORE = get_typestore(Stores.ROS2_HUMBLE)
+# Jazzy's definitions, as Troupe writes them (its Range has `variance`).
+TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 
 
 def ros2_messages(path):

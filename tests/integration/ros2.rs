@@ -4,7 +4,8 @@
 //! simulated laser and odometry, its Twist drives the robot and Troupe
 //! stops it when `cmd_vel` goes quiet, its graph lists Troupe's nodes and
 //! topics, a late transient-local subscriber still gets the map, and its
-//! service client gets the map by `GetMap`. rmw_zenoh's own details that
+//! service client gets the map by `GetMap`; `troupe record` of the ROS 2
+//! traffic reads back as ROS 2 messages. rmw_zenoh's own details that
 //! hiroz does not check (the attachment's GID, sequence numbers from 1)
 //! are pinned by the golden tests of libs/ros2/src/rmw.rs.
 
@@ -215,6 +216,45 @@ fn a_ros2_peer_sees_drives_and_maps_a_troupe_robot() {
         .block_on(client.call_with_timeout(&Default::default(), DEADLINE))
         .expect("GetMap's answer");
     assert_eq!(got.map.data, map.data);
+
+    // What ROS 2 nodes hear on the router, recorded, reads as ROS 2 messages.
+    let file = std::env::temp_dir().join(format!("{ns}.mcap"));
+    let (st, _, err) = troupe_tests::troupe_output(&troupe_tests::strings(&[
+        "--namespace",
+        &ns,
+        "--connect",
+        &endpoint,
+        "--no-multicast",
+        "record",
+        "0/**",
+        "--duration",
+        "2",
+        "-o",
+        file.to_str().unwrap(),
+    ]));
+    assert!(st.success(), "{err}");
+    let bytes = std::fs::read(&file).unwrap();
+    let _ = std::fs::remove_file(&file);
+    let mut scans = 0;
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        if m.channel.topic != "/robot_6665/scan" {
+            continue;
+        }
+        let schema = m.channel.schema.as_ref().expect("a schema");
+        assert_eq!(
+            (
+                schema.name.as_str(),
+                schema.encoding.as_str(),
+                m.channel.message_encoding.as_str()
+            ),
+            ("sensor_msgs/msg/LaserScan", "ros2msg", "cdr")
+        );
+        let s: troupe_ros2::msg::LaserScan = cdr::deserialize(&m.data).unwrap();
+        assert_eq!(s.ranges.len(), scan.ranges.len());
+        scans += 1;
+    }
+    assert!(scans > 0, "no /robot_6665/scan in the recording: {err}");
 
     launcher.terminate();
 }

@@ -342,6 +342,10 @@ pub enum Type {
     /// `std_msgs/msg/String`: what has no ROS 2 form, as its JSON, in a
     /// rosbag2 directory (whose readers take CDR only).
     String,
+    /// `geometry_msgs/msg/Twist`: what ROS 2 nodes drive a base with.
+    Twist,
+    /// `geometry_msgs/msg/PoseStamped`: a goal, from rviz2 or Nav2.
+    PoseStamped,
 }
 
 // The definitions, one per message, without the comments of ROS's files.
@@ -361,7 +365,7 @@ const TRANSFORM_STAMPED: &str =
 
 impl Type {
     /// Every type.
-    pub const ALL: [Type; 12] = [
+    pub const ALL: [Type; 14] = [
         Type::LaserScan,
         Type::Range,
         Type::Odometry,
@@ -374,6 +378,8 @@ impl Type {
         Type::Image,
         Type::CompressedImage,
         Type::String,
+        Type::Twist,
+        Type::PoseStamped,
     ];
 
     /// Its full name, `sensor_msgs/msg/LaserScan`.
@@ -391,6 +397,8 @@ impl Type {
             Type::Image => "sensor_msgs/msg/Image",
             Type::CompressedImage => "sensor_msgs/msg/CompressedImage",
             Type::String => "std_msgs/msg/String",
+            Type::Twist => "geometry_msgs/msg/Twist",
+            Type::PoseStamped => "geometry_msgs/msg/PoseStamped",
         }
     }
 
@@ -497,6 +505,17 @@ impl Type {
                 &[("std_msgs/Header", HEADER), ("builtin_interfaces/Time", TIME)],
             ),
             Type::String => ("string data\n", &[]),
+            Type::Twist => (TWIST, &[("geometry_msgs/Vector3", VECTOR3)]),
+            Type::PoseStamped => (
+                POSE_STAMPED,
+                &[
+                    ("std_msgs/Header", HEADER),
+                    ("builtin_interfaces/Time", TIME),
+                    ("geometry_msgs/Pose", POSE),
+                    ("geometry_msgs/Point", VECTOR3),
+                    ("geometry_msgs/Quaternion", QUATERNION),
+                ],
+            ),
         };
         let mut text = own.to_owned();
         for (name, fields) in uses {

@@ -144,6 +144,29 @@ pub fn topic_key(domain: u32, fqn: &str, ty: &str, hash: &str) -> String {
     format!("{domain}/{name}/{}/{hash}", dds_type_name(ty))
 }
 
+/// A data key's domain, topic and type (`sensor_msgs/msg/LaserScan`), if
+/// it has rmw_zenoh's form: `0/robot_6665/scan/sensor_msgs::msg::dds_::LaserScan_/RIHS01_…`
+/// is `(0, "/robot_6665/scan", "sensor_msgs/msg/LaserScan")`.
+pub fn parse_key(key: &str) -> Option<(u32, String, String)> {
+    let mut parts: Vec<&str> = key.split('/').collect();
+    if parts.len() < 4 {
+        return None;
+    }
+    let _hash = parts.pop()?;
+    let dds = parts.pop()?;
+    let domain = parts[0].parse().ok()?;
+    let (ns, name) = dds.split_once("::dds_::")?;
+    let name = name.strip_suffix('_')?;
+    if ns.is_empty() || name.is_empty() || parts[1..].iter().any(|p| p.is_empty()) {
+        return None;
+    }
+    Some((
+        domain,
+        format!("/{}", parts[1..].join("/")),
+        format!("{}/{name}", ns.replace("::", "/")),
+    ))
+}
+
 /// A name in a token: every `/` as `%` (`/robot_6665` is `%robot_6665`).
 pub fn mangle(name: &str) -> String {
     name.replace('/', "%")
@@ -383,6 +406,47 @@ mod tests {
             Some("TypeHashNotSupported")
         );
         assert_eq!(type_hash("foo_msgs/msg/Bar", Distro::Jazzy), None);
+    }
+
+    #[test]
+    fn keys_read_back() {
+        let key = topic_key(
+            0,
+            "/robot_6665/scan",
+            "sensor_msgs/msg/LaserScan",
+            "RIHS01_x",
+        );
+        assert_eq!(
+            parse_key(&key),
+            Some((
+                0,
+                "/robot_6665/scan".into(),
+                "sensor_msgs/msg/LaserScan".into()
+            ))
+        );
+        assert_eq!(
+            parse_key("3/chatter/std_msgs::msg::dds_::String_/TypeHashNotSupported"),
+            Some((3, "/chatter".into(), "std_msgs/msg/String".into()))
+        );
+        for not in [
+            "robot/6665/laser/0",
+            "sim/clock",
+            "0//a::dds_::B_/h",
+            "x/t/a::dds_::B_/h",
+        ] {
+            assert_eq!(parse_key(not), None, "{not}");
+        }
+    }
+
+    #[test]
+    fn every_type_troupe_writes_has_its_hash() {
+        for ty in crate::Type::ALL {
+            assert!(
+                type_hash(ty.name(), Distro::Jazzy).is_some(),
+                "{}",
+                ty.name()
+            );
+        }
     }
 
     #[test]

@@ -18,6 +18,8 @@
 //! `PoseWithCovarianceStamped`: amcl starts again there); they go out as this process's commands, so a fleet's access rules
 //! decide whether they pass.
 
+pub mod front;
+
 use std::collections::HashMap;
 use std::sync::mpsc::SyncSender;
 use std::sync::{Arc, Mutex};
@@ -108,16 +110,28 @@ pub fn serve(a: &FoxgloveArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         .name("foxglove-ws".into())
         .spawn(move || rt.block_on(std::future::pending::<()>()))
         .context("starting the WebSocket server's thread")?;
+    // The public port is the front's (classic clients: front.rs); the
+    // SDK's server listens on loopback behind it.
+    let public = std::net::TcpListener::bind((a.bind.as_str(), a.port))
+        .with_context(|| format!("serving Foxglove on {}:{}", a.bind, a.port))?;
+    public.set_nonblocking(true)?;
+    let port = public.local_addr()?.port();
     let server = ctx
         .websocket_server()
         .tokio_runtime(&sockets)
         .name("troupe")
-        .bind(a.bind.clone(), a.port)
+        .bind("127.0.0.1", 0)
         .capabilities(capabilities)
         .supported_encodings(["json"])
         .listener(Arc::new(Commands::new(session.clone(), latched.clone())))
         .start_blocking()
-        .with_context(|| format!("serving Foxglove on {}:{}", a.bind, a.port))?;
+        .context("starting the Foxglove SDK's server on loopback")?;
+    {
+        let _in = sockets.enter();
+        let inner = std::net::SocketAddr::from(([127, 0, 0, 1], server.port()));
+        let listener = tokio::net::TcpListener::from_std(public)?;
+        sockets.spawn(front::run(listener, inner));
+    }
 
     let (tx, rx) = std::sync::mpsc::sync_channel::<Heard>(10_000);
     let live = Arc::new(Mutex::new(Live::new(
@@ -184,8 +198,7 @@ pub fn serve(a: &FoxgloveArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     // On stdout once the port is bound: a script may connect when it appears.
     println_out(&format!(
         "troupe foxglove: ws://{}:{} (open it in Foxglove: Open connection, Foxglove WebSocket; Ctrl-C stops)",
-        a.bind,
-        server.port()
+        a.bind, port
     ));
     drop(tx);
     for h in rx {

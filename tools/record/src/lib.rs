@@ -35,7 +35,9 @@ pub const LIVELINESS: &str = "troupe/liveliness";
 #[derive(Debug, Args)]
 pub struct RecordArgs {
     /// Key expressions to record (default: every device's data, `robot/*/*/*`,
-    /// and the simulation clock, `sim/clock`).
+    /// and the simulation clock, `sim/clock`). ROS 2 traffic on the router
+    /// (rmw_zenoh's keys: `0/**` for domain 0) is written as the ROS 2
+    /// messages it carries, on their topics.
     pub keys: Vec<String>,
     /// The file to write (with splitting: NAME_0.mcap, NAME_1.mcap, …).
     #[arg(short = 'o', long, value_name = "FILE", default_value = "troupe.mcap")]
@@ -559,6 +561,7 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     let split_ns = a.split_duration.map(troupe_ros2::stamp_ns);
     let writer = std::thread::spawn(move || -> anyhow::Result<(Files, u64, u64)> {
         let (mut count, mut bytes) = (0u64, 0u64);
+        let mut ros2_defs = ros2::Ros2::new();
         let mut failed: Option<anyhow::Error> = None;
         for h in rx {
             if failed.is_some() {
@@ -583,6 +586,11 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
                 // Neither ROS 2 nor Foxglove has a form for a device's
                 // coming and going.
                 (Heard::Token { .. }, Some(_)) => continue,
+                (Heard::Sample { key, payload, at }, None) if ros2::is_ros2(key) => {
+                    // ROS 2 traffic keeps its own form: CDR of its type.
+                    bytes += payload.len() as u64;
+                    ros2_defs.write(&mut files, key, payload, *at)
+                }
                 (Heard::Sample { key, payload, at }, None) => {
                     let (schema, stamp) = codec::split(payload)
                         .map_or(("?", 0), |(tag, stamp, _)| {

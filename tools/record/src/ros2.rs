@@ -21,6 +21,25 @@ pub const CDR: &str = "cdr";
 pub(crate) const KEPT: &str = "(kept: the shape of later messages)";
 pub(crate) const JSON: &str = "JSON";
 pub(crate) const UNREADABLE: &str = "(unreadable: left out)";
+/// ROS 2 messages heard on the router, in a summary.
+const ROS2: &str = "(ROS 2, as sent)";
+const UNKNOWN_TYPE: &str = "(a ROS 2 type Troupe has no definition of: left out)";
+
+/// The header stamp of a ROS 2 message of type `t` whose first field is a
+/// `std_msgs/Header` (its first 8 bytes after CDR's 4), in nanoseconds.
+fn header_stamp(t: Type, cdr: &[u8]) -> Option<u64> {
+    let headed = !matches!(t, Type::TfMessage | Type::String | Type::Twist);
+    let b = cdr.get(4..12).filter(|_| headed)?;
+    let sec = i32::from_le_bytes(b[..4].try_into().ok()?);
+    let nanosec = u32::from_le_bytes(b[4..].try_into().ok()?);
+    Some(troupe_ros2::msg::Time { sec, nanosec }.ns())
+}
+
+/// True for a key of ROS 2 traffic (rmw_zenoh's form), recorded as the
+/// ROS 2 message it carries whatever the format.
+pub fn is_ros2(key: &str) -> bool {
+    troupe_ros2::rmw::parse_key(key).is_some()
+}
 
 /// Writes samples as ROS 2 messages, and counts what went where.
 #[derive(Default)]
@@ -107,6 +126,19 @@ impl Ros2 {
         payload: &[u8],
         log_time: u64,
     ) -> anyhow::Result<()> {
+        // ROS 2 traffic on the router (rmw_zenoh's keys): already CDR.
+        if let Some((_, topic, ty)) = troupe_ros2::rmw::parse_key(key) {
+            return match Type::from_name(&ty) {
+                Some(t) => {
+                    let stamp = header_stamp(t, payload).unwrap_or(log_time);
+                    self.put(files, ROS2, &topic, t, payload, log_time, stamp)
+                }
+                None => {
+                    *self.counts.entry((ROS2, UNKNOWN_TYPE)).or_default() += 1;
+                    Ok(())
+                }
+            };
+        }
         let Ok(s) = decode_any(payload) else {
             *self.counts.entry(("?", UNREADABLE)).or_default() += 1;
             return Ok(());
