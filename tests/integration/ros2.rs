@@ -314,3 +314,29 @@ fn bad_ros2_input_is_counted_and_the_robot_stays_safe() {
     assert!(stage.child.try_wait().unwrap().is_none(), "stage died");
     stage.terminate();
 }
+
+/// `troupe bench ros2` times both paths in one run and prints their ratio;
+/// both got scans.
+#[test]
+fn bench_ros2_prints_both_paths_and_their_ratio() {
+    let (st, out, err) = troupe_tests::troupe_output(&troupe_tests::strings(&[
+        "bench",
+        "ros2",
+        "--seconds",
+        "0.5",
+        "--rate",
+        "200",
+        "--fleet-seconds",
+        "0",
+    ]));
+    assert!(st.success(), "{out}{err}");
+    for path in ["Troupe's key", "ROS 2 (/robot_6665/scan)"] {
+        let line = out
+            .lines()
+            .find(|l| l.contains(path))
+            .unwrap_or_else(|| panic!("{out}"));
+        let rate: f64 = line.split_whitespace().last().unwrap().parse().unwrap();
+        assert!(rate > 50.0, "{line}");
+    }
+    assert!(out.contains("ROS 2 / Troupe: p50"), "{out}");
+}
