@@ -196,7 +196,7 @@ pub fn launch(a: LaunchArgs, z: &ZenohArgs, catalog: &Catalog) -> anyhow::Result
     let ros2 = a.ros2.config(plan.launch.ros2.as_ref())?;
     if let Some(r) = &ros2 {
         tracing::info!(
-            "ROS 2: every node shows its devices on domain {} ({:?}), robots in {}",
+            "ROS 2: every node shows its devices on domain {} ({}), robots in {}",
             r.domain,
             r.distro,
             r.namespace

@@ -183,6 +183,19 @@ pub fn launch_ports(launcher: &mut Proc) -> (String, std::net::SocketAddr) {
     )
 }
 
+/// A stream's lines, read on a thread of their own.
+fn line_channel(r: impl std::io::Read + Send + 'static) -> mpsc::Receiver<String> {
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(r).lines().map_while(Result::ok) {
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    rx
+}
+
 /// A child process that is killed when dropped, so a failing test leaves no orphan.
 pub struct Proc {
     /// The child.
@@ -220,30 +233,12 @@ impl Proc {
 
     /// The child's stdout, line by line, read on a thread.
     pub fn lines(&mut self) -> mpsc::Receiver<String> {
-        let out = self.child.stdout.take().expect("stdout piped");
-        let (tx, rx) = mpsc::channel();
-        std::thread::spawn(move || {
-            for line in BufReader::new(out).lines().map_while(Result::ok) {
-                if tx.send(line).is_err() {
-                    break;
-                }
-            }
-        });
-        rx
+        line_channel(self.child.stdout.take().expect("stdout piped"))
     }
 
     /// The child's stderr (its log), line by line, read on a thread.
     pub fn err_lines(&mut self) -> mpsc::Receiver<String> {
-        let err = self.child.stderr.take().expect("stderr piped");
-        let (tx, rx) = mpsc::channel();
-        std::thread::spawn(move || {
-            for line in BufReader::new(err).lines().map_while(Result::ok) {
-                if tx.send(line).is_err() {
-                    break;
-                }
-            }
-        });
-        rx
+        line_channel(self.child.stderr.take().expect("stderr piped"))
     }
 
     /// The first line the child prints on stdout, within the deadline.

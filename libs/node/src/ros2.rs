@@ -175,13 +175,7 @@ impl Ros2 {
         vec![
             "--ros2".into(),
             format!("--ros2-domain={}", self.domain),
-            format!(
-                "--ros2-distro={}",
-                match self.distro {
-                    Distro::Jazzy => "jazzy",
-                    Distro::Humble => "humble",
-                }
-            ),
+            format!("--ros2-distro={}", self.distro),
             format!("--ros2-namespace={}", self.namespace),
             format!(
                 "--ros2-cmd-vel-timeout={}",
@@ -365,7 +359,7 @@ impl Face {
             }
         }
         tracing::info!(
-            "ROS 2: node {}/{} on domain {} ({:?})",
+            "ROS 2: node {}/{} on domain {} ({})",
             face.ident.node.namespace.trim_end_matches('/'),
             face.ident.node.name,
             ros.domain,

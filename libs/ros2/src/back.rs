@@ -55,14 +55,6 @@ fn secs(t: Time) -> f64 {
     f64::from(t.sec) + f64::from(t.nanosec) * 1e-9
 }
 
-fn pose2(p: &Pose) -> Pose2d {
-    Pose2d {
-        x: p.position.x,
-        y: p.position.y,
-        yaw: p.orientation.yaw(),
-    }
-}
-
 /// The sample (payload, as it travels) that carries the ROS 2 message
 /// `data` of type `ty` on `key`.
 ///
@@ -112,7 +104,7 @@ pub fn to_sample(ty: Type, key: &str, data: &[u8]) -> Result<Vec<u8>, BackError>
             let o: Odometry = decode(ty, data)?;
             let t = o.twist.twist;
             let d = position2d::Data {
-                pose: pose2(&o.pose.pose),
+                pose: o.pose.pose.planar(),
                 vel: Pose2d {
                     x: t.linear.x,
                     y: t.linear.y,
@@ -124,10 +116,9 @@ pub fn to_sample(ty: Type, key: &str, data: &[u8]) -> Result<Vec<u8>, BackError>
         }
         (Type::PoseWithCovarianceStamped, Interface::Localize) => {
             let p: PoseWithCovarianceStamped = decode(ty, data)?;
-            let c = p.pose.covariance.0;
             let h = localize::Hypoth {
-                mean: pose2(&p.pose.pose),
-                cov: [c[0], c[7], c[35], c[1], c[11], c[5]],
+                mean: p.pose.pose.planar(),
+                cov: p.pose.covariance.planar(),
                 weight: 1.0,
             };
             let hs = localize::Hypoths {

@@ -24,7 +24,7 @@
 use troupe_msgs::{codec, localize, planner, position2d, Device, Interface, Pose2d};
 use troupe_msgs::{Command as _, Request as _};
 
-use crate::msg::{Pose, PoseStamped, PoseWithCovarianceStamped, Twist, Type};
+use crate::msg::{PoseStamped, PoseWithCovarianceStamped, Twist, Type};
 
 /// A robot's namespace from a template: `{robot}` is the robot's port
 /// (`/robot_{robot}` gives `/robot_6665`).
@@ -154,7 +154,7 @@ impl Inbound {
             }
             Inbound::Goal => {
                 let p: PoseStamped = de(self.ros_type(), cdr)?;
-                let goal = pose2(&p.pose);
+                let goal = p.pose.planar();
                 finite(&[goal.x, goal.y, goal.yaw])?;
                 Ok((
                     planner::Goal::NAME,
@@ -163,12 +163,11 @@ impl Inbound {
             }
             Inbound::InitialPose => {
                 let p: PoseWithCovarianceStamped = de(self.ros_type(), cdr)?;
-                let mean = pose2(&p.pose.pose);
+                let mean = p.pose.pose.planar();
                 finite(&[mean.x, mean.y, mean.yaw])?;
-                let c = p.pose.covariance.0;
                 let set = localize::SetPose {
                     mean,
-                    cov: [c[0], c[7], c[35], c[1], c[11], c[5]],
+                    cov: p.pose.covariance.planar(),
                 };
                 Ok((localize::SetPose::NAME, codec::encode(&set, now)))
             }
@@ -188,14 +187,6 @@ pub fn stop_command(now: f64) -> Vec<u8> {
     )
 }
 
-fn pose2(p: &Pose) -> Pose2d {
-    Pose2d {
-        x: p.position.x,
-        y: p.position.y,
-        yaw: p.orientation.yaw(),
-    }
-}
-
 /// A message of type `ty` as `distro`'s definition lays it out: Humble's
 /// `Range` ends before Jazzy's `variance`, its last 4 bytes.
 pub fn for_distro(ty: Type, distro: crate::rmw::Distro, mut cdr: Vec<u8>) -> Vec<u8> {
@@ -208,7 +199,7 @@ pub fn for_distro(ty: Type, distro: crate::rmw::Distro, mut cdr: Vec<u8>) -> Vec
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::msg::{Header, PoseWithCovariance, Quaternion, Vector3};
+    use crate::msg::{Header, Pose, PoseWithCovariance, Quaternion, Vector3};
 
     const LASER: Device = Device::new(6665, Interface::Laser, 0);
 

@@ -98,10 +98,29 @@ pub struct Pose {
     pub orientation: Quaternion,
 }
 
+impl Pose {
+    /// The pose in the plane: x, y and the heading about z.
+    pub fn planar(&self) -> troupe_msgs::Pose2d {
+        troupe_msgs::Pose2d {
+            x: self.position.x,
+            y: self.position.y,
+            yaw: self.orientation.yaw(),
+        }
+    }
+}
+
 /// A 6x6 covariance, row-major over x, y, z, roll, pitch, yaw
 /// (`float64[36]`: a fixed array, no length on the wire).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Cov(pub [f64; 36]);
+
+impl Cov {
+    /// The planar part in Player's order: xx, yy, yaw-yaw, xy, y-yaw, x-yaw.
+    pub fn planar(&self) -> [f64; 6] {
+        let c = &self.0;
+        [c[0], c[7], c[35], c[1], c[11], c[5]]
+    }
+}
 
 impl Default for Cov {
     fn default() -> Self {

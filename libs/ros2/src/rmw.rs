@@ -25,6 +25,16 @@ pub enum Distro {
     Humble,
 }
 
+impl std::fmt::Display for Distro {
+    /// Its flag's value: `jazzy` or `humble`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Distro::Jazzy => "jazzy",
+            Distro::Humble => "humble",
+        })
+    }
+}
+
 impl std::str::FromStr for Distro {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
@@ -537,6 +547,9 @@ mod tests {
         assert_eq!("Humble".parse::<Distro>(), Ok(Distro::Humble));
         assert_eq!("rolling".parse::<Distro>(), Ok(Distro::Jazzy));
         assert!("foxy".parse::<Distro>().unwrap_err().contains("humble"));
+        for d in [Distro::Jazzy, Distro::Humble] {
+            assert_eq!(d.to_string().parse::<Distro>(), Ok(d));
+        }
     }
 
     fn hex(b: &[u8]) -> String {

@@ -63,12 +63,6 @@ pub fn run(a: &Ros2BenchArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn now_s() -> f64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0.0, |d| d.as_secs_f64())
-}
-
 /// Latencies and a count, filled by a subscriber's callback.
 #[derive(Default)]
 struct Got {
@@ -78,7 +72,7 @@ struct Got {
 
 impl Got {
     fn take(&self, stamp: f64) {
-        let d = Duration::from_secs_f64((now_s() - stamp).max(0.0));
+        let d = Duration::from_secs_f64((troupe_node::Clock::wall().now() - stamp).max(0.0));
         self.lat.lock().unwrap_or_else(|p| p.into_inner()).push(d);
         self.n.fetch_add(1, Ordering::Relaxed);
     }
