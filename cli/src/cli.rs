@@ -347,3 +347,111 @@ fn offline(own: &[&str]) -> Vec<clap::Arg> {
         .map(|a| a.hide(true))
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use clap::CommandFactory;
+
+    use super::Cli;
+
+    /// Every command's path and its options that take a value.
+    fn options(cmd: &clap::Command, path: &mut Vec<String>, out: &mut Vec<(Vec<String>, String)>) {
+        for arg in cmd.get_arguments() {
+            let takes = arg.get_num_args().is_none_or(|n| n.takes_values());
+            if let (Some(long), true) = (arg.get_long(), takes) {
+                if long != "help" && long != "version" {
+                    out.push((path.clone(), long.to_owned()));
+                }
+            }
+        }
+        for sub in cmd.get_subcommands() {
+            path.push(sub.get_name().to_owned());
+            options(sub, path, out);
+            path.pop();
+        }
+    }
+
+    /// The command tree with nothing required, so that one flag parses alone.
+    fn lenient(cmd: clap::Command) -> clap::Command {
+        let ids: Vec<_> = cmd.get_arguments().map(|a| a.get_id().clone()).collect();
+        let mut cmd = cmd.subcommand_required(false).arg_required_else_help(false);
+        for id in ids {
+            cmd = cmd.mut_arg(id, |a| a.required(false));
+        }
+        let subs: Vec<_> = cmd
+            .get_subcommands()
+            .map(|s| s.get_name().to_owned())
+            .collect();
+        for s in subs {
+            cmd = cmd.mut_subcommand(s, lenient);
+        }
+        cmd
+    }
+
+    /// The value `long` parsed to in the innermost matched command.
+    fn parsed_f64(m: &clap::ArgMatches, path: &[String], long: &str) -> Option<f64> {
+        let mut m = m;
+        for p in path {
+            m = m.subcommand_matches(p)?;
+        }
+        let id = long.replace('-', "_");
+        match m.try_get_one::<f64>(&id) {
+            Ok(v) => v.copied(),
+            Err(_) => None,
+        }
+    }
+
+    /// No flag of any command takes a number it would panic on or misuse:
+    /// `inf`, `NaN` and the like are refused while parsing (exit 2, with a
+    /// message), and every duration refuses a negative value.
+    #[test]
+    fn no_flag_takes_a_non_finite_number_and_no_duration_a_negative_one() {
+        let cmd = lenient(Cli::command());
+        let mut all = Vec::new();
+        options(&cmd, &mut Vec::new(), &mut all);
+        assert!(all.len() > 100, "only {} options found", all.len());
+        let mut accepted = Vec::new();
+        let mut floats = 0;
+        for (path, long) in &all {
+            for value in ["2.5", "inf", "-inf", "NaN", "1e999", "-1", "1e300"] {
+                let mut argv = vec!["troupe".to_owned()];
+                argv.extend(path.iter().cloned());
+                argv.push(format!("--{long}={value}"));
+                let Ok(m) = cmd.clone().try_get_matches_from(&argv) else {
+                    continue;
+                };
+                let Some(v) = parsed_f64(&m, path, long) else {
+                    continue;
+                };
+                if value == "2.5" {
+                    floats += 1;
+                    continue;
+                }
+                let duration = cmd_arg_is_seconds(&cmd, path, long);
+                if !v.is_finite() || (duration && !(0.0..=1e12).contains(&v)) {
+                    accepted.push(argv[1..].join(" "));
+                }
+            }
+        }
+        assert!(
+            floats > 0 || !accepted.is_empty(),
+            "no number flags were found"
+        );
+        assert!(accepted.is_empty(), "accepted: {accepted:#?}");
+    }
+
+    /// Whether a flag's value names seconds (`value_name = "SECS"`).
+    fn cmd_arg_is_seconds(cmd: &clap::Command, path: &[String], long: &str) -> bool {
+        let mut c = cmd;
+        for p in path {
+            match c.find_subcommand(p) {
+                Some(s) => c = s,
+                None => return false,
+            }
+        }
+        c.get_arguments()
+            .find(|a| a.get_long() == Some(long))
+            .and_then(|a| a.get_value_names())
+            .is_some_and(|n| n.iter().any(|n| n.as_str() == "SECS"))
+    }
+}

@@ -35,7 +35,7 @@ mod golden {
     #[test]
     fn every_compat_cfg_parses_and_plans_or_says_why_not() {
         let Some(compat) = compat() else {
-            eprintln!("skipping: ../shared/compat is absent");
+            troupe_node::testing::cannot_run("../shared/compat is absent");
             return;
         };
         let golden = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden");

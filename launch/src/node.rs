@@ -50,7 +50,7 @@ pub struct NodeArgs {
     pub sim_time: bool,
 
     /// Seconds to wait for each required device.
-    #[arg(long, value_name = "SECS", default_value_t = 30.0)]
+    #[arg(long, value_name = "SECS", default_value_t = 30.0, value_parser = troupe_node::args::seconds)]
     pub requires_timeout: f64,
 
     #[command(flatten)]

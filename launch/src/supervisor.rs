@@ -61,10 +61,10 @@ pub struct LaunchArgs {
     #[arg(long, value_name = "DIR")]
     pub log_dir: Option<PathBuf>,
     /// Seconds to wait for every device to come up before reporting what is missing.
-    #[arg(long, value_name = "SECS", default_value_t = 30.0)]
+    #[arg(long, value_name = "SECS", default_value_t = 30.0, value_parser = troupe_node::args::seconds)]
     pub ready_timeout: f64,
     /// Seconds between SIGTERM and SIGKILL when stopping a node.
-    #[arg(long, value_name = "SECS", default_value_t = 5.0)]
+    #[arg(long, value_name = "SECS", default_value_t = 5.0, value_parser = troupe_node::args::seconds)]
     pub grace: f64,
     /// Serve no Player clients: start no TCP bridge on the robot ports.
     #[arg(long)]
@@ -83,7 +83,7 @@ pub struct LaunchArgs {
     pub bridge_any_port: bool,
     /// Run the simulator at this multiple of real time, whatever the world
     /// file says (1 = real time; 0 = Player's pace, 100 steps a second)
-    #[arg(long, value_name = "X")]
+    #[arg(long, value_name = "X", value_parser = troupe_node::args::finite)]
     pub speedup: Option<f64>,
     /// Also serve `troupe view` (the running world in a browser) on ADDR:
     /// `--view` alone serves 127.0.0.1:8080, `--view=127.0.0.1:0` any free

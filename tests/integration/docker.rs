@@ -106,11 +106,8 @@ fn engine() -> Option<Vec<String>> {
     });
     match found {
         Ok(c) => Some(c.clone()),
-        Err(why) if std::env::var("CI").is_ok_and(|v| v == "true") => {
-            panic!("CI=true, and {why}: the Docker tests must run in CI")
-        }
         Err(why) => {
-            eprintln!("skipping: {why}");
+            troupe_tests::cannot_run(why);
             None
         }
     }

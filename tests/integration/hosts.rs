@@ -111,7 +111,7 @@ provides = [{ device = "robot/6665/laser/0" }]
 #[test]
 fn a_plan_split_across_two_hosts_runs_and_heals_after_a_cut_link() {
     let Some(hosts) = Hosts::new() else {
-        eprintln!("skipping: needs root and `ip netns` to make two hosts");
+        troupe_tests::cannot_run("it needs root and `ip netns` to make two hosts");
         return;
     };
     let dir = std::env::temp_dir().join(troupe_tests::unique_namespace("hosts"));

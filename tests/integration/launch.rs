@@ -208,6 +208,27 @@ fn plan_and_dry_run_print_the_plan_and_bad_cfgs_say_where() {
     );
 }
 
+/// A duration flag given `inf` is refused by clap (exit 2, a message), not
+/// a backtrace where it becomes a `Duration`.
+#[test]
+fn infinite_and_negative_durations_are_refused_with_a_message() {
+    let cfg = temp_cfg("durations", STACK);
+    let cfg = cfg.to_str().unwrap();
+    for (flag, value, says) in [
+        ("--ready-timeout", "inf", "inf is not a finite number"),
+        ("--grace", "inf", "inf is not a finite number"),
+        ("--grace", "NaN", "NaN is not a finite number"),
+        ("--ready-timeout", "-1", "-1 is negative"),
+    ] {
+        let (st, _, err) = troupe_output(&strings(&["launch", cfg, &format!("{flag}={value}")]));
+        assert_eq!(st.code(), Some(2), "{flag} {value}: {err}");
+        assert!(
+            err.contains(says) && !err.contains("panicked"),
+            "{flag} {value}: {err}"
+        );
+    }
+}
+
 /// Drives robot 7000's base (a passthrough's) 10 cm, from its odometry.
 fn drives_through_7000(robot: &troupe_client::Client) {
     let pp = troupe_client::Position2dProxy::new(robot, 0).unwrap();

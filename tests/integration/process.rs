@@ -785,3 +785,64 @@ fn bench_latency_prints_its_floor_and_zenoh_at_its_fastest_beside_the_figures() 
         "both ratios, the figures' and the fastest path's:\n{out}"
     );
 }
+
+/// A panic in any of a driver's hooks ends its process with status 101 and
+/// the panic's message, for the supervisor to restart it: never a driver
+/// hung with its devices still announced. A request's hook runs on Zenoh's
+/// thread while the driver is idle (`Driver::quick`), where a panic used to
+/// unwind that thread only.
+#[test]
+fn a_driver_that_panics_in_any_hook_exits_for_its_supervisor() {
+    use troupe_msgs::codec::{self, Command, Request};
+    use troupe_msgs::{keys, position2d, Device, Interface};
+    use troupe_node::zenoh::Wait;
+    let net = TestNet::new("panic");
+    let dev = Device::new(6665, Interface::Position2d, 0);
+    for hook in ["setup", "tick", "request", "command"] {
+        let mut args = net.child_args();
+        args.extend(strings(&[
+            "node",
+            "dummy",
+            "--provides",
+            "position2d:0",
+            "-o",
+            "rate=2",
+            "-o",
+            &format!("panic_in={hook}"),
+        ]));
+        let mut node = Proc::troupe(&format!("dummy-{hook}"), &args);
+        let client = net.client();
+        match hook {
+            "request" => {
+                net.wait_live(&["6665:position2d:0"]);
+                let asked = client
+                    .get(keys::req(&dev, position2d::GetGeom::NAME))
+                    .payload(codec::encode(&position2d::GetGeom, 0.0))
+                    .wait()
+                    .unwrap();
+                // No answer comes: the process is gone.
+                assert!(asked.recv().is_err(), "the panicking hook answered");
+            }
+            "command" => {
+                net.wait_live(&["6665:position2d:0"]);
+                let cmd = position2d::CmdVel::default();
+                client
+                    .put(
+                        keys::cmd(&dev, position2d::CmdVel::NAME),
+                        codec::encode(&cmd, 0.0),
+                    )
+                    .wait()
+                    .unwrap();
+            }
+            _ => {}
+        }
+        let status = node.wait();
+        let err = node.stderr();
+        assert_eq!(status.code(), Some(101), "{hook}: {status:?}\n{err}");
+        assert!(
+            err.contains("panicking in its")
+                && err.contains("exiting (status 101) to be restarted"),
+            "{hook}: {err}"
+        );
+    }
+}

@@ -17,7 +17,7 @@ pub const DEADLINE: Duration = Duration::from_secs(20);
 
 static COUNTER: AtomicU32 = AtomicU32::new(0);
 
-pub use troupe_node::testing::compat;
+pub use troupe_node::testing::{cannot_run, compat, in_ci};
 
 /// A namespace no other test (or test run) uses.
 pub fn unique_namespace(name: &str) -> String {

@@ -106,7 +106,7 @@ pub struct ZenohArgs {
     /// Seconds of silence after which a link's other end counts as gone and
     /// its devices leave (Zenoh's lease; default 10). Keep-alives go out
     /// four times per lease.
-    #[arg(long, value_name = "SECS", global = true)]
+    #[arg(long, value_name = "SECS", global = true, value_parser = crate::args::seconds)]
     pub lease: Option<f64>,
 }
 
@@ -575,6 +575,45 @@ pub fn without_location(text: &str) -> String {
     match text.rfind(" at ") {
         Some(i) if text[i..].contains(".rs:") => text[..i].trim_end().to_owned(),
         _ => text.to_owned(),
+    }
+}
+
+/// A flag's number of seconds (`--grace 2.5`): finite and not negative.
+/// Every duration flag of the CLI parses with it, so that `inf`, `NaN`
+/// and `-1` are refused with a message (exit 2) rather than panicking
+/// where they become a `Duration`.
+///
+/// # Errors
+///
+/// What is wrong with `text`, for clap to print.
+pub fn seconds(text: &str) -> std::result::Result<f64, String> {
+    let v = finite(text)?;
+    if v < 0.0 {
+        return Err(format!("{text} is negative: give seconds, 0 or more"));
+    }
+    if v > MAX_SECONDS {
+        return Err(format!(
+            "{text} is too long: give at most {MAX_SECONDS} seconds (a year)"
+        ));
+    }
+    Ok(v)
+}
+
+/// The longest duration a flag takes: a year.
+pub const MAX_SECONDS: f64 = 365.0 * 24.0 * 3600.0;
+
+/// A flag's number (a rate, a probability, a speed-up): finite; `inf` and
+/// `NaN` are refused. Ranges of their own are checked where the value is
+/// used.
+///
+/// # Errors
+///
+/// What is wrong with `text`, for clap to print.
+pub fn finite(text: &str) -> std::result::Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        Ok(_) => Err(format!("{text} is not a finite number")),
+        Err(_) => Err(format!("{text} is not a number")),
     }
 }
 

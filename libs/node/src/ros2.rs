@@ -91,7 +91,7 @@ pub struct Ros2Args {
     pub ros2_namespace: Option<String>,
     /// Seconds a base keeps the last `cmd_vel` before it stops (ROS 2
     /// teleop and Nav2 send it several times a second) [default: 0.5].
-    #[arg(long, value_name = "SECS")]
+    #[arg(long, value_name = "SECS", value_parser = crate::args::seconds)]
     pub ros2_cmd_vel_timeout: Option<f64>,
 }
 

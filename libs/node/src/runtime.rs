@@ -77,6 +77,7 @@ pub fn run<D: Driver>(section: Section, zargs: &ZenohArgs, cfg: &NodeConfig) -> 
     };
     let stop = Stop::default();
     install_signal_handlers(stop.clone())?;
+    exit_on_panic();
     let handle = spawn::<D>(session.clone(), section, cfg, stop)?;
     let result = handle.join();
     session
@@ -84,6 +85,23 @@ pub fn run<D: Driver>(section: Section, zargs: &ZenohArgs, cfg: &NodeConfig) -> 
         .wait()
         .map_err(z(|| "closing the session".into()))?;
     result
+}
+
+/// Ends the process on a panic in any of its threads, after the panic's
+/// message, with exit status 101, for the supervisor to restart it.
+///
+/// A panic on a thread other than the driver's (a request's hook run on
+/// Zenoh's thread, a Zenoh callback) would otherwise unwind that thread
+/// only: the driver hung with its liveliness tokens up, and nothing would
+/// restart it. A driver's state after a panic is unknown, so its
+/// `shutdown` is not run; the operating system closes its devices.
+fn exit_on_panic() {
+    let report = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        report(info);
+        tracing::error!("a panic: exiting (status 101) to be restarted");
+        std::process::exit(101);
+    }));
 }
 
 /// A handle that asks a running node to stop.

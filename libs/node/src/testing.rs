@@ -35,7 +35,8 @@ type Answer = std::result::Result<Vec<u8>, Vec<u8>>;
 
 /// The file `rel` of the Player and Stage projects' samples, read in place
 /// from the workspace's sibling `../shared/compat` (`stage/simple.cfg`);
-/// `None`, said on stderr, when it is absent, for the test to skip.
+/// `None` when it is absent, for the test to skip ([`cannot_run`]: under
+/// `CI=true` the test fails instead).
 pub fn compat(rel: &str) -> Option<std::path::PathBuf> {
     // This crate is libs/node in the workspace: any crate's tests find the
     // samples from here.
@@ -45,9 +46,26 @@ pub fn compat(rel: &str) -> Option<std::path::PathBuf> {
     if path.exists() {
         Some(path)
     } else {
-        eprintln!("skipping: {} is absent", path.display());
+        cannot_run(&format!("{} is absent", path.display()));
         None
     }
+}
+
+/// True under `CI=true` (`.ci/run` sets it).
+pub fn in_ci() -> bool {
+    std::env::var("CI").is_ok_and(|v| v == "true")
+}
+
+/// Says why a test cannot run here, on one line, for it to return early;
+/// under `CI=true` it panics instead, so that no test passes in CI without
+/// running.
+///
+/// # Panics
+///
+/// Under `CI=true`.
+pub fn cannot_run(why: &str) {
+    assert!(!in_ci(), "CI=true, and {why}: this test must run in CI");
+    eprintln!("skipping: {why}");
 }
 
 #[derive(Default)]

@@ -10,6 +10,7 @@
 //! | provides | any number of `laser`, `ranger`, `position2d`, `ptz`, `blobfinder`, `power`, `fiducial`, `dio`, `aio`, `camera`, `wsn` devices |
 //! | requires | nothing |
 //! | option `rate` | float, Hz, default 10 |
+//! | option `panic_in` | for testing supervision: `setup`, `tick`, `request` or `command`, the hook that panics (a request's hook runs on Zenoh's thread) |
 //!
 //! The data are Player's: a 361-beam laser scan at 8 m over ±90°, 361 ranger
 //! ranges of 8 m, a position2d at (1, 1, 1) moving at (1, 1, 1), a 320 x 240
@@ -47,12 +48,31 @@ pub const INTERFACES: &[Interface] = &[
 pub struct Options {
     /// Data rate, Hz.
     pub rate: f64,
+    /// The hook that panics, to test supervision.
+    pub panic_in: Option<Hook>,
 }
 
 impl Default for Options {
     fn default() -> Self {
-        Options { rate: 10.0 }
+        Options {
+            rate: 10.0,
+            panic_in: None,
+        }
     }
+}
+
+/// A hook of the driver (`panic_in`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Hook {
+    /// `setup`, before the devices are announced.
+    Setup,
+    /// Each tick, when data are published.
+    Tick,
+    /// A request (answered on Zenoh's thread while the driver is idle).
+    Request,
+    /// A command.
+    Command,
 }
 
 /// The dummy driver.
@@ -61,6 +81,16 @@ pub struct Dummy {
     period: Duration,
     /// Ticks so far, modulo 256: the grey of the next camera image.
     ticks: u8,
+    panic_in: Option<Hook>,
+}
+
+impl Dummy {
+    fn hook(&self, hook: Hook) {
+        assert!(
+            self.panic_in != Some(hook),
+            "dummy: panicking in its {hook:?} hook, as its options asked (panic_in)"
+        );
+    }
 }
 
 impl Driver for Dummy {
@@ -92,10 +122,12 @@ impl Driver for Dummy {
             devices,
             period: Duration::from_secs_f64(1.0 / options.rate),
             ticks: 0,
+            panic_in: options.panic_in,
         })
     }
 
     fn setup(&mut self, ctx: &mut Ctx) -> Result<()> {
+        self.hook(Hook::Setup);
         ctx.set_tick(Some(self.period));
         Ok(())
     }
@@ -103,6 +135,7 @@ impl Driver for Dummy {
     fn on_event(&mut self, ctx: &mut Ctx, event: Event) -> Result<()> {
         match event {
             Event::Tick => {
+                self.hook(Hook::Tick);
                 for d in &self.devices {
                     publish(ctx, d, self.ticks)?;
                 }
@@ -110,10 +143,15 @@ impl Driver for Dummy {
                 Ok(())
             }
             Event::Request(r) => {
+                self.hook(Hook::Request);
                 r.nack("the dummy driver refuses every request");
                 Ok(())
             }
-            Event::Command(_) | Event::Data(_) | Event::Reply(_) | Event::Wake => Ok(()),
+            Event::Command(_) => {
+                self.hook(Hook::Command);
+                Ok(())
+            }
+            Event::Data(_) | Event::Reply(_) | Event::Wake => Ok(()),
         }
     }
 }

@@ -42,7 +42,7 @@ pub struct BridgeBenchArgs {
     #[arg(long, default_value_t = 100)]
     pub clients: usize,
     /// How long the many clients read.
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, default_value_t = 5.0, value_name = "SECS", value_parser = troupe_node::args::seconds)]
     pub seconds: f64,
 }
 

@@ -23,7 +23,7 @@ use crate::harness::{Figures, Kid, Window, ROBOTS};
 #[derive(Debug, clap::Args)]
 pub struct FoxgloveBenchArgs {
     /// Seconds measured for each row.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, value_name = "SECS", value_parser = troupe_node::args::seconds)]
     pub seconds: f64,
     /// Where Stage's sample bitmaps are (cave.png).
     #[arg(long, value_name = "DIR")]

@@ -28,10 +28,10 @@ pub struct PythonBenchArgs {
     #[arg(long, default_value = "python3")]
     pub python: String,
     /// Scans published per second.
-    #[arg(long, default_value_t = 20_000.0)]
+    #[arg(long, default_value_t = 20_000.0, value_parser = troupe_node::args::finite)]
     pub rate: f64,
     /// Seconds of each reading phase.
-    #[arg(long, default_value_t = 3.0)]
+    #[arg(long, default_value_t = 3.0, value_name = "SECS", value_parser = troupe_node::args::seconds)]
     pub seconds: f64,
     /// Timed requests, from Python and from Rust.
     #[arg(long, default_value_t = 2000)]

@@ -19,7 +19,7 @@ use troupe_record::{each_message, record, Compress, Files, RecordArgs, Schema, E
 #[derive(Debug, Args)]
 pub struct RecordBenchArgs {
     /// Wall seconds to record the 100-Pioneer world.
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(long, default_value_t = 20.0, value_name = "SECS", value_parser = troupe_node::args::seconds)]
     pub seconds: f64,
     /// Size of the file `log info` is timed on, MB.
     #[arg(long, value_name = "MB", default_value_t = 1000)]

@@ -36,13 +36,13 @@ use crate::harness::{percentile, us, Kid};
 #[derive(Debug, clap::Args)]
 pub struct Ros2BenchArgs {
     /// Seconds of each round (three of each kind, alternating).
-    #[arg(long, default_value_t = 3.0)]
+    #[arg(long, default_value_t = 3.0, value_name = "SECS", value_parser = troupe_node::args::seconds)]
     pub seconds: f64,
     /// The laser driver's rate, Hz (flat out for the throughput figure).
-    #[arg(long, default_value_t = 1000.0)]
+    #[arg(long, default_value_t = 1000.0, value_parser = troupe_node::args::finite)]
     pub rate: f64,
     /// Seconds the 100-Pioneer world runs for each of its rows (0: skip it).
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, value_name = "SECS", value_parser = troupe_node::args::seconds)]
     pub fleet_seconds: f64,
     /// Where Stage's sample bitmaps are (cave.png), for the 100-Pioneer world.
     #[arg(long, value_name = "DIR")]

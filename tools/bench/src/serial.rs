@@ -14,7 +14,7 @@ use troupe_sicklms200::emulator;
 #[derive(Debug, Args)]
 pub struct SerialBenchArgs {
     /// Seconds of scans measured per case (after the connection).
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, default_value_t = 5.0, value_name = "SECS", value_parser = troupe_node::args::seconds)]
     pub seconds: f64,
 }
 

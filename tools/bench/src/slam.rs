@@ -29,10 +29,10 @@ use troupe_node::testing::Harness;
 #[derive(Debug, Args)]
 pub struct SlamBenchArgs {
     /// Simulated seconds each robot wanders.
-    #[arg(long, default_value_t = 900.0)]
+    #[arg(long, default_value_t = 900.0, value_name = "SECS", value_parser = troupe_node::args::seconds)]
     pub seconds: f64,
     /// Odometry's error in yaw (0.05: it reads turns 5% long).
-    #[arg(long, default_value_t = 0.05)]
+    #[arg(long, default_value_t = 0.05, value_parser = troupe_node::args::finite)]
     pub yaw_error: f64,
     /// Where Stage's sample worlds are (simple.world, autolab.world).
     #[arg(long, value_name = "DIR")]

@@ -14,7 +14,7 @@ use crate::harness::bench_world;
 #[derive(Debug, Args)]
 pub struct StageBenchArgs {
     /// Simulated seconds per world.
-    #[arg(long, default_value_t = 60.0)]
+    #[arg(long, default_value_t = 60.0, value_name = "SECS", value_parser = troupe_node::args::seconds)]
     pub seconds: f64,
     /// Run only this world (simple, pioneers100, hospital1000) in this process.
     #[arg(long, hide = true)]

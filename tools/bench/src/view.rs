@@ -23,7 +23,7 @@ use troupe_node::{Mode, ZenohArgs};
 #[derive(Debug, clap::Args)]
 pub struct ViewBenchArgs {
     /// Seconds measured for each count of browsers.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, value_name = "SECS", value_parser = troupe_node::args::seconds)]
     pub seconds: f64,
     /// Counts of browsers to measure with, in turn.
     #[arg(long, value_delimiter = ',', default_value = "0,1,20")]
@@ -40,7 +40,7 @@ pub struct ViewBenchArgs {
     #[arg(long, default_value_t = 20)]
     pub streams: usize,
     /// The world's speed against real time.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = troupe_node::args::finite)]
     pub speedup: f64,
     /// Run the browsers under SCHED_IDLE (`chrt --idle 0`): they get only
     /// the CPU the fleet and the view server leave, as browsers on other

@@ -34,25 +34,25 @@ pub struct EmulateArgs {
     pub link: PathBuf,
 
     /// Fault: probability of random bytes before each frame sent (line noise).
-    #[arg(long, value_name = "P", default_value_t = 0.0)]
+    #[arg(long, value_name = "P", default_value_t = 0.0, value_parser = troupe_node::args::finite)]
     pub noise: f64,
     /// Fault: probability of losing each byte sent.
-    #[arg(long, value_name = "P", default_value_t = 0.0)]
+    #[arg(long, value_name = "P", default_value_t = 0.0, value_parser = troupe_node::args::finite)]
     pub drop: f64,
     /// Fault: probability of one flipped bit in each frame sent (bad checksum).
-    #[arg(long, value_name = "P", default_value_t = 0.0)]
+    #[arg(long, value_name = "P", default_value_t = 0.0, value_parser = troupe_node::args::finite)]
     pub corrupt: f64,
     /// Fault: probability of cutting each frame sent short.
-    #[arg(long, value_name = "P", default_value_t = 0.0)]
+    #[arg(long, value_name = "P", default_value_t = 0.0, value_parser = troupe_node::args::finite)]
     pub truncate: f64,
     /// Fault: a device that never answers.
     #[arg(long)]
     pub mute: bool,
     /// Fault: unplug the device (close the line, remove the link) after SECS.
-    #[arg(long, value_name = "SECS")]
+    #[arg(long, value_name = "SECS", value_parser = troupe_node::args::seconds)]
     pub unplug_after: Option<f64>,
     /// Plug it back in (a fresh power-up) SECS after unplugging.
-    #[arg(long, value_name = "SECS", requires = "unplug_after")]
+    #[arg(long, value_name = "SECS", requires = "unplug_after", value_parser = troupe_node::args::seconds)]
     pub replug_after: Option<f64>,
     /// p2os: the robot's subclass (p3dx-sh, p3dx, p3at-sh, p3at, p2dx, p2de, p2at, amigo-sh, amigo).
     #[arg(long, default_value = "p3dx-sh")]

@@ -323,7 +323,7 @@ pub struct ComposeArgs {
     pub secure: Option<PathBuf>,
     /// Zenoh's lease in the fleet, in seconds: how long a cut-off host's
     /// devices stay listed.
-    #[arg(long, value_name = "SECS", default_value_t = 3.0)]
+    #[arg(long, value_name = "SECS", default_value_t = 3.0, value_parser = troupe_node::args::seconds)]
     pub lease: f64,
 }
 

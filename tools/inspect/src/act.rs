@@ -45,10 +45,10 @@ pub struct CmdArgs {
     pub message: Message,
     /// Keep sending it for this many seconds. A motion command (`vel`,
     /// `car`) is repeated until Ctrl-C without it; the base is stopped at the end.
-    #[arg(long = "for", value_name = "SECS")]
+    #[arg(long = "for", value_name = "SECS", value_parser = troupe_node::args::seconds)]
     pub seconds: Option<f64>,
     /// How often to send it while it is held, per second.
-    #[arg(long, value_name = "HZ", default_value_t = 10.0)]
+    #[arg(long, value_name = "HZ", default_value_t = 10.0, value_parser = troupe_node::args::finite)]
     pub rate: f64,
 }
 
@@ -58,7 +58,7 @@ pub struct CallArgs {
     #[command(flatten)]
     pub message: Message,
     /// Seconds to wait for the answer.
-    #[arg(long, value_name = "SECS", default_value_t = 5.0)]
+    #[arg(long, value_name = "SECS", default_value_t = 5.0, value_parser = troupe_node::args::seconds)]
     pub timeout: f64,
 }
 

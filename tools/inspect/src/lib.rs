@@ -27,7 +27,7 @@ pub struct ListArgs {
     #[arg(long)]
     pub json: bool,
     /// Seconds to wait for answers.
-    #[arg(long, value_name = "SECS", default_value_t = 2.0)]
+    #[arg(long, value_name = "SECS", default_value_t = 2.0, value_parser = troupe_node::args::seconds)]
     pub wait: f64,
     /// Keep running and print each device as it comes (`+`) and goes (`-`).
     #[arg(long)]
@@ -44,7 +44,7 @@ pub struct ReadyArgs {
     #[arg(short = 'p', long = "robot", value_name = "PORT", default_value_t = troupe_msgs::DEFAULT_ROBOT)]
     pub robot: u32,
     /// Seconds to wait for them to come up (0: look once).
-    #[arg(long, value_name = "SECS", default_value_t = 0.0)]
+    #[arg(long, value_name = "SECS", default_value_t = 0.0, value_parser = troupe_node::args::seconds)]
     pub wait: f64,
 }
 
@@ -63,7 +63,7 @@ pub struct EchoArgs {
     #[arg(short = 'n', long, value_name = "N")]
     pub count: Option<u64>,
     /// Give up after this many seconds without a sample (default: wait forever).
-    #[arg(long, value_name = "SECS")]
+    #[arg(long, value_name = "SECS", value_parser = troupe_node::args::seconds)]
     pub timeout: Option<f64>,
 }
 

@@ -61,7 +61,7 @@ pub struct BuildArgs {
     #[arg(short = 'o', long, value_name = "MAP.yaml")]
     pub output: PathBuf,
     /// Metres per cell.
-    #[arg(long, default_value_t = 0.05, value_name = "M")]
+    #[arg(long, default_value_t = 0.05, value_name = "M", value_parser = troupe_node::args::finite)]
     pub resolution: f64,
     /// The odometry (a position2d) when the log holds several.
     #[arg(long, value_name = "DEVICE")]

@@ -43,13 +43,13 @@ pub struct RecordArgs {
     #[arg(short = 'o', long, value_name = "FILE", default_value = "troupe.mcap")]
     pub output: PathBuf,
     /// Stop after this many seconds (default: at Ctrl-C or SIGTERM).
-    #[arg(long, value_name = "SECS")]
+    #[arg(long, value_name = "SECS", value_parser = troupe_node::args::seconds)]
     pub duration: Option<f64>,
     /// Start a new file after this many megabytes.
-    #[arg(long, value_name = "MB")]
+    #[arg(long, value_name = "MB", value_parser = troupe_node::args::finite)]
     pub split_size: Option<f64>,
     /// Start a new file after this many seconds.
-    #[arg(long, value_name = "SECS")]
+    #[arg(long, value_name = "SECS", value_parser = troupe_node::args::seconds)]
     pub split_duration: Option<f64>,
     /// Compress chunks.
     #[arg(long, value_enum, default_value_t = Compress::None)]
@@ -99,13 +99,13 @@ pub struct PlayArgs {
     /// An MCAP file written by `troupe record`, or a ROS 2 bag's MCAP.
     pub file: PathBuf,
     /// Speed: 2 plays twice as fast as recorded; 0 as fast as the network takes it.
-    #[arg(long, value_name = "X", default_value_t = 1.0)]
+    #[arg(long, value_name = "X", default_value_t = 1.0, value_parser = troupe_node::args::finite)]
     pub rate: f64,
     /// Skip the first SECS of the recording.
-    #[arg(long, value_name = "SECS", default_value_t = 0.0)]
+    #[arg(long, value_name = "SECS", default_value_t = 0.0, value_parser = troupe_node::args::seconds)]
     pub start: f64,
     /// Stop SECS into the recording.
-    #[arg(long, value_name = "SECS")]
+    #[arg(long, value_name = "SECS", value_parser = troupe_node::args::seconds)]
     pub end: Option<f64>,
     /// Start again at the end, until Ctrl-C.
     #[arg(long = "loop")]

@@ -47,7 +47,7 @@ pub struct ViewArgs {
     #[arg(long, default_value_t = 8080)]
     pub port: u16,
     /// Frames a second sent to each page, at most.
-    #[arg(long, default_value_t = 30.0)]
+    #[arg(long, default_value_t = 30.0, value_parser = troupe_node::args::finite)]
     pub fps: f64,
     /// Watch these namespaces instead of the session's one (comma-separated;
     /// `-` for keys under no namespace): the page lists each one's devices
