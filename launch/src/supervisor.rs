@@ -77,6 +77,11 @@ pub struct LaunchArgs {
     /// e.g. `--bridge-allow 10.1.0.0/16`); default: anyone who reaches it.
     #[arg(long, value_name = "CIDR", value_parser = troupe_bridge::parse_network)]
     pub bridge_allow: Vec<troupe_bridge::IpNetwork>,
+    /// Player clients each robot port serves at once (see `troupe bridge
+    /// --help`).
+    #[arg(long, value_name = "N", default_value_t = troupe_bridge::DEFAULT_MAX_CLIENTS,
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
+    pub bridge_max_clients: usize,
     /// Let the bridge listen on free TCP ports instead of the robot numbers;
     /// it prints `troupe bridge: robot 6665 on ADDR:PORT` on stdout.
     #[arg(long)]
@@ -874,6 +879,7 @@ fn bridge_config(a: &LaunchArgs, states: &[Arc<NodeState>]) -> Option<troupe_bri
         ports,
         order: provided,
         allow: a.bridge_allow.clone(),
+        max_clients: a.bridge_max_clients,
         ..Default::default()
     })
 }

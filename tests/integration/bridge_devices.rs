@@ -9,7 +9,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{mpsc, Arc};
 use std::time::{Duration, Instant};
 
-use troupe_bridge::{Bridge, Config, Port};
+use troupe_bridge::{Bridge, Config, Limits, Port};
 use troupe_msgs::codec::{decode, encode, split};
 use troupe_msgs::*;
 use troupe_node::zenoh::{Session, Wait};
@@ -374,6 +374,18 @@ fn bridge(
     std::thread::JoinHandle<()>,
     tokio::sync::oneshot::Sender<()>,
 ) {
+    bridge_with(net, Config::default())
+}
+
+/// The bridge in this process, on a free port, configured as `base` says.
+fn bridge_with(
+    net: &TestNet,
+    base: Config,
+) -> (
+    SocketAddr,
+    std::thread::JoinHandle<()>,
+    tokio::sync::oneshot::Sender<()>,
+) {
     let session = net.client();
     let (addr_tx, addr_rx) = mpsc::channel();
     let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
@@ -388,7 +400,7 @@ fn bridge(
                     robot: ROBOT,
                     listen: "127.0.0.1:0".parse().unwrap(),
                 }],
-                ..Config::default()
+                ..base
             };
             let b = Bridge::bind(session, cfg).await.unwrap();
             addr_tx.send(b.local_addrs()[0].1).unwrap();
@@ -734,6 +746,191 @@ fn a_late_subscriber_gets_the_latest_sample_of_a_quiet_device() {
         "{data:?}"
     );
     drop(c);
+    let _ = stop.send(());
+    thread.join().unwrap();
+}
+
+/// A client that writes requests ahead without reading its answers holds a
+/// bounded amount of the bridge: once `MAX_PENDING_REQUESTS` wait and
+/// `MAX_UNREAD_ANSWERS` are unread, the bridge reads no more of it and
+/// TCP holds it back. Once it reads, every request it sent is answered.
+/// (Before, the bridge read them all into an unbounded queue: a client
+/// that wrote a million grew the launcher by 240 MB.)
+#[test]
+fn a_client_sending_requests_ahead_is_held_back_and_each_request_is_answered() {
+    let net = TestNet::new("bridge-flood");
+    let _devs = devices(&net);
+    let (addr, thread, stop) = bridge(&net);
+    let pos = Device::new(ROBOT, Interface::Position2d, 0);
+    let code = u32::from(Interface::Position2d.code());
+    let mut c = Player::connect(addr, ROBOT);
+    c.open(pos);
+    // Small socket buffers: the bridge's bound, not the kernel's, shows.
+    nix::sys::socket::setsockopt(&c.s, nix::sys::socket::sockopt::SndBuf, &4096).unwrap();
+    // PLAYER_POSITION2D_REQ_GET_GEOM, 200,000 times (8 MB).
+    let req = Frame::new([0, ROBOT, code, 0, 3, 1], &[]).encode();
+    const N: usize = 200_000;
+    c.s.set_write_timeout(Some(Duration::from_secs(2))).unwrap();
+    let (mut sent, mut partial) = (0, 0);
+    while sent < N {
+        match c.s.write(&req[partial..]) {
+            Ok(n) => {
+                partial += n;
+                if partial == req.len() {
+                    (sent, partial) = (sent + 1, 0);
+                }
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => break,
+            Err(e) => panic!("writing requests: {e}"),
+        }
+    }
+    assert!(
+        sent < N / 4,
+        "the bridge took {sent} of {N} requests from a client that read no answer"
+    );
+    // Now it reads, and finishes the request it had begun.
+    let rest = req[partial..].to_vec();
+    let mut w = c.s.try_clone().unwrap();
+    let finish = std::thread::spawn(move || {
+        w.set_write_timeout(None).unwrap();
+        w.write_all(&rest).unwrap();
+    });
+    let expected = sent + usize::from(partial > 0);
+    let mut answered = 0;
+    while answered < expected {
+        let f = c.recv();
+        if f.h[2] == code && (f.kind() == 4 || f.kind() == 6) {
+            answered += 1;
+        }
+    }
+    finish.join().unwrap();
+    // Still served as any client.
+    c.send(1, 0, 3, 1, &[]);
+    assert_eq!(c.reply().h[5], 1, "DEVLIST answered");
+    let _ = stop.send(());
+    thread.join().unwrap();
+}
+
+/// Replace rules are capped per client: a rule with an existing rule's
+/// fields changes it (as Player's), a new one past the cap is NACKed.
+#[test]
+fn replace_rules_past_the_cap_are_refused_and_changing_one_still_works() {
+    let net = TestNet::new("bridge-rules");
+    let _devs = devices(&net);
+    let (addr, thread, stop) = bridge(&net);
+    let mut c = Player::connect(addr, ROBOT);
+    let rule = |index: i32, replace: i32| {
+        let mut b = Vec::new();
+        for v in [4, index, 1, -1, replace] {
+            b.extend_from_slice(&v.to_be_bytes());
+        }
+        b
+    };
+    let max = i32::try_from(troupe_bridge::queue::MAX_RULES).unwrap();
+    for index in 0..max {
+        c.send(1, 0, 3, 10, &rule(index, 1));
+        assert_eq!(c.reply().kind(), 4, "rule {index} accepted");
+    }
+    c.send(1, 0, 3, 10, &rule(max, 1));
+    assert_eq!(c.reply().kind(), 6, "a rule past the cap is NACKed");
+    c.send(1, 0, 3, 10, &rule(0, 0));
+    assert_eq!(c.reply().kind(), 4, "an existing rule changes");
+    let _ = stop.send(());
+    thread.join().unwrap();
+}
+
+/// Past `max_clients`, a connection is closed before the banner, and the
+/// clients already in are served as before.
+#[test]
+fn connections_past_the_cap_are_closed_before_the_banner() {
+    let net = TestNet::new("bridge-cap");
+    let _devs = devices(&net);
+    let (addr, thread, stop) = bridge_with(
+        &net,
+        Config {
+            max_clients: 3,
+            ..Config::default()
+        },
+    );
+    let mut clients: Vec<Player> = (0..3).map(|_| Player::connect(addr, ROBOT)).collect();
+    let mut extra = std::net::TcpStream::connect(addr).unwrap();
+    extra.set_read_timeout(Some(DEADLINE)).unwrap();
+    let mut got = Vec::new();
+    extra.read_to_end(&mut got).expect("closed");
+    assert!(got.is_empty(), "the fourth client got {} bytes", got.len());
+    for c in &mut clients {
+        c.send(1, 0, 3, 1, &[]);
+        assert_eq!(c.reply().h[5], 1, "DEVLIST answered");
+    }
+    let _ = stop.send(());
+    thread.join().unwrap();
+}
+
+/// A client that connects and sends nothing, one that stops halfway
+/// through a message, and one that never reads what it asked for are each
+/// dropped after their limit; a client that sent whole messages and then
+/// only listens stays, and is served.
+#[test]
+fn idle_trickling_and_unread_clients_are_dropped_after_their_limits() {
+    use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
+    use std::os::fd::AsFd;
+    let net = TestNet::new("bridge-slow");
+    let devs = devices(&net);
+    // A 40 KB scan every 5 ms: a client that reads nothing fills its socket.
+    *devs.big.lock().unwrap() = Some(encode(
+        &laser::Scan {
+            ranges: vec![1.0; 10_000],
+            ..Default::default()
+        },
+        1.0,
+    ));
+    let limit = Duration::from_secs(1);
+    let (addr, thread, stop) = bridge_with(
+        &net,
+        Config {
+            limits: Limits {
+                first_message: limit,
+                message: limit,
+                stalled: limit,
+            },
+            ..Config::default()
+        },
+    );
+    let mut listener = Player::connect(addr, ROBOT);
+    listener.send(1, 0, 3, 1, &[]);
+    assert_eq!(listener.reply().h[5], 1);
+
+    let mut unread = Player::connect(addr, ROBOT);
+    unread.open(Device::new(ROBOT, Interface::Laser, 0));
+    let t0 = Instant::now();
+    let idle = Player::connect(addr, ROBOT);
+    let mut trickle = Player::connect(addr, ROBOT);
+    let header = Frame::new([0, ROBOT, 1, 0, 3, 1], &[]).encode();
+    trickle.s.write_all(&header[..10]).unwrap();
+
+    for (name, mut c) in [("idle", idle), ("trickling", trickle)] {
+        let mut rest = Vec::new();
+        c.s.read_to_end(&mut rest)
+            .unwrap_or_else(|e| panic!("the {name} client: {e}"));
+        assert!(
+            rest.is_empty(),
+            "the {name} client got {} bytes",
+            rest.len()
+        );
+    }
+    // Reset, not closed in order: what it did not read is discarded.
+    let mut fds = [PollFd::new(unread.s.as_fd(), PollFlags::empty())];
+    let n = poll(&mut fds, PollTimeout::try_from(DEADLINE).unwrap()).unwrap();
+    let hup = fds[0].revents().unwrap_or(PollFlags::empty());
+    assert!(
+        n == 1 && hup.intersects(PollFlags::POLLHUP | PollFlags::POLLERR),
+        "the client that reads nothing is still connected: {hup:?}"
+    );
+    assert!(t0.elapsed() >= limit, "dropped before its limit");
+
+    // The one that only listens is still served.
+    listener.send(1, 0, 3, 1, &[]);
+    assert_eq!(listener.reply().h[5], 1, "DEVLIST answered");
     let _ = stop.send(());
     thread.join().unwrap();
 }

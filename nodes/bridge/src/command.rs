@@ -38,6 +38,14 @@ pub struct BridgeArgs {
     #[arg(long, value_name = "N", default_value_t = crate::queue::DEFAULT_MAXLEN)]
     pub queue_len: usize,
 
+    /// Clients each robot port serves at once; more are closed before the
+    /// banner (and counted). A client that sends nothing for 30 s after
+    /// connecting, takes over 30 s to send one message, or reads nothing
+    /// for 30 s while output waits is dropped.
+    #[arg(long, value_name = "N", default_value_t = crate::DEFAULT_MAX_CLIENTS,
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
+    pub max_clients: usize,
+
     /// The other way round: connect to the Player server at HOST:PORT as a
     /// client and publish its devices on Troupe's keys (commands sent to them
     /// go back to the server), so a robot still running Player joins the
@@ -45,7 +53,7 @@ pub struct BridgeArgs {
     #[arg(
         long,
         value_name = "HOST:PORT",
-        conflicts_with_all = ["ports", "bind", "queue_len", "allow"]
+        conflicts_with_all = ["ports", "bind", "queue_len", "allow", "max_clients"]
     )]
     pub import: Option<String>,
 
@@ -134,6 +142,7 @@ pub fn run(a: BridgeArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             ports,
             maxlen: a.queue_len.max(1),
             allow: a.allow,
+            max_clients: a.max_clients,
             lister,
             ..Config::default()
         };

@@ -26,4 +26,7 @@ mod server;
 pub mod wire;
 pub mod xdr;
 
-pub use server::{parse_network, Bridge, BridgeError, Config, IpNetwork, Port};
+pub use server::{
+    parse_network, Bridge, BridgeError, Config, IpNetwork, Limits, Port, DEFAULT_MAX_CLIENTS,
+    MAX_PENDING_REQUESTS, MAX_UNREAD_ANSWERS,
+};

@@ -26,6 +26,13 @@ use std::time::{Duration, Instant};
 
 use crate::wire::{self, Header, PLAYER_CODE, RESP_ACK, RESP_NACK};
 
+/// The most replace rules one client may add (distinct ones: a rule with a
+/// rule's fields changes that rule). Player sets no limit; each queued
+/// message is checked against every rule, on the thread that fans a
+/// device's samples out to all its clients, so one client's rules would
+/// slow the others. Clients add a few; beyond this the request is NACKed.
+pub const MAX_RULES: usize = 64;
+
 /// Player's `PLAYER_MSGQUEUE_DEFAULT_MAXLEN`.
 pub const DEFAULT_MAXLEN: usize = 1024;
 
@@ -180,6 +187,9 @@ impl Pace {
 #[derive(Debug)]
 pub struct Queue {
     items: VecDeque<Out>,
+    /// How many of `items` are responses (never dropped, so counted: the
+    /// bridge reads no more of a client's requests while too many wait).
+    answers: usize,
     rules: Vec<Rule>,
     maxlen: usize,
     pull: bool,
@@ -205,6 +215,7 @@ impl Queue {
     pub fn new(maxlen: usize) -> Queue {
         Queue {
             items: VecDeque::new(),
+            answers: 0,
             rules: Vec::new(),
             maxlen,
             pull: false,
@@ -229,16 +240,27 @@ impl Queue {
         self.pull
     }
 
-    /// Adds a rule, or changes the action of an existing rule with the same fields.
-    pub fn add_rule(&mut self, rule: Rule) {
+    /// Adds a rule, or changes the action of an existing rule with the same
+    /// fields (as Player's `AddReplaceRule`); `false`, adding nothing, when
+    /// the client already has [`MAX_RULES`] rules.
+    pub fn add_rule(&mut self, rule: Rule) -> bool {
         let same = |r: &&mut Rule| {
             (r.interf, r.index, r.kind, r.subtype)
                 == (rule.interf, rule.index, rule.kind, rule.subtype)
         };
-        match self.rules.iter_mut().find(same) {
-            Some(r) => r.replace = rule.replace,
-            None => self.rules.push(rule),
+        if let Some(r) = self.rules.iter_mut().find(same) {
+            r.replace = rule.replace;
+        } else if self.rules.len() < MAX_RULES {
+            self.rules.push(rule);
+        } else {
+            return false;
         }
+        true
+    }
+
+    /// Responses waiting to be sent.
+    pub fn answers(&self) -> usize {
+        self.answers
     }
 
     /// The client opened a device at `now`: from the next PULL round on, a
@@ -313,10 +335,15 @@ impl Queue {
             }
             Replace::Replace => {
                 if let Some(i) = self.items.iter().rposition(|o| o.same_signature(&m)) {
-                    self.items.remove(i);
+                    if self.items.remove(i).is_some_and(|o| o.is_response()) {
+                        self.answers -= 1;
+                    }
                 }
             }
             Replace::Accept => {}
+        }
+        if m.is_response() {
+            self.answers += 1;
         }
         self.items.push_back(m);
     }
@@ -418,6 +445,7 @@ impl Queue {
     /// A client's `REQ DATA`: its ACK goes first, and a round opens.
     pub fn request_data(&mut self, ack: Out) {
         self.items.push_front(ack);
+        self.answers += 1;
         self.data_requested = true;
         self.fresh = false;
         self.waiting_since = None;
@@ -428,9 +456,12 @@ impl Queue {
     pub fn pop(&mut self, now: Instant) -> Option<Out> {
         // Between rounds a PULL client still gets answers (and what is
         // queued ahead of them) at once; the scan only runs then.
-        let may_go = !self.pull || self.data_requested || self.items.iter().any(Out::is_response);
+        let may_go = !self.pull || self.data_requested || self.answers > 0;
         if !self.items.is_empty() && may_go {
             let m = self.items.pop_front()?;
+            if m.is_response() {
+                self.answers -= 1;
+            }
             if self.data_requested && m.kind == wire::DATA && !self.fresh && self.new_step(&m) {
                 // Its wait for due data starts at the next `must_wait`
                 // (nothing has set one since the request).

@@ -74,6 +74,11 @@ pub struct Config {
     /// Networks clients may connect from; empty = any. Others are refused
     /// before the banner.
     pub allow: Vec<IpNetwork>,
+    /// Clients one robot port serves at once; more are closed before the
+    /// banner, and counted.
+    pub max_clients: usize,
+    /// How long the bridge waits for what a client owes it: see [`Limits`].
+    pub limits: Limits,
     /// For a bridge on a peer session: a client session of the same router,
     /// whose listing of live devices is whole at once (a peer's first query
     /// reaches only the peers it has links to yet). The ports open once
@@ -89,10 +94,57 @@ impl Default for Config {
             order: Vec::new(),
             maxlen: DEFAULT_MAXLEN,
             allow: Vec::new(),
+            max_clients: DEFAULT_MAX_CLIENTS,
+            limits: Limits::default(),
             lister: None,
         }
     }
 }
+
+/// Clients a robot port serves at once unless told otherwise.
+pub const DEFAULT_MAX_CLIENTS: usize = 256;
+
+/// A client's requests that wait their turn (Player's drivers answer in
+/// order): at this many, the bridge reads no more of that client's socket
+/// until one is answered, and TCP's flow control holds the client back.
+/// Nothing is dropped; Player's server instead drops what overflows a
+/// driver's queue, unanswered.
+pub const MAX_PENDING_REQUESTS: usize = 64;
+
+/// Answers queued for a client that has not read them: at this many, its
+/// next request waits (and so, through [`MAX_PENDING_REQUESTS`], its
+/// socket is not read) until it reads.
+pub const MAX_UNREAD_ANSWERS: usize = 64;
+
+/// How long the bridge waits for a client before it drops the connection.
+/// Each bounds what a client that stops halfway can hold: its socket, its
+/// slot among [`Config::max_clients`], its queue.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Limits {
+    /// From connecting to its first whole message (libplayerc sends its
+    /// data mode at once).
+    pub first_message: Duration,
+    /// From a message's first byte to its last (a client trickling bytes).
+    pub message: Duration,
+    /// With output waiting, the longest the client's socket may take
+    /// nothing (a client that never reads). Its data beyond the queue's
+    /// length are dropped meanwhile, as Player does.
+    pub stalled: Duration,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Limits {
+            first_message: Duration::from_secs(30),
+            message: Duration::from_secs(30),
+            stalled: Duration::from_secs(30),
+        }
+    }
+}
+
+/// Addresses whose refused connections are counted one by one; the rest
+/// are counted together.
+const REFUSED_ADDRESSES: usize = 1024;
 
 /// Reads `--allow`'s argument: a network (`10.1.0.0/16`, `fd00::/8`) or
 /// one address (`192.168.1.7`).
@@ -126,6 +178,10 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
 struct ClientQueue {
     out: Mutex<Outbox>,
     bell: Notify,
+    /// Rung when the socket took what waited: answers may queue again.
+    room: Notify,
+    /// Rung when the writer gives up on a client that does not read.
+    gone: Notify,
     wire: OwnedWriteHalf,
 }
 
@@ -137,6 +193,8 @@ struct Outbox {
     sent: usize,
     /// The socket failed: nothing more goes out.
     closed: bool,
+    /// When the socket last took bytes, or had nothing waiting for it.
+    moved: Instant,
 }
 
 impl ClientQueue {
@@ -148,8 +206,11 @@ impl ClientQueue {
                 unsent: wire::banner().to_vec(),
                 sent: 0,
                 closed: false,
+                moved: Instant::now(),
             }),
             bell: Notify::new(),
+            room: Notify::new(),
+            gone: Notify::new(),
             wire,
         }
     }
@@ -169,6 +230,20 @@ impl ClientQueue {
         }
         r
     }
+
+    /// Waits until fewer than [`MAX_UNREAD_ANSWERS`] answers wait for the
+    /// client.
+    async fn room_for_answers(&self) {
+        loop {
+            let room = self.room.notified();
+            tokio::pin!(room);
+            room.as_mut().enable();
+            if lock(&self.out).queue.answers() < MAX_UNREAD_ANSWERS {
+                return;
+            }
+            room.await;
+        }
+    }
 }
 
 impl Outbox {
@@ -186,11 +261,15 @@ impl Outbox {
                     }
                 }
                 if self.unsent.is_empty() {
+                    self.moved = Instant::now();
                     return true;
                 }
             }
             match wire.try_write(&self.unsent[self.sent..]) {
-                Ok(n) if n > 0 => self.sent += n,
+                Ok(n) if n > 0 => {
+                    self.sent += n;
+                    self.moved = Instant::now();
+                }
                 Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => return false,
                 Ok(_) => self.close("the socket took nothing".into()),
                 Err(e) => self.close(e.to_string()),
@@ -234,6 +313,12 @@ struct Shared {
     /// Connections refused by `allow`, by address: the first from each is
     /// logged, the rest counted.
     refused: Mutex<HashMap<IpAddr, u64>>,
+    /// Refused connections from addresses beyond [`REFUSED_ADDRESSES`].
+    refused_elsewhere: AtomicU64,
+    /// Connections closed because the port served `max_clients` already.
+    full: AtomicU64,
+    max_clients: usize,
+    limits: Limits,
 }
 
 impl Shared {
@@ -360,6 +445,10 @@ impl Bridge {
             dropped: Mutex::default(),
             allow: cfg.allow,
             refused: Mutex::new(HashMap::new()),
+            refused_elsewhere: AtomicU64::new(0),
+            full: AtomicU64::new(0),
+            max_clients: cfg.max_clients,
+            limits: cfg.limits,
         });
         // Changes first, then the current list: no token is missed, and the
         // port opens only once DEVLIST would be complete. The subscriber
@@ -488,11 +577,20 @@ impl Bridge {
         }
         drop(dropped);
         let refused = lock(&self.shared.refused);
+        let elsewhere = self.shared.refused_elsewhere.load(Ordering::Relaxed);
         if !refused.is_empty() {
             tracing::warn!(
-                "refused {} connections from {} addresses outside --allow",
-                refused.values().sum::<u64>(),
-                refused.len()
+                "refused {} connections from {} addresses outside --allow{}",
+                refused.values().sum::<u64>() + elsewhere,
+                refused.len(),
+                if elsewhere > 0 { " and more" } else { "" }
+            );
+        }
+        let full = self.shared.full.load(Ordering::Relaxed);
+        if full > 0 {
+            tracing::warn!(
+                "closed {full} connections that came while {} clients were served (--max-clients)",
+                self.shared.max_clients
             );
         }
     }
@@ -500,30 +598,50 @@ impl Bridge {
 
 async fn accept_loop(shared: Arc<Shared>, robot: u32, host: u32, listener: TcpListener) {
     let mut clients = tokio::task::JoinSet::new();
+    let slots = Arc::new(tokio::sync::Semaphore::new(shared.max_clients));
     loop {
         tokio::select! {
             accepted = listener.accept() => match accepted {
                 Ok((stream, peer)) if !allowed(&shared.allow, peer.ip()) => {
+                    let ip = peer.ip().to_canonical();
                     let mut refused = lock(&shared.refused);
-                    let n = refused.entry(peer.ip().to_canonical()).or_insert(0);
-                    *n += 1;
-                    if *n == 1 {
+                    let n = if refused.len() < REFUSED_ADDRESSES || refused.contains_key(&ip) {
+                        let n = refused.entry(ip).or_insert(0);
+                        *n += 1;
+                        *n
+                    } else {
+                        shared.refused_elsewhere.fetch_add(1, Ordering::Relaxed) + 1
+                    };
+                    if n == 1 {
                         tracing::warn!(
-                            "robot {robot}: refused a client from {}: not in --allow (more from it are counted, not logged)",
-                            peer.ip().to_canonical()
+                            "robot {robot}: refused a client from {ip}: not in --allow (more from it are counted, not logged)",
                         );
                     }
                     // Closed before the banner: the peer learns nothing.
                     drop(stream);
                 }
                 Ok((stream, peer)) => {
+                    let Ok(slot) = slots.clone().try_acquire_owned() else {
+                        // Closed before the banner; a client retries later.
+                        if shared.full.fetch_add(1, Ordering::Relaxed) == 0 {
+                            tracing::warn!(
+                                "robot {robot}: closed a connection from {peer}: {} clients are served already (--max-clients; more are counted, not logged)",
+                                shared.max_clients
+                            );
+                        }
+                        drop(stream);
+                        continue;
+                    };
                     let id = shared.next_client.fetch_add(1, Ordering::Relaxed);
                     tracing::info!("robot {robot}: client {id} connected from {peer}");
                     let _ = stream.set_nodelay(true);
                     let (rd, wr) = stream.into_split();
                     let queue = Arc::new(ClientQueue::new(shared.maxlen, wr));
-                    let conn = Conn { shared: shared.clone(), robot, host, id, queue, subscribed: Vec::new(), ignored_commands: 0, unanswered: 0 };
-                    clients.spawn(conn.serve(rd));
+                    let conn = Conn { shared: shared.clone(), robot, host, id, queue, subscribed: Vec::new(), ignored_commands: 0, unanswered: 0, unknown: 0, rules_refused: 0 };
+                    clients.spawn(async move {
+                        conn.serve(rd).await;
+                        drop(slot);
+                    });
                 }
                 Err(e) => {
                     tracing::warn!("robot {robot}: accept failed: {e}");
@@ -550,6 +668,10 @@ struct Conn {
     /// Requests left unanswered because no client had opened a device of
     /// their driver.
     unanswered: u64,
+    /// Messages to devices that are not live.
+    unknown: u64,
+    /// Replace rules refused past [`crate::queue::MAX_RULES`].
+    rules_refused: u64,
 }
 
 /// A device request waiting for its turn: Player drivers answer in order.
@@ -563,8 +685,9 @@ struct Pending {
 
 impl Conn {
     async fn serve(mut self, mut rd: OwnedReadHalf) {
-        let writer = tokio::spawn(write_loop(self.queue.clone()));
-        let (req_tx, req_rx) = mpsc::unbounded_channel();
+        let limits = self.shared.limits;
+        let writer = tokio::spawn(write_loop(self.queue.clone(), limits.stalled));
+        let (req_tx, req_rx) = mpsc::channel(MAX_PENDING_REQUESTS);
         let requests = tokio::spawn(request_loop(
             self.shared.clone(),
             self.queue.clone(),
@@ -572,11 +695,30 @@ impl Conn {
         ));
         let mut buf = Vec::with_capacity(64 * 1024);
         let mut chunk = vec![0u8; 64 * 1024];
+        // What the client owes, and by when: its first message, then the
+        // rest of a message begun; nothing once it has sent whole ones.
+        let connected = Instant::now();
+        let mut owed = Some((connected + limits.first_message, "its first message"));
         let why = 'conn: loop {
-            let n = match rd.read(&mut chunk).await {
-                Ok(0) => break 'conn "closed by the client".to_owned(),
-                Ok(n) => n,
-                Err(e) => break 'conn format!("read failed: {e}"),
+            let read = async {
+                match owed {
+                    Some((at, _)) => tokio::time::timeout_at(at.into(), rd.read(&mut chunk)).await,
+                    None => Ok(rd.read(&mut chunk).await),
+                }
+            };
+            let n = tokio::select! {
+                r = read => match r {
+                    Err(_) => {
+                        let (_, what) = owed.unwrap_or((connected, "a message"));
+                        break 'conn format!("{what} did not come in time");
+                    }
+                    Ok(Ok(0)) => break 'conn "closed by the client".to_owned(),
+                    Ok(Ok(n)) => n,
+                    Ok(Err(e)) => break 'conn format!("read failed: {e}"),
+                },
+                () = self.queue.gone.notified() => {
+                    break 'conn format!("it read nothing for {:?}", limits.stalled);
+                }
             };
             buf.extend_from_slice(&chunk[..n]);
             let mut start = 0;
@@ -588,12 +730,16 @@ impl Conn {
                             break 'conn reason;
                         }
                         start += len;
+                        owed = None;
                     }
                     Ok(None) => break,
                     Err(e) => break 'conn e.to_string(),
                 }
             }
             buf.drain(..start);
+            if !buf.is_empty() {
+                owed.get_or_insert((Instant::now() + limits.message, "the rest of a message"));
+            }
         };
         tracing::info!(
             "robot {}: client {} disconnected: {why}",
@@ -612,6 +758,17 @@ impl Conn {
                 self.id,
                 self.ignored_commands
             );
+        }
+        for (n, what) in [
+            (
+                self.unknown,
+                "messages to devices that are not live (skipped)",
+            ),
+            (self.rules_refused, "replace rules past the limit (refused)"),
+        ] {
+            if n > 1 {
+                tracing::info!("robot {}: client {} sent {n} {what}", self.robot, self.id);
+            }
         }
         if self.unanswered > 1 {
             tracing::info!(
@@ -655,7 +812,7 @@ impl Conn {
         &mut self,
         h: Header,
         body: &[u8],
-        req_tx: &mpsc::UnboundedSender<Pending>,
+        req_tx: &mpsc::Sender<Pending>,
     ) -> Result<(), String> {
         if h.interf == u32::from(PLAYER_CODE) {
             return self.handle_player(h, body);
@@ -664,15 +821,18 @@ impl Conn {
             .addr(h.interf, h.index)
             .filter(|d| self.shared.is_live(d))
         else {
-            tracing::warn!(
-                "robot {}: client {}: skipping message of type {}:{} to unknown device {}:{}",
-                self.robot,
-                self.id,
-                h.kind,
-                h.subtype,
-                h.interf,
-                h.index
-            );
+            self.unknown += 1;
+            if self.unknown == 1 {
+                tracing::warn!(
+                    "robot {}: client {}: skipping message of type {}:{} to unknown device {}:{} (more are counted, not logged)",
+                    self.robot,
+                    self.id,
+                    h.kind,
+                    h.subtype,
+                    h.interf,
+                    h.index
+                );
+            }
             return Ok(());
         };
         let kind = u8::try_from(h.kind).unwrap_or(0);
@@ -743,17 +903,21 @@ impl Conn {
                 payload,
                 reply,
             })) => {
-                let _ = req_tx.send(Pending {
-                    header: Header {
-                        host: self.host,
-                        robot: self.robot,
-                        ..h
-                    },
-                    dev,
-                    name,
-                    payload,
-                    reply,
-                });
+                // Waits while MAX_PENDING_REQUESTS wait: the socket is
+                // not read meanwhile.
+                let _ = req_tx
+                    .send(Pending {
+                        header: Header {
+                            host: self.host,
+                            robot: self.robot,
+                            ..h
+                        },
+                        dev,
+                        name,
+                        payload,
+                        reply,
+                    })
+                    .await;
                 Ok(())
             }
         }
@@ -860,7 +1024,7 @@ impl Conn {
                     *v = r.i32().map_err(bad)?;
                 }
                 r.end().map_err(bad)?;
-                self.queue.with(|q| {
+                let added = self.queue.with(|q| {
                     q.add_rule(Rule {
                         interf: f[0],
                         index: f[1],
@@ -869,7 +1033,18 @@ impl Conn {
                         replace: Replace::from_player(f[4]),
                     })
                 });
-                self.reply(&h, RESP_ACK, &[]);
+                if !added {
+                    self.rules_refused += 1;
+                    if self.rules_refused == 1 {
+                        tracing::warn!(
+                            "robot {}: client {}: refused a replace rule past its {}th (NACK; more are counted, not logged)",
+                            self.robot,
+                            self.id,
+                            crate::queue::MAX_RULES
+                        );
+                    }
+                }
+                self.reply(&h, if added { RESP_ACK } else { RESP_NACK }, &[]);
             }
             other => {
                 tracing::debug!("client {}: player request {other} refused", self.id);
@@ -1078,15 +1253,28 @@ fn data_message(dev: Device, host: u32, payload: &[u8]) -> Result<Out, Dropped> 
 
 /// Finishes what a full socket could not take when it was queued, and
 /// ends a PULL round whose wait for due devices runs out.
-async fn write_loop(q: Arc<ClientQueue>) {
+async fn write_loop(q: Arc<ClientQueue>, stalled: Duration) {
     loop {
-        let (done, deadline) = {
+        let (done, deadline, moved) = {
             let mut out = lock(&q.out);
-            (out.flush(&q.wire), out.queue.deadline())
+            (out.flush(&q.wire), out.queue.deadline(), out.moved)
         };
+        q.room.notify_waiters();
         if !done {
-            if q.wire.writable().await.is_err() {
-                return;
+            tokio::select! {
+                w = q.wire.writable() => if w.is_err() {
+                    return;
+                },
+                () = tokio::time::sleep_until((moved + stalled).into()) => {
+                    if lock(&q.out).moved == moved {
+                        // Dropped with a reset: what it did not read is
+                        // discarded, not sent after the fact.
+                        let _ = q.wire.as_ref().set_zero_linger();
+                        lock(&q.out).close(format!("nothing read for {stalled:?}"));
+                        q.gone.notify_one();
+                        return;
+                    }
+                }
             }
         } else if let Some(at) = deadline {
             tokio::select! {
@@ -1105,12 +1293,12 @@ async fn write_loop(q: Arc<ClientQueue>) {
 /// A small answer is turned into Player's and written from the Zenoh
 /// callback that receives it; a large one (a map tile to compress) comes
 /// back here, off Zenoh's receiving thread.
-async fn request_loop(
-    shared: Arc<Shared>,
-    q: Arc<ClientQueue>,
-    mut rx: mpsc::UnboundedReceiver<Pending>,
-) {
-    while let Some(mut p) = rx.recv().await {
+async fn request_loop(shared: Arc<Shared>, q: Arc<ClientQueue>, mut rx: mpsc::Receiver<Pending>) {
+    loop {
+        // A client that does not read its answers gets no more (and, its
+        // requests left waiting, its socket is not read).
+        q.room_for_answers().await;
+        let Some(mut p) = rx.recv().await else { break };
         let payload = std::mem::take(&mut p.payload);
         let p = Arc::new(p);
         let key = keys::req(&p.dev, p.name);

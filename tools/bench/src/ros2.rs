@@ -71,8 +71,11 @@ struct Got {
 }
 
 impl Got {
-    fn take(&self, stamp: f64) {
-        let d = Duration::from_secs_f64((troupe_node::Clock::wall().now() - stamp).max(0.0));
+    /// A sample stamped `stamp` arrived at `now` (read before decoding it:
+    /// the decoder is the bench's, not the path's; a ROS 2 node's own
+    /// CDR decoding copies the arrays whole).
+    fn take(&self, stamp: f64, now: f64) {
+        let d = Duration::from_secs_f64((now - stamp).max(0.0));
         self.lat.lock().unwrap_or_else(|p| p.into_inner()).push(d);
         self.n.fetch_add(1, Ordering::Relaxed);
     }
@@ -148,8 +151,9 @@ fn laser_rounds(a: &Ros2BenchArgs) -> anyhow::Result<()> {
                 let s = session
                     .declare_subscriber(&troupe_key)
                     .callback(move |s| {
+                        let now = troupe_node::Clock::wall().now();
                         if let Ok(m) = codec::decode::<laser::Scan>(&s.payload().to_bytes()) {
-                            g.take(m.stamp);
+                            g.take(m.stamp, now);
                         }
                     })
                     .wait()
@@ -159,13 +163,14 @@ fn laser_rounds(a: &Ros2BenchArgs) -> anyhow::Result<()> {
                 let s = session
                     .declare_subscriber(&ros_key)
                     .callback(move |s| {
+                        let now = troupe_node::Clock::wall().now();
                         let has = s
                             .attachment()
                             .and_then(|b| Attachment::parse(&b.to_bytes()))
                             .is_some();
                         let bytes = s.payload().to_bytes();
                         if let (true, Ok(m)) = (has, cdr::deserialize::<LaserScan>(&bytes)) {
-                            g.take(m.header.stamp.ns() as f64 * 1e-9);
+                            g.take(m.header.stamp.ns() as f64 * 1e-9, now);
                         }
                     })
                     .wait()
