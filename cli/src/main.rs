@@ -15,13 +15,31 @@ mod samples;
 
 use std::io::Write;
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use clap::Parser;
 
+/// Set by the panic hook: a panic on any thread fails the command, even
+/// one its main thread outlived.
+static PANICKED: AtomicBool = AtomicBool::new(false);
+
 fn main() -> ExitCode {
+    let report = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        PANICKED.store(true, Ordering::SeqCst);
+        report(info);
+    }));
     let cli = cli::Cli::parse();
     troupe_node::init_logging(cli.log.as_deref());
-    match run(cli) {
+    let result = run(cli);
+    if PANICKED.load(Ordering::SeqCst) {
+        let _ = writeln!(
+            std::io::stderr(),
+            "troupe: error: a thread panicked (above)"
+        );
+        return ExitCode::from(101);
+    }
+    match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             if e.chain().any(|c| {

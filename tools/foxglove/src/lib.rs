@@ -100,8 +100,14 @@ pub fn serve(a: &FoxgloveArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         None => vec![Capability::ClientPublish, Capability::Time],
     };
     // The SDK's sockets on one thread of their own: its default runtime
-    // (a worker per core) woke another thread for nearly every message.
-    let rt = tokio::runtime::Builder::new_current_thread()
+    // (a worker per core) woke another thread for nearly every message. A
+    // one-worker runtime, not a current-thread one: the listener holds a
+    // Zenoh session, and Zenoh panics when a session closes on a
+    // current-thread runtime (it did at Ctrl-C, when the server's tasks
+    // dropped the last clone).
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .thread_name("foxglove-ws")
         .enable_all()
         .build()
         .context("starting the WebSocket server's thread")?;
@@ -217,6 +223,11 @@ pub fn serve(a: &FoxgloveArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     }
     drop((data, clock, tokens));
     let _ = server.stop();
+    // Closed here, whichever clone goes last.
+    session
+        .close()
+        .wait()
+        .map_err(|e| anyhow::anyhow!("closing the session: {e}"))?;
     Ok(())
 }
 
