@@ -26,13 +26,16 @@ def test_simple_cfg_reads_every_device_and_drives(launch):
     assert isinstance(ranges, np.ndarray) and ranges.dtype == np.float64
     beams = len(ranges)
     assert beams > 100 and 0 < ranges.min() <= ranges.max() <= laser.max_range
-    assert laser.bearings[-1] == pytest.approx(laser.min_angle + (beams - 1) * laser.resolution)
+    # tr_laser: 180 beams over 180 degrees, the first at -pi/2.
+    assert beams == 180 and laser.resolution == pytest.approx(math.pi / 180)
+    assert laser.bearings[0] == pytest.approx(-math.pi / 2)
+    assert laser.bearings[-1] == pytest.approx(-math.pi / 2 + 179 * math.pi / 180)
     assert laser.points.shape == (beams, 2) and laser.stamp > 0
     assert laser.geometry()["size"]["width"] > 0
 
     sonar.read(timeout=10)
     lranger.read(timeout=10)
-    assert len(sonar.ranges) > 0 and len(lranger.ranges) == beams
+    assert len(sonar.ranges) == 16 and len(lranger.ranges) == beams
     assert len(sonar.geometry()["element_poses"]) == len(sonar.ranges)
 
     # Drive: the odometry and the simulator both see r0 move forward.
@@ -131,16 +134,28 @@ def test_gripper_and_blobfinder(launch):
     gripper.read(timeout=10)
     assert gripper.state == "open"
     gripper.close()
+    # The paddles close on nothing here: moving, then closed (Stage's).
+    seen = []
     for _ in gripper.stream(timeout=10):
-        if gripper.state in ("closed", "moving"):
+        if not seen or seen[-1] != gripper.state:
+            seen.append(gripper.state)
+        if gripper.state == "closed":
             break
-    assert gripper.state in ("closed", "moving")
-    assert gripper.geometry()["capacity"] >= 0
+    assert seen[-2:] == ["moving", "closed"], seen
+    assert gripper.stored == 0
+    geometry = gripper.geometry()
+    assert (geometry["num_beams"], geometry["capacity"]) == (2, 0), geometry
 
     bob = launch("bigbob.cfg", ["6665:blobfinder:0"])
     finder = bob.client.robot(6665).blobfinder(0)
     finder.read(timeout=10)
-    assert finder.width > 0 and isinstance(finder.blobs, list)
+    # bob1's camera sees at least one coloured item, inside its image and
+    # its 5 m range.
+    blobs = finder.blobs
+    assert finder.width > 0 and blobs, blobs
+    for b in blobs:
+        assert 0 <= b["x"] < finder.width and 0 <= b["y"] < finder.height, b
+        assert 0 < b["range"] <= 5.0 and b["area"] > 0, b
 
 
 def test_without_numpy_ranges_and_maps_are_lists(launch, monkeypatch):

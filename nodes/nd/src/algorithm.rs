@@ -733,6 +733,18 @@ mod tests {
         assert!(close(m, 0.3, 0.0), "{m:?}");
     }
 
+    /// `f`'s result, or a failure if it takes over 20 s: the code under
+    /// test went round forever in Player, and a regression must fail the
+    /// test, not hang it (the thread is left behind).
+    fn within<T: Send + 'static>(what: &str, f: impl FnOnce() -> T + Send + 'static) -> T {
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let _ = tx.send(f());
+        });
+        rx.recv_timeout(std::time::Duration::from_secs(20))
+            .unwrap_or_else(|_| panic!("{what} did not end within 20 s"))
+    }
+
     #[test]
     fn the_region_search_ends_where_players_went_round_forever() {
         // Obstacles in sectors 31..=170 at 0.2–1.0 m, 8 m beyond; the goal
@@ -748,13 +760,15 @@ mod tests {
             points.push((r * a.cos(), r * a.sin()));
         }
         let g = sector_angle(55);
-        let got = pioneer().decide(
-            (6.6 * g.cos(), 6.6 * g.sin()),
-            0.5,
-            (0.0, 0.0, 0.0),
-            Motion { v: 0.0, w: 0.0 },
-            &points,
-        );
+        let got = within("the region search", move || {
+            pioneer().decide(
+                (6.6 * g.cos(), 6.6 * g.sin()),
+                0.5,
+                (0.0, 0.0, 0.0),
+                Motion { v: 0.0, w: 0.0 },
+                &points,
+            )
+        });
         // It returns: a way, or none.
         assert!(got.is_ok() || got == Err(Refusal::NoRegion), "{got:?}");
     }
@@ -764,6 +778,11 @@ mod tests {
     /// every decision returns, and every motion is finite and within the limits.
     #[test]
     fn every_random_scene_gets_an_answer() {
+        let (moved, refused) = within("5000 random scenes", random_scenes);
+        assert!(moved > refused, "{moved} decisions, {refused} refusals");
+    }
+
+    fn random_scenes() -> (u32, u32) {
         let nd = pioneer();
         let mut seed = 0x9E37_79B9_7F4A_7C15u64;
         let mut unit = || {
@@ -807,7 +826,7 @@ mod tests {
                 Err(_) => refused += 1,
             }
         }
-        assert!(moved > refused, "{moved} decisions, {refused} refusals");
+        (moved, refused)
     }
 
     #[test]
