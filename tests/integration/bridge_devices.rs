@@ -763,50 +763,54 @@ fn a_client_sending_requests_ahead_is_held_back_and_each_request_is_answered() {
     let (addr, thread, stop) = bridge(&net);
     let pos = Device::new(ROBOT, Interface::Position2d, 0);
     let code = u32::from(Interface::Position2d.code());
-    let mut c = Player::connect(addr, ROBOT);
-    c.open(pos);
-    // Small socket buffers: the bridge's bound, not the kernel's, shows.
-    nix::sys::socket::setsockopt(&c.s, nix::sys::socket::sockopt::SndBuf, &4096).unwrap();
-    // PLAYER_POSITION2D_REQ_GET_GEOM, 200,000 times (8 MB).
-    let req = Frame::new([0, ROBOT, code, 0, 3, 1], &[]).encode();
-    const N: usize = 200_000;
-    c.s.set_write_timeout(Some(Duration::from_secs(2))).unwrap();
-    let (mut sent, mut partial) = (0, 0);
-    while sent < N {
-        match c.s.write(&req[partial..]) {
-            Ok(n) => {
-                partial += n;
-                if partial == req.len() {
-                    (sent, partial) = (sent + 1, 0);
+    // A device's request (PLAYER_POSITION2D_REQ_GET_GEOM, answered by its
+    // driver in turn) and the bridge's own (DEVLIST, answered at once).
+    for (what, interf, subtype) in [("GET_GEOM", code, 1), ("DEVLIST", 1, 1)] {
+        let mut c = Player::connect(addr, ROBOT);
+        c.open(pos);
+        // Small socket buffers: the bridge's bound, not the kernel's, shows.
+        nix::sys::socket::setsockopt(&c.s, nix::sys::socket::sockopt::SndBuf, &4096).unwrap();
+        // 200,000 requests (8 MB).
+        let req = Frame::new([0, ROBOT, interf, 0, 3, subtype], &[]).encode();
+        const N: usize = 200_000;
+        c.s.set_write_timeout(Some(Duration::from_secs(2))).unwrap();
+        let (mut sent, mut partial) = (0, 0);
+        while sent < N {
+            match c.s.write(&req[partial..]) {
+                Ok(n) => {
+                    partial += n;
+                    if partial == req.len() {
+                        (sent, partial) = (sent + 1, 0);
+                    }
                 }
+                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => break,
+                Err(e) => panic!("writing requests: {e}"),
             }
-            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => break,
-            Err(e) => panic!("writing requests: {e}"),
         }
-    }
-    assert!(
-        sent < N / 4,
-        "the bridge took {sent} of {N} requests from a client that read no answer"
-    );
-    // Now it reads, and finishes the request it had begun.
-    let rest = req[partial..].to_vec();
-    let mut w = c.s.try_clone().unwrap();
-    let finish = std::thread::spawn(move || {
-        w.set_write_timeout(None).unwrap();
-        w.write_all(&rest).unwrap();
-    });
-    let expected = sent + usize::from(partial > 0);
-    let mut answered = 0;
-    while answered < expected {
-        let f = c.recv();
-        if f.h[2] == code && (f.kind() == 4 || f.kind() == 6) {
-            answered += 1;
+        assert!(
+            sent < N / 4,
+            "{what}: the bridge took {sent} of {N} requests from a client that read no answer"
+        );
+        // Now it reads, and finishes the request it had begun.
+        let rest = req[partial..].to_vec();
+        let mut w = c.s.try_clone().unwrap();
+        let finish = std::thread::spawn(move || {
+            w.set_write_timeout(None).unwrap();
+            w.write_all(&rest).unwrap();
+        });
+        let expected = sent + usize::from(partial > 0);
+        let mut answered = 0;
+        while answered < expected {
+            let f = c.recv();
+            if f.h[2] == interf && f.h[5] == subtype && (f.kind() == 4 || f.kind() == 6) {
+                answered += 1;
+            }
         }
+        finish.join().unwrap();
+        // Still served as any client.
+        c.send(1, 0, 3, 1, &[]);
+        assert_eq!(c.reply().h[5], 1, "{what}: DEVLIST answered");
     }
-    finish.join().unwrap();
-    // Still served as any client.
-    c.send(1, 0, 3, 1, &[]);
-    assert_eq!(c.reply().h[5], 1, "DEVLIST answered");
     let _ = stop.send(());
     thread.join().unwrap();
 }

@@ -693,8 +693,11 @@ impl Conn {
             self.queue.clone(),
             req_rx,
         ));
-        let mut buf = Vec::with_capacity(64 * 1024);
-        let mut chunk = vec![0u8; 64 * 1024];
+        // Small: a client sends requests and commands of tens of bytes,
+        // and an idle connection holds these (a large message is
+        // gathered in `buf`, which grows).
+        let mut buf = Vec::new();
+        let mut chunk = vec![0u8; 8 * 1024];
         // What the client owes, and by when: its first message, then the
         // rest of a message begun; nothing once it has sent whole ones.
         let connected = Instant::now();
@@ -814,6 +817,11 @@ impl Conn {
         body: &[u8],
         req_tx: &mpsc::Sender<Pending>,
     ) -> Result<(), String> {
+        if h.kind == u32::from(REQ) {
+            // Every request is answered: with MAX_UNREAD_ANSWERS waiting
+            // for a client that does not read, its socket is not read.
+            self.queue.room_for_answers().await;
+        }
         if h.interf == u32::from(PLAYER_CODE) {
             return self.handle_player(h, body);
         }

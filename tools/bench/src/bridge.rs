@@ -41,21 +41,27 @@ pub struct BridgeBenchArgs {
     /// Clients reading position2d at 10 Hz each, all at once.
     #[arg(long, default_value_t = 100)]
     pub clients: usize,
-    /// How long the many clients read.
+    /// How long the many clients read (and each row of --hostile).
     #[arg(long, default_value_t = 5.0, value_name = "SECS", value_parser = troupe_node::args::seconds)]
     pub seconds: f64,
+    /// Instead, 50 well-behaved clients beside hostile ones in turn (idle
+    /// connections, clients that never read, a flood of requests, of
+    /// replace rules, random bytes): their p99 against a quiet run, their
+    /// data, this process's memory, and whether it still serves.
+    #[arg(long)]
+    pub hostile: bool,
 }
 
 const ROBOT: u32 = troupe_msgs::DEFAULT_ROBOT;
 
 /// The header of request `subtype` to `interf`:0 of the bench's robot.
-fn req(interf: Interface, subtype: u32) -> [u32; 6] {
+pub(crate) fn req(interf: Interface, subtype: u32) -> [u32; 6] {
     let code = u32::from(interf.code());
     [0, ROBOT, code, 0, u32::from(wire::REQ), subtype]
 }
 
 /// A Player message header from its six leading fields.
-fn header(h: [u32; 6]) -> Header {
+pub(crate) fn header(h: [u32; 6]) -> Header {
     let [host, robot, interf, index, kind, subtype] = h;
     Header {
         host,
@@ -69,7 +75,7 @@ fn header(h: [u32; 6]) -> Header {
 }
 
 /// The next message from the bridge.
-fn next(s: &mut TcpStream) -> anyhow::Result<(Header, Vec<u8>)> {
+pub(crate) fn next(s: &mut TcpStream) -> anyhow::Result<(Header, Vec<u8>)> {
     let mut hdr = [0u8; HEADER_LEN];
     s.read_exact(&mut hdr)?;
     let got = Header::read(&hdr)?;
@@ -81,7 +87,7 @@ fn next(s: &mut TcpStream) -> anyhow::Result<(Header, Vec<u8>)> {
 /// A Player client's side of a request, in raw XDR over a socket without
 /// TCP_NODELAY, as libplayerc: send, then read until the answer (DATA ahead
 /// of it is read and dropped, as the client queues it).
-fn request(s: &mut TcpStream, h: [u32; 6], body: &[u8]) -> anyhow::Result<Vec<u8>> {
+pub(crate) fn request(s: &mut TcpStream, h: [u32; 6], body: &[u8]) -> anyhow::Result<Vec<u8>> {
     let [_, _, interf, _, _, subtype] = h;
     s.write_all(&wire::message(header(h), body))?;
     loop {
@@ -95,7 +101,7 @@ fn request(s: &mut TcpStream, h: [u32; 6], body: &[u8]) -> anyhow::Result<Vec<u8
 }
 
 /// The `player` device's request `sub`.
-fn player_req(sub: u8) -> [u32; 6] {
+pub(crate) fn player_req(sub: u8) -> [u32; 6] {
     [
         0,
         0,
@@ -107,7 +113,7 @@ fn player_req(sub: u8) -> [u32; 6] {
 }
 
 /// A client past the banner, in PULL mode as libplayerc puts itself.
-fn connect(addr: SocketAddr) -> anyhow::Result<TcpStream> {
+pub(crate) fn connect(addr: SocketAddr) -> anyhow::Result<TcpStream> {
     let mut s = TcpStream::connect(addr)?;
     // A request the bridge leaves unanswered fails the bench, not hangs it.
     s.set_read_timeout(Some(Duration::from_secs(10)))?;
@@ -121,7 +127,7 @@ fn connect(addr: SocketAddr) -> anyhow::Result<TcpStream> {
     Ok(s)
 }
 
-fn open(s: &mut TcpStream, interf: Interface) -> anyhow::Result<()> {
+pub(crate) fn open(s: &mut TcpStream, interf: Interface) -> anyhow::Result<()> {
     open_at(s, interf, 0)
 }
 
@@ -477,6 +483,12 @@ fn measure(a: &BridgeBenchArgs, router: &troupe_node::zenoh::Session) -> anyhow:
     let server = rt.spawn(bridge.run(async {
         let _ = stop_rx.await;
     }));
+    if a.hostile {
+        let table = crate::hostile::run(addr, a.seconds, &mut std::io::stdout().lock());
+        let _ = stop_tx.send(());
+        let _ = rt.block_on(server);
+        return table;
+    }
 
     let mut s = connect(addr)?;
     // As Player, the bridge answers a device's requests once a client has

@@ -392,3 +392,17 @@ pub(crate) fn echo(to: &str, size: usize) -> anyhow::Result<()> {
     }
     Ok(())
 }
+
+/// A field of `/proc/self/status` given in kB, in MB (0 where unknown).
+pub(crate) fn status_mb(field: &str) -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines().find(|l| l.starts_with(field)).and_then(|l| {
+                l.split_whitespace()
+                    .nth(1)
+                    .and_then(|v| v.parse::<f64>().ok())
+            })
+        })
+        .map_or(0.0, |kb| kb / 1024.0)
+}

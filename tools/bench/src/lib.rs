@@ -10,6 +10,7 @@
 pub mod bridge;
 pub mod foxglove;
 mod harness;
+mod hostile;
 pub mod latency;
 pub mod launch;
 pub mod nav;

@@ -58,27 +58,13 @@ pub struct StageBenchArgs {
 }
 
 fn peak_rss_mb() -> f64 {
-    status_mb("VmHWM:")
+    crate::harness::status_mb("VmHWM:")
 }
 
 /// The memory this process holds now that is not mapped from files (the
 /// binary's own pages, 7–10 MB, move with its code layout alone): MB.
 fn anon_rss_mb() -> f64 {
-    status_mb("RssAnon:")
-}
-
-/// A field of `/proc/self/status` given in kB, in MB (0 where unknown).
-fn status_mb(field: &str) -> f64 {
-    std::fs::read_to_string("/proc/self/status")
-        .ok()
-        .and_then(|s| {
-            s.lines().find(|l| l.starts_with(field)).and_then(|l| {
-                l.split_whitespace()
-                    .nth(1)
-                    .and_then(|v| v.parse::<f64>().ok())
-            })
-        })
-        .map_or(0.0, |kb| kb / 1024.0)
+    crate::harness::status_mb("RssAnon:")
 }
 
 /// `troupe bench stage`: simulated seconds per wall second and peak memory.
