@@ -38,8 +38,10 @@ pub enum Command {
   troupe launch robot.cfg --dry-run               # print the plan, start nothing
   troupe launch worlds/simple.cfg --speedup 5     # the simulator at 5x real time
 
-An embedded Zenoh router listens on tcp/127.0.0.1:7447 unless --connect names
-another. Ctrl-C stops the nodes in reverse start order.")]
+An embedded Zenoh router listens on tcp/127.0.0.1:7447 (--listen ENDPOINT moves
+it, e.g. --listen tcp/0.0.0.0:7447 for other hosts) unless --connect names
+another router; the nodes join it as peers (--mode client: as clients).
+Ctrl-C stops the nodes in reverse start order.")]
     Launch(troupe_launch::supervisor::LaunchArgs),
 
     /// Translate a Player .cfg into a launch plan (TOML) and print it.

@@ -938,3 +938,63 @@ fn idle_trickling_and_unread_clients_are_dropped_after_their_limits() {
     let _ = stop.send(());
     thread.join().unwrap();
 }
+
+/// Planted panics: on a DEVLIST to index 7, and in the sonar's feed.
+fn faults(what: &str) {
+    assert!(what != "message 1:7:3:1", "a planted panic");
+    assert!(what != "sample 6665:sonar:0", "a planted panic in a feed");
+}
+
+/// A panic in the bridge's code (a bug, planted here) closes only the
+/// connection whose message caused it, and a panic in a device's feed
+/// drops that sample only: the bridge, inside the launcher, goes on.
+#[test]
+fn a_panic_in_the_bridge_closes_one_connection_and_the_rest_goes_on() {
+    let net = TestNet::new("bridge-panic");
+    let _devs = devices(&net);
+    let (addr, thread, stop) = bridge_with(
+        &net,
+        Config {
+            fault: Some(faults),
+            ..Config::default()
+        },
+    );
+    let pos = Device::new(ROBOT, Interface::Position2d, 0);
+    let mut calm = Player::connect(addr, ROBOT);
+    calm.open(Device::new(ROBOT, Interface::Sonar, 0));
+    calm.open(pos);
+    let mut bad = Player::connect(addr, ROBOT);
+    bad.open(pos);
+    bad.send(1, 7, 3, 1, &[]);
+    // Closed (its data flowing until then), within the deadline.
+    let until = Instant::now() + DEADLINE;
+    let mut chunk = [0u8; 64 * 1024];
+    loop {
+        assert!(
+            Instant::now() < until,
+            "the connection that panicked is still open"
+        );
+        match bad.s.read(&mut chunk) {
+            Ok(0) => break,
+            Ok(_) => {}
+            Err(e) => panic!("reading the connection that panicked: {e}"),
+        }
+    }
+    // The other client still gets position2d's samples and its answers.
+    let code = u32::from(Interface::Position2d.code());
+    let mut samples = 0;
+    while samples < 20 {
+        let f = calm.recv();
+        if f.h[2] == code && f.kind() == 1 {
+            samples += 1;
+        }
+    }
+    calm.send(1, 0, 3, 1, &[]);
+    assert_eq!(calm.reply().h[5], 1, "DEVLIST answered");
+    // And a new client is served.
+    let mut fresh = Player::connect(addr, ROBOT);
+    fresh.send(1, 0, 3, 1, &[]);
+    assert_eq!(fresh.reply().h[5], 1, "DEVLIST answered");
+    let _ = stop.send(());
+    thread.join().unwrap();
+}

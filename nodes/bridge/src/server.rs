@@ -79,6 +79,11 @@ pub struct Config {
     pub max_clients: usize,
     /// How long the bridge waits for what a client owes it: see [`Limits`].
     pub limits: Limits,
+    /// Tests only: called with `message INTERF:INDEX:KIND:SUBTYPE` for each
+    /// message a client sends and `sample DEVICE` for each device sample,
+    /// where the bridge's own code runs, to make it panic there.
+    #[doc(hidden)]
+    pub fault: Option<fn(&str)>,
     /// For a bridge on a peer session: a client session of the same router,
     /// whose listing of live devices is whole at once (a peer's first query
     /// reaches only the peers it has links to yet). The ports open once
@@ -96,6 +101,7 @@ impl Default for Config {
             allow: Vec::new(),
             max_clients: DEFAULT_MAX_CLIENTS,
             limits: Limits::default(),
+            fault: None,
             lister: None,
         }
     }
@@ -163,6 +169,24 @@ pub fn parse_network(text: &str) -> Result<IpNetwork, String> {
 fn allowed(allow: &[IpNetwork], ip: IpAddr) -> bool {
     let ip = ip.to_canonical();
     allow.is_empty() || allow.iter().any(|n| n.contains(ip))
+}
+
+/// Runs `f`, the body of a Zenoh callback, so that a panic in it (a bug)
+/// ends that call alone: Zenoh's threads are the launcher's router's, and
+/// the stack goes on. The panic hook has printed the panic; this says
+/// where, once per place.
+fn contained(place: impl FnOnce() -> String, f: impl FnOnce()) {
+    if std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).is_err() {
+        static SAID: Mutex<Vec<String>> = Mutex::new(Vec::new());
+        let place = place();
+        let mut said = lock(&SAID);
+        if !said.contains(&place) {
+            tracing::error!(
+                "a panic in {place} (a bug): that call is dropped and the bridge goes on (more there are not logged)"
+            );
+            said.push(place);
+        }
+    }
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -319,6 +343,7 @@ struct Shared {
     full: AtomicU64,
     max_clients: usize,
     limits: Limits,
+    fault: Option<fn(&str)>,
 }
 
 impl Shared {
@@ -449,6 +474,7 @@ impl Bridge {
             full: AtomicU64::new(0),
             max_clients: cfg.max_clients,
             limits: cfg.limits,
+            fault: cfg.fault,
         });
         // Changes first, then the current list: no token is missed, and the
         // port opens only once DEVLIST would be complete. The subscriber
@@ -637,7 +663,7 @@ async fn accept_loop(shared: Arc<Shared>, robot: u32, host: u32, listener: TcpLi
                     let _ = stream.set_nodelay(true);
                     let (rd, wr) = stream.into_split();
                     let queue = Arc::new(ClientQueue::new(shared.maxlen, wr));
-                    let conn = Conn { shared: shared.clone(), robot, host, id, queue, subscribed: Vec::new(), ignored_commands: 0, unanswered: 0, unknown: 0, rules_refused: 0 };
+                    let conn = Conn { shared: shared.clone(), robot, host, id, queue, subscribed: Vec::new(), ignored_commands: 0, unanswered: 0, unknown: 0, rules_refused: 0, tasks: Vec::new() };
                     clients.spawn(async move {
                         conn.serve(rd).await;
                         drop(slot);
@@ -648,7 +674,15 @@ async fn accept_loop(shared: Arc<Shared>, robot: u32, host: u32, listener: TcpLi
                     tokio::time::sleep(Duration::from_millis(50)).await;
                 }
             },
-            Some(_) = clients.join_next(), if !clients.is_empty() => {}
+            Some(done) = clients.join_next(), if !clients.is_empty() => {
+                if let Err(e) = done {
+                    if e.is_panic() {
+                        // The panic's message is above (the panic hook's);
+                        // the client's subscriptions went with its task.
+                        tracing::error!("robot {robot}: a client's task panicked (a bug): its connection is closed, the others go on");
+                    }
+                }
+            }
         }
     }
 }
@@ -672,6 +706,21 @@ struct Conn {
     unknown: u64,
     /// Replace rules refused past [`crate::queue::MAX_RULES`].
     rules_refused: u64,
+    /// The client's writer and request tasks, stopped with it.
+    tasks: Vec<tokio::task::AbortHandle>,
+}
+
+/// However a client's task ends, a panic included, its tasks stop and its
+/// devices' feeds forget it.
+impl Drop for Conn {
+    fn drop(&mut self) {
+        for t in &self.tasks {
+            t.abort();
+        }
+        for dev in std::mem::take(&mut self.subscribed) {
+            self.unsubscribe(dev);
+        }
+    }
 }
 
 /// A device request waiting for its turn: Player drivers answer in order.
@@ -687,12 +736,14 @@ impl Conn {
     async fn serve(mut self, mut rd: OwnedReadHalf) {
         let limits = self.shared.limits;
         let writer = tokio::spawn(write_loop(self.queue.clone(), limits.stalled));
+        self.tasks.push(writer.abort_handle());
         let (req_tx, req_rx) = mpsc::channel(MAX_PENDING_REQUESTS);
         let requests = tokio::spawn(request_loop(
             self.shared.clone(),
             self.queue.clone(),
             req_rx,
         ));
+        self.tasks.push(requests.abort_handle());
         // Small: a client sends requests and commands of tens of bytes,
         // and an idle connection holds these (a large message is
         // gathered in `buf`, which grows).
@@ -751,9 +802,6 @@ impl Conn {
         );
         writer.abort();
         requests.abort();
-        for dev in std::mem::take(&mut self.subscribed) {
-            self.unsubscribe(dev);
-        }
         if self.ignored_commands > 1 {
             tracing::info!(
                 "robot {}: client {} sent {} commands to devices it had not opened (ignored)",
@@ -817,6 +865,12 @@ impl Conn {
         body: &[u8],
         req_tx: &mpsc::Sender<Pending>,
     ) -> Result<(), String> {
+        if let Some(fault) = self.shared.fault {
+            fault(&format!(
+                "message {}:{}:{}:{}",
+                h.interf, h.index, h.kind, h.subtype
+            ));
+        }
         if h.kind == u32::from(REQ) {
             // Every request is answered: with MAX_UNREAD_ANSWERS waiting
             // for a client that does not read, its socket is not read.
@@ -1095,24 +1149,35 @@ impl Conn {
         let clients: Clients = Arc::new(Mutex::new(vec![(self.id, self.queue.clone())]));
         let (c, shared) = (clients.clone(), Arc::downgrade(&self.shared));
         let host = self.host;
+        let fault = self.shared.fault;
         let sub = self
             .shared
             .session
             .declare_subscriber(keys::data(&dev))
             .callback(move |s| {
-                let bytes = s.payload().to_bytes();
-                match data_message(dev, host, &bytes) {
-                    Ok(out) => {
-                        for (_, q) in lock(&c).iter() {
-                            q.push(out.clone());
+                // On a thread of the launcher's router: a panic (a bug)
+                // ends this sample only.
+                contained(
+                    || format!("the feed of {dev}"),
+                    || {
+                        if let Some(fault) = fault {
+                            fault(&format!("sample {dev}"));
                         }
-                    }
-                    Err(why) => {
-                        if let Some(sh) = shared.upgrade() {
-                            *lock(&sh.dropped).entry(why).or_insert(0) += 1;
+                        let bytes = s.payload().to_bytes();
+                        match data_message(dev, host, &bytes) {
+                            Ok(out) => {
+                                for (_, q) in lock(&c).iter() {
+                                    q.push(out.clone());
+                                }
+                            }
+                            Err(why) => {
+                                if let Some(sh) = shared.upgrade() {
+                                    *lock(&sh.dropped).entry(why).or_insert(0) += 1;
+                                }
+                            }
                         }
-                    }
-                }
+                    },
+                );
             })
             .wait();
         match sub {
