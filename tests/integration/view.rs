@@ -649,7 +649,18 @@ fn the_view_draws_map_devices() {
     let (code, _) = get(&base, "/api/map/6665:map:9");
     assert_eq!(code, 404);
 
+    // A page left open (its stream of frames): the view still stops at
+    // once and cleanly (it ignored SIGTERM until killed, waiting on it).
+    let mut page = TcpStream::connect(host).unwrap();
+    page.set_read_timeout(Some(DEADLINE)).unwrap();
+    write!(page, "GET /api/stream HTTP/1.0\r\nHost: {host}\r\n\r\n").unwrap();
+    let mut first = [0u8; 256];
+    assert!(
+        page.read(&mut first).unwrap() > 0,
+        "the stream's first bytes"
+    );
     stack.stop();
+    drop(page);
 }
 
 /// Two stacks in two namespaces on one network. `launch --view` serves the

@@ -81,6 +81,9 @@ struct View {
     /// The frame rates pages opened with `?report` say they draw at, and
     /// when they said it.
     reports: Mutex<BTreeMap<String, (Instant, [f64; 2])>>,
+    /// True once the view stops: the pages' streams end, so the server's
+    /// graceful shutdown does not wait on them.
+    stopping: watch::Receiver<bool>,
 }
 
 impl View {
@@ -807,9 +810,11 @@ pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             held.push(watch_space(shared.clone(), session.clone()).await?);
             spaces.push((shared, session));
         }
+        let (stop, stopping) = watch::channel(false);
         let app: App = Arc::new(View {
             spaces,
             reports: Mutex::default(),
+            stopping,
         });
         let routes = Router::new()
             .route(
@@ -878,7 +883,11 @@ pub fn run(a: ViewArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             out.flush()?;
         }
         axum::serve(listener, routes)
-            .with_graceful_shutdown(async move { signals.recv().await })
+            .with_graceful_shutdown(async move {
+                signals.recv().await;
+                // Open streams (a page left open) end now.
+                let _ = stop.send(true);
+            })
             .await
             .context("serving the view")?;
         tracing::info!("view stopped");
@@ -1047,21 +1056,28 @@ async fn stream(
         shared: s.clone(),
         page,
     });
+    let stopping = v.stopping.clone();
     let frames = futures::stream::unfold(
-        (s, rx, None::<tokio::time::Instant>, page),
-        move |(s, mut rx, last, page)| async move {
-            if let Some(t) = last {
-                tokio::time::sleep_until(t + period).await;
+        (s, rx, None::<tokio::time::Instant>, page, stopping),
+        move |(s, mut rx, last, page, mut stopping)| async move {
+            let next = async {
+                if let Some(t) = last {
+                    tokio::time::sleep_until(t + period).await;
+                }
+                rx.changed().await
+            };
+            // Ends with the view (its sender dropped, or it stops).
+            tokio::select! {
+                changed = next => changed.ok()?,
+                _ = stopping.wait_for(|stop| *stop) => return None,
             }
-            // Ends with the view (its sender dropped).
-            rx.changed().await.ok()?;
             let version = *rx.borrow_and_update();
             // (The period runs from when a frame is begun: making it is
             // part of the frame's time.)
             let begun = tokio::time::Instant::now();
             let frame = s.frame_text(version, page.as_ref().map(|p| p.page.as_str()));
             let event = Event::default().data(&*frame);
-            Some((Ok(event), (s, rx, Some(begun), page)))
+            Some((Ok(event), (s, rx, Some(begun), page, stopping)))
         },
     );
     Ok(Sse::new(frames).keep_alive(KeepAlive::default()))
