@@ -689,11 +689,10 @@ fn declare_pub(
 /// do, and makes its `OccupancyGrid`.
 fn fetch_grid(session: &Session, dev: &Device) -> std::result::Result<Vec<u8>, String> {
     // The map answers once it is ready (its token is up).
-    crate::runtime::wait_live(session, dev, Duration::from_secs(3600))
-        .map_err(|e| e.to_string())?;
+    crate::net::wait_live(session, dev, Duration::from_secs(3600)).map_err(|e| e.to_string())?;
     let ask = |name: &str, payload: Vec<u8>| -> std::result::Result<Vec<u8>, String> {
         let key = keys::req(dev, name);
-        let replies = crate::runtime::ask(session, &key, crate::REQUEST_TIMEOUT)
+        let replies = crate::net::ask(session, &key, crate::REQUEST_TIMEOUT)
             .payload(payload)
             .wait()
             .map_err(|e| format!("asking {key}: {e}"))?;

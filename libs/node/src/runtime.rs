@@ -22,11 +22,9 @@ use std::time::{Duration, Instant};
 
 use troupe_msgs::{codec, keys, sim, Device};
 use zenoh::bytes::ZBytes;
-use zenoh::handlers::DefaultHandler;
 use zenoh::liveliness::LivelinessToken;
 use zenoh::pubsub::{Publisher, Subscriber};
-use zenoh::query::{ConsolidationMode, Query, Queryable};
-use zenoh::session::SessionGetBuilder;
+use zenoh::query::{Query, Queryable};
 use zenoh::{Session, Wait};
 
 use crate::args::{Mode, ZenohArgs};
@@ -36,6 +34,7 @@ use crate::driver::Driver;
 use crate::error::{NodeError, RequestError, Result};
 use crate::event::{nack_reason, Event, Reply, ReplySink, Request, RequestId, Responder, Sample};
 use crate::inbox::{Inbox, Popped};
+use crate::net::{ask, wait_live};
 use crate::ros2::{Face, Ros2};
 use crate::section::Section;
 
@@ -272,20 +271,6 @@ pub fn spawn<D: Driver>(
         })
         .map_err(|e| NodeError::Driver(format!("starting the driver thread: {e}").into()))?;
     Ok(NodeHandle { thread, stop })
-}
-
-/// A get on request key `key` as every Troupe requester asks (drivers, the
-/// client, the bridge): each answer taken as it arrives, not held until the
-/// query closes as Zenoh's default consolidation does, within `timeout`.
-pub fn ask<'a>(
-    session: &'a Session,
-    key: &'a str,
-    timeout: Duration,
-) -> SessionGetBuilder<'a, 'a, DefaultHandler> {
-    session
-        .get(key)
-        .timeout(timeout)
-        .consolidation(ConsolidationMode::None)
 }
 
 /// What a section gives that its driver does not use.
@@ -597,37 +582,6 @@ pub(crate) fn dispatch<D: Driver>(
             Ok(())
         }
         other => other,
-    }
-}
-
-/// Waits until some driver announces `dev` (its liveliness token), at most
-/// `timeout`.
-///
-/// # Errors
-///
-/// [`NodeError::RequiresTimeout`] when it does not appear in time, or the
-/// Zenoh error of watching for it.
-pub fn wait_live(session: &Session, dev: &Device, timeout: Duration) -> Result<()> {
-    let key = keys::token_any(dev);
-    let sub = session
-        .liveliness()
-        .declare_subscriber(&key)
-        .history(true)
-        .wait()
-        .map_err(z(|| format!("watching liveliness of {dev}")))?;
-    tracing::info!("waiting for required device {dev}");
-    let deadline = Instant::now() + timeout;
-    loop {
-        match sub.recv_deadline(deadline) {
-            Ok(Some(s)) if s.kind() == zenoh::sample::SampleKind::Put => return Ok(()),
-            Ok(Some(_)) => continue,
-            Ok(None) | Err(_) => {
-                return Err(NodeError::RequiresTimeout {
-                    device: *dev,
-                    waited: timeout,
-                })
-            }
-        }
     }
 }
 

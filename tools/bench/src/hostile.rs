@@ -23,8 +23,8 @@ use std::time::{Duration, Instant};
 use troupe_bridge::wire::{self, player};
 use troupe_msgs::Interface;
 
-use super::bridge::{connect, header, next, open, player_req, req, request};
 use crate::harness::{percentile, status_mb, us};
+use crate::raw_player::{connect, header, next, open, player_req, req, request};
 
 /// What the good clients saw in one row.
 #[derive(Default)]

@@ -15,6 +15,7 @@ pub mod latency;
 pub mod launch;
 pub mod nav;
 pub mod python;
+mod raw_player;
 mod ray;
 pub mod record;
 pub mod ros2;

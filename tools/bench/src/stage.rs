@@ -57,6 +57,15 @@ pub struct StageBenchArgs {
     pub parry: bool,
 }
 
+/// What the comparison with Stage takes of the flags.
+fn runs(a: &StageBenchArgs) -> crate::vs_stage::Runs {
+    crate::vs_stage::Runs {
+        seconds: a.seconds,
+        threads: a.threads,
+        pairs: a.pairs,
+    }
+}
+
 fn peak_rss_mb() -> f64 {
     crate::harness::status_mb("VmHWM:")
 }
@@ -74,7 +83,7 @@ pub fn run(a: &StageBenchArgs) -> anyhow::Result<()> {
         "--stage runs Stage on --world FILE or on --stage-worlds DIR: give one"
     );
     if let (Some(path), Some(stage)) = (&a.world, &a.stage) {
-        return crate::vs_stage::compare(a, stage, path);
+        return crate::vs_stage::compare(&runs(a), stage, path);
     }
     if let Some(path) = &a.world {
         let name = path.file_name().unwrap_or_default().to_string_lossy();
@@ -133,7 +142,7 @@ pub fn run(a: &StageBenchArgs) -> anyhow::Result<()> {
             })?;
         for file in ["benchmark/cave.world", "benchmark/hospital.world"] {
             match &a.stage {
-                Some(stage) => crate::vs_stage::compare(a, stage, &worlds.join(file))?,
+                Some(stage) => crate::vs_stage::compare(&runs(a), stage, &worlds.join(file))?,
                 None => run(&["--world".as_ref(), worlds.join(file).as_os_str()])?,
             }
         }

@@ -12,8 +12,6 @@ use std::time::Instant;
 use anyhow::Context;
 use nix::sys::resource::{getrusage, UsageWho};
 
-use crate::stage::StageBenchArgs;
-
 /// One run of a whole process: wall seconds, CPU seconds, peak memory (MB),
 /// and what it wrote to stdout.
 struct Run {
@@ -158,11 +156,21 @@ fn median(mut v: Vec<f64>) -> f64 {
     }
 }
 
+/// How long, on how many threads, and how many times each side runs.
+pub struct Runs {
+    /// Simulated seconds of each run.
+    pub seconds: f64,
+    /// Troupe's worker threads (Stage's `threads`).
+    pub threads: usize,
+    /// Runs of each side, in turn.
+    pub pairs: u32,
+}
+
 /// Runs `world` with Stage (`stage -g`, from a copy set up by [`staged`]
 /// beside it, so that its includes and bitmaps resolve) and with Troupe,
 /// `a.pairs` times each in turn, and prints Troupe's row and both sides'
 /// medians with their ratio.
-pub fn compare(a: &StageBenchArgs, stage: &Path, world: &Path) -> anyhow::Result<()> {
+pub fn compare(a: &Runs, stage: &Path, world: &Path) -> anyhow::Result<()> {
     let name = world
         .file_name()
         .context("a world file, not a directory")?
