@@ -397,10 +397,7 @@ mod tests {
             m = m.subcommand_matches(p)?;
         }
         let id = long.replace('-', "_");
-        match m.try_get_one::<f64>(&id) {
-            Ok(v) => v.copied(),
-            Err(_) => None,
-        }
+        m.try_get_one::<f64>(&id).ok().flatten().copied()
     }
 
     /// No flag of any command takes a number it would panic on or misuse:

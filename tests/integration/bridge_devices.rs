@@ -638,8 +638,7 @@ fn dozens_of_clients_flow_while_one_is_stuck_and_bad_input_closes_only_its_conne
     huge.s.read_to_end(&mut rest).expect("closed");
     // The others are served as before.
     let c = &mut clients[0];
-    c.send(1, 0, 3, 1, &[]);
-    assert_eq!(c.reply().h[5], 1, "DEVLIST answered");
+    assert_eq!(c.devlist().h[5], 1, "DEVLIST answered");
 
     drop(stuck);
     drop(clients);
@@ -808,8 +807,7 @@ fn a_client_sending_requests_ahead_is_held_back_and_each_request_is_answered() {
         }
         finish.join().unwrap();
         // Still served as any client.
-        c.send(1, 0, 3, 1, &[]);
-        assert_eq!(c.reply().h[5], 1, "{what}: DEVLIST answered");
+        assert_eq!(c.devlist().h[5], 1, "{what}: DEVLIST answered");
     }
     let _ = stop.send(());
     thread.join().unwrap();
@@ -863,8 +861,7 @@ fn connections_past_the_cap_are_closed_before_the_banner() {
     extra.read_to_end(&mut got).expect("closed");
     assert!(got.is_empty(), "the fourth client got {} bytes", got.len());
     for c in &mut clients {
-        c.send(1, 0, 3, 1, &[]);
-        assert_eq!(c.reply().h[5], 1, "DEVLIST answered");
+        assert_eq!(c.devlist().h[5], 1, "DEVLIST answered");
     }
     let _ = stop.send(());
     thread.join().unwrap();
@@ -901,8 +898,7 @@ fn idle_trickling_and_unread_clients_are_dropped_after_their_limits() {
         },
     );
     let mut listener = Player::connect(addr, ROBOT);
-    listener.send(1, 0, 3, 1, &[]);
-    assert_eq!(listener.reply().h[5], 1);
+    assert_eq!(listener.devlist().h[5], 1);
 
     let mut unread = Player::connect(addr, ROBOT);
     unread.open(Device::new(ROBOT, Interface::Laser, 0));
@@ -933,8 +929,7 @@ fn idle_trickling_and_unread_clients_are_dropped_after_their_limits() {
     assert!(t0.elapsed() >= limit, "dropped before its limit");
 
     // The one that only listens is still served.
-    listener.send(1, 0, 3, 1, &[]);
-    assert_eq!(listener.reply().h[5], 1, "DEVLIST answered");
+    assert_eq!(listener.devlist().h[5], 1, "DEVLIST answered");
     let _ = stop.send(());
     thread.join().unwrap();
 }
@@ -989,12 +984,10 @@ fn a_panic_in_the_bridge_closes_one_connection_and_the_rest_goes_on() {
             samples += 1;
         }
     }
-    calm.send(1, 0, 3, 1, &[]);
-    assert_eq!(calm.reply().h[5], 1, "DEVLIST answered");
+    assert_eq!(calm.devlist().h[5], 1, "DEVLIST answered");
     // And a new client is served.
     let mut fresh = Player::connect(addr, ROBOT);
-    fresh.send(1, 0, 3, 1, &[]);
-    assert_eq!(fresh.reply().h[5], 1, "DEVLIST answered");
+    assert_eq!(fresh.devlist().h[5], 1, "DEVLIST answered");
     let _ = stop.send(());
     thread.join().unwrap();
 }

@@ -148,6 +148,12 @@ impl Player {
         }
     }
 
+    /// PLAYER_PLAYER_REQ_DEVLIST: its reply.
+    pub fn devlist(&mut self) -> Frame {
+        self.send(1, 0, 3, 1, &[]);
+        self.reply()
+    }
+
     /// Subscribes to `d` (PLAYER_PLAYER_REQ_DEV, access read/write).
     pub fn open(&mut self, d: Device) {
         assert_eq!(self.dev(d, 1), 1, "opening {d}");

@@ -720,16 +720,23 @@ fn the_secured_fleet_of_the_docs_runs_on_one_machine() {
     router.terminate();
 }
 
-/// The capabilities a Foxglove server offers, from the serverInfo it sends
-/// first (protocol `foxglove.sdk.v1`).
-fn foxglove_capabilities(url: &str) -> Vec<String> {
+/// A Foxglove client of `troupe foxglove` at `url` (the SDK's subprotocol).
+fn foxglove_client(
+    url: &str,
+) -> tungstenite::WebSocket<tungstenite::stream::MaybeTlsStream<std::net::TcpStream>> {
     use tungstenite::client::IntoClientRequest;
     let mut req = url.into_client_request().unwrap();
     req.headers_mut().insert(
         "Sec-WebSocket-Protocol",
         tungstenite::http::HeaderValue::from_static("foxglove.sdk.v1"),
     );
-    let (mut ws, _) = tungstenite::connect(req).unwrap();
+    tungstenite::connect(req).unwrap().0
+}
+
+/// The capabilities a Foxglove server offers, from the serverInfo it sends
+/// first (protocol `foxglove.sdk.v1`).
+fn foxglove_capabilities(url: &str) -> Vec<String> {
+    let mut ws = foxglove_client(url);
     let info: serde_json::Value = match ws.read().unwrap() {
         tungstenite::Message::Text(t) => serde_json::from_str(&t).unwrap(),
         other => panic!("expected serverInfo, got {other:?}"),
@@ -853,7 +860,6 @@ fn a_driver_that_panics_in_any_hook_exits_for_its_supervisor() {
 /// and a panic on any thread of a command fails it.
 #[test]
 fn foxglove_stops_cleanly_with_clients_attached() {
-    use tungstenite::client::IntoClientRequest;
     let net = TestNet::new("fox-stop");
     let mut dummy = Proc::troupe(
         "dummy",
@@ -875,12 +881,7 @@ fn foxglove_stops_cleanly_with_clients_attached() {
             .unwrap_or_else(|| panic!("no address in {line:?}"));
         let clients: Vec<_> = (0..2)
             .map(|_| {
-                let mut req = url.into_client_request().unwrap();
-                req.headers_mut().insert(
-                    "Sec-WebSocket-Protocol",
-                    tungstenite::http::HeaderValue::from_static("foxglove.sdk.v1"),
-                );
-                let (mut ws, _) = tungstenite::connect(req).unwrap();
+                let mut ws = foxglove_client(url);
                 // serverInfo, then the laser's channel once it is heard.
                 let mut advertised = false;
                 while !advertised {

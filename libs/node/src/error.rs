@@ -108,6 +108,12 @@ impl NodeError {
     }
 }
 
+/// Turns Zenoh's error into a [`NodeError::Zenoh`] saying what was being
+/// done (`.map_err(z(|| format!("declaring {key}")))`).
+pub(crate) fn z(what: impl FnOnce() -> String) -> impl FnOnce(zenoh::Error) -> NodeError {
+    move |e| NodeError::zenoh(what(), e)
+}
+
 /// The runtime's result type.
 pub type Result<T, E = NodeError> = std::result::Result<T, E>;
 

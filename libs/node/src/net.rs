@@ -9,7 +9,7 @@ use zenoh::query::ConsolidationMode;
 use zenoh::session::SessionGetBuilder;
 use zenoh::{Session, Wait};
 
-use crate::error::{NodeError, Result};
+use crate::error::{z, NodeError, Result};
 
 /// A get on request key `key` as every Troupe requester asks (drivers, the
 /// client, the bridge): each answer taken as it arrives, not held until the
@@ -39,7 +39,7 @@ pub fn wait_live(session: &Session, dev: &Device, timeout: Duration) -> Result<(
         .declare_subscriber(&key)
         .history(true)
         .wait()
-        .map_err(|e| NodeError::zenoh(format!("watching liveliness of {dev}"), e))?;
+        .map_err(z(|| format!("watching liveliness of {dev}")))?;
     tracing::info!("waiting for required device {dev}");
     let deadline = Instant::now() + timeout;
     loop {

@@ -32,7 +32,7 @@ use zenoh_ext::{AdvancedPublisher, AdvancedPublisherBuilderExt, CacheConfig, Mis
 
 use crate::clock::Clock;
 use crate::ctx::ReadyAnswers;
-use crate::error::{NodeError, Result};
+use crate::error::{z, NodeError, Result};
 use crate::event::{Event, ReplySink, Request, Responder, Sample};
 use crate::inbox::Inbox;
 
@@ -191,10 +191,6 @@ impl Ros2 {
     fn hash(&self, ty: &str) -> &'static str {
         rmw::type_hash(ty, self.distro).unwrap_or(rmw::NO_TYPE_HASH)
     }
-}
-
-fn z(what: impl FnOnce() -> String) -> impl FnOnce(zenoh::Error) -> NodeError {
-    move |e| NodeError::zenoh(what(), e)
 }
 
 /// Counts a repeated problem and says it at 1, 10, 100… occurrences.

@@ -31,7 +31,7 @@ use crate::args::{Mode, ZenohArgs};
 use crate::clock::Clock;
 use crate::ctx::{Bus, Ctx, ReadyAnswers};
 use crate::driver::Driver;
-use crate::error::{NodeError, RequestError, Result};
+use crate::error::{z, NodeError, RequestError, Result};
 use crate::event::{nack_reason, Event, Reply, ReplySink, Request, RequestId, Responder, Sample};
 use crate::inbox::{Inbox, Popped};
 use crate::net::{ask, wait_live};
@@ -57,10 +57,6 @@ impl Default for NodeConfig {
             ros2: None,
         }
     }
-}
-
-fn z(what: impl FnOnce() -> String) -> impl FnOnce(zenoh::Error) -> NodeError {
-    move |e| NodeError::zenoh(what(), e)
 }
 
 /// Runs driver `D` in this process until SIGINT or SIGTERM.

@@ -117,9 +117,9 @@ pub const DEFAULT_MAX_CLIENTS: usize = 256;
 /// driver's queue, unanswered.
 pub const MAX_PENDING_REQUESTS: usize = 64;
 
-/// Answers queued for a client that has not read them: at this many, its
-/// next request waits (and so, through [`MAX_PENDING_REQUESTS`], its
-/// socket is not read) until it reads.
+/// Answers queued for a client that has not read them: at this many, the
+/// bridge reads no more of its socket until it reads (the requests already
+/// waiting, [`MAX_PENDING_REQUESTS`] at most, are still answered).
 pub const MAX_UNREAD_ANSWERS: usize = 64;
 
 /// How long the bridge waits for a client before it drops the connection.
@@ -735,15 +735,15 @@ struct Pending {
 impl Conn {
     async fn serve(mut self, mut rd: OwnedReadHalf) {
         let limits = self.shared.limits;
-        let writer = tokio::spawn(write_loop(self.queue.clone(), limits.stalled));
-        self.tasks.push(writer.abort_handle());
         let (req_tx, req_rx) = mpsc::channel(MAX_PENDING_REQUESTS);
+        // Both stopped with the connection (`Drop for Conn`).
+        let writer = tokio::spawn(write_loop(self.queue.clone(), limits.stalled));
         let requests = tokio::spawn(request_loop(
             self.shared.clone(),
             self.queue.clone(),
             req_rx,
         ));
-        self.tasks.push(requests.abort_handle());
+        self.tasks = vec![writer.abort_handle(), requests.abort_handle()];
         // Small: a client sends requests and commands of tens of bytes,
         // and an idle connection holds these (a large message is
         // gathered in `buf`, which grows).
@@ -800,17 +800,16 @@ impl Conn {
             self.robot,
             self.id
         );
-        writer.abort();
-        requests.abort();
-        if self.ignored_commands > 1 {
-            tracing::info!(
-                "robot {}: client {} sent {} commands to devices it had not opened (ignored)",
-                self.robot,
-                self.id,
-                self.ignored_commands
-            );
-        }
+        // Each was said at its first; the count goes with the client.
         for (n, what) in [
+            (
+                self.ignored_commands,
+                "commands to devices it had not opened (ignored)",
+            ),
+            (
+                self.unanswered,
+                "requests to devices no client had opened (not answered)",
+            ),
             (
                 self.unknown,
                 "messages to devices that are not live (skipped)",
@@ -820,14 +819,6 @@ impl Conn {
             if n > 1 {
                 tracing::info!("robot {}: client {} sent {n} {what}", self.robot, self.id);
             }
-        }
-        if self.unanswered > 1 {
-            tracing::info!(
-                "robot {}: client {} made {} requests of devices no client had opened (not answered)",
-                self.robot,
-                self.id,
-                self.unanswered
-            );
         }
         let dropped = lock(&self.queue.out).queue.dropped_total();
         if dropped > 0 {
@@ -1367,11 +1358,7 @@ async fn write_loop(q: Arc<ClientQueue>, stalled: Duration) {
 /// callback that receives it; a large one (a map tile to compress) comes
 /// back here, off Zenoh's receiving thread.
 async fn request_loop(shared: Arc<Shared>, q: Arc<ClientQueue>, mut rx: mpsc::Receiver<Pending>) {
-    loop {
-        // A client that does not read its answers gets no more (and, its
-        // requests left waiting, its socket is not read).
-        q.room_for_answers().await;
-        let Some(mut p) = rx.recv().await else { break };
+    while let Some(mut p) = rx.recv().await {
         let payload = std::mem::take(&mut p.payload);
         let p = Arc::new(p);
         let key = keys::req(&p.dev, p.name);

@@ -52,7 +52,9 @@ pub struct BridgeBenchArgs {
     pub hostile: bool,
 }
 
-use crate::raw_player::{connect, header, next, open, open_at, player_req, req, request, ROBOT};
+use crate::raw_player::{
+    connect, header, next, open, open_at, player_req, pull_round, req, request, ROBOT,
+};
 
 /// A Player client in PUSH mode (Player's default) with `devices` of
 /// robot port `addr` open, reading on a thread of its own until `stop`:
@@ -161,27 +163,15 @@ fn read_at_10hz(addr: SocketAddr, phase: Duration, seconds: f64) -> anyhow::Resu
     let start = Instant::now();
     let period = Duration::from_millis(100);
     let mut due = start + phase;
-    let req = wire::message(header(player_req(player::DATA)), &[]);
     while start.elapsed().as_secs_f64() < seconds {
         // Pacing the client, not synchronising with anything.
         std::thread::sleep(due.saturating_duration_since(Instant::now()));
         due += period;
         let t0 = Instant::now();
-        s.write_all(&req)?;
-        let mut data = false;
-        loop {
-            let (h, _) = next(&mut s)?;
-            match u8::try_from(h.kind) {
-                Ok(wire::DATA) => data = true,
-                Ok(wire::SYNCH) => {
-                    r.overflows += usize::from(h.subtype == u32::from(player::SYNCH_OVERFLOW));
-                    break;
-                }
-                _ => {}
-            }
-        }
+        let round = pull_round(&mut s)?;
         r.reads.push(t0.elapsed());
-        r.with_data += usize::from(data);
+        r.overflows += usize::from(round.overflow);
+        r.with_data += usize::from(round.data);
     }
     Ok(r)
 }

@@ -24,7 +24,7 @@ use troupe_bridge::wire::{self, player};
 use troupe_msgs::Interface;
 
 use crate::harness::{percentile, status_mb, us};
-use crate::raw_player::{connect, header, next, open, player_req, req, request};
+use crate::raw_player::{connect, header, open, player_req, pull_round, req, request};
 
 /// What the good clients saw in one row.
 #[derive(Default)]
@@ -48,7 +48,6 @@ fn good(addr: SocketAddr, phase: Duration, seconds: f64, all_in: &Barrier) -> an
     all_in.wait();
     let mut s = opened?;
     let mut seen = Seen::default();
-    let read = wire::message(header(player_req(player::DATA)), &[]);
     let geom = req(Interface::Position2d, 1);
     let start = Instant::now();
     let mut due = start + phase;
@@ -57,22 +56,11 @@ fn good(addr: SocketAddr, phase: Duration, seconds: f64, all_in: &Barrier) -> an
         std::thread::sleep(due.saturating_duration_since(Instant::now()));
         due += Duration::from_millis(100);
         let t0 = Instant::now();
-        s.write_all(&read)?;
-        let mut data = false;
-        loop {
-            let (h, _) = next(&mut s)?;
-            match u8::try_from(h.kind) {
-                Ok(wire::DATA) => data = true,
-                Ok(wire::SYNCH) => {
-                    seen.overflows += usize::from(h.subtype == u32::from(player::SYNCH_OVERFLOW));
-                    break;
-                }
-                _ => {}
-            }
-        }
+        let round = pull_round(&mut s)?;
         seen.times.push(t0.elapsed());
         seen.reads += 1;
-        seen.with_data += usize::from(data);
+        seen.overflows += usize::from(round.overflow);
+        seen.with_data += usize::from(round.data);
         let t0 = Instant::now();
         match request(&mut s, geom, &[]) {
             Ok(_) => seen.times.push(t0.elapsed()),

@@ -97,3 +97,29 @@ pub(crate) fn open_at(s: &mut TcpStream, interf: Interface, index: u32) -> anyho
     body.bytes(&[]);
     request(s, player_req(player::DEV), &body.finish()).map(drop)
 }
+
+/// What one `Read()` in PULL mode brought.
+pub(crate) struct Round {
+    /// Some DATA came before the SYNCH.
+    pub data: bool,
+    /// The SYNCH said data was dropped.
+    pub overflow: bool,
+}
+
+/// One `Read()` in PULL mode, as libplayerc's `playerc_client_read`: REQ
+/// DATA, then everything up to the SYNCH.
+pub(crate) fn pull_round(s: &mut TcpStream) -> anyhow::Result<Round> {
+    s.write_all(&wire::message(header(player_req(player::DATA)), &[]))?;
+    let mut data = false;
+    loop {
+        let (h, _) = next(s)?;
+        match u8::try_from(h.kind) {
+            Ok(wire::DATA) => data = true,
+            Ok(wire::SYNCH) => {
+                let overflow = h.subtype == u32::from(player::SYNCH_OVERFLOW);
+                return Ok(Round { data, overflow });
+            }
+            _ => {}
+        }
+    }
+}
