@@ -391,6 +391,8 @@ fn bridge_with(
     let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
     let t = std::thread::spawn(move || {
         let rt = tokio::runtime::Builder::new_multi_thread()
+            // Four workers: a test stalls one on purpose.
+            .worker_threads(4)
             .enable_all()
             .build()
             .unwrap();
@@ -988,6 +990,70 @@ fn a_panic_in_the_bridge_closes_one_connection_and_the_rest_goes_on() {
     // And a new client is served.
     let mut fresh = Player::connect(addr, ROBOT);
     assert_eq!(fresh.devlist().h[5], 1, "DEVLIST answered");
+    let _ = stop.send(());
+    thread.join().unwrap();
+}
+
+/// The peer whose samples stall where they are queued, and the bell that
+/// lets them go on.
+static STALLED: (std::sync::Mutex<Option<String>>, std::sync::Condvar) =
+    (std::sync::Mutex::new(None), std::sync::Condvar::new());
+
+/// A planted stall: the named client's queueing waits until released (a
+/// minute at most, so a failing test ends).
+fn stall_one(what: &str) {
+    let (peer, bell) = &STALLED;
+    let until = Instant::now() + Duration::from_secs(60);
+    let mut p = peer.lock().unwrap();
+    while p.as_ref().is_some_and(|p| what == format!("queue {p}")) {
+        let left = until.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            break;
+        }
+        p = bell.wait_timeout(p, left).unwrap().0;
+    }
+}
+
+/// A device's feed is shared by all its clients: one client whose
+/// queueing stalls (a wait planted where its samples enter its queue,
+/// standing for whatever one client costs there) holds up no other client
+/// of the device, and gets its own samples once it goes on.
+#[test]
+fn a_client_whose_queueing_stalls_holds_up_no_other_client_of_a_device() {
+    let net = TestNet::new("bridge-inbox");
+    let _devs = devices(&net);
+    let (addr, thread, stop) = bridge_with(
+        &net,
+        Config {
+            fault: Some(stall_one),
+            ..Config::default()
+        },
+    );
+    let pos = Device::new(ROBOT, Interface::Position2d, 0);
+    let code = u32::from(Interface::Position2d.code());
+    let mut stuck = Player::connect(addr, ROBOT);
+    stuck.open(pos);
+    *STALLED.0.lock().unwrap() = Some(stuck.s.local_addr().unwrap().to_string());
+    let mut calm = Player::connect(addr, ROBOT);
+    calm.open(pos);
+    // The devices publish every 5 ms: 50 samples within the read timeout,
+    // while the other client's queueing is stalled.
+    let mut samples = 0;
+    while samples < 50 {
+        let f = calm.recv();
+        if f.h[2] == code && f.kind() == 1 {
+            samples += 1;
+        }
+    }
+    *STALLED.0.lock().unwrap() = None;
+    STALLED.1.notify_all();
+    let mut samples = 0;
+    while samples < 5 {
+        let f = stuck.recv();
+        if f.h[2] == code && f.kind() == 1 {
+            samples += 1;
+        }
+    }
     let _ = stop.send(());
     thread.join().unwrap();
 }

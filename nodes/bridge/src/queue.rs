@@ -297,6 +297,15 @@ impl Queue {
         self.waiting
     }
 
+    /// Counts `n` data messages that were dropped before they reached the
+    /// queue, as if it had been full.
+    pub fn overflowed(&mut self, n: u64) {
+        self.dropped = self
+            .dropped
+            .saturating_add(u32::try_from(n).unwrap_or(u32::MAX));
+        self.dropped_total += n;
+    }
+
     /// Messages dropped because the queue was full, since the queue was made.
     pub fn dropped_total(&self) -> u64 {
         self.dropped_total

@@ -1,7 +1,11 @@
 //! The bridge itself: a TCP listener per robot port, three tasks per client
 //! (reading, asking devices in order, finishing writes a full socket
 //! refused), one Zenoh subscriber per device that at least one client
-//! opened. Answers and data are written by the thread that has them.
+//! opened. An answer is written by the thread that has it; a device's
+//! sample waits in each subscribed client's inbox for that client's writer
+//! task, so the feed that every client of a device shares does the same
+//! small work whatever any one client does (its replace rules, its full
+//! socket, its PULL rounds).
 
 use std::collections::HashMap;
 use std::net::{IpAddr, SocketAddr};
@@ -80,8 +84,9 @@ pub struct Config {
     /// How long the bridge waits for what a client owes it: see [`Limits`].
     pub limits: Limits,
     /// Tests only: called with `message INTERF:INDEX:KIND:SUBTYPE` for each
-    /// message a client sends and `sample DEVICE` for each device sample,
-    /// where the bridge's own code runs, to make it panic there.
+    /// message a client sends, `sample DEVICE` for each device sample and
+    /// `queue PEER` as a client's samples are queued, where the bridge's own
+    /// code runs, to make it panic or stall there.
     #[doc(hidden)]
     pub fault: Option<fn(&str)>,
     /// For a bridge on a peer session: a client session of the same router,
@@ -195,12 +200,24 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
 
 /// A client's queue and its socket.
 ///
-/// Whoever queues a message writes what the socket takes at once, on its own
+/// Whoever queues an answer writes what the socket takes at once, on its own
 /// thread: a request's answer goes out from the Zenoh callback that received
-/// it, with no task to wake in between. The writer task only finishes what a
-/// full socket could not take, so a stuck client holds up no one else.
+/// it, with no task to wake in between. A device's samples come through
+/// [`ClientQueue::deliver`] instead: the feed shared by all the device's
+/// clients only appends to each one's inbox, and the client's writer task
+/// queues them under its rules and writes them. The writer task also
+/// finishes what a full socket could not take, so a stuck client holds up
+/// no one else.
 struct ClientQueue {
     out: Mutex<Outbox>,
+    /// Samples from the device feeds, not yet queued (locked after `out`
+    /// when both are).
+    inbox: Mutex<Vec<Out>>,
+    /// Samples the inbox had no room for, not yet counted in the queue.
+    inbox_dropped: AtomicU64,
+    /// [`Config::fault`], called with `queue PEER` as the inbox is taken.
+    fault: Option<fn(&str)>,
+    peer: SocketAddr,
     bell: Notify,
     /// Rung when the socket took what waited: answers may queue again.
     room: Notify,
@@ -219,10 +236,17 @@ struct Outbox {
     closed: bool,
     /// When the socket last took bytes, or had nothing waiting for it.
     moved: Instant,
+    /// The inbox's last contents, emptied (kept for its allocation).
+    spare: Vec<Out>,
 }
 
 impl ClientQueue {
-    fn new(maxlen: usize, wire: OwnedWriteHalf) -> ClientQueue {
+    fn new(
+        maxlen: usize,
+        wire: OwnedWriteHalf,
+        peer: SocketAddr,
+        fault: Option<fn(&str)>,
+    ) -> ClientQueue {
         ClientQueue {
             out: Mutex::new(Outbox {
                 queue: Queue::new(maxlen),
@@ -231,7 +255,12 @@ impl ClientQueue {
                 sent: 0,
                 closed: false,
                 moved: Instant::now(),
+                spare: Vec::new(),
             }),
+            inbox: Mutex::new(Vec::new()),
+            inbox_dropped: AtomicU64::new(0),
+            fault,
+            peer,
             bell: Notify::new(),
             room: Notify::new(),
             gone: Notify::new(),
@@ -243,10 +272,48 @@ impl ClientQueue {
         self.with(|q| q.push(m));
     }
 
+    /// A device's sample, from the feed all its clients share: appended to
+    /// the inbox for the writer task, whatever the client's state. Past
+    /// the queue's length (a writer that is not run) it is dropped and
+    /// counted as the queue's own overflow is.
+    fn deliver(&self, m: Out, maxlen: usize) {
+        let mut inbox = lock(&self.inbox);
+        if inbox.len() >= maxlen {
+            drop(inbox);
+            self.inbox_dropped.fetch_add(1, Ordering::Relaxed);
+            return;
+        }
+        inbox.push(m);
+        // A longer inbox has rung already, and the writer has yet to take
+        // it.
+        let first = inbox.len() == 1;
+        drop(inbox);
+        if first {
+            self.bell.notify_one();
+        }
+    }
+
+    /// Moves the inbox into the queue, in arrival order, ahead of whatever
+    /// is queued next.
+    fn take_inbox(&self, out: &mut Outbox) {
+        if let Some(fault) = self.fault {
+            fault(&format!("queue {}", self.peer));
+        }
+        std::mem::swap(&mut *lock(&self.inbox), &mut out.spare);
+        for m in out.spare.drain(..) {
+            out.queue.push(m);
+        }
+        let lost = self.inbox_dropped.swap(0, Ordering::Relaxed);
+        if lost > 0 {
+            out.queue.overflowed(lost);
+        }
+    }
+
     /// Changes the queue, then writes what may go now; whatever the socket
     /// cannot take yet is left to the writer task.
     fn with<R>(&self, f: impl FnOnce(&mut Queue) -> R) -> R {
         let mut out = lock(&self.out);
+        self.take_inbox(&mut out);
         let r = f(&mut out.queue);
         // The writer task also keeps a PULL round's deadline.
         if !out.flush(&self.wire) || out.queue.deadline().is_some() {
@@ -662,7 +729,7 @@ async fn accept_loop(shared: Arc<Shared>, robot: u32, host: u32, listener: TcpLi
                     tracing::info!("robot {robot}: client {id} connected from {peer}");
                     let _ = stream.set_nodelay(true);
                     let (rd, wr) = stream.into_split();
-                    let queue = Arc::new(ClientQueue::new(shared.maxlen, wr));
+                    let queue = Arc::new(ClientQueue::new(shared.maxlen, wr, peer, shared.fault));
                     let conn = Conn { shared: shared.clone(), robot, host, id, queue, subscribed: Vec::new(), ignored_commands: 0, unanswered: 0, unknown: 0, rules_refused: 0, tasks: Vec::new() };
                     clients.spawn(async move {
                         conn.serve(rd).await;
@@ -1139,7 +1206,7 @@ impl Conn {
         }
         let clients: Clients = Arc::new(Mutex::new(vec![(self.id, self.queue.clone())]));
         let (c, shared) = (clients.clone(), Arc::downgrade(&self.shared));
-        let host = self.host;
+        let (host, maxlen) = (self.host, self.shared.maxlen);
         let fault = self.shared.fault;
         let sub = self
             .shared
@@ -1158,7 +1225,7 @@ impl Conn {
                         match data_message(dev, host, &bytes) {
                             Ok(out) => {
                                 for (_, q) in lock(&c).iter() {
-                                    q.push(out.clone());
+                                    q.deliver(out.clone(), maxlen);
                                 }
                             }
                             Err(why) => {
@@ -1315,12 +1382,14 @@ fn data_message(dev: Device, host: u32, payload: &[u8]) -> Result<Out, Dropped> 
     Ok(Out::new(h, &body))
 }
 
-/// Finishes what a full socket could not take when it was queued, and
-/// ends a PULL round whose wait for due devices runs out.
+/// Queues the samples the feeds left in the inbox and writes them,
+/// finishes what a full socket could not take when it was queued, and ends
+/// a PULL round whose wait for due devices runs out.
 async fn write_loop(q: Arc<ClientQueue>, stalled: Duration) {
     loop {
         let (done, deadline, moved) = {
             let mut out = lock(&q.out);
+            q.take_inbox(&mut out);
             (out.flush(&q.wire), out.queue.deadline(), out.moved)
         };
         q.room.notify_waiters();
@@ -1329,6 +1398,9 @@ async fn write_loop(q: Arc<ClientQueue>, stalled: Duration) {
                 w = q.wire.writable() => if w.is_err() {
                     return;
                 },
+                // Samples come meanwhile: queued, so the queue's length
+                // and rules bound them.
+                () = q.bell.notified() => {}
                 () = tokio::time::sleep_until((moved + stalled).into()) => {
                     if lock(&q.out).moved == moved {
                         // Dropped with a reset: what it did not read is
