@@ -16,6 +16,7 @@ pub mod codec;
 pub mod keys;
 
 mod any;
+mod bytes;
 mod geometry;
 mod iface;
 

@@ -34,6 +34,7 @@ pub struct Data {
     /// [`COMPRESS_RAW`] or [`COMPRESS_JPEG`].
     pub compression: u32,
     /// The pixels, or the compressed file.
+    #[serde(with = "crate::bytes::u8s")]
     pub image: Vec<u8>,
 }
 message!(Data, "camera/data@1");

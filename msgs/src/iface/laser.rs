@@ -18,6 +18,7 @@ pub struct Scan {
     /// Metres, one per beam.
     pub ranges: Vec<f32>,
     /// Reflectance per beam (0 = none), Player's `intensity`.
+    #[serde(with = "crate::bytes::u8s")]
     pub intensity: Vec<u8>,
     /// Scan counter.
     pub id: u32,

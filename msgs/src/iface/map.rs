@@ -38,6 +38,7 @@ pub struct Data {
     /// Rows in the tile.
     pub height: u32,
     /// `width * height` cells, row-major: -1 free, 0 unknown, +1 occupied.
+    #[serde(with = "crate::bytes::i8s")]
     pub cells: Vec<i8>,
 }
 message!(Data, "map/data@1");
