@@ -4,6 +4,7 @@
 //!   interface codes;
 //! - [`keys`]: the Zenoh key expressions, the only place keys are spelled;
 //! - [`codec`]: the postcard codec, whose payloads carry a schema tag;
+//! - [`protocol`]: Player's message types and subtypes, each named once;
 //! - one module per interface (`position2d`, `laser`, `map`, …) with its data,
 //!   commands and requests, in SI units and radians, with Player's meaning;
 //! - [`decode_any`]: decodes any payload by its tag, for tools like `troupe echo`.
@@ -14,6 +15,7 @@
 pub mod addr;
 pub mod codec;
 pub mod keys;
+pub mod protocol;
 
 mod any;
 mod bytes;

@@ -18,13 +18,13 @@
 use std::io::Write;
 
 use troupe_msgs::codec::{decode, encode, Command, Message, Request};
+use troupe_msgs::protocol::{self as p, CMD, REQ};
 use troupe_msgs::{
     aio, bumper, common, dio, fiducial, gripper, ir, laser, localize, log, map, planner,
     position2d, ptz, ranger, simulation, sonar, AnyMsg, Color, DecodeError, Interface, Pose2d,
     Pose3d, Size2d, Size3d,
 };
 
-use crate::wire::{CMD, REQ};
 use crate::xdr::{Reader, Writer, XdrError};
 
 /// Why a message could not be translated.
@@ -169,44 +169,44 @@ pub fn to_player(msg: &AnyMsg) -> Option<(Interface, u8, Vec<u8>)> {
             w_pose2d(&mut w, &d.pose);
             w_pose2d(&mut w, &d.vel);
             w.flag(d.stall);
-            (I::Position2d, 1)
+            (I::Position2d, p::position2d::DATA_STATE)
         }
         AnyMsg::Position2dGeom(g) => {
             position2d_geom(g, &mut w);
-            (I::Position2d, 2)
+            (I::Position2d, p::position2d::DATA_GEOM)
         }
         AnyMsg::LaserScan(s) => {
             laser_scan(s, &mut w);
-            (I::Laser, 1)
+            (I::Laser, p::laser::DATA_SCAN)
         }
         AnyMsg::LaserScanPose(s) => {
             laser_scan(&s.scan, &mut w);
             w_pose2d(&mut w, &s.pose);
-            (I::Laser, 2)
+            (I::Laser, p::laser::DATA_SCANPOSE)
         }
         AnyMsg::RangerRanges(r) => {
             w_f64s(&mut w, &r.ranges);
-            (I::Ranger, 1)
+            (I::Ranger, p::ranger::DATA_RANGE)
         }
         AnyMsg::RangerIntensities(r) => {
             w_f64s(&mut w, &r.intensities);
-            (I::Ranger, 3)
+            (I::Ranger, p::ranger::DATA_INTNS)
         }
         AnyMsg::RangerGeom(g) => {
             ranger_geom(g, &mut w);
-            (I::Ranger, 5)
+            (I::Ranger, p::ranger::DATA_GEOM)
         }
         AnyMsg::SonarRanges(s) => {
             w_f32s(&mut w, &s.ranges);
-            (I::Sonar, 1)
+            (I::Sonar, p::sonar::DATA_RANGES)
         }
         AnyMsg::SonarGeom(g) => {
             w_pose3ds(&mut w, &g.poses);
-            (I::Sonar, 2)
+            (I::Sonar, p::sonar::DATA_GEOM)
         }
         AnyMsg::MapInfo(i) => {
             map_info(i, &mut w);
-            (I::Map, 1)
+            (I::Map, p::map::DATA_INFO)
         }
         AnyMsg::LocalizeHypoths(h) => {
             w.u32(h.pending_count).f64(h.pending_time);
@@ -217,7 +217,7 @@ pub fn to_player(msg: &AnyMsg) -> Option<(Interface, u8, Vec<u8>)> {
                 }
                 w.f64(h.weight);
             });
-            (I::Localize, 1)
+            (I::Localize, p::localize::DATA_HYPOTHS)
         }
         AnyMsg::PlannerState(s) => {
             w.flag(s.valid).flag(s.done);
@@ -225,7 +225,7 @@ pub fn to_player(msg: &AnyMsg) -> Option<(Interface, u8, Vec<u8>)> {
             w_pose2d(&mut w, &s.goal);
             w_pose2d(&mut w, &s.waypoint);
             w.i32(s.waypoint_idx).u32(s.waypoints_count);
-            (I::Planner, 1)
+            (I::Planner, p::planner::DATA_STATE)
         }
         AnyMsg::BlobfinderData(d) => {
             w.u32(d.width).u32(d.height);
@@ -241,7 +241,7 @@ pub fn to_player(msg: &AnyMsg) -> Option<(Interface, u8, Vec<u8>)> {
                     .u32(b.bottom)
                     .f32(b.range);
             });
-            (I::Blobfinder, 1)
+            (I::Blobfinder, p::blobfinder::DATA_BLOBS)
         }
         AnyMsg::GripperData(d) => {
             let state = match d.state {
@@ -251,7 +251,7 @@ pub fn to_player(msg: &AnyMsg) -> Option<(Interface, u8, Vec<u8>)> {
                 gripper::State::Error => 4,
             };
             w.u32(state).u32(d.beams).u32(u32::from(d.stored));
-            (I::Gripper, 1)
+            (I::Gripper, p::gripper::DATA_STATE)
         }
         AnyMsg::FiducialData(d) => {
             w.array(&d.fiducials, |w, f| {
@@ -259,7 +259,7 @@ pub fn to_player(msg: &AnyMsg) -> Option<(Interface, u8, Vec<u8>)> {
                 w_pose3d(w, &f.pose);
                 w_pose3d(w, &f.upose);
             });
-            (I::Fiducial, 1)
+            (I::Fiducial, p::fiducial::DATA_SCAN)
         }
         AnyMsg::PowerData(p) => {
             w.u32(p.valid)
@@ -268,7 +268,7 @@ pub fn to_player(msg: &AnyMsg) -> Option<(Interface, u8, Vec<u8>)> {
                 .f32(p.joules)
                 .f32(p.watts)
                 .i32(i32::from(p.charging));
-            (I::Power, 1)
+            (I::Power, p::power::DATA_STATE)
         }
         AnyMsg::GpsData(g) => {
             // player_gps_data_t: Player's fixed-point fields.
@@ -290,7 +290,7 @@ pub fn to_player(msg: &AnyMsg) -> Option<(Interface, u8, Vec<u8>)> {
                 .u32(whole(g.vdop * 10.0))
                 .f64(g.err_horz)
                 .f64(g.err_vert);
-            (I::Gps, 1)
+            (I::Gps, p::gps::DATA_STATE)
         }
         AnyMsg::CameraData(c) => {
             w.u32(c.width)
@@ -300,7 +300,7 @@ pub fn to_player(msg: &AnyMsg) -> Option<(Interface, u8, Vec<u8>)> {
                 .u32(c.fdiv)
                 .u32(c.compression)
                 .bytes(&c.image);
-            (I::Camera, 1)
+            (I::Camera, p::camera::DATA_STATE)
         }
         AnyMsg::WsnData(d) => {
             let p = &d.readings;
@@ -319,29 +319,29 @@ pub fn to_player(msg: &AnyMsg) -> Option<(Interface, u8, Vec<u8>)> {
             ] {
                 w.f32(v);
             }
-            (I::Wsn, 1)
+            (I::Wsn, p::wsn::DATA_STATE)
         }
         AnyMsg::BumperData(b) => {
             let bits: Vec<u8> = b.bumpers.iter().map(|&x| u8::from(x)).collect();
             w.bytes(&bits);
-            (I::Bumper, 1)
+            (I::Bumper, p::bumper::DATA_STATE)
         }
         AnyMsg::BumperGeom(g) => {
             bumper_geom(g, &mut w);
-            (I::Bumper, 2)
+            (I::Bumper, p::bumper::DATA_GEOM)
         }
         AnyMsg::IrData(d) => {
             w_f32s(&mut w, &d.voltages);
             w_f32s(&mut w, &d.ranges);
-            (I::Ir, 1)
+            (I::Ir, p::ir::DATA_RANGES)
         }
         AnyMsg::AioData(d) => {
             w_f32s(&mut w, &d.voltages);
-            (I::Aio, 1)
+            (I::Aio, p::aio::DATA_STATE)
         }
         AnyMsg::DioData(d) => {
             w.u32(d.count).u32(d.bits);
-            (I::Dio, 1)
+            (I::Dio, p::dio::DATA_VALUES)
         }
         AnyMsg::PtzData(d) => {
             w.f32(d.pan)
@@ -350,7 +350,7 @@ pub fn to_player(msg: &AnyMsg) -> Option<(Interface, u8, Vec<u8>)> {
                 .f32(d.panspeed)
                 .f32(d.tiltspeed)
                 .u32(0);
-            (I::Ptz, 1)
+            (I::Ptz, p::ptz::DATA_STATE)
         }
         _ => return None,
     };
@@ -519,14 +519,14 @@ fn translate(
     use Interface as I;
     let out = match (iface, kind, subtype) {
         // position2d
-        (I::Position2d, CMD, 1) => command(
+        (I::Position2d, CMD, p::position2d::CMD_VEL) => command(
             &position2d::CmdVel {
                 vel: r_pose2d(r)?,
                 state: r.flag()?,
             },
             t,
         ),
-        (I::Position2d, CMD, 2) => command(
+        (I::Position2d, CMD, p::position2d::CMD_POS) => command(
             &position2d::CmdPos {
                 pos: r_pose2d(r)?,
                 vel: r_pose2d(r)?,
@@ -534,30 +534,44 @@ fn translate(
             },
             t,
         ),
-        (I::Position2d, CMD, 3) => command(
+        (I::Position2d, CMD, p::position2d::CMD_CAR) => command(
             &position2d::CmdCar {
                 velocity: r.f64()?,
                 angle: r.f64()?,
             },
             t,
         ),
-        (I::Position2d, REQ, 1) => request(&position2d::GetGeom, t, position2d_geom),
-        (I::Position2d, REQ, 2) => request(&position2d::MotorPower { state: r.flag()? }, t, empty),
-        (I::Position2d, REQ, 3) => request(&position2d::VelocityMode { value: r.u32()? }, t, empty),
-        (I::Position2d, REQ, 4) => {
+        (I::Position2d, REQ, p::position2d::REQ_GET_GEOM) => {
+            request(&position2d::GetGeom, t, position2d_geom)
+        }
+        (I::Position2d, REQ, p::position2d::REQ_MOTOR_POWER) => {
+            request(&position2d::MotorPower { state: r.flag()? }, t, empty)
+        }
+        (I::Position2d, REQ, p::position2d::REQ_VELOCITY_MODE) => {
+            request(&position2d::VelocityMode { value: r.u32()? }, t, empty)
+        }
+        (I::Position2d, REQ, p::position2d::REQ_POSITION_MODE) => {
             request(&position2d::PositionMode { state: r.flag()? }, t, empty)
         }
-        (I::Position2d, REQ, 5) => request(&position2d::SetOdom { pose: r_pose2d(r)? }, t, empty),
-        (I::Position2d, REQ, 6) => request(&position2d::ResetOdom, t, empty),
+        (I::Position2d, REQ, p::position2d::REQ_SET_ODOM) => {
+            request(&position2d::SetOdom { pose: r_pose2d(r)? }, t, empty)
+        }
+        (I::Position2d, REQ, p::position2d::REQ_RESET_ODOM) => {
+            request(&position2d::ResetOdom, t, empty)
+        }
 
         // log
-        (I::Log, REQ, 1) => request(&log::SetWriteState { state: r.flag()? }, t, empty),
-        (I::Log, REQ, 2) => request(&log::SetReadState { state: r.flag()? }, t, empty),
-        (I::Log, REQ, 3) => request(&log::GetState, t, |s, w| {
+        (I::Log, REQ, p::log::REQ_SET_WRITE_STATE) => {
+            request(&log::SetWriteState { state: r.flag()? }, t, empty)
+        }
+        (I::Log, REQ, p::log::REQ_SET_READ_STATE) => {
+            request(&log::SetReadState { state: r.flag()? }, t, empty)
+        }
+        (I::Log, REQ, p::log::REQ_GET_STATE) => request(&log::GetState, t, |s, w| {
             w.u32(u32::from(s.kind)).flag(s.state);
         }),
-        (I::Log, REQ, 4) => request(&log::Rewind, t, empty),
-        (I::Log, REQ, 5) => request(
+        (I::Log, REQ, p::log::REQ_SET_READ_REWIND) => request(&log::Rewind, t, empty),
+        (I::Log, REQ, p::log::REQ_SET_FILENAME) => request(
             &log::SetFilename {
                 filename: r.string()?,
             },
@@ -566,8 +580,8 @@ fn translate(
         ),
 
         // laser
-        (I::Laser, REQ, 1) => request(&laser::GetGeom, t, laser_geom),
-        (I::Laser, REQ, 2) => {
+        (I::Laser, REQ, p::laser::REQ_GET_GEOM) => request(&laser::GetGeom, t, laser_geom),
+        (I::Laser, REQ, p::laser::REQ_SET_CONFIG) => {
             let config = laser::Config {
                 min_angle: r.f32()?,
                 max_angle: r.f32()?,
@@ -579,8 +593,8 @@ fn translate(
             };
             request(&laser::SetConfig { config }, t, laser_config)
         }
-        (I::Laser, REQ, 3) => request(&laser::GetConfig, t, laser_config),
-        (I::Laser, REQ, 5) => request(&laser::GetId, t, |i, w| {
+        (I::Laser, REQ, p::laser::REQ_GET_CONFIG) => request(&laser::GetConfig, t, laser_config),
+        (I::Laser, REQ, p::laser::REQ_GET_ID) => request(&laser::GetId, t, |i, w| {
             w.u32(i.serial_number);
         }),
         (I::Laser | I::Ranger | I::Sonar, REQ, _) if is_power(iface, subtype) => {
@@ -588,9 +602,11 @@ fn translate(
         }
 
         // ranger
-        (I::Ranger, REQ, 1) => request(&ranger::GetGeom, t, ranger_geom),
-        (I::Ranger, REQ, 3) => request(&ranger::IntensityEnable { state: r.flag()? }, t, empty),
-        (I::Ranger, REQ, 4) => {
+        (I::Ranger, REQ, p::ranger::REQ_GET_GEOM) => request(&ranger::GetGeom, t, ranger_geom),
+        (I::Ranger, REQ, p::ranger::REQ_INTNS) => {
+            request(&ranger::IntensityEnable { state: r.flag()? }, t, empty)
+        }
+        (I::Ranger, REQ, p::ranger::REQ_SET_CONFIG) => {
             let config = ranger::Config {
                 min_angle: r.f64()?,
                 max_angle: r.f64()?,
@@ -602,14 +618,18 @@ fn translate(
             };
             request(&ranger::SetConfig { config }, t, ranger_config)
         }
-        (I::Ranger, REQ, 5) => request(&ranger::GetConfig, t, ranger_config),
+        (I::Ranger, REQ, p::ranger::REQ_GET_CONFIG) => {
+            request(&ranger::GetConfig, t, ranger_config)
+        }
 
         // sonar
-        (I::Sonar, REQ, 1) => request(&sonar::GetGeom, t, |g, w| w_pose3ds(w, &g.poses)),
+        (I::Sonar, REQ, p::sonar::REQ_GET_GEOM) => {
+            request(&sonar::GetGeom, t, |g, w| w_pose3ds(w, &g.poses))
+        }
 
         // map
-        (I::Map, REQ, 1) => request(&map::GetInfo, t, map_info),
-        (I::Map, REQ, 2) => {
+        (I::Map, REQ, p::map::REQ_GET_INFO) => request(&map::GetInfo, t, map_info),
+        (I::Map, REQ, p::map::REQ_GET_DATA) => {
             let q = map::GetData {
                 col: r.u32()?,
                 row: r.u32()?,
@@ -621,7 +641,7 @@ fn translate(
             let _data = r.xdr_bytes()?;
             request(&q, t, map_data)
         }
-        (I::Map, REQ, 3) => request(&map::GetVector, t, |v, w| {
+        (I::Map, REQ, p::map::REQ_GET_VECTOR) => request(&map::GetVector, t, |v, w| {
             w.f32(v.min_x as f32)
                 .f32(v.max_x as f32)
                 .f32(v.min_y as f32)
@@ -632,7 +652,7 @@ fn translate(
         }),
 
         // localize
-        (I::Localize, REQ, 1) => {
+        (I::Localize, REQ, p::localize::REQ_SET_POSE) => {
             let mean = r_pose2d(r)?;
             let mut cov = [0.0; 6];
             for c in &mut cov {
@@ -641,30 +661,38 @@ fn translate(
             let q = localize::SetPose { mean, cov };
             request(&q, t, empty)
         }
-        (I::Localize, REQ, 2) => request(&localize::GetParticles, t, |p, w| {
-            w_pose2d(w, &p.mean);
-            w.f64(p.variance);
-            w.array(&p.particles, |w, p| {
-                w_pose2d(w, &p.pose);
-                w.f64(p.weight);
-            });
-        }),
+        (I::Localize, REQ, p::localize::REQ_GET_PARTICLES) => {
+            request(&localize::GetParticles, t, |p, w| {
+                w_pose2d(w, &p.mean);
+                w.f64(p.variance);
+                w.array(&p.particles, |w, p| {
+                    w_pose2d(w, &p.pose);
+                    w.f64(p.weight);
+                });
+            })
+        }
 
         // planner
-        (I::Planner, CMD, 1) => command(&planner::Goal { goal: r_pose2d(r)? }, t),
-        (I::Planner, REQ, 1) => request(&planner::GetWaypoints, t, |p, w| {
-            let dist: f64 = p
-                .waypoints
-                .windows(2)
-                .map(|ab| (ab[1].x - ab[0].x).hypot(ab[1].y - ab[0].y))
-                .sum();
-            w.f64(dist);
-            w.array(&p.waypoints, w_pose2d);
-        }),
-        (I::Planner, REQ, 2) => request(&planner::Enable { state: r.flag()? }, t, empty),
+        (I::Planner, CMD, p::planner::CMD_GOAL) => {
+            command(&planner::Goal { goal: r_pose2d(r)? }, t)
+        }
+        (I::Planner, REQ, p::planner::REQ_GET_WAYPOINTS) => {
+            request(&planner::GetWaypoints, t, |p, w| {
+                let dist: f64 = p
+                    .waypoints
+                    .windows(2)
+                    .map(|ab| (ab[1].x - ab[0].x).hypot(ab[1].y - ab[0].y))
+                    .sum();
+                w.f64(dist);
+                w.array(&p.waypoints, w_pose2d);
+            })
+        }
+        (I::Planner, REQ, p::planner::REQ_ENABLE) => {
+            request(&planner::Enable { state: r.flag()? }, t, empty)
+        }
 
         // simulation
-        (I::Simulation, REQ, 1) => {
+        (I::Simulation, REQ, p::simulation::REQ_GET_POSE2D) => {
             let name = r.string()?;
             let _pose = r_pose2d(r)?; // libplayerc sends its buffer's garbage here
             request(&simulation::GetPose2d { name }, t, |p, w| {
@@ -672,14 +700,14 @@ fn translate(
                 w_pose2d(w, &p.pose);
             })
         }
-        (I::Simulation, REQ, 2) => {
+        (I::Simulation, REQ, p::simulation::REQ_SET_POSE2D) => {
             let q = simulation::SetPose2d {
                 name: r.string()?,
                 pose: r_pose2d(r)?,
             };
             request(&q, t, empty)
         }
-        (I::Simulation, REQ, 3) => {
+        (I::Simulation, REQ, p::simulation::REQ_GET_POSE3D) => {
             let name = r.string()?;
             let _pose = r_pose3d(r)?; // the client's buffer, as for GET_POSE2D
             let _simtime = r.f64()?;
@@ -689,7 +717,7 @@ fn translate(
                 w.f64(p.simtime);
             })
         }
-        (I::Simulation, REQ, 4) => {
+        (I::Simulation, REQ, p::simulation::REQ_SET_POSE3D) => {
             let q = simulation::SetPose3d {
                 name: r.string()?,
                 pose: r_pose3d(r)?,
@@ -697,7 +725,7 @@ fn translate(
             let _simtime = r.f64()?;
             request(&q, t, empty)
         }
-        (I::Simulation, REQ, 5) => {
+        (I::Simulation, REQ, p::simulation::REQ_GET_PROPERTY) => {
             let name = r.string()?;
             let prop = r.string()?;
             let _index = r.u32()?;
@@ -719,7 +747,7 @@ fn translate(
                 w.bytes(&property_bytes(&p.value, buffer));
             })
         }
-        (I::Simulation, REQ, 6) => {
+        (I::Simulation, REQ, p::simulation::REQ_SET_PROPERTY) => {
             let name = r.string()?;
             let prop = r.string()?;
             let _index = r.u32()?;
@@ -728,10 +756,10 @@ fn translate(
         }
 
         // gripper
-        (I::Gripper, CMD, 1) => command(&gripper::Open, t),
-        (I::Gripper, CMD, 2) => command(&gripper::Close, t),
-        (I::Gripper, CMD, 3) => command(&gripper::Stop, t),
-        (I::Gripper, REQ, 1) => request(&gripper::GetGeom, t, |g, w| {
+        (I::Gripper, CMD, p::gripper::CMD_OPEN) => command(&gripper::Open, t),
+        (I::Gripper, CMD, p::gripper::CMD_CLOSE) => command(&gripper::Close, t),
+        (I::Gripper, CMD, p::gripper::CMD_STOP) => command(&gripper::Stop, t),
+        (I::Gripper, REQ, p::gripper::REQ_GET_GEOM) => request(&gripper::GetGeom, t, |g, w| {
             w_pose3d(w, &g.pose);
             w_bbox3d(w, &g.outer_size);
             w_bbox3d(w, &g.inner_size);
@@ -739,37 +767,39 @@ fn translate(
         }),
 
         // fiducial
-        (I::Fiducial, REQ, 1) => request(&fiducial::GetGeom, t, |g, w| {
+        (I::Fiducial, REQ, p::fiducial::REQ_GET_GEOM) => request(&fiducial::GetGeom, t, |g, w| {
             w_pose3d(w, &g.pose);
             w_bbox3d(w, &g.size);
             w_bbox2d(w, &g.fiducial_size);
         }),
-        (I::Fiducial, REQ, 7) => request(&fiducial::GetId, t, |i, w| {
+        (I::Fiducial, REQ, p::fiducial::REQ_GET_ID) => request(&fiducial::GetId, t, |i, w| {
             w.u32(i.id);
         }),
-        (I::Fiducial, REQ, 8) => request(&fiducial::SetId { id: r.u32()? }, t, |i, w| {
-            w.u32(i.id);
-        }),
+        (I::Fiducial, REQ, p::fiducial::REQ_SET_ID) => {
+            request(&fiducial::SetId { id: r.u32()? }, t, |i, w| {
+                w.u32(i.id);
+            })
+        }
 
         // bumper, ir, aio, dio, ptz
-        (I::Bumper, REQ, 1) => request(&bumper::GetGeom, t, bumper_geom),
-        (I::Ir, REQ, 1) => request(&ir::GetGeom, t, |g, w| w_pose3ds(w, &g.poses)),
-        (I::Ir, REQ, 2) => request(&common::Power { state: r.flag()? }, t, empty),
-        (I::Aio, CMD, 1) => command(
+        (I::Bumper, REQ, p::bumper::REQ_GET_GEOM) => request(&bumper::GetGeom, t, bumper_geom),
+        (I::Ir, REQ, p::ir::REQ_POSE) => request(&ir::GetGeom, t, |g, w| w_pose3ds(w, &g.poses)),
+        (I::Ir, REQ, p::ir::REQ_POWER) => request(&common::Power { state: r.flag()? }, t, empty),
+        (I::Aio, CMD, p::aio::CMD_STATE) => command(
             &aio::Cmd {
                 id: r.u32()?,
                 voltage: r.f32()?,
             },
             t,
         ),
-        (I::Dio, CMD, 1) => command(
+        (I::Dio, CMD, p::dio::CMD_VALUES) => command(
             &dio::Cmd {
                 count: r.u32()?,
                 bits: r.u32()?,
             },
             t,
         ),
-        (I::Ptz, CMD, 1) => command(
+        (I::Ptz, CMD, p::ptz::CMD_STATE) => command(
             &ptz::Cmd {
                 target: ptz::Data {
                     pan: r.f32()?,
@@ -826,7 +856,7 @@ pub fn data_from_player(
     let r = &mut r;
     let out = (|| -> Result<Option<Vec<u8>>, XdrError> {
         let payload = match (iface, subtype) {
-            (I::Position2d, 1) => encode(
+            (I::Position2d, p::position2d::DATA_STATE) => encode(
                 &position2d::Data {
                     pose: r_pose2d(r)?,
                     vel: r_pose2d(r)?,
@@ -834,23 +864,27 @@ pub fn data_from_player(
                 },
                 stamp,
             ),
-            (I::Laser, 1) => encode(&r_laser_scan(r)?, stamp),
-            (I::Laser, 2) => encode(
+            (I::Laser, p::laser::DATA_SCAN) => encode(&r_laser_scan(r)?, stamp),
+            (I::Laser, p::laser::DATA_SCANPOSE) => encode(
                 &laser::ScanPose {
                     scan: r_laser_scan(r)?,
                     pose: r_pose2d(r)?,
                 },
                 stamp,
             ),
-            (I::Ranger, 1) => encode(&ranger::Ranges { ranges: r_f64s(r)? }, stamp),
-            (I::Ranger, 3) => encode(
+            (I::Ranger, p::ranger::DATA_RANGE) => {
+                encode(&ranger::Ranges { ranges: r_f64s(r)? }, stamp)
+            }
+            (I::Ranger, p::ranger::DATA_INTNS) => encode(
                 &ranger::Intensities {
                     intensities: r_f64s(r)?,
                 },
                 stamp,
             ),
-            (I::Sonar, 1) => encode(&sonar::Ranges { ranges: r_f32s(r)? }, stamp),
-            (I::Power, 1) => encode(
+            (I::Sonar, p::sonar::DATA_RANGES) => {
+                encode(&sonar::Ranges { ranges: r_f32s(r)? }, stamp)
+            }
+            (I::Power, p::power::DATA_STATE) => encode(
                 &troupe_msgs::power::Data {
                     valid: r.u32()?,
                     volts: r.f32()?,
@@ -861,7 +895,7 @@ pub fn data_from_player(
                 },
                 stamp,
             ),
-            (I::Gps, 1) => {
+            (I::Gps, p::gps::DATA_STATE) => {
                 let (secs, usecs) = (r.u32()?, r.u32()?);
                 encode(
                     &troupe_msgs::gps::Data {
@@ -883,7 +917,7 @@ pub fn data_from_player(
                     stamp,
                 )
             }
-            (I::Camera, 1) => encode(
+            (I::Camera, p::camera::DATA_STATE) => encode(
                 &troupe_msgs::camera::Data {
                     width: r.u32()?,
                     height: r.u32()?,
@@ -895,7 +929,7 @@ pub fn data_from_player(
                 },
                 stamp,
             ),
-            (I::Wsn, 1) => encode(
+            (I::Wsn, p::wsn::DATA_STATE) => encode(
                 &troupe_msgs::wsn::Data {
                     node_type: r.u32()?,
                     node_id: r.u32()?,
@@ -915,20 +949,20 @@ pub fn data_from_player(
                 },
                 stamp,
             ),
-            (I::Ir, 1) => encode(
+            (I::Ir, p::ir::DATA_RANGES) => encode(
                 &ir::Data {
                     voltages: r_f32s(r)?,
                     ranges: r_f32s(r)?,
                 },
                 stamp,
             ),
-            (I::Aio, 1) => encode(
+            (I::Aio, p::aio::DATA_STATE) => encode(
                 &aio::Data {
                     voltages: r_f32s(r)?,
                 },
                 stamp,
             ),
-            (I::Dio, 1) => encode(
+            (I::Dio, p::dio::DATA_VALUES) => encode(
                 &dio::Data {
                     count: r.u32()?,
                     bits: r.u32()?,
@@ -1078,7 +1112,7 @@ pub fn request_to_player(iface: Interface, payload: &[u8]) -> Option<ToServer> {
     let mut w = Writer::new();
     let (subtype, reply) = match &msg {
         AnyMsg::Position2dGetGeom(_) => (
-            1,
+            p::position2d::REQ_GET_GEOM,
             answer(|r| {
                 Ok(position2d::Geom {
                     pose: r_pose3d(r)?,
@@ -1088,23 +1122,23 @@ pub fn request_to_player(iface: Interface, payload: &[u8]) -> Option<ToServer> {
         ),
         AnyMsg::Position2dMotorPower(q) => {
             w.flag(q.state);
-            (2, acked())
+            (p::position2d::REQ_MOTOR_POWER, acked())
         }
         AnyMsg::Position2dVelocityMode(q) => {
             w.u32(q.value);
-            (3, acked())
+            (p::position2d::REQ_VELOCITY_MODE, acked())
         }
         AnyMsg::Position2dPositionMode(q) => {
             w.flag(q.state);
-            (4, acked())
+            (p::position2d::REQ_POSITION_MODE, acked())
         }
         AnyMsg::Position2dSetOdom(q) => {
             w_pose2d(&mut w, &q.pose);
-            (5, acked())
+            (p::position2d::REQ_SET_ODOM, acked())
         }
-        AnyMsg::Position2dResetOdom(_) => (6, acked()),
+        AnyMsg::Position2dResetOdom(_) => (p::position2d::REQ_RESET_ODOM, acked()),
         AnyMsg::LaserGetGeom(_) => (
-            1,
+            p::laser::REQ_GET_GEOM,
             answer(|r| {
                 Ok(laser::Geom {
                     pose: r_pose3d(r)?,
@@ -1114,11 +1148,11 @@ pub fn request_to_player(iface: Interface, payload: &[u8]) -> Option<ToServer> {
         ),
         AnyMsg::LaserSetConfig(q) => {
             laser_config(&q.config, &mut w);
-            (2, answer(r_laser_config))
+            (p::laser::REQ_SET_CONFIG, answer(r_laser_config))
         }
-        AnyMsg::LaserGetConfig(_) => (3, answer(r_laser_config)),
+        AnyMsg::LaserGetConfig(_) => (p::laser::REQ_GET_CONFIG, answer(r_laser_config)),
         AnyMsg::RangerGetGeom(_) => (
-            1,
+            p::ranger::REQ_GET_GEOM,
             answer(|r| {
                 Ok(ranger::Geom {
                     pose: r_pose3d(r)?,
@@ -1130,11 +1164,11 @@ pub fn request_to_player(iface: Interface, payload: &[u8]) -> Option<ToServer> {
         ),
         AnyMsg::RangerSetConfig(q) => {
             ranger_config(&q.config, &mut w);
-            (4, answer(r_ranger_config))
+            (p::ranger::REQ_SET_CONFIG, answer(r_ranger_config))
         }
-        AnyMsg::RangerGetConfig(_) => (5, answer(r_ranger_config)),
+        AnyMsg::RangerGetConfig(_) => (p::ranger::REQ_GET_CONFIG, answer(r_ranger_config)),
         AnyMsg::SonarGetGeom(_) => (
-            1,
+            p::sonar::REQ_GET_GEOM,
             answer(|r| {
                 Ok(sonar::Geom {
                     poses: r.array(48, r_pose3d)?,
@@ -1142,7 +1176,7 @@ pub fn request_to_player(iface: Interface, payload: &[u8]) -> Option<ToServer> {
             }),
         ),
         AnyMsg::MapGetInfo(_) => (
-            1,
+            p::map::REQ_GET_INFO,
             answer(|r| {
                 Ok(map::Info {
                     resolution: r.f32()?,
@@ -1154,19 +1188,21 @@ pub fn request_to_player(iface: Interface, payload: &[u8]) -> Option<ToServer> {
         ),
         AnyMsg::PlannerEnable(q) => {
             w.flag(q.state);
-            (2, acked())
+            (p::planner::REQ_ENABLE, acked())
         }
         AnyMsg::LocalizeSetPose(q) => {
             w_pose2d(&mut w, &q.mean);
             for c in q.cov {
                 w.f64(c);
             }
-            (1, acked())
+            (p::localize::REQ_SET_POSE, acked())
         }
         AnyMsg::Power(q) => {
             let subtype = match iface {
-                Interface::Laser => 4,
-                Interface::Ranger | Interface::Sonar | Interface::Ir => 2,
+                Interface::Laser => p::laser::REQ_POWER,
+                Interface::Ranger => p::ranger::REQ_POWER,
+                Interface::Sonar => p::sonar::REQ_POWER,
+                Interface::Ir => p::ir::REQ_POWER,
                 _ => return None,
             };
             w.flag(q.state);
@@ -1181,11 +1217,13 @@ pub fn request_to_player(iface: Interface, payload: &[u8]) -> Option<ToServer> {
     })
 }
 
-/// Player's POWER request subtypes: laser 4, ranger 2, sonar 2.
+/// Player's POWER requests of the laser, ranger and sonar.
 fn is_power(iface: Interface, subtype: u8) -> bool {
     matches!(
         (iface, subtype),
-        (Interface::Laser, 4) | (Interface::Ranger, 2) | (Interface::Sonar, 2)
+        (Interface::Laser, p::laser::REQ_POWER)
+            | (Interface::Ranger, p::ranger::REQ_POWER)
+            | (Interface::Sonar, p::sonar::REQ_POWER)
     )
 }
 

@@ -273,7 +273,7 @@ pub async fn run(
     let mut w = Writer::new();
     w.u32(0).array(&[] as &[u32], |_, _| {});
     let list = conn
-        .ask(player::DEVLIST, &w.finish(), &mut ignore)
+        .ask(player::REQ_DEVLIST, &w.finish(), &mut ignore)
         .await?
         .ok_or_else(|| conn.protocol("refused DEVLIST"))?;
     let mut r = Reader::new(&list);
@@ -299,7 +299,7 @@ pub async fn run(
         w_addr(&mut w, a);
         w.bytes(&[]);
         let driver = match conn
-            .ask(player::DRIVERINFO, &w.finish(), &mut ignore)
+            .ask(player::REQ_DRIVERINFO, &w.finish(), &mut ignore)
             .await?
         {
             Some(b) => {
@@ -314,7 +314,7 @@ pub async fn run(
         w_addr(&mut w, a);
         w.u32(player::OPEN).bytes(&[]);
         if conn
-            .ask(player::DEV, &w.finish(), &mut ignore)
+            .ask(player::REQ_DEV, &w.finish(), &mut ignore)
             .await?
             .is_none()
         {

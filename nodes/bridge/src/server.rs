@@ -1052,7 +1052,7 @@ impl Conn {
         }
         let mut r = Reader::new(body);
         match u8::try_from(h.subtype).unwrap_or(0) {
-            player::DEVLIST => {
+            player::REQ_DEVLIST => {
                 let list = self.shared.devlist(self.robot);
                 let mut w = Writer::new();
                 w.array(&list, |w, d| {
@@ -1063,7 +1063,7 @@ impl Conn {
                 });
                 self.reply(&h, RESP_ACK, &w.finish());
             }
-            player::DRIVERINFO => {
+            player::REQ_DRIVERINFO => {
                 let (interf, index) = read_addr(&mut r).map_err(bad)?;
                 r.bytes().and_then(|_| r.end()).map_err(bad)?;
                 match self.device(interf, index) {
@@ -1076,7 +1076,7 @@ impl Conn {
                     None => self.reply(&h, RESP_NACK, &[]),
                 }
             }
-            player::DEV => {
+            player::REQ_DEV => {
                 let (interf, index) = read_addr(&mut r).map_err(bad)?;
                 let access = r.u32().map_err(bad)?;
                 r.bytes().and_then(|_| r.end()).map_err(bad)?;
@@ -1125,11 +1125,11 @@ impl Conn {
                     }
                 }
             }
-            player::DATA => {
+            player::REQ_DATA => {
                 let ack = Out::new(self.header(h.interf, h.index, RESP_ACK, h.subtype), &[]);
                 self.queue.with(|q| q.request_data(ack));
             }
-            player::DATAMODE => {
+            player::REQ_DATAMODE => {
                 let mode = r.u32().and_then(|m| r.end().map(|()| m)).map_err(bad)?;
                 match mode {
                     player::PUSH => self.queue.with(|q| q.set_pull(false)),
@@ -1138,7 +1138,7 @@ impl Conn {
                 }
                 self.reply(&h, RESP_ACK, &[]);
             }
-            player::ADD_REPLACE_RULE => {
+            player::REQ_ADD_REPLACE_RULE => {
                 let mut f = [0i32; 5];
                 for v in &mut f {
                     *v = r.i32().map_err(bad)?;

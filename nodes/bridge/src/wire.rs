@@ -13,39 +13,15 @@ pub const HEADER_LEN: usize = 40;
 /// Player's limit on a whole message, header included (8 MiB).
 pub const MAX_MESSAGE: usize = 8 * 1024 * 1024;
 
-/// `PLAYER_MSGTYPE_DATA`.
-pub const DATA: u8 = 1;
-/// `PLAYER_MSGTYPE_CMD`.
-pub const CMD: u8 = 2;
-/// `PLAYER_MSGTYPE_REQ`.
-pub const REQ: u8 = 3;
-/// `PLAYER_MSGTYPE_RESP_ACK`.
-pub const RESP_ACK: u8 = 4;
-/// `PLAYER_MSGTYPE_SYNCH`.
-pub const SYNCH: u8 = 5;
-/// `PLAYER_MSGTYPE_RESP_NACK`.
-pub const RESP_NACK: u8 = 6;
+pub use troupe_msgs::protocol::{CMD, DATA, REQ, RESP_ACK, RESP_NACK, SYNCH};
 
 /// Interface code of the `player` meta-device.
 pub const PLAYER_CODE: u16 = 1;
-/// `player` requests.
+/// The `player` meta-device's message subtypes, and the modes its
+/// requests carry (`player.h`).
 pub mod player {
-    /// Device list.
-    pub const DEVLIST: u8 = 1;
-    /// Driver name of a device.
-    pub const DRIVERINFO: u8 = 2;
-    /// Subscribe/unsubscribe.
-    pub const DEV: u8 = 3;
-    /// One round of data in PULL mode.
-    pub const DATA: u8 = 4;
-    /// PUSH or PULL.
-    pub const DATAMODE: u8 = 5;
-    /// Replace rules of the client's queue.
-    pub const ADD_REPLACE_RULE: u8 = 10;
-    /// SYNCH subtype: end of a PULL round.
-    pub const SYNCH_OK: u8 = 1;
-    /// SYNCH subtype: end of a PULL round in which data was dropped.
-    pub const SYNCH_OVERFLOW: u8 = 2;
+    pub use troupe_msgs::protocol::player::*;
+
     /// `PLAYER_OPEN_MODE`.
     pub const OPEN: u32 = 1;
     /// `PLAYER_CLOSE_MODE`.

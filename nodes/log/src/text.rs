@@ -20,10 +20,8 @@ use troupe_msgs::{
     ptz, ranger, sonar, AnyMsg, Interface, Pose2d, Pose3d, Size2d, Size3d,
 };
 
-/// Player's `PLAYER_MSGTYPE_DATA`.
-pub const DATA: u8 = 1;
-/// Player's `PLAYER_MSGTYPE_RESP_ACK`.
-pub const RESP_ACK: u8 = 4;
+use troupe_msgs::protocol as p;
+pub use troupe_msgs::protocol::{DATA, RESP_ACK};
 /// 127.0.0.1 as Player packs a host address (the host field of every line
 /// Troupe writes: Troupe's devices have no host of their own).
 pub const LOCALHOST: u32 = 16_777_343;
@@ -116,7 +114,7 @@ fn payload(msg: &AnyMsg) -> Option<(u8, u8, String)> {
                 scan.ranges.len()
             );
             beams(&mut s, &scan.ranges, &scan.intensity);
-            (DATA, 1)
+            (DATA, p::laser::DATA_SCAN)
         }
         AnyMsg::LaserScanPose(sp) => {
             let (scan, p) = (&sp.scan, &sp.pose);
@@ -134,7 +132,7 @@ fn payload(msg: &AnyMsg) -> Option<(u8, u8, String)> {
                 scan.ranges.len()
             );
             beams(&mut s, &scan.ranges, &scan.intensity);
-            (DATA, 2)
+            (DATA, p::laser::DATA_SCANPOSE)
         }
         AnyMsg::LaserGeom(g) => {
             let _ = write!(
@@ -142,15 +140,15 @@ fn payload(msg: &AnyMsg) -> Option<(u8, u8, String)> {
                 "{:+7.3} {:+7.3} {:7.3} {:7.3} {:7.3}",
                 g.pose.x, g.pose.y, g.pose.yaw, g.size.length, g.size.width
             );
-            (RESP_ACK, 1)
+            (RESP_ACK, p::laser::REQ_GET_GEOM)
         }
         AnyMsg::RangerRanges(r) => {
             values(&mut s, true, &r.ranges);
-            (DATA, 1)
+            (DATA, p::ranger::DATA_RANGE)
         }
         AnyMsg::RangerIntensities(r) => {
             values(&mut s, true, &r.intensities);
-            (DATA, 3)
+            (DATA, p::ranger::DATA_INTNS)
         }
         AnyMsg::RangerGeom(g) => {
             pose3d6(&mut s, &g.pose);
@@ -163,7 +161,7 @@ fn payload(msg: &AnyMsg) -> Option<(u8, u8, String)> {
             for z in &g.element_sizes {
                 size3(&mut s, z);
             }
-            (RESP_ACK, 1)
+            (RESP_ACK, p::ranger::REQ_GET_GEOM)
         }
         AnyMsg::RangerConfig(c) => {
             let _ = write!(
@@ -177,7 +175,7 @@ fn payload(msg: &AnyMsg) -> Option<(u8, u8, String)> {
                 c.range_res,
                 c.frequency
             );
-            (RESP_ACK, 5)
+            (RESP_ACK, p::ranger::REQ_GET_CONFIG)
         }
         AnyMsg::Position2dData(d) => {
             pose2d_line(&mut s, &d.pose);
@@ -189,7 +187,7 @@ fn payload(msg: &AnyMsg) -> Option<(u8, u8, String)> {
                 d.vel.yaw,
                 u8::from(d.stall)
             );
-            (DATA, 1)
+            (DATA, p::position2d::DATA_STATE)
         }
         AnyMsg::Position2dGeom(g) => {
             let _ = write!(
@@ -197,15 +195,15 @@ fn payload(msg: &AnyMsg) -> Option<(u8, u8, String)> {
                 "{:+07.3} {:+07.3} {:+04.3} {:+07.3} {:+07.3}",
                 g.pose.x, g.pose.y, g.pose.yaw, g.size.length, g.size.width
             );
-            (RESP_ACK, 1)
+            (RESP_ACK, p::position2d::REQ_GET_GEOM)
         }
         AnyMsg::SonarRanges(r) => {
             values(&mut s, false, &r.ranges);
-            (DATA, 1)
+            (DATA, p::sonar::DATA_RANGES)
         }
         AnyMsg::SonarGeom(g) => {
             planar_poses(&mut s, &g.poses);
-            (RESP_ACK, 1)
+            (RESP_ACK, p::sonar::REQ_GET_GEOM)
         }
         AnyMsg::LocalizeHypoths(h) => {
             let _ = write!(
@@ -223,7 +221,7 @@ fn payload(msg: &AnyMsg) -> Option<(u8, u8, String)> {
                     h.mean.x, h.mean.y, h.mean.yaw, c[0], c[1], c[2], c[3], c[4], c[5], h.weight
                 );
             }
-            (DATA, 1)
+            (DATA, p::localize::DATA_HYPOTHS)
         }
         AnyMsg::LocalizeParticles(p) => {
             let _ = write!(
@@ -242,7 +240,7 @@ fn payload(msg: &AnyMsg) -> Option<(u8, u8, String)> {
                     q.pose.x, q.pose.y, q.pose.yaw, q.weight
                 );
             }
-            (RESP_ACK, 2)
+            (RESP_ACK, p::localize::REQ_GET_PARTICLES)
         }
         AnyMsg::PtzData(d) => {
             let _ = write!(
@@ -250,7 +248,7 @@ fn payload(msg: &AnyMsg) -> Option<(u8, u8, String)> {
                 "{:+07.3} {:+07.3} {:+04.3} {:+07.3} {:+07.3}",
                 d.pan, d.tilt, d.zoom, d.panspeed, d.tiltspeed
             );
-            (DATA, 1)
+            (DATA, p::ptz::DATA_STATE)
         }
         AnyMsg::PowerData(d) => {
             let on = |mask: u32, v: f32| if d.valid & mask != 0 { v } else { 0.0 };
@@ -264,7 +262,7 @@ fn payload(msg: &AnyMsg) -> Option<(u8, u8, String)> {
                 u8::from(d.valid & power::VALID_CHARGING != 0 && d.charging),
                 d.valid
             );
-            (DATA, 1)
+            (DATA, p::power::DATA_STATE)
         }
         AnyMsg::GpsData(d) => {
             // The fields Player's readlog reads (21 tokens, speed and
@@ -291,7 +289,7 @@ fn payload(msg: &AnyMsg) -> Option<(u8, u8, String)> {
                 d.speed,
                 d.course
             );
-            (DATA, 1)
+            (DATA, p::gps::DATA_STATE)
         }
         AnyMsg::CameraData(d) => {
             // writelog's fields (no fdiv), then the image as upper-case hex
@@ -311,11 +309,11 @@ fn payload(msg: &AnyMsg) -> Option<(u8, u8, String)> {
                 s.push(char::from(HEX[usize::from(b >> 4)]));
                 s.push(char::from(HEX[usize::from(b & 0x0f)]));
             }
-            (DATA, 1)
+            (DATA, p::camera::DATA_STATE)
         }
         AnyMsg::AioData(d) => {
             values(&mut s, true, &d.voltages);
-            (DATA, 1)
+            (DATA, p::aio::DATA_STATE)
         }
         AnyMsg::DioData(d) => {
             let count = d.count.min(32);
@@ -323,25 +321,25 @@ fn payload(msg: &AnyMsg) -> Option<(u8, u8, String)> {
             for i in 0..count {
                 let _ = write!(s, "{} ", (d.bits >> i) & 1);
             }
-            (DATA, 1)
+            (DATA, p::dio::DATA_VALUES)
         }
         AnyMsg::IrData(d) => {
             let _ = write!(s, "{} ", d.ranges.len());
             for v in &d.ranges {
                 let _ = write!(s, "{v:3.3} ");
             }
-            (DATA, 1)
+            (DATA, p::ir::DATA_RANGES)
         }
         AnyMsg::IrGeom(g) => {
             planar_poses(&mut s, &g.poses);
-            (RESP_ACK, 1)
+            (RESP_ACK, p::ir::REQ_POSE)
         }
         AnyMsg::BumperData(d) => {
             let _ = write!(s, "{} ", d.bumpers.len());
             for b in &d.bumpers {
                 let _ = write!(s, "{} ", u8::from(*b));
             }
-            (DATA, 1)
+            (DATA, p::bumper::DATA_STATE)
         }
         AnyMsg::BumperGeom(g) => {
             let _ = write!(s, "{} ", g.bumpers.len());
@@ -352,7 +350,7 @@ fn payload(msg: &AnyMsg) -> Option<(u8, u8, String)> {
                     b.pose.x, b.pose.y, b.pose.yaw, b.length, b.radius
                 );
             }
-            (RESP_ACK, 1)
+            (RESP_ACK, p::bumper::REQ_GET_GEOM)
         }
         AnyMsg::FiducialData(d) => {
             let _ = write!(s, "{}", d.fiducials.len());
@@ -366,7 +364,7 @@ fn payload(msg: &AnyMsg) -> Option<(u8, u8, String)> {
                     );
                 }
             }
-            (DATA, 1)
+            (DATA, p::fiducial::DATA_SCAN)
         }
         AnyMsg::FiducialGeom(g) => {
             // Player's format strings meet without a space between pitch and yaw.
@@ -386,7 +384,7 @@ fn payload(msg: &AnyMsg) -> Option<(u8, u8, String)> {
                 g.fiducial_size.length,
                 g.fiducial_size.width
             );
-            (RESP_ACK, 1)
+            (RESP_ACK, p::fiducial::REQ_GET_GEOM)
         }
         AnyMsg::BlobfinderData(d) => {
             let _ = write!(s, "{} {} {}", d.width, d.height, d.blobs.len());
@@ -397,7 +395,7 @@ fn payload(msg: &AnyMsg) -> Option<(u8, u8, String)> {
                     b.id, b.color, b.area, b.x, b.y, b.left, b.right, b.top, b.bottom, b.range
                 );
             }
-            (DATA, 1)
+            (DATA, p::blobfinder::DATA_BLOBS)
         }
         _ => return None,
     };
@@ -732,7 +730,7 @@ pub fn message(line: &Line<'_>) -> Result<AnyMsg, LineError> {
     use Interface as I;
     let mut f = Fields { line, at: 0 };
     let msg = match (line.interface, line.kind, line.subtype) {
-        (I::Laser, DATA, 1) => {
+        (I::Laser, DATA, p::laser::DATA_SCAN) => {
             let mut scan = laser::Scan {
                 id: f.f64()? as u32,
                 min_angle: f.f32()?,
@@ -744,7 +742,7 @@ pub fn message(line: &Line<'_>) -> Result<AnyMsg, LineError> {
             f.beams(&mut scan)?;
             AnyMsg::LaserScan(scan)
         }
-        (I::Laser, DATA, 2) => {
+        (I::Laser, DATA, p::laser::DATA_SCANPOSE) => {
             let id = f.f64()? as u32;
             let pose = f.pose2d()?;
             let mut scan = laser::Scan {
@@ -758,21 +756,21 @@ pub fn message(line: &Line<'_>) -> Result<AnyMsg, LineError> {
             f.beams(&mut scan)?;
             AnyMsg::LaserScanPose(laser::ScanPose { scan, pose })
         }
-        (I::Laser, RESP_ACK, 1) => {
+        (I::Laser, RESP_ACK, p::laser::REQ_GET_GEOM) => {
             let (pose, size) = f.planar_body()?;
             AnyMsg::LaserGeom(laser::Geom { pose, size })
         }
-        (I::Ranger, DATA, 1) => {
+        (I::Ranger, DATA, p::ranger::DATA_RANGE) => {
             let n = f.count(1)?;
             let ranges = (0..n).map(|_| f.f64()).collect::<Result<_, _>>()?;
             AnyMsg::RangerRanges(ranger::Ranges { ranges })
         }
-        (I::Ranger, DATA, 3) => {
+        (I::Ranger, DATA, p::ranger::DATA_INTNS) => {
             let n = f.count(1)?;
             let intensities = (0..n).map(|_| f.f64()).collect::<Result<_, _>>()?;
             AnyMsg::RangerIntensities(ranger::Intensities { intensities })
         }
-        (I::Ranger, RESP_ACK, 1) => {
+        (I::Ranger, RESP_ACK, p::ranger::REQ_GET_GEOM) => {
             let pose = f.pose3d()?;
             let size = f.size3()?;
             let n = f.count(6)?;
@@ -786,7 +784,7 @@ pub fn message(line: &Line<'_>) -> Result<AnyMsg, LineError> {
                 element_sizes,
             })
         }
-        (I::Ranger, RESP_ACK, 5) => AnyMsg::RangerConfig(ranger::Config {
+        (I::Ranger, RESP_ACK, p::ranger::REQ_GET_CONFIG) => AnyMsg::RangerConfig(ranger::Config {
             min_angle: f.f64()?,
             max_angle: f.f64()?,
             angular_res: f.f64()?,
@@ -795,27 +793,29 @@ pub fn message(line: &Line<'_>) -> Result<AnyMsg, LineError> {
             range_res: f.f64()?,
             frequency: f.f64()?,
         }),
-        (I::Position2d, DATA, 1) => AnyMsg::Position2dData(position2d::Data {
-            pose: f.pose2d()?,
-            vel: f.pose2d()?,
-            stall: f.f64()? != 0.0,
-        }),
-        (I::Position2d, RESP_ACK, 1) => {
+        (I::Position2d, DATA, p::position2d::DATA_STATE) => {
+            AnyMsg::Position2dData(position2d::Data {
+                pose: f.pose2d()?,
+                vel: f.pose2d()?,
+                stall: f.f64()? != 0.0,
+            })
+        }
+        (I::Position2d, RESP_ACK, p::position2d::REQ_GET_GEOM) => {
             let (pose, size) = f.planar_body()?;
             AnyMsg::Position2dGeom(position2d::Geom { pose, size })
         }
-        (I::Sonar, DATA, 1) => {
+        (I::Sonar, DATA, p::sonar::DATA_RANGES) => {
             let n = f.count(1)?;
             let ranges = (0..n).map(|_| f.f32()).collect::<Result<_, _>>()?;
             AnyMsg::SonarRanges(sonar::Ranges { ranges })
         }
         // The geometry as data (2) or as the answer to a request (1).
-        (I::Sonar, DATA, 2) | (I::Sonar, RESP_ACK, 1) => {
+        (I::Sonar, DATA, p::sonar::DATA_GEOM) | (I::Sonar, RESP_ACK, p::sonar::REQ_GET_GEOM) => {
             let n = f.count(3)?;
             let poses = (0..n).map(|_| f.planar()).collect::<Result<_, _>>()?;
             AnyMsg::SonarGeom(sonar::Geom { poses })
         }
-        (I::Localize, DATA, 1) => {
+        (I::Localize, DATA, p::localize::DATA_HYPOTHS) => {
             let pending_count = f.f64()? as u32;
             let pending_time = f.f64()?;
             let n = f.count(10)?;
@@ -839,7 +839,7 @@ pub fn message(line: &Line<'_>) -> Result<AnyMsg, LineError> {
                 hypoths,
             })
         }
-        (I::Localize, RESP_ACK, 2) => {
+        (I::Localize, RESP_ACK, p::localize::REQ_GET_PARTICLES) => {
             let mean = f.pose2d()?;
             let variance = f.f64()?;
             let n = f.count(4)?;
@@ -857,14 +857,14 @@ pub fn message(line: &Line<'_>) -> Result<AnyMsg, LineError> {
                 particles,
             })
         }
-        (I::Ptz, DATA, 1) => AnyMsg::PtzData(ptz::Data {
+        (I::Ptz, DATA, p::ptz::DATA_STATE) => AnyMsg::PtzData(ptz::Data {
             pan: f.f32()?,
             tilt: f.f32()?,
             zoom: f.f32()?,
             panspeed: f.f32()?,
             tiltspeed: f.f32()?,
         }),
-        (I::Power, DATA, 1) => {
+        (I::Power, DATA, p::power::DATA_STATE) => {
             let (volts, percent, joules, watts) = (f.f32()?, f.f32()?, f.f32()?, f.f32()?);
             let charging = f.f64()? != 0.0;
             AnyMsg::PowerData(power::Data {
@@ -876,7 +876,7 @@ pub fn message(line: &Line<'_>) -> Result<AnyMsg, LineError> {
                 charging,
             })
         }
-        (I::Gps, DATA, 1) => {
+        (I::Gps, DATA, p::gps::DATA_STATE) => {
             let time = f.f64()?;
             let (latitude, longitude, altitude) = (f.f64()?, f.f64()?, f.f64()?);
             let (utm_e, utm_n) = (f.f64()?, f.f64()?);
@@ -906,7 +906,7 @@ pub fn message(line: &Line<'_>) -> Result<AnyMsg, LineError> {
                 err_vert,
             })
         }
-        (I::Camera, DATA, 1) => {
+        (I::Camera, DATA, p::camera::DATA_STATE) => {
             let (width, height, bpp) = (f.f64()? as u32, f.f64()? as u32, f.f64()? as u32);
             let (format, compression) = (f.f64()? as u32, f.f64()? as u32);
             let count = f.f64()? as usize;
@@ -927,12 +927,12 @@ pub fn message(line: &Line<'_>) -> Result<AnyMsg, LineError> {
                 image,
             })
         }
-        (I::Aio, DATA, 1) => {
+        (I::Aio, DATA, p::aio::DATA_STATE) => {
             let n = f.count(1)?;
             let voltages = (0..n).map(|_| f.f32()).collect::<Result<_, _>>()?;
             AnyMsg::AioData(aio::Data { voltages })
         }
-        (I::Dio, DATA, 1) => {
+        (I::Dio, DATA, p::dio::DATA_VALUES) => {
             let n = f.count(1)?.min(32);
             let mut bits = 0u32;
             for i in 0..n {
@@ -945,7 +945,7 @@ pub fn message(line: &Line<'_>) -> Result<AnyMsg, LineError> {
                 bits,
             })
         }
-        (I::Fiducial, DATA, 1) => {
+        (I::Fiducial, DATA, p::fiducial::DATA_SCAN) => {
             let n = f.count(13)?;
             let mut fiducials = Vec::with_capacity(n);
             for _ in 0..n {
@@ -965,7 +965,7 @@ pub fn message(line: &Line<'_>) -> Result<AnyMsg, LineError> {
             }
             AnyMsg::FiducialData(fiducial::Data { fiducials })
         }
-        (I::Fiducial, RESP_ACK, 1) => {
+        (I::Fiducial, RESP_ACK, p::fiducial::REQ_GET_GEOM) => {
             let v = signed_numbers(line, 11)?;
             AnyMsg::FiducialGeom(fiducial::Geom {
                 pose: Pose3d {
@@ -987,7 +987,7 @@ pub fn message(line: &Line<'_>) -> Result<AnyMsg, LineError> {
                 },
             })
         }
-        (I::Blobfinder, DATA, 1) => {
+        (I::Blobfinder, DATA, p::blobfinder::DATA_BLOBS) => {
             let (width, height) = (f.f64()? as u32, f.f64()? as u32);
             let n = f.count(10)?;
             let mut blobs = Vec::with_capacity(n);
@@ -1012,7 +1012,7 @@ pub fn message(line: &Line<'_>) -> Result<AnyMsg, LineError> {
                 blobs,
             })
         }
-        (I::Ir, DATA, 1) => {
+        (I::Ir, DATA, p::ir::DATA_RANGES) => {
             let n = f.count(1)?;
             let ranges = (0..n).map(|_| f.f32()).collect::<Result<_, _>>()?;
             AnyMsg::IrData(ir::Data {
@@ -1020,19 +1020,20 @@ pub fn message(line: &Line<'_>) -> Result<AnyMsg, LineError> {
                 ranges,
             })
         }
-        (I::Ir, RESP_ACK, 1) => {
+        (I::Ir, RESP_ACK, p::ir::REQ_POSE) => {
             let n = f.count(3)?;
             let poses = (0..n).map(|_| f.planar()).collect::<Result<_, _>>()?;
             AnyMsg::IrGeom(ir::Geom { poses })
         }
-        (I::Bumper, DATA, 1) => {
+        (I::Bumper, DATA, p::bumper::DATA_STATE) => {
             let n = f.count(1)?;
             let bumpers = (0..n)
                 .map(|_| f.f64().map(|v| v != 0.0))
                 .collect::<Result<_, _>>()?;
             AnyMsg::BumperData(bumper::Data { bumpers })
         }
-        (I::Bumper, DATA, 2) | (I::Bumper, RESP_ACK, 1) => {
+        (I::Bumper, DATA, p::bumper::DATA_GEOM)
+        | (I::Bumper, RESP_ACK, p::bumper::REQ_GET_GEOM) => {
             let n = f.count(5)?;
             let bumpers = (0..n)
                 .map(|_| {

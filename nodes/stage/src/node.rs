@@ -125,6 +125,10 @@ pub struct Stage {
     /// The simulation devices, model names and models whose pose was asked
     /// for: their answers are kept ready, renewed whenever the model may move.
     watched: Vec<(Device, String, usize)>,
+    /// The pose of Stage's ground model, which a world file cannot name
+    /// (see [`GROUND`]): it has no body, so only the simulation device
+    /// sees it.
+    ground: troupe_msgs::Pose2d,
     /// `stage_quirks`: Stage's plugin's ways where it ignores the interface.
     quirks: bool,
     /// When the models' poses last went out (viewers get them at most
@@ -134,6 +138,12 @@ pub struct Stage {
 
 /// How often a running simulation publishes its models' poses for viewers.
 const POSES_HZ: f64 = 30.0;
+
+/// The names of the ground model Stage's world makes before any of the
+/// file's (libstage/world.cc): unnamed, it is `model:0`, and then it is
+/// renamed `_ground_model`; Stage keeps both names. The simulation device
+/// answers for it at the origin, as Stage does.
+const GROUND: [&str; 2] = ["model:0", "_ground_model"];
 
 /// Models already serving a device of each interface. A laser or sonar may
 /// be the same sensor as a ranger device: each interface has its own set.
@@ -320,6 +330,7 @@ impl Driver for Stage {
             steps_per_tick,
             snapshot: o.snapshot.clone(),
             watched: Vec::new(),
+            ground: troupe_msgs::Pose2d::default(),
             quirks,
             poses_sent: Default::default(),
         })
@@ -983,6 +994,10 @@ impl Stage {
         } else if r.is::<simulation::GetPose2d>() {
             let q = r.decode::<simulation::GetPose2d>()?;
             match find(&self.sim, &q.name) {
+                None if GROUND.contains(&q.name.as_str()) => r.reply(&simulation::Pose2dOf {
+                    pose: self.ground,
+                    name: q.name,
+                }),
                 Some(m) => {
                     let pose = self.pose_of(m, &q.name);
                     // A pose asked for once is asked for again (a client
@@ -1005,6 +1020,10 @@ impl Stage {
         } else if r.is::<simulation::SetPose2d>() {
             let q = r.decode::<simulation::SetPose2d>()?;
             match find(&self.sim, &q.name) {
+                None if GROUND.contains(&q.name.as_str()) => {
+                    self.ground = q.pose;
+                    r.reply(&common::Ack);
+                }
                 Some(m) => {
                     self.sim.set_pose(m, q.pose.into());
                     // Renewed before the answer: a client that set a pose
@@ -1360,6 +1379,45 @@ mod tests {
             .unwrap()
             .unwrap_err()
             .contains("no model named `nobody`"));
+    }
+
+    /// Stage's ground model, which no world file names, is `model:0` and
+    /// `_ground_model` to the simulation device, at the origin; a pose set
+    /// on it is the pose it reports (as Player with Stage answers).
+    #[test]
+    fn the_ground_model_answers_by_stage_s_two_names() {
+        let w = world_file("ground", WORLD);
+        let mut h = Harness::<Stage>::from_json(&format!(
+            r#"{{"name":"stage","provides":["simulation:0"],"options":{{"worldfile":"{}","step_when_told":1}}}}"#,
+            w.display()
+        ))
+        .unwrap();
+        let sim = dev(Interface::Simulation, 0);
+        let pose_of = |h: &mut Harness<Stage>, name: &str| {
+            let p = h
+                .request(sim, &simulation::GetPose2d { name: name.into() })
+                .unwrap();
+            h.reply::<simulation::Pose2dOf>(p).unwrap()
+        };
+        for name in GROUND {
+            assert_eq!(
+                pose_of(&mut h, name).unwrap().pose,
+                troupe_msgs::Pose2d::default()
+            );
+        }
+        let to = troupe_msgs::Pose2d::new(1.0, 2.0, 0.5);
+        let p = h
+            .request(
+                sim,
+                &simulation::SetPose2d {
+                    name: "_ground_model".into(),
+                    pose: to,
+                },
+            )
+            .unwrap();
+        assert!(h.reply::<common::Ack>(p).unwrap().is_ok());
+        assert_eq!(pose_of(&mut h, "model:0").unwrap().pose, to);
+        assert!(pose_of(&mut h, "model:9").is_err(), "only the ground's");
     }
 
     #[test]

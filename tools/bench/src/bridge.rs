@@ -211,7 +211,7 @@ fn read_loop(addr: SocketAddr, seconds: f64) -> anyhow::Result<Pulls> {
         .iter()
         .map(|&(i, k)| (u32::from(i.code()), k))
         .collect();
-    let req = wire::message(header(player_req(player::DATA)), &[]);
+    let req = wire::message(header(player_req(player::REQ_DATA)), &[]);
     let position = u32::from(Interface::Position2d.code());
     let mut p = Pulls::default();
     let mut last = f64::NEG_INFINITY;
@@ -461,7 +461,7 @@ fn measure(a: &BridgeBenchArgs, router: &troupe_node::zenoh::Session) -> anyhow:
     open(&mut stuck, Interface::Position2d)?;
     request(
         &mut stuck,
-        player_req(player::DATAMODE),
+        player_req(player::REQ_DATAMODE),
         &player::PUSH.to_be_bytes(),
     )?;
     let readers = (0..a.clients)

@@ -92,7 +92,7 @@ fn attacks() -> Vec<(&'static str, Attack)> {
                         let mut s = connect(addr)?;
                         request(
                             &mut s,
-                            player_req(player::DATAMODE),
+                            player_req(player::REQ_DATAMODE),
                             &player::PUSH.to_be_bytes(),
                         )?;
                         open(&mut s, Interface::Laser)?;
@@ -138,7 +138,7 @@ fn attacks() -> Vec<(&'static str, Attack)> {
                             body.extend_from_slice(&v.to_be_bytes());
                         }
                         batch.extend(wire::message(
-                            header(player_req(player::ADD_REPLACE_RULE)),
+                            header(player_req(player::REQ_ADD_REPLACE_RULE)),
                             &body,
                         ));
                         if batch.len() > 64 * 1024 {
@@ -179,7 +179,7 @@ fn attacks() -> Vec<(&'static str, Attack)> {
 /// Whether a new client is answered its DEVLIST.
 fn serving(addr: SocketAddr) -> bool {
     connect(addr)
-        .and_then(|mut s| request(&mut s, player_req(player::DEVLIST), &[]).map(drop))
+        .and_then(|mut s| request(&mut s, player_req(player::REQ_DEVLIST), &[]).map(drop))
         .is_ok()
 }
 

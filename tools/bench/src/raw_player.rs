@@ -78,7 +78,7 @@ pub(crate) fn connect(addr: SocketAddr) -> anyhow::Result<TcpStream> {
     s.read_exact(&mut banner)?;
     request(
         &mut s,
-        player_req(player::DATAMODE),
+        player_req(player::REQ_DATAMODE),
         &player::PULL.to_be_bytes(),
     )?;
     Ok(s)
@@ -95,7 +95,7 @@ pub(crate) fn open_at(s: &mut TcpStream, interf: Interface, index: u32) -> anyho
     }
     // An empty driver name.
     body.bytes(&[]);
-    request(s, player_req(player::DEV), &body.finish()).map(drop)
+    request(s, player_req(player::REQ_DEV), &body.finish()).map(drop)
 }
 
 /// What one `Read()` in PULL mode brought.
@@ -109,7 +109,7 @@ pub(crate) struct Round {
 /// One `Read()` in PULL mode, as libplayerc's `playerc_client_read`: REQ
 /// DATA, then everything up to the SYNCH.
 pub(crate) fn pull_round(s: &mut TcpStream) -> anyhow::Result<Round> {
-    s.write_all(&wire::message(header(player_req(player::DATA)), &[]))?;
+    s.write_all(&wire::message(header(player_req(player::REQ_DATA)), &[]))?;
     let mut data = false;
     loop {
         let (h, _) = next(s)?;
