@@ -936,6 +936,18 @@ fn idle_trickling_and_unread_clients_are_dropped_after_their_limits() {
     thread.join().unwrap();
 }
 
+/// Reads until `n` position2d samples came (other messages pass by).
+fn position2d_samples(p: &mut Player, n: usize) {
+    let code = u32::from(Interface::Position2d.code());
+    let mut samples = 0;
+    while samples < n {
+        let f = p.recv();
+        if f.h[2] == code && f.kind() == 1 {
+            samples += 1;
+        }
+    }
+}
+
 /// Planted panics: on a DEVLIST to index 7, and in the sonar's feed.
 fn faults(what: &str) {
     assert!(what != "message 1:7:3:1", "a planted panic");
@@ -978,14 +990,7 @@ fn a_panic_in_the_bridge_closes_one_connection_and_the_rest_goes_on() {
         }
     }
     // The other client still gets position2d's samples and its answers.
-    let code = u32::from(Interface::Position2d.code());
-    let mut samples = 0;
-    while samples < 20 {
-        let f = calm.recv();
-        if f.h[2] == code && f.kind() == 1 {
-            samples += 1;
-        }
-    }
+    position2d_samples(&mut calm, 20);
     assert_eq!(calm.devlist().h[5], 1, "DEVLIST answered");
     // And a new client is served.
     let mut fresh = Player::connect(addr, ROBOT);
@@ -1030,7 +1035,6 @@ fn a_client_whose_queueing_stalls_holds_up_no_other_client_of_a_device() {
         },
     );
     let pos = Device::new(ROBOT, Interface::Position2d, 0);
-    let code = u32::from(Interface::Position2d.code());
     let mut stuck = Player::connect(addr, ROBOT);
     stuck.open(pos);
     *STALLED.0.lock().unwrap() = Some(stuck.s.local_addr().unwrap().to_string());
@@ -1038,22 +1042,10 @@ fn a_client_whose_queueing_stalls_holds_up_no_other_client_of_a_device() {
     calm.open(pos);
     // The devices publish every 5 ms: 50 samples within the read timeout,
     // while the other client's queueing is stalled.
-    let mut samples = 0;
-    while samples < 50 {
-        let f = calm.recv();
-        if f.h[2] == code && f.kind() == 1 {
-            samples += 1;
-        }
-    }
+    position2d_samples(&mut calm, 50);
     *STALLED.0.lock().unwrap() = None;
     STALLED.1.notify_all();
-    let mut samples = 0;
-    while samples < 5 {
-        let f = stuck.recv();
-        if f.h[2] == code && f.kind() == 1 {
-            samples += 1;
-        }
-    }
+    position2d_samples(&mut stuck, 5);
     let _ = stop.send(());
     thread.join().unwrap();
 }

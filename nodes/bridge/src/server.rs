@@ -215,6 +215,8 @@ struct ClientQueue {
     inbox: Mutex<Vec<Out>>,
     /// Samples the inbox had no room for, not yet counted in the queue.
     inbox_dropped: AtomicU64,
+    /// The queue's length, which bounds the inbox too.
+    maxlen: usize,
     /// [`Config::fault`], called with `queue PEER` as the inbox is taken.
     fault: Option<fn(&str)>,
     peer: SocketAddr,
@@ -259,6 +261,7 @@ impl ClientQueue {
             }),
             inbox: Mutex::new(Vec::new()),
             inbox_dropped: AtomicU64::new(0),
+            maxlen,
             fault,
             peer,
             bell: Notify::new(),
@@ -276,9 +279,9 @@ impl ClientQueue {
     /// the inbox for the writer task, whatever the client's state. Past
     /// the queue's length (a writer that is not run) it is dropped and
     /// counted as the queue's own overflow is.
-    fn deliver(&self, m: Out, maxlen: usize) {
+    fn deliver(&self, m: Out) {
         let mut inbox = lock(&self.inbox);
-        if inbox.len() >= maxlen {
+        if inbox.len() >= self.maxlen {
             drop(inbox);
             self.inbox_dropped.fetch_add(1, Ordering::Relaxed);
             return;
@@ -1206,7 +1209,7 @@ impl Conn {
         }
         let clients: Clients = Arc::new(Mutex::new(vec![(self.id, self.queue.clone())]));
         let (c, shared) = (clients.clone(), Arc::downgrade(&self.shared));
-        let (host, maxlen) = (self.host, self.shared.maxlen);
+        let host = self.host;
         let fault = self.shared.fault;
         let sub = self
             .shared
@@ -1225,7 +1228,7 @@ impl Conn {
                         match data_message(dev, host, &bytes) {
                             Ok(out) => {
                                 for (_, q) in lock(&c).iter() {
-                                    q.deliver(out.clone(), maxlen);
+                                    q.deliver(out.clone());
                                 }
                             }
                             Err(why) => {

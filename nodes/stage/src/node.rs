@@ -1142,6 +1142,18 @@ mod tests {
         .unwrap()
     }
 
+    /// The simulation device's answer to a `GetPose2d` of `name`.
+    fn ask_pose(
+        h: &mut Harness<Stage>,
+        sim: Device,
+        name: &str,
+    ) -> std::result::Result<simulation::Pose2dOf, String> {
+        let p = h
+            .request(sim, &simulation::GetPose2d { name: name.into() })
+            .unwrap();
+        h.reply::<simulation::Pose2dOf>(p).unwrap()
+    }
+
     fn dev(i: Interface, n: u32) -> Device {
         Device::new(6665, i, n)
     }
@@ -1393,12 +1405,7 @@ mod tests {
         ))
         .unwrap();
         let sim = dev(Interface::Simulation, 0);
-        let pose_of = |h: &mut Harness<Stage>, name: &str| {
-            let p = h
-                .request(sim, &simulation::GetPose2d { name: name.into() })
-                .unwrap();
-            h.reply::<simulation::Pose2dOf>(p).unwrap()
-        };
+        let pose_of = |h: &mut Harness<Stage>, name: &str| ask_pose(h, sim, name);
         for name in GROUND {
             assert_eq!(
                 pose_of(&mut h, name).unwrap().pose,
@@ -1429,12 +1436,7 @@ mod tests {
         ))
         .unwrap();
         let (sim, pos) = (dev(Interface::Simulation, 0), dev(Interface::Position2d, 0));
-        let pose_of = |h: &mut Harness<Stage>, name: &str| {
-            let p = h
-                .request(sim, &simulation::GetPose2d { name: name.into() })
-                .unwrap();
-            h.reply::<simulation::Pose2dOf>(p).unwrap().unwrap().pose
-        };
+        let pose_of = |h: &mut Harness<Stage>, name: &str| ask_pose(h, sim, name).unwrap().pose;
         let start = pose_of(&mut h, "r0");
         assert_eq!((start.x, start.y), (0.0, 0.0));
         assert_eq!(pose_of(&mut h, "r0"), start, "the kept answer");
