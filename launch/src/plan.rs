@@ -86,8 +86,8 @@ pub struct DeviceRef {
 }
 
 impl DeviceRef {
-    fn parse(&self) -> Result<Device, String> {
-        keys::parse_data(&self.device).map_err(|e| e.to_string())
+    fn parse(&self) -> Result<Device, AddrError> {
+        keys::parse_data(&self.device)
     }
 }
 
@@ -127,8 +127,12 @@ pub struct NodeSpec {
 
 impl NodeSpec {
     /// The node's section, as `troupe node` takes it.
-    pub fn section(&self) -> Result<Section, String> {
-        let addr = |r: &DeviceRef| -> Result<DevAddr, String> {
+    ///
+    /// # Errors
+    ///
+    /// A device that is no data key.
+    pub fn section(&self) -> Result<Section, AddrError> {
+        let addr = |r: &DeviceRef| -> Result<DevAddr, AddrError> {
             let d = r.parse()?;
             Ok(DevAddr {
                 key: r.role.clone(),

@@ -26,7 +26,7 @@ mod scene;
 
 pub use drive::{Body, DiffDrive};
 pub use grid::{Grid, Hit, InTile, Lattice, TileBox, EMPTY};
-pub use occmap::OccMap;
+pub use occmap::{OccMap, TileError};
 pub use odometry::Odometry;
 pub use pose::{bounds, normalize, ray_to_box, Pose, Transform};
 pub use scene::{Room, Scene};

@@ -32,6 +32,24 @@ pub fn centre(info: &map::Info, index: usize) -> (f64, f64) {
     (info.origin.x + (i + 0.5) * r, info.origin.y + (j + 0.5) * r)
 }
 
+/// A map tile whose cell count does not match its size.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("map tile {width}x{height} at ({col}, {row}) has {cells} cells, expected {expected}")]
+pub struct TileError {
+    /// Columns the tile says it has.
+    pub width: u32,
+    /// Rows the tile says it has.
+    pub height: u32,
+    /// Its first column.
+    pub col: u32,
+    /// Its first row.
+    pub row: u32,
+    /// Cells it carries.
+    pub cells: usize,
+    /// Cells its size calls for.
+    pub expected: usize,
+}
+
 /// A grid of cells (-1 free, 0 unknown, +1 occupied), row 0 at the bottom
 /// (the map's origin), as Player's map interface lays them out.
 #[derive(Debug, Clone, PartialEq)]
@@ -64,7 +82,7 @@ impl OccMap {
     /// # Errors
     ///
     /// As [`OccMap::put_tile`].
-    pub fn from_tile(info: map::Info, tile: &map::Data) -> Result<Self, String> {
+    pub fn from_tile(info: map::Info, tile: &map::Data) -> Result<Self, TileError> {
         let mut m = OccMap::filled(info, UNKNOWN);
         m.put_tile(tile)?;
         Ok(m)
@@ -131,18 +149,18 @@ impl OccMap {
     ///
     /// # Errors
     ///
-    /// The tile's cell count does not match its size.
-    pub fn put_tile(&mut self, tile: &map::Data) -> Result<(), String> {
-        let n = tile.width as usize * tile.height as usize;
-        if tile.cells.len() != n {
-            return Err(format!(
-                "map tile {}x{} at ({}, {}) has {} cells, expected {n}",
-                tile.width,
-                tile.height,
-                tile.col,
-                tile.row,
-                tile.cells.len()
-            ));
+    /// [`TileError`] when the tile's cell count does not match its size.
+    pub fn put_tile(&mut self, tile: &map::Data) -> Result<(), TileError> {
+        let expected = tile.width as usize * tile.height as usize;
+        if tile.cells.len() != expected {
+            return Err(TileError {
+                width: tile.width,
+                height: tile.height,
+                col: tile.col,
+                row: tile.row,
+                cells: tile.cells.len(),
+                expected,
+            });
         }
         let (w, h) = self.size();
         for tj in 0..tile.height as usize {
@@ -284,6 +302,7 @@ mod tests {
         assert!(n
             .put_tile(&bad)
             .unwrap_err()
+            .to_string()
             .contains("3 cells, expected 4"));
         // A tile hanging off the map writes only what is on it.
         n.put_tile(&map::Data {

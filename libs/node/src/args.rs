@@ -380,7 +380,7 @@ const FILE_KEYS: [&str; 9] = [
 /// directory (Zenoh takes them from the working directory, which differs
 /// between a shell, a supervisor's child and a container), and checks
 /// that each can be read: Zenoh's own error would not name the file.
-fn beside(c: &mut Config, file: &std::path::Path) -> std::result::Result<(), String> {
+fn beside(c: &mut Config, file: &std::path::Path) -> std::result::Result<(), ConfigFileError> {
     let dir = file.parent().unwrap_or(std::path::Path::new(""));
     for key in FILE_KEYS {
         let Some(name) = c
@@ -391,40 +391,128 @@ fn beside(c: &mut Config, file: &std::path::Path) -> std::result::Result<(), Str
             continue;
         };
         let full = dir.join(&name);
-        if let Err(e) = std::fs::File::open(&full) {
-            return Err(format!("{key} `{}`: {e}", full.display()));
+        if let Err(source) = std::fs::File::open(&full) {
+            return Err(ConfigFileError::Unreadable {
+                key: (*key).to_owned(),
+                path: full.display().to_string(),
+                source,
+            });
         }
         if full.as_os_str() != name.as_str() {
             let full = full.display().to_string();
             c.insert_json5(key, &json_str(&full))
-                .map_err(|e| format!("{key} = {full}: {e}"))?;
+                .map_err(|e| ConfigFileError::Rewrite {
+                    key: (*key).to_owned(),
+                    value: full,
+                    reason: e.to_string(),
+                })?;
         }
     }
     Ok(())
 }
 
+/// What is wrong in a Zenoh config file, found before Zenoh would fail
+/// on it without naming the file.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigFileError {
+    /// A file it names cannot be read.
+    #[error("{key} `{path}`: {source}")]
+    Unreadable {
+        /// The config key (or certificate field) naming the file.
+        key: String,
+        /// The file, as opened.
+        path: String,
+        /// Why it cannot be read.
+        source: std::io::Error,
+    },
+    /// A file's name, taken from the config's directory, could not be put back.
+    #[error("{key} = {value}: {reason}")]
+    Rewrite {
+        /// The config key.
+        key: String,
+        /// The full path.
+        value: String,
+        /// Zenoh's reason.
+        reason: String,
+    },
+    /// A `..._base64` certificate field is not base64.
+    #[error("{name}_base64 is not base64: {reason}")]
+    NotBase64 {
+        /// The certificate field.
+        name: String,
+        /// The decoder's reason.
+        reason: String,
+    },
+    /// A certificate field holds something else.
+    #[error("{name} is not {what}: {reason}")]
+    NotCertificate {
+        /// The certificate field.
+        name: String,
+        /// What it should be.
+        what: &'static str,
+        /// The parser's reason.
+        reason: String,
+    },
+    /// The authority's certificate is out of its validity.
+    #[error("the authority's certificate ({subject}) {dates}")]
+    AuthorityDates {
+        /// Its subject.
+        subject: String,
+        /// What is wrong with its dates.
+        dates: String,
+    },
+    /// This host's certificate is out of its validity.
+    #[error("this host's certificate ({subject}) {dates}: make new ones with `troupe fleet-keys`")]
+    HostDates {
+        /// Its subject.
+        subject: String,
+        /// What is wrong with its dates.
+        dates: String,
+    },
+    /// This host's certificate comes from another authority.
+    #[error(
+        "this host's certificate ({subject}) was issued by `{issuer}`, not by this config's \
+         authority `{authority}`: both must come from the same `troupe fleet-keys`"
+    )]
+    WrongIssuer {
+        /// Its subject.
+        subject: String,
+        /// Who issued it.
+        issuer: String,
+        /// The config's authority.
+        authority: String,
+    },
+}
+
 /// What is wrong with the certificates a Zenoh config names: a file that is
 /// not there, a certificate out of its validity, one not issued by the
 /// authority beside it. Zenoh itself would only fail to make a link.
-fn check_certificates(c: &Config) -> std::result::Result<(), String> {
+fn check_certificates(c: &Config) -> std::result::Result<(), ConfigFileError> {
     use base64::Engine as _;
     let field = |k: &str| -> Option<String> {
         let v = c.get_json(&format!("transport/link/tls/{k}")).ok()?;
         serde_json::from_str::<String>(&v).ok()
     };
     // A certificate, by its field (a path, or the PEM text in base64).
-    let pem = |name: &str| -> std::result::Result<Option<Vec<u8>>, String> {
+    let pem = |name: &str| -> std::result::Result<Option<Vec<u8>>, ConfigFileError> {
         if let Some(path) = field(name) {
             return std::fs::read(&path)
                 .map(Some)
-                .map_err(|e| format!("{name} `{path}`: {e}"));
+                .map_err(|source| ConfigFileError::Unreadable {
+                    key: name.to_owned(),
+                    path,
+                    source,
+                });
         }
         match field(&format!("{name}_base64")) {
             None => Ok(None),
             Some(b) => base64::engine::general_purpose::STANDARD
                 .decode(b.trim())
                 .map(Some)
-                .map_err(|e| format!("{name}_base64 is not base64: {e}")),
+                .map_err(|e| ConfigFileError::NotBase64 {
+                    name: name.to_owned(),
+                    reason: e.to_string(),
+                }),
         }
     };
     let now = std::time::SystemTime::now()
@@ -433,12 +521,17 @@ fn check_certificates(c: &Config) -> std::result::Result<(), String> {
     // Subject, issuer, and what is wrong with its dates, if anything.
     let read = |name: &str,
                 bytes: &[u8]|
-     -> std::result::Result<(String, String, Option<String>), String> {
+     -> std::result::Result<(String, String, Option<String>), ConfigFileError> {
+        let not = |what: &'static str, reason: String| ConfigFileError::NotCertificate {
+            name: name.to_owned(),
+            what,
+            reason,
+        };
         let (_, p) = x509_parser::pem::parse_x509_pem(bytes)
-            .map_err(|e| format!("{name} is not a PEM certificate: {e}"))?;
+            .map_err(|e| not("a PEM certificate", e.to_string()))?;
         let cert = p
             .parse_x509()
-            .map_err(|e| format!("{name} is not an X.509 certificate: {e}"))?;
+            .map_err(|e| not("an X.509 certificate", e.to_string()))?;
         let v = cert.validity();
         let dates = if v.not_after.timestamp() < now {
             Some(format!("expired on {}", v.not_after))
@@ -453,22 +546,22 @@ fn check_certificates(c: &Config) -> std::result::Result<(), String> {
         Some(b) => Some(read("root_ca_certificate", &b)?),
         None => None,
     };
-    if let Some((subject, _, Some(dates))) = &ca {
-        return Err(format!("the authority's certificate ({subject}) {dates}"));
+    if let Some((subject, _, Some(dates))) = ca.clone() {
+        return Err(ConfigFileError::AuthorityDates { subject, dates });
     }
     for name in ["connect_certificate", "listen_certificate"] {
         let Some(bytes) = pem(name)? else { continue };
         let (subject, issuer, dates) = read(name, &bytes)?;
         if let Some(dates) = dates {
-            return Err(format!(
-                "this host's certificate ({subject}) {dates}: make new ones with `troupe fleet-keys`"
-            ));
+            return Err(ConfigFileError::HostDates { subject, dates });
         }
-        if let Some((ca_subject, _, _)) = &ca {
-            if issuer != *ca_subject {
-                return Err(format!(
-                    "this host's certificate ({subject}) was issued by `{issuer}`, not by this config's authority `{ca_subject}`: both must come from the same `troupe fleet-keys`"
-                ));
+        if let Some((authority, _, _)) = &ca {
+            if issuer != *authority {
+                return Err(ConfigFileError::WrongIssuer {
+                    subject,
+                    issuer,
+                    authority: authority.clone(),
+                });
             }
         }
     }
@@ -578,6 +671,23 @@ pub fn without_location(text: &str) -> String {
     }
 }
 
+/// What is wrong with a flag's number, for clap to print (exit 2).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum NumberError {
+    /// Not a number at all.
+    #[error("{0} is not a number")]
+    NotANumber(String),
+    /// `inf` or `NaN`.
+    #[error("{0} is not a finite number")]
+    NotFinite(String),
+    /// Seconds below zero.
+    #[error("{0} is negative: give seconds, 0 or more")]
+    Negative(String),
+    /// More than [`MAX_SECONDS`].
+    #[error("{0} is too long: give at most {MAX_SECONDS} seconds (a year)")]
+    TooLong(String),
+}
+
 /// A flag's number of seconds (`--grace 2.5`): finite and not negative.
 /// Every duration flag of the CLI parses with it, so that `inf`, `NaN`
 /// and `-1` are refused with a message (exit 2) rather than panicking
@@ -585,16 +695,14 @@ pub fn without_location(text: &str) -> String {
 ///
 /// # Errors
 ///
-/// What is wrong with `text`, for clap to print.
-pub fn seconds(text: &str) -> std::result::Result<f64, String> {
+/// What is wrong with `text`.
+pub fn seconds(text: &str) -> std::result::Result<f64, NumberError> {
     let v = finite(text)?;
     if v < 0.0 {
-        return Err(format!("{text} is negative: give seconds, 0 or more"));
+        return Err(NumberError::Negative(text.to_owned()));
     }
     if v > MAX_SECONDS {
-        return Err(format!(
-            "{text} is too long: give at most {MAX_SECONDS} seconds (a year)"
-        ));
+        return Err(NumberError::TooLong(text.to_owned()));
     }
     Ok(v)
 }
@@ -608,12 +716,12 @@ pub const MAX_SECONDS: f64 = 365.0 * 24.0 * 3600.0;
 ///
 /// # Errors
 ///
-/// What is wrong with `text`, for clap to print.
-pub fn finite(text: &str) -> std::result::Result<f64, String> {
+/// What is wrong with `text`.
+pub fn finite(text: &str) -> std::result::Result<f64, NumberError> {
     match text.trim().parse::<f64>() {
         Ok(v) if v.is_finite() => Ok(v),
-        Ok(_) => Err(format!("{text} is not a finite number")),
-        Err(_) => Err(format!("{text} is not a number")),
+        Ok(_) => Err(NumberError::NotFinite(text.to_owned())),
+        Err(_) => Err(NumberError::NotANumber(text.to_owned())),
     }
 }
 

@@ -32,7 +32,7 @@ use zenoh_ext::{AdvancedPublisher, AdvancedPublisherBuilderExt, CacheConfig, Mis
 
 use crate::clock::Clock;
 use crate::ctx::ReadyAnswers;
-use crate::error::{z, NodeError, Result};
+use crate::error::{z, NodeError, RequestError, Result};
 use crate::event::{Event, ReplySink, Request, Responder, Sample};
 use crate::inbox::Inbox;
 
@@ -130,7 +130,9 @@ impl Ros2Args {
         let f = file.cloned().unwrap_or_default();
         let distro = match (&self.ros2_distro, &f.distro) {
             (Some(d), _) => *d,
-            (None, Some(d)) => d.parse().map_err(|e: String| bad(format!("distro: {e}")))?,
+            (None, Some(d)) => d
+                .parse()
+                .map_err(|e: rmw::UnknownDistro| bad(format!("distro: {e}")))?,
             (None, None) => Distro::Jazzy,
         };
         let domain = self.ros2_domain.or(f.domain).unwrap_or(0);
@@ -683,29 +685,31 @@ fn declare_pub(
 
 /// Asks map device `dev` for its info and every cell, as the other drivers
 /// do, and makes its `OccupancyGrid`.
-fn fetch_grid(session: &Session, dev: &Device) -> std::result::Result<Vec<u8>, String> {
+fn fetch_grid(session: &Session, dev: &Device) -> Result<Vec<u8>> {
     // The map answers once it is ready (its token is up).
-    crate::net::wait_live(session, dev, Duration::from_secs(3600)).map_err(|e| e.to_string())?;
-    let ask = |name: &str, payload: Vec<u8>| -> std::result::Result<Vec<u8>, String> {
+    crate::net::wait_live(session, dev, Duration::from_secs(3600))?;
+    let ask = |name: &str, payload: Vec<u8>| -> Result<Vec<u8>> {
         let key = keys::req(dev, name);
         let replies = crate::net::ask(session, &key, crate::REQUEST_TIMEOUT)
             .payload(payload)
             .wait()
-            .map_err(|e| format!("asking {key}: {e}"))?;
-        match replies.recv() {
-            Ok(r) => match r.into_result() {
-                Ok(s) => Ok(s.payload().to_bytes().into_owned()),
-                Err(e) => Err(format!(
-                    "{key} refused: {}",
-                    String::from_utf8_lossy(&e.payload().to_bytes())
-                )),
-            },
-            Err(_) => Err(format!("no answer on {key}")),
+            .map_err(z(|| format!("asking {key}")))?;
+        let reply = replies.recv().map_err(|_| RequestError::NoReplier)?;
+        match reply.into_result() {
+            Ok(s) => Ok(s.payload().to_bytes().into_owned()),
+            Err(e) => Err(RequestError::Nack(
+                String::from_utf8_lossy(&e.payload().to_bytes()).into_owned(),
+            )
+            .into()),
         }
+    };
+    let decode_err = |source| NodeError::Decode {
+        key: keys::data(dev),
+        source,
     };
     use troupe_msgs::Request as _;
     let info_bytes = ask(map::GetInfo::NAME, codec::encode(&map::GetInfo, 0.0))?;
-    let info = codec::decode::<map::Info>(&info_bytes).map_err(|e| e.to_string())?;
+    let info = codec::decode::<map::Info>(&info_bytes).map_err(decode_err)?;
     let q = map::GetData {
         col: 0,
         row: 0,
@@ -715,7 +719,7 @@ fn fetch_grid(session: &Session, dev: &Device) -> std::result::Result<Vec<u8>, S
     let data = ask(map::GetData::NAME, codec::encode(&q, 0.0))?;
     let mut t = Translator::new();
     let key = keys::data(dev);
-    let decoded = |b: &[u8]| troupe_msgs::decode_any(b).map_err(|e| e.to_string());
+    let decoded = |b: &[u8]| troupe_msgs::decode_any(b).map_err(decode_err);
     let _ = t.translate(&key, 0, &decoded(&info_bytes)?.msg);
     let cells = decoded(&data)?;
     let outs = t
@@ -724,7 +728,7 @@ fn fetch_grid(session: &Session, dev: &Device) -> std::result::Result<Vec<u8>, S
     outs.into_iter()
         .find(|o| o.ty == Type::OccupancyGrid)
         .map(|o| o.data)
-        .ok_or_else(|| "the map's cells do not make a whole grid".to_owned())
+        .ok_or_else(|| NodeError::Driver("the map's cells do not make a whole grid".into()))
 }
 
 /// Hands a converted ROS 2 message to the driver: a command as a Troupe

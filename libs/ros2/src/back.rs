@@ -23,7 +23,7 @@ pub fn key_of_topic(topic: &str) -> Option<String> {
     Some(keys::data(&dev))
 }
 
-/// Why a ROS 2 message did not become a sample.
+/// Why a ROS 2 message did not become a sample, a command or a request.
 #[derive(Debug, thiserror::Error)]
 pub enum BackError {
     /// The payload is not the type its schema names.
@@ -33,6 +33,12 @@ pub enum BackError {
         ty: &'static str,
         /// The decoder's complaint.
         source: cdr::Error,
+    },
+    /// A speed or a pose that is not finite: no robot should act on it.
+    #[error("a {ty} with a value that is not finite")]
+    NotFinite {
+        /// The message's type.
+        ty: &'static str,
     },
     /// The type has no form on the key's interface.
     #[error("a {ty} has no form on {key} (a laser or ranger takes LaserScan, a position2d Odometry, a localize PoseWithCovarianceStamped, sim/clock Clock)")]

@@ -24,6 +24,7 @@
 use troupe_msgs::{codec, localize, planner, position2d, Device, Interface, Pose2d};
 use troupe_msgs::{Command as _, Request as _};
 
+use crate::back::BackError;
 use crate::msg::{PoseStamped, PoseWithCovarianceStamped, Twist, Type};
 
 /// A robot's namespace from a template: `{robot}` is the robot's port
@@ -124,18 +125,17 @@ impl Inbound {
     ///
     /// The bytes are not this type's CDR, or carry a value no robot should
     /// act on (a speed or a pose that is not finite).
-    pub fn to_troupe(self, cdr: &[u8], now: f64) -> Result<(&'static str, Vec<u8>), String> {
-        fn de<T: serde::de::DeserializeOwned>(ty: &str, b: &[u8]) -> Result<T, String> {
-            cdr::deserialize(b).map_err(|e| format!("not a {ty} in CDR: {e}"))
+    pub fn to_troupe(self, cdr: &[u8], now: f64) -> Result<(&'static str, Vec<u8>), BackError> {
+        fn de<T: serde::de::DeserializeOwned>(ty: &'static str, b: &[u8]) -> Result<T, BackError> {
+            cdr::deserialize(b).map_err(|source| BackError::Cdr { ty, source })
         }
         let finite = |vals: &[f64]| {
             if vals.iter().all(|v| v.is_finite()) {
                 Ok(())
             } else {
-                Err(format!(
-                    "a {} with a value that is not finite",
-                    self.ros_type()
-                ))
+                Err(BackError::NotFinite {
+                    ty: self.ros_type(),
+                })
             }
         };
         match self {
@@ -267,7 +267,7 @@ mod tests {
         let e = Inbound::CmdVel
             .to_troupe(&crate::cdr(&nan), 0.0)
             .unwrap_err();
-        assert!(e.contains("not finite"), "{e}");
+        assert!(e.to_string().contains("not finite"), "{e}");
         let stop = codec::decode::<position2d::CmdVel>(&stop_command(2.0)).unwrap();
         assert_eq!(stop.msg.vel, Pose2d::default());
     }

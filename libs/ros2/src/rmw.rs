@@ -35,15 +35,18 @@ impl std::fmt::Display for Distro {
     }
 }
 
+/// A distribution name Troupe does not know.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown ROS 2 distribution `{0}` (jazzy, kilted, rolling or humble)")]
+pub struct UnknownDistro(pub String);
+
 impl std::str::FromStr for Distro {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = UnknownDistro;
+    fn from_str(s: &str) -> Result<Self, UnknownDistro> {
         match s.to_ascii_lowercase().as_str() {
             "jazzy" | "kilted" | "rolling" => Ok(Distro::Jazzy),
             "humble" => Ok(Distro::Humble),
-            other => Err(format!(
-                "unknown ROS 2 distribution `{other}` (jazzy, kilted, rolling or humble)"
-            )),
+            other => Err(UnknownDistro(other.to_owned())),
         }
     }
 }
@@ -368,22 +371,6 @@ pub fn wall_ns() -> i64 {
         .map_or(0, |d| i64::try_from(d.as_nanos()).unwrap_or(i64::MAX))
 }
 
-/// The ROS domain: `ROS_DOMAIN_ID` when set to a number, else 0.
-///
-/// # Errors
-///
-/// `ROS_DOMAIN_ID` is set but is no number (ROS 2 refuses it too).
-pub fn domain_from_env() -> Result<u32, String> {
-    match std::env::var("ROS_DOMAIN_ID") {
-        Err(_) => Ok(0),
-        Ok(v) if v.trim().is_empty() => Ok(0),
-        Ok(v) => v
-            .trim()
-            .parse()
-            .map_err(|_| format!("ROS_DOMAIN_ID is `{v}`, not a domain number (0-232)")),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -546,7 +533,11 @@ mod tests {
     fn distros_parse() {
         assert_eq!("Humble".parse::<Distro>(), Ok(Distro::Humble));
         assert_eq!("rolling".parse::<Distro>(), Ok(Distro::Jazzy));
-        assert!("foxy".parse::<Distro>().unwrap_err().contains("humble"));
+        assert!("foxy"
+            .parse::<Distro>()
+            .unwrap_err()
+            .to_string()
+            .contains("humble"));
         for d in [Distro::Jazzy, Distro::Humble] {
             assert_eq!(d.to_string().parse::<Distro>(), Ok(d));
         }

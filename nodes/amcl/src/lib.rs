@@ -229,13 +229,55 @@ pub struct Localizer {
     updates: u64,
 }
 
+/// An option whose value Player would not accept.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum OptionError {
+    /// Not a sensor model amcl knows.
+    #[error("laser_model_type `{0}` is not known: `beam` (Player's) or `likelihood_field`")]
+    LaserModel(String),
+    /// A pose option without its three values.
+    #[error("{name} needs three values (x y yaw), not {values:?}")]
+    NotThree {
+        /// The option.
+        name: &'static str,
+        /// What it holds.
+        values: Vec<f64>,
+    },
+    /// A drift row that is not up to three fractions.
+    #[error(
+        "odom_drift[{row}] needs up to three non-negative fractions (of x, y and θ motion), not {values:?}"
+    )]
+    Drift {
+        /// Which row.
+        row: usize,
+        /// What it holds.
+        values: Vec<f64>,
+    },
+    /// `update_thresh` without its two values.
+    #[error("update_thresh needs a distance and an angle, not {0:?}")]
+    UpdateThresh(Vec<f64>),
+    /// The particle counts are the wrong way round or zero.
+    #[error(
+        "pf_min_samples ({min}) must not exceed pf_max_samples ({max}), which must be positive"
+    )]
+    Samples {
+        /// `pf_min_samples`.
+        min: usize,
+        /// `pf_max_samples`.
+        max: usize,
+    },
+    /// The KLD bounds are not positive.
+    #[error("pf_err and pf_z must be positive")]
+    PfBounds,
+}
+
 impl Localizer {
     /// A localizer from the driver's options.
     ///
     /// # Errors
     ///
     /// An option has a value Player would not accept.
-    pub fn new(o: &Options) -> std::result::Result<Self, String> {
+    pub fn new(o: &Options) -> std::result::Result<Self, OptionError> {
         let model = match o.laser_model_type.as_str() {
             "beam" => Model::Beam {
                 sigma: o.laser_range_var,
@@ -247,17 +289,14 @@ impl Localizer {
                 sigma_hit: o.laser_sigma_hit,
                 max_dist: o.laser_likelihood_max_dist,
             },
-            other => {
-                return Err(format!(
-                "laser_model_type `{other}` is not known: `beam` (Player's) or `likelihood_field`"
-            ))
-            }
+            other => return Err(OptionError::LaserModel(other.to_owned())),
         };
-        let three = |name: &str, v: &[f64]| -> std::result::Result<[f64; 3], String> {
-            match v {
-                [a, b, c] => Ok([*a, *b, *c]),
-                _ => Err(format!("{name} needs three values (x y yaw), not {v:?}")),
-            }
+        let three = |name: &'static str, v: &[f64]| match v {
+            [a, b, c] => Ok([*a, *b, *c]),
+            _ => Err(OptionError::NotThree {
+                name,
+                values: v.to_vec(),
+            }),
         };
         // Player reads each drift row element by element, a missing one at
         // its default.
@@ -267,9 +306,10 @@ impl Localizer {
             .enumerate()
         {
             if row.len() > 3 || row.iter().any(|v| !v.is_finite() || *v < 0.0) {
-                return Err(format!(
-                    "odom_drift[{k}] needs up to three non-negative fractions (of x, y and θ motion), not {row:?}"
-                ));
+                return Err(OptionError::Drift {
+                    row: k,
+                    values: row.clone(),
+                });
             }
             drift[k][..row.len()].copy_from_slice(row);
         }
@@ -277,20 +317,16 @@ impl Localizer {
         let sd = three("init_pose_var", &o.init_pose_var)?;
         let thresh = match o.update_thresh.as_slice() {
             [d, a] => (*d, *a),
-            v => {
-                return Err(format!(
-                    "update_thresh needs a distance and an angle, not {v:?}"
-                ))
-            }
+            v => return Err(OptionError::UpdateThresh(v.to_vec())),
         };
         if o.pf_max_samples == 0 || o.pf_min_samples > o.pf_max_samples {
-            return Err(format!(
-                "pf_min_samples ({}) must not exceed pf_max_samples ({}), which must be positive",
-                o.pf_min_samples, o.pf_max_samples
-            ));
+            return Err(OptionError::Samples {
+                min: o.pf_min_samples,
+                max: o.pf_max_samples,
+            });
         }
         if o.pf_err.is_nan() || o.pf_err <= 0.0 || o.pf_z.is_nan() || o.pf_z <= 0.0 {
-            return Err("pf_err and pf_z must be positive".into());
+            return Err(OptionError::PfBounds);
         }
         let config = pf::Config {
             min_samples: o.pf_min_samples,
@@ -711,7 +747,7 @@ impl Driver for Amcl {
                 "`provides` needs a localize or a position2d device (e.g. [\"localize:0\" \"position2d:2\"])",
             ));
         }
-        let loc = Localizer::new(&o).map_err(|e| NodeError::config(Self::NAME, e))?;
+        let loc = Localizer::new(&o).map_err(|e| NodeError::config(Self::NAME, e.to_string()))?;
         let odom = section.required_one(Interface::Position2d, Some("odometry"))?;
         // A laser, else a sonar ring, with the map keyed by it.
         let has = |i: Interface| section.required().iter().any(|s| s.device.interface == i);
@@ -1375,7 +1411,7 @@ mod tests {
 
     #[test]
     fn bad_options_are_named() {
-        let e = |o: Options| Localizer::new(&o).err().unwrap();
+        let e = |o: Options| Localizer::new(&o).err().unwrap().to_string();
         assert!(e(Options {
             laser_model_type: "x".into(),
             ..Options::default()

@@ -27,6 +27,6 @@ pub mod wire;
 pub mod xdr;
 
 pub use server::{
-    parse_network, Bridge, BridgeError, Config, IpNetwork, Limits, Port, DEFAULT_MAX_CLIENTS,
-    MAX_PENDING_REQUESTS, MAX_UNREAD_ANSWERS,
+    parse_network, Bridge, BridgeError, Config, IpNetwork, Limits, NetworkError, Port,
+    DEFAULT_MAX_CLIENTS, MAX_PENDING_REQUESTS, MAX_UNREAD_ANSWERS,
 };

@@ -162,11 +162,24 @@ const REFUSED_ADDRESSES: usize = 1024;
 ///
 /// # Errors
 ///
-/// A message naming the text and the expected form.
-pub fn parse_network(text: &str) -> Result<IpNetwork, String> {
-    text.trim().parse::<IpNetwork>().map_err(|e| {
-        format!("`{text}` is not a network like 10.1.0.0/16 or an address like 10.1.0.7 ({e})")
-    })
+/// [`NetworkError`], naming the text and the expected form.
+pub fn parse_network(text: &str) -> Result<IpNetwork, NetworkError> {
+    text.trim()
+        .parse::<IpNetwork>()
+        .map_err(|source| NetworkError {
+            text: text.to_owned(),
+            source,
+        })
+}
+
+/// `--allow`'s argument is no network.
+#[derive(Debug, thiserror::Error)]
+#[error("`{text}` is not a network like 10.1.0.0/16 or an address like 10.1.0.7 ({source})")]
+pub struct NetworkError {
+    /// The argument.
+    pub text: String,
+    /// The parser's reason.
+    pub source: ipnetwork::IpNetworkError,
 }
 
 /// Whether a client at `ip` may connect (an IPv4 client of an IPv6
@@ -1553,7 +1566,7 @@ mod tests {
         assert!(!allowed(&allow, ip("192.168.7.10")));
         assert!(!allowed(&allow, ip("127.0.0.1")));
         assert!(allowed(&[], ip("203.0.113.5")), "no list: anyone");
-        let e = parse_network("10.1.0.0/33").unwrap_err();
+        let e = parse_network("10.1.0.0/33").unwrap_err().to_string();
         assert!(
             e.contains("`10.1.0.0/33` is not a network like 10.1.0.0/16"),
             "{e}"

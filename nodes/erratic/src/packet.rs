@@ -119,15 +119,38 @@ pub struct Motor {
     pub rstall: u8,
 }
 
+/// A packet shorter than what it announces.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum PacketError {
+    /// A motor packet of this many bytes.
+    #[error("motor packet of {0} bytes: 18 expected")]
+    ShortMotor(usize),
+    /// A packet with no count.
+    #[error("empty {0} packet")]
+    Empty(&'static str),
+    /// Fewer bytes than the count calls for.
+    #[error("{kind} packet of {len} bytes announces {count} {of}")]
+    Short {
+        /// The packet's kind.
+        kind: &'static str,
+        /// Its length.
+        len: usize,
+        /// What it announces.
+        count: usize,
+        /// Of what.
+        of: &'static str,
+    },
+}
+
 impl Motor {
     /// Decodes a motor packet's data.
     ///
     /// # Errors
     ///
     /// A packet shorter than 18 bytes, in words.
-    pub fn decode(d: &[u8]) -> Result<Motor, String> {
+    pub fn decode(d: &[u8]) -> Result<Motor, PacketError> {
         if d.len() < 18 {
-            return Err(format!("motor packet of {} bytes: 18 expected", d.len()));
+            return Err(PacketError::ShortMotor(d.len()));
         }
         let i16at = |i: usize| i16::from_le_bytes([d[i], d[i + 1]]);
         Ok(Motor {
@@ -163,13 +186,15 @@ impl Motor {
 /// # Errors
 ///
 /// A count the packet does not hold.
-pub fn decode_sonar(d: &[u8]) -> Result<Vec<(u8, u16)>, String> {
-    let n = usize::from(*d.get(1).ok_or("empty sonar packet")?);
+pub fn decode_sonar(d: &[u8]) -> Result<Vec<(u8, u16)>, PacketError> {
+    let n = usize::from(*d.get(1).ok_or(PacketError::Empty("sonar"))?);
     if d.len() < 2 + 3 * n {
-        return Err(format!(
-            "sonar packet of {} bytes announces {n} readings",
-            d.len()
-        ));
+        return Err(PacketError::Short {
+            kind: "sonar",
+            len: d.len(),
+            count: n,
+            of: "readings",
+        });
     }
     Ok((0..n)
         .map(|i| {
@@ -196,13 +221,15 @@ pub fn encode_sonar(readings: &[(u8, u16)]) -> Vec<u8> {
 /// # Errors
 ///
 /// A count the packet does not hold.
-pub fn decode_analog(d: &[u8]) -> Result<(Vec<u16>, u8), String> {
-    let n = usize::from(*d.get(1).ok_or("empty analog packet")?);
+pub fn decode_analog(d: &[u8]) -> Result<(Vec<u16>, u8), PacketError> {
+    let n = usize::from(*d.get(1).ok_or(PacketError::Empty("analog"))?);
     if d.len() < 3 + 2 * n {
-        return Err(format!(
-            "analog packet of {} bytes announces {n} channels",
-            d.len()
-        ));
+        return Err(PacketError::Short {
+            kind: "analog",
+            len: d.len(),
+            count: n,
+            of: "channels",
+        });
     }
     let words = (0..n)
         .map(|i| u16::from_le_bytes([d[2 + 2 * i], d[3 + 2 * i]]))

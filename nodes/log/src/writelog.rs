@@ -46,7 +46,9 @@ use troupe_msgs::{
     bumper, camera, decode_any, fiducial, ir, laser, localize, log, position2d, ranger, sonar,
     AnyMsg, Device, Interface, Stamped,
 };
-use troupe_node::{Ctx, Driver, Event, NodeError, RequestId, Result, Sample, Section, Switch};
+use troupe_node::{
+    Ctx, Driver, Event, NodeError, RequestError, RequestId, Result, Sample, Section, Switch,
+};
 
 use crate::text;
 
@@ -182,7 +184,7 @@ impl Driver for WriteLog {
             Event::Data(s) => self.data(ctx, &s),
             Event::Reply(r) => {
                 if let Some(dev) = self.particle_requests.remove(&r.id) {
-                    match answer(&r, dev) {
+                    match answer(&r) {
                         Ok(m) => self.write_msg(
                             dev,
                             <localize::Particles as troupe_msgs::Message>::SCHEMA,
@@ -197,7 +199,7 @@ impl Driver for WriteLog {
                     return Ok(());
                 };
                 let dev = slot.1;
-                slot.2 = Some(match answer(&r, dev) {
+                slot.2 = Some(match answer(&r) {
                     Ok(m) => text::line(m.stamp, dev.robot, dev.interface, dev.index, &m.msg),
                     Err(e) => {
                         tracing::warn!(
@@ -446,10 +448,9 @@ impl WriteLog {
 }
 
 /// A reply's message, or why there is none.
-fn answer(r: &troupe_node::Reply, dev: Device) -> std::result::Result<Stamped<AnyMsg>, String> {
+fn answer(r: &troupe_node::Reply) -> std::result::Result<Stamped<AnyMsg>, RequestError> {
     match &r.result {
-        Ok(s) => decode_any(&s.payload().to_bytes())
-            .map_err(|e| format!("{dev}: a malformed answer: {e}")),
-        Err(e) => Err(e.to_string()),
+        Ok(s) => decode_any(&s.payload().to_bytes()).map_err(RequestError::Decode),
+        Err(e) => Err(e.clone()),
     }
 }

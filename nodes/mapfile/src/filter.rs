@@ -121,7 +121,8 @@ impl<T: Transform> MapFilter<T> {
         let Some((info, cells)) = fetch.on_reply(ctx, &r, T::NAME)? else {
             return Ok(());
         };
-        let source = OccMap::from_tile(info, &cells).map_err(|e| NodeError::config(T::NAME, e))?;
+        let source = OccMap::from_tile(info, &cells)
+            .map_err(|e| NodeError::config(T::NAME, e.to_string()))?;
         let out = self.transform.apply(&source);
         tracing::info!(
             "{}: {} x {} map at {:.3} m/cell from {}'s {} x {} at {:.3}",

@@ -86,25 +86,33 @@ impl ScanConfig {
     ///
     /// # Errors
     ///
-    /// What is wrong, in words.
-    pub fn check(&self) -> Result<(), String> {
+    /// The first value it cannot take.
+    pub fn check(&self) -> Result<(), ScanConfigError> {
         if ![25, 50, 100].contains(&self.res) {
-            return Err(format!(
-                "resolution {} is not one of 25, 50, 100 (1/100 degree)",
-                self.res
-            ));
+            return Err(ScanConfigError::Resolution(self.res));
         }
         if ![1, 10, 100].contains(&self.range_res) {
-            return Err(format!(
-                "range_res {} is not one of 1, 10, 100 (mm)",
-                self.range_res
-            ));
+            return Err(ScanConfigError::RangeResolution(self.range_res));
         }
         if self.min_angle > self.max_angle {
-            return Err("min_angle is greater than max_angle".into());
+            return Err(ScanConfigError::Angles);
         }
         Ok(())
     }
+}
+
+/// A scan configuration the LMS200 cannot take.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ScanConfigError {
+    /// Not 0.25, 0.5 or 1 degree.
+    #[error("resolution {0} is not one of 25, 50, 100 (1/100 degree)")]
+    Resolution(u16),
+    /// Not 1, 10 or 100 mm.
+    #[error("range_res {0} is not one of 1, 10, 100 (mm)")]
+    RangeResolution(u32),
+    /// The scan's ends the wrong way round.
+    #[error("min_angle is greater than max_angle")]
+    Angles,
 }
 
 /// How to reach the scanner.

@@ -138,7 +138,7 @@ impl Driver for SickLms200 {
             min_angle: -9000,
             max_angle: 9000,
         };
-        config.check().map_err(bad)?;
+        config.check().map_err(|e| bad(e.to_string()))?;
         Ok(SickLms200 {
             laser: section.provided_one(Interface::Laser, None)?,
             settings: Settings {

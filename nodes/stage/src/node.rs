@@ -218,7 +218,7 @@ impl Driver for Stage {
             cfg_err("`worldfile` is required (e.g. worldfile \"simple.world\")".into())
         })?;
         let w = world::load(&path).map_err(|e| cfg_err(e.to_string()))?;
-        let mut sim = Sim::new(w).map_err(cfg_err)?;
+        let mut sim = Sim::new(w).map_err(|e| cfg_err(e.to_string()))?;
         let quirks = o.stage_quirks.is_some_and(Switch::on);
         sim.stage_ranges(quirks);
         // Which model serves which device.
@@ -296,7 +296,7 @@ impl Driver for Stage {
         let mut maps = Vec::new();
         for &(dev, src) in &devices {
             if let Source::Map { model } = src {
-                let map = sim.model_map(model).map_err(cfg_err)?;
+                let map = sim.model_map(model).map_err(|e| cfg_err(e.to_string()))?;
                 tracing::info!(
                     "{dev}: a {} x {} map at {} m/cell drawn from model `{}`",
                     map.info.width,

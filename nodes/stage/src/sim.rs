@@ -242,19 +242,34 @@ fn id(m: usize) -> u16 {
     (m + 1) as u16
 }
 
+/// A world the simulation cannot take as it is.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SimError {
+    /// More models than a grid cell can name.
+    #[error("the world has {0} models; at most 65534 are supported")]
+    TooManyModels(usize),
+    /// A model drawn as a map with no positive cell size.
+    #[error("{pos}: model `{model}` has map_resolution {res}; a map needs a positive cell size")]
+    MapResolution {
+        /// Where the model is declared.
+        pos: String,
+        /// The model.
+        model: String,
+        /// Its `map_resolution`.
+        res: f64,
+    },
+}
+
 impl Sim {
     /// Builds the simulation of `world`.
     ///
     /// # Errors
     ///
     /// A world with more models than a grid cell can name.
-    pub fn new(world: World) -> Result<Sim, String> {
+    pub fn new(world: World) -> Result<Sim, SimError> {
         let n = world.models.len();
         if n >= usize::from(u16::MAX) {
-            return Err(format!(
-                "the world has {n} models; at most {} are supported",
-                u16::MAX - 1
-            ));
+            return Err(SimError::TooManyModels(n));
         }
         let poses: Vec<Pose> = world.models.iter().map(|m| m.pose).collect();
         let roots: Vec<usize> = (0..n).map(|m| world.root(m)).collect();

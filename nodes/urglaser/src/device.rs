@@ -82,6 +82,7 @@ enum Fail {
     NoReply(String),
     Refused(String),
     Garbled(String),
+    Specs(scip::SpecsError),
 }
 
 impl std::fmt::Display for Fail {
@@ -90,6 +91,7 @@ impl std::fmt::Display for Fail {
             Fail::NoReply(what) => write!(f, "no reply to {what}"),
             Fail::Refused(what) => write!(f, "the URG refused {what}"),
             Fail::Garbled(what) => write!(f, "unreadable {what}"),
+            Fail::Specs(e) => write!(f, "unreadable version or parameters: {e}"),
         }
     }
 }
@@ -185,12 +187,12 @@ impl<F: Fn(Update)> Session<'_, F> {
         let specs = match version {
             // No checksums: a reply that does not parse is asked again.
             Version::Scip1 => self.ask(b"V", "the version request (V)", 200, |r| {
-                scip::specs_1(r).map_err(Fail::Garbled)
+                scip::specs_1(r).map_err(Fail::Specs)
             })?,
             Version::Scip2 => {
                 let pp = self.ask_2(b"PP", "the parameter request (PP)")?;
                 let vv = self.ask_2(b"VV", "the version request (VV)")?;
-                scip::specs_2(&pp, &vv).map_err(|e| SessionError::Device(Fail::Garbled(e)))?
+                scip::specs_2(&pp, &vv).map_err(|e| SessionError::Device(Fail::Specs(e)))?
             }
         };
         tracing::info!(
@@ -249,7 +251,7 @@ impl<F: Fn(Update)> Session<'_, F> {
     fn choose_version(&mut self) -> Result<Version, Error> {
         let firmware = self.ask(b"V", "the version request (V)", 200, |r| {
             if r.ok_1() {
-                let s = scip::specs_1(r).map_err(Fail::Garbled)?;
+                let s = scip::specs_1(r).map_err(Fail::Specs)?;
                 Ok(Some(s.firmware))
             } else if r.status_2().is_some() {
                 Ok(None)

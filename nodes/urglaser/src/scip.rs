@@ -345,16 +345,16 @@ fn serial(v: &str) -> Option<u32> {
 /// # Errors
 ///
 /// What is missing or unreadable.
-pub fn specs_1(r: &Response) -> Result<Specs, String> {
-    let line = |key: &str| {
+pub fn specs_1(r: &Response) -> Result<Specs, SpecsError> {
+    let line = |key: &'static str| {
         r.body()
             .iter()
             .find_map(|l| std::str::from_utf8(l).ok()?.strip_prefix(key))
-            .ok_or_else(|| format!("no {key} line"))
+            .ok_or(SpecsError::Missing(key))
     };
     let firm = line("FIRM:")?;
-    let firmware = atol(firm).ok_or_else(|| format!("FIRM:{firm}: no version"))?;
-    let bad = || format!("FIRM:{firm}: not (dmin-dmax[mm],deg[deg],amin-amax[step],rpm[rpm])");
+    let firmware = atol(firm).ok_or_else(|| SpecsError::Firmware(firm.to_owned()))?;
+    let bad = || SpecsError::Spec(firm.to_owned());
     let (_, spec) = firm.split_once('(').ok_or_else(bad)?;
     let fields: Vec<&str> = spec.trim_end_matches(')').split(',').collect();
     let range = |f: &str| -> Option<(u32, u32)> {
@@ -371,7 +371,7 @@ pub fn specs_1(r: &Response) -> Result<Specs, String> {
         last_step: u16::try_from(amax).map_err(|_| bad())?,
         ares: ARES,
         rpm,
-        serial: serial(seri).ok_or_else(|| format!("SERI:{seri}: no number"))?,
+        serial: serial(seri).ok_or_else(|| SpecsError::Serial(seri.to_owned()))?,
         firmware,
     })
 }
@@ -381,30 +381,30 @@ pub fn specs_1(r: &Response) -> Result<Specs, String> {
 /// # Errors
 ///
 /// What is missing, unreadable or fails its checksum.
-pub fn specs_2(pp: &Response, vv: &Response) -> Result<Specs, String> {
-    let params = |r: &Response| -> Result<Vec<(String, String)>, String> {
+pub fn specs_2(pp: &Response, vv: &Response) -> Result<Specs, SpecsError> {
+    let params = |r: &Response| -> Result<Vec<(String, String)>, SpecsError> {
         r.body()
             .iter()
             .map(|l| {
                 param(l)
                     .map(|(k, v)| (k.to_owned(), v.to_owned()))
-                    .ok_or_else(|| format!("bad line {:?}", String::from_utf8_lossy(l)))
+                    .ok_or_else(|| SpecsError::BadLine(String::from_utf8_lossy(l).into_owned()))
             })
             .collect()
     };
     let (pp, vv) = (params(pp)?, params(vv)?);
-    let get = |list: &[(String, String)], key: &str| -> Result<String, String> {
+    let get = |list: &[(String, String)], key: &'static str| -> Result<String, SpecsError> {
         list.iter()
             .find(|(k, _)| k == key)
             .map(|(_, v)| v.clone())
-            .ok_or_else(|| format!("no {key}"))
+            .ok_or(SpecsError::Missing(key))
     };
-    let num = |key: &str| -> Result<u32, String> {
+    let num = |key: &'static str| -> Result<u32, SpecsError> {
         let v = get(&pp, key)?;
-        atol(&v).ok_or_else(|| format!("{key}:{v}: not a number"))
+        atol(&v).ok_or(SpecsError::NotANumber { key, value: v })
     };
-    let step = |key: &str| -> Result<u16, String> {
-        u16::try_from(num(key)?).map_err(|_| format!("{key} out of range"))
+    let step = |key: &'static str| -> Result<u16, SpecsError> {
+        u16::try_from(num(key)?).map_err(|_| SpecsError::OutOfRange(key))
     };
     let firm = get(&vv, "FIRM")?;
     let seri = get(&vv, "SERI")?;
@@ -414,9 +414,40 @@ pub fn specs_2(pp: &Response, vv: &Response) -> Result<Specs, String> {
         last_step: step("AMAX")?,
         ares: num("ARES")?.max(1),
         rpm: num("SCAN").unwrap_or(600),
-        serial: serial(&seri).ok_or_else(|| format!("SERI:{seri}: no number"))?,
-        firmware: atol(&firm).ok_or_else(|| format!("FIRM:{firm}: no version"))?,
+        serial: serial(&seri).ok_or(SpecsError::Serial(seri))?,
+        firmware: atol(&firm).ok_or(SpecsError::Firmware(firm))?,
     })
+}
+
+/// What is missing or unreadable in a URG's version or parameters.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum SpecsError {
+    /// A line the reply must have.
+    #[error("no {0} line")]
+    Missing(&'static str),
+    /// FIRM holds no version number.
+    #[error("FIRM:{0}: no version")]
+    Firmware(String),
+    /// FIRM's specification is not SCIP 1.1's.
+    #[error("FIRM:{0}: not (dmin-dmax[mm],deg[deg],amin-amax[step],rpm[rpm])")]
+    Spec(String),
+    /// SERI holds no serial number.
+    #[error("SERI:{0}: no number")]
+    Serial(String),
+    /// A line that is no `KEY:value;` parameter.
+    #[error("bad line {0:?}")]
+    BadLine(String),
+    /// A parameter that must be a number.
+    #[error("{key}:{value}: not a number")]
+    NotANumber {
+        /// The parameter.
+        key: &'static str,
+        /// What it holds.
+        value: String,
+    },
+    /// A step number past 65535.
+    #[error("{0} out of range")]
+    OutOfRange(&'static str),
 }
 
 #[cfg(test)]
@@ -546,6 +577,9 @@ mod tests {
         assert_eq!((s.max_range_mm, s.ares, s.serial), (5600, 1024, 611_771));
         let mut bad = pp.clone();
         bad.lines[4][2] ^= 1;
-        assert!(specs_2(&bad, &vv).unwrap_err().contains("bad line"));
+        assert!(specs_2(&bad, &vv)
+            .unwrap_err()
+            .to_string()
+            .contains("bad line"));
     }
 }

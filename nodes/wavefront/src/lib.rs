@@ -301,8 +301,8 @@ impl Wavefront {
             return Ok(());
         };
         if let Some((info, cells)) = fetch.on_reply(ctx, &r, "wavefront")? {
-            let m =
-                OccMap::from_tile(info, &cells).map_err(|e| NodeError::config("wavefront", e))?;
+            let m = OccMap::from_tile(info, &cells)
+                .map_err(|e| NodeError::config("wavefront", e.to_string()))?;
             *map = Some(m);
         } else if *geom == Some(r.id) {
             *geom = None;

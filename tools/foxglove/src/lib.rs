@@ -440,7 +440,10 @@ impl ServerListener for Commands {
             } else {
                 self.session.put(&c.key, c.payload).wait()
             };
-            sent.map_err(|e| format!("sending on {}: {e}", c.key))
+            sent.map_err(|e| CommandError::Send {
+                key: c.key,
+                reason: e.to_string(),
+            })
         });
         if let Err(why) = sent {
             let mut refused = lock(&self.refused);
@@ -494,24 +497,59 @@ fn published_pose(v: &serde_json::Value) -> Pose2d {
 /// Foxglove's "pose estimate": 0.5 m, 15 degrees), in Player's order.
 const SET_POSE_COV: [f64; 6] = [0.25, 0.25, 0.068_538_923_266_547_87, 0.0, 0.0, 0.0];
 
+/// Why a client's message makes no command, said for the client's user.
+#[derive(Debug, thiserror::Error)]
+pub enum CommandError {
+    /// Not JSON.
+    #[error("`{0}` messages are not read: publish JSON")]
+    Encoding(String),
+    /// A topic with no device in it.
+    #[error("expected /robot/PORT/INTERFACE/INDEX/cmd_vel, …/goal or …/set_pose")]
+    Topic,
+    /// The topic's device is no device.
+    #[error("{device}: {source}")]
+    Device {
+        /// The topic's device part.
+        device: String,
+        /// Why it is none.
+        source: troupe_msgs::AddrError,
+    },
+    /// The payload does not parse.
+    #[error("not JSON: {0}")]
+    Json(serde_json::Error),
+    /// A topic that takes no commands.
+    #[error(
+        "{0}: only a position2d's …/cmd_vel, a planner's …/goal and a localizer's …/set_pose take commands"
+    )]
+    NotACommand(String),
+    /// Zenoh would not send it.
+    #[error("sending on {key}: {reason}")]
+    Send {
+        /// Where.
+        key: String,
+        /// Zenoh's reason.
+        reason: String,
+    },
+}
+
 /// The command a client's message on `topic` makes.
 ///
 /// # Errors
 ///
 /// Why it makes none, said for the client's user.
-pub fn command_of(topic: &str, encoding: &str, payload: &[u8]) -> Result<Command, String> {
+pub fn command_of(topic: &str, encoding: &str, payload: &[u8]) -> Result<Command, CommandError> {
     if encoding != "json" {
-        return Err(format!("`{encoding}` messages are not read: publish JSON"));
+        return Err(CommandError::Encoding(encoding.to_owned()));
     }
     let (device, what) = topic
         .trim_start_matches('/')
         .rsplit_once('/')
-        .ok_or_else(|| {
-            "expected /robot/PORT/INTERFACE/INDEX/cmd_vel, …/goal or …/set_pose".to_owned()
-        })?;
-    let dev = keys::parse_data(device).map_err(|e| format!("{device}: {e}"))?;
-    let v: serde_json::Value =
-        serde_json::from_slice(payload).map_err(|e| format!("not JSON: {e}"))?;
+        .ok_or(CommandError::Topic)?;
+    let dev = keys::parse_data(device).map_err(|source| CommandError::Device {
+        device: device.to_owned(),
+        source,
+    })?;
+    let v: serde_json::Value = serde_json::from_slice(payload).map_err(CommandError::Json)?;
     let f = |path: &[&str]| {
         path.iter()
             .try_fold(&v, |v, k| v.get(k))
@@ -553,9 +591,7 @@ pub fn command_of(topic: &str, encoding: &str, payload: &[u8]) -> Result<Command
                 request: true,
             })
         }
-        _ => Err(format!(
-            "{topic}: only a position2d's …/cmd_vel, a planner's …/goal and a localizer's …/set_pose take commands"
-        )),
+        _ => Err(CommandError::NotACommand(topic.to_owned())),
     }
 }
 
@@ -605,10 +641,14 @@ mod tests {
         let s: localize::SetPose = codec::decode(&set.payload).unwrap().msg;
         assert_eq!((s.mean.x, s.mean.y, s.mean.yaw), (-6.0, -6.0, 0.0));
         let refused = command_of("/robot/6665/laser/0/cmd_vel", "json", b"{}").unwrap_err();
-        assert!(refused.contains("only a position2d"), "{refused}");
+        assert!(
+            refused.to_string().contains("only a position2d"),
+            "{refused}"
+        );
         assert!(command_of("/robot/6665/position2d/0/cmd_vel", "cdr", b"").is_err());
         assert!(command_of("/robot/6665/position2d/0/cmd_vel", "json", b"{")
             .unwrap_err()
+            .to_string()
             .contains("not JSON"));
     }
 }

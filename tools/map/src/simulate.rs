@@ -135,12 +135,12 @@ impl Explorer {
 ///
 /// No such robot, no laser on it (a ranger of many beams), or a world the
 /// simulator refuses.
-pub fn simulate(mut world: World, setup: &Setup) -> Result<Run, String> {
+pub fn simulate(mut world: World, setup: &Setup) -> anyhow::Result<Run> {
     let Some(&robot) = world.names.get(&setup.robot) else {
-        return Err(format!("the world has no model `{}`", setup.robot));
+        anyhow::bail!("the world has no model `{}`", setup.robot);
     };
     let Some(pos) = world.models[robot].position.as_mut() else {
-        return Err(format!("`{}` is not a position model", setup.robot));
+        anyhow::bail!("`{}` is not a position model", setup.robot);
     };
     pos.localization = Localization::Odom;
     pos.odom_error = Some(setup.odom_error);
@@ -160,7 +160,9 @@ pub fn simulate(mut world: World, setup: &Setup) -> Result<Run, String> {
                     .first()
                     .is_some_and(|s| s.samples > 1)
         })
-        .ok_or_else(|| format!("`{}` has no laser (a ranger of many beams)", setup.robot))?;
+        .ok_or_else(|| {
+            anyhow::anyhow!("`{}` has no laser (a ranger of many beams)", setup.robot)
+        })?;
     let sensor = world.models[laser].sensors[0].clone();
     let on_robot = world.models[laser].pose.compose(&sensor.pose);
     let (fov, samples) = (sensor.fov, sensor.samples);
@@ -170,7 +172,7 @@ pub fn simulate(mut world: World, setup: &Setup) -> Result<Run, String> {
         .bases
         .iter()
         .position(|b| b.model == robot)
-        .ok_or_else(|| format!("`{}` is not a base the simulator drives", setup.robot))?;
+        .ok_or_else(|| anyhow::anyhow!("`{}` is not a base the simulator drives", setup.robot))?;
     sim.sense_only([laser]);
     let step = sim.world().interval_sim;
     let every = (setup.every / step).round().max(1.0) as u64;
@@ -265,7 +267,7 @@ fn push(log: &mut String, t: f64, iface: Interface, msg: &AnyMsg) {
 }
 
 /// The centres of the cells of the static models a laser sees, world frame.
-fn statics(world: &World) -> Result<Vec<(f64, f64)>, String> {
+fn statics(world: &World) -> anyhow::Result<Vec<(f64, f64)>> {
     let mut world = world.clone();
     for m in &mut world.models {
         m.map_resolution = 0.05;

@@ -644,9 +644,9 @@ async fn request<R: troupe_msgs::Request>(
     session: &troupe_node::zenoh::Session,
     dev: Device,
     req: &R,
-) -> Result<R::Reply, String> {
+) -> anyhow::Result<R::Reply> {
     ask_once(session, dev, req).await?.ok_or_else(|| {
-        format!("{dev} did not answer (no such device, or this identity may not ask it)")
+        anyhow::anyhow!("{dev} did not answer (no such device, or this identity may not ask it)")
     })
 }
 
@@ -658,7 +658,7 @@ async fn request_on_arrival<R: troupe_msgs::Request>(
     session: &troupe_node::zenoh::Session,
     dev: Device,
     req: &R,
-) -> Result<R::Reply, String> {
+) -> anyhow::Result<R::Reply> {
     for _ in 1..ARRIVAL_ASKS {
         if let Some(reply) = ask_once(session, dev, req).await? {
             return Ok(reply);
@@ -675,23 +675,23 @@ async fn ask_once<R: troupe_msgs::Request>(
     session: &troupe_node::zenoh::Session,
     dev: Device,
     req: &R,
-) -> Result<Option<R::Reply>, String> {
+) -> anyhow::Result<Option<R::Reply>> {
     let key = keys::req(&dev, R::NAME);
     let replies = troupe_node::ask(session, &key, WORLD_TIMEOUT)
         .payload(codec::encode(req, troupe_node::Clock::wall().now()))
         .await
-        .map_err(|e| format!("asking {key}: {e}"))?;
+        .map_err(|e| anyhow::anyhow!("asking {key}: {e}"))?;
     let Ok(reply) = replies.recv_async().await else {
         return Ok(None);
     };
     let reply = reply.into_result().map_err(|e| {
         let reason = codec::decode::<troupe_msgs::common::Nack>(&e.payload().to_bytes())
             .map_or_else(|_| "no reason given".to_owned(), |n| n.msg.reason);
-        format!("{dev} refused: {reason}")
+        anyhow::anyhow!("{dev} refused: {reason}")
     })?;
     codec::decode::<R::Reply>(&reply.payload().to_bytes())
         .map(|s| Some(s.msg))
-        .map_err(|e| format!("{dev}'s answer does not decode: {e}"))
+        .map_err(|e| anyhow::anyhow!("{dev}'s answer does not decode: {e}"))
 }
 
 /// Asks map device `dev` for its info and every cell, and keeps its
@@ -717,9 +717,8 @@ async fn fetch_map(session: troupe_node::zenoh::Session, shared: Arc<Shared>, de
             }])
         });
         let mut png = Vec::new();
-        img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
-            .map_err(|e| e.to_string())?;
-        Ok::<_, String>((info, png))
+        img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)?;
+        anyhow::Ok((info, png))
     };
     match picture.await {
         Ok((info, png)) => {
@@ -730,7 +729,7 @@ async fn fetch_map(session: troupe_node::zenoh::Session, shared: Arc<Shared>, de
             drop(l);
             shared.touch();
         }
-        Err(e) => tracing::warn!("cannot draw map {dev}: {e}"),
+        Err(e) => tracing::warn!("cannot draw map {dev}: {e:#}"),
     }
 }
 
@@ -1197,7 +1196,7 @@ async fn command(State(v): State<App>, Json(o): Json<Order>) -> Response {
             };
             match request(session, dev, &set).await {
                 Ok(_) => (StatusCode::OK, "acknowledged").into_response(),
-                Err(e) => gone(e),
+                Err(e) => gone(format!("{e:#}")),
             }
         }
         _ => bad(format!(

@@ -88,14 +88,15 @@ impl Sim {
     /// # Errors
     ///
     /// A `map_resolution` that is not a positive number.
-    pub fn model_map(&self, m: usize) -> Result<OccMap, String> {
+    pub fn model_map(&self, m: usize) -> Result<OccMap, SimError> {
         let d = &self.world.models[m];
         let res = d.map_resolution;
         if !(res > 0.0 && res.is_finite()) {
-            return Err(format!(
-                "{}: model `{}` has map_resolution {res}; a map needs a positive cell size",
-                d.pos, d.name
-            ));
+            return Err(SimError::MapResolution {
+                pos: d.pos.to_string(),
+                model: d.name.clone(),
+                res,
+            });
         }
         let (sx, sy) = (d.size[0], d.size[1]);
         let (w, h) = (
