@@ -1049,3 +1049,186 @@ fn a_client_whose_queueing_stalls_holds_up_no_other_client_of_a_device() {
     let _ = stop.send(());
     thread.join().unwrap();
 }
+
+/// A robot stepping as Stage under Player does: every 20 ms of wall time a
+/// step of 0.1 simulated s, position2d once and the laser twice (Stage's
+/// ranger sends ranges then intensities, and rangertolaser a scan for
+/// each), all stamped with the step's time; each device also answers gets
+/// with its latest sample, as a driver's runtime does. Stops when dropped.
+struct Stepper {
+    stop: Arc<AtomicBool>,
+    _live: Vec<troupe_node::zenoh::liveliness::LivelinessToken>,
+}
+
+impl Drop for Stepper {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+    }
+}
+
+fn stepper(net: &TestNet, pos: Device, laser: Device) -> Stepper {
+    let s = net.peer();
+    let live = [pos, laser]
+        .iter()
+        .map(|d| {
+            s.liveliness()
+                .declare_token(keys::token(d, "fake"))
+                .wait()
+                .unwrap()
+        })
+        .collect();
+    net.wait_live(&[&pos.to_string(), &laser.to_string()]);
+    // The latest sample of each device, answered to gets.
+    let latest: Arc<std::sync::Mutex<[Vec<u8>; 2]>> = Arc::default();
+    let answers: Vec<Queryable> = [pos, laser]
+        .iter()
+        .enumerate()
+        .map(|(i, d)| {
+            let latest = latest.clone();
+            s.declare_queryable(keys::data(d))
+                .callback(move |q| {
+                    let b = latest.lock().unwrap()[i].clone();
+                    if !b.is_empty() {
+                        q.reply(q.key_expr().clone(), b).wait().unwrap();
+                    }
+                })
+                .wait()
+                .unwrap()
+        })
+        .collect();
+    let stop = Arc::new(AtomicBool::new(false));
+    let st = stop.clone();
+    std::thread::spawn(move || {
+        let _answers = answers;
+        for k in 1u32.. {
+            if st.load(Ordering::Relaxed) {
+                break;
+            }
+            let t = f64::from(k) * 0.1;
+            let p = encode(&position2d::Data::default(), t);
+            let l = encode(
+                &laser::Scan {
+                    max_range: 8.0,
+                    ranges: vec![1.0; 8],
+                    ..Default::default()
+                },
+                t,
+            );
+            *latest.lock().unwrap() = [p.clone(), l.clone()];
+            s.put(keys::data(&pos), p).wait().unwrap();
+            s.put(keys::data(&laser), l.clone()).wait().unwrap();
+            s.put(keys::data(&laser), l).wait().unwrap();
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    });
+    Stepper { stop, _live: live }
+}
+
+type Queryable = troupe_node::zenoh::query::Queryable<()>;
+
+/// libplayerc's `playerc_client_read` in PULL mode: the DATA kept while it
+/// waited for an answer, if any; else a data request and the round up to
+/// its SYNCH. Returns each message's interface and stamp.
+fn libplayerc_read(c: &mut Player) -> Vec<(u32, f64)> {
+    use crate::player::{DATA, RESP_ACK, SYNCH};
+    if !c.seen.is_empty() {
+        return c.seen.drain(..).map(|f| (f.h[2], f.timestamp)).collect();
+    }
+    c.send(1, 0, 3, 4, &[]);
+    assert_eq!(c.reply().kind(), RESP_ACK);
+    let mut got: Vec<(u32, f64)> = c.seen.drain(..).map(|f| (f.h[2], f.timestamp)).collect();
+    loop {
+        let f = c.recv();
+        match f.kind() {
+            DATA => got.push((f.h[2], f.timestamp)),
+            SYNCH => return got,
+            k => panic!("a message of type {k} in a round"),
+        }
+    }
+}
+
+/// Player 3.1 with Stage 4.3 (simple.cfg): a PULL client that opens
+/// position2d, then the laser, gets every opened device from its second
+/// read on, each read a newer step; Troupe's second read carried the laser
+/// alone (its sample of the step the client already had).
+#[test]
+fn every_opened_device_is_in_the_second_pull_read_and_each_read_is_newer() {
+    let net = TestNet::new("bridge-pull-second");
+    let pos = Device::new(ROBOT, Interface::Position2d, 0);
+    let las = Device::new(ROBOT, Interface::Laser, 0);
+    let _robot = stepper(&net, pos, las);
+    let (addr, thread, stop) = bridge(&net);
+    let mut c = Player::connect(addr, ROBOT);
+    c.send(1, 0, 3, 5, &2u32.to_be_bytes());
+    assert_eq!(c.reply().kind(), crate::player::RESP_ACK);
+    c.open(pos);
+    c.open(las);
+    let (pos_code, las_code) = (
+        u32::from(Interface::Position2d.code()),
+        u32::from(Interface::Laser.code()),
+    );
+    let mut newest = f64::NEG_INFINITY;
+    let first = libplayerc_read(&mut c);
+    for (_, t) in &first {
+        newest = newest.max(*t);
+    }
+    for read in 2..=6 {
+        let got = libplayerc_read(&mut c);
+        for code in [pos_code, las_code] {
+            assert!(
+                got.iter().any(|&(i, _)| i == code),
+                "read {read} lacks interface {code}: {got:?} (read 1: {first:?})"
+            );
+        }
+        let top = got
+            .iter()
+            .map(|&(_, t)| t)
+            .fold(f64::NEG_INFINITY, f64::max);
+        assert!(top > newest, "read {read} brings no newer step: {got:?}");
+        newest = top;
+    }
+    drop(c);
+    let _ = stop.send(());
+    thread.join().unwrap();
+}
+
+/// Player with a replace rule for data (PUSH mode) keeps a device's newest
+/// queued message: a client got each of rangertolaser's doubled scans once
+/// (287 laser messages in 28.6 simulated s); Troupe passed both (602 in
+/// 30.1 s). Without a rule both copies go out, from Player as from Troupe.
+#[test]
+fn a_replace_rule_leaves_one_scan_of_each_step_in_push_mode() {
+    let net = TestNet::new("bridge-push-replace");
+    let pos = Device::new(ROBOT, Interface::Position2d, 0);
+    let las = Device::new(ROBOT, Interface::Laser, 0);
+    let _robot = stepper(&net, pos, las);
+    let (addr, thread, stop) = bridge(&net);
+    let mut ruled = Player::connect(addr, ROBOT);
+    // PLAYER_PLAYER_REQ_ADD_REPLACE_RULE: any interface and index, DATA,
+    // any subtype, replace.
+    ruled.send(1, 0, 3, 10, &be(&[u32::MAX, u32::MAX, 1, u32::MAX, 1]));
+    assert_eq!(ruled.reply().kind(), crate::player::RESP_ACK);
+    ruled.open(las);
+    let mut plain = Player::connect(addr, ROBOT);
+    plain.open(las);
+    let stamps = |c: &mut Player, n: usize| -> Vec<f64> {
+        let mut v: Vec<f64> = c.seen.drain(..).map(|f| f.timestamp).collect();
+        while v.len() < n {
+            let f = c.recv();
+            assert_eq!(f.kind(), crate::player::DATA, "{f:?}");
+            v.push(f.timestamp);
+        }
+        v
+    };
+    let got = stamps(&mut ruled, 40);
+    let mut distinct = got.clone();
+    distinct.dedup();
+    assert_eq!(got, distinct, "a step's scan twice under the rule: {got:?}");
+    // Without the rule: both copies of every step after the first whole one.
+    let got = stamps(&mut plain, 40);
+    let twice = got.windows(2).filter(|w| w[0] == w[1]).count();
+    assert!(twice >= 15, "{twice} doubled steps in {got:?}");
+    drop((ruled, plain));
+    let _ = stop.send(());
+    thread.join().unwrap();
+}

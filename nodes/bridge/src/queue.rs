@@ -207,6 +207,9 @@ pub struct Queue {
     waiting: Option<Instant>,
     dropped: u32,
     dropped_total: u64,
+    /// The stamp of the last data message written, by interface, index
+    /// and subtype: a replace rule's step already delivered.
+    written: Vec<((u32, u32, u8), f64)>,
 }
 
 impl Queue {
@@ -227,6 +230,7 @@ impl Queue {
             waiting: None,
             dropped: 0,
             dropped_total: 0,
+            written: Vec::new(),
         }
     }
 
@@ -289,6 +293,7 @@ impl Queue {
     /// The client closed a device: its pace no longer holds rounds back.
     pub fn forget(&mut self, interf: u32, index: u32) {
         self.paces.retain(|p| (p.sig.0, p.sig.1) != (interf, index));
+        self.written.retain(|w| (w.0 .0, w.0 .1) != (interf, index));
     }
 
     /// When a PULL round waiting for due devices gives up on them: the
@@ -347,6 +352,12 @@ impl Queue {
                     if self.items.remove(i).is_some_and(|o| o.is_response()) {
                         self.answers -= 1;
                     }
+                } else if m.kind == wire::DATA && self.written_stamp(&m) == Some(m.stamp) {
+                    // A second message of a step already written (Stage's
+                    // ranger, so rangertolaser, sends two): Player, which
+                    // writes its queues once per pass, replaces the first
+                    // before it goes out; here the first went out.
+                    return;
                 }
             }
             Replace::Accept => {}
@@ -355,6 +366,21 @@ impl Queue {
             self.answers += 1;
         }
         self.items.push_back(m);
+    }
+
+    /// The stamp of the last data message written of `m`'s kind.
+    fn written_stamp(&self, m: &Out) -> Option<f64> {
+        let sig = (m.interf, m.index, m.subtype);
+        self.written.iter().find(|w| w.0 == sig).map(|w| w.1)
+    }
+
+    /// Notes that data `m` was written.
+    fn wrote(&mut self, m: &Out) {
+        let sig = (m.interf, m.index, m.subtype);
+        match self.written.iter_mut().find(|w| w.0 == sig) {
+            Some(w) => w.1 = m.stamp,
+            None => self.written.push((sig, m.stamp)),
+        }
     }
 
     /// Notes a data sample's stamp in its pace (dropped or not: it came,
@@ -470,6 +496,15 @@ impl Queue {
             let m = self.items.pop_front()?;
             if m.is_response() {
                 self.answers -= 1;
+            }
+            if m.kind == wire::DATA {
+                self.wrote(&m);
+                if self.pull && !self.data_requested {
+                    // Data that went out ahead of an answer, between
+                    // rounds: the client has that step, so the next
+                    // round brings a newer one (Player's next pass).
+                    self.round_stamp = self.round_stamp.max(m.stamp);
+                }
             }
             if self.data_requested && m.kind == wire::DATA && !self.fresh && self.new_step(&m) {
                 // Its wait for due data starts at the next `must_wait`
@@ -848,6 +883,72 @@ mod tests {
         assert_eq!(q.deadline(), None);
         q.push(data(4, 0.4));
         q.push(data(6, 0.4));
+        assert_eq!(drain(&mut q), [(D, 4), (D, 6), (S, 1)]);
+    }
+
+    /// Player with Stage: rangertolaser publishes a laser scan per ranger
+    /// message, two per step with one stamp, and Player writes a client's
+    /// queue once per pass, so a replace rule leaves one scan a step (287
+    /// in 28.6 simulated s). Here the first of the two may be written
+    /// before the second comes; the second is then dropped.
+    #[test]
+    fn a_replace_rule_leaves_one_message_of_a_kind_a_step() {
+        let replace = Rule {
+            interf: -1,
+            index: -1,
+            kind: i32::from(D),
+            subtype: -1,
+            replace: Replace::Replace,
+        };
+        let mut q = Queue::new(8);
+        q.add_rule(replace);
+        for t in [0.1, 0.2] {
+            q.push(data(6, t));
+            assert_eq!(drain(&mut q), [(D, 6)]);
+            q.push(data(6, t));
+            assert_eq!(drain(&mut q), [], "the second scan of {t}");
+        }
+        // Another kind of the same step still goes out.
+        q.push(data_of(6, 0, 2, 0.2));
+        assert_eq!(drain(&mut q), [(D, 6)]);
+        // Closed and opened again: its steps start afresh.
+        q.forget(6, 0);
+        q.push(data(6, 0.2));
+        assert_eq!(drain(&mut q), [(D, 6)]);
+        // With no rule, as from Player, both copies go out.
+        let mut q = Queue::new(8);
+        for _ in 0..2 {
+            q.push(data(6, 0.1));
+        }
+        assert_eq!(drain(&mut q), [(D, 6), (D, 6)]);
+    }
+
+    /// A client opens position2d, then the laser, and reads as libplayerc
+    /// does: position2d's data that went out ahead of the laser's answer
+    /// is a step the client has, so its next round (its second read)
+    /// brings a whole newer step, as Player's next pass does, not the
+    /// laser's sample of that same step alone.
+    #[test]
+    fn a_round_after_data_went_out_with_an_answer_brings_a_newer_step() {
+        let mut q = Queue::new(64);
+        q.set_pull(true);
+        q.expect(4, 0, Instant::now());
+        q.push(data(4, 0.1));
+        q.push(msg(A, 1, 4));
+        assert_eq!(drain(&mut q), [(D, 4), (A, 1)]);
+        q.expect(6, 0, Instant::now());
+        q.push(msg(A, 1, 6));
+        // The laser's latest, sent on opening, as the bridge does.
+        q.push(data(6, 0.1));
+        assert_eq!(drain(&mut q), [(A, 1)]);
+        q.request_data(msg(A, 1, 4));
+        assert_eq!(
+            drain(&mut q),
+            [(A, 1), (D, 6)],
+            "no SYNCH on a step the client has"
+        );
+        q.push(data(4, 0.2));
+        q.push(data(6, 0.2));
         assert_eq!(drain(&mut q), [(D, 4), (D, 6), (S, 1)]);
     }
 }
