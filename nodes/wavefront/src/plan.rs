@@ -16,7 +16,7 @@
 //! (through unblocked cells), the first 0.5 m taken without looking, and
 //! the goal cell last.
 
-use troupe_geom::occmap::{self, OccMap};
+use troupe_geom::occmap::OccMap;
 use troupe_msgs::map;
 
 /// Planning parameters (metres).
@@ -340,13 +340,29 @@ impl Planner {
         &self.params
     }
 
+    /// The cell of world point (x, y) as Player's planner takes it: the
+    /// nearest cell corner (plan.h's PLAN_GXWX rounds; its PLAN_WXGX puts
+    /// cell i at origin + i × scale), so that a client gets the waypoints
+    /// Player gave: (-6.961, -6.951) on the cave's map is (-6.976, -6.944).
     fn cell(&self, x: f64, y: f64) -> Option<usize> {
-        occmap::index_of(&self.info, x, y)
+        let s = self.res();
+        let (w, h) = (self.info.width as usize, self.info.height as usize);
+        let i = ((x - self.info.origin.x) / s + 0.5).floor();
+        let j = ((y - self.info.origin.y) / s + 0.5).floor();
+        if !(i >= 0.0 && j >= 0.0 && (i as usize) < w && (j as usize) < h) {
+            return None;
+        }
+        Some(j as usize * w + i as usize)
     }
 
-    /// The centre of cell `k`, world frame.
-    pub fn centre(&self, k: usize) -> (f64, f64) {
-        occmap::centre(&self.info, k)
+    /// The world point of cell `k`, as Player's planner places it (see
+    /// [`Planner::cell`]).
+    pub fn point(&self, k: usize) -> (f64, f64) {
+        let (s, w) = (self.res(), self.info.width as usize);
+        (
+            self.info.origin.x + (k % w) as f64 * s,
+            self.info.origin.y + (k / w) as f64 * s,
+        )
     }
 
     fn res(&self) -> f64 {
@@ -437,7 +453,7 @@ impl Planner {
         };
         let seen = |from: usize, k: usize| self.visible(path[from], path[k]);
         let blind = (0.5 / self.res()).floor() as usize + 1;
-        let mut out = vec![self.centre(first)];
+        let mut out = vec![self.point(first)];
         let mut at = 0;
         while at + 1 < path.len() {
             let mut k = (at + blind).min(path.len() - 1);
@@ -466,7 +482,7 @@ impl Planner {
                 k = lo;
             }
             at = k;
-            out.push(self.centre(path[at]));
+            out.push(self.point(path[at]));
         }
         out
     }
@@ -513,17 +529,53 @@ mod tests {
             assert!(dist[k] >= 0.4, "path cell {k} too close: {}", dist[k]);
         }
         // Through the gap (x > 8 m).
-        assert!(path.iter().any(|&k| p.centre(k).0 > 8.0));
+        assert!(path.iter().any(|&k| p.point(k).0 > 8.0));
         let wps = p.waypoints(&path);
         assert!(wps.len() >= 3 && wps.len() < 10, "{wps:?}");
-        assert_eq!(wps[0], p.centre(path[0]));
-        assert_eq!(*wps.last().unwrap(), p.centre(*path.last().unwrap()));
+        assert_eq!(wps[0], p.point(path[0]));
+        assert_eq!(*wps.last().unwrap(), p.point(*path.last().unwrap()));
         // Each leg is in line of sight after the first half metre.
         for w in wps.windows(2).skip(1) {
             let a = p.cell(w[0].0, w[0].1).unwrap();
             let b = p.cell(w[1].0, w[1].1).unwrap();
             assert!(p.visible(a, b), "{w:?}");
         }
+    }
+
+    /// Player 3.1's wavefront in cpp-planner-localize's transcript (the
+    /// cave's map, 0.032 m cells from (-8, -8)): from amcl's estimate
+    /// (-6.96113, -6.951) to the goal (-4.5, -5.5), GET_WAYPOINTS answered
+    /// [(-6.976, -6.944), (-4.512, -5.504)], 2.85393 m. The same points,
+    /// on an open map of that grid.
+    #[test]
+    fn waypoints_sit_where_player_s_planner_puts_them() {
+        let info = map::Info {
+            width: 500,
+            height: 500,
+            resolution: 0.032,
+            origin: Pose2d::new(-8.0, -8.0, 0.0),
+        };
+        let m = OccMap::from_fn(info, |_, _| FREE);
+        let mut p = Planner::new(
+            &m,
+            Params {
+                min_radius: 0.19 + 0.15,
+                ..params()
+            },
+        );
+        let path = p.plan((-6.96113, -6.951), (-4.5, -5.5)).unwrap();
+        let wps = p.waypoints(&path);
+        let near =
+            |a: (f64, f64), b: (f64, f64)| (a.0 - b.0).abs() < 1e-6 && (a.1 - b.1).abs() < 1e-6;
+        assert_eq!(wps.len(), 2, "{wps:?}");
+        assert!(near(wps[0], (-6.976, -6.944)), "{wps:?}");
+        assert!(near(wps[1], (-4.512, -5.504)), "{wps:?}");
+        let length = (wps[1].0 - wps[0].0).hypot(wps[1].1 - wps[0].1);
+        assert!((length - 2.85393).abs() < 5e-6, "{length}");
+        // A point just right of a cell's corner, and just left, are that corner's.
+        assert_eq!(p.cell(-8.0 + 0.032 * 10.0 + 0.015, -8.0), Some(10));
+        assert_eq!(p.cell(-8.0 + 0.032 * 10.0 - 0.015, -8.0), Some(10));
+        assert_eq!(p.cell(-8.02, -8.0), None);
     }
 
     #[test]
