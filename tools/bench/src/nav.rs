@@ -146,7 +146,7 @@ fn wavefront(name: &str, m: &OccMap, from: (f64, f64), to: (f64, f64)) -> anyhow
     let length: f64 = path
         .windows(2)
         .map(|w| {
-            let (a, b) = (p.centre(w[0]), p.centre(w[1]));
+            let (a, b) = (p.point(w[0]), p.point(w[1]));
             (a.0 - b.0).hypot(a.1 - b.1)
         })
         .sum();
