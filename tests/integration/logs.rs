@@ -836,6 +836,20 @@ fn a_recorded_stage_run_plays_back_in_order_ten_times_faster() {
         })
         .collect();
     assert!(recorded.len() > 100, "{} messages", recorded.len());
+    // `log info`'s span of stamps (simulated time), read from the file's
+    // two ends alone: the first and last stamps of every sample.
+    let (lo, hi) = recorded
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), (_, t)| {
+            (a.min(*t), b.max(*t))
+        });
+    let span = stamps_line(&info);
+    assert!(
+        (span.0 - (hi - lo)).abs() < 2e-3
+            && (span.1 - lo).abs() < 2e-3
+            && (span.2 - hi).abs() < 2e-3,
+        "{span:?}, the samples' stamps {lo} to {hi}:\n{info}"
+    );
 
     // Played into another namespace, on a router of its own.
     let mut router = Proc::troupe(
@@ -925,6 +939,11 @@ fn a_recorded_stage_run_plays_back_in_order_ten_times_faster() {
         n > 0 && n < recorded.len(),
         "{n} of {} read from the cut file",
         recorded.len()
+    );
+    let cut_span = stamps_line(&info);
+    assert!(
+        (cut_span.1 - lo).abs() < 2e-3 && cut_span.2 < hi,
+        "{cut_span:?}\n{info}"
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -1037,4 +1056,17 @@ fn a_recorded_mcap_plays_into_amcl_which_localizes_as_it_did_live() {
     let after = live.first().map_or(0.0, |l| l.0) + 5.0;
     offline_as_good_as_live("the MCAP replay", &live, &offline, &odom, after);
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `troupe log info`'s `stamps:` line: the span, the first and the last.
+fn stamps_line(info: &str) -> (f64, f64, f64) {
+    let line = info
+        .lines()
+        .find_map(|l| l.strip_prefix("stamps:"))
+        .unwrap_or_else(|| panic!("no stamps in\n{info}"));
+    let n: Vec<f64> = line
+        .split(|c: char| !(c.is_ascii_digit() || c == '.' || c == '-'))
+        .filter_map(|w| w.parse().ok())
+        .collect();
+    (n[0], n[1], n[2])
 }

@@ -1133,7 +1133,7 @@ fn info(path: &Path) -> anyhow::Result<()> {
     let mut out = std::io::stdout().lock();
     // The summary at the end says it all without reading the messages.
     let (size, summary) = summary(path)?;
-    let (counts, channels, start, end, total) = match summary
+    let (counts, channels, start, end, total, stamps) = match summary
         .as_ref()
         .and_then(|s| s.stats.as_ref().map(|st| (s, st)))
     {
@@ -1150,12 +1150,14 @@ fn info(path: &Path) -> anyhow::Result<()> {
                     (*id, (c.topic.clone(), schema, c.message_encoding.clone()))
                 })
                 .collect();
+            let stamps = stamp_span(path, s, st.message_start_time, st.message_end_time)?;
             (
                 st.channel_message_counts.clone(),
                 channels,
                 st.message_start_time,
                 st.message_end_time,
                 st.message_count,
+                stamps,
             )
         }
         None => {
@@ -1168,7 +1170,12 @@ fn info(path: &Path) -> anyhow::Result<()> {
             let mut counts = BTreeMap::new();
             let mut channels = BTreeMap::new();
             let (mut start, mut end, mut total) = (u64::MAX, 0, 0);
+            let mut stamps: Option<(u64, u64)> = None;
             each_message(path, |m| {
+                if m.encoding == ENCODING {
+                    let t = m.publish_time;
+                    stamps = Some(stamps.map_or((t, t), |(a, b)| (a.min(t), b.max(t))));
+                }
                 let next = u16::try_from(ids.len()).unwrap_or(u16::MAX);
                 let id = *ids
                     .entry((m.topic.to_owned(), m.schema.to_owned()))
@@ -1186,13 +1193,23 @@ fn info(path: &Path) -> anyhow::Result<()> {
                 total += 1;
                 Ok(true)
             })?;
-            (counts, channels, start.min(end), end, total)
+            (counts, channels, start.min(end), end, total, stamps)
         }
     };
     let secs = end.saturating_sub(start) as f64 / 1e9;
     writeln!(out, "file:      {name}")?;
     writeln!(out, "size:      {:.1} MB", size as f64 / 1e6)?;
     writeln!(out, "duration:  {secs:.3} s")?;
+    if let Some((first, last)) = stamps {
+        let s = |ns: u64| ns as f64 / 1e9;
+        writeln!(
+            out,
+            "stamps:    {:.3} s, {:.3} to {:.3} (the drivers' clock: simulated time under a simulator)",
+            s(last.saturating_sub(first)),
+            s(first),
+            s(last)
+        )?;
+    }
     writeln!(out, "messages:  {total}")?;
     let mut topics: Vec<(&String, &String, &String, u64)> = channels
         .iter()
@@ -1219,6 +1236,65 @@ fn info(path: &Path) -> anyhow::Result<()> {
     )?;
     Ok(())
 }
+
+/// The first and last stamps (ns) of a recording's samples, from its
+/// first and last [`EDGE`] of log time, read through the summary's chunk
+/// indexes: the middle of a large file is never read.
+fn stamp_span(
+    path: &Path,
+    summary: &mcap::Summary,
+    start: u64,
+    end: u64,
+) -> anyhow::Result<Option<(u64, u64)>> {
+    use mcap::sans_io::indexed_reader::{IndexedReadEvent, IndexedReader, IndexedReaderOptions};
+    use std::io::{Read as _, Seek as _};
+    let samples: std::collections::HashSet<u16> = summary
+        .channels
+        .iter()
+        .filter(|(_, c)| c.message_encoding == ENCODING)
+        .map(|(id, _)| *id)
+        .collect();
+    let name = path.display().to_string();
+    let mut f = std::fs::File::open(path).with_context(|| format!("opening {name}"))?;
+    let mut buf = Vec::new();
+    let mut edge = |options: IndexedReaderOptions, pick: fn(u64, u64) -> u64| {
+        let mut r = IndexedReader::new_with_options(summary, options)
+            .with_context(|| format!("{name}: its chunk indexes"))?;
+        let mut found: Option<u64> = None;
+        while let Some(event) = r.next_event() {
+            match event.with_context(|| format!("reading {name}"))? {
+                IndexedReadEvent::ReadChunkRequest { offset, length } => {
+                    f.seek(std::io::SeekFrom::Start(offset))?;
+                    buf.resize(length, 0);
+                    f.read_exact(&mut buf)?;
+                    r.insert_chunk_record_data(offset, &buf)
+                        .with_context(|| format!("reading {name}"))?;
+                }
+                IndexedReadEvent::Message { header, .. } => {
+                    if samples.contains(&header.channel_id) {
+                        let t = header.publish_time;
+                        found = Some(found.map_or(t, |s| pick(s, t)));
+                    }
+                }
+            }
+        }
+        anyhow::Ok(found)
+    };
+    let first = edge(
+        IndexedReaderOptions::new().log_time_before(start.saturating_add(EDGE)),
+        u64::min,
+    )?;
+    let last = edge(
+        IndexedReaderOptions::new().log_time_on_or_after(end.saturating_sub(EDGE)),
+        u64::max,
+    )?;
+    Ok(first.zip(last))
+}
+
+/// How much log time at each end of a recording [`stamp_span`] reads, ns:
+/// a sample stamped before the first or after the last sample received
+/// within it is not seen.
+const EDGE: u64 = 2_000_000_000;
 
 fn export(path: &Path, format: Format, out: impl std::io::Write) -> anyhow::Result<()> {
     let mut out = std::io::BufWriter::new(out);
