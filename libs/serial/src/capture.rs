@@ -133,14 +133,16 @@ impl Capture {
     }
 
     /// The capture at `path`; when the environment sets `TROUPE_BLESS` (as
-    /// for the golden files), `record` writes it afresh first.
+    /// for the golden files), `record` writes it afresh first, and the
+    /// file's own notes (the comment lines heading it below the recorder's
+    /// two: where its bytes come from) are kept.
     ///
     /// # Errors
     ///
     /// As [`Capture::load`].
     pub fn blessed(path: &Path, record: impl FnOnce(&Path)) -> Result<Capture, CaptureError> {
         if std::env::var_os("TROUPE_BLESS").is_some() {
-            record(path);
+            rerecord(path, record)?;
         }
         Capture::load(path)
     }
@@ -161,6 +163,41 @@ impl Capture {
             _ => None,
         })
     }
+}
+
+/// Lines the recorder writes at the head of a capture.
+const RECORDER_HEAD: usize = 2;
+
+/// Records the capture at `path` afresh with `record`, keeping the notes
+/// that headed the old file below the recorder's own lines.
+fn rerecord(path: &Path, record: impl FnOnce(&Path)) -> Result<(), CaptureError> {
+    let notes: Vec<String> = std::fs::read_to_string(path)
+        .map(|t| {
+            t.lines()
+                .take_while(|l| l.starts_with('#'))
+                .skip(RECORDER_HEAD)
+                .map(str::to_owned)
+                .collect()
+        })
+        .unwrap_or_default();
+    record(path);
+    if notes.is_empty() {
+        return Ok(());
+    }
+    let failed = |e: std::io::Error| CaptureError {
+        origin: path.display().to_string(),
+        line: 0,
+        why: format!("keeping its notes: {e}"),
+    };
+    let text = std::fs::read_to_string(path).map_err(failed)?;
+    let mut lines: Vec<&str> = text.lines().collect();
+    let at = lines
+        .iter()
+        .take(RECORDER_HEAD)
+        .take_while(|l| l.starts_with('#'))
+        .count();
+    lines.splice(at..at, notes.iter().map(String::as_str));
+    std::fs::write(path, lines.join("\n") + "\n").map_err(failed)
 }
 
 /// Writes what crosses an emulated line to a capture file, as it happens.
@@ -364,5 +401,27 @@ mod tests {
                 &Entry::ToDevice(vec![2]),
             ]
         );
+    }
+
+    #[test]
+    fn recording_afresh_keeps_the_notes_heading_the_file() {
+        let path = std::env::temp_dir().join(format!("capture-notes-{}.txt", std::process::id()));
+        let write = |p: &Path, byte: u8| {
+            let mut r = Recorder::create(p, "test").unwrap();
+            r.record(true, &[byte], 9600);
+        };
+        write(&path, 1);
+        let old = std::fs::read_to_string(&path).unwrap();
+        let mut lines: Vec<&str> = old.lines().collect();
+        lines.insert(2, "# PROVENANCE: the manual, page 25");
+        std::fs::write(&path, lines.join("\n") + "\n").unwrap();
+        rerecord(&path, |p| write(p, 2)).unwrap();
+        let new = std::fs::read_to_string(&path).unwrap();
+        let _ = std::fs::remove_file(&path);
+        let head: Vec<&str> = new.lines().take(4).collect();
+        assert_eq!(head[2], "# PROVENANCE: the manual, page 25", "{new}");
+        assert_eq!(head[0], "# test");
+        assert_eq!(head[3], "baud 9600");
+        assert!(new.contains("> 02") && !new.contains("> 01"), "{new}");
     }
 }
