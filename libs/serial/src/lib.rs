@@ -39,6 +39,6 @@ pub use link::{Link, LinkError, SessionError};
 pub use port::{LineError, Port, StopBits, BAUD_RATES};
 pub use pty::{Pacer, Pty};
 pub use thread::{
-    end_session, recv_where, run_sessions, Emulator, Ended, LineThread, Linked, Reports,
+    end_session, recv_where, run_sessions, Emulator, Ended, HeldLine, LineThread, Linked, Reports,
 };
 pub use watchdog::CommandWatchdog;

@@ -89,6 +89,38 @@ impl<O: Send + 'static, U: Send + 'static> LineThread<O, U> {
     }
 }
 
+/// A driver's hold on its line thread: `None` until the driver is set up
+/// (and in tests that never open a port). What every serial driver does
+/// with it, said once.
+pub trait HeldLine<O, U> {
+    /// Queues an order, if there is a thread; false when there is none or
+    /// it has ended.
+    fn order(&self, order: O) -> bool;
+    /// The updates reported since the last call (none without a thread).
+    fn updates_now(&self) -> Vec<U>;
+    /// Stops the thread, if there is one, with `last` (see
+    /// [`LineThread::stop`]).
+    fn stop_with(&mut self, last: O);
+}
+
+impl<O: Send + 'static, U: Send + 'static> HeldLine<O, U> for Option<LineThread<O, U>> {
+    fn order(&self, order: O) -> bool {
+        self.as_ref().is_some_and(|l| l.send(order))
+    }
+
+    fn updates_now(&self) -> Vec<U> {
+        self.as_ref()
+            .map(|l| l.updates().try_iter().collect())
+            .unwrap_or_default()
+    }
+
+    fn stop_with(&mut self, last: O) {
+        if let Some(line) = self.take() {
+            line.stop(last);
+        }
+    }
+}
+
 /// The next message on `rx` that `want` accepts, the others skipped,
 /// within `within`: how tests and tools wait for a line thread's update.
 ///

@@ -49,7 +49,7 @@ use troupe_msgs::{
     aio, common, ir, position2d, power, ptz, sonar, Device, Interface, Pose2d, Pose3d, Size3d,
 };
 use troupe_node::{Ctx, Driver, Event, NodeError, Result, Section, Unit};
-use troupe_serial::CommandWatchdog;
+use troupe_serial::{CommandWatchdog, HeldLine};
 
 use crate::device::{Line, Order, Settings, Update};
 use crate::packet::{cmd, command_int, frame, kind, Motor};
@@ -296,7 +296,7 @@ impl Driver for Erratic {
             Event::Wake => self.drain(ctx),
             Event::Tick => {
                 if self.watchdog.expired(ctx.now()) {
-                    self.order(Order::Vel { speed: 0, turn: 0 });
+                    self.line.order(Order::Vel { speed: 0, turn: 0 });
                 }
                 Ok(())
             }
@@ -305,17 +305,17 @@ impl Driver for Erratic {
                 let speed = (v.x * 1000.0).round() as i32;
                 let turn = v.yaw.to_degrees().round() as i32;
                 self.watchdog.commanded(ctx.now(), speed != 0 || turn != 0);
-                self.order(Order::Vel { speed, turn });
+                self.line.order(Order::Vel { speed, turn });
                 Ok(())
             }
             Event::Command(c) if c.is::<ptz::Cmd>() => {
                 let target = c.decode::<ptz::Cmd>()?.msg.target;
                 let dev = c.device;
                 if Some(dev) == self.dev.tilt {
-                    self.order(Order::Servo(0, f64::from(target.tilt)));
+                    self.line.order(Order::Servo(0, f64::from(target.tilt)));
                 } else {
-                    self.order(Order::Servo(2, f64::from(target.pan)));
-                    self.order(Order::Servo(1, f64::from(target.tilt)));
+                    self.line.order(Order::Servo(2, f64::from(target.pan)));
+                    self.line.order(Order::Servo(1, f64::from(target.tilt)));
                 }
                 let clamp = |a: f32| {
                     let deg = f64::from(a).to_degrees().trunc();
@@ -342,7 +342,7 @@ impl Driver for Erratic {
             Event::Command(c) => Err(c.unexpected()),
             Event::Request(r) if r.is::<position2d::MotorPower>() => {
                 let on = r.decode::<position2d::MotorPower>()?.state;
-                self.order(Order::Enable(on));
+                self.line.order(Order::Enable(on));
                 r.reply(&common::Ack);
                 Ok(())
             }
@@ -361,7 +361,7 @@ impl Driver for Erratic {
             }
             Event::Request(r) if r.is::<position2d::VelocityMode>() => {
                 let separate = r.decode::<position2d::VelocityMode>()?.value != 0;
-                self.order(Order::DirectWheel(!separate));
+                self.line.order(Order::DirectWheel(!separate));
                 r.reply(&common::Ack);
                 Ok(())
             }
@@ -374,20 +374,12 @@ impl Driver for Erratic {
     }
 
     fn shutdown(&mut self, _: &mut Ctx) -> Result<()> {
-        if let Some(line) = self.line.take() {
-            line.stop(Order::Stop);
-        }
+        self.line.stop_with(Order::Stop);
         Ok(())
     }
 }
 
 impl Erratic {
-    fn order(&self, o: Order) {
-        if let Some(line) = &self.line {
-            line.send(o);
-        }
-    }
-
     /// The sonar ring of a revision, answered without waking this thread.
     fn keep_sonar_geometry(&self, ctx: &mut Ctx, p: &params::Params) -> Result<()> {
         let Some(d) = self.dev.sonar else {
@@ -404,11 +396,7 @@ impl Erratic {
     }
 
     fn drain(&mut self, ctx: &mut Ctx) -> Result<()> {
-        let Some(line) = &self.line else {
-            return Ok(());
-        };
-        let updates: Vec<Update> = line.updates().try_iter().collect();
-        for u in updates {
+        for u in self.line.updates_now() {
             match u {
                 Update::Ready { name, params, baud } => {
                     tracing::info!(

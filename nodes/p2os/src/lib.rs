@@ -61,7 +61,7 @@ use troupe_msgs::{
     Size3d,
 };
 use troupe_node::{Ctx, Driver, Event, NodeError, Result, Section, Unit};
-use troupe_serial::CommandWatchdog;
+use troupe_serial::{CommandWatchdog, HeldLine};
 
 use crate::device::{Line, Order, Settings, Update};
 use crate::packet::Sip;
@@ -297,7 +297,7 @@ impl Driver for P2os {
             Event::Wake => self.drain(ctx),
             Event::Tick => {
                 if self.watchdog.expired(ctx.now()) {
-                    self.order(Order::Vel { speed: 0, turn: 0 });
+                    self.line.order(Order::Vel { speed: 0, turn: 0 });
                 }
                 Ok(())
             }
@@ -306,30 +306,30 @@ impl Driver for P2os {
                 let speed = (v.x * 1000.0).round() as i32;
                 let turn = v.yaw.to_degrees().round() as i32;
                 self.watchdog.commanded(ctx.now(), speed != 0 || turn != 0);
-                self.order(Order::Vel { speed, turn });
+                self.line.order(Order::Vel { speed, turn });
                 Ok(())
             }
             Event::Command(c) if c.is::<gripper::Open>() => {
-                self.order(Order::Gripper(packet::grip::OPEN));
+                self.line.order(Order::Gripper(packet::grip::OPEN));
                 Ok(())
             }
             Event::Command(c) if c.is::<gripper::Close>() => {
-                self.order(Order::Gripper(packet::grip::CLOSE));
+                self.line.order(Order::Gripper(packet::grip::CLOSE));
                 Ok(())
             }
             Event::Command(c) if c.is::<gripper::Stop>() => {
-                self.order(Order::Gripper(packet::grip::STOP));
+                self.line.order(Order::Gripper(packet::grip::STOP));
                 Ok(())
             }
             Event::Command(c) => Err(c.unexpected()),
             Event::Request(r) if r.is::<position2d::MotorPower>() => {
                 let on = r.decode::<position2d::MotorPower>()?.state;
-                self.order(Order::Enable(on));
+                self.line.order(Order::Enable(on));
                 r.reply(&common::Ack);
                 Ok(())
             }
             Event::Request(r) if r.is::<position2d::ResetOdom>() => {
-                self.order(Order::ResetOdom);
+                self.line.order(Order::ResetOdom);
                 self.odom = Odometry::new(15);
                 r.reply(&common::Ack);
                 Ok(())
@@ -343,7 +343,7 @@ impl Driver for P2os {
             }
             Event::Request(r) if r.is::<position2d::VelocityMode>() => {
                 let separate = r.decode::<position2d::VelocityMode>()?.value != 0;
-                self.order(Order::DirectWheel(!separate));
+                self.line.order(Order::DirectWheel(!separate));
                 r.reply(&common::Ack);
                 Ok(())
             }
@@ -356,20 +356,12 @@ impl Driver for P2os {
     }
 
     fn shutdown(&mut self, _: &mut Ctx) -> Result<()> {
-        if let Some(line) = self.line.take() {
-            line.stop(Order::Stop);
-        }
+        self.line.stop_with(Order::Stop);
         Ok(())
     }
 }
 
 impl P2os {
-    fn order(&self, o: Order) {
-        if let Some(line) = &self.line {
-            line.send(o);
-        }
-    }
-
     /// The geometry of the robot's type, answered without waking this
     /// thread ([`Ctx::answer_always`]).
     fn keep_geometry(&self, ctx: &mut Ctx, p: &Params) -> Result<()> {
@@ -391,11 +383,7 @@ impl P2os {
     }
 
     fn drain(&mut self, ctx: &mut Ctx) -> Result<()> {
-        let Some(line) = &self.line else {
-            return Ok(());
-        };
-        let updates: Vec<Update> = line.updates().try_iter().collect();
-        for u in updates {
+        for u in self.line.updates_now() {
             match u {
                 Update::Ready { name, params, baud } => {
                     tracing::info!(

@@ -42,6 +42,7 @@ use std::time::Duration;
 use serde::Deserialize;
 use troupe_msgs::{laser, Device, Interface, Pose3d, Size3d};
 use troupe_node::{Ctx, Driver, Event, NodeError, Responder, Result, Section, Unit};
+use troupe_serial::HeldLine;
 
 use crate::device::{Line, Order, ScanConfig, Settings, Update};
 use crate::telegram::RawScan;
@@ -204,9 +205,7 @@ impl Driver for SickLms200 {
     }
 
     fn shutdown(&mut self, _: &mut Ctx) -> Result<()> {
-        if let Some(line) = self.line.take() {
-            line.stop(Order::Stop);
-        }
+        self.line.stop_with(Order::Stop);
         tracing::info!(scans = self.scan_id, "laser shutdown");
         Ok(())
     }
@@ -225,11 +224,7 @@ impl SickLms200 {
     }
 
     fn drain(&mut self, ctx: &mut Ctx) -> Result<()> {
-        let Some(line) = &self.line else {
-            return Ok(());
-        };
-        let updates: Vec<Update> = line.updates().try_iter().collect();
-        for u in updates {
+        for u in self.line.updates_now() {
             match u {
                 Update::Ready { kind, baud } => {
                     tracing::info!("laser ready: {kind} at {baud} baud");

@@ -42,6 +42,7 @@ use std::path::PathBuf;
 use serde::Deserialize;
 use troupe_msgs::{laser, Device, Interface, Pose3d, Size3d};
 use troupe_node::{Ctx, Driver, Event, NodeError, Responder, Result, Section, Unit};
+use troupe_serial::HeldLine;
 
 use crate::device::{Line, Order, Settings, Update};
 use crate::scip::Specs;
@@ -272,9 +273,7 @@ impl Driver for UrgLaser {
     }
 
     fn shutdown(&mut self, _: &mut Ctx) -> Result<()> {
-        if let Some(line) = self.line.take() {
-            line.stop(Order::Stop);
-        }
+        self.line.stop_with(Order::Stop);
         tracing::info!(scans = self.scan_id, "laser shutdown");
         Ok(())
     }
@@ -303,11 +302,7 @@ impl UrgLaser {
     }
 
     fn drain(&mut self, ctx: &mut Ctx) -> Result<()> {
-        let Some(line) = &self.line else {
-            return Ok(());
-        };
-        let updates: Vec<Update> = line.updates().try_iter().collect();
-        for u in updates {
+        for u in self.line.updates_now() {
             match u {
                 Update::Ready {
                     specs,

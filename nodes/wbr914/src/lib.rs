@@ -48,7 +48,7 @@ use serde::Deserialize;
 use troupe_geom::Pose;
 use troupe_msgs::{aio, common, dio, ir, position2d, Device, Interface, Pose2d, Pose3d, Size3d};
 use troupe_node::{Ctx, Driver, Event, NodeError, Result, Section, Unit};
-use troupe_serial::CommandWatchdog;
+use troupe_serial::{CommandWatchdog, HeldLine};
 
 use crate::device::{Line, Order, Sample, Settings, Update};
 
@@ -182,7 +182,7 @@ impl Driver for Wbr914 {
             Event::Wake => self.drain(ctx),
             Event::Tick => {
                 if self.watchdog.expired(ctx.now()) {
-                    self.order(Order::Vel(0.0, 0.0));
+                    self.line.order(Order::Vel(0.0, 0.0));
                 }
                 Ok(())
             }
@@ -190,29 +190,29 @@ impl Driver for Wbr914 {
                 let v = c.decode::<position2d::CmdVel>()?.msg.vel;
                 self.watchdog
                     .commanded(ctx.now(), v.x != 0.0 || v.yaw != 0.0);
-                self.order(Order::Vel(v.x, v.yaw));
+                self.line.order(Order::Vel(v.x, v.yaw));
                 Ok(())
             }
             Event::Command(c) if c.is::<dio::Cmd>() => {
                 let cmd = c.decode::<dio::Cmd>()?.msg;
-                self.order(Order::Dio(cmd.count, cmd.bits));
+                self.line.order(Order::Dio(cmd.count, cmd.bits));
                 Ok(())
             }
             Event::Command(c) => Err(c.unexpected()),
             Event::Request(r) if r.is::<position2d::MotorPower>() => {
                 let on = r.decode::<position2d::MotorPower>()?.state;
-                self.order(Order::Enable(on));
+                self.line.order(Order::Enable(on));
                 r.reply(&common::Ack);
                 Ok(())
             }
             Event::Request(r) if r.is::<position2d::ResetOdom>() => {
-                self.order(Order::ResetOdom);
+                self.line.order(Order::ResetOdom);
                 r.reply(&common::Ack);
                 Ok(())
             }
             Event::Request(r) if r.is::<position2d::SetOdom>() => {
                 let pose: Pose = r.decode::<position2d::SetOdom>()?.pose.into();
-                self.order(Order::SetOdom(pose));
+                self.line.order(Order::SetOdom(pose));
                 r.reply(&common::Ack);
                 Ok(())
             }
@@ -225,26 +225,14 @@ impl Driver for Wbr914 {
     }
 
     fn shutdown(&mut self, _: &mut Ctx) -> Result<()> {
-        if let Some(line) = self.line.take() {
-            line.stop(Order::Stop);
-        }
+        self.line.stop_with(Order::Stop);
         Ok(())
     }
 }
 
 impl Wbr914 {
-    fn order(&self, o: Order) {
-        if let Some(line) = &self.line {
-            line.send(o);
-        }
-    }
-
     fn drain(&mut self, ctx: &mut Ctx) -> Result<()> {
-        let Some(line) = &self.line else {
-            return Ok(());
-        };
-        let updates: Vec<Update> = line.updates().try_iter().collect();
-        for u in updates {
+        for u in self.line.updates_now() {
             match u {
                 Update::Ready { versions, cycle_us } => {
                     tracing::info!(
