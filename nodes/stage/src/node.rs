@@ -1036,6 +1036,11 @@ impl Stage {
         } else if r.is::<simulation::GetPose3d>() {
             let q = r.decode::<simulation::GetPose3d>()?;
             match find(&self.sim, &q.name) {
+                None if GROUND.contains(&q.name.as_str()) => r.reply(&simulation::Pose3dOf {
+                    pose: pose3(self.ground.into(), 0.0),
+                    name: q.name,
+                    simtime: (self.sim.time * 1e6).round(),
+                }),
                 Some(m) => r.reply(&simulation::Pose3dOf {
                     pose: pose3(self.sim.poses[m], self.sim.world().models[m].z),
                     name: q.name,
@@ -1046,6 +1051,11 @@ impl Stage {
         } else if r.is::<simulation::SetPose3d>() {
             let q = r.decode::<simulation::SetPose3d>()?;
             match find(&self.sim, &q.name) {
+                None if GROUND.contains(&q.name.as_str()) => {
+                    let p = q.pose;
+                    self.ground = troupe_msgs::Pose2d::new(p.x, p.y, p.yaw);
+                    r.reply(&common::Ack);
+                }
                 Some(m) => {
                     // Roll and pitch are not Stage's.
                     self.sim.set_z(m, q.pose.z);
@@ -1425,6 +1435,17 @@ mod tests {
         assert!(h.reply::<common::Ack>(p).unwrap().is_ok());
         assert_eq!(pose_of(&mut h, "model:0").unwrap().pose, to);
         assert!(pose_of(&mut h, "model:9").is_err(), "only the ground's");
+        // In 3D too: at the ground's height, 0.
+        let p = h
+            .request(
+                sim,
+                &simulation::GetPose3d {
+                    name: "model:0".into(),
+                },
+            )
+            .unwrap();
+        let p3 = h.reply::<simulation::Pose3dOf>(p).unwrap().unwrap().pose;
+        assert_eq!((p3.x, p3.y, p3.z, p3.yaw), (1.0, 2.0, 0.0, 0.5));
     }
 
     #[test]
