@@ -153,12 +153,12 @@ pub fn serve(a: &FoxgloveArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     let data = {
         let live = live.clone();
         session
-            .declare_subscriber("robot/*/*/*")
+            .declare_subscriber(keys::data_all())
             .callback(move |s| {
                 lock(&live).heard(s.key_expr().as_str(), &s.payload().to_bytes());
             })
             .wait()
-            .map_err(|err| anyhow::anyhow!("subscribing to robot/*/*/*: {err}"))?
+            .map_err(|err| anyhow::anyhow!("subscribing to {}: {err}", keys::data_all()))?
     };
     let clock = {
         let tx = tx.clone();
