@@ -16,6 +16,7 @@
 //! answer to a REQ is the oldest one pending for that device and subtype.
 
 use std::collections::{HashMap, VecDeque};
+use std::pin::Pin;
 use std::time::{Duration, Instant};
 
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
@@ -23,7 +24,9 @@ use tokio::net::TcpStream;
 use tokio::sync::mpsc;
 use troupe_msgs::common;
 use troupe_msgs::{keys, Device, Interface};
-use troupe_node::zenoh::query::Query;
+use troupe_node::zenoh::liveliness::LivelinessToken;
+use troupe_node::zenoh::pubsub::Subscriber;
+use troupe_node::zenoh::query::{Query, Queryable};
 use troupe_node::zenoh::Session;
 
 use crate::codec;
@@ -191,6 +194,98 @@ impl Conn {
             ))),
         }
     }
+
+    /// Connects to the Player server at `server` and checks its banner.
+    async fn open(server: &str) -> Result<Conn, ImportError> {
+        let stream = TcpStream::connect(server)
+            .await
+            .map_err(|source| ImportError::Io {
+                server: server.to_owned(),
+                source,
+            })?;
+        let _ = stream.set_nodelay(true);
+        let mut conn = Conn {
+            server: server.to_owned(),
+            stream,
+            buf: Vec::new(),
+        };
+        conn.read_banner().await?;
+        Ok(conn)
+    }
+
+    /// Reads the banner a server greets with: it must be Player's.
+    async fn read_banner(&mut self) -> Result<(), ImportError> {
+        let mut banner = [0u8; BANNER_LEN];
+        self.stream
+            .read_exact(&mut banner)
+            .await
+            .map_err(|e| self.io(e))?;
+        if !banner.starts_with(b"Player v.") {
+            let shown = String::from_utf8_lossy(&banner);
+            return Err(self.protocol(format!(
+                "is not a Player server (banner {:?})",
+                shown.trim_end_matches('\0')
+            )));
+        }
+        let version = String::from_utf8_lossy(&banner);
+        tracing::info!(
+            "connected to {}: {}",
+            self.server,
+            version.trim_end_matches('\0')
+        );
+        Ok(())
+    }
+
+    /// The addresses of the server's devices, as DEVLIST gives them.
+    async fn device_list(&mut self) -> Result<Vec<(u32, u32, u32, u32)>, ImportError> {
+        let mut ignore = |_: Header, _: &[u8]| {};
+        // DEVLIST: libplayerc's request carries an empty list.
+        let mut w = Writer::new();
+        w.u32(0).array(&[] as &[u32], |_, _| {});
+        let list = self
+            .ask(player::REQ_DEVLIST, &w.finish(), &mut ignore)
+            .await?
+            .ok_or_else(|| self.protocol("refused DEVLIST"))?;
+        let mut r = Reader::new(&list);
+        r.array(16, r_addr)
+            .map_err(|e| self.protocol(format!("DEVLIST reply: {e}")))
+    }
+
+    /// The driver DRIVERINFO names for the server's device `a` (or "unknown").
+    async fn driver_of(
+        &mut self,
+        a: (u32, u32, u32, u32),
+        dev: Device,
+    ) -> Result<String, ImportError> {
+        let mut ignore = |_: Header, _: &[u8]| {};
+        let mut w = Writer::new();
+        w_addr(&mut w, a);
+        w.bytes(&[]);
+        match self
+            .ask(player::REQ_DRIVERINFO, &w.finish(), &mut ignore)
+            .await?
+        {
+            Some(b) => {
+                let mut r = Reader::new(&b);
+                r_addr(&mut r)
+                    .and_then(|_| r.string())
+                    .map_err(|e| self.protocol(format!("DRIVERINFO reply for {dev}: {e}")))
+            }
+            None => Ok("unknown".to_owned()),
+        }
+    }
+
+    /// Subscribes to the server's device `a` (OPEN): whether it agreed.
+    async fn subscribe(&mut self, a: (u32, u32, u32, u32)) -> Result<bool, ImportError> {
+        let mut ignore = |_: Header, _: &[u8]| {};
+        let mut w = Writer::new();
+        w_addr(&mut w, a);
+        w.u32(player::OPEN).bytes(&[]);
+        Ok(self
+            .ask(player::REQ_DEV, &w.finish(), &mut ignore)
+            .await?
+            .is_some())
+    }
 }
 
 fn w_addr(w: &mut Writer, a: (u32, u32, u32, u32)) {
@@ -241,106 +336,91 @@ pub async fn run(
     select: &Select,
     shutdown: impl std::future::Future<Output = ()>,
 ) -> Result<(), ImportError> {
-    let stream = TcpStream::connect(server)
-        .await
-        .map_err(|source| ImportError::Io {
-            server: server.to_owned(),
-            source,
-        })?;
-    let _ = stream.set_nodelay(true);
-    let mut conn = Conn {
-        server: server.to_owned(),
-        stream,
-        buf: Vec::new(),
-    };
-    let mut banner = [0u8; BANNER_LEN];
-    conn.stream
-        .read_exact(&mut banner)
-        .await
-        .map_err(|e| conn.io(e))?;
-    if !banner.starts_with(b"Player v.") {
-        let shown = String::from_utf8_lossy(&banner);
-        return Err(conn.protocol(format!(
-            "is not a Player server (banner {:?})",
-            shown.trim_end_matches('\0')
-        )));
-    }
-    let version = String::from_utf8_lossy(&banner);
-    tracing::info!("connected to {server}: {}", version.trim_end_matches('\0'));
+    let mut conn = Conn::open(server).await?;
+    let addrs = conn.device_list().await?;
+    let (devices, tokens) = import_devices(&mut conn, &session, select, addrs).await?;
+    check_imported(&conn, select, &devices)?;
+    let (cmd_rx, subs) = follow_commands(&session, &devices).await?;
+    let (req_rx, queryables) = answer_requests(&session, &devices).await?;
 
-    let mut ignore = |_: Header, _: &[u8]| {};
-    // DEVLIST: libplayerc's request carries an empty list.
-    let mut w = Writer::new();
-    w.u32(0).array(&[] as &[u32], |_, _| {});
-    let list = conn
-        .ask(player::REQ_DEVLIST, &w.finish(), &mut ignore)
-        .await?
-        .ok_or_else(|| conn.protocol("refused DEVLIST"))?;
-    let mut r = Reader::new(&list);
-    let addrs = r
-        .array(16, r_addr)
-        .map_err(|e| conn.protocol(format!("DEVLIST reply: {e}")))?;
+    let mut relay = Relay::new(&session, conn, &devices, cmd_rx, req_rx);
+    tokio::pin!(shutdown);
+    let outcome = relay.until(shutdown).await;
+    tracing::info!(
+        "import of {server} ended: {} samples published, {} malformed",
+        relay.published,
+        relay.bad
+    );
+    drop(subs);
+    drop(queryables);
+    drop(tokens);
+    outcome
+}
 
+/// Imports the devices at `addrs` that `select` takes, with their tokens.
+async fn import_devices(
+    conn: &mut Conn,
+    session: &Session,
+    select: &Select,
+    addrs: Vec<(u32, u32, u32, u32)>,
+) -> Result<(Vec<Imported>, Vec<LivelinessToken>), ImportError> {
     let mut devices: Vec<Imported> = Vec::new();
     let mut tokens = Vec::new();
     for a in addrs {
         let Some(iface) = u16::try_from(a.2).ok().and_then(Interface::from_code) else {
             tracing::warn!(
-                "device {}:{} of {server}: interface code unknown to Troupe; skipped",
+                "device {}:{} of {}: interface code unknown to Troupe; skipped",
                 a.2,
-                a.3
+                a.3,
+                conn.server
             );
             continue;
         };
         let Some(dev) = select.local(a.1, iface, a.3) else {
             continue;
         };
-        let mut w = Writer::new();
-        w_addr(&mut w, a);
-        w.bytes(&[]);
-        let driver = match conn
-            .ask(player::REQ_DRIVERINFO, &w.finish(), &mut ignore)
-            .await?
-        {
-            Some(b) => {
-                let mut r = Reader::new(&b);
-                r_addr(&mut r)
-                    .and_then(|_| r.string())
-                    .map_err(|e| conn.protocol(format!("DRIVERINFO reply for {dev}: {e}")))?
-            }
-            None => "unknown".to_owned(),
-        };
-        let mut w = Writer::new();
-        w_addr(&mut w, a);
-        w.u32(player::OPEN).bytes(&[]);
-        if conn
-            .ask(player::REQ_DEV, &w.finish(), &mut ignore)
-            .await?
-            .is_none()
-        {
-            tracing::warn!("{server} refused the subscription to {dev} ({driver}); skipped");
+        let driver = conn.driver_of(a, dev).await?;
+        if !conn.subscribe(a).await? {
+            tracing::warn!(
+                "{} refused the subscription to {dev} ({driver}); skipped",
+                conn.server
+            );
             continue;
         }
-        // A key chunk: no separators or wildcards from a driver's name.
-        let name: String = driver
-            .chars()
-            .map(|c| {
-                if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
-                    c
-                } else {
-                    '_'
-                }
-            })
-            .collect();
-        let token = session
-            .liveliness()
-            .declare_token(keys::token(&dev, &format!("player-{name}")))
-            .await
-            .map_err(zenoh_error(format!("declaring {dev}")))?;
+        let token = declare_token(session, dev, &driver).await?;
         tracing::info!("importing {dev} ({driver})");
         tokens.push(token);
         devices.push(Imported { addr: a, dev });
     }
+    Ok((devices, tokens))
+}
+
+/// Declares `dev`'s liveliness token, naming its Player `driver`.
+async fn declare_token(
+    session: &Session,
+    dev: Device,
+    driver: &str,
+) -> Result<LivelinessToken, ImportError> {
+    // A key chunk: no separators or wildcards from a driver's name.
+    let name: String = driver
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    session
+        .liveliness()
+        .declare_token(keys::token(&dev, &format!("player-{name}")))
+        .await
+        .map_err(zenoh_error(format!("declaring {dev}")))
+}
+
+/// Fails if `select` names a device that was not imported, or none was.
+fn check_imported(conn: &Conn, select: &Select, devices: &[Imported]) -> Result<(), ImportError> {
     if let Select::Only(pairs) = select {
         for ((iface, index), dev) in pairs {
             if !devices.iter().any(|d| d.dev == *dev) {
@@ -353,11 +433,23 @@ pub async fn run(
     if devices.is_empty() {
         return Err(conn.protocol("serves no device Troupe can import"));
     }
+    Ok(())
+}
 
-    // Commands from Troupe's side, for the connection to write.
-    let (cmd_tx, mut cmd_rx) = mpsc::unbounded_channel::<(Imported, u8, Vec<u8>)>();
+/// A command from Troupe's side, for the connection to write as a CMD.
+type Command = (Imported, u8, Vec<u8>);
+
+/// A request from Troupe's side, for the connection to ask of the server.
+type Request = (Imported, codec::ToServer, Query);
+
+/// Follows the commands Troupe clients send to `devices`, onto the receiver.
+async fn follow_commands(
+    session: &Session,
+    devices: &[Imported],
+) -> Result<(mpsc::UnboundedReceiver<Command>, Vec<Subscriber<()>>), ImportError> {
+    let (cmd_tx, cmd_rx) = mpsc::unbounded_channel::<Command>();
     let mut subs = Vec::new();
-    for &d in &devices {
+    for &d in devices {
         let tx = cmd_tx.clone();
         let sub = session
             .declare_subscriber(keys::cmd_any(&d.dev))
@@ -379,11 +471,17 @@ pub async fn run(
         subs.push(sub);
     }
     drop(cmd_tx);
+    Ok((cmd_rx, subs))
+}
 
-    // Requests from Troupe's side, asked of the server in turn.
-    let (req_tx, mut req_rx) = mpsc::unbounded_channel::<(Imported, codec::ToServer, Query)>();
+/// Queues the requests to `devices` the server can answer; refuses the rest.
+async fn answer_requests(
+    session: &Session,
+    devices: &[Imported],
+) -> Result<(mpsc::UnboundedReceiver<Request>, Vec<Queryable<()>>), ImportError> {
+    let (req_tx, req_rx) = mpsc::unbounded_channel::<Request>();
     let mut queryables = Vec::new();
-    for &d in &devices {
+    for &d in devices {
         let tx = req_tx.clone();
         let q = session
             .declare_queryable(keys::req_any(&d.dev))
@@ -415,76 +513,125 @@ pub async fn run(
         queryables.push(q);
     }
     drop(req_tx);
-    // Asked and not yet answered, oldest first.
-    let mut pending: VecDeque<Asked> = VecDeque::new();
+    Ok((req_rx, queryables))
+}
 
-    let by_addr: HashMap<(u32, u32), Imported> =
-        devices.iter().map(|d| ((d.addr.2, d.addr.3), *d)).collect();
-    let (mut published, mut bad) = (0u64, 0u64);
-    tokio::pin!(shutdown);
-    let outcome = loop {
-        tokio::select! {
-            () = &mut shutdown => break Ok(()),
-            cmd = cmd_rx.recv() => {
-                let Some((d, subtype, body)) = cmd else { continue };
-                if let Err(e) = conn.send(d.header(wire::CMD, subtype), &body).await {
-                    break Err(e);
+/// An import under way: the connection, what it relays and what it counted.
+struct Relay<'a> {
+    session: &'a Session,
+    /// The imported devices by the server's (interface code, index).
+    by_addr: HashMap<(u32, u32), Imported>,
+    /// Samples published.
+    published: u64,
+    /// DATA dropped as malformed.
+    bad: u64,
+    /// Asked and not yet answered, oldest first.
+    pending: VecDeque<Asked>,
+    req_rx: mpsc::UnboundedReceiver<Request>,
+    cmd_rx: mpsc::UnboundedReceiver<Command>,
+    conn: Conn,
+}
+
+impl<'a> Relay<'a> {
+    /// A relay of `devices` between `session` and `conn`, nothing done yet.
+    fn new(
+        session: &'a Session,
+        conn: Conn,
+        devices: &[Imported],
+        cmd_rx: mpsc::UnboundedReceiver<Command>,
+        req_rx: mpsc::UnboundedReceiver<Request>,
+    ) -> Self {
+        Relay {
+            session,
+            by_addr: devices.iter().map(|d| ((d.addr.2, d.addr.3), *d)).collect(),
+            published: 0,
+            bad: 0,
+            pending: VecDeque::new(),
+            req_rx,
+            cmd_rx,
+            conn,
+        }
+    }
+
+    /// Relays until `shutdown` completes (`Ok`) or the connection fails.
+    async fn until(
+        &mut self,
+        mut shutdown: Pin<&mut impl std::future::Future<Output = ()>>,
+    ) -> Result<(), ImportError> {
+        loop {
+            tokio::select! {
+                () = &mut shutdown => return Ok(()),
+                cmd = self.cmd_rx.recv() => {
+                    let Some((d, subtype, body)) = cmd else { continue };
+                    self.conn.send(d.header(wire::CMD, subtype), &body).await?;
                 }
-            }
-            req = req_rx.recv() => {
-                let Some((d, out, query)) = req else { continue };
-                if let Err(e) = conn.send(d.header(REQ, out.subtype), &out.body).await {
-                    break Err(e);
+                req = self.req_rx.recv() => {
+                    let Some(req) = req else { continue };
+                    self.forward_request(req).await?;
                 }
-                // The asker has long given up on what the server never answered.
-                pending.retain(|p| p.at.elapsed() < STALE);
-                pending.push_back(Asked {
-                    to: d,
-                    subtype: out.subtype,
-                    reply: out.reply,
-                    query,
-                    at: Instant::now(),
-                });
-            }
-            msg = conn.next() => {
-                let (h, body) = match msg {
-                    Ok(m) => m,
-                    Err(e) => break Err(e),
-                };
-                let kind = u8::try_from(h.kind).unwrap_or(0);
-                if kind == RESP_ACK || kind == RESP_NACK {
-                    let at = pending.iter().position(|p| p.to.answers(p.subtype, &h));
-                    if let Some(p) = at.and_then(|i| pending.remove(i)) {
-                        answer(&p, kind, &body, h.timestamp).await;
-                    }
-                    continue;
-                }
-                if kind != DATA {
-                    continue;
-                }
-                let Some(d) = by_addr.get(&(h.interf, h.index)) else { continue };
-                let subtype = u8::try_from(h.subtype).unwrap_or(0);
-                match codec::data_from_player(d.dev.interface, subtype, &body, h.timestamp) {
-                    Ok(Some(payload)) => {
-                        if let Err(e) = session.put(keys::data(&d.dev), payload).await {
-                            tracing::warn!("publishing {}: {e}", d.dev);
-                        }
-                        published += 1;
-                    }
-                    Ok(None) => {}
-                    Err(e) => {
-                        bad += 1;
-                        tracing::warn!("{}: dropped: {e}", d.dev);
-                    }
+                msg = self.conn.next() => {
+                    let (h, body) = msg?;
+                    self.receive(h, &body).await;
                 }
             }
         }
-    };
-    tracing::info!("import of {server} ended: {published} samples published, {bad} malformed");
-    drop(subs);
-    drop(queryables);
-    drop(tokens);
-    outcome
+    }
+
+    /// Sends a Troupe request to the server, to be answered when it answers.
+    async fn forward_request(&mut self, (d, out, query): Request) -> Result<(), ImportError> {
+        self.conn
+            .send(d.header(REQ, out.subtype), &out.body)
+            .await?;
+        // The asker has long given up on what the server never answered.
+        self.pending.retain(|p| p.at.elapsed() < STALE);
+        self.pending.push_back(Asked {
+            to: d,
+            subtype: out.subtype,
+            reply: out.reply,
+            query,
+            at: Instant::now(),
+        });
+        Ok(())
+    }
+
+    /// Handles a message from the server: an answer, or DATA to publish.
+    async fn receive(&mut self, h: Header, body: &[u8]) {
+        let kind = u8::try_from(h.kind).unwrap_or(0);
+        if kind == RESP_ACK || kind == RESP_NACK {
+            self.answer_pending(kind, &h, body).await;
+        } else if kind == DATA {
+            self.publish(&h, body).await;
+        }
+    }
+
+    /// Answers the oldest pending request that the server's ACK or NACK `h` is for.
+    async fn answer_pending(&mut self, kind: u8, h: &Header, body: &[u8]) {
+        let at = self.pending.iter().position(|p| p.to.answers(p.subtype, h));
+        if let Some(p) = at.and_then(|i| self.pending.remove(i)) {
+            answer(&p, kind, body, h.timestamp).await;
+        }
+    }
+
+    /// Publishes an imported device's DATA, counting published and malformed.
+    async fn publish(&mut self, h: &Header, body: &[u8]) {
+        let Some(&d) = self.by_addr.get(&(h.interf, h.index)) else {
+            return;
+        };
+        let subtype = u8::try_from(h.subtype).unwrap_or(0);
+        match codec::data_from_player(d.dev.interface, subtype, body, h.timestamp) {
+            Ok(Some(payload)) => {
+                if let Err(e) = self.session.put(keys::data(&d.dev), payload).await {
+                    tracing::warn!("publishing {}: {e}", d.dev);
+                }
+                self.published += 1;
+            }
+            Ok(None) => {}
+            Err(e) => {
+                self.bad += 1;
+                tracing::warn!("{}: dropped: {e}", d.dev);
+            }
+        }
+    }
 }
 
 /// Requests unanswered this long are forgotten.
