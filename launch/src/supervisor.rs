@@ -13,7 +13,7 @@
 
 use std::collections::BTreeSet;
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::Stdio;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
@@ -26,9 +26,11 @@ use nix::unistd::Pid;
 use tokio::io::{AsyncBufReadExt, BufReader};
 use tokio::process::Command;
 use tokio::sync::watch;
+use tokio::task::JoinHandle;
 use troupe_msgs::{keys, Device};
 use troupe_node::process::{StopSignals, SUPERVISOR_ENV};
-use troupe_node::zenoh::Wait;
+use troupe_node::zenoh::pubsub::Subscriber;
+use troupe_node::zenoh::{Session, Wait};
 use troupe_node::{Mode, ZenohArgs};
 
 use crate::catalog::Catalog;
@@ -285,6 +287,9 @@ impl NodeState {
     }
 }
 
+/// Runs the stack until a signal, or until every node is done on its own:
+/// the network, the bridge and the viewers, the nodes in start order and the
+/// readiness report; then stops it all in order and says how it went.
 async fn supervise(
     a: LaunchArgs,
     z: ZenohArgs,
@@ -295,65 +300,116 @@ async fn supervise(
 ) -> anyhow::Result<()> {
     let started = Instant::now();
     let mut signals = StopSignals::new().context("catching SIGTERM and SIGINT")?;
-    // The network: an embedded router unless told to join another.
-    let embedded = z.connect.is_empty() && z.zenoh_config.is_none();
-    let (session, child_net) = if embedded {
-        let listen = if z.listen.is_empty() {
-            vec![troupe_node::DEFAULT_ROUTER.to_owned()]
-        } else {
-            z.listen.clone()
-        };
-        // The namespace applies to the router's own session only (its
-        // watcher and the bridge), not to what it routes for others.
-        let rz = ZenohArgs {
-            listen: listen.clone(),
-            namespace: z.namespace.clone(),
-            no_multicast: !z.multicast,
-            multicast: z.multicast,
-            ..Default::default()
-        };
-        let session = match rz.open(Mode::Router) {
-            Ok(s) => s,
-            Err(e) => return Err(router_not_started(&listen, &z, e)),
-        };
-        let locators = troupe_node::locators(&session);
-        // A line on stdout for scripts and tests that pass --listen …:0.
-        let mut out = std::io::stdout().lock();
-        writeln!(
-            out,
-            "troupe launch: router listening on {}",
-            locators.join(" ")
-        )?;
-        out.flush()?;
-        drop(out);
-        // The nodes take the launch's flags (--mode, --lease, --multicast…),
-        // but connect to this router, and peers listen on loopback.
-        let mut child = ZenohArgs {
-            connect: locators,
-            listen: Vec::new(),
-            no_multicast: !z.multicast,
-            ..z.clone()
-        }
-        .to_child_args();
-        // A client listens on nothing: its data goes through the router.
-        if z.mode != Some(Mode::Client) {
-            child.extend(["--listen".into(), "tcp/127.0.0.1:0".into()]);
-        }
-        (session, child)
-    } else {
-        let Some(session) = signals
-            .unless_stopped(z.open_in_background(Mode::Client))
-            .await?
-        else {
-            return Ok(());
-        };
-        (session, z.to_child_args())
+    let Some((session, child_net)) = join_network(&z, &mut signals).await? else {
+        return Ok(());
     };
+    let (live, live_rx, liveliness) = watch_liveliness(&session)?;
+    let (stop_tx, stop_rx) = watch::channel(false);
+    let stack = Stack::new(specs, child_net, live, live_rx, stop_rx);
+    let bridge = if a.no_bridge {
+        None
+    } else {
+        stack.start_bridge(&a, &session)
+    };
+    let exe = std::env::current_exe().context("finding the troupe binary")?;
+    let viewers = stack.start_viewers(&a, &exe);
+    let mut tasks = stack.start_nodes(&a, &exe, sim_time, &clocks, &ros2_args);
+    let reporter = stack.report_readiness(a.ready_timeout, started);
+
+    let signalled = signal_or_all_done(&mut signals, &mut tasks).await;
+    reporter.abort();
+    // The bridge first: Player clients see the robot go, not a bridge
+    // serving devices that are stopping.
+    let _ = stop_tx.send(true);
+    if let Some(b) = bridge {
+        let _ = b.await;
+    }
+    let viewers_failed = await_viewers(viewers).await;
+    if signalled {
+        stack.stop_in_reverse_order(&mut tasks, a.grace).await;
+    }
+    drop(liveliness);
+    let _ = session.close().await;
+    stack.verdict(viewers_failed)
+}
+
+/// The network: an embedded router unless told to join another. The
+/// launcher's session and its children's network flags; `None` when a
+/// signal came before the router answered.
+async fn join_network(
+    z: &ZenohArgs,
+    signals: &mut StopSignals,
+) -> anyhow::Result<Option<(Session, Vec<String>)>> {
+    let embedded = z.connect.is_empty() && z.zenoh_config.is_none();
+    if embedded {
+        return start_router(z).map(Some);
+    }
+    let Some(session) = signals
+        .unless_stopped(z.open_in_background(Mode::Client))
+        .await?
+    else {
+        return Ok(None);
+    };
+    Ok(Some((session, z.to_child_args())))
+}
+
+/// Starts the embedded router and says where it listens (on stdout): its
+/// session and the network flags that connect the children to it.
+fn start_router(z: &ZenohArgs) -> anyhow::Result<(Session, Vec<String>)> {
+    let listen = if z.listen.is_empty() {
+        vec![troupe_node::DEFAULT_ROUTER.to_owned()]
+    } else {
+        z.listen.clone()
+    };
+    // The namespace applies to the router's own session only (its
+    // watcher and the bridge), not to what it routes for others.
+    let rz = ZenohArgs {
+        listen: listen.clone(),
+        namespace: z.namespace.clone(),
+        no_multicast: !z.multicast,
+        multicast: z.multicast,
+        ..Default::default()
+    };
+    let session = match rz.open(Mode::Router) {
+        Ok(s) => s,
+        Err(e) => return Err(router_not_started(&listen, z, e)),
+    };
+    let locators = troupe_node::locators(&session);
+    // A line on stdout for scripts and tests that pass --listen …:0.
+    let mut out = std::io::stdout().lock();
+    writeln!(
+        out,
+        "troupe launch: router listening on {}",
+        locators.join(" ")
+    )?;
+    out.flush()?;
+    drop(out);
+    // The nodes take the launch's flags (--mode, --lease, --multicast…),
+    // but connect to this router, and peers listen on loopback.
+    let mut child = ZenohArgs {
+        connect: locators,
+        listen: Vec::new(),
+        no_multicast: !z.multicast,
+        ..z.clone()
+    }
+    .to_child_args();
+    // A client listens on nothing: its data goes through the router.
+    if z.mode != Some(Mode::Client) {
+        child.extend(["--listen".into(), "tcp/127.0.0.1:0".into()]);
+    }
+    Ok((session, child))
+}
+
+/// The launcher's view of liveliness, in the plan's namespace: the live
+/// devices, a receiver that ticks with each change, and the subscriber
+/// that keeps them (dropping it stops the watch).
+fn watch_liveliness(
+    session: &Session,
+) -> anyhow::Result<(Arc<Live>, watch::Receiver<u64>, Subscriber<()>)> {
     let live = Arc::new(Live::default());
     let (live_tx, live_rx) = watch::channel(0u64);
     let l = live.clone();
-    // The launcher's view of liveliness, in the plan's namespace.
-    let _liveliness = session
+    let subscriber = session
         .liveliness()
         .declare_subscriber(keys::tokens(None))
         .history(true)
@@ -371,114 +427,16 @@ async fn supervise(
         })
         .wait()
         .map_err(|e| anyhow::anyhow!("watching liveliness: {e}"))?;
+    Ok((live, live_rx, subscriber))
+}
 
-    let (stop_tx, stop_rx) = watch::channel(false);
-    let states: Vec<Arc<NodeState>> = specs
-        .into_iter()
-        .map(|spec| Arc::new(NodeState::new(spec)))
-        .collect();
-    let local: BTreeSet<Device> = states
-        .iter()
-        .flat_map(|s| {
-            s.spec
-                .provides
-                .iter()
-                .filter_map(|r| keys::parse_data(&r.device).ok())
-        })
-        .collect();
-    let bridge = if a.no_bridge {
-        None
-    } else {
-        bridge_config(&a, &states).map(|cfg| {
-            tokio::spawn(serve_bridge(
-                session.clone(),
-                cfg,
-                live.clone(),
-                live_rx.clone(),
-                stop_rx.clone(),
-                local.clone(),
-            ))
-        })
-    };
-    let exe = std::env::current_exe().context("finding the troupe binary")?;
-    // The view and the Foxglove server join as peers, on the nodes' network
-    // flags, their listener on loopback as the nodes' (without --listen a
-    // peer listens on every interface).
-    let viewers: Vec<_> = [(Viewer::VIEW, a.view), (Viewer::FOXGLOVE, a.foxglove)]
-        .into_iter()
-        .filter_map(|(v, at)| {
-            let at = at?;
-            let run = run_viewer(v, exe.clone(), child_net.clone(), at, stop_rx.clone());
-            Some((v, tokio::spawn(run)))
-        })
-        .collect();
-    let mut tasks = Vec::new();
-    for st in &states {
-        let ctx = NodeCtx {
-            exe: exe.clone(),
-            net: child_net.clone(),
-            log_dir: a.log_dir.clone(),
-            live: live.clone(),
-            live_rx: live_rx.clone(),
-            stop_rx: stop_rx.clone(),
-            local: local.clone(),
-            sim_time: sim_time && !clocks.contains(&st.spec.driver),
-            ros2: ros2_args.clone(),
-        };
-        tasks.push(tokio::spawn(run_node(st.clone(), ctx)));
-    }
-    // Readiness report.
-    let all: BTreeSet<Device> = local.clone();
-    let reporter = {
-        let (live, mut rx, states) = (live.clone(), live_rx.clone(), states.clone());
-        let timeout = Duration::from_secs_f64(a.ready_timeout.max(0.1));
-        tokio::spawn(async move {
-            let deadline = tokio::time::Instant::now() + timeout;
-            loop {
-                let missing: Vec<Device> = {
-                    let set = live.devices.lock().unwrap_or_else(|p| p.into_inner());
-                    all.iter().filter(|d| !set.contains(d)).copied().collect()
-                };
-                if missing.is_empty() {
-                    tracing::info!(
-                        "all {} nodes up, {} devices live, {:.2} s after launch",
-                        states.len(),
-                        all.len(),
-                        started.elapsed().as_secs_f64()
-                    );
-                    return;
-                }
-                if tokio::time::timeout_at(deadline, rx.changed())
-                    .await
-                    .is_err()
-                {
-                    for s in &states {
-                        let m: Vec<String> = s
-                            .spec
-                            .provides
-                            .iter()
-                            .filter_map(|r| keys::parse_data(&r.device).ok())
-                            .filter(|d| missing.contains(d))
-                            .map(|d| d.to_string())
-                            .collect();
-                        if !m.is_empty() {
-                            tracing::error!(
-                                "node `{}` has not brought up {} after {:.0} s (see its log lines above)",
-                                s.spec.name,
-                                m.join(", "),
-                                timeout.as_secs_f64()
-                            );
-                        }
-                    }
-                    return;
-                }
-            }
-        })
-    };
-
-    // Wait for a signal, or for every node to be done on its own.
-    // A finished task's handle is dropped (None), never polled again.
-    let mut tasks: Vec<Option<tokio::task::JoinHandle<()>>> = tasks.into_iter().map(Some).collect();
+/// Waits for SIGTERM or SIGINT (true) or for every node to be done on its
+/// own (false). A finished task's handle is dropped (None), never polled
+/// again.
+async fn signal_or_all_done(
+    signals: &mut StopSignals,
+    tasks: &mut [Option<JoinHandle<()>>],
+) -> bool {
     let all_done = async {
         for t in tasks.iter_mut() {
             if let Some(h) = t.as_mut() {
@@ -487,28 +445,147 @@ async fn supervise(
             *t = None;
         }
     };
-    let signalled = tokio::select! {
+    tokio::select! {
         () = signals.recv() => true,
         _ = all_done => false,
-    };
-    reporter.abort();
-    // The bridge first: Player clients see the robot go, not a bridge
-    // serving devices that are stopping.
-    let _ = stop_tx.send(true);
-    if let Some(b) = bridge {
-        let _ = b.await;
     }
-    // The view and the Foxglove server stop with the stack; one that
-    // failed fails the launch.
-    let mut viewers_failed = Vec::new();
+}
+
+/// Waits for the view and the Foxglove server, which stop with the stack:
+/// how those that failed are named (one that failed fails the launch).
+async fn await_viewers(viewers: Vec<(Viewer, JoinHandle<bool>)>) -> Vec<&'static str> {
+    let mut failed = Vec::new();
     for (v, task) in viewers {
         if !task.await.unwrap_or(false) {
-            viewers_failed.push(v.failed);
+            failed.push(v.failed);
         }
     }
-    if signalled {
+    failed
+}
+
+/// What the launcher shares with the tasks it starts: this host's nodes,
+/// the devices they provide, the children's network flags, liveliness and
+/// the stop.
+struct Stack {
+    states: Vec<Arc<NodeState>>,
+    local: BTreeSet<Device>,
+    net: Vec<String>,
+    live: Arc<Live>,
+    live_rx: watch::Receiver<u64>,
+    stop_rx: watch::Receiver<bool>,
+}
+
+impl Stack {
+    /// The stack of the nodes `specs`, with the devices they provide.
+    fn new(
+        specs: Vec<NodeSpec>,
+        net: Vec<String>,
+        live: Arc<Live>,
+        live_rx: watch::Receiver<u64>,
+        stop_rx: watch::Receiver<bool>,
+    ) -> Stack {
+        let states: Vec<Arc<NodeState>> = specs
+            .into_iter()
+            .map(|spec| Arc::new(NodeState::new(spec)))
+            .collect();
+        let local: BTreeSet<Device> = states
+            .iter()
+            .flat_map(|s| {
+                s.spec
+                    .provides
+                    .iter()
+                    .filter_map(|r| keys::parse_data(&r.device).ok())
+            })
+            .collect();
+        Stack {
+            states,
+            local,
+            net,
+            live,
+            live_rx,
+            stop_rx,
+        }
+    }
+
+    /// Starts the Player bridge for the stack's robots, if it has any.
+    fn start_bridge(&self, a: &LaunchArgs, session: &Session) -> Option<JoinHandle<()>> {
+        bridge_config(a, &self.states).map(|cfg| {
+            tokio::spawn(serve_bridge(
+                session.clone(),
+                cfg,
+                self.live.clone(),
+                self.live_rx.clone(),
+                self.stop_rx.clone(),
+                self.local.clone(),
+            ))
+        })
+    }
+
+    /// Starts the viewers asked for (`--view`, `--foxglove`), each with
+    /// the task that tells whether it ran cleanly.
+    fn start_viewers(&self, a: &LaunchArgs, exe: &Path) -> Vec<(Viewer, JoinHandle<bool>)> {
+        // The view and the Foxglove server join as peers, on the nodes' network
+        // flags, their listener on loopback as the nodes' (without --listen a
+        // peer listens on every interface).
+        [(Viewer::VIEW, a.view), (Viewer::FOXGLOVE, a.foxglove)]
+            .into_iter()
+            .filter_map(|(v, at)| {
+                let at = at?;
+                let run = run_viewer(
+                    v,
+                    exe.to_path_buf(),
+                    self.net.clone(),
+                    at,
+                    self.stop_rx.clone(),
+                );
+                Some((v, tokio::spawn(run)))
+            })
+            .collect()
+    }
+
+    /// Starts a task for each node, in the plan's order: it waits for what
+    /// the node requires, then runs it. Their handles (None once done).
+    fn start_nodes(
+        &self,
+        a: &LaunchArgs,
+        exe: &Path,
+        sim_time: bool,
+        clocks: &BTreeSet<String>,
+        ros2_args: &[String],
+    ) -> Vec<Option<JoinHandle<()>>> {
+        let mut tasks = Vec::new();
+        for st in &self.states {
+            let ctx = NodeCtx {
+                exe: exe.to_path_buf(),
+                net: self.net.clone(),
+                log_dir: a.log_dir.clone(),
+                live: self.live.clone(),
+                live_rx: self.live_rx.clone(),
+                stop_rx: self.stop_rx.clone(),
+                local: self.local.clone(),
+                sim_time: sim_time && !clocks.contains(&st.spec.driver),
+                ros2: ros2_args.to_vec(),
+            };
+            tasks.push(Some(tokio::spawn(run_node(st.clone(), ctx))));
+        }
+        tasks
+    }
+
+    /// Starts the readiness report, which waits `ready_timeout` seconds
+    /// (at least 0.1) for every device of the stack.
+    fn report_readiness(&self, ready_timeout: f64, started: Instant) -> JoinHandle<()> {
+        let all: BTreeSet<Device> = self.local.clone();
+        let (live, rx, states) = (self.live.clone(), self.live_rx.clone(), self.states.clone());
+        let timeout = Duration::from_secs_f64(ready_timeout.max(0.1));
+        tokio::spawn(report_ready(live, rx, states, all, timeout, started))
+    }
+
+    /// After a signal: stops the nodes in reverse start order, SIGKILLing
+    /// those that outlive SIGTERM by `grace` seconds.
+    async fn stop_in_reverse_order(&self, tasks: &mut [Option<JoinHandle<()>>], grace: f64) {
+        let states = &self.states;
         tracing::info!("stopping {} nodes in reverse start order", states.len());
-        let grace = Duration::from_secs_f64(a.grace.max(0.0));
+        let grace = Duration::from_secs_f64(grace.max(0.0));
         let mut orders: Vec<u32> = states.iter().map(|s| s.spec.start_order).collect();
         orders.sort_unstable();
         orders.dedup();
@@ -516,45 +593,119 @@ async fn supervise(
             let group: Vec<usize> = (0..states.len())
                 .filter(|&i| states[i].spec.start_order == o)
                 .collect();
-            for &i in &group {
-                states[i].stopping.store(true, Ordering::SeqCst);
-                signal(&states[i], Signal::SIGTERM);
-            }
-            // A node's task ends once its process has exited.
-            let deadline = tokio::time::Instant::now() + grace;
-            for &i in &group {
-                let Some(mut h) = tasks[i].take() else {
-                    continue;
-                };
-                if tokio::time::timeout_at(deadline, &mut h).await.is_err() {
-                    let s = &states[i];
-                    tracing::warn!(
-                        "node `{}` ignored SIGTERM for {grace:?}; killing it",
-                        s.spec.name
-                    );
-                    signal(s, Signal::SIGKILL);
-                    s.failed.store(true, Ordering::SeqCst);
-                    let _ = h.await;
-                }
+            self.stop_group(&group, tasks, grace).await;
+        }
+    }
+
+    /// Stops the nodes `group` (indices of one start order) together:
+    /// SIGTERM, then SIGKILL for those still running after `grace`.
+    async fn stop_group(
+        &self,
+        group: &[usize],
+        tasks: &mut [Option<JoinHandle<()>>],
+        grace: Duration,
+    ) {
+        let states = &self.states;
+        for &i in group {
+            states[i].stopping.store(true, Ordering::SeqCst);
+            signal(&states[i], Signal::SIGTERM);
+        }
+        // A node's task ends once its process has exited.
+        let deadline = tokio::time::Instant::now() + grace;
+        for &i in group {
+            let Some(mut h) = tasks[i].take() else {
+                continue;
+            };
+            if tokio::time::timeout_at(deadline, &mut h).await.is_err() {
+                let s = &states[i];
+                tracing::warn!(
+                    "node `{}` ignored SIGTERM for {grace:?}; killing it",
+                    s.spec.name
+                );
+                signal(s, Signal::SIGKILL);
+                s.failed.store(true, Ordering::SeqCst);
+                let _ = h.await;
             }
         }
     }
-    drop(_liveliness);
-    let _ = session.close().await;
-    let mut failed: Vec<&str> = states
-        .iter()
-        .filter(|s| s.failed.load(Ordering::SeqCst))
-        .map(|s| s.spec.name.as_str())
-        .collect();
-    failed.extend(viewers_failed);
-    if failed.is_empty() {
-        tracing::info!("stack stopped cleanly");
-        Ok(())
-    } else {
-        anyhow::bail!(
-            "the stack did not run cleanly: {} failed",
-            failed.join(", ")
-        )
+
+    /// How the launch went: an error naming the nodes and viewers that
+    /// failed, if any did.
+    fn verdict(&self, viewers_failed: Vec<&'static str>) -> anyhow::Result<()> {
+        let mut failed: Vec<&str> = self
+            .states
+            .iter()
+            .filter(|s| s.failed.load(Ordering::SeqCst))
+            .map(|s| s.spec.name.as_str())
+            .collect();
+        failed.extend(viewers_failed);
+        if failed.is_empty() {
+            tracing::info!("stack stopped cleanly");
+            Ok(())
+        } else {
+            anyhow::bail!(
+                "the stack did not run cleanly: {} failed",
+                failed.join(", ")
+            )
+        }
+    }
+}
+
+/// The readiness report: a line once every device of `all` is live, or,
+/// after `timeout`, an error for each node that has not brought up its own.
+async fn report_ready(
+    live: Arc<Live>,
+    mut rx: watch::Receiver<u64>,
+    states: Vec<Arc<NodeState>>,
+    all: BTreeSet<Device>,
+    timeout: Duration,
+    started: Instant,
+) {
+    let deadline = tokio::time::Instant::now() + timeout;
+    loop {
+        let missing: Vec<Device> = {
+            let set = live.devices.lock().unwrap_or_else(|p| p.into_inner());
+            all.iter().filter(|d| !set.contains(d)).copied().collect()
+        };
+        if missing.is_empty() {
+            tracing::info!(
+                "all {} nodes up, {} devices live, {:.2} s after launch",
+                states.len(),
+                all.len(),
+                started.elapsed().as_secs_f64()
+            );
+            return;
+        }
+        if tokio::time::timeout_at(deadline, rx.changed())
+            .await
+            .is_err()
+        {
+            report_missing(&states, &missing, timeout);
+            return;
+        }
+    }
+}
+
+/// Names, for each node, the devices of `missing` it has not brought up
+/// within `timeout`.
+fn report_missing(states: &[Arc<NodeState>], missing: &[Device], timeout: Duration) {
+    for s in states {
+        let m: Vec<String> = s
+            .spec
+            .provides
+            .iter()
+            .filter_map(|r| keys::parse_data(&r.device).ok())
+            .filter(|d| missing.contains(d))
+            .map(|d| d.to_string())
+            .collect();
+        if !m.is_empty() {
+            tracing::error!(
+                "node `{}` has not brought up {} after {:.0} s (see its log lines above)",
+                s.spec.name,
+                m.join(", "),
+                timeout.as_secs_f64()
+            );
+        }
     }
 }
 
