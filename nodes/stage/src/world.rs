@@ -260,6 +260,9 @@ pub struct World {
     pub names: HashMap<String, usize>,
 }
 
+/// A block's outline: its corners in order.
+type Polygon = Vec<(f64, f64)>;
+
 struct Reader {
     len: f64,
     ang: f64,
@@ -427,6 +430,351 @@ impl Reader {
         }
         Ok(out)
     }
+    /// A reader in the units the world's own settings give (`unit_length`, `unit_angle`).
+    fn in_units_of(g: &Entity) -> Result<Self, WorldError> {
+        Ok(Reader {
+            len: unit(
+                g,
+                "unit_length",
+                &[("m", 1.0), ("cm", 0.01), ("mm", 0.001)],
+                1.0,
+            )?,
+            ang: unit(
+                g,
+                "unit_angle",
+                &[("degrees", PI / 180.0), ("radians", 1.0)],
+                PI / 180.0,
+            )?,
+            notes: RefCell::default(),
+            randoms: Cell::new(0),
+        })
+    }
+    /// Logs each warning once, with how many models it concerns.
+    fn report_warnings(&self) {
+        for line in summarize(&self.notes.borrow()) {
+            tracing::warn!("{line}");
+        }
+    }
+    /// A `block`'s outline (`points`, `point[i]`) and its `z` span.
+    fn block(&self, e: &Entity) -> Result<(Polygon, (f64, f64)), WorldError> {
+        let n = self.int(e, "points", 0).max(0) as usize;
+        let mut pts = Vec::with_capacity(n);
+        for i in 0..n {
+            let name = format!("point[{i}]");
+            let (x, y) = match e.props.get(name.as_str()) {
+                Some(p) if p.values.len() >= 2 => {
+                    (p.values[0].num() * self.len, p.values[1].num() * self.len)
+                }
+                Some(p) => return Err(short(p, &name, 2, "[x y]")),
+                None => (0.0, 0.0),
+            };
+            pts.push((x, y));
+        }
+        let z = match e.props.get("z") {
+            Some(p) if p.values.len() >= 2 => (p.values[0].num(), p.values[1].num()),
+            Some(p) => return Err(short(p, "z", 2, "[min max]")),
+            None => (0.0, 1.0),
+        };
+        Ok((pts, z))
+    }
+    /// A ranger's `sensor`.
+    fn sensor(&self, e: &Entity) -> Result<Sensor, WorldError> {
+        let (pose, z) = self.pose(e, "pose")?.unwrap_or_default();
+        let range = match e.props.get("range") {
+            Some(p) if p.values.len() >= 2 => {
+                (p.values[0].num() * self.len, p.values[1].num() * self.len)
+            }
+            Some(p) => return Err(short(p, "range", 2, "[min max]")),
+            None => (0.0, 5.0),
+        };
+        Ok(Sensor {
+            pose,
+            z,
+            size: self.size(e, [0.02, 0.02, 0.02])?,
+            range,
+            fov: self.angle(e, "fov", 0.1),
+            samples: self.int(e, "samples", 1).max(1) as usize,
+        })
+    }
+    /// A position model's settings.
+    fn position(&self, e: &Entity) -> Result<PositionCfg, WorldError> {
+        let drive = self.drive(e);
+        let localization = self.localization(e);
+        let odom = self.odom_error(e)?;
+        let half = PI / 2.0;
+        Ok(PositionCfg {
+            drive,
+            velocity_bounds: self.bounds(
+                e,
+                "velocity_bounds",
+                [-1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -half, half],
+            )?,
+            acceleration_bounds: self.bounds(
+                e,
+                "acceleration_bounds",
+                [-1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -half, half],
+            )?,
+            localization,
+            localization_origin: self.pose(e, "localization_origin")?.map(|(p, _)| p),
+            odom_error: odom,
+            wheelbase: self.length(e, "wheelbase", 1.0),
+        })
+    }
+    /// `drive`: diff, omni or car (another name is warned of, and is diff).
+    fn drive(&self, e: &Entity) -> Drive {
+        match self.string(e, "drive").as_deref() {
+            None | Some("diff") => Drive::Diff,
+            Some("omni") => Drive::Omni,
+            Some("car") => Drive::Car,
+            Some(other) => {
+                self.note(format!(
+                    "{}: unknown drive \"{other}\" (diff, omni or car); using diff",
+                    e.props["drive"].pos
+                ));
+                Drive::Diff
+            }
+        }
+    }
+    /// `localization`: gps or odom (another name is warned of, and is gps).
+    fn localization(&self, e: &Entity) -> Localization {
+        match self.string(e, "localization").as_deref() {
+            None | Some("gps") => Localization::Gps,
+            Some("odom") => Localization::Odom,
+            Some(other) => {
+                self.note(format!(
+                    "{}: unknown localization \"{other}\" (gps or odom); using gps",
+                    e.props["localization"].pos
+                ));
+                Localization::Gps
+            }
+        }
+    }
+    /// `odom_error`, if the model sets it.
+    fn odom_error(&self, e: &Entity) -> Result<Option<[f64; 3]>, WorldError> {
+        // As Stage's `Pose::Load` ("llla"): the turn's error is read
+        // as an angle.
+        match e.props.get("odom_error") {
+            Some(p) if p.values.len() >= 4 => Ok(Some([
+                p.values[0].num(),
+                p.values[1].num(),
+                p.values[3].num() * self.ang,
+            ])),
+            Some(p) if p.values.len() == 3 => Ok(Some([
+                p.values[0].num(),
+                p.values[1].num(),
+                p.values[2].num() * self.ang,
+            ])),
+            Some(p) => Err(short(p, "odom_error", 4, "[x y z a]")),
+            None => Ok(None),
+        }
+    }
+    /// A blobfinder's settings.
+    fn blobfinder(&self, e: &Entity) -> Result<BlobfinderCfg, WorldError> {
+        let mut colors = Vec::new();
+        if e.props.contains_key("colors") {
+            let n = self.int(e, "colors_count", 0).max(0) as usize;
+            let p = &e.props["colors"];
+            if p.values.len() < n {
+                return Err(short(p, "colors", n, "(one per colors_count)"));
+            }
+            for v in p.values.iter().take(n) {
+                colors.push(colors::lookup(v.text()).unwrap_or(colors::RED));
+            }
+        }
+        let image = match e.props.get("image") {
+            Some(p) if p.values.len() >= 2 => (
+                p.values[0].num().max(1.0) as u32,
+                p.values[1].num().max(1.0) as u32,
+            ),
+            Some(p) => return Err(short(p, "image", 2, "[width height]")),
+            None => (80, 60),
+        };
+        Ok(BlobfinderCfg {
+            colors,
+            image,
+            range: self.float(e, "range", 12.0),
+            fov: self.angle(e, "fov", PI / 3.0),
+            pan: self.angle(e, "pan", 0.0),
+        })
+    }
+    /// A fiducial detector's settings.
+    fn fiducial(&self, e: &Entity) -> FiducialCfg {
+        FiducialCfg {
+            range_min: self.length(e, "range_min", 0.0),
+            range_max: self.length(e, "range_max", 8.0),
+            range_max_id: self.length(e, "range_max_id", 5.0),
+            fov: self.angle(e, "fov", PI),
+        }
+    }
+    /// A camera's settings.
+    fn camera(&self, e: &Entity) -> Result<CameraCfg, WorldError> {
+        let pair = |name: &str, default: (f64, f64), what: &str| match e.props.get(name) {
+            Some(p) if p.values.len() >= 2 => Ok((p.values[0].num(), p.values[1].num())),
+            Some(p) => Err(short(p, name, 2, what)),
+            None => Ok(default),
+        };
+        let (w, h) = pair("resolution", (32.0, 32.0), "[width height]")?;
+        let (near, far) = pair("range", (0.2, 8.0), "[min max]")?;
+        let (hfov, vfov) = pair("fov", (70.0, 40.0), "[horizontal vertical]")?;
+        let (pan, tilt) = pair("pantilt", (0.0, 0.0), "[pan tilt]")?;
+        let pixels = |v: f64| v.clamp(1.0, 4096.0) as u32;
+        let fov = |v: f64| v.clamp(1.0, 179.0).to_radians();
+        Ok(CameraCfg {
+            resolution: (pixels(w), pixels(h)),
+            range: (near.max(1e-3), far.max(near.max(1e-3) + 1e-3)),
+            fov: (fov(hfov), fov(vfov)),
+            pantilt: (pan.to_radians(), tilt.to_radians()),
+        })
+    }
+    /// `ctrl`: the model's controllers, each with its arguments.
+    fn ctrl(&self, e: &Entity) -> Vec<String> {
+        match self.prop(e, "ctrl") {
+            Some(p) => p.values.iter().map(|v| v.text().to_owned()).collect(),
+            None => Vec::new(),
+        }
+    }
+    /// The sensors Stage 3 sets on the model itself: a `laser`'s one, a ranger's `scount`.
+    fn stage3_sensors(&self, e: &Entity, kind: Kind) -> Result<Vec<Sensor>, WorldError> {
+        let mut sensors = Vec::new();
+        if e.kind == "laser" {
+            sensors.push(self.stage3_laser(e));
+        }
+        // Stage 3 ranger: scount / spose[i] / sview[i] / ssize[i].
+        if kind == Kind::Ranger {
+            let n = self.int(e, "scount", 0).max(0) as usize;
+            for i in 0..n {
+                sensors.push(self.stage3_sonar(e, i)?);
+            }
+        }
+        Ok(sensors)
+    }
+    /// Stage 3: a laser is one sensor with these properties on the model.
+    fn stage3_laser(&self, e: &Entity) -> Sensor {
+        let skip = self.int(e, "laser_sample_skip", 1).max(1) as usize;
+        Sensor {
+            pose: Pose::default(),
+            z: 0.0,
+            size: [0.02, 0.02, 0.02],
+            range: (
+                self.length(e, "range_min", 0.0),
+                self.length(e, "range_max", 8.0),
+            ),
+            fov: self.angle(e, "fov", PI),
+            samples: (self.int(e, "samples", 361).max(1) as usize).div_ceil(skip),
+        }
+    }
+    /// Stage 3 ranger's sensor `i` (`spose[i]`, `sview[i]` or `sview`).
+    fn stage3_sonar(&self, e: &Entity, i: usize) -> Result<Sensor, WorldError> {
+        let sp = e.props.get(format!("spose[{i}]").as_str());
+        let pose = match sp {
+            Some(p) if p.values.len() >= 3 => Pose::new(
+                p.values[0].num() * self.len,
+                p.values[1].num() * self.len,
+                p.values[2].num() * self.ang,
+            ),
+            Some(p) => return Err(short(p, &format!("spose[{i}]"), 3, "[x y a]")),
+            None => Pose::default(),
+        };
+        let view = e
+            .props
+            .get(format!("sview[{i}]").as_str())
+            .or_else(|| e.props.get("sview"));
+        let (range, fov) = match view {
+            Some(p) if p.values.len() >= 3 => (
+                (p.values[0].num() * self.len, p.values[1].num() * self.len),
+                p.values[2].num() * self.ang,
+            ),
+            Some(p) => return Err(short(p, "sview", 3, "[min max fov]")),
+            None => ((0.0, 5.0), 0.1),
+        };
+        Ok(Sensor {
+            pose,
+            z: 0.0,
+            size: [0.02, 0.02, 0.02],
+            range,
+            fov,
+            samples: 1,
+        })
+    }
+    /// A model's body as the file draws it (Stage 2 polygons, a bitmap), or
+    /// Stage's default: a square, or a gripper's back and paddles.
+    fn body(&self, e: &Entity, kind: Kind, dir: &Path) -> Result<Body, WorldError> {
+        let mut blocks = Vec::new();
+        let mut default_block = matches!(
+            kind,
+            Kind::Model | Kind::Position | Kind::Bumper | Kind::Other
+        );
+        if self.int(e, "noblocks", 0) != 0 {
+            default_block = false;
+        }
+        // Stage 2: polygons N with polygon[i].points and polygon[i].point[j].
+        let np = self.int(e, "polygons", 0).max(0) as usize;
+        for i in 0..np {
+            let poly = self.polygon(e, i)?;
+            if poly.len() >= 2 {
+                blocks.push(poly);
+                default_block = false;
+            }
+        }
+        if let Some(cells) = self.bitmap(e, dir)? {
+            blocks.extend(cells);
+            default_block = false;
+        }
+        if default_block {
+            blocks.push(rect(-0.5, -0.5, 0.5, 0.5));
+        } else if kind == Kind::Gripper && blocks.is_empty() && self.int(e, "noblocks", 0) == 0 {
+            // Stage's gripper body: a block at the back and two paddles
+            // (0.66 of its length, 0.1 of its width each), drawn open.
+            blocks.push(rect(0.0, 0.0, 0.34, 1.0));
+            blocks.push(rect(0.34, 0.0, 1.0, 0.1));
+            blocks.push(rect(0.34, 0.9, 1.0, 1.0));
+        }
+        Ok(Body {
+            z: vec![(0.0, 1.0); blocks.len()],
+            blocks,
+            default_block,
+            boundary: self.int(e, "boundary", 0) != 0,
+        })
+    }
+    /// Stage 2's polygon `i` (`polygon[i].points`, `polygon[i].point[j]`).
+    fn polygon(&self, e: &Entity, i: usize) -> Result<Polygon, WorldError> {
+        let pts = self.int(e, &format!("polygon[{i}].points"), 0).max(0) as usize;
+        let mut poly = Vec::new();
+        for j in 0..pts {
+            let key = format!("polygon[{i}].point[{j}]");
+            match e.props.get(key.as_str()) {
+                Some(p) if p.values.len() >= 2 => {
+                    poly.push((p.values[0].num() * self.len, p.values[1].num() * self.len))
+                }
+                Some(p) => return Err(short(p, &key, 2, "[x y]")),
+                None => poly.push((0.0, 0.0)),
+            }
+        }
+        Ok(poly)
+    }
+    /// The `bitmap`'s dark cells (found beside the world file), one rectangle each.
+    fn bitmap(&self, e: &Entity, dir: &Path) -> Result<Option<Vec<Polygon>>, WorldError> {
+        let Some(file) = self.string(e, "bitmap") else {
+            return Ok(None);
+        };
+        let p = if Path::new(&file).is_absolute() {
+            file.clone().into()
+        } else {
+            dir.join(&file)
+        };
+        let bmp = Bitmap::load(&p).map_err(|err| WorldError {
+            pos: e.props["bitmap"].pos.clone(),
+            msg: err.to_string(),
+        })?;
+        let mut cells = Vec::new();
+        for rc in bmp.dark_rects(128) {
+            // Image rows grow downwards; the world's y grows upwards.
+            let (x0, x1) = (f64::from(rc.x), f64::from(rc.x + rc.w));
+            let (y0, y1) = (-f64::from(rc.y + rc.h), -f64::from(rc.y));
+            cells.push(rect(x0, y0, x1, y1));
+        }
+        Ok(Some(cells))
+    }
 }
 
 fn kind_of(e: &Entity) -> Result<Option<Kind>, WorldError> {
@@ -520,53 +868,34 @@ fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Vec<(f64, f64)> {
     vec![(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
 }
 
-/// Loads the world file at `path`.
-///
-/// # Errors
-///
-/// A syntax error, an unknown model type, a too-short tuple or a missing
-/// bitmap, each with file:line:column.
-pub fn load(path: &Path) -> Result<World, WorldError> {
-    let wf = worldfile::parse(path)?;
-    let g = &wf.entities[0];
-    let unit = |name: &str, table: &[(&str, f64)], default: f64| -> Result<f64, WorldError> {
-        match g.props.get(name) {
-            None => Ok(default),
-            Some(p) => {
-                let t = p.values.first().map(Val::text).unwrap_or("");
-                table
-                    .iter()
-                    .find(|(n, _)| *n == t)
-                    .map(|(_, f)| *f)
-                    .ok_or_else(|| WorldError {
-                        pos: p.pos.clone(),
-                        msg: format!(
-                            "{name} must be one of {}",
-                            table
-                                .iter()
-                                .map(|(n, _)| format!("\"{n}\""))
-                                .collect::<Vec<_>>()
-                                .join(", ")
-                        ),
-                    })
-            }
+/// The factor the world's unit setting `name` picks from `table` (`default` when unset).
+fn unit(g: &Entity, name: &str, table: &[(&str, f64)], default: f64) -> Result<f64, WorldError> {
+    match g.props.get(name) {
+        None => Ok(default),
+        Some(p) => {
+            let t = p.values.first().map(Val::text).unwrap_or("");
+            table
+                .iter()
+                .find(|(n, _)| *n == t)
+                .map(|(_, f)| *f)
+                .ok_or_else(|| WorldError {
+                    pos: p.pos.clone(),
+                    msg: format!(
+                        "{name} must be one of {}",
+                        table
+                            .iter()
+                            .map(|(n, _)| format!("\"{n}\""))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                })
         }
-    };
-    let r = Reader {
-        len: unit(
-            "unit_length",
-            &[("m", 1.0), ("cm", 0.01), ("mm", 0.001)],
-            1.0,
-        )?,
-        ang: unit(
-            "unit_angle",
-            &[("degrees", PI / 180.0), ("radians", 1.0)],
-            PI / 180.0,
-        )?,
-        notes: RefCell::default(),
-        randoms: Cell::new(0),
-    };
-    let mut world = World {
+    }
+}
+
+/// The world's own settings (resolution, step, quit time, speed…), with no models yet.
+fn world_settings(r: &Reader, g: &Entity) -> World {
+    World {
         resolution: r.float(g, "resolution", 0.02).max(1e-4),
         interval_sim: r.float(g, "interval_sim", 100.0).max(1.0) / 1000.0,
         quit_time: r.float(g, "quit_time", 0.0).max(0.0),
@@ -575,99 +904,226 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
         paused: r.int(g, "paused", 0) != 0,
         models: Vec::new(),
         names: HashMap::new(),
+    }
+}
+
+/// A model's size when the file gives none, by type (Stage's defaults).
+fn default_size(kind: Kind) -> [f64; 3] {
+    match kind {
+        Kind::Ranger => [0.15, 0.15, 0.2],
+        Kind::Gripper => [0.2, 0.3, 0.2],
+        Kind::Fiducial => [0.0, 0.0, 0.0],
+        Kind::Camera => [0.1, 0.07, 0.05],
+        _ => [0.4, 0.4, 1.0],
+    }
+}
+
+/// A model's colour when the file gives none, by type (Stage's defaults).
+fn default_color(kind: Kind) -> Color {
+    match kind {
+        Kind::Ranger => Color {
+            r: 0.0,
+            g: 0.0,
+            b: 0.5,
+            a: 1.0,
+        },
+        _ => colors::RED,
+    }
+}
+
+/// Box `i` of the `dynamic` controller on model `m` (`parent`): blue, 10 cm,
+/// somewhere within a metre of the model's centre, facing any way.
+fn dynamic_box(parent: &ModelDef, m: usize, i: u64, name: String) -> ModelDef {
+    let draw = |k: u64| colors::unit_draw([m as u64, i, k]);
+    let blue = Color {
+        r: 0.0,
+        g: 0.0,
+        b: 1.0,
+        a: 1.0,
     };
-    let mut model_of: HashMap<usize, usize> = HashMap::new();
-    let mut raw_blocks: Vec<Vec<Vec<(f64, f64)>>> = Vec::new();
-    // Each raw block's `z`, in the same order.
-    let mut raw_z: Vec<Vec<(f64, f64)>> = Vec::new();
-    let mut has_default_block: Vec<bool> = Vec::new();
-    let mut boundaries: Vec<bool> = Vec::new();
-    // Stage's world makes its ground, a top-level `model`, before the
-    // file's: unnamed top-level models count from `model:1`.
-    let mut counts: HashMap<(Option<usize>, String), usize> =
-        HashMap::from([((None, "model".to_owned()), 1)]);
-    let dir = path.parent().unwrap_or(Path::new("."));
+    ModelDef {
+        name,
+        kind: Kind::Model,
+        parent: Some(m),
+        children: Vec::new(),
+        pose: Pose::new(
+            -1.0 + 2.0 * draw(0),
+            -1.0 + 2.0 * draw(1),
+            troupe_geom::normalize(2.0 * PI * draw(2)),
+        ),
+        z: 0.0,
+        size: [0.1, 0.1, 0.1],
+        origin: Pose::default(),
+        color: blue,
+        blocks: Vec::new(),
+        block_z: Vec::new(),
+        position: None,
+        sensors: Vec::new(),
+        ctrl: Vec::new(),
+        blobfinder: None,
+        fiducial: None,
+        camera: None,
+        energy: Energy::default(),
+        update_interval: 0.1,
+        obstacle_return: true,
+        ranger_return: 1.0,
+        blob_return: true,
+        fiducial_return: 0,
+        gripper_return: false,
+        stack_children: true,
+        map_resolution: 0.1,
+        pos: parent.pos.clone(),
+    }
+}
+
+/// Loads the world file at `path`.
+///
+/// # Errors
+///
+/// A syntax error, an unknown model type, a too-short tuple or a missing
+/// bitmap, each with file:line:column.
+pub fn load(path: &Path) -> Result<World, WorldError> {
+    let wf = worldfile::parse(path)?;
+    let globals = &wf.entities[0];
+    let r = Reader::in_units_of(globals)?;
+    let world = world_settings(&r, globals);
+    let mut loader = Loader::new(r, world, path);
     for (ei, e) in wf.entities.iter().enumerate().skip(1) {
-        let parent_model = e.parent.and_then(|p| model_of.get(&p).copied());
-        match e.kind.as_str() {
-            "window" => continue,
-            "block" => {
-                let Some(m) = parent_model else {
-                    return Err(WorldError {
-                        pos: e.pos.clone(),
-                        msg: "a `block` must be inside a model".into(),
-                    });
-                };
-                let n = r.int(e, "points", 0).max(0) as usize;
-                let mut pts = Vec::with_capacity(n);
-                for i in 0..n {
-                    let name = format!("point[{i}]");
-                    let (x, y) = match e.props.get(name.as_str()) {
-                        Some(p) if p.values.len() >= 2 => {
-                            (p.values[0].num() * r.len, p.values[1].num() * r.len)
-                        }
-                        Some(p) => return Err(short(p, &name, 2, "[x y]")),
-                        None => (0.0, 0.0),
-                    };
-                    pts.push((x, y));
-                }
-                let z = match e.props.get("z") {
-                    Some(p) if p.values.len() >= 2 => (p.values[0].num(), p.values[1].num()),
-                    Some(p) => return Err(short(p, "z", 2, "[min max]")),
-                    None => (0.0, 1.0),
-                };
-                if pts.len() >= 2 {
-                    if has_default_block[m] {
-                        raw_blocks[m].clear();
-                        raw_z[m].clear();
-                        has_default_block[m] = false;
-                    }
-                    canonicalize_winding(&mut pts);
-                    raw_blocks[m].push(pts);
-                    raw_z[m].push(z);
-                }
-                continue;
-            }
-            "sensor" => {
-                let Some(m) = parent_model.filter(|&m| world.models[m].kind == Kind::Ranger) else {
-                    return Err(WorldError {
-                        pos: e.pos.clone(),
-                        msg: "a `sensor` must be inside a ranger".into(),
-                    });
-                };
-                let (pose, z) = r.pose(e, "pose")?.unwrap_or_default();
-                let range = match e.props.get("range") {
-                    Some(p) if p.values.len() >= 2 => {
-                        (p.values[0].num() * r.len, p.values[1].num() * r.len)
-                    }
-                    Some(p) => return Err(short(p, "range", 2, "[min max]")),
-                    None => (0.0, 5.0),
-                };
-                let sensor = Sensor {
-                    pose,
-                    z,
-                    size: r.size(e, [0.02, 0.02, 0.02])?,
-                    range,
-                    fov: r.angle(e, "fov", 0.1),
-                    samples: r.int(e, "samples", 1).max(1) as usize,
-                };
-                world.models[m].sensors.push(sensor);
-                continue;
-            }
-            _ => {}
+        loader.read_entity(ei, e)?;
+    }
+    loader.add_dynamic_boxes();
+    loader.fit_bodies();
+    loader.r.report_warnings();
+    Ok(loader.world)
+}
+
+/// A model's body as the file draws it, before it is fitted to the model's size.
+struct Body {
+    /// Polygons as drawn (metres, or a bitmap's pixels).
+    blocks: Vec<Polygon>,
+    /// Each block's `z`, in the same order.
+    z: Vec<(f64, f64)>,
+    /// The blocks are Stage's default square, which a `block` replaces.
+    default_block: bool,
+    /// Walls go along its edges (`boundary`).
+    boundary: bool,
+}
+
+/// What loading keeps from one entity to the next.
+struct Loader<'a> {
+    /// Reads properties in the world's units, and keeps its warnings.
+    r: Reader,
+    /// The world so far.
+    world: World,
+    /// Each model's body until all are read, in model order.
+    bodies: Vec<Body>,
+    /// Entity index → model index.
+    model_of: HashMap<usize, usize>,
+    /// Models made so far of each type under each parent, for `type:n` names.
+    counts: HashMap<(Option<usize>, String), usize>,
+    /// The world file's directory, where bitmaps are found.
+    dir: &'a Path,
+}
+
+impl<'a> Loader<'a> {
+    /// A loader filling `world`, read from the file at `path`.
+    fn new(r: Reader, world: World, path: &'a Path) -> Self {
+        Loader {
+            r,
+            world,
+            bodies: Vec::new(),
+            model_of: HashMap::new(),
+            // Stage's world makes its ground, a top-level `model`, before the
+            // file's: unnamed top-level models count from `model:1`.
+            counts: HashMap::from([((None, "model".to_owned()), 1)]),
+            dir: path.parent().unwrap_or(Path::new(".")),
         }
-        let Some(kind) = kind_of(e)? else { continue };
-        let idx = world.models.len();
-        model_of.insert(ei, idx);
+    }
+
+    /// Reads entity `ei`: a model, or a block or sensor of the model it is in.
+    fn read_entity(&mut self, ei: usize, e: &Entity) -> Result<(), WorldError> {
+        let parent = e.parent.and_then(|p| self.model_of.get(&p).copied());
+        match e.kind.as_str() {
+            "window" => Ok(()),
+            "block" => self.add_block(e, parent),
+            "sensor" => self.add_sensor(e, parent),
+            _ => match kind_of(e)? {
+                Some(kind) => self.add_model(ei, e, kind, parent),
+                None => Ok(()),
+            },
+        }
+    }
+
+    /// Adds a `block` to its model's body (the first replaces the default square).
+    fn add_block(&mut self, e: &Entity, parent: Option<usize>) -> Result<(), WorldError> {
+        let Some(m) = parent else {
+            return Err(WorldError {
+                pos: e.pos.clone(),
+                msg: "a `block` must be inside a model".into(),
+            });
+        };
+        let (mut pts, z) = self.r.block(e)?;
+        if pts.len() >= 2 {
+            let body = &mut self.bodies[m];
+            if body.default_block {
+                body.blocks.clear();
+                body.z.clear();
+                body.default_block = false;
+            }
+            canonicalize_winding(&mut pts);
+            body.blocks.push(pts);
+            body.z.push(z);
+        }
+        Ok(())
+    }
+
+    /// Adds a `sensor` to the ranger it is in.
+    fn add_sensor(&mut self, e: &Entity, parent: Option<usize>) -> Result<(), WorldError> {
+        let Some(m) = parent.filter(|&m| self.world.models[m].kind == Kind::Ranger) else {
+            return Err(WorldError {
+                pos: e.pos.clone(),
+                msg: "a `sensor` must be inside a ranger".into(),
+            });
+        };
+        let sensor = self.r.sensor(e)?;
+        self.world.models[m].sensors.push(sensor);
+        Ok(())
+    }
+
+    /// Adds the model entity `ei` describes, under `parent`, by both its names.
+    fn add_model(
+        &mut self,
+        ei: usize,
+        e: &Entity,
+        kind: Kind,
+        parent: Option<usize>,
+    ) -> Result<(), WorldError> {
+        let idx = self.world.models.len();
+        self.model_of.insert(ei, idx);
+        let (auto, name) = self.names(e, parent);
+        let (def, body) = self.read_model(e, kind, parent, name.clone())?;
+        self.world.models.push(def);
+        self.bodies.push(body);
+        if let Some(p) = parent {
+            self.world.models[p].children.push(idx);
+        }
+        self.world.names.insert(auto, idx);
+        self.world.names.insert(name, idx);
+        Ok(())
+    }
+
+    /// The name Stage gives a new model (`type:n` among its siblings) and the
+    /// name it goes by (its `name`, under its parent's), in that order.
+    fn names(&mut self, e: &Entity, parent: Option<usize>) -> (String, String) {
         // Names: `type:n` among siblings, or the given name (children: parent.name).
-        let k = counts.entry((parent_model, e.kind.clone())).or_insert(0);
-        let parent_name = parent_model.map(|p| world.models[p].name.clone());
+        let k = self.counts.entry((parent, e.kind.clone())).or_insert(0);
+        let parent_name = parent.map(|p| self.world.models[p].name.clone());
         let auto = match &parent_name {
             Some(pn) => format!("{pn}.{}:{}", e.kind, k),
             None => format!("{}:{}", e.kind, k),
         };
         *k += 1;
-        let name = match r.string(e, "name") {
+        let name = match self.r.string(e, "name") {
             Some(n) if n.starts_with('/') => n[1..].to_owned(),
             Some(n) => match &parent_name {
                 Some(pn) => format!("{pn}.{n}"),
@@ -675,262 +1131,42 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
             },
             None => auto.clone(),
         };
-        let default_size = match kind {
-            Kind::Ranger => [0.15, 0.15, 0.2],
-            Kind::Gripper => [0.2, 0.3, 0.2],
-            Kind::Fiducial => [0.0, 0.0, 0.0],
-            Kind::Camera => [0.1, 0.07, 0.05],
-            _ => [0.4, 0.4, 1.0],
-        };
-        let size = r.size(e, default_size)?;
+        (auto, name)
+    }
+
+    /// Model `name` of type `kind` as entity `e` describes it, and its body.
+    fn read_model(
+        &self,
+        e: &Entity,
+        kind: Kind,
+        parent: Option<usize>,
+        name: String,
+    ) -> Result<(ModelDef, Body), WorldError> {
+        let r = &self.r;
+        let size = r.size(e, default_size(kind))?;
         let (pose, z) = r.pose(e, "pose")?.unwrap_or_default();
         let origin = r.pose(e, "origin")?.map(|(p, _)| p).unwrap_or_default();
-        let default_color = match kind {
-            Kind::Ranger => Color {
-                r: 0.0,
-                g: 0.0,
-                b: 0.5,
-                a: 1.0,
-            },
-            _ => colors::RED,
-        };
-        let position = if kind == Kind::Position {
-            let drive = match r.string(e, "drive").as_deref() {
-                None | Some("diff") => Drive::Diff,
-                Some("omni") => Drive::Omni,
-                Some("car") => Drive::Car,
-                Some(other) => {
-                    r.note(format!(
-                        "{}: unknown drive \"{other}\" (diff, omni or car); using diff",
-                        e.props["drive"].pos
-                    ));
-                    Drive::Diff
-                }
-            };
-            let localization = match r.string(e, "localization").as_deref() {
-                None | Some("gps") => Localization::Gps,
-                Some("odom") => Localization::Odom,
-                Some(other) => {
-                    r.note(format!(
-                        "{}: unknown localization \"{other}\" (gps or odom); using gps",
-                        e.props["localization"].pos
-                    ));
-                    Localization::Gps
-                }
-            };
-            // As Stage's `Pose::Load` ("llla"): the turn's error is read
-            // as an angle.
-            let odom = match e.props.get("odom_error") {
-                Some(p) if p.values.len() >= 4 => Some([
-                    p.values[0].num(),
-                    p.values[1].num(),
-                    p.values[3].num() * r.ang,
-                ]),
-                Some(p) if p.values.len() == 3 => Some([
-                    p.values[0].num(),
-                    p.values[1].num(),
-                    p.values[2].num() * r.ang,
-                ]),
-                Some(p) => return Err(short(p, "odom_error", 4, "[x y z a]")),
-                None => None,
-            };
-            let half = PI / 2.0;
-            Some(PositionCfg {
-                drive,
-                velocity_bounds: r.bounds(
-                    e,
-                    "velocity_bounds",
-                    [-1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -half, half],
-                )?,
-                acceleration_bounds: r.bounds(
-                    e,
-                    "acceleration_bounds",
-                    [-1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -half, half],
-                )?,
-                localization,
-                localization_origin: r.pose(e, "localization_origin")?.map(|(p, _)| p),
-                odom_error: odom,
-                wheelbase: r.length(e, "wheelbase", 1.0),
-            })
-        } else {
-            None
-        };
-        let blobfinder = if kind == Kind::Blobfinder {
-            let mut colors = Vec::new();
-            if e.props.contains_key("colors") {
-                let n = r.int(e, "colors_count", 0).max(0) as usize;
-                let p = &e.props["colors"];
-                if p.values.len() < n {
-                    return Err(short(p, "colors", n, "(one per colors_count)"));
-                }
-                for v in p.values.iter().take(n) {
-                    colors.push(colors::lookup(v.text()).unwrap_or(colors::RED));
-                }
-            }
-            let image = match e.props.get("image") {
-                Some(p) if p.values.len() >= 2 => (
-                    p.values[0].num().max(1.0) as u32,
-                    p.values[1].num().max(1.0) as u32,
-                ),
-                Some(p) => return Err(short(p, "image", 2, "[width height]")),
-                None => (80, 60),
-            };
-            Some(BlobfinderCfg {
-                colors,
-                image,
-                range: r.float(e, "range", 12.0),
-                fov: r.angle(e, "fov", PI / 3.0),
-                pan: r.angle(e, "pan", 0.0),
-            })
-        } else {
-            None
-        };
-        let fiducial = (kind == Kind::Fiducial).then(|| FiducialCfg {
-            range_min: r.length(e, "range_min", 0.0),
-            range_max: r.length(e, "range_max", 8.0),
-            range_max_id: r.length(e, "range_max_id", 5.0),
-            fov: r.angle(e, "fov", PI),
-        });
-        let camera = if kind == Kind::Camera {
-            let pair = |name: &str, default: (f64, f64), what: &str| match e.props.get(name) {
-                Some(p) if p.values.len() >= 2 => Ok((p.values[0].num(), p.values[1].num())),
-                Some(p) => Err(short(p, name, 2, what)),
-                None => Ok(default),
-            };
-            let (w, h) = pair("resolution", (32.0, 32.0), "[width height]")?;
-            let (near, far) = pair("range", (0.2, 8.0), "[min max]")?;
-            let (hfov, vfov) = pair("fov", (70.0, 40.0), "[horizontal vertical]")?;
-            let (pan, tilt) = pair("pantilt", (0.0, 0.0), "[pan tilt]")?;
-            let pixels = |v: f64| v.clamp(1.0, 4096.0) as u32;
-            let fov = |v: f64| v.clamp(1.0, 179.0).to_radians();
-            Some(CameraCfg {
-                resolution: (pixels(w), pixels(h)),
-                range: (near.max(1e-3), far.max(near.max(1e-3) + 1e-3)),
-                fov: (fov(hfov), fov(vfov)),
-                pantilt: (pan.to_radians(), tilt.to_radians()),
-            })
-        } else {
-            None
-        };
-        let ctrl = match e.props.get("ctrl") {
-            Some(p) => p.values.iter().map(|v| v.text().to_owned()).collect(),
-            None => Vec::new(),
-        };
-        let mut sensors = Vec::new();
-        if e.kind == "laser" {
-            // Stage 3: a laser is one sensor with these properties on the model.
-            let skip = r.int(e, "laser_sample_skip", 1).max(1) as usize;
-            sensors.push(Sensor {
-                pose: Pose::default(),
-                z: 0.0,
-                size: [0.02, 0.02, 0.02],
-                range: (r.length(e, "range_min", 0.0), r.length(e, "range_max", 8.0)),
-                fov: r.angle(e, "fov", PI),
-                samples: (r.int(e, "samples", 361).max(1) as usize).div_ceil(skip),
-            });
-        }
-        // Stage 3 ranger: scount / spose[i] / sview[i] / ssize[i].
-        if kind == Kind::Ranger {
-            let n = r.int(e, "scount", 0).max(0) as usize;
-            for i in 0..n {
-                let sp = e.props.get(format!("spose[{i}]").as_str());
-                let pose = match sp {
-                    Some(p) if p.values.len() >= 3 => Pose::new(
-                        p.values[0].num() * r.len,
-                        p.values[1].num() * r.len,
-                        p.values[2].num() * r.ang,
-                    ),
-                    Some(p) => return Err(short(p, &format!("spose[{i}]"), 3, "[x y a]")),
-                    None => Pose::default(),
-                };
-                let view = e
-                    .props
-                    .get(format!("sview[{i}]").as_str())
-                    .or_else(|| e.props.get("sview"));
-                let (range, fov) = match view {
-                    Some(p) if p.values.len() >= 3 => (
-                        (p.values[0].num() * r.len, p.values[1].num() * r.len),
-                        p.values[2].num() * r.ang,
-                    ),
-                    Some(p) => return Err(short(p, "sview", 3, "[min max fov]")),
-                    None => ((0.0, 5.0), 0.1),
-                };
-                sensors.push(Sensor {
-                    pose,
-                    z: 0.0,
-                    size: [0.02, 0.02, 0.02],
-                    range,
-                    fov,
-                    samples: 1,
-                });
-            }
-        }
-        let mut blocks = Vec::new();
-        let mut default_block = matches!(
+        let position = (kind == Kind::Position)
+            .then(|| r.position(e))
+            .transpose()?;
+        let blobfinder = (kind == Kind::Blobfinder)
+            .then(|| r.blobfinder(e))
+            .transpose()?;
+        let fiducial = (kind == Kind::Fiducial).then(|| r.fiducial(e));
+        let camera = (kind == Kind::Camera).then(|| r.camera(e)).transpose()?;
+        let ctrl = r.ctrl(e);
+        let sensors = r.stage3_sensors(e, kind)?;
+        let body = r.body(e, kind, self.dir)?;
+        let def = ModelDef {
+            name,
             kind,
-            Kind::Model | Kind::Position | Kind::Bumper | Kind::Other
-        );
-        if r.int(e, "noblocks", 0) != 0 {
-            default_block = false;
-        }
-        // Stage 2: polygons N with polygon[i].points and polygon[i].point[j].
-        let np = r.int(e, "polygons", 0).max(0) as usize;
-        for i in 0..np {
-            let pts = r.int(e, &format!("polygon[{i}].points"), 0).max(0) as usize;
-            let mut poly = Vec::new();
-            for j in 0..pts {
-                let key = format!("polygon[{i}].point[{j}]");
-                match e.props.get(key.as_str()) {
-                    Some(p) if p.values.len() >= 2 => {
-                        poly.push((p.values[0].num() * r.len, p.values[1].num() * r.len))
-                    }
-                    Some(p) => return Err(short(p, &key, 2, "[x y]")),
-                    None => poly.push((0.0, 0.0)),
-                }
-            }
-            if poly.len() >= 2 {
-                blocks.push(poly);
-                default_block = false;
-            }
-        }
-        if let Some(file) = r.string(e, "bitmap") {
-            let p = if Path::new(&file).is_absolute() {
-                file.clone().into()
-            } else {
-                dir.join(&file)
-            };
-            let bmp = Bitmap::load(&p).map_err(|err| WorldError {
-                pos: e.props["bitmap"].pos.clone(),
-                msg: err.to_string(),
-            })?;
-            for rc in bmp.dark_rects(128) {
-                // Image rows grow downwards; the world's y grows upwards.
-                let (x0, x1) = (f64::from(rc.x), f64::from(rc.x + rc.w));
-                let (y0, y1) = (-f64::from(rc.y + rc.h), -f64::from(rc.y));
-                blocks.push(rect(x0, y0, x1, y1));
-            }
-            default_block = false;
-        }
-        if default_block {
-            blocks.push(rect(-0.5, -0.5, 0.5, 0.5));
-        } else if kind == Kind::Gripper && blocks.is_empty() && r.int(e, "noblocks", 0) == 0 {
-            // Stage's gripper body: a block at the back and two paddles
-            // (0.66 of its length, 0.1 of its width each), drawn open.
-            blocks.push(rect(0.0, 0.0, 0.34, 1.0));
-            blocks.push(rect(0.34, 0.0, 1.0, 0.1));
-            blocks.push(rect(0.34, 0.9, 1.0, 1.0));
-        }
-        let boundary = r.int(e, "boundary", 0) != 0;
-        world.models.push(ModelDef {
-            name: name.clone(),
-            kind,
-            parent: parent_model,
+            parent,
             children: Vec::new(),
             pose,
             z,
             size,
             origin,
-            color: r.color(e, default_color),
+            color: r.color(e, default_color(kind)),
             blocks: Vec::new(),
             block_z: Vec::new(),
             obstacle_return: r.int(e, "obstacle_return", 1) != 0,
@@ -949,109 +1185,79 @@ pub fn load(path: &Path) -> Result<World, WorldError> {
             fiducial,
             camera,
             pos: e.pos.clone(),
-        });
-        raw_z.push(vec![(0.0, 1.0); blocks.len()]);
-        raw_blocks.push(blocks);
-        has_default_block.push(default_block);
-        boundaries.push(boundary);
-        if let Some(p) = parent_model {
-            world.models[p].children.push(idx);
-        }
-        world.names.insert(auto, idx);
-        world.names.insert(name, idx);
-    }
-    // Stage's `dynamic` controller: at start-up, 100 blue 10 cm boxes on
-    // its model, anywhere within a metre of its centre, facing any way
-    // (Stage draws them at random; here the same on every load).
-    for m in 0..world.models.len() {
-        let ctrl = &world.models[m].ctrl;
-        if !ctrl
-            .iter()
-            .any(|c| c.split_whitespace().next() == Some("dynamic"))
-        {
-            continue;
-        }
-        let blue = Color {
-            r: 0.0,
-            g: 0.0,
-            b: 1.0,
-            a: 1.0,
         };
-        for i in 0..100u64 {
-            let draw = |k: u64| colors::unit_draw([m as u64, i, k]);
-            let k = counts.entry((Some(m), "model".to_owned())).or_insert(0);
-            let name = format!("{}.model:{k}", world.models[m].name);
-            *k += 1;
-            let idx = world.models.len();
-            let parent = &world.models[m];
-            let child = ModelDef {
-                name: name.clone(),
-                kind: Kind::Model,
-                parent: Some(m),
-                children: Vec::new(),
-                pose: Pose::new(
-                    -1.0 + 2.0 * draw(0),
-                    -1.0 + 2.0 * draw(1),
-                    troupe_geom::normalize(2.0 * PI * draw(2)),
-                ),
-                z: 0.0,
-                size: [0.1, 0.1, 0.1],
-                origin: Pose::default(),
-                color: blue,
-                blocks: Vec::new(),
-                block_z: Vec::new(),
-                position: None,
-                sensors: Vec::new(),
-                ctrl: Vec::new(),
-                blobfinder: None,
-                fiducial: None,
-                camera: None,
-                energy: Energy::default(),
-                update_interval: 0.1,
-                obstacle_return: true,
-                ranger_return: 1.0,
-                blob_return: true,
-                fiducial_return: 0,
-                gripper_return: false,
-                stack_children: true,
-                map_resolution: 0.1,
-                pos: parent.pos.clone(),
-            };
-            world.models.push(child);
-            world.models[m].children.push(idx);
-            raw_blocks.push(vec![rect(-0.5, -0.5, 0.5, 0.5)]);
-            raw_z.push(vec![(0.0, 1.0)]);
-            has_default_block.push(true);
-            boundaries.push(false);
-            world.names.insert(name, idx);
-        }
+        Ok((def, body))
     }
-    // Bodies: stretch to size, add boundary walls, apply the origin.
-    for (m, (mut blocks, mut z)) in raw_blocks.into_iter().zip(raw_z).enumerate() {
-        let [sx, sy, sz] = world.models[m].size;
-        stretch(&mut blocks, sx, sy);
-        stretch_z(&mut z, sz);
-        if boundaries[m] {
-            let (hx, hy, t) = (sx / 2.0, sy / 2.0, 0.01);
-            blocks.push(rect(-hx, -hy, -hx + t, hy));
-            blocks.push(rect(-hx, -hy, hx, -hy + t));
-            blocks.push(rect(-hx, hy - t, hx, hy));
-            blocks.push(rect(hx - t, -hy, hx, hy));
-            z.extend([(0.0, sz); 4]);
-        }
-        let o = world.models[m].origin;
-        for b in &mut blocks {
-            for p in b.iter_mut() {
-                *p = o.apply(p.0, p.1);
+
+    /// Stage's `dynamic` controller: at start-up, 100 blue 10 cm boxes on
+    /// its model, anywhere within a metre of its centre, facing any way
+    /// (Stage draws them at random; here the same on every load).
+    fn add_dynamic_boxes(&mut self) {
+        for m in 0..self.world.models.len() {
+            let ctrl = &self.world.models[m].ctrl;
+            if !ctrl
+                .iter()
+                .any(|c| c.split_whitespace().next() == Some("dynamic"))
+            {
+                continue;
+            }
+            for i in 0..100u64 {
+                self.add_box(m, i);
             }
         }
-        world.models[m].blocks = blocks;
-        world.models[m].block_z = z;
     }
-    for line in summarize(&r.notes.borrow()) {
-        tracing::warn!("{line}");
+
+    /// Adds box `i` of the `dynamic` controller on model `m`.
+    fn add_box(&mut self, m: usize, i: u64) {
+        let k = self
+            .counts
+            .entry((Some(m), "model".to_owned()))
+            .or_insert(0);
+        let name = format!("{}.model:{k}", self.world.models[m].name);
+        *k += 1;
+        let idx = self.world.models.len();
+        let child = dynamic_box(&self.world.models[m], m, i, name.clone());
+        self.world.models.push(child);
+        self.world.models[m].children.push(idx);
+        self.bodies.push(Body {
+            blocks: vec![rect(-0.5, -0.5, 0.5, 0.5)],
+            z: vec![(0.0, 1.0)],
+            default_block: true,
+            boundary: false,
+        });
+        self.world.names.insert(name, idx);
     }
-    Ok(world)
+
+    /// Bodies: stretch to size, add boundary walls, apply the origin.
+    fn fit_bodies(&mut self) {
+        for (m, body) in std::mem::take(&mut self.bodies).into_iter().enumerate() {
+            let Body {
+                mut blocks,
+                mut z,
+                boundary,
+                ..
+            } = body;
+            let [sx, sy, sz] = self.world.models[m].size;
+            stretch(&mut blocks, sx, sy);
+            stretch_z(&mut z, sz);
+            if boundary {
+                let (hx, hy, t) = (sx / 2.0, sy / 2.0, 0.01);
+                blocks.push(rect(-hx, -hy, -hx + t, hy));
+                blocks.push(rect(-hx, -hy, hx, -hy + t));
+                blocks.push(rect(-hx, hy - t, hx, hy));
+                blocks.push(rect(hx - t, -hy, hx, hy));
+                z.extend([(0.0, sz); 4]);
+            }
+            let o = self.world.models[m].origin;
+            for b in &mut blocks {
+                for p in b.iter_mut() {
+                    *p = o.apply(p.0, p.1);
+                }
+            }
+            self.world.models[m].blocks = blocks;
+            self.world.models[m].block_z = z;
+        }
+    }
 }
 
 impl World {
