@@ -174,17 +174,22 @@ The image starts FROM scratch (no registry is needed): /troupe is the
 entrypoint, run as user 10000, with the worlds at /worlds.")]
     Image(troupe_fleet::docker::ImageArgs),
 
-    /// Write a Docker Compose file that runs a .cfg or plan as a fleet of containers.
+    /// Write a Docker Compose file (or a Swarm stack, or Kubernetes manifests) that runs a .cfg or plan as a fleet of containers.
     #[command(args = offline(&["lease"]))]
     #[command(after_help = "Examples:
   troupe compose worlds/fleet.cfg --in-image /worlds -o docker-compose.yml
   troupe compose robot.cfg -o robot/docker-compose.yml   # mounts robot.cfg's directory at /stack
+  troupe compose worlds/fleet.cfg --in-image /worlds --swarm -o troupe-stack.yml
+  troupe compose worlds/fleet.cfg --in-image /worlds --k8s -o troupe-k8s.yml
 
 One service per host of the plan (the host field of the addresses a driver
 provides, \"robot1:6665:laser:0\"; a plan without hosts is one service, `stack`),
 each running `troupe launch FILE --host NAME`, its nodes still one process each;
 a router, and a Player bridge on 127.0.0.1 of this machine. Health checks
-(`troupe ready`), restart policies, reconnection and a short lease are set.")]
+(`troupe ready`), restart policies, reconnection and a short lease are set.
+With --swarm or --k8s, the fleet spans machines: each host runs on the
+nodes labelled for it (troupe.host.HOST=true, troupe.host/HOST=true) beside
+a router of its own, linked to the fleet's router (docs/fleets.md).")]
     Compose(troupe_fleet::docker::ComposeArgs),
 
     /// Make a fleet's certificates and each host's Zenoh config (TLS, mutual authentication).

@@ -343,6 +343,22 @@ const RUN_BY: &[(&str, &str)] = &[
     ),
     // Fleets.
     ("docker-compose", DOCKER_FLEET),
+    // docs/fleets.md, many machines.
+    (
+        "troupe compose worlds/fleet.cfg --in-image /worlds --swarm",
+        SWARM,
+    ),
+    ("docker node update", SWARM),
+    ("docker stack deploy", SWARM),
+    ("docker stack rm", SWARM),
+    (
+        "troupe compose worlds/fleet.cfg --in-image /worlds --k8s",
+        K8S,
+    ),
+    (
+        "kubectl",
+        "no cluster here: k8s_manifests_validate_against_kubernetes_own_schemas checks the manifests against Kubernetes' own schemas",
+    ),
     ("target/release/troupe image", DOCKER_FLEET),
     ("cargo run --release -- list", DOCKER_FLEET),
     (
@@ -426,6 +442,12 @@ const RUN_BY: &[(&str, &str)] = &[
 
 const DOCKER_FLEET: &str =
     "docker_fleet_comes_up_drives_a_robot_from_a_player_client_and_goes_down_cleanly";
+
+/// The test that deploys the Swarm stack on a one-node swarm.
+const SWARM: &str = "docker_swarm_runs_the_generated_stack_and_reschedules_a_killed_host";
+
+/// The test that checks the Kubernetes manifests against Kubernetes' schemas.
+const K8S: &str = "k8s_manifests_validate_against_kubernetes_own_schemas";
 
 /// The source files whose test functions `RUN_BY` may name.
 fn test_sources(dir: &Path, out: &mut String) {

@@ -144,6 +144,8 @@ mod compose {
             in_image: Some("/worlds".into()),
             secure: None,
             lease: 3.0,
+            swarm: false,
+            k8s: false,
         };
         let want = render(&args, &crate::drivers::catalog()).unwrap();
         let have = std::fs::read_to_string(&file).unwrap();
@@ -180,6 +182,8 @@ mod compose {
             in_image: None,
             secure: None,
             lease: 3.0,
+            swarm: false,
+            k8s: false,
         };
         let y = render(&args, &crate::drivers::catalog()).unwrap();
         assert!(y.contains("\n  stack:\n"), "{y}");
@@ -192,5 +196,75 @@ mod compose {
             y.contains(r#""127.0.0.1:${TROUPE_PORT_6665-6665}:6665""#),
             "{y}"
         );
+    }
+
+    fn fleet_args(swarm: bool, k8s: bool, in_image: Option<&str>) -> ComposeArgs {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        ComposeArgs {
+            file: root.join("worlds/fleet.cfg"),
+            robot: troupe_msgs::DEFAULT_ROBOT,
+            output: Some(root.join("troupe-stack.yml")),
+            image: "troupe:latest".into(),
+            in_image: in_image.map(str::to_owned),
+            secure: None,
+            lease: 3.0,
+            swarm,
+            k8s,
+        }
+    }
+
+    /// The Compose file, the Swarm stack and the Kubernetes manifests are
+    /// one model of the fleet written three ways: each host runs the same
+    /// command in each, and on many machines each host has a router of its
+    /// own, on the host's machines, linked to the fleet's.
+    #[test]
+    fn the_swarm_stack_and_the_k8s_manifests_are_the_compose_file_s_services() {
+        let catalog = crate::drivers::catalog();
+        let compose = render(&fleet_args(false, false, Some("/worlds")), &catalog).unwrap();
+        let swarm = render(&fleet_args(true, false, Some("/worlds")), &catalog).unwrap();
+        let k8s = render(&fleet_args(false, true, Some("/worlds")), &catalog).unwrap();
+        for host in ["sim", "robot6665", "robot6666", "robot6667"] {
+            let launch =
+                format!(r#""launch", "/worlds/fleet.cfg", "--host", "{host}", "--no-bridge"]"#);
+            for (what, text) in [("compose", &compose), ("swarm", &swarm), ("k8s", &k8s)] {
+                assert!(text.contains(&launch), "{what} runs no {host}:\n{text}");
+            }
+            // Beside its own router, on its own machines.
+            let router = format!(r#""--connect", "tcp/router-{host}:7447", "--mode", "client""#);
+            assert!(swarm.contains(&router) && k8s.contains(&router), "{host}");
+            assert!(!compose.contains(&router), "one machine, one router");
+            assert_eq!(
+                swarm
+                    .matches(&format!("node.labels.troupe.host.{host} == true"))
+                    .count(),
+                2,
+                "{host} and its router placed by its label:\n{swarm}"
+            );
+            assert_eq!(
+                k8s.matches(&format!("troupe.host/{host}: \"true\""))
+                    .count(),
+                2,
+                "{host} and its router placed by its label"
+            );
+            assert!(k8s.contains(&format!(
+                "kind: Service\nmetadata:\n  name: router-{host}\n"
+            )));
+        }
+        assert!(swarm.contains("version: \"3.8\""));
+        assert!(swarm.contains("networks:\n  fleet:\n    driver: overlay\n"));
+        assert!(swarm.contains("restart_policy:\n        condition: any"));
+        assert!(swarm.contains("published: ${TROUPE_PORT_6666-6666}"));
+        assert_eq!(k8s.matches("kind: Deployment").count(), 10, "{k8s}");
+        assert!(k8s.contains("readinessProbe:"));
+        assert!(k8s.contains("port: 6667"));
+    }
+
+    #[test]
+    fn a_swarm_or_a_cluster_needs_the_cfg_in_the_image() {
+        let catalog = crate::drivers::catalog();
+        for (swarm, k8s) in [(true, false), (false, true)] {
+            let e = render(&fleet_args(swarm, k8s, None), &catalog).unwrap_err();
+            assert!(e.to_string().contains("--in-image"), "{e}");
+        }
     }
 }

@@ -715,3 +715,280 @@ fn docker_a_secured_fleet_serves_its_viewer_and_player_clients_and_refuses_plain
     drop(fleet);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `troupe compose --k8s` of worlds/fleet.cfg, plain and secured, checked
+/// against Kubernetes' own schemas (the `kubernetes-validate` package,
+/// strict: no field Kubernetes does not know); a manifest with a field it
+/// does not know is refused, so the check can fail. No cluster runs here.
+#[test]
+fn k8s_manifests_validate_against_kubernetes_own_schemas() {
+    let validate = root().join("target/python-env/bin/kubernetes-validate");
+    if !validate.is_file() {
+        troupe_tests::cannot_run(
+            "no target/python-env/bin/kubernetes-validate (.ci/run installs it from PyPI)",
+        );
+        return;
+    }
+    let dir = std::env::temp_dir().join(troupe_tests::unique_namespace("k8s"));
+    let keys = dir.join("keys");
+    ok(Command::new(troupe_tests::troupe_bin())
+        .arg("fleet-keys")
+        .arg(&keys)
+        .args([
+            "--hosts",
+            "sim:6665:6666:6667,robot6665:6665,robot6666:6666,robot6667:6667",
+            "--operators",
+            "bridge",
+        ]));
+    let compose = |out: &Path, secure: bool| {
+        let mut c = Command::new(troupe_tests::troupe_bin());
+        c.arg("compose")
+            .arg(root().join("worlds/fleet.cfg"))
+            .args(["--in-image", "/worlds", "--k8s", "-o"])
+            .arg(out);
+        if secure {
+            c.arg("--secure").arg(&keys);
+        }
+        ok(&mut c);
+        std::fs::read_to_string(out).unwrap()
+    };
+    let check = |file: &Path| run(Command::new(&validate).arg("--strict").arg(file));
+    for secure in [false, true] {
+        let file = dir.join(format!("k8s-{secure}.yml"));
+        let text = compose(&file, secure);
+        let out = check(&file);
+        let said = String::from_utf8_lossy(&out.stdout).into_owned()
+            + &String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{said}\n{text}");
+        // Every resource passed: a Deployment for each router, host and the
+        // bridge, a Service for each router and the bridge (secured: one
+        // router, whose identities the hosts' configs name).
+        let resources = if secure { 6 + 2 } else { 10 + 6 };
+        assert_eq!(
+            said.matches("passed for resource").count(),
+            resources,
+            "{said}"
+        );
+        assert_eq!(text.contains("secretName: troupe-keys"), secure);
+    }
+    let text = std::fs::read_to_string(dir.join("k8s-false.yml")).unwrap();
+    let bad = dir.join("bad.yml");
+    std::fs::write(
+        &bad,
+        text.replacen("  replicas: 1\n", "  replicas: 1\n  replica: 2\n", 1),
+    )
+    .unwrap();
+    assert!(!check(&bad).status.success(), "an unknown field passed");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A one-node swarm this test made: it leaves it when dropped (with the
+/// stack it deployed); it touches no swarm it did not make.
+struct Swarm {
+    stack: String,
+    dir: PathBuf,
+    _turn: MutexGuard<'static, ()>,
+}
+
+impl Swarm {
+    /// A fresh swarm of this engine; `None` where Docker is absent or the
+    /// engine already belongs to a swarm.
+    fn init() -> Option<Swarm> {
+        engine()?;
+        let turn = TURN.lock().unwrap_or_else(|p| p.into_inner());
+        let state =
+            ok(Command::new("docker").args(["info", "--format", "{{.Swarm.LocalNodeState}}"]));
+        if state != "inactive" {
+            troupe_tests::cannot_run(&format!(
+                "this Docker engine is in a swarm already ({state}): the test makes its own and touches no other"
+            ));
+            return None;
+        }
+        image();
+        ok(Command::new("docker").args(["swarm", "init", "--advertise-addr", "127.0.0.1"]));
+        let stack = troupe_tests::unique_namespace("swarm").replace('_', "-");
+        let dir = std::env::temp_dir().join(&stack);
+        std::fs::create_dir_all(&dir).unwrap();
+        Some(Swarm {
+            stack,
+            dir,
+            _turn: turn,
+        })
+    }
+
+    /// Labels this node with every host of worlds/fleet.cfg.
+    fn label_all(&self) {
+        let node = ok(Command::new("docker").args(["info", "--format", "{{.Swarm.NodeID}}"]));
+        let mut c = Command::new("docker");
+        c.args(["node", "update"]);
+        for h in ["sim", "robot6665", "robot6666", "robot6667"] {
+            c.args(["--label-add", &format!("troupe.host.{h}=true")]);
+        }
+        ok(c.arg(node));
+    }
+
+    /// The tasks that ever ran `service` of the stack.
+    fn tasks(&self, service: &str) -> usize {
+        ok(Command::new("docker").args([
+            "service",
+            "ps",
+            "-q",
+            &format!("{}_{service}", self.stack),
+        ]))
+        .lines()
+        .count()
+    }
+
+    /// The running container of `service`.
+    fn container(&self, service: &str) -> String {
+        let id = ok(Command::new("docker").args([
+            "ps",
+            "-q",
+            "--filter",
+            &format!(
+                "label=com.docker.swarm.service.name={}_{service}",
+                self.stack
+            ),
+        ]));
+        assert!(!id.is_empty() && !id.contains('\n'), "{service}: {id:?}");
+        id
+    }
+}
+
+impl Drop for Swarm {
+    fn drop(&mut self) {
+        if std::thread::panicking() {
+            for s in ["router", "sim", "robot6666", "bridge"] {
+                let logs = run(Command::new("docker").args([
+                    "service",
+                    "logs",
+                    "--tail",
+                    "30",
+                    &format!("{}_{s}", self.stack),
+                ]));
+                eprintln!(
+                    "--- {s} ---\n{}{}",
+                    String::from_utf8_lossy(&logs.stdout),
+                    String::from_utf8_lossy(&logs.stderr)
+                );
+            }
+        }
+        let _ = run(Command::new("docker").args(["stack", "rm", &self.stack]));
+        let _ = run(Command::new("docker").args(["swarm", "leave", "--force"]));
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+/// A port free on this machine now (the swarm publishes on the node's
+/// ports, and picks none itself).
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// `troupe compose --swarm` of worlds/fleet.cfg on a one-node swarm: every
+/// host beside its own router, placed by its label; every device comes up,
+/// a Player client reads a laser through the bridge's published port, a
+/// killed task is rescheduled and its devices come back (no other task
+/// restarts), and `docker stack rm` takes it all down.
+#[test]
+fn docker_swarm_runs_the_generated_stack_and_reschedules_a_killed_host() {
+    let Some(swarm) = Swarm::init() else { return };
+    swarm.label_all();
+    let file = swarm.dir.join("troupe-stack.yml");
+    ok(Command::new(troupe_tests::troupe_bin())
+        .arg("compose")
+        .arg(root().join("worlds/fleet.cfg"))
+        .args(["--in-image", "/worlds", "--swarm", "-o"])
+        .arg(&file));
+    let router_port = free_port();
+    let mut deploy = Command::new("docker");
+    deploy
+        .args(["stack", "deploy", "-c"])
+        .arg(&file)
+        .arg(&swarm.stack)
+        .env("TROUPE_IMAGE", IMAGE)
+        .env("TROUPE_ROUTER_PORT", router_port.to_string());
+    let mut player_ports = BTreeMap::new();
+    for r in ROBOTS {
+        let p = free_port();
+        deploy.env(format!("TROUPE_PORT_{r}"), p.to_string());
+        player_ports.insert(r, p);
+    }
+    let t = Instant::now();
+    ok(&mut deploy);
+    let session = ZenohArgs {
+        connect: vec![format!("tcp/127.0.0.1:{router_port}")],
+        no_multicast: true,
+        reconnect: true,
+        ..Default::default()
+    }
+    .open(Mode::Client)
+    .expect("a session with the stack's router");
+    let mut tokens = Tokens::new(&session);
+    tokens.until(&fleet_devices(), true, Duration::from_secs(180));
+    eprintln!(
+        "docker swarm: every device of the stack ready {:.1} s after `stack deploy`",
+        t.elapsed().as_secs_f64()
+    );
+
+    // A Player client on this machine reads r0's laser through the bridge.
+    let mut player = Player::connect(
+        SocketAddr::from(([127, 0, 0, 1], player_ports[&6665])),
+        6665,
+    );
+    player.open(troupe_msgs::Device::new(6665, Interface::Laser, 0));
+    let m = player.recv();
+    assert_eq!(
+        (m.kind(), m.h[2]),
+        (DATA, u32::from(Interface::Laser.code())),
+        "{m:?}"
+    );
+    drop(player);
+
+    // robot6666's computer dies: the swarm starts it again, its devices
+    // return, and no other task was replaced.
+    let services = [
+        "router",
+        "router-sim",
+        "sim",
+        "router-robot6665",
+        "robot6665",
+        "router-robot6666",
+        "robot6666",
+        "router-robot6667",
+        "robot6667",
+        "bridge",
+    ];
+    let before: Vec<usize> = services.iter().map(|s| swarm.tasks(s)).collect();
+    assert!(before.iter().all(|&n| n == 1), "{before:?}");
+    ok(Command::new("docker").args(["kill", &swarm.container("robot6666")]));
+    let gone = tokens.until(&nav_devices(6666), false, LEASE * 4);
+    let back = tokens.until(&nav_devices(6666), true, Duration::from_secs(120));
+    eprintln!(
+        "docker swarm: a killed host's devices gone in {:.1} s, back {:.1} s later",
+        gone.as_secs_f64(),
+        back.as_secs_f64()
+    );
+    let after: Vec<usize> = services.iter().map(|s| swarm.tasks(s)).collect();
+    for (i, s) in services.iter().enumerate() {
+        let want = if *s == "robot6666" { 2 } else { 1 };
+        assert_eq!(after[i], want, "{s}: {} tasks", after[i]);
+    }
+    drop(tokens);
+    drop(session);
+
+    // Down: every service and the overlay network gone.
+    ok(Command::new("docker").args(["stack", "rm", &swarm.stack]));
+    let left = ok(Command::new("docker").args([
+        "service",
+        "ls",
+        "-q",
+        "--filter",
+        &format!("label=com.docker.stack.namespace={}", swarm.stack),
+    ]));
+    assert!(left.is_empty(), "services left: {left}");
+}

@@ -325,6 +325,41 @@ pub struct ComposeArgs {
     /// devices stay listed.
     #[arg(long, value_name = "SECS", default_value_t = 3.0, value_parser = troupe_node::args::seconds)]
     pub lease: f64,
+    /// Write a Docker Swarm stack instead (`docker stack deploy -c FILE
+    /// NAME`): each host of the cfg a service on the nodes labelled
+    /// `troupe.host.HOST=true` beside a Zenoh router of its own, the
+    /// hosts' routers linked to the fleet's router, an overlay network.
+    /// Needs --in-image.
+    #[arg(long, conflicts_with = "k8s")]
+    pub swarm: bool,
+    /// Write Kubernetes manifests instead (`kubectl apply -f FILE`): each
+    /// host a Deployment on the nodes labelled `troupe.host/HOST=true`
+    /// beside a router of its own, Services for the routers and the Player
+    /// ports, readiness probes. Needs --in-image.
+    #[arg(long)]
+    pub k8s: bool,
+}
+
+/// What `troupe compose` writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Target {
+    /// A Docker Compose file: one machine.
+    Compose,
+    /// A Docker Swarm stack.
+    Swarm,
+    /// Kubernetes manifests.
+    K8s,
+}
+
+impl ComposeArgs {
+    /// What these flags ask for.
+    pub fn target(&self) -> Target {
+        match (self.swarm, self.k8s) {
+            (true, _) => Target::Swarm,
+            (_, true) => Target::K8s,
+            _ => Target::Compose,
+        }
+    }
 }
 
 /// `troupe compose`.
@@ -382,6 +417,19 @@ pub fn render(a: &ComposeArgs, catalog: &Catalog) -> anyhow::Result<String> {
     if a.lease != 3.0 {
         shown.extend(["--lease".into(), a.lease.to_string()]);
     }
+    match a.target() {
+        Target::Compose => {}
+        Target::Swarm => shown.push("--swarm".into()),
+        Target::K8s => shown.push("--k8s".into()),
+    }
+    if a.target() != Target::Compose && a.in_image.is_none() {
+        anyhow::bail!(
+            "{}: a swarm's or a cluster's nodes do not share this machine's files: put the cfg \
+             and its worlds in the image (`troupe image --worlds DIR` puts DIR at /worlds) and \
+             name its directory there with --in-image (e.g. --in-image /worlds)",
+            a.file.display()
+        );
+    }
     if let Some(o) = a.output.as_ref().and_then(|o| o.file_name()) {
         shown.extend(["-o".into(), o.to_string_lossy().into_owned()]);
     }
@@ -404,7 +452,11 @@ pub fn render(a: &ComposeArgs, catalog: &Catalog) -> anyhow::Result<String> {
     if let Some((dir, _)) = &keys {
         fleet.check_keys(dir)?;
     }
-    fleet.to_yaml()
+    match a.target() {
+        Target::Compose => fleet.to_yaml(),
+        Target::Swarm => crate::orchestrate::swarm(&fleet),
+        Target::K8s => crate::orchestrate::k8s(&fleet),
+    }
 }
 
 /// Where the containers find the cfg.
@@ -483,14 +535,45 @@ pub struct Fleet<'a> {
     pub keys: Option<String>,
 }
 
-/// A service of the fleet: the router, one per host, the bridge.
-struct Service {
-    name: String,
-    command: Vec<String>,
-    ports: Vec<(String, u16)>,
-    health: Vec<String>,
-    depends: Vec<String>,
-    comment: String,
+/// A service of the fleet: the router, one per host (and, on many
+/// machines, a router beside each host), the bridge. One model, which the
+/// Compose file, the Swarm stack and the Kubernetes manifests each write
+/// in their own terms.
+pub(crate) struct Service {
+    /// Its name: the container's host name, the address others use.
+    pub(crate) name: String,
+    /// The troupe binary's arguments.
+    pub(crate) command: Vec<String>,
+    /// Ports published outside the fleet: the variable that overrides the
+    /// host port, and the port.
+    pub(crate) ports: Vec<(String, u16)>,
+    /// `troupe` arguments that succeed once the service is ready.
+    pub(crate) health: Vec<String>,
+    /// Services that must be healthy first (Compose only).
+    pub(crate) depends: Vec<String>,
+    /// What it is, for the reader.
+    pub(crate) comment: String,
+    /// The cfg host whose machines it runs on; `None`: anywhere.
+    pub(crate) place: Option<String>,
+    /// The port it listens on inside the fleet (a router's 7447).
+    pub(crate) listens: Option<u16>,
+    /// The identity whose config it reads, under --secure.
+    pub(crate) identity: Option<String>,
+}
+
+/// Where a host's containers reach the fleet.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Layout {
+    /// Every container is a client of the one router (one machine).
+    OneRouter,
+    /// Each host has a router of its own on its machine, linked to the
+    /// fleet's router: its nodes' traffic among themselves stays on it.
+    RouterPerHost,
+}
+
+/// The name of the router beside `host`.
+pub(crate) fn host_router(host: &str) -> String {
+    format!("router-{host}")
 }
 
 impl Fleet<'_> {
@@ -532,17 +615,17 @@ impl Fleet<'_> {
         Ok(hosts)
     }
 
-    /// How `who` joins the fleet: as a client of the router by name, or
+    /// How `who` joins the fleet: as a client of `router` by name, or
     /// (secured) with its own config, which says the same over TLS.
-    fn net(&self, who: &str) -> Vec<String> {
+    fn net(&self, who: &str, router: &str) -> Vec<String> {
         let mut v = match &self.keys {
-            None => strings(&[
-                "--connect",
-                "tcp/router:7447",
-                "--mode",
-                "client",
-                "--no-multicast",
-            ]),
+            None => vec![
+                "--connect".to_owned(),
+                format!("tcp/{router}:7447"),
+                "--mode".to_owned(),
+                "client".to_owned(),
+                "--no-multicast".to_owned(),
+            ],
             Some(_) => vec!["--zenoh-config".to_owned(), format!("/keys/{who}.json5")],
         };
         v.extend([
@@ -553,10 +636,14 @@ impl Fleet<'_> {
         v
     }
 
-    /// A health check's way to the router, as `who`.
-    fn probe(&self, who: &str) -> Vec<String> {
+    /// A health check's way to `router`, as `who`.
+    fn probe(&self, who: &str, router: &str) -> Vec<String> {
         match &self.keys {
-            None => strings(&["--connect", "tcp/router:7447", "--no-multicast"]),
+            None => vec![
+                "--connect".to_owned(),
+                format!("tcp/{router}:7447"),
+                "--no-multicast".to_owned(),
+            ],
             Some(_) => vec!["--zenoh-config".to_owned(), format!("/keys/{who}.json5")],
         }
     }
@@ -594,8 +681,15 @@ impl Fleet<'_> {
         )
     }
 
-    fn services(&self) -> anyhow::Result<Vec<Service>> {
+    /// The fleet's services, laid out as `layout` says (a secured fleet
+    /// keeps one router: its identities are the hosts' and the router's).
+    pub(crate) fn services(&self, layout: Layout) -> anyhow::Result<Vec<Service>> {
         let hosts = self.hosts()?;
+        let layout = if self.keys.is_some() {
+            Layout::OneRouter
+        } else {
+            layout
+        };
         let mut out = vec![Service {
             name: "router".into(),
             command: {
@@ -624,7 +718,13 @@ impl Fleet<'_> {
                 ]),
             },
             depends: Vec::new(),
-            comment: "The Zenoh router every container connects to (and `troupe list` on this machine, at 127.0.0.1:7447).".into(),
+            comment: match layout {
+                Layout::OneRouter => "The Zenoh router every container connects to (and `troupe list` on this machine, at 127.0.0.1:7447).".into(),
+                Layout::RouterPerHost => "The fleet's Zenoh router: each host's router links to it (and `troupe list`, at its published port).".into(),
+            },
+            place: None,
+            listens: Some(7447),
+            identity: Some("router".into()),
         }];
         let path = match &self.source {
             Source::InImage(p) => p.clone(),
@@ -634,13 +734,46 @@ impl Fleet<'_> {
         let mut robots = BTreeSet::new();
         for (host, devices) in &hosts {
             robots.extend(devices.iter().map(|d| d.robot));
-            let mut command = self.net(host);
+            let router = match layout {
+                Layout::OneRouter => "router".to_owned(),
+                Layout::RouterPerHost => {
+                    let name = host_router(host);
+                    let mut command = strings(&["--connect", "tcp/router:7447", "--reconnect"]);
+                    command.extend(strings(&[
+                        "router",
+                        "--listen",
+                        "tcp/0.0.0.0:7447",
+                        "--no-multicast",
+                    ]));
+                    command.extend(["--lease".to_owned(), self.lease.to_string()]);
+                    out.push(Service {
+                        name: name.clone(),
+                        command,
+                        ports: Vec::new(),
+                        health: strings(&[
+                            "--connect",
+                            "tcp/127.0.0.1:7447",
+                            "--no-multicast",
+                            "ready",
+                        ]),
+                        depends: vec!["router".into()],
+                        comment: format!(
+                            "Host `{host}`'s router, on its machine, linked to the fleet's."
+                        ),
+                        place: Some(host.clone()),
+                        listens: Some(7447),
+                        identity: None,
+                    });
+                    name
+                }
+            };
+            let mut command = self.net(host, &router);
             command.extend(["launch".to_owned(), path.clone()]);
             if split {
                 command.extend(["--host".to_owned(), host.clone()]);
             }
             command.push("--no-bridge".into());
-            let mut health = self.probe(host);
+            let mut health = self.probe(host, &router);
             health.push("ready".into());
             health.extend(
                 devices
@@ -659,8 +792,11 @@ impl Fleet<'_> {
                 command,
                 ports: Vec::new(),
                 health,
-                depends: vec!["router".into()],
+                depends: vec![router],
                 comment: format!("Host `{host}`: {}, each its own process.", nodes.join(", ")),
+                place: Some(host.clone()),
+                listens: None,
+                identity: Some(host.clone()),
             });
         }
         let robots: Vec<u16> = robots
@@ -668,7 +804,7 @@ impl Fleet<'_> {
             .filter_map(|r| u16::try_from(r).ok())
             .collect();
         if !robots.is_empty() {
-            let mut command = self.net("bridge");
+            let mut command = self.net("bridge", "router");
             command.push("bridge".into());
             for r in &robots {
                 command.extend(["-p".to_owned(), r.to_string()]);
@@ -679,12 +815,18 @@ impl Fleet<'_> {
                 command,
                 ports: robots.iter().map(|r| (format!("TROUPE_PORT_{r}"), *r)).collect(),
                 health: {
-                    let mut v = self.probe("bridge");
+                    let mut v = self.probe("bridge", "router");
                     v.push("ready".into());
                     v
                 },
                 depends: hosts.iter().map(|(h, _)| h.clone()).collect(),
-                comment: "Player TCP for libplayerc, libplayerc++ and playerv: every robot port, on this machine's 127.0.0.1 only (Player has no authentication).".into(),
+                comment: match layout {
+                    Layout::OneRouter => "Player TCP for libplayerc, libplayerc++ and playerv: every robot port, on this machine's 127.0.0.1 only (Player has no authentication).".into(),
+                    Layout::RouterPerHost => "Player TCP for libplayerc, libplayerc++ and playerv: every robot port (Player has no authentication: publish these on a trusted network only).".into(),
+                },
+                place: None,
+                listens: None,
+                identity: Some("bridge".into()),
             });
         }
         Ok(out)
@@ -692,7 +834,7 @@ impl Fleet<'_> {
 
     /// The compose file.
     pub fn to_yaml(&self) -> anyhow::Result<String> {
-        let services = self.services()?;
+        let services = self.services(Layout::OneRouter)?;
         let mut s = String::new();
         let _ = writeln!(
             s,
@@ -778,16 +920,16 @@ fn check_service_name(h: &str) -> anyhow::Result<()> {
     }
 }
 
-fn strings(v: &[&str]) -> Vec<String> {
+pub(crate) fn strings(v: &[&str]) -> Vec<String> {
     v.iter().map(|s| (*s).to_owned()).collect()
 }
 
-fn yaml_str(s: &str) -> String {
+pub(crate) fn yaml_str(s: &str) -> String {
     serde_json::Value::String(s.to_owned()).to_string()
 }
 
 /// A flow list of double-quoted strings (JSON's quoting is YAML's).
-fn yaml_list(v: &[String]) -> String {
+pub(crate) fn yaml_list(v: &[String]) -> String {
     let items: Vec<String> = v.iter().map(|x| yaml_str(x)).collect();
     format!("[{}]", items.join(", "))
 }
