@@ -54,7 +54,14 @@ pub fn req_any(dev: &Device) -> String {
 
 /// The liveliness token declaring that `driver` provides `dev`.
 pub fn token(dev: &Device, driver: &str) -> String {
-    format!("{}/driver/{driver}", data(dev))
+    token_at(&data(dev), driver)
+}
+
+/// The liveliness token declaring that `driver` provides the device whose
+/// data key is `key`, a key already spelled (remapped, say):
+/// `robot/6665/laser/0/driver/play`.
+pub fn token_at(key: &str, driver: &str) -> String {
+    format!("{key}/driver/{driver}")
 }
 
 /// Liveliness selector for the token of `dev`, whichever driver provides it.
@@ -65,6 +72,18 @@ pub fn token_any(dev: &Device) -> String {
 /// Selector for the data of every device: `robot/*/*/*`.
 pub fn data_all() -> String {
     format!("{ROOT}/*/*/*")
+}
+
+/// Selector for every key of every robot: data, commands, requests and
+/// liveliness tokens: `robot/**`.
+pub fn all() -> String {
+    format!("{ROOT}/**")
+}
+
+/// The prefix of every key of robot `robot`: `robot/6665/` (what a port
+/// remapping replaces).
+pub fn robot_prefix(robot: u32) -> String {
+    format!("{ROOT}/{robot}/")
 }
 
 /// Selector for the data of every device of `interface`, on every robot:
@@ -160,6 +179,21 @@ mod tests {
         let t = token(&d, "stage");
         assert_eq!(parse_token(&t).unwrap(), (d, "stage".to_owned()));
         assert_eq!(tokens(Some(6665)), "robot/6665/*/*/driver/*");
+    }
+
+    #[test]
+    fn selectors_and_prefixes_are_spelled_under_the_root() {
+        let d = Device::new(6665, Interface::Laser, 0);
+        assert_eq!(data_all(), "robot/*/*/*");
+        assert_eq!(all(), "robot/**");
+        assert_eq!(robot_prefix(6665), "robot/6665/");
+        assert!(data(&d).starts_with(&robot_prefix(6665)));
+        assert!(!data(&d).starts_with(&robot_prefix(666)));
+        assert_eq!(
+            token_at(&data(&d), "play"),
+            "robot/6665/laser/0/driver/play"
+        );
+        assert_eq!(token_at(&data(&d), "stage"), token(&d, "stage"));
     }
 
     #[test]

@@ -14,13 +14,15 @@ use std::collections::{BTreeMap, HashMap};
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, Sender, SyncSender};
 use std::sync::Arc;
+use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime};
 
 use anyhow::Context;
 use clap::{Args, Subcommand, ValueEnum};
-use troupe_msgs::{codec, decode_any, keys};
-use troupe_node::zenoh::{sample::SampleKind, Wait};
+use troupe_msgs::{codec, decode_any, keys, Device};
+use troupe_node::zenoh::{pubsub::Subscriber, sample::SampleKind, Session, Wait};
 use troupe_node::{Mode, ZenohArgs};
 
 pub mod foxglove;
@@ -252,6 +254,15 @@ enum Heard {
     },
 }
 
+impl Heard {
+    /// When the recorder heard it, ns since the Unix epoch.
+    fn at(&self) -> u64 {
+        match self {
+            Heard::Sample { at, .. } | Heard::Token { at, .. } => *at,
+        }
+    }
+}
+
 /// A channel's schema record: its name, encoding and text.
 #[derive(Debug, Clone, Copy)]
 pub struct Schema<'a> {
@@ -446,7 +457,7 @@ impl Files {
 /// `troupe record`.
 pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     let exprs = if a.keys.is_empty() {
-        vec!["robot/*/*/*".to_owned(), "sim/clock".to_owned()]
+        vec![keys::data_all(), keys::SIM_CLOCK.to_owned()]
     } else {
         a.keys.clone()
     };
@@ -457,94 +468,183 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
     // step bursts were dropped (a client lost 0.4-8% of the 100-Pioneer
     // world flat out; a peer loses none, at half the CPU).
     let session = z.open_peer()?;
-    let (tx, rx) = std::sync::mpsc::sync_channel::<Heard>(a.queue.max(1));
-    let dropped = Arc::new(AtomicU64::new(0));
+    let (queue, rx) = Queue::new(a.queue);
+    let listening = Listening::start(&session, &exprs, &queue)?;
+    let dropped = queue.into_dropped();
+    let split = a.split_size.is_some() || a.split_duration.is_some();
+    announce(&exprs, &a.output, split)?;
+    let writer = Writer::open(&a, split)?;
+    let writer = std::thread::spawn(move || writer.run(rx));
+    let started = Instant::now();
+    let deadline = a
+        .duration
+        .map(|d| started + Duration::from_secs_f64(d.max(0.0)));
+    wait_for_stop(&stop_rx, deadline, &dropped, a.queue);
+    listening.stop();
+    drop(session);
+    let (files, count, bytes) = writer
+        .join()
+        .map_err(|_| anyhow::anyhow!("the recorder's writer thread panicked"))??;
+    report(&files, count, bytes, started, &dropped)
+}
+
+/// The way to the writer: what a full queue has no room for is dropped and
+/// counted.
+#[derive(Clone)]
+struct Queue {
+    tx: SyncSender<Heard>,
+    dropped: Arc<AtomicU64>,
+}
+
+impl Queue {
+    /// A queue of `capacity` (one at least), and the writer's end of it.
+    fn new(capacity: usize) -> (Queue, Receiver<Heard>) {
+        let (tx, rx) = std::sync::mpsc::sync_channel::<Heard>(capacity.max(1));
+        let dropped = Arc::new(AtomicU64::new(0));
+        (Queue { tx, dropped }, rx)
+    }
+
+    /// Hands `h` to the writer, or counts it dropped when the queue is full.
+    fn send(&self, h: Heard) {
+        if self.tx.try_send(h).is_err() {
+            self.dropped.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    /// Lets this sender go (the writer ends when the listeners' go too),
+    /// keeping the count of dropped samples.
+    fn into_dropped(self) -> Arc<AtomicU64> {
+        self.dropped
+    }
+}
+
+/// What the recorder hears with: its subscriptions, the thread asking
+/// arriving devices for their set-up, and the watch on liveliness.
+struct Listening {
+    subs: Vec<Subscriber<()>>,
+    asker: JoinHandle<()>,
+    tokens: Subscriber<()>,
+}
+
+impl Listening {
+    /// Subscribes to `exprs`, starts the asker and watches liveliness, each
+    /// sending what it hears to `queue`.
+    fn start(session: &Session, exprs: &[String], queue: &Queue) -> anyhow::Result<Listening> {
+        let subs = subscribe(session, exprs, queue)?;
+        let (arrived, asker) = spawn_asker(session, queue);
+        let tokens = watch_liveliness(session, arrived, queue)?;
+        Ok(Listening {
+            subs,
+            asker,
+            tokens,
+        })
+    }
+
+    /// Stops hearing: the subscriptions, then the liveliness watch, whose end
+    /// ends the asker, which is waited for.
+    fn stop(self) {
+        drop(self.subs);
+        drop(self.tokens);
+        let _ = self.asker.join();
+    }
+}
+
+/// Subscribes to each of `exprs`, queueing every sample with when it came.
+fn subscribe(
+    session: &Session,
+    exprs: &[String],
+    queue: &Queue,
+) -> anyhow::Result<Vec<Subscriber<()>>> {
     let mut subs = Vec::new();
-    for e in &exprs {
-        let (tx, dropped) = (tx.clone(), dropped.clone());
+    for e in exprs {
+        let queue = queue.clone();
         let sub = session
             .declare_subscriber(e.as_str())
             .callback(move |s| {
-                let h = Heard::Sample {
+                queue.send(Heard::Sample {
                     key: s.key_expr().as_str().to_owned(),
                     payload: s.payload().to_bytes().into_owned(),
                     at: now_ns(),
-                };
-                if tx.try_send(h).is_err() {
-                    dropped.fetch_add(1, Ordering::Relaxed);
-                }
+                });
             })
             .wait()
             .map_err(|err| anyhow::anyhow!("subscribing to {e}: {err}"))?;
         subs.push(sub);
     }
+    Ok(subs)
+}
+
+/// Starts the thread that asks each device sent to it for its set-up,
+/// queueing the answers as the device's samples.
+fn spawn_asker(session: &Session, queue: &Queue) -> (Sender<Device>, JoinHandle<()>) {
     // What a Player client asks a device for once, asked as it comes: a
     // map's grid, a sensor's geometry and configuration. The answers are
     // recorded as samples of the device: they give a map to show and the
     // frames of the scans.
-    let (arrived, asking) = std::sync::mpsc::channel::<troupe_msgs::Device>();
-    let asker = {
-        let (tx, dropped, session) = (tx.clone(), dropped.clone(), session.clone());
-        std::thread::spawn(move || {
-            for dev in asking {
-                for payload in troupe_node::setup_answers(&session, &dev) {
-                    let h = Heard::Sample {
-                        key: keys::data(&dev),
-                        payload,
-                        at: now_ns(),
-                    };
-                    if tx.try_send(h).is_err() {
-                        dropped.fetch_add(1, Ordering::Relaxed);
-                    }
+    let (arrived, asking) = std::sync::mpsc::channel::<Device>();
+    let (queue, session) = (queue.clone(), session.clone());
+    let asker = std::thread::spawn(move || {
+        for dev in asking {
+            for payload in troupe_node::setup_answers(&session, &dev) {
+                queue.send(Heard::Sample {
+                    key: keys::data(&dev),
+                    payload,
+                    at: now_ns(),
+                });
+            }
+        }
+    });
+    (arrived, asker)
+}
+
+/// Watches devices come and go (those already live too), queueing each
+/// event and sending each device that comes to the asker.
+fn watch_liveliness(
+    session: &Session,
+    arrived: Sender<Device>,
+    queue: &Queue,
+) -> anyhow::Result<Subscriber<()>> {
+    let queue = queue.clone();
+    session
+        .liveliness()
+        .declare_subscriber(keys::all())
+        .history(true)
+        .callback(move |s| {
+            let key = s.key_expr().as_str();
+            let came = s.kind() == SampleKind::Put;
+            if came {
+                if let Ok((dev, _)) = keys::parse_token(key) {
+                    let _ = arrived.send(dev);
                 }
             }
+            queue.send(Heard::Token {
+                key: key.to_owned(),
+                came,
+                at: now_ns(),
+            });
         })
-    };
-    let tokens = {
-        let (tx, dropped) = (tx.clone(), dropped.clone());
-        session
-            .liveliness()
-            .declare_subscriber("robot/**")
-            .history(true)
-            .callback(move |s| {
-                let key = s.key_expr().as_str();
-                let came = s.kind() == SampleKind::Put;
-                if came {
-                    if let Ok((dev, _)) = keys::parse_token(key) {
-                        let _ = arrived.send(dev);
-                    }
-                }
-                let h = Heard::Token {
-                    key: key.to_owned(),
-                    came,
-                    at: now_ns(),
-                };
-                if tx.try_send(h).is_err() {
-                    dropped.fetch_add(1, Ordering::Relaxed);
-                }
-            })
-            .wait()
-            .map_err(|e| anyhow::anyhow!("watching liveliness: {e}"))?
-    };
-    drop(tx);
-    let split = a.split_size.is_some() || a.split_duration.is_some();
+        .wait()
+        .map_err(|e| anyhow::anyhow!("watching liveliness: {e}"))
+}
+
+/// Says what is recorded where.
+fn announce(exprs: &[String], output: &Path, split: bool) -> anyhow::Result<()> {
     // On stdout, once every subscription is in place: a script (or a test)
     // may start what it records when this line appears.
     writeln!(
         std::io::stdout().lock(),
         "troupe record: {} to {}{} (Ctrl-C stops)",
         exprs.join(" "),
-        a.output.display(),
+        output.display(),
         if split { " (split)" } else { "" }
     )?;
+    Ok(())
+}
 
-    let bag = a.rosbag2.then(|| a.output.clone());
-    let base = match &bag {
-        Some(dir) => rosbag2_base(dir, split)?,
-        None => a.output.clone(),
-    };
-    let mut files = Files::new(base, split, a.compress);
-    let mut converter = match (a.format, a.rosbag2) {
+/// The converter `--format` and `--rosbag2` ask for; none writes samples as
+/// they travelled.
+fn converter_for(format: RecordFormat, rosbag2: bool) -> anyhow::Result<Option<Converter>> {
+    Ok(match (format, rosbag2) {
         (RecordFormat::Troupe | RecordFormat::Ros2, true) => Some(Converter::rosbag2()),
         (RecordFormat::Foxglove, true) => {
             anyhow::bail!("--rosbag2 is a directory of ROS 2 messages: not --format foxglove")
@@ -552,75 +652,73 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         (RecordFormat::Troupe, false) => None,
         (RecordFormat::Ros2, false) => Some(Converter::ros2()),
         (RecordFormat::Foxglove, false) => Some(Converter::foxglove()),
-    };
-    if let Some(c) = &converter {
-        files = files.with_profile(c.profile());
+    })
+}
+
+/// The writer thread: the recording's files, what converts the samples,
+/// and what has been written.
+struct Writer {
+    files: Files,
+    converter: Option<Converter>,
+    /// Writes ROS 2 traffic as itself, among samples as they travelled.
+    ros2_defs: ros2::Ros2,
+    /// The rosbag2 directory (`--rosbag2`).
+    bag: Option<PathBuf>,
+    split_bytes: Option<u64>,
+    split_ns: Option<u64>,
+    count: u64,
+    bytes: u64,
+}
+
+impl Writer {
+    /// Opens the first file (in a new rosbag2 directory with `--rosbag2`),
+    /// of the profile its converter writes.
+    fn open(a: &RecordArgs, split: bool) -> anyhow::Result<Writer> {
+        let bag = a.rosbag2.then(|| a.output.clone());
+        let base = match &bag {
+            Some(dir) => rosbag2_base(dir, split)?,
+            None => a.output.clone(),
+        };
+        let mut files = Files::new(base, split, a.compress);
+        let converter = converter_for(a.format, a.rosbag2)?;
+        if let Some(c) = &converter {
+            files = files.with_profile(c.profile());
+        }
+        files.open(now_ns())?;
+        Ok(Writer {
+            files,
+            converter,
+            ros2_defs: ros2::Ros2::new(),
+            bag,
+            split_bytes: a.split_size.map(|mb| (mb * 1e6) as u64),
+            split_ns: a.split_duration.map(troupe_ros2::stamp_ns),
+            count: 0,
+            bytes: 0,
+        })
     }
-    files.open(now_ns())?;
-    let split_bytes = a.split_size.map(|mb| (mb * 1e6) as u64);
-    let split_ns = a.split_duration.map(troupe_ros2::stamp_ns);
-    let writer = std::thread::spawn(move || -> anyhow::Result<(Files, u64, u64)> {
-        let (mut count, mut bytes) = (0u64, 0u64);
-        let mut ros2_defs = ros2::Ros2::new();
+
+    /// Writes what comes until the listeners are gone, stopping at the first
+    /// failure; then finishes, giving the files, messages and sample bytes.
+    fn run(mut self, rx: Receiver<Heard>) -> anyhow::Result<(Files, u64, u64)> {
         let mut failed: Option<anyhow::Error> = None;
         for h in rx {
             if failed.is_some() {
                 continue;
             }
-            let at = match &h {
-                Heard::Sample { at, .. } | Heard::Token { at, .. } => *at,
-            };
-            if split_bytes.is_some_and(|b| files.bytes >= b)
-                || split_ns.is_some_and(|d| at.saturating_sub(files.opened_at) >= d)
-            {
-                if let Err(e) = files.close().and_then(|()| files.open(at)) {
-                    failed = Some(e);
-                    continue;
-                }
+            if let Err(e) = self.rotate_if_due(h.at()) {
+                failed = Some(e);
+                continue;
             }
-            let r = match (&h, converter.as_mut()) {
-                (Heard::Sample { key, payload, at }, Some(w)) => {
-                    bytes += payload.len() as u64;
-                    w.write(&mut files, key, payload, *at)
-                }
-                // Neither ROS 2 nor Foxglove has a form for a device's
-                // coming and going.
-                (Heard::Token { .. }, Some(_)) => continue,
-                (Heard::Sample { key, payload, at }, None) if ros2::is_ros2(key) => {
-                    // ROS 2 traffic keeps its own form: CDR of its type.
-                    bytes += payload.len() as u64;
-                    ros2_defs.write(&mut files, key, payload, *at)
-                }
-                (Heard::Sample { key, payload, at }, None) => {
-                    let (schema, stamp) = codec::split(payload)
-                        .map_or(("?", 0), |(tag, stamp, _)| {
-                            (tag, troupe_ros2::stamp_ns(stamp))
-                        });
-                    bytes += payload.len() as u64;
-                    files.write(
-                        key,
-                        Schema::troupe(schema, ENCODING),
-                        ENCODING,
-                        payload,
-                        *at,
-                        stamp,
-                    )
-                }
-                (Heard::Token { key, came, at }, None) => files.write(
-                    key,
-                    Schema::troupe("liveliness", LIVELINESS),
-                    LIVELINESS,
-                    &[u8::from(*came)],
-                    *at,
-                    *at,
-                ),
-            };
-            match r {
-                Ok(()) => count += 1,
+            match self.write(&h) {
+                Ok(true) => self.count += 1,
+                Ok(false) => {}
                 Err(e) => {
                     // Said at once; what was written before stays readable.
-                    eprintln!("troupe record: {e:#}; recording stopped after {count} messages");
-                    let _ = files.close();
+                    eprintln!(
+                        "troupe record: {e:#}; recording stopped after {} messages",
+                        self.count
+                    );
+                    let _ = self.files.close();
                     failed = Some(e);
                 }
             }
@@ -628,21 +726,86 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         if let Some(e) = failed {
             return Err(e);
         }
-        files.close()?;
-        if let Some(c) = converter {
-            if let Some(dir) = &bag {
-                write_metadata(dir, &files, &c)?;
+        self.finish()
+    }
+
+    /// Starts the next file, at `at`, once this one has its `--split-size`
+    /// or `--split-duration`.
+    fn rotate_if_due(&mut self, at: u64) -> anyhow::Result<()> {
+        if self.split_bytes.is_some_and(|b| self.files.bytes >= b)
+            || self
+                .split_ns
+                .is_some_and(|d| at.saturating_sub(self.files.opened_at) >= d)
+        {
+            self.files.close().and_then(|()| self.files.open(at))?;
+        }
+        Ok(())
+    }
+
+    /// Writes `h` as the format asks; false when it has no form there.
+    fn write(&mut self, h: &Heard) -> anyhow::Result<bool> {
+        let files = &mut self.files;
+        match (h, self.converter.as_mut()) {
+            (Heard::Sample { key, payload, at }, Some(w)) => {
+                self.bytes += payload.len() as u64;
+                w.write(files, key, payload, *at)?;
+            }
+            // Neither ROS 2 nor Foxglove has a form for a device's
+            // coming and going.
+            (Heard::Token { .. }, Some(_)) => return Ok(false),
+            (Heard::Sample { key, payload, at }, None) if ros2::is_ros2(key) => {
+                // ROS 2 traffic keeps its own form: CDR of its type.
+                self.bytes += payload.len() as u64;
+                self.ros2_defs.write(files, key, payload, *at)?;
+            }
+            (Heard::Sample { key, payload, at }, None) => {
+                let (schema, stamp) = codec::split(payload).map_or(("?", 0), |(tag, stamp, _)| {
+                    (tag, troupe_ros2::stamp_ns(stamp))
+                });
+                self.bytes += payload.len() as u64;
+                files.write(
+                    key,
+                    Schema::troupe(schema, ENCODING),
+                    ENCODING,
+                    payload,
+                    *at,
+                    stamp,
+                )?;
+            }
+            (Heard::Token { key, came, at }, None) => files.write(
+                key,
+                Schema::troupe("liveliness", LIVELINESS),
+                LIVELINESS,
+                &[u8::from(*came)],
+                *at,
+                *at,
+            )?,
+        }
+        Ok(true)
+    }
+
+    /// Finishes the last file, a rosbag2 directory's metadata and the
+    /// converter's summary.
+    fn finish(mut self) -> anyhow::Result<(Files, u64, u64)> {
+        self.files.close()?;
+        if let Some(c) = self.converter {
+            if let Some(dir) = &self.bag {
+                write_metadata(dir, &self.files, &c)?;
             }
             eprint!("troupe record: as {} messages:\n{}", c.name(), c.summary());
         }
-        Ok((files, count, bytes))
-    });
+        Ok((self.files, self.count, self.bytes))
+    }
+}
 
-    // Until a signal or the duration; the drop count is said as it grows.
-    let started = Instant::now();
-    let deadline = a
-        .duration
-        .map(|d| started + Duration::from_secs_f64(d.max(0.0)));
+/// Waits for a signal or the end of `--duration`, saying the drop count
+/// as it grows.
+fn wait_for_stop(
+    stop_rx: &Receiver<()>,
+    deadline: Option<Instant>,
+    dropped: &AtomicU64,
+    queue: usize,
+) {
     let mut said = 0;
     loop {
         let tick = Duration::from_secs(1);
@@ -658,7 +821,7 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             tracing::warn!(
                 "the recorder is behind: {} samples dropped so far (--queue {} full)",
                 n,
-                a.queue
+                queue
             );
             said = n;
         }
@@ -666,13 +829,16 @@ pub fn record(a: RecordArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             break;
         }
     }
-    drop(subs);
-    drop(tokens);
-    let _ = asker.join();
-    drop(session);
-    let (files, count, bytes) = writer
-        .join()
-        .map_err(|_| anyhow::anyhow!("the recorder's writer thread panicked"))??;
+}
+
+/// Says what was recorded where; fails if samples were dropped.
+fn report(
+    files: &Files,
+    count: u64,
+    bytes: u64,
+    started: Instant,
+    dropped: &AtomicU64,
+) -> anyhow::Result<()> {
     let secs = started.elapsed().as_secs_f64();
     let dropped = dropped.load(Ordering::Relaxed);
     let mut out = std::io::stdout().lock();
@@ -833,7 +999,7 @@ fn remaps(list: &[String]) -> anyhow::Result<Remaps> {
             .parse()
             .with_context(|| format!("--remap {arg}: `{to}` is not a robot port"))?;
         r.ports
-            .push((format!("robot/{from}/"), format!("robot/{to}/")));
+            .push((keys::robot_prefix(from), keys::robot_prefix(to)));
     }
     Ok(r)
 }
@@ -902,7 +1068,7 @@ pub fn play(a: PlayArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         if m.encoding == ros2::CDR {
             match ros2_key(m.topic, &remaps) {
                 Some(key) if key != keys::SIM_CLOCK && wanted(&key) => {
-                    let token = format!("{key}/driver/play");
+                    let token = keys::token_at(&key, "play");
                     if !live.contains(&token) {
                         live.push(token);
                     }
