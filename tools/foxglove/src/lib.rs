@@ -178,7 +178,7 @@ pub fn serve(a: &FoxgloveArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         let tx = tx.clone();
         session
             .liveliness()
-            .declare_subscriber("robot/**")
+            .declare_subscriber(keys::tokens(None))
             .history(true)
             .callback(move |s| {
                 if let Ok((dev, _)) = keys::parse_token(s.key_expr().as_str()) {
