@@ -664,17 +664,7 @@ fn docker_a_secured_fleet_serves_its_viewer_and_player_clients_and_refuses_plain
     // The fleet's keys, readable by the image's user, and its compose file.
     let dir = std::env::temp_dir().join(troupe_tests::unique_namespace("secure-fleet"));
     let keys = dir.join("keys");
-    ok(Command::new(troupe_tests::troupe_bin())
-        .arg("fleet-keys")
-        .arg(&keys)
-        .args([
-            "--hosts",
-            "sim:6665:6666:6667,robot6665:6665,robot6666:6666,robot6667:6667",
-            "--operators",
-            "bridge",
-            "--viewers",
-            "eye",
-        ]));
+    fleet_keys(&keys, &["--viewers", "eye"]);
     for e in std::fs::read_dir(&keys).unwrap() {
         std::os::unix::fs::chown(e.unwrap().path(), Some(10000), Some(10000)).unwrap();
     }
@@ -716,6 +706,21 @@ fn docker_a_secured_fleet_serves_its_viewer_and_player_clients_and_refuses_plain
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `troupe fleet-keys` for worlds/fleet.cfg's hosts and the bridge (an
+/// operator) into `dir`, with `more` flags.
+fn fleet_keys(dir: &Path, more: &[&str]) {
+    ok(Command::new(troupe_tests::troupe_bin())
+        .arg("fleet-keys")
+        .arg(dir)
+        .args([
+            "--hosts",
+            "sim:6665:6666:6667,robot6665:6665,robot6666:6666,robot6667:6667",
+            "--operators",
+            "bridge",
+        ])
+        .args(more));
+}
+
 /// `troupe compose --k8s` of worlds/fleet.cfg, plain and secured, checked
 /// against Kubernetes' own schemas (the `kubernetes-validate` package,
 /// strict: no field Kubernetes does not know); a manifest with a field it
@@ -731,15 +736,7 @@ fn k8s_manifests_validate_against_kubernetes_own_schemas() {
     }
     let dir = std::env::temp_dir().join(troupe_tests::unique_namespace("k8s"));
     let keys = dir.join("keys");
-    ok(Command::new(troupe_tests::troupe_bin())
-        .arg("fleet-keys")
-        .arg(&keys)
-        .args([
-            "--hosts",
-            "sim:6665:6666:6667,robot6665:6665,robot6666:6666,robot6667:6667",
-            "--operators",
-            "bridge",
-        ]));
+    fleet_keys(&keys, &[]);
     let compose = |out: &Path, secure: bool| {
         let mut c = Command::new(troupe_tests::troupe_bin());
         c.arg("compose")

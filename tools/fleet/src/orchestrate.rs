@@ -39,6 +39,24 @@ fn check_names(services: &[Service]) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The services on many machines, and the file's first line.
+fn opening(fleet: &Fleet<'_>) -> anyhow::Result<(Vec<Service>, String)> {
+    let services = fleet.services(Layout::RouterPerHost)?;
+    check_names(&services)?;
+    let first = format!(
+        "# Written by `{}`; regenerate rather than edit.\n",
+        fleet.command
+    );
+    Ok((services, first))
+}
+
+/// The hosts the services are placed on, in order.
+fn placed(services: &[Service]) -> Vec<&str> {
+    let mut hosts: Vec<&str> = services.iter().filter_map(|v| v.place.as_deref()).collect();
+    hosts.dedup();
+    hosts
+}
+
 fn path<'f>(fleet: &'f Fleet<'_>) -> &'f str {
     match &fleet.source {
         Source::InImage(p) => p,
@@ -52,16 +70,8 @@ fn path<'f>(fleet: &'f Fleet<'_>) -> &'f str {
 ///
 /// A plan whose hosts cannot be services.
 pub fn swarm(fleet: &Fleet<'_>) -> anyhow::Result<String> {
-    let services = fleet.services(Layout::RouterPerHost)?;
-    check_names(&services)?;
-    let mut s = String::new();
-    let _ = writeln!(
-        s,
-        "# Written by `{}`; regenerate rather than edit.",
-        fleet.command
-    );
-    let mut hosts: Vec<&str> = services.iter().filter_map(|v| v.place.as_deref()).collect();
-    hosts.dedup();
+    let (services, mut s) = opening(fleet)?;
+    let hosts = placed(&services);
     let labels: Vec<String> = hosts
         .iter()
         .map(|h| format!("--label-add {}=true", swarm_label(h)))
@@ -171,16 +181,8 @@ fn secret_list(who: &str) -> Vec<String> {
 ///
 /// A plan whose hosts cannot be services.
 pub fn k8s(fleet: &Fleet<'_>) -> anyhow::Result<String> {
-    let services = fleet.services(Layout::RouterPerHost)?;
-    check_names(&services)?;
-    let mut s = String::new();
-    let _ = writeln!(
-        s,
-        "# Written by `{}`; regenerate rather than edit.",
-        fleet.command
-    );
-    let mut hosts: Vec<&str> = services.iter().filter_map(|v| v.place.as_deref()).collect();
-    hosts.dedup();
+    let (services, mut s) = opening(fleet)?;
+    let hosts = placed(&services);
     let _ = write!(
         s,
         "#\n\
