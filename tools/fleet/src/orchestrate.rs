@@ -233,12 +233,17 @@ fn labels(s: &mut String, indent: &str, svc: &Service) {
     let _ = writeln!(s, "{indent}troupe/service: {}", yaml_str(&svc.name));
 }
 
-fn deployment(s: &mut String, fleet: &Fleet<'_>, svc: &Service) {
-    let _ = writeln!(s, "# {}", svc.comment);
-    s.push_str("apiVersion: apps/v1\nkind: Deployment\nmetadata:\n");
+/// A resource's kind and its metadata: `svc`'s name and labels.
+fn head(s: &mut String, api: &str, kind: &str, svc: &Service) {
+    let _ = writeln!(s, "apiVersion: {api}\nkind: {kind}\nmetadata:");
     let _ = writeln!(s, "  name: {}", svc.name);
     s.push_str("  labels:\n");
     labels(s, "    ", svc);
+}
+
+fn deployment(s: &mut String, fleet: &Fleet<'_>, svc: &Service) {
+    let _ = writeln!(s, "# {}", svc.comment);
+    head(s, "apps/v1", "Deployment", svc);
     s.push_str("spec:\n  replicas: 1\n  selector:\n    matchLabels:\n");
     let _ = writeln!(s, "      troupe/service: {}", yaml_str(&svc.name));
     s.push_str("  template:\n    metadata:\n      labels:\n");
@@ -290,10 +295,7 @@ fn deployment(s: &mut String, fleet: &Fleet<'_>, svc: &Service) {
 }
 
 fn service(s: &mut String, svc: &Service, ports: &[(String, u16)]) {
-    s.push_str("apiVersion: v1\nkind: Service\nmetadata:\n");
-    let _ = writeln!(s, "  name: {}", svc.name);
-    s.push_str("  labels:\n");
-    labels(s, "    ", svc);
+    head(s, "v1", "Service", svc);
     s.push_str("spec:\n  selector:\n");
     let _ = writeln!(s, "    troupe/service: {}", yaml_str(&svc.name));
     s.push_str("  ports:\n");
