@@ -1037,9 +1037,13 @@ fn a_client_whose_queueing_stalls_holds_up_no_other_client_of_a_device() {
     let pos = Device::new(ROBOT, Interface::Position2d, 0);
     let mut stuck = Player::connect(addr, ROBOT);
     stuck.open(pos);
-    *STALLED.0.lock().unwrap() = Some(stuck.s.local_addr().unwrap().to_string());
     let mut calm = Player::connect(addr, ROBOT);
     calm.open(pos);
+    // The stall blocks the runtime thread it happens on (as no real
+    // queueing would): both clients are in before it, so that a task
+    // queued behind it on that thread (a new connection's) is not what
+    // the test waits for.
+    *STALLED.0.lock().unwrap() = Some(stuck.s.local_addr().unwrap().to_string());
     // The devices publish every 5 ms: 50 samples within the read timeout,
     // while the other client's queueing is stalled.
     position2d_samples(&mut calm, 50);

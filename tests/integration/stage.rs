@@ -346,14 +346,20 @@ fn with_stage_quirks_the_laser_reads_as_real_stage_s() {
     let mut player = Player::connect(addr, 6665);
     player.open(Device::new(6665, Interface::Laser, 0));
     // PLAYER_LASER_DATA_SCAN: min, max, resolution, max range, then the
-    // ranges and the intensities (each a count and an XDR array).
+    // ranges and the intensities (each a count and an XDR array). As
+    // Player's, rangertolaser sends a scan for each of the ranger's two
+    // messages, the first without intensities: the one with them.
+    let word_of = |b: &[u8], i: usize| u32::from_be_bytes(b[i * 4..i * 4 + 4].try_into().unwrap());
     let scan = loop {
         let m = player.recv();
         if m.kind() == DATA && m.h[2] == 6 && m.h[5] == 1 {
-            break m.body;
+            let n = word_of(&m.body, 4) as usize;
+            if word_of(&m.body, 6 + n) as usize == n {
+                break m.body;
+            }
         }
     };
-    let word = |i: usize| u32::from_be_bytes(scan[i * 4..i * 4 + 4].try_into().unwrap());
+    let word = |i: usize| word_of(&scan, i);
     let n = word(4) as usize;
     assert_eq!(n, 180);
     let ours: Vec<f32> = (0..n).map(|k| f32::from_bits(word(6 + k))).collect();
