@@ -12,7 +12,9 @@ import troupe
 def test_simple_cfg_reads_every_device_and_drives(launch):
     stack = launch("simple.cfg", ["6665:position2d:0", "6665:laser:0", "6665:ranger:1", "6665:simulation:0"])
     client = stack.client
-    names = {str(d): d.driver for d in client.devices(6665)}
+    # The listing ends when the router has answered; on a loaded machine
+    # its answer once took longer than the 1 s default.
+    names = {str(d): d.driver for d in client.devices(6665, timeout=10)}
     assert names["6665:laser:0"] == "rangertolaser" and names["6665:position2d:0"] == "stage", names
 
     robot = client.robot(6665)
