@@ -208,8 +208,11 @@ pub struct Queue {
     dropped: u32,
     dropped_total: u64,
     /// The stamp of the last data message written, by interface, index
-    /// and subtype: a replace rule's step already delivered.
+    /// and subtype: a replace rule's step already delivered (kept only
+    /// while a rule replaces).
     written: Vec<((u32, u32, u8), f64)>,
+    /// Some rule replaces: [`Queue::written`] is kept.
+    replacing: bool,
 }
 
 impl Queue {
@@ -231,6 +234,7 @@ impl Queue {
             dropped: 0,
             dropped_total: 0,
             written: Vec::new(),
+            replacing: false,
         }
     }
 
@@ -259,6 +263,7 @@ impl Queue {
         } else {
             return false;
         }
+        self.replacing = self.rules.iter().any(|r| r.replace == Replace::Replace);
         true
     }
 
@@ -498,7 +503,9 @@ impl Queue {
                 self.answers -= 1;
             }
             if m.kind == wire::DATA {
-                self.wrote(&m);
+                if self.replacing {
+                    self.wrote(&m);
+                }
                 if self.pull && !self.data_requested {
                     // Data that went out ahead of an answer, between
                     // rounds: the client has that step, so the next
@@ -663,17 +670,22 @@ mod tests {
         assert_eq!(q.len(), 1);
     }
 
-    #[test]
-    fn replace_rule_keeps_only_the_newest_of_a_signature() {
-        let mut q = Queue::new(8);
-        q.set_pull(true);
-        q.add_rule(Rule {
+    /// A rule that replaces every device's data (libplayerc's advice).
+    fn replace_data() -> Rule {
+        Rule {
             interf: -1,
             index: -1,
             kind: i32::from(D),
             subtype: -1,
             replace: Replace::Replace,
-        });
+        }
+    }
+
+    #[test]
+    fn replace_rule_keeps_only_the_newest_of_a_signature() {
+        let mut q = Queue::new(8);
+        q.set_pull(true);
+        q.add_rule(replace_data());
         for _ in 0..5 {
             q.push(msg(D, 4, 1));
             q.push(msg(D, 6, 1));
@@ -893,15 +905,8 @@ mod tests {
     /// before the second comes; the second is then dropped.
     #[test]
     fn a_replace_rule_leaves_one_message_of_a_kind_a_step() {
-        let replace = Rule {
-            interf: -1,
-            index: -1,
-            kind: i32::from(D),
-            subtype: -1,
-            replace: Replace::Replace,
-        };
         let mut q = Queue::new(8);
-        q.add_rule(replace);
+        q.add_rule(replace_data());
         for t in [0.1, 0.2] {
             q.push(data(6, t));
             assert_eq!(drain(&mut q), [(D, 6)]);
