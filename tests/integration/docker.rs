@@ -645,14 +645,7 @@ fn docker_a_restarted_router_is_rejoined_by_every_container() {
     only_restarted(&before, &after, Some("router"));
 
     // The bridge rejoined too: a Player client gets r0's odometry.
-    let mut player = Player::connect(fleet.published("bridge", 6665), 6665);
-    player.open(troupe_msgs::Device::new(6665, Interface::Position2d, 0));
-    let m = player.recv();
-    assert_eq!(
-        (m.kind(), m.h[2]),
-        (DATA, u32::from(Interface::Position2d.code())),
-        "{m:?}"
-    );
+    reads_through_the_bridge(fleet.published("bridge", 6665), 6665, Interface::Position2d);
     drop(session);
 }
 
@@ -683,10 +676,7 @@ fn docker_a_secured_fleet_serves_its_viewer_and_player_clients_and_refuses_plain
     // The viewer, from this machine, sees every device.
     let (_session, _tokens) = live_after_up(&fleet, "secured, ");
     // Player clients reach the robots through the bridge, which joins as an operator.
-    let mut player = Player::connect(fleet.published("bridge", 6666), 6666);
-    player.open(troupe_msgs::Device::new(6666, Interface::Position2d, 0));
-    let m = player.recv();
-    assert_eq!(m.kind(), DATA, "{m:?}");
+    reads_through_the_bridge(fleet.published("bridge", 6666), 6666, Interface::Position2d);
     // Plain TCP, or TLS without a certificate, does not get in.
     let port = fleet.published("router", 7447).port();
     for (endpoint, cfg) in [
@@ -704,6 +694,19 @@ fn docker_a_secured_fleet_serves_its_viewer_and_player_clients_and_refuses_plain
     }
     drop(fleet);
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A Player client at `at` opens `robot`'s device 0 of `interface`: the
+/// first message it gets is that device's data.
+fn reads_through_the_bridge(at: SocketAddr, robot: u32, interface: Interface) {
+    let mut player = Player::connect(at, robot);
+    player.open(troupe_msgs::Device::new(robot, interface, 0));
+    let m = player.recv();
+    assert_eq!(
+        (m.kind(), m.h[2]),
+        (DATA, u32::from(interface.code())),
+        "{m:?}"
+    );
 }
 
 /// `troupe fleet-keys` for worlds/fleet.cfg's hosts and the bridge (an
@@ -933,18 +936,11 @@ fn docker_swarm_runs_the_generated_stack_and_reschedules_a_killed_host() {
     );
 
     // A Player client on this machine reads r0's laser through the bridge.
-    let mut player = Player::connect(
+    reads_through_the_bridge(
         SocketAddr::from(([127, 0, 0, 1], player_ports[&6665])),
         6665,
+        Interface::Laser,
     );
-    player.open(troupe_msgs::Device::new(6665, Interface::Laser, 0));
-    let m = player.recv();
-    assert_eq!(
-        (m.kind(), m.h[2]),
-        (DATA, u32::from(Interface::Laser.code())),
-        "{m:?}"
-    );
-    drop(player);
 
     // robot6666's computer dies: the swarm starts it again, its devices
     // return, and no other task was replaced.

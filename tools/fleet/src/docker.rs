@@ -561,6 +561,36 @@ pub(crate) struct Service {
     pub(crate) identity: Option<String>,
 }
 
+impl Service {
+    /// Its health check: `troupe` with these arguments.
+    pub(crate) fn health_command(&self) -> Vec<String> {
+        let mut v = vec!["/troupe".to_owned()];
+        v.extend(self.health.iter().cloned());
+        v
+    }
+
+    /// A Compose or Swarm service's first keys: what it is, its name, the
+    /// image, its host name and command.
+    pub(crate) fn write_head(&self, s: &mut String, image: &str) {
+        let _ = writeln!(s, "  # {}", self.comment);
+        let _ = writeln!(s, "  {}:", self.name);
+        let _ = writeln!(s, "    image: ${{TROUPE_IMAGE:-{image}}}");
+        let _ = writeln!(s, "    hostname: {}", self.name);
+        let _ = writeln!(s, "    command: {}", yaml_list(&self.command));
+    }
+
+    /// A Compose or Swarm service's grace period and health check.
+    pub(crate) fn write_health(&self, s: &mut String) {
+        s.push_str("    stop_grace_period: 10s\n");
+        let mut test = vec!["CMD".to_owned()];
+        test.extend(self.health_command());
+        let _ = writeln!(s, "    healthcheck:\n      test: {}", yaml_list(&test));
+        s.push_str(
+            "      interval: 1s\n      timeout: 5s\n      retries: 3\n      start_period: 60s\n",
+        );
+    }
+}
+
 /// Where a host's containers reach the fleet.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum Layout {
@@ -858,11 +888,7 @@ impl Fleet<'_> {
         );
         s.push_str("version: \"2.4\"\n\nservices:\n");
         for svc in &services {
-            let _ = writeln!(s, "  # {}", svc.comment);
-            let _ = writeln!(s, "  {}:", svc.name);
-            let _ = writeln!(s, "    image: ${{TROUPE_IMAGE:-{}}}", self.image);
-            let _ = writeln!(s, "    hostname: {}", svc.name);
-            let _ = writeln!(s, "    command: {}", yaml_list(&svc.command));
+            svc.write_head(&mut s, &self.image);
             let mut volumes = Vec::new();
             if let Source::Mounted { host_dir, .. } = &self.source {
                 if svc.name != "router" && svc.name != "bridge" {
@@ -886,11 +912,7 @@ impl Fleet<'_> {
             }
             s.push_str("    networks: [fleet]\n");
             s.push_str("    restart: unless-stopped\n");
-            s.push_str("    stop_grace_period: 10s\n");
-            let mut test = vec!["CMD".to_owned(), "/troupe".to_owned()];
-            test.extend(svc.health.iter().cloned());
-            let _ = writeln!(s, "    healthcheck:\n      test: {}", yaml_list(&test));
-            s.push_str("      interval: 1s\n      timeout: 5s\n      retries: 3\n      start_period: 60s\n");
+            svc.write_health(&mut s);
             if !svc.depends.is_empty() {
                 s.push_str("    depends_on:\n");
                 for d in &svc.depends {

@@ -102,11 +102,7 @@ pub fn swarm(fleet: &Fleet<'_>) -> anyhow::Result<String> {
     );
     s.push_str("version: \"3.8\"\n\nservices:\n");
     for svc in &services {
-        let _ = writeln!(s, "  # {}", svc.comment);
-        let _ = writeln!(s, "  {}:", svc.name);
-        let _ = writeln!(s, "    image: ${{TROUPE_IMAGE:-{}}}", fleet.image);
-        let _ = writeln!(s, "    hostname: {}", svc.name);
-        let _ = writeln!(s, "    command: {}", yaml_list(&svc.command));
+        svc.write_head(&mut s, &fleet.image);
         if !svc.ports.is_empty() {
             s.push_str("    ports:\n");
             for (var, p) in &svc.ports {
@@ -126,13 +122,7 @@ pub fn swarm(fleet: &Fleet<'_>) -> anyhow::Result<String> {
             }
         }
         s.push_str("    networks: [fleet]\n");
-        s.push_str("    stop_grace_period: 10s\n");
-        let mut test = vec!["CMD".to_owned(), "/troupe".to_owned()];
-        test.extend(svc.health.iter().cloned());
-        let _ = writeln!(s, "    healthcheck:\n      test: {}", yaml_list(&test));
-        s.push_str(
-            "      interval: 1s\n      timeout: 5s\n      retries: 3\n      start_period: 60s\n",
-        );
+        svc.write_health(&mut s);
         s.push_str("    deploy:\n      replicas: 1\n");
         s.push_str("      restart_policy:\n        condition: any\n        delay: 1s\n");
         if let Some(h) = &svc.place {
@@ -277,12 +267,10 @@ fn deployment(s: &mut String, fleet: &Fleet<'_>, svc: &Service) {
             );
         }
     }
-    let mut probe = vec!["/troupe".to_owned()];
-    probe.extend(svc.health.iter().cloned());
     let _ = writeln!(
         s,
         "          readinessProbe:\n            exec:\n              command: {}\n            periodSeconds: 2\n            timeoutSeconds: 5\n            failureThreshold: 3",
-        yaml_list(&probe)
+        yaml_list(&svc.health_command())
     );
     if fleet.keys.is_some() && svc.identity.is_some() {
         s.push_str(
