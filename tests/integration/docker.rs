@@ -725,18 +725,16 @@ fn fleet_keys(dir: &Path, more: &[&str]) {
 }
 
 /// `troupe compose --k8s` of worlds/fleet.cfg, plain and secured, checked
-/// against Kubernetes' own schemas (the `kubernetes-validate` package,
-/// strict: no field Kubernetes does not know); a manifest with a field it
-/// does not know is refused, so the check can fail. No cluster runs here.
+/// against Kubernetes' own schemas (the `kubernetes-validate` package in
+/// the tests' Python environment, strict: no field Kubernetes does not
+/// know); a manifest with a field it does not know is refused, so the
+/// check can fail. No cluster runs here.
 #[test]
 fn k8s_manifests_validate_against_kubernetes_own_schemas() {
-    let validate = root().join("target/python-env/bin/kubernetes-validate");
-    if !validate.is_file() {
-        troupe_tests::cannot_run(
-            "no target/python-env/bin/kubernetes-validate (.ci/run installs it from PyPI)",
-        );
+    let Some(python3) = crate::python::python3() else {
         return;
-    }
+    };
+    let validate = crate::python::environment(&python3).with_file_name("kubernetes-validate");
     let dir = std::env::temp_dir().join(troupe_tests::unique_namespace("k8s"));
     let keys = dir.join("keys");
     fleet_keys(&keys, &[]);

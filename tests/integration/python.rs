@@ -3,8 +3,8 @@
 //! stacks they launch with this build's `troupe`.
 //!
 //! The environment is `target/python-env` (made once; pip installs maturin,
-//! pytest, numpy, mcap-ros2-support, mcap-protobuf-support, rosbags, websockets and
-//! foxglove-schemas-protobuf from PyPI), the package is built by `maturin
+//! pytest, numpy, mcap-ros2-support, mcap-protobuf-support, rosbags, websockets,
+//! foxglove-schemas-protobuf and kubernetes-validate from PyPI), the package is built by `maturin
 //! develop` on the workspace's own `target/` in the dev profile, so it reuses what
 //! `cargo test` compiled. Where no `python3` answers the test says so and
 //! passes; under CI (`CI=true`) that is a failure.
@@ -37,8 +37,11 @@ fn run(what: &str, cmd: &mut Command) -> String {
     text
 }
 
-/// `target/python-env`, made and furnished if need be: its `python`.
-fn environment(python3: &str) -> PathBuf {
+/// `target/python-env`, made and furnished if need be (one test at a
+/// time): its `python`.
+pub(crate) fn environment(python3: &str) -> PathBuf {
+    static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _turn = ONE_AT_A_TIME.lock().unwrap_or_else(|p| p.into_inner());
     let env = root().join("target").join("python-env");
     let python = env.join("bin").join("python");
     if !python.exists() {
@@ -48,7 +51,7 @@ fn environment(python3: &str) -> PathBuf {
         );
     }
     run(
-        "pip install maturin pytest numpy mcap-ros2-support mcap-protobuf-support rosbags websockets foxglove-schemas-protobuf",
+        "pip install maturin pytest numpy mcap-ros2-support mcap-protobuf-support rosbags websockets foxglove-schemas-protobuf kubernetes-validate",
         Command::new(&python).args([
             "-m",
             "pip",
@@ -63,18 +66,26 @@ fn environment(python3: &str) -> PathBuf {
             "rosbags",
             "websockets",
             "foxglove-schemas-protobuf",
+            "kubernetes-validate",
         ]),
     );
     python
 }
 
-#[test]
-fn the_python_package_passes_its_tests_and_lessons() {
+/// The `python3` to make the environment with (`$PYTHON` names another);
+/// `None`, said, where none answers.
+pub(crate) fn python3() -> Option<String> {
     let python3 = std::env::var("PYTHON").unwrap_or_else(|_| "python3".into());
     if Command::new(&python3).arg("--version").output().is_err() {
         troupe_tests::cannot_run(&format!("no `{python3}` here (set PYTHON to point at one)"));
-        return;
+        return None;
     }
+    Some(python3)
+}
+
+#[test]
+fn the_python_package_passes_its_tests_and_lessons() {
+    let Some(python3) = python3() else { return };
     let python = environment(&python3);
     let env = python.parent().and_then(Path::parent).expect("the venv");
     let troupe = troupe_tests::troupe_bin();
