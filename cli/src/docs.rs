@@ -444,7 +444,8 @@ const DOCKER_FLEET: &str =
     "docker_fleet_comes_up_drives_a_robot_from_a_player_client_and_goes_down_cleanly";
 
 /// The test that deploys the Swarm stack on a one-node swarm.
-const SWARM: &str = "docker_swarm_runs_the_generated_stack_and_reschedules_a_killed_host";
+const SWARM: &str =
+    "docker_swarm_runs_the_generated_stack_reschedules_a_killed_host_and_heals_a_cut_router";
 
 /// The test that checks the Kubernetes manifests against Kubernetes' schemas.
 const K8S: &str = "k8s_manifests_validate_against_kubernetes_own_schemas";

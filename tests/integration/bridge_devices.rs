@@ -1236,3 +1236,70 @@ fn a_replace_rule_leaves_one_scan_of_each_step_in_push_mode() {
     let _ = stop.send(());
     thread.join().unwrap();
 }
+
+/// Where the bridge is with the late device: (hearing its token, asked
+/// the network for it), and the bell that rings at each.
+static LATE: (std::sync::Mutex<(bool, bool)>, std::sync::Condvar) = (
+    std::sync::Mutex::new((false, false)),
+    std::sync::Condvar::new(),
+);
+
+/// Waits (a minute at most, so a failing test ends) until `done` says so
+/// of [`LATE`]; whether it did.
+fn late_until(done: impl Fn(&(bool, bool)) -> bool) -> bool {
+    let (state, bell) = &LATE;
+    let until = Instant::now() + Duration::from_secs(60);
+    let mut s = state.lock().unwrap();
+    while !done(&s) {
+        let left = until.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return false;
+        }
+        s = bell.wait_timeout(s, left).unwrap().0;
+    }
+    true
+}
+
+/// A planted delay: the bridge hears fiducial:3's token only once it has
+/// asked the network for it.
+fn hear_late(what: &str) {
+    let (state, bell) = &LATE;
+    if what == format!("ask {ROBOT}:fiducial:3") {
+        state.lock().unwrap().1 = true;
+        bell.notify_all();
+    } else if what == format!("token {ROBOT}:fiducial:3") {
+        state.lock().unwrap().0 = true;
+        bell.notify_all();
+        late_until(|s| s.1);
+    }
+}
+
+/// A device that has just come, which the routers know of and the bridge
+/// has not heard of yet (a robot rejoining as a client connects): the
+/// client's open is granted, as the device is live, not refused as
+/// unknown.
+#[test]
+fn an_open_of_a_device_the_bridge_has_not_heard_of_yet_asks_the_network() {
+    let net = TestNet::new("bridge-late");
+    let (addr, thread, stop) = bridge_with(
+        &net,
+        Config {
+            fault: Some(hear_late),
+            ..Config::default()
+        },
+    );
+    let mut p = Player::connect(addr, ROBOT);
+    let late = Device::new(ROBOT, Interface::Fiducial, 3);
+    let driver = net.client();
+    let _token = driver
+        .liveliness()
+        .declare_token(keys::token(&late, "dummy"))
+        .wait()
+        .unwrap();
+    assert!(late_until(|s| s.0), "the bridge never heard the token");
+    // Player::open asserts the ACK.
+    p.open(late);
+    assert!(late_until(|s| s.1), "the network was not asked");
+    let _ = stop.send(());
+    thread.join().unwrap();
+}

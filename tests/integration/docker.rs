@@ -9,7 +9,7 @@
 //! (`CI=true`) that is a failure. They print what they measure:
 //! `cargo test -p troupe-tests --test integration docker -- --nocapture`.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -450,20 +450,15 @@ fn only_restarted(
     }
 }
 
-#[test]
-fn docker_fleet_comes_up_drives_a_robot_from_a_player_client_and_goes_down_cleanly() {
-    let Some(fleet) = Fleet::up("fleet-up") else {
-        return;
-    };
-    let (session, _tokens) = live_after_up(&fleet, "");
-
-    // A Player client on this machine gives robot 6666 a goal through the
-    // bridge's published port; the simulator says whether r1 gets there.
-    let mut player = Player::connect(fleet.published("bridge", 6666), 6666);
+/// A Player client on this machine gives robot 6666 a goal 3 m ahead
+/// through the bridge at `bridge`; the simulator (through `session`) says
+/// whether r1 gets there.
+fn drives_to_a_goal(session: &Session, bridge: SocketAddr) {
+    let mut player = Player::connect(bridge, 6666);
     let planner = troupe_msgs::Device::new(6666, Interface::Planner, 0);
     player.open(planner);
     player.open(troupe_msgs::Device::new(6666, Interface::Position2d, 0));
-    let start = truth(&session, "r1");
+    let start = truth(session, "r1");
     let goal = Pose2d::new(start.x + 3.0, start.y, 0.0);
     let body: Vec<u8> = [goal.x, goal.y, goal.yaw]
         .iter()
@@ -476,7 +471,7 @@ fn docker_fleet_comes_up_drives_a_robot_from_a_player_client_and_goes_down_clean
         // Paced by r1's odometry, which the bridge sends as it comes.
         let m = player.recv();
         assert_eq!(m.kind(), DATA, "{m:?}");
-        let now = truth(&session, "r1");
+        let now = truth(session, "r1");
         // wavefront is done within its distance_epsilon (0.5 m) of the
         // goal as amcl has r1, and amcl's estimate is off the truth by
         // up to 0.3 m.
@@ -486,14 +481,23 @@ fn docker_fleet_comes_up_drives_a_robot_from_a_player_client_and_goes_down_clean
                 dist(start, goal),
                 t.elapsed().as_secs_f64()
             );
-            break;
+            return;
         }
         assert!(
             Instant::now() < deadline,
             "r1 is at {now:?}, not at the goal {goal:?}"
         );
     }
-    drop(player);
+}
+
+#[test]
+fn docker_fleet_comes_up_drives_a_robot_from_a_player_client_and_goes_down_cleanly() {
+    let Some(fleet) = Fleet::up("fleet-up") else {
+        return;
+    };
+    let (session, _tokens) = live_after_up(&fleet, "");
+
+    drives_to_a_goal(&session, fleet.published("bridge", 6666));
     drop(session);
 
     // `down` is stop then remove: stop, so the exit codes can be read.
@@ -851,6 +855,84 @@ impl Swarm {
         assert!(!id.is_empty() && !id.contains('\n'), "{service}: {id:?}");
         id
     }
+
+    /// The process that runs `service` (as the host numbers it) and its
+    /// children: a launcher and the nodes it started. A health check's
+    /// probe is the shim's child, not among them.
+    fn processes(&self, service: &str) -> BTreeSet<u32> {
+        let id = self.container(service);
+        let main: u32 =
+            ok(Command::new("docker").args(["inspect", "--format", "{{.State.Pid}}", &id]))
+                .parse()
+                .unwrap();
+        let top = ok(Command::new("docker").args(["top", &id, "-eo", "pid,ppid"]));
+        let out: BTreeSet<u32> = top
+            .lines()
+            .skip(1)
+            .filter_map(|l| {
+                let mut f = l.split_whitespace().map(|w| w.parse::<u32>().ok());
+                let (pid, ppid) = (f.next()??, f.next()??);
+                (pid == main || ppid == main).then_some(pid)
+            })
+            .collect();
+        assert!(out.contains(&main), "{service}: {top}");
+        out
+    }
+
+    /// The address of `service`'s container on the stack's network.
+    fn address(&self, service: &str) -> String {
+        ok(Command::new("docker").args([
+            "inspect",
+            "--format",
+            &format!(
+                "{{{{(index .NetworkSettings.Networks \"{}_fleet\").IPAddress}}}}",
+                self.stack
+            ),
+            &self.container(service),
+        ]))
+    }
+}
+
+/// A host's router cut off from every other router, its own host's
+/// container still beside it: the packet filter of the router's network
+/// namespace drops all but loopback and that container, both ways.
+struct Cut {
+    pid: String,
+    rules: [Vec<String>; 2],
+}
+
+impl Cut {
+    /// Cuts `router` off from all but `host` (services of `swarm`).
+    fn new(swarm: &Swarm, router: &str, host: &str) -> Cut {
+        let pid = ok(Command::new("docker").args([
+            "inspect",
+            "--format",
+            "{{.State.Pid}}",
+            &swarm.container(router),
+        ]));
+        let keep = swarm.address(host);
+        let rule = |chain: &str, dir: &str, peer: &str| {
+            troupe_tests::strings(&[chain, "!", dir, "lo", "!", peer, &keep, "-j", "DROP"])
+        };
+        let cut = Cut {
+            pid,
+            rules: [rule("INPUT", "-i", "-s"), rule("OUTPUT", "-o", "-d")],
+        };
+        cut.iptables("-I");
+        cut
+    }
+
+    fn iptables(&self, op: &str) {
+        for r in &self.rules {
+            ok(Command::new("nsenter")
+                .args(["-t", &self.pid, "-n", "iptables", op])
+                .args(r));
+        }
+    }
+
+    fn heal(self) {
+        self.iptables("-D");
+    }
 }
 
 impl Drop for Swarm {
@@ -891,9 +973,11 @@ fn free_port() -> u16 {
 /// host beside its own router, placed by its label; every device comes up,
 /// a Player client reads a laser through the bridge's published port, a
 /// killed task is rescheduled and its devices come back (no other task
-/// restarts), and `docker stack rm` takes it all down.
+/// restarts), a host's router cut off from the others and healed brings
+/// its devices back with nothing restarted, and `docker stack rm` takes it
+/// all down.
 #[test]
-fn docker_swarm_runs_the_generated_stack_and_reschedules_a_killed_host() {
+fn docker_swarm_runs_the_generated_stack_reschedules_a_killed_host_and_heals_a_cut_router() {
     let Some(swarm) = Swarm::init() else { return };
     swarm.label_all();
     let file = swarm.dir.join("troupe-stack.yml");
@@ -969,6 +1053,38 @@ fn docker_swarm_runs_the_generated_stack_and_reschedules_a_killed_host() {
         let want = if *s == "robot6666" { 2 } else { 1 };
         assert_eq!(after[i], want, "{s}: {} tasks", after[i]);
     }
+
+    // Two hosts apart: robot6666's router cut off from every other router
+    // (its host still reaches it), then healed. r1's drivers are on one
+    // side, the simulator that drives it on the other: its devices leave
+    // and return, r1 drives to a goal, and no process on either side, nor
+    // any task, was started again.
+    let sides = [
+        "router",
+        "router-sim",
+        "sim",
+        "router-robot6666",
+        "robot6666",
+    ];
+    let processes: Vec<BTreeSet<u32>> = sides.iter().map(|s| swarm.processes(s)).collect();
+    let cut = Cut::new(&swarm, "router-robot6666", "robot6666");
+    let gone = tokens.until(&nav_devices(6666), false, LEASE * 4);
+    cut.heal();
+    let back = tokens.until(&nav_devices(6666), true, Duration::from_secs(60));
+    eprintln!(
+        "docker swarm: robot6666's router cut off -> its devices gone in {:.1} s; link restored -> back in {:.1} s",
+        gone.as_secs_f64(),
+        back.as_secs_f64()
+    );
+    drives_to_a_goal(
+        &session,
+        SocketAddr::from(([127, 0, 0, 1], player_ports[&6666])),
+    );
+    for (s, was) in sides.iter().zip(&processes) {
+        assert_eq!(&swarm.processes(s), was, "{s}: a process was started again");
+    }
+    let last: Vec<usize> = services.iter().map(|s| swarm.tasks(s)).collect();
+    assert_eq!(last, after, "tasks of {services:?}");
     drop(tokens);
     drop(session);
 

@@ -326,7 +326,8 @@ impl Drop for Star {
 /// (a ranger, and rangertolaser reading it, one process each): every
 /// robot's devices come up, a robot's scan reaches a client on another
 /// host, and what crossed each host's link is printed beside what its
-/// robot published (its ranger and laser, which no one elsewhere reads).
+/// robot published (its ranger and laser, which no one elsewhere reads),
+/// with the CPU each router spent from its start.
 #[test]
 fn twenty_hosts_each_with_its_router_come_up_and_a_robot_s_scan_reaches_another() {
     const N: usize = 20;
@@ -461,18 +462,39 @@ fn twenty_hosts_each_with_its_router_come_up_and_a_robot_s_scan_reaches_another(
         })
         .collect();
     rates.sort_by(f64::total_cmp);
+    // What each router spent, as a share of one core over the run.
+    let mut cpu: Vec<f64> = procs
+        .iter()
+        .step_by(2)
+        .map(|r| 100.0 * r.cpu_seconds() / secs)
+        .collect();
+    cpu.sort_by(f64::total_cmp);
     eprintln!(
         "20 hosts: routers and launches started in {:.2} s; all {} devices live {:.1} s after the first start; \
-         each host's link carried {:.1}–{:.1} kB/s (median {:.1}) over {secs:.1} s; robot {last}'s scan reached a client on host h0",
+         each host's link carried {:.1}–{:.1} kB/s (median {:.1}) over {secs:.1} s; robot {last}'s scan reached a client on host h0; \
+         CPU of a core: each host's router {:.1}–{:.1}% (median {:.1}), the fleet's router {:.1}%",
         started.as_secs_f64(),
         2 * N,
         ready.as_secs_f64(),
         rates[0],
         rates[N - 1],
         rates[N / 2],
+        cpu[0],
+        cpu[N - 1],
+        cpu[N / 2],
+        100.0 * core.cpu_seconds() / secs,
     );
-    for mut p in procs.into_iter().rev() {
-        assert!(p.terminate().success(), "{}", p.stderr());
+    // All told to stop at once: each launcher stops its nodes in turn.
+    let t = Instant::now();
+    for p in procs.iter().rev() {
+        p.term();
     }
+    for mut p in procs.into_iter().rev() {
+        assert!(p.wait().success(), "{}", p.stderr());
+    }
+    eprintln!(
+        "20 hosts: every process stopped {:.1} s after SIGTERM",
+        t.elapsed().as_secs_f64()
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

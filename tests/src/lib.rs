@@ -231,6 +231,28 @@ impl Proc {
         }
     }
 
+    /// The CPU time the child has used so far (user and system), seconds.
+    pub fn cpu_seconds(&self) -> f64 {
+        let stat = std::fs::read_to_string(format!("/proc/{}/stat", self.child.id()))
+            .unwrap_or_else(|e| panic!("{}: /proc/{}/stat: {e}", self.name, self.child.id()));
+        // Fields 14 and 15 (utime, stime), counted after the command's ")".
+        let ticks: u64 = stat
+            .rsplit_once(") ")
+            .map(|(_, rest)| {
+                rest.split(' ')
+                    .skip(11)
+                    .take(2)
+                    .filter_map(|t| t.parse::<u64>().ok())
+                    .sum()
+            })
+            .unwrap_or(0);
+        let hz = nix::unistd::sysconf(nix::unistd::SysconfVar::CLK_TCK)
+            .ok()
+            .flatten()
+            .unwrap_or(100);
+        ticks as f64 / hz as f64
+    }
+
     /// The child's stdout, line by line, read on a thread.
     pub fn lines(&mut self) -> mpsc::Receiver<String> {
         line_channel(self.child.stdout.take().expect("stdout piped"))
@@ -267,11 +289,16 @@ impl Proc {
 
     /// Sends SIGTERM and waits (within the deadline) for the exit status.
     pub fn terminate(&mut self) -> std::process::ExitStatus {
+        self.term();
+        self.wait()
+    }
+
+    /// Sends SIGTERM, and does not wait.
+    pub fn term(&self) {
         use nix::sys::signal::{kill, Signal};
         use nix::unistd::Pid;
         let pid = Pid::from_raw(i32::try_from(self.child.id()).expect("pid"));
         kill(pid, Signal::SIGTERM).expect("kill -TERM");
-        self.wait()
     }
 
     /// Waits (within the deadline) for the child to exit.

@@ -84,9 +84,11 @@ pub struct Config {
     /// How long the bridge waits for what a client owes it: see [`Limits`].
     pub limits: Limits,
     /// Tests only: called with `message INTERF:INDEX:KIND:SUBTYPE` for each
-    /// message a client sends, `sample DEVICE` for each device sample and
-    /// `queue PEER` as a client's samples are queued, where the bridge's own
-    /// code runs, to make it panic or stall there.
+    /// message a client sends, `sample DEVICE` for each device sample,
+    /// `queue PEER` as a client's samples are queued, `token DEVICE` as a
+    /// device's liveliness is heard and `ask DEVICE` as the network is
+    /// asked for a device, where the bridge's own code runs, to make it
+    /// panic or stall there.
     #[doc(hidden)]
     pub fault: Option<fn(&str)>,
     /// For a bridge on a peer session: a client session of the same router,
@@ -406,6 +408,8 @@ struct Shared {
     session: Session,
     /// Live devices and their drivers, from liveliness.
     devices: Mutex<HashMap<Device, String>>,
+    /// Told whenever liveliness changes `devices`.
+    heard: tokio::sync::Notify,
     order: Vec<Device>,
     feeds: Mutex<HashMap<Device, DeviceFeed>>,
     /// Latest simulation time, as f64 bits; NaN until a clock is seen.
@@ -545,6 +549,7 @@ impl Bridge {
         let shared = Arc::new(Shared {
             session: session.clone(),
             devices: Mutex::new(HashMap::new()),
+            heard: tokio::sync::Notify::new(),
             order: cfg.order,
             feeds: Mutex::new(HashMap::new()),
             sim_time: AtomicU64::new(f64::NAN.to_bits()),
@@ -564,10 +569,9 @@ impl Bridge {
         // takes history too: a peer's first query can run before its routes
         // to every publisher exist, and what it missed comes then.
         let s = Arc::downgrade(&shared);
+        let fault = cfg.fault;
         let touched = Arc::new(Mutex::new(std::collections::HashSet::new()));
         let t = touched.clone();
-        let heard = Arc::new(tokio::sync::Notify::new());
-        let h = heard.clone();
         let watch = session
             .liveliness()
             .declare_subscriber(keys::tokens(None))
@@ -577,6 +581,9 @@ impl Bridge {
                 let Ok((dev, driver)) = keys::parse_token(sample.key_expr().as_str()) else {
                     return;
                 };
+                if let Some(fault) = fault {
+                    fault(&format!("token {dev}"));
+                }
                 lock(&t).insert(dev);
                 let mut devices = lock(&shared.devices);
                 match sample.kind() {
@@ -589,7 +596,8 @@ impl Bridge {
                         devices.remove(&dev);
                     }
                 }
-                h.notify_waiters();
+                drop(devices);
+                shared.heard.notify_waiters();
             })
             .await
             .map_err(|source| BridgeError::Zenoh {
@@ -618,7 +626,7 @@ impl Bridge {
             }
         }
         if cfg.lister.is_some() {
-            wait_to_hear(&touched, &listed, &heard).await;
+            wait_to_hear(&touched, &listed, &shared.heard).await;
         }
         for (dev, driver) in listed {
             if !lock(&touched).contains(&dev) {
@@ -951,6 +959,15 @@ impl Conn {
             self.queue.room_for_answers().await;
         }
         if h.interf == u32::from(PLAYER_CODE) {
+            if h.subtype == u32::from(player::REQ_DEV) {
+                let mut r = Reader::new(body);
+                if let Some(dev) = read_addr(&mut r)
+                    .ok()
+                    .and_then(|(interf, index)| self.addr(interf, index))
+                {
+                    self.catch_up(dev).await;
+                }
+            }
             return self.handle_player(h, body);
         }
         let Some(dev) = self
@@ -1055,6 +1072,56 @@ impl Conn {
                     })
                     .await;
                 Ok(())
+            }
+        }
+    }
+
+    /// Before an open of a device this bridge has not heard of is refused:
+    /// the device may have come (back) an instant ago, heard of by the
+    /// routers and not yet here. If the network has its token, waits (at
+    /// most [`REQUEST_TIMEOUT`]) for this bridge's own liveliness to say
+    /// so; `devices` stays as liveliness tells it.
+    async fn catch_up(&self, dev: Device) {
+        if self.shared.is_live(&dev) {
+            return;
+        }
+        if let Some(fault) = self.shared.fault {
+            fault(&format!("ask {dev}"));
+        }
+        let live = match self
+            .shared
+            .session
+            .liveliness()
+            .get(keys::token_any(&dev))
+            .timeout(REQUEST_TIMEOUT)
+            .await
+        {
+            Ok(replies) => replies.recv_async().await.is_ok_and(|r| r.result().is_ok()),
+            Err(e) => {
+                tracing::debug!("asking the network for {dev}: {e}");
+                false
+            }
+        };
+        if !live {
+            return;
+        }
+        let deadline = tokio::time::Instant::now() + REQUEST_TIMEOUT;
+        loop {
+            let next = self.shared.heard.notified();
+            tokio::pin!(next);
+            next.as_mut().enable();
+            if self.shared.is_live(&dev) {
+                tracing::debug!("{dev}: live here too now, as the network said");
+                return;
+            }
+            if tokio::time::timeout_at(deadline, next).await.is_err() {
+                tracing::warn!(
+                    "robot {}: client {}: {dev} is live on the network but this bridge did not hear of it within {} s",
+                    self.robot,
+                    self.id,
+                    REQUEST_TIMEOUT.as_secs_f64()
+                );
+                return;
             }
         }
     }
