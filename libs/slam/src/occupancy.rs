@@ -13,6 +13,30 @@ const HIT: f32 = 0.847;
 const MISS: f32 = -0.405;
 /// Log-odds are kept within ±this.
 const CLAMP: f32 = 6.0;
+/// Metres of a beam that hit nothing traced as free. A laser reads its
+/// maximum through glass, off black or shiny surfaces and through open
+/// doors as well as into open space, so such a ray clears only its first
+/// metres (Cartographer's `missing_data_ray_length`, 5 m by default), and
+/// stops at a cell already seen occupied: a ray that saw nothing erases no
+/// wall. Traced 30 m, on the Freiburg 079 dataset at its corrected poses
+/// they kept 89.5% of the walls a map of the hits alone has (now 99.9%),
+/// and made Intel's 40 x 37 m building an 82 x 79 m map.
+pub const MISSING_RAY: f64 = 5.0;
+/// Metres beyond which a hit is traced as free up to here, with no end
+/// (GMapping's `maxUrange`): far ends are wide and few.
+pub const USABLE_RANGE: f64 = 30.0;
+
+/// How a beam is traced.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Ray {
+    /// Free along, occupied at its end.
+    Hit,
+    /// Free along, to its end: a hit beyond [`USABLE_RANGE`], cut there.
+    Cut,
+    /// Free along while nothing seen occupied is met: a beam that hit
+    /// nothing, cut at [`MISSING_RAY`].
+    Missing,
+}
 /// map_server's thresholds: above `occupied_thresh` a cell is occupied,
 /// below `free_thresh` free, unknown between.
 pub const OCCUPIED_THRESH: f64 = 0.65;
@@ -127,25 +151,37 @@ impl Occupancy {
     }
 
     /// Traces one scan's beams from `sensor` (its pose in the world): the
-    /// cells along each beam are seen free, the cell it ends in occupied
-    /// (unless the beam hit nothing, at `max_range`).
+    /// cells along each beam are seen free, the cell it ends in occupied.
+    /// A beam that hit nothing (at `max_range`) is traced free for
+    /// [`MISSING_RAY`] at most and up to the first cell seen occupied; a
+    /// hit beyond [`USABLE_RANGE`] is traced free up to there.
     pub fn add(&mut self, sensor: Pose, min_angle: f64, step: f64, max_range: f64, ranges: &[f32]) {
-        let reach = max_range.min(30.0);
+        let ray = |r: f32| {
+            let r = f64::from(r);
+            if !r.is_finite() || r <= 0.0 {
+                None
+            } else if r >= max_range - 0.01 {
+                Some((r.min(MISSING_RAY), Ray::Missing))
+            } else if r > USABLE_RANGE {
+                Some((USABLE_RANGE, Ray::Cut))
+            } else {
+                Some((r, Ray::Hit))
+            }
+        };
+        let reach = ranges
+            .iter()
+            .filter_map(|&r| ray(r))
+            .fold(0f64, |m, (r, _)| m.max(r));
         self.reserve(
             (sensor.x - reach, sensor.y - reach),
             (sensor.x + reach, sensor.y + reach),
         );
         let o = self.index(sensor.x, sensor.y);
         for (k, &r) in ranges.iter().enumerate() {
-            let r = f64::from(r);
-            if !r.is_finite() || r <= 0.0 {
-                continue;
-            }
-            let hit = r < max_range - 0.01;
-            let r = r.min(reach);
+            let Some((r, how)) = ray(r) else { continue };
             let a = sensor.yaw + min_angle + k as f64 * step;
             let end = self.index(sensor.x + r * a.cos(), sensor.y + r * a.sin());
-            self.trace(o, end, hit);
+            self.trace(o, end, how);
         }
     }
 
@@ -160,17 +196,29 @@ impl Occupancy {
         );
     }
 
-    /// Bresenham from `a` to `b`: free along, occupied at `b` if `hit`.
+    /// Whether cell (`i`, `j`) has been seen occupied more than free.
+    fn seen_occupied(&self, i: i64, j: i64) -> bool {
+        i >= 0
+            && j >= 0
+            && (i as usize) < self.w
+            && (j as usize) < self.h
+            && self.odds[j as usize * self.w + i as usize] > 0.0
+    }
+
+    /// Bresenham from `a` to `b`: free along, occupied at `b` if a hit.
     /// A hit's last cell before `b` is left alone: a beam grazing a wall
     /// passes through the wall's cells next to the one it ends in, and
     /// would otherwise wear away walls seen at a slant.
-    fn trace(&mut self, a: (i64, i64), b: (i64, i64), hit: bool) {
+    fn trace(&mut self, a: (i64, i64), b: (i64, i64), how: Ray) {
         let (dx, dy) = ((b.0 - a.0).abs(), -(b.1 - a.1).abs());
         let (sx, sy) = ((b.0 - a.0).signum(), (b.1 - a.1).signum());
         let (mut x, mut y, mut err) = (a.0, a.1, dx + dy);
-        let spare = i64::from(hit);
+        let spare = i64::from(how == Ray::Hit);
         let mut left = dx.max(-dy);
         while (x, y) != b {
+            if how == Ray::Missing && self.seen_occupied(x, y) {
+                return;
+            }
             if left > spare {
                 self.bump(x, y, MISS);
             }
@@ -185,7 +233,11 @@ impl Occupancy {
                 y += sy;
             }
         }
-        self.bump(b.0, b.1, if hit { HIT } else { MISS });
+        match how {
+            Ray::Hit => self.bump(b.0, b.1, HIT),
+            Ray::Missing if self.seen_occupied(b.0, b.1) => {}
+            _ => self.bump(b.0, b.1, MISS),
+        }
     }
 
     /// Cell (`i`, `j`) (from the lower left) by map_server's thresholds.
@@ -316,5 +368,51 @@ mod tests {
         assert_eq!(g.occupied().len(), 2);
         g.trim(2);
         assert_eq!(g.occupied().len(), 2);
+    }
+
+    #[test]
+    fn a_beam_that_hit_nothing_clears_its_first_metres_and_no_wall() {
+        let mut g = Occupancy::new(0.1);
+        // A wall 3 m ahead, seen once.
+        g.add(Pose::new(0.0, 0.0, 0.0), 0.0, 0.0, 80.0, &[3.0]);
+        // Then many readings of nothing (glass, say) along the same line.
+        for _ in 0..50 {
+            g.add(Pose::new(0.0, 0.0, 0.0), 0.0, 0.0, 80.0, &[80.0]);
+        }
+        let (x0, y0) = g.origin();
+        let at = |g: &Occupancy, x: f64, y: f64| {
+            g.cell(((x - x0) / 0.1) as usize, ((y - y0) / 0.1) as usize)
+        };
+        assert_eq!(at(&g, 1.0, 0.05), Cell::Free);
+        assert_eq!(at(&g, 3.05, 0.05), Cell::Occupied, "the wall stands");
+        assert_eq!(at(&g, 4.0, 0.05), Cell::Unknown, "nothing past the wall");
+        // In the open, a ray of nothing is free for MISSING_RAY only, and
+        // the grid grows no farther.
+        let mut open = Occupancy::new(0.1);
+        open.add(Pose::new(0.0, 0.0, 0.0), 0.0, 0.0, 80.0, &[80.0]);
+        let (w, _) = open.size();
+        assert!(
+            (w as f64) * 0.1 < 2.0 * MISSING_RAY + 3.0,
+            "{w} cells across"
+        );
+        let (ox, oy) = open.origin();
+        let cell = |x: f64| open.cell(((x - ox) / 0.1) as usize, ((0.05 - oy) / 0.1) as usize);
+        assert_eq!(
+            cell(MISSING_RAY - 0.5),
+            Cell::Unknown,
+            "one reading: not yet free"
+        );
+        assert!(open.odds.iter().filter(|&&o| o < 0.0).count() as f64 * 0.1 <= MISSING_RAY + 0.2);
+    }
+
+    #[test]
+    fn a_hit_beyond_the_usable_range_marks_no_end() {
+        let mut g = Occupancy::new(0.1);
+        for _ in 0..5 {
+            g.add(Pose::new(0.0, 0.0, 0.0), 0.0, 0.0, 80.0, &[40.0]);
+        }
+        assert!(g.occupied().is_empty(), "{:?}", g.occupied());
+        let (w, _) = g.size();
+        assert!((w as f64) * 0.1 < 2.0 * USABLE_RANGE + 3.0);
     }
 }

@@ -5,10 +5,12 @@
 //! The algorithm is libs/slam's (troupe-slam); this crate reads the logs,
 //! runs it, writes and judges the map:
 //!
-//! - [`source`]: odometry and scans from Player text logs and MCAP recordings;
+//! - [`source`]: odometry and scans from Player text logs, MCAP recordings
+//!   and CARMEN logs ([`carmen`]);
 //! - [`eval`]: a map's accuracy and coverage against the true world;
 //! - [`simulate`]: logs made with Troupe's Stage, with their truth.
 
+pub mod carmen;
 pub mod eval;
 pub mod simulate;
 pub mod source;
@@ -35,6 +37,7 @@ pub enum MapCmd {
     #[command(after_help = "Examples:
   troupe map build run.log -o cave.yaml                 # a Player log (writelog)
   troupe map build run.mcap -o cave.yaml                # a `troupe record` recording
+  troupe map build intel.clf.gz -o intel.yaml           # a CARMEN log (the classic datasets), gzipped or not
   troupe map build a.log b.log --odom 6666:position2d:0 --scan 6666:laser:0 -o r1.yaml
   troupe map build run.log -o cave.yaml --trajectory poses.txt
 
@@ -54,7 +57,8 @@ comes back to where it has been; the summary says how many.")]
 /// Flags of `troupe map build`.
 #[derive(Debug, Args)]
 pub struct BuildArgs {
-    /// Player text logs and MCAP recordings, read together in time order.
+    /// Player text logs, MCAP recordings and CARMEN logs (`.clf`, `.log`;
+    /// text logs may be gzipped), read together in time order.
     #[arg(required = true, value_name = "LOG")]
     pub logs: Vec<PathBuf>,
     /// Where to write the map's YAML (the PNG goes beside it, same name).

@@ -1,6 +1,7 @@
 //! What a map is built from: a robot's odometry and its range scans, read
-//! from Player text logs (as Player's `writelog` writes them) or Troupe's
-//! MCAP recordings (`troupe record`).
+//! from Player text logs (as Player's `writelog` writes them), Troupe's
+//! MCAP recordings (`troupe record`) or CARMEN logs (the classic datasets',
+//! [`crate::carmen`]); a text log may be gzipped.
 //!
 //! A log may hold several robots and sensors: [`Select`] names the two
 //! devices to use, and without it the only position2d and the only laser
@@ -64,8 +65,8 @@ pub enum SourceError {
         /// Why.
         source: std::io::Error,
     },
-    /// The file is neither a Player text log nor an MCAP recording.
-    #[error("{0}: neither a Player text log (`## Player version …`, then `time host robot interface …` lines) nor an MCAP recording")]
+    /// The file is neither a Player text log, an MCAP recording nor a CARMEN log.
+    #[error("{0}: neither a Player text log (`## Player version …`, then `time host robot interface …` lines), an MCAP recording nor a CARMEN log (`ODOM …`, `FLASER …` lines)")]
     Format(PathBuf),
     /// An MCAP file that cannot be read at all.
     #[error("{path}: {why}")]
@@ -82,10 +83,10 @@ pub enum SourceError {
 
 /// A problem repeated across a log: the first place and how many.
 #[derive(Default)]
-struct Problems(BTreeMap<String, (String, usize)>);
+pub(crate) struct Problems(BTreeMap<String, (String, usize)>);
 
 impl Problems {
-    fn add(&mut self, kind: &str, first: impl FnOnce() -> String) {
+    pub(crate) fn add(&mut self, kind: &str, first: impl FnOnce() -> String) {
         let e = self
             .0
             .entry(kind.to_owned())
@@ -105,12 +106,12 @@ impl Problems {
 }
 
 /// One message of a log: where it came from and what it is.
-struct Entry {
-    t: f64,
-    device: Device,
-    msg: AnyMsg,
+pub(crate) struct Entry {
+    pub(crate) t: f64,
+    pub(crate) device: Device,
+    pub(crate) msg: AnyMsg,
     /// `file:line` (text) or `file: message N` (MCAP).
-    place: String,
+    pub(crate) place: String,
 }
 
 /// Reads `paths` (Player text logs and MCAP recordings, in any mix) and
@@ -160,11 +161,24 @@ fn read_file(
     if troupe_record::is_mcap(path).map_err(io)? {
         return read_mcap(path, out, problems);
     }
-    let bytes = std::fs::read(path).map_err(io)?;
+    let mut bytes = std::fs::read(path).map_err(io)?;
+    if bytes.starts_with(&[0x1f, 0x8b]) {
+        let mut text = Vec::new();
+        std::io::Read::read_to_end(
+            &mut flate2::read::MultiGzDecoder::new(&bytes[..]),
+            &mut text,
+        )
+        .map_err(io)?;
+        bytes = text;
+    }
     let Ok(text) = std::str::from_utf8(&bytes) else {
         return Err(SourceError::Format(path.to_owned()));
     };
     let name = path.display().to_string();
+    if crate::carmen::is_carmen(text) {
+        crate::carmen::read(&name, text, out, problems);
+        return Ok(());
+    }
     let mut read_any = false;
     for (n, line) in text.lines().enumerate() {
         let place = || format!("{name}:{}", n + 1);
@@ -489,6 +503,17 @@ fn collect(entries: &[Entry], rec: &mut Recording, problems: &mut Problems) {
     }
     rec.odom.sort_by(|a, b| a.t.total_cmp(&b.t));
     rec.scans.sort_by(|a, b| a.t.total_cmp(&b.t));
+    // Player's writelog (and so Troupe's) often logs a scan twice: the
+    // same stamp, the same ranges. Traced twice, it would count double.
+    let before = rec.scans.len();
+    rec.scans
+        .dedup_by(|b, a| a.t == b.t && a.ranges == b.ranges);
+    let twice = before - rec.scans.len();
+    if twice > 0 {
+        problems.add("twice", || {
+            format!("{twice} scans logged twice (the same stamp and ranges): each counted once")
+        });
+    }
 }
 
 impl Recording {
@@ -580,6 +605,28 @@ mod tests {
         let mid = rec.odom_at(0.2).unwrap();
         assert!((mid.x - 0.05).abs() < 1e-9, "{mid:?}");
         assert!(rec.odom_at(0.05).is_none());
+    }
+
+    #[test]
+    fn a_scan_logged_twice_counts_once() {
+        let mut text = HEAD.to_owned();
+        text += &pos(0.1, 0.0);
+        text += &laser(0.2, 2.0);
+        text += &laser(0.2, 2.0); // writelog's second copy
+        text += &laser(0.2, 2.5); // same stamp, other ranges: kept
+        text += &laser(0.3, 2.0);
+        text += &laser(0.3, 2.0);
+        text += &pos(0.4, 0.1);
+        let rec = read(&[write("twice.log", &text)], &Select::default()).unwrap();
+        let stamps: Vec<f64> = rec.scans.iter().map(|s| s.t).collect();
+        assert_eq!(stamps, [0.2, 0.2, 0.3]);
+        assert!(
+            rec.warnings
+                .iter()
+                .any(|w| w.starts_with("2 scans logged twice")),
+            "{:?}",
+            rec.warnings
+        );
     }
 
     #[test]
@@ -726,8 +773,12 @@ mod tests {
         let rec = read(&[p], &Select::default()).unwrap();
         assert_eq!(rec.scan_device.map(|d| d.interface), Some(Interface::Laser));
         assert_eq!(rec.odom.len(), 337);
-        assert_eq!(rec.scans.len(), 349);
+        // Of its 349 laser lines, 11 repeat the scan before them.
+        assert_eq!(rec.scans.len(), 338);
         assert_eq!(rec.scans[0].ranges.len(), 180);
-        assert!(rec.warnings.is_empty(), "{:?}", rec.warnings);
+        assert_eq!(
+            rec.warnings,
+            ["11 scans logged twice (the same stamp and ranges): each counted once"]
+        );
     }
 }
