@@ -90,6 +90,64 @@ pub struct Slam {
     /// The keyframe of the last closure: the next waits a few keyframes,
     /// so driving along an old path does not optimise at every step.
     last_closure: Option<usize>,
+    /// Odometry's scale on distance and on turns, learnt from matches.
+    pub calibration: Calibration,
+}
+
+/// Odometry's systematic error, as a wrong wheel diameter (distance) and
+/// wheelbase (turns) make it, learnt online: the turns and distances the
+/// scan matches found, against those odometry read, summed over the
+/// keyframes whose match fit well. Each keyframe's guess is odometry's
+/// step scaled by it, so the match starts where the robot likely is, and
+/// what odometry is worth between keyframes ([`ODOMETRY`]) no longer pulls
+/// every match the same wrong way (bending a long corridor).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Calibration {
+    /// Metres the matches moved, and odometry read, plus the prior's.
+    distance: (f64, f64),
+    /// Radians the matches turned, and odometry read, plus the prior's.
+    turn: (f64, f64),
+}
+
+/// What the calibration believes before any match: no error, worth this
+/// many metres and radians of matched travel.
+const CALIBRATION_PRIOR: (f64, f64) = (5.0, 2.0);
+/// The scales it keeps within: a wheel 20% off is a broken robot.
+const CALIBRATION_RANGE: (f64, f64) = (0.8, 1.25);
+
+impl Default for Calibration {
+    fn default() -> Self {
+        Calibration {
+            distance: (CALIBRATION_PRIOR.0, CALIBRATION_PRIOR.0),
+            turn: (CALIBRATION_PRIOR.1, CALIBRATION_PRIOR.1),
+        }
+    }
+}
+
+impl Calibration {
+    /// The scale odometry's distances need (found / read).
+    pub fn distance(&self) -> f64 {
+        (self.distance.0 / self.distance.1).clamp(CALIBRATION_RANGE.0, CALIBRATION_RANGE.1)
+    }
+
+    /// The scale odometry's turns need.
+    pub fn turn(&self) -> f64 {
+        (self.turn.0 / self.turn.1).clamp(CALIBRATION_RANGE.0, CALIBRATION_RANGE.1)
+    }
+
+    /// Odometry's step `d`, corrected.
+    pub fn apply(&self, d: Pose) -> Pose {
+        let k = self.distance();
+        Pose::new(d.x * k, d.y * k, d.yaw * self.turn())
+    }
+
+    /// Learns from a match that found step `found` where odometry read `read`.
+    fn learn(&mut self, read: Pose, found: Pose) {
+        self.distance.0 += found.x.hypot(found.y);
+        self.distance.1 += read.x.hypot(read.y);
+        self.turn.0 += found.yaw.abs();
+        self.turn.1 += read.yaw.abs();
+    }
 }
 
 /// Keyframes between two loop closures.
@@ -171,6 +229,7 @@ impl Slam {
             closures: 0,
             unmatched: 0,
             last_closure: None,
+            calibration: Calibration::default(),
         }
     }
 
@@ -180,13 +239,13 @@ impl Slam {
     }
 
     /// The graph's pose of the robot at odometric pose `odom`, carried from
-    /// the last keyframe by odometry.
+    /// the last keyframe by odometry (calibrated).
     pub fn pose_of(&self, odom: Pose) -> Pose {
         match self.keyframes.last() {
             None => odom,
             Some(k) => {
                 let at = self.graph.poses[self.keyframes.len() - 1];
-                at.compose(&k.odom.inverse().compose(&odom))
+                at.compose(&self.calibration.apply(k.odom.inverse().compose(&odom)))
             }
         }
     }
@@ -222,6 +281,11 @@ impl Slam {
             let found = m.search(&points, guess, self.params.window, reach, Some(ODOMETRY));
             fit = found.score;
             if found.score >= self.params.min_fit {
+                let last = &self.keyframes[n - 1];
+                self.calibration.learn(
+                    last.odom.inverse().compose(&odom),
+                    self.graph.poses[n - 1].inverse().compose(&found.pose),
+                );
                 found.pose
             } else {
                 self.unmatched += 1;
@@ -333,7 +397,7 @@ impl Slam {
             };
         }
         let k = &self.keyframes[i - 1];
-        self.graph.poses[i - 1].compose(&k.odom.inverse().compose(&odom))
+        self.graph.poses[i - 1].compose(&self.calibration.apply(k.odom.inverse().compose(&odom)))
     }
 
     /// Metres the corrected trajectory runs.

@@ -7,6 +7,10 @@
 //! less the network): how many scans a second it takes on one core, and
 //! its slowest.
 //!
+//! With `--datasets DIR`, real robots' CARMEN logs too (the corrected
+//! logs of the classic datasets): each mapped from its odometry made
+//! wrong, against the trajectory it carries, its RMS error printed.
+//!
 //! The worlds: Troupe's office (worlds/wander.world, its robot driven by
 //! the map crate's explorer: Stage's `wander` wedges itself in the
 //! office's doorways), and where ../shared/compat is, Stage's own
@@ -18,6 +22,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use clap::Args;
+use troupe_geom::Pose;
 use troupe_map::eval;
 use troupe_map::simulate::{simulate, Driver, Setup};
 use troupe_map::slam::Params;
@@ -40,6 +45,16 @@ pub struct SlamBenchArgs {
     /// Keep the logs and maps here (default: a temporary directory, removed).
     #[arg(long, value_name = "DIR")]
     pub keep: Option<PathBuf>,
+    /// Real robots' datasets too: the CARMEN logs in DIR whose scans carry
+    /// the corrected trajectory (`*-corrected.log.gz`, `*.gfs.log`), each
+    /// mapped from its own raw odometry (its ODOM lines, where it has
+    /// them) and from that trajectory with odometry made wrong: distance
+    /// 3% long, turns 5% large, 2% random a step.
+    #[arg(long, value_name = "DIR")]
+    pub datasets: Option<PathBuf>,
+    /// Seeds of the random part of the made-wrong odometry, per dataset.
+    #[arg(long, default_value_t = 3, value_name = "N")]
+    pub seeds: u64,
 }
 
 /// Runs the bench.
@@ -147,6 +162,9 @@ pub fn run(a: &SlamBenchArgs) -> anyhow::Result<()> {
             live.p99.as_secs_f64() * 1e3,
         )?;
     }
+    if let Some(d) = &a.datasets {
+        datasets(d, a.seeds, &dir, &mut out)?;
+    }
     if a.keep.is_none() {
         let _ = std::fs::remove_dir_all(&dir);
     } else {
@@ -204,4 +222,194 @@ fn online(rec: &Recording) -> anyhow::Result<Online> {
         worst: times.last().copied().unwrap_or_default(),
         p99: crate::harness::percentile(&times, 0.99),
     })
+}
+
+/// The table of real robots' datasets: each CARMEN log of `dir` read
+/// twice, once as it is (its ODOM lines: the robot's own odometry) and
+/// once with its scans' poses (the corrected trajectory) as odometry,
+/// which is the reference.
+fn datasets(dir: &Path, seeds: u64, work: &Path, out: &mut impl Write) -> anyhow::Result<()> {
+    let mut logs: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map_err(|e| anyhow::anyhow!("--datasets {}: {e}", dir.display()))?
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| {
+            let n = p.to_string_lossy();
+            n.ends_with(".log") || n.ends_with(".clf") || n.ends_with(".gz")
+        })
+        .collect();
+    logs.sort();
+    writeln!(
+        out,
+        "troupe bench slam: real robots' datasets in {} (CARMEN logs; reference: the corrected trajectory the log carries); \
+         accuracy and coverage against the reference map (the scans traced at the reference poses), \
+         trajectory = RMS distance from the reference after the best rigid alignment",
+        dir.display()
+    )?;
+    for path in logs {
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let name = name.split('.').next().unwrap_or("?");
+        let name = name.strip_suffix("-corrected").unwrap_or(name).to_owned();
+        let mut text = Vec::new();
+        let raw = std::fs::read(&path)?;
+        if raw.starts_with(&[0x1f, 0x8b]) {
+            std::io::Read::read_to_end(
+                &mut flate2::read::MultiGzDecoder::new(&raw[..]),
+                &mut text,
+            )?;
+        } else {
+            text = raw;
+        }
+        let text = String::from_utf8_lossy(&text);
+        let reference_log = work.join(format!("{name}-reference.clf"));
+        let kept: String = text
+            .lines()
+            .filter(|l| !l.starts_with("ODOM"))
+            .flat_map(|l| [l, "\n"])
+            .collect();
+        std::fs::write(&reference_log, kept)?;
+        let reference = source::read(std::slice::from_ref(&reference_log), &Select::default())
+            .map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
+        let truth = Truth::of(&reference);
+        let span = reference.scans.last().map_or(0.0, |l| l.t) - reference.scans[0].t;
+        let mut runs: Vec<(String, Recording, Pose)> = Vec::new();
+        if text.lines().any(|l| l.starts_with("ODOM")) {
+            let own = source::read(std::slice::from_ref(&path), &Select::default())
+                .map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
+            // The map's frame is the odometry's at the start.
+            let t = reference.scans[0].t;
+            let frame = match (reference.odom_at(t), own.odom_at(t)) {
+                (Some(r), Some(o)) => r.compose(&o.inverse()),
+                _ => Pose::new(0.0, 0.0, 0.0),
+            };
+            runs.push(("its ODOM lines".into(), own, frame));
+        }
+        for seed in 1..=seeds {
+            runs.push((
+                format!("wrong odometry, seed {seed}"),
+                made_wrong(&reference, seed),
+                Pose::new(0.0, 0.0, 0.0),
+            ));
+        }
+        writeln!(
+            out,
+            "  {name}: {} scans, {span:.0} s, {:.0} m of reference trajectory",
+            reference.scans.len(),
+            truth.length
+        )?;
+        for (what, rec, frame) in runs {
+            let t0 = Instant::now();
+            let built = troupe_map::build(&rec, Params::default(), |_, _| {});
+            let took = t0.elapsed().as_secs_f64();
+            let s = eval::score(
+                &built.grid.occupied(),
+                &truth.walls,
+                &truth.walls,
+                frame,
+                0.1,
+            );
+            let odometry = troupe_map::odometry_map(&rec, 0.05);
+            let raw = eval::score(&odometry.occupied(), &truth.walls, &truth.walls, frame, 0.1);
+            let (rms, raw_rms) = truth.trajectory_error(&rec, &built.slam);
+            writeln!(
+                out,
+                "    {what:<24} accuracy {:>5.1}% (odometry alone {:>5.1}%)  coverage {:>5.1}%  trajectory {:.2} m (odometry alone {:.2} m)  built {:>4.0}x the log's pace  {} loop closures",
+                100.0 * s.accuracy,
+                100.0 * raw.accuracy,
+                100.0 * s.coverage,
+                rms,
+                raw_rms,
+                span / took.max(1e-9),
+                built.slam.closures,
+            )?;
+            built
+                .grid
+                .save(&work.join(format!("{name}-{}.yaml", what.replace([' ', ','], "-"))))?;
+        }
+    }
+    Ok(())
+}
+
+/// A dataset's reference: its poses at each scan and the walls they saw.
+struct Truth {
+    /// (time, pose) of each scan.
+    poses: Vec<(f64, Pose)>,
+    /// The scans' hits at the reference poses, one per 2.5 cm.
+    walls: Vec<(f64, f64)>,
+    /// Metres the reference trajectory runs.
+    length: f64,
+}
+
+impl Truth {
+    fn of(rec: &Recording) -> Truth {
+        let mut poses = Vec::new();
+        let mut seen = std::collections::HashSet::new();
+        let mut walls = Vec::new();
+        for (pose, scan) in rec.placed() {
+            poses.push((scan.t, pose));
+            let at = pose.compose(&rec.sensor);
+            let place = at.applier();
+            for (i, &r) in scan.ranges.iter().enumerate() {
+                let r = f64::from(r);
+                if !(r.is_finite() && r > 0.05 && r < scan.max_range - 0.01 && r <= 30.0) {
+                    continue;
+                }
+                let a = scan.min_angle + i as f64 * scan.step;
+                let (x, y) = place(r * a.cos(), r * a.sin());
+                if seen.insert(((x / 0.025).floor() as i64, (y / 0.025).floor() as i64)) {
+                    walls.push((x, y));
+                }
+            }
+        }
+        let length = poses
+            .windows(2)
+            .map(|w| (w[1].1.x - w[0].1.x).hypot(w[1].1.y - w[0].1.y))
+            .sum();
+        Truth {
+            poses,
+            walls,
+            length,
+        }
+    }
+
+    /// The RMS error of the built trajectory (and of odometry alone) at
+    /// the reference's scan times.
+    fn trajectory_error(&self, rec: &Recording, slam: &troupe_map::slam::Slam) -> (f64, f64) {
+        let (mut built, mut odom, mut truth) = (Vec::new(), Vec::new(), Vec::new());
+        for &(t, p) in &self.poses {
+            let Some(o) = rec.odom_at(t) else { continue };
+            let c = slam.corrected(t, o);
+            built.push((c.x, c.y));
+            odom.push((o.x, o.y));
+            truth.push((p.x, p.y));
+        }
+        (
+            eval::rms_after_alignment(&built, &truth).0,
+            eval::rms_after_alignment(&odom, &truth).0,
+        )
+    }
+}
+
+/// `rec` with its odometry made wrong as a wrong wheel diameter and
+/// wheelbase make it (each step's distance 3% long, its turn 5% large)
+/// and 2% random on each step's distance and turn, seeded.
+fn made_wrong(rec: &Recording, seed: u64) -> Recording {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    let mut noise = || 1.0 + 0.02 * (rng.gen::<f64>() * 2.0 - 1.0) * 3f64.sqrt();
+    let mut out = rec.clone();
+    let mut at = rec
+        .odom
+        .first()
+        .map_or(Pose::new(0.0, 0.0, 0.0), |o| o.pose);
+    for (i, o) in out.odom.iter_mut().enumerate().skip(1) {
+        let d = rec.odom[i - 1].pose.inverse().compose(&rec.odom[i].pose);
+        let (k, turn) = (1.03 * noise(), 1.05 * noise());
+        at = at.compose(&Pose::new(d.x * k, d.y * k, d.yaw * turn));
+        o.pose = at;
+    }
+    out
 }

@@ -47,6 +47,19 @@ fn a_wander_through_the_office_makes_an_accurate_map() {
     );
     assert!(s.accuracy >= 0.9, "accuracy {:.3}", s.accuracy);
     assert!(s.coverage >= 0.75, "coverage {:.3}", s.coverage);
+    // Odometry reads distance 2% and turns 4% long: the builder learnt it.
+    let c = built.slam.calibration;
+    eprintln!(
+        "calibration: distance x{:.4}, turns x{:.4}",
+        c.distance(),
+        c.turn()
+    );
+    assert!(
+        (c.distance() * 1.02 - 1.0).abs() < 0.01,
+        "distance x{}",
+        c.distance()
+    );
+    assert!((c.turn() * 1.04 - 1.0).abs() < 0.01, "turns x{}", c.turn());
 
     // The same log with odometry alone is far worse: the test can fail.
     let odometry = odometry_map(&rec, 0.05);
