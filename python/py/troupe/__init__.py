@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 import os
 import threading
+import time
 from typing import Any, Callable, Dict, Iterator, List, NamedTuple, Optional, Sequence, Tuple, Union
 
 from . import _native
@@ -274,6 +275,9 @@ class Proxy:
     """
 
     interface = ""
+    #: The kind that carries the device's data, where it sends others
+    #: beside it: the first ``read()`` waits for one of these.
+    data_kind: Optional[str] = None
 
     def __init__(self, robot: Robot, index: int = 0, interface: Optional[str] = None):
         if interface is not None:
@@ -315,8 +319,15 @@ class Proxy:
         return self._feed.seq
 
     def read(self, timeout: float = READ_TIMEOUT) -> "Proxy":
-        """Waits for a message newer than the last read (at most ``timeout`` s); returns the proxy."""
+        """Waits for a message newer than the last read (at most ``timeout`` s); returns the proxy.
+
+        The first read waits for the device's data itself (a ranger's ranges,
+        not only its intensities), so its fields are filled when it returns.
+        """
+        deadline = time.monotonic() + timeout
         after, _, _, _ = self._feed.next(self._seen, timeout)
+        while self._seen == 0 and self.data_kind and self.latest(self.data_kind) is None:
+            after, _, _, _ = self._feed.next(after, max(0.0, deadline - time.monotonic()))
         self._seen = max(after, self._feed.seq)
         return self
 
@@ -518,6 +529,7 @@ class Ranger(Proxy):
     """A set of range sensors (a laser or a sonar ring, Player 3's ranger)."""
 
     interface = "ranger"
+    data_kind = "ranger/ranges"
 
     @property
     def ranges(self):
