@@ -492,3 +492,49 @@ fn every_command_of_the_docs_shell_blocks_is_run_by_a_test() {
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
+
+/// The local targets of a page's Markdown links and images (`](path)`):
+/// not web addresses, not anchors within the page; an anchor after a path
+/// dropped.
+fn local_links(text: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut rest = text;
+    while let Some(at) = rest.find("](") {
+        rest = &rest[at + 2..];
+        let Some(end) = rest.find(')') else { break };
+        let target = rest[..end].split_whitespace().next().unwrap_or("");
+        let path = target.split('#').next().unwrap_or("");
+        if !path.is_empty() && !path.contains("://") && !path.starts_with("mailto:") {
+            out.push(path.to_owned());
+        }
+    }
+    out
+}
+
+#[test]
+fn every_image_and_local_link_of_the_docs_exists() {
+    let root = root();
+    let mut pages = pages();
+    pages.push((
+        "ARCHITECTURE.md".into(),
+        std::fs::read_to_string(root.join("ARCHITECTURE.md")).unwrap(),
+    ));
+    let mut broken = Vec::new();
+    for (name, text) in &pages {
+        let dir = root.join(name).parent().unwrap().to_path_buf();
+        for link in local_links(text) {
+            if !dir.join(&link).exists() {
+                broken.push(format!("{name}: {link}"));
+            }
+        }
+    }
+    assert!(
+        broken.is_empty(),
+        "links to nothing:\n{}",
+        broken.join("\n")
+    );
+    assert_eq!(
+        local_links("![a](x.png) [b](https://e.org) [c](#top) [d](y.md#s \"t\")"),
+        ["x.png", "y.md"]
+    );
+}
