@@ -31,3 +31,16 @@ pub struct Scan {
     /// Metres, one per beam.
     pub ranges: Vec<f32>,
 }
+
+impl Scan {
+    /// The beams that hit something, as (range, bearing in the sensor's
+    /// frame): a reading at the maximum is no return, one under 5 cm or
+    /// not finite no reading.
+    pub fn hits(&self) -> impl Iterator<Item = (f64, f64)> + '_ {
+        self.ranges.iter().enumerate().filter_map(|(i, &r)| {
+            let r = f64::from(r);
+            (r.is_finite() && r > 0.05 && r < self.max_range - 0.01)
+                .then_some((r, self.min_angle + i as f64 * self.step))
+        })
+    }
+}

@@ -143,9 +143,15 @@ impl Occupancy {
         )
     }
 
+    /// Where cell (`i`, `j`) is in `odds`, if it is in the grid.
+    fn at(&self, i: i64, j: i64) -> Option<usize> {
+        let (i, j) = (usize::try_from(i).ok()?, usize::try_from(j).ok()?);
+        (i < self.w && j < self.h).then_some(j * self.w + i)
+    }
+
     fn bump(&mut self, i: i64, j: i64, by: f32) {
-        if i >= 0 && j >= 0 && (i as usize) < self.w && (j as usize) < self.h {
-            let c = &mut self.odds[j as usize * self.w + i as usize];
+        if let Some(k) = self.at(i, j) {
+            let c = &mut self.odds[k];
             *c = (*c + by).clamp(-CLAMP, CLAMP);
         }
     }
@@ -198,11 +204,7 @@ impl Occupancy {
 
     /// Whether cell (`i`, `j`) has been seen occupied more than free.
     fn seen_occupied(&self, i: i64, j: i64) -> bool {
-        i >= 0
-            && j >= 0
-            && (i as usize) < self.w
-            && (j as usize) < self.h
-            && self.odds[j as usize * self.w + i as usize] > 0.0
+        self.at(i, j).is_some_and(|k| self.odds[k] > 0.0)
     }
 
     /// Bresenham from `a` to `b`: free along, occupied at `b` if a hit.

@@ -204,12 +204,7 @@ pub fn points(scan: &Scan, sensor: Pose, cell: f64) -> (Vec<(f64, f64)>, f64) {
     let mut seen = std::collections::HashSet::new();
     let mut out = Vec::with_capacity(scan.ranges.len());
     let mut reach = 0f64;
-    for (i, &r) in scan.ranges.iter().enumerate() {
-        let r = f64::from(r);
-        if !(r.is_finite() && r > 0.05 && r < scan.max_range - 0.01) {
-            continue;
-        }
-        let a = scan.min_angle + i as f64 * scan.step;
+    for (r, a) in scan.hits() {
         let (x, y) = place(r * a.cos(), r * a.sin());
         if seen.insert(((x / cell).floor() as i64, (y / cell).floor() as i64)) {
             out.push((x, y));
@@ -241,13 +236,17 @@ impl Slam {
     /// The graph's pose of the robot at odometric pose `odom`, carried from
     /// the last keyframe by odometry (calibrated).
     pub fn pose_of(&self, odom: Pose) -> Pose {
-        match self.keyframes.last() {
-            None => odom,
-            Some(k) => {
-                let at = self.graph.poses[self.keyframes.len() - 1];
-                at.compose(&self.calibration.apply(k.odom.inverse().compose(&odom)))
-            }
+        match self.keyframes.len() {
+            0 => odom,
+            n => self.carried(n - 1, odom),
         }
+    }
+
+    /// The robot at odometric pose `odom`, carried from keyframe `i`'s
+    /// graph pose by odometry's step from it, calibrated.
+    fn carried(&self, i: usize, odom: Pose) -> Pose {
+        let step = self.keyframes[i].odom.inverse().compose(&odom);
+        self.graph.poses[i].compose(&self.calibration.apply(step))
     }
 
     /// Whether odometric pose `odom` is far enough from the last keyframe
@@ -387,17 +386,14 @@ impl Slam {
     }
 
     /// The robot's pose at odometric pose `odom` taken at time `t`, by the
-    /// graph: carried by odometry from the last keyframe before `t`.
+    /// graph: carried by odometry from the last keyframe before `t` (the
+    /// first, for a time before it).
     pub fn corrected(&self, t: f64, odom: Pose) -> Pose {
-        let i = self.keyframes.partition_point(|k| k.t <= t);
-        if i == 0 {
-            return match self.keyframes.first() {
-                None => odom,
-                Some(k) => self.graph.poses[0].compose(&k.odom.inverse().compose(&odom)),
-            };
+        if self.keyframes.is_empty() {
+            return odom;
         }
-        let k = &self.keyframes[i - 1];
-        self.graph.poses[i - 1].compose(&self.calibration.apply(k.odom.inverse().compose(&odom)))
+        let i = self.keyframes.partition_point(|k| k.t <= t);
+        self.carried(i.saturating_sub(1), odom)
     }
 
     /// Metres the corrected trajectory runs.

@@ -123,16 +123,7 @@ pub fn run(a: &SlamBenchArgs) -> anyhow::Result<()> {
         let took = t0.elapsed().as_secs_f64();
         built.grid.save(&dir.join(format!("{name}.yaml")))?;
         let t_first = rec.scans[0].t;
-        let frame = run.frame(&rec);
-        let s = eval::score(
-            &built.grid.occupied(),
-            &run.obstacles,
-            &run.seen,
-            frame,
-            0.1,
-        );
-        let odometry = troupe_map::odometry_map(&rec, 0.05);
-        let raw = eval::score(&odometry.occupied(), &run.obstacles, &run.seen, frame, 0.1);
+        let (s, raw) = judged(&rec, &built, &run.obstacles, &run.seen, run.frame(&rec));
         let span = rec.scans.last().map_or(0.0, |l| l.t) - t_first;
         let live = online(&rec)?;
         writeln!(
@@ -251,16 +242,8 @@ fn datasets(dir: &Path, seeds: u64, work: &Path, out: &mut impl Write) -> anyhow
             .unwrap_or_default();
         let name = name.split('.').next().unwrap_or("?");
         let name = name.strip_suffix("-corrected").unwrap_or(name).to_owned();
-        let mut text = Vec::new();
-        let raw = std::fs::read(&path)?;
-        if raw.starts_with(&[0x1f, 0x8b]) {
-            std::io::Read::read_to_end(
-                &mut flate2::read::MultiGzDecoder::new(&raw[..]),
-                &mut text,
-            )?;
-        } else {
-            text = raw;
-        }
+        let text =
+            source::read_bytes(&path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
         let text = String::from_utf8_lossy(&text);
         let reference_log = work.join(format!("{name}-reference.clf"));
         let kept: String = text
@@ -273,36 +256,24 @@ fn datasets(dir: &Path, seeds: u64, work: &Path, out: &mut impl Write) -> anyhow
             .map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
         let truth = Truth::of(&reference);
         let span = reference.scans.last().map_or(0.0, |l| l.t) - reference.scans[0].t;
-        // Not the logs' own ODOM lines: in these corrected logs GMapping
-        // re-anchored them at each corrected scan pose (the ODOM stamped 0
-        // after each FLASER), a jump at every scan, not a robot's odometry.
-        let mut runs: Vec<(String, Recording, Pose)> = Vec::new();
-        for seed in 1..=seeds {
-            runs.push((
-                format!("wrong odometry, seed {seed}"),
-                made_wrong(&reference, seed),
-                Pose::new(0.0, 0.0, 0.0),
-            ));
-        }
         writeln!(
             out,
             "  {name}: {} scans, {span:.0} s, {:.0} m of reference trajectory",
             reference.scans.len(),
             truth.length
         )?;
-        for (what, rec, frame) in runs {
+        // Not from the logs' own ODOM lines: in these corrected logs
+        // GMapping re-anchored them at each corrected scan pose (the ODOM
+        // stamped 0 after each FLASER), a jump at every scan. The made-wrong
+        // odometry starts where the reference does: the frames are one.
+        for seed in 1..=seeds {
+            let what = format!("wrong odometry, seed {seed}");
+            let rec = made_wrong(&reference, seed);
             let t0 = Instant::now();
             let built = troupe_map::build(&rec, Params::default(), |_, _| {});
             let took = t0.elapsed().as_secs_f64();
-            let s = eval::score(
-                &built.grid.occupied(),
-                &truth.walls,
-                &truth.walls,
-                frame,
-                0.1,
-            );
-            let odometry = troupe_map::odometry_map(&rec, 0.05);
-            let raw = eval::score(&odometry.occupied(), &truth.walls, &truth.walls, frame, 0.1);
+            let same = Pose::new(0.0, 0.0, 0.0);
+            let (s, raw) = judged(&rec, &built, &truth.walls, &truth.walls, same);
             let (rms, raw_rms) = truth.trajectory_error(&rec, &built.slam);
             writeln!(
                 out,
@@ -323,6 +294,22 @@ fn datasets(dir: &Path, seeds: u64, work: &Path, out: &mut impl Write) -> anyhow
     Ok(())
 }
 
+/// How `built` scores against `obstacles` and the walls `seen`, and how
+/// the map of odometry alone would, the map's frame at `frame` in theirs.
+fn judged(
+    rec: &Recording,
+    built: &troupe_map::Built,
+    obstacles: &[(f64, f64)],
+    seen: &[(f64, f64)],
+    frame: Pose,
+) -> (eval::Score, eval::Score) {
+    let odometry = troupe_map::odometry_map(rec, 0.05);
+    (
+        eval::score(&built.grid.occupied(), obstacles, seen, frame, 0.1),
+        eval::score(&odometry.occupied(), obstacles, seen, frame, 0.1),
+    )
+}
+
 /// A dataset's reference: its poses at each scan and the walls they saw.
 struct Truth {
     /// (time, pose) of each scan.
@@ -340,14 +327,8 @@ impl Truth {
         let mut walls = Vec::new();
         for (pose, scan) in rec.placed() {
             poses.push((scan.t, pose));
-            let at = pose.compose(&rec.sensor);
-            let place = at.applier();
-            for (i, &r) in scan.ranges.iter().enumerate() {
-                let r = f64::from(r);
-                if !(r.is_finite() && r > 0.05 && r < scan.max_range - 0.01 && r <= 30.0) {
-                    continue;
-                }
-                let a = scan.min_angle + i as f64 * scan.step;
+            let place = pose.compose(&rec.sensor).applier();
+            for (r, a) in scan.hits().filter(|&(r, _)| r <= 30.0) {
                 let (x, y) = place(r * a.cos(), r * a.sin());
                 if seen.insert(((x / 0.025).floor() as i64, (y / 0.025).floor() as i64)) {
                     walls.push((x, y));

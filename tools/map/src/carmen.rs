@@ -92,15 +92,7 @@ pub(crate) fn read(name: &str, text: &str, out: &mut Vec<Entry>, problems: &mut 
                     return;
                 }
                 clock_started |= t > 0.0;
-                odom.push(Entry {
-                    t,
-                    device: device(Interface::Position2d, 0),
-                    msg: AnyMsg::Position2dData(position2d::Data {
-                        pose,
-                        ..Default::default()
-                    }),
-                    place: place(),
-                });
+                odom.push(odometry(t, pose, place()));
             }),
             "FLASER" | "RLASER" => flaser(&f).map(|(t, ranges, robot)| {
                 scans.push(Raw {
@@ -124,7 +116,6 @@ pub(crate) fn read(name: &str, text: &str, out: &mut Vec<Entry>, problems: &mut 
                     place: place(),
                 });
             }),
-            k if k.starts_with('#') => Ok(()),
             _ => Ok(()),
         };
         if let Err(e) = parsed {
@@ -173,29 +164,20 @@ pub(crate) fn read(name: &str, text: &str, out: &mut Vec<Entry>, problems: &mut 
     }
     let no_odom = odom.is_empty();
     out.extend(odom);
-    let mut odd = 0usize;
-    let mut odd_first = String::new();
     for s in scans {
         let n = s.ranges.len();
         let (start, step) = s.angles.unwrap_or_else(|| {
-            if ![180, 181, 360, 361].contains(&n) && odd == 0 {
-                odd_first.clone_from(&s.place);
+            if ![180, 181, 360, 361].contains(&n) {
+                problems.add("carmen beams", || {
+                    format!("{}: FLASER of {n} beams, a count CARMEN gives no angles for (not 180, 181, 360 or 361): read as 180° from -90°", s.place)
+                });
             }
-            odd += usize::from(![180, 181, 360, 361].contains(&n));
             (-PI / 2.0, flaser_step(n))
         });
         let max_range = s.max_range.unwrap_or(max[usize::from(s.rear)]);
         let index = u32::from(s.rear);
         if no_odom {
-            out.push(Entry {
-                t: s.t,
-                device: device(Interface::Position2d, 0),
-                msg: AnyMsg::Position2dData(position2d::Data {
-                    pose: s.robot,
-                    ..Default::default()
-                }),
-                place: s.place.clone(),
-            });
+            out.push(odometry(s.t, s.robot, s.place.clone()));
         }
         out.push(Entry {
             t: s.t,
@@ -211,10 +193,18 @@ pub(crate) fn read(name: &str, text: &str, out: &mut Vec<Entry>, problems: &mut 
             place: s.place,
         });
     }
-    if odd > 0 {
-        problems.add("carmen beams", || {
-            format!("{odd_first}: FLASER with {odd} scans of a beam count CARMEN gives no angles for (not 180, 181, 360 or 361): read as 180° from -90°")
-        });
+}
+
+/// An odometry sample, as `6665:position2d:0`'s data.
+fn odometry(t: f64, pose: Pose2d, place: String) -> Entry {
+    Entry {
+        t,
+        device: device(Interface::Position2d, 0),
+        msg: AnyMsg::Position2dData(position2d::Data {
+            pose,
+            ..Default::default()
+        }),
+        place,
     }
 }
 
@@ -236,26 +226,32 @@ fn device(interface: Interface, index: u32) -> Device {
     }
 }
 
-/// Field `i` of `f` as a number.
-fn num(f: &[&str], i: usize, what: &str) -> Result<f64, String> {
+/// Field `i` of `f` read as `T` and kept if `ok`; `what` names the field
+/// and `kind` what it must be, in the error.
+fn field<T: std::str::FromStr>(
+    f: &[&str],
+    i: usize,
+    what: &str,
+    kind: &str,
+    ok: impl Fn(&T) -> bool,
+) -> Result<T, String> {
     let s = f
         .get(i)
         .ok_or_else(|| format!("cut short before its {what}"))?;
-    s.parse::<f64>()
+    s.parse::<T>()
         .ok()
-        .filter(|v| v.is_finite())
-        .ok_or_else(|| format!("{what} {s:?} is not a number"))
+        .filter(ok)
+        .ok_or_else(|| format!("{what} {s:?} is not a {kind}"))
+}
+
+/// Field `i` of `f` as a number.
+fn num(f: &[&str], i: usize, what: &str) -> Result<f64, String> {
+    field(f, i, what, "number", |v: &f64| v.is_finite())
 }
 
 /// A count field: how many values follow.
 fn count(f: &[&str], i: usize, what: &str) -> Result<usize, String> {
-    let s = f
-        .get(i)
-        .ok_or_else(|| format!("cut short before its {what}"))?;
-    s.parse::<usize>()
-        .ok()
-        .filter(|&n| n <= 100_000)
-        .ok_or_else(|| format!("{what} {s:?} is not a count"))
+    field(f, i, what, "count", |&n: &usize| n <= 100_000)
 }
 
 fn ranges(f: &[&str], from: usize, n: usize) -> Result<Vec<f32>, String> {

@@ -149,6 +149,24 @@ fn device_name(d: Option<Device>) -> String {
     d.map_or_else(|| "the log".to_owned(), |d| d.to_string())
 }
 
+/// A text log's bytes, gunzipped where it is gzipped.
+///
+/// # Errors
+///
+/// The file cannot be read, or its gzip stream is broken.
+pub fn read_bytes(path: &Path) -> std::io::Result<Vec<u8>> {
+    let bytes = std::fs::read(path)?;
+    if !bytes.starts_with(&[0x1f, 0x8b]) {
+        return Ok(bytes);
+    }
+    let mut text = Vec::new();
+    std::io::Read::read_to_end(
+        &mut flate2::read::MultiGzDecoder::new(&bytes[..]),
+        &mut text,
+    )?;
+    Ok(text)
+}
+
 fn read_file(
     path: &Path,
     out: &mut Vec<Entry>,
@@ -161,16 +179,7 @@ fn read_file(
     if troupe_record::is_mcap(path).map_err(io)? {
         return read_mcap(path, out, problems);
     }
-    let mut bytes = std::fs::read(path).map_err(io)?;
-    if bytes.starts_with(&[0x1f, 0x8b]) {
-        let mut text = Vec::new();
-        std::io::Read::read_to_end(
-            &mut flate2::read::MultiGzDecoder::new(&bytes[..]),
-            &mut text,
-        )
-        .map_err(io)?;
-        bytes = text;
-    }
+    let bytes = read_bytes(path).map_err(io)?;
     let Ok(text) = std::str::from_utf8(&bytes) else {
         return Err(SourceError::Format(path.to_owned()));
     };
