@@ -383,6 +383,11 @@ const RUN_BY: &[(&str, &str)] = &[
         "a_recorded_run_localizes_offline_as_it_did_live",
     ),
     (
+        "troupe launch worlds/slam.cfg",
+        "troupe_map_save_writes_the_live_slam_map",
+    ),
+    ("troupe map save", "troupe_map_save_writes_the_live_slam_map"),
+    (
         "troupe map",
         "a_recorded_run_localizes_offline_as_it_did_live",
     ),

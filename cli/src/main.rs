@@ -78,7 +78,7 @@ fn run(cli: cli::Cli) -> anyhow::Result<()> {
         Command::View(a) => troupe_view::run(a, z),
         Command::Emulate(a) => troupe_emulate::run(a, z),
         Command::Bench(b) => troupe_bench::run(b, z),
-        Command::Map(c) => troupe_map::run(c),
+        Command::Map(c) => troupe_map::run(c, z),
         Command::Bridge(a) => troupe_bridge::command::run(a, z),
         Command::Image(a) => troupe_fleet::docker::image(a),
         Command::Compose(a) => troupe_fleet::docker::compose(a, &drivers::catalog()),

@@ -1070,3 +1070,62 @@ fn stamps_line(info: &str) -> (f64, f64, f64) {
         .collect();
     (n[0], n[1], n[2])
 }
+
+/// worlds/slam.cfg: the map the `slam` driver is building, saved while it
+/// builds by `troupe map save` as map_server's YAML and PNG, which load as
+/// a map; a device that is no map, or no device at all, says so.
+#[test]
+fn troupe_map_save_writes_the_live_slam_map() {
+    let cfg = Path::new(env!("CARGO_MANIFEST_DIR")).join("../worlds/slam.cfg");
+    let ns = troupe_tests::unique_namespace("mapsave");
+    let mut launcher = troupe_tests::launch(&ns, &cfg, &["--speedup", "4"]);
+    let (router, _) = troupe_tests::launch_ports(&mut launcher);
+    let session = troupe_tests::client_at(&router, &ns);
+    // The map's info on its data key at each refresh: wait for one of a
+    // minute of driving (a keyframe every 0.3 m: about 80 of them).
+    let infos = data_of(&session, Interface::Map);
+    let grown = loop {
+        let info = next::<troupe_msgs::map::Info>(&infos, "map info");
+        if info.stamp >= 60.0 {
+            break info.msg;
+        }
+    };
+    let dir = std::env::temp_dir().join(troupe_tests::unique_namespace("mapsave"));
+    std::fs::create_dir_all(&dir).unwrap();
+    let yaml = dir.join("live.yaml");
+    let net = troupe_tests::strings(&["--connect", &router, "--namespace", &ns, "--no-multicast"]);
+    let save = |extra: &[&str]| {
+        let mut args = net.clone();
+        args.extend(troupe_tests::strings(&["map", "save"]));
+        args.extend(troupe_tests::strings(extra));
+        troupe_tests::troupe_output(&args)
+    };
+    let (st, out, err) = save(&["-o", yaml.to_str().unwrap()]);
+    assert!(st.success(), "{out}{err}");
+    assert!(out.contains("from 6665:map:0"), "{out}");
+    let map = troupe_mapfile::load_any(&yaml).unwrap();
+    let (w, h) = map.size();
+    assert!(
+        w * h >= (grown.width * grown.height) as usize,
+        "{w} x {h}, after {grown:?}"
+    );
+    assert!((map.resolution() - 0.05).abs() < 1e-6);
+    let count = |v: i8| map.cells.iter().filter(|&&c| c == v).count();
+    let (occupied, free) = (
+        count(troupe_geom::occmap::OCCUPIED),
+        count(troupe_geom::occmap::FREE),
+    );
+    assert!(
+        occupied > 100 && free > 10 * occupied,
+        "{occupied} occupied, {free} free"
+    );
+
+    let (st, _, err) = save(&["--map", "laser:0", "-o", yaml.to_str().unwrap()]);
+    assert!(!st.success() && err.contains("not a map device"), "{err}");
+    let (st, _, err) = save(&["--map", "6670:map:0", "-o", yaml.to_str().unwrap()]);
+    assert!(
+        !st.success() && err.contains("asking 6670:map:0 for its map"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

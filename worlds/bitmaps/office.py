@@ -8,8 +8,8 @@ like the world files that use it. Run it from anywhere to redraw the PNG:
     python3 worlds/bitmaps/office.py
 """
 import os
-import struct
-import zlib
+
+from png import gray_png
 
 SIZE_M = 16.0
 RES = 0.05
@@ -44,21 +44,8 @@ def draw():
     return n, img
 
 
-def png(n, img):
-    raw = b"".join(b"\x00" + bytes(row) for row in img)
-
-    def chunk(kind, data):
-        body = kind + data
-        return struct.pack(">I", len(data)) + body + struct.pack(">I", zlib.crc32(body))
-
-    return (b"\x89PNG\r\n\x1a\n"
-            + chunk(b"IHDR", struct.pack(">IIBBBBB", n, n, 8, 0, 0, 0, 0))
-            + chunk(b"IDAT", zlib.compress(raw, 9))
-            + chunk(b"IEND", b""))
-
-
 if __name__ == "__main__":
     out = os.path.join(os.path.dirname(os.path.abspath(__file__)), "office.png")
     with open(out, "wb") as f:
-        f.write(png(*draw()))
+        f.write(gray_png(draw()[-1]))
     print(out)

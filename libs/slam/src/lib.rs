@@ -1,15 +1,14 @@
 //! Graph SLAM: scans and odometry in, poses and an occupancy grid out; no
-//! network, no logs (the one file it writes is the map, on request). The
+//! network, no files. The
 //! offline builder (`troupe map build`, tools/map) feeds it from logs; a
 //! driver can feed it live, one scan at a time.
 //!
 //! - [`matcher`]: correlative scan matching on likelihood fields;
 //! - [`graph`]: the pose graph and its optimisation;
 //! - [`slam`]: keyframes, local matching, loop closures;
-//! - [`occupancy`]: the grid the scans are traced into, written as ROS
-//!   map_server's PNG and YAML.
+//! - [`occupancy`]: the grid the scans are traced into, served as a map.
 //!
-//! Depends on troupe-geom and nalgebra only.
+//! Depends on troupe-geom, troupe-msgs and nalgebra only.
 
 pub mod graph;
 pub mod matcher;
@@ -33,6 +32,32 @@ pub struct Scan {
 }
 
 impl Scan {
+    /// A laser scan taken at `t`. Its beams span `min_angle` to
+    /// `max_angle`, first to last: Stage spaces `samples` beams over its
+    /// `fov` as `fov / (samples - 1)` while Player's Stage plugin reports
+    /// `fov / samples` as the resolution (180 beams over 180°: 1.0056°
+    /// apart, said 1°), so the span is trusted over the resolution where
+    /// the two disagree. On a 909 s log the real Player and Stage wrote of
+    /// Stage's cave, taking the said 1° put the last beams up to 14 cm off
+    /// at 8 m and the map's accuracy at 80.7% of its cells within 10 cm of
+    /// a wall.
+    pub fn of_laser(t: f64, s: &troupe_msgs::laser::Scan) -> Scan {
+        let n = s.ranges.len();
+        let span = f64::from(s.max_angle) - f64::from(s.min_angle);
+        let step = if n > 1 && span > 0.0 {
+            span / (n - 1) as f64
+        } else {
+            f64::from(s.resolution)
+        };
+        Scan {
+            t,
+            min_angle: f64::from(s.min_angle),
+            step,
+            max_range: f64::from(s.max_range),
+            ranges: s.ranges.clone(),
+        }
+    }
+
     /// The beams that hit something, as (range, bearing in the sensor's
     /// frame): a reading at the maximum is no return, one under 5 cm or
     /// not finite no reading.

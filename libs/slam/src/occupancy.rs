@@ -1,12 +1,12 @@
 //! The map itself: every scan's beams traced through a grid of log-odds
 //! (a beam's cells are more likely free, its end more likely occupied),
-//! then written as ROS map_server writes a map — a PNG and a YAML beside
-//! it — which `mapfile`, Nav2, slam_toolbox and Foxglove read.
+//! then each cell occupied, free or unknown by map_server's thresholds, as
+//! a map device serves it ([`Occupancy::to_occmap`]; `troupe_mapfile::save`
+//! writes it as map_server's PNG and YAML).
 
-use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
-
+use troupe_geom::occmap::{OccMap, FREE, OCCUPIED, UNKNOWN};
 use troupe_geom::Pose;
+use troupe_msgs::{map, Pose2d};
 
 /// Log-odds added where a beam ends (p = 0.7) and where it passes (p = 0.4).
 const HIT: f32 = 0.847;
@@ -300,54 +300,25 @@ impl Occupancy {
         (self.w, self.h, self.odds) = (w, h, odds);
     }
 
-    /// The map as map_server's trinary image: occupied 0, free 254,
-    /// unknown 205, the top row the grid's highest.
-    pub fn image(&self) -> image::GrayImage {
-        let (w, h) = (self.w as u32, self.h as u32);
-        image::GrayImage::from_fn(w, h, |x, y| {
-            let j = (h - 1 - y) as usize;
-            image::Luma([match self.cell(x as usize, j) {
-                Cell::Occupied => 0,
-                Cell::Free => 254,
-                Cell::Unknown => 205,
-            }])
+    /// The grid as a map device serves it and map_server writes it:
+    /// each cell occupied, free or unknown.
+    pub fn to_occmap(&self) -> OccMap {
+        let info = map::Info {
+            width: self.w as u32,
+            height: self.h as u32,
+            resolution: self.res as f32,
+            origin: Pose2d::new(self.x0, self.y0, 0.0),
+        };
+        if self.w == 0 || self.h == 0 {
+            return OccMap::filled(info, UNKNOWN);
+        }
+        OccMap::from_fn(info, |i, j| match self.cell(i, j) {
+            Cell::Occupied => OCCUPIED,
+            Cell::Free => FREE,
+            Cell::Unknown => UNKNOWN,
         })
     }
-
-    /// Writes `yaml` and the PNG it names (same stem), in map_server's format.
-    ///
-    /// # Errors
-    ///
-    /// A file cannot be written.
-    pub fn save(&self, yaml: &Path) -> Result<PathBuf, MapWriteError> {
-        let png = yaml.with_extension("png");
-        let name = png
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        self.image()
-            .save_with_format(&png, image::ImageFormat::Png)
-            .map_err(|e| MapWriteError(png.clone(), e.to_string()))?;
-        let mut text = String::new();
-        let _ = writeln!(
-            text,
-            "# Written by `troupe map build`: an occupancy map in ROS map_server's format."
-        );
-        let _ = writeln!(text, "image: {name}");
-        let _ = writeln!(text, "resolution: {}", self.res);
-        let _ = writeln!(text, "origin: [{:.4}, {:.4}, 0.0]", self.x0, self.y0);
-        let _ = writeln!(text, "negate: 0");
-        let _ = writeln!(text, "occupied_thresh: {OCCUPIED_THRESH}");
-        let _ = writeln!(text, "free_thresh: {FREE_THRESH}");
-        std::fs::write(yaml, text).map_err(|e| MapWriteError(yaml.to_owned(), e.to_string()))?;
-        Ok(png)
-    }
 }
-
-/// A map file that could not be written.
-#[derive(Debug, thiserror::Error)]
-#[error("writing {path}: {why}", path = .0.display(), why = .1)]
-pub struct MapWriteError(pub PathBuf, pub String);
 
 #[cfg(test)]
 mod tests {

@@ -35,7 +35,7 @@ pub mod filter;
 pub mod yaml;
 
 pub use filter::{MapCspace, MapScale};
-pub use yaml::{load_any, MapYaml};
+pub use yaml::{load_any, save, MapYaml, SaveError};
 
 use std::io::Read as _;
 use std::path::{Path, PathBuf};

@@ -194,9 +194,99 @@ pub fn load_any(path: &Path) -> Result<OccMap, LoadError> {
     }
 }
 
+/// A map that could not be written.
+#[derive(Debug, thiserror::Error)]
+#[error("cannot write map {}: {reason}", path.display())]
+pub struct SaveError {
+    /// The file.
+    pub path: PathBuf,
+    /// What went wrong.
+    pub reason: String,
+}
+
+/// The thresholds a saved map is written with: map_server's defaults, which
+/// its three grey levels (0, 205, 254) fall well clear of.
+const OCCUPIED_THRESH: f64 = 0.65;
+const FREE_THRESH: f64 = 0.196;
+
+/// Writes `map` as `yaml` and the PNG it names (same stem), in
+/// map_server's trinary form: occupied black (0), free white (254),
+/// unknown grey (205), the top row the map's highest; `by` says on the
+/// YAML's first line what wrote it.
+///
+/// # Errors
+///
+/// A file cannot be written.
+pub fn save(map: &OccMap, yaml: &Path, by: &str) -> Result<PathBuf, SaveError> {
+    use std::fmt::Write as _;
+    use troupe_geom::occmap::{FREE, OCCUPIED};
+    let failed = |path: &Path, e: &dyn std::fmt::Display| SaveError {
+        path: path.to_owned(),
+        reason: e.to_string(),
+    };
+    let png = yaml.with_extension("png");
+    let (w, h) = map.size();
+    let image = image::GrayImage::from_fn(w as u32, h as u32, |x, y| {
+        let j = h as i64 - 1 - i64::from(y);
+        image::Luma([match map.get(i64::from(x), j) {
+            Some(OCCUPIED) => 0,
+            Some(FREE) => 254,
+            _ => 205,
+        }])
+    });
+    image
+        .save_with_format(&png, image::ImageFormat::Png)
+        .map_err(|e| failed(&png, &e))?;
+    let name = png
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let o = map.origin();
+    let mut text = format!("# Written by {by}: an occupancy map in ROS map_server's format.\n");
+    let _ = writeln!(text, "image: {name}");
+    // As the f32 it travels as: 0.05, not 0.05000000074505806.
+    let _ = writeln!(text, "resolution: {}", map.info.resolution);
+    let _ = writeln!(text, "origin: [{:.4}, {:.4}, 0.0]", o.x, o.y);
+    let _ = writeln!(text, "negate: 0");
+    let _ = writeln!(text, "occupied_thresh: {OCCUPIED_THRESH}");
+    let _ = writeln!(text, "free_thresh: {FREE_THRESH}");
+    std::fs::write(yaml, text).map_err(|e| failed(yaml, &e))?;
+    Ok(png)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_saved_map_loads_as_it_was() {
+        use troupe_geom::occmap::{FREE, OCCUPIED, UNKNOWN};
+        let info = troupe_msgs::map::Info {
+            width: 7,
+            height: 4,
+            resolution: 0.1,
+            origin: troupe_msgs::Pose2d::new(-1.25, 2.5, 0.0),
+        };
+        let map = OccMap::from_fn(info, |i, j| match (i + 2 * j) % 3 {
+            0 => OCCUPIED,
+            1 => FREE,
+            _ => UNKNOWN,
+        });
+        let dir = std::env::temp_dir().join(format!("troupe-mapfile-save-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let png = save(&map, &dir.join("m.yaml"), "a test").unwrap();
+        assert_eq!(png, dir.join("m.png"));
+        let back = load_any(&dir.join("m.yaml")).unwrap();
+        assert_eq!(back.size(), map.size());
+        assert_eq!(back.origin(), map.origin());
+        for j in 0..4 {
+            for i in 0..7 {
+                assert_eq!(back.get(i, j), map.get(i, j), "cell ({i}, {j})");
+            }
+        }
+        let err = save(&map, &dir.join("no/such/dir/m.yaml"), "a test").unwrap_err();
+        assert!(err.to_string().starts_with("cannot write map "), "{err}");
+    }
 
     #[test]
     fn a_map_server_file_reads_and_its_mistakes_name_their_line() {

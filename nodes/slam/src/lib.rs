@@ -17,22 +17,25 @@
 //! - Each laser scan, with the latest odometry, goes to the SLAM front end:
 //!   a keyframe every 0.3 m or 0.3 rad, matched against the last ones, loop
 //!   closures with a graph optimisation (see libs/slam).
-//! - Every scan is traced into the occupancy grid from its corrected pose;
-//!   after a loop closure the grid is traced anew from the keyframes' scans.
+//! - Each keyframe's scan is traced into the occupancy grid from its pose
+//!   in the graph, as `troupe map build` traces them; after a loop closure
+//!   the grid is traced anew by the graph as it then stands, 100 keyframes
+//!   at each new scan (the served grid grows meanwhile), and served when
+//!   done.
 //! - The map device answers `GET_INFO` and `GET_DATA` as `mapfile` does, from
 //!   the grid as it stood at the last refresh (every `map_every` scans, and
-//!   after a loop closure), and publishes its info at each refresh.
+//!   when a rebuild is done), and publishes its info at each refresh.
 //! - The position2d device, if provided, publishes the odometry carried into
 //!   the map's frame (the odometry's own frame at the first scan) by the
 //!   graph, with odometry's velocities.
 
 use serde::Deserialize;
-use troupe_geom::occmap::{OccMap, FREE, OCCUPIED, UNKNOWN};
+use troupe_geom::occmap::OccMap;
 use troupe_geom::Pose;
-use troupe_msgs::{laser, map, position2d, Device, Interface, Pose2d};
+use troupe_msgs::{laser, map, position2d, Device, Interface};
 use troupe_node::{Ctx, Driver, Event, NodeError, RequestId, Result, Section, Unit};
-use troupe_slam::occupancy::{Cell, Occupancy};
-use troupe_slam::slam::{self, Params, Slam};
+use troupe_slam::occupancy::Occupancy;
+use troupe_slam::slam::{Params, Slam};
 use troupe_slam::Scan;
 
 /// Options, by name.
@@ -57,6 +60,33 @@ impl Default for Options {
     }
 }
 
+/// Keyframes traced anew at each scan while the grid is rebuilt after a
+/// loop closure: the served grid keeps growing meanwhile, and no scan waits
+/// for the whole run to be traced again (a 900 s run is about 1,300
+/// keyframes; 100 take about 11 ms, so a rebuild of that run is done 13
+/// scans later).
+const REBUILD_SHARE: usize = 100;
+
+/// A grid being traced anew from the scans, by the graph as it now stands.
+#[derive(Debug)]
+struct Rebuild {
+    grid: Occupancy,
+    /// The next scan to trace.
+    next: usize,
+    /// The graph moved again since this rebuild began: another follows.
+    again: bool,
+}
+
+impl Rebuild {
+    fn new(res: f64) -> Rebuild {
+        Rebuild {
+            grid: Occupancy::new(res),
+            next: 0,
+            again: false,
+        }
+    }
+}
+
 /// The slam driver.
 pub struct SlamNode {
     odom_dev: Device,
@@ -68,10 +98,9 @@ pub struct SlamNode {
     odom: Option<Pose>,
     slam: Slam,
     grid: Occupancy,
-    /// Every scan since the start with its odometry, to trace the grid
-    /// anew after a loop closure.
-    traced: Vec<(Pose, Scan)>,
     closures: usize,
+    /// The grid being traced anew since the last loop closure.
+    rebuild: Option<Rebuild>,
     since_refresh: u32,
     every: u32,
     map: OccMap,
@@ -91,7 +120,7 @@ impl SlamNode {
     /// Serves the grid as it stands, and says so on the map's data key (its
     /// info, Player's `PLAYER_MAP_DATA_INFO`): a view redraws the map.
     fn refresh(&mut self, ctx: &mut Ctx, t: f64) -> Result<()> {
-        self.map = to_occmap(&self.grid);
+        self.map = self.grid.to_occmap();
         self.since_refresh = 0;
         ctx.answer_always::<map::GetInfo>(&self.map_dev, &self.map.info)?;
         ctx.publish_at(&self.map_dev, &self.map.info, t)
@@ -101,33 +130,35 @@ impl SlamNode {
         let (Some(odom), Some(sensor)) = (self.odom, self.sensor) else {
             return Ok(());
         };
-        let scan = Scan {
-            t,
-            min_angle: f64::from(s.min_angle),
-            step: f64::from(s.resolution),
-            max_range: f64::from(s.max_range),
-            ranges: s.ranges.clone(),
-        };
+        let scan = Scan::of_laser(t, s);
         let res = self.slam.params().resolution;
-        if self.slam.due(odom) {
-            let (pts, reach) = slam::points(&scan, sensor, res);
-            self.slam.add(t, odom, pts, reach);
+        let n = self.slam.keyframes.len();
+        if self.slam.add(odom, &scan, sensor) {
+            self.slam.trace(&mut self.grid, n..n + 1);
         }
-        self.traced.push((odom, scan));
-        let place = |sc: &Scan, o: Pose| self.slam.corrected(sc.t, o).compose(&sensor);
         if self.slam.closures != self.closures {
-            // The graph moved: trace every scan again from where it now puts it.
+            // The graph moved: trace every keyframe again from where it now
+            // puts it, a share at each scan; one more round if it moves
+            // again meanwhile.
             self.closures = self.slam.closures;
-            let mut grid = Occupancy::new(res);
-            for (o, sc) in &self.traced {
-                grid.add_scan(place(sc, *o), sc);
+            match &mut self.rebuild {
+                Some(r) => r.again = true,
+                None => self.rebuild = Some(Rebuild::new(res)),
             }
-            self.grid = grid;
-            return self.refresh(ctx, t);
         }
-        if let Some((o, sc)) = self.traced.last() {
-            let at = place(sc, *o);
-            self.grid.add_scan(at, sc);
+        if let Some(r) = self.rebuild.as_mut() {
+            let all = self.slam.keyframes.len();
+            let end = (r.next + REBUILD_SHARE).min(all);
+            self.slam.trace(&mut r.grid, r.next..end);
+            r.next = end;
+            if end == all {
+                let done = std::mem::replace(r, Rebuild::new(res));
+                self.grid = done.grid;
+                if !done.again {
+                    self.rebuild = None;
+                }
+                return self.refresh(ctx, t);
+            }
         }
         self.since_refresh += 1;
         if self.since_refresh >= self.every {
@@ -137,24 +168,47 @@ impl SlamNode {
     }
 }
 
-/// The grid as a map device serves it.
-fn to_occmap(grid: &Occupancy) -> OccMap {
-    let (w, h) = grid.size();
-    let (x0, y0) = grid.origin();
-    let info = map::Info {
-        width: w as u32,
-        height: h as u32,
-        resolution: grid.res() as f32,
-        origin: Pose2d::new(x0, y0, 0.0),
-    };
-    if w == 0 || h == 0 {
-        return OccMap::filled(info, UNKNOWN);
+/// The driver fed a log as a launched stack feeds it, less the network:
+/// each scan (at its stamp) after the odometry that places it, the laser
+/// at `sensor` on the robot. `took` hears how long the driver spent on
+/// each scan with its odometry. For the benchmark and the tests that hold
+/// the online map against the offline build of the same log.
+///
+/// # Errors
+///
+/// What the driver returned for a message.
+pub fn replay<'a>(
+    sensor: Pose,
+    placed: impl IntoIterator<Item = (Pose, &'a Scan)>,
+    mut took: impl FnMut(std::time::Duration),
+) -> Result<troupe_node::testing::Harness<SlamNode>> {
+    const ODOM: Device = Device::new(6665, Interface::Position2d, 0);
+    const LASER: Device = Device::new(6665, Interface::Laser, 0);
+    let mut h = troupe_node::testing::Harness::<SlamNode>::from_json(&format!(
+        r#"{{"name":"slam","requires":["odometry:::position2d:0","laser:0"],"provides":["map:0"],"options":{{"laser_pose":[{},{},{}]}}}}"#,
+        sensor.x, sensor.y, sensor.yaw
+    ))?;
+    for (odom, s) in placed {
+        let beams = s.ranges.len().max(1) as f64;
+        let scan = laser::Scan {
+            min_angle: s.min_angle as f32,
+            max_angle: (s.min_angle + s.step * (beams - 1.0)) as f32,
+            resolution: s.step as f32,
+            max_range: s.max_range as f32,
+            ranges: s.ranges.clone(),
+            ..Default::default()
+        };
+        let data = position2d::Data {
+            pose: odom.into(),
+            ..Default::default()
+        };
+        h.set_time(s.t);
+        let t0 = std::time::Instant::now();
+        h.input(ODOM, &data)?;
+        h.input(LASER, &scan)?;
+        took(t0.elapsed());
     }
-    OccMap::from_fn(info, |i, j| match grid.cell(i, j) {
-        Cell::Occupied => OCCUPIED,
-        Cell::Free => FREE,
-        Cell::Unknown => UNKNOWN,
-    })
+    Ok(h)
 }
 
 impl Driver for SlamNode {
@@ -205,10 +259,10 @@ impl Driver for SlamNode {
             geom_request: None,
             odom: None,
             slam: Slam::new(params),
-            map: to_occmap(&grid),
+            map: grid.to_occmap(),
             grid,
-            traced: Vec::new(),
             closures: 0,
+            rebuild: None,
             since_refresh: 0,
             every: o.map_every.max(1),
         })

@@ -1,17 +1,20 @@
 //! Maps from logs: `troupe map build` makes an occupancy map from a
 //! robot's odometry and laser, as Player's course had users do with
-//! GMapping, and `troupe map show` draws one in the terminal.
+//! GMapping; `troupe map save` writes a live map device's map (the `slam`
+//! driver's) to files, and `troupe map show` draws one in the terminal.
 //!
 //! The algorithm is libs/slam's (troupe-slam); this crate reads the logs,
 //! runs it, writes and judges the map:
 //!
 //! - [`source`]: odometry and scans from Player text logs, MCAP recordings
-//!   and CARMEN logs ([`carmen`]);
+//!   (Troupe's, and ROS 2 bags: LaserScan, Odometry, `/tf_static`) and
+//!   CARMEN logs ([`carmen`]);
 //! - [`eval`]: a map's accuracy and coverage against the true world;
 //! - [`simulate`]: logs made with Troupe's Stage, with their truth.
 
 pub mod carmen;
 pub mod eval;
+mod ros2;
 pub mod simulate;
 pub mod source;
 
@@ -24,9 +27,10 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use clap::{Args, Subcommand};
 use troupe_geom::Pose;
-use troupe_msgs::DevAddr;
+use troupe_msgs::{DevAddr, Interface, DEFAULT_ROBOT};
+use troupe_node::ZenohArgs;
 
-use crate::source::{Recording, Select};
+use crate::source::{Pick, Recording, Select};
 use troupe_slam::occupancy::Occupancy;
 use troupe_slam::slam::{Params, Slam};
 
@@ -38,6 +42,7 @@ pub enum MapCmd {
   troupe map build run.log -o cave.yaml                 # a Player log (writelog)
   troupe map build run.mcap -o cave.yaml                # a `troupe record` recording
   troupe map build intel.clf.gz -o intel.yaml           # a CARMEN log (the classic datasets), gzipped or not
+  troupe map build bag_0.mcap --scan /scan --odom /odom -o lab.yaml   # a ROS 2 bag (MCAP)
   troupe map build a.log b.log --odom 6666:position2d:0 --scan 6666:laser:0 -o r1.yaml
   troupe map build run.log -o cave.yaml --trajectory poses.txt
 
@@ -48,6 +53,18 @@ Nav2, slam_toolbox and Foxglove read it. The builder matches each keyframe's
 scan against the map the last few made, and closes loops where the robot
 comes back to where it has been; the summary says how many.")]
     Build(BuildArgs),
+    /// Save a live map (the `slam` driver's as it builds, or any map
+    /// device's) as map_server's YAML and PNG.
+    #[command(after_help = "Examples:
+  troupe map save -o live.yaml                          # map:0 of robot 6665
+  troupe map save --map 6666:map:0 -o r1.yaml           # another robot's
+
+It asks the device for its info and its cells as any client does (GET_INFO,
+then GET_DATA a tile at a time), so it works on a running stack from any
+host that reaches its router (--connect). The map is the one the device
+serves now: the `slam` driver refreshes it every `map_every` scans and after
+each loop closure.")]
+    Save(SaveArgs),
     /// Draw a map (a map_server YAML, or an image) in the terminal.
     #[command(after_help = "Example:
   troupe map show cave.yaml --width 100")]
@@ -67,15 +84,28 @@ pub struct BuildArgs {
     /// Metres per cell.
     #[arg(long, default_value_t = 0.05, value_name = "M", value_parser = troupe_node::args::finite)]
     pub resolution: f64,
-    /// The odometry (a position2d) when the log holds several.
-    #[arg(long, value_name = "DEVICE")]
-    pub odom: Option<DevAddr>,
-    /// The range sensor (a laser, or a ranger) when the log holds several.
-    #[arg(long, value_name = "DEVICE")]
-    pub scan: Option<DevAddr>,
+    /// The odometry when the log holds several: a position2d
+    /// (`6665:position2d:0`), or in a ROS 2 bag an Odometry topic (`/odom`).
+    #[arg(long, value_name = "DEVICE|TOPIC")]
+    pub odom: Option<Pick>,
+    /// The range sensor when the log holds several: a laser or a ranger
+    /// (`6665:laser:0`), or in a ROS 2 bag a LaserScan topic (`/scan`).
+    #[arg(long, value_name = "DEVICE|TOPIC")]
+    pub scan: Option<Pick>,
     /// Also write the corrected trajectory: `time x y yaw` a line, one per scan.
     #[arg(long, value_name = "FILE")]
     pub trajectory: Option<PathBuf>,
+}
+
+/// Flags of `troupe map save`.
+#[derive(Debug, Args)]
+pub struct SaveArgs {
+    /// The map device (`map:0` is robot 6665's).
+    #[arg(long, default_value = "map:0", value_name = "DEVICE")]
+    pub map: DevAddr,
+    /// Where to write the map's YAML (the PNG goes beside it, same name).
+    #[arg(short = 'o', long, value_name = "MAP.yaml")]
+    pub output: PathBuf,
 }
 
 /// Flags of `troupe map show`.
@@ -93,11 +123,48 @@ pub struct ShowArgs {
 /// # Errors
 ///
 /// What the subcommand met: an unreadable log, a map that cannot be written.
-pub fn run(cmd: MapCmd) -> anyhow::Result<()> {
+pub fn run(cmd: MapCmd, z: &ZenohArgs) -> anyhow::Result<()> {
     match cmd {
         MapCmd::Build(a) => build_cmd(&a),
+        MapCmd::Save(a) => save(&a, z),
         MapCmd::Show(a) => show(&a),
     }
+}
+
+fn save(a: &SaveArgs, z: &ZenohArgs) -> anyhow::Result<()> {
+    if a.map.interface != Interface::Map {
+        anyhow::bail!("--map {}: not a map device (map:0, 6666:map:0)", a.map);
+    }
+    let dev = a.map.device(a.map.robot.unwrap_or(DEFAULT_ROBOT));
+    let client = troupe_client::Client::connect(z, dev.robot)?;
+    let mut proxy = troupe_client::MapProxy::new(&client, dev.index);
+    proxy
+        .request_map()
+        .with_context(|| format!("asking {dev} for its map"))?;
+    let map = troupe_geom::occmap::OccMap {
+        info: troupe_msgs::map::Info {
+            width: proxy.width(),
+            height: proxy.height(),
+            resolution: proxy.resolution() as f32,
+            origin: proxy.origin(),
+        },
+        cells: proxy.cells().to_vec(),
+    };
+    let png = troupe_mapfile::save(&map, &a.output, &format!("`troupe map save` from {dev}"))?;
+    let (w, h) = map.size();
+    let known = map
+        .cells
+        .iter()
+        .filter(|&&c| c != troupe_geom::occmap::UNKNOWN)
+        .count();
+    writeln!(
+        std::io::stdout().lock(),
+        "troupe map: {} ({w} x {h} cells of {} m, {known} known) and {}, from {dev}",
+        a.output.display(),
+        map.info.resolution,
+        png.display()
+    )?;
+    Ok(())
 }
 
 /// A built map and how it was made.
@@ -118,19 +185,14 @@ pub fn build(rec: &Recording, params: Params, mut progress: impl FnMut(usize, f6
     let placed = rec.placed();
     let mut slam = Slam::new(params);
     for (k, (odom, scan)) in placed.iter().enumerate() {
-        if slam.due(*odom) {
-            let (pts, reach) = slam::points(scan, rec.sensor, params.resolution);
-            slam.add(scan.t, *odom, pts, reach);
-        }
+        slam.add(*odom, scan, rec.sensor);
         if k % 50 == 0 {
             progress(k, scan.t);
         }
     }
     slam.finish();
     let mut grid = Occupancy::new(params.resolution);
-    for (odom, scan) in &placed {
-        grid.add_scan(slam.corrected(scan.t, *odom).compose(&rec.sensor), scan);
-    }
+    slam.trace(&mut grid, 0..slam.keyframes.len());
     grid.trim(10);
     progress(rec.scans.len(), rec.scans.last().map_or(0.0, |s| s.t));
     Built {
@@ -188,10 +250,7 @@ fn build_cmd(a: &BuildArgs) -> anyhow::Result<()> {
     if tty {
         let _ = writeln!(err);
     }
-    let png = built
-        .grid
-        .save(&a.output)
-        .with_context(|| format!("writing the map {}", a.output.display()))?;
+    let png = troupe_mapfile::save(&built.grid.to_occmap(), &a.output, "`troupe map build`")?;
     if let Some(path) = &a.trajectory {
         write_trajectory(path, &rec, &built.slam)?;
     }

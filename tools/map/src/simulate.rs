@@ -74,6 +74,30 @@ pub enum Driver {
     Ctrl(String),
     /// [`Explorer`]: cruises, steers to open space, backs out of stalls.
     Explore,
+    /// [`follow_left`]: round a building, the wall on its left.
+    FollowLeft,
+}
+
+/// Keeps the wall on the left 1.2 m away at 0.45 m/s, turning right where
+/// something is ahead: a robot on its way round a corridor that circles
+/// a block (worlds/loop.world) drives round it, rather than back and
+/// forth. The velocity (forward m/s, turn rad/s) for a scan of beams
+/// evenly over `fov` radians, rightmost first.
+pub fn follow_left(ranges: &[f64], fov: f64) -> (f64, f64) {
+    let n = ranges.len().max(2);
+    let angle = |i: usize| -fov / 2.0 + fov * i as f64 / (n - 1) as f64;
+    let nearest = |lo: f64, hi: f64| {
+        ranges
+            .iter()
+            .enumerate()
+            .filter(|&(i, _)| (lo..=hi).contains(&angle(i)))
+            .fold(f64::INFINITY, |a, (_, &r)| a.min(r))
+    };
+    if nearest(-0.35, 0.35) < 1.0 {
+        return (0.05, -0.8);
+    }
+    let left = nearest(0.9, 1.9);
+    (0.45, (0.8 * (left - 1.2)).clamp(-0.5, 0.5))
 }
 
 /// A driver for exploring a building: Stage's `wander` turns in place
@@ -147,7 +171,7 @@ pub fn simulate(mut world: World, setup: &Setup) -> anyhow::Result<Run> {
     match &setup.driver {
         Driver::Own => {}
         Driver::Ctrl(c) => world.models[robot].ctrl = vec![c.clone()],
-        Driver::Explore => world.models[robot].ctrl.clear(),
+        Driver::Explore | Driver::FollowLeft => world.models[robot].ctrl.clear(),
     }
     let laser = world.models[robot]
         .children
@@ -166,7 +190,7 @@ pub fn simulate(mut world: World, setup: &Setup) -> anyhow::Result<Run> {
     let sensor = world.models[laser].sensors[0].clone();
     let on_robot = world.models[laser].pose.compose(&sensor.pose);
     let (fov, samples) = (sensor.fov, sensor.samples);
-    let obstacles = statics(&world)?;
+    let obstacles = statics(&world)?.all;
     let mut sim = Sim::new(world)?;
     let base = sim
         .bases
@@ -199,11 +223,17 @@ pub fn simulate(mut world: World, setup: &Setup) -> anyhow::Result<Run> {
     };
     let mut seen = std::collections::HashSet::new();
     let mut last: Option<Pose> = None;
-    let mut explorer = (setup.driver == Driver::Explore).then(Explorer::default);
+    let mut explorer = Explorer::default();
     for k in 1..=steps {
-        if let (Some(e), Some(r)) = (explorer.as_mut(), sim.readings[laser].first()) {
-            let stalled = sim.bases[base].stall;
-            let (v, w) = e.drive(r.ranges, fov, stalled, k);
+        let reading = sim.readings[laser].first();
+        let vel = match (&setup.driver, reading) {
+            (Driver::Explore, Some(r)) => {
+                Some(explorer.drive(r.ranges, fov, sim.bases[base].stall, k))
+            }
+            (Driver::FollowLeft, Some(r)) => Some(follow_left(r.ranges, fov)),
+            _ => None,
+        };
+        if let Some((v, w)) = vel {
             sim.bases[base].cmd = Some(Command::Vel(Pose::new(v, 0.0, w)));
         }
         sim.step();
@@ -267,13 +297,29 @@ fn push(log: &mut String, t: f64, iface: Interface, msg: &AnyMsg) {
 }
 
 /// The centres of the cells of the static models a laser sees, world frame.
-fn statics(world: &World) -> anyhow::Result<Vec<(f64, f64)>> {
+/// A world's static obstacles (what a laser sees and nothing moves), one
+/// point per 5 cm cell of their rasters.
+#[derive(Debug, Clone, Default)]
+pub struct Statics {
+    /// Every cell of them.
+    pub all: Vec<(f64, f64)>,
+    /// The cells on a wall's face (a side open to a cell without obstacle):
+    /// the part a laser can see.
+    pub faces: Vec<(f64, f64)>,
+}
+
+/// The static obstacles of `world`.
+///
+/// # Errors
+///
+/// A world the simulator refuses.
+pub fn statics(world: &World) -> anyhow::Result<Statics> {
     let mut world = world.clone();
     for m in &mut world.models {
         m.map_resolution = 0.05;
     }
     let sim = Sim::new(world.clone())?;
-    let mut out = Vec::new();
+    let (mut all, mut faces) = (Vec::new(), Vec::new());
     for (m, def) in world.models.iter().enumerate() {
         let moving = def.position.is_some() || def.parent.is_some();
         // What the laser sees: Stage's own floorplans have no obstacle_return.
@@ -282,13 +328,18 @@ fn statics(world: &World) -> anyhow::Result<Vec<(f64, f64)>> {
         }
         let map = sim.model_map(m)?;
         let (w, h) = map.size();
-        for j in 0..h {
-            for i in 0..w {
-                if map.get(i as i64, j as i64).is_some_and(|c| c > 0) {
-                    out.push(troupe_geom::occmap::centre(&map.info, j * w + i));
+        let solid = |i: i64, j: i64| map.get(i, j).is_some_and(|c| c > 0);
+        for j in 0..h as i64 {
+            for i in 0..w as i64 {
+                if solid(i, j) {
+                    let at = troupe_geom::occmap::centre(&map.info, j as usize * w + i as usize);
+                    all.push(at);
+                    if !(solid(i - 1, j) && solid(i + 1, j) && solid(i, j - 1) && solid(i, j + 1)) {
+                        faces.push(at);
+                    }
                 }
             }
         }
     }
-    Ok(out)
+    Ok(Statics { all, faces })
 }

@@ -18,6 +18,8 @@ use troupe_geom::Pose;
 use troupe_msgs::{decode_any, keys, AnyMsg, DevAddr, Device, Interface, DEFAULT_ROBOT};
 pub use troupe_slam::Scan;
 
+use crate::ros2::Bag;
+
 /// A pose of the robot's odometry, at a time.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Odom {
@@ -30,10 +32,32 @@ pub struct Odom {
 /// Which devices of a log to build from.
 #[derive(Debug, Clone, Default)]
 pub struct Select {
-    /// The odometry: a position2d (`6665:position2d:0`).
-    pub odom: Option<DevAddr>,
-    /// The range sensor: a laser, or a ranger read as a laser.
-    pub scan: Option<DevAddr>,
+    /// The odometry: a position2d (`6665:position2d:0`), or an Odometry topic.
+    pub odom: Option<Pick>,
+    /// The range sensor: a laser, or a ranger read as a laser; or a
+    /// LaserScan topic.
+    pub scan: Option<Pick>,
+}
+
+/// A device of a log: by its address (`6665:laser:0`), or in a ROS 2 bag
+/// by its topic (`/scan`).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Pick {
+    /// A Troupe or Player device.
+    Device(DevAddr),
+    /// A ROS 2 topic.
+    Topic(String),
+}
+
+impl std::str::FromStr for Pick {
+    type Err = troupe_msgs::AddrError;
+
+    fn from_str(s: &str) -> Result<Pick, Self::Err> {
+        if s.starts_with('/') {
+            return Ok(Pick::Topic(s.to_owned()));
+        }
+        s.parse().map(Pick::Device)
+    }
 }
 
 /// What a log gave: odometry and scans in time order, the sensor's pose on
@@ -52,6 +76,8 @@ pub struct Recording {
     pub sensor: Pose,
     /// Problems met and passed over, one line each, with counts.
     pub warnings: Vec<String>,
+    /// The ROS 2 topics the two devices were read from (`/scan as 6665:laser:0`).
+    pub topics: Vec<String>,
 }
 
 /// Why a log gives no map.
@@ -94,7 +120,7 @@ impl Problems {
         e.1 += 1;
     }
 
-    fn lines(self) -> Vec<String> {
+    pub(crate) fn lines(self) -> Vec<String> {
         self.0
             .into_values()
             .map(|(first, n)| match n {
@@ -124,11 +150,25 @@ pub(crate) struct Entry {
 pub fn read(paths: &[PathBuf], select: &Select) -> Result<Recording, SourceError> {
     let mut problems = Problems::default();
     let mut entries = Vec::new();
+    let mut bag = Bag::default();
     for path in paths {
-        read_file(path, &mut entries, &mut problems)?;
+        read_file(path, &mut entries, &mut bag, &mut problems)?;
     }
-    let mut rec = choose(&entries, select)?;
+    let mut rec = choose(&entries, &bag, select)?;
     collect(&entries, &mut rec, &mut problems);
+    if let (Some(o), Some(s)) = (rec.odom_device, rec.scan_device) {
+        match bag.mount(o, s) {
+            Some(Ok(pose)) => rec.sensor = pose,
+            Some(Err(why)) => problems.add("mount", || {
+                format!("{why}: the scans are taken at the robot's centre")
+            }),
+            None => {}
+        }
+        rec.topics = [o, s]
+            .iter()
+            .filter_map(|&d| Some(format!("{} as {d}", bag.topic_of(d)?)))
+            .collect();
+    }
     rec.warnings = problems.lines();
     if rec.odom.is_empty() {
         return Err(SourceError::Devices(format!(
@@ -170,6 +210,7 @@ pub fn read_bytes(path: &Path) -> std::io::Result<Vec<u8>> {
 fn read_file(
     path: &Path,
     out: &mut Vec<Entry>,
+    bag: &mut Bag,
     problems: &mut Problems,
 ) -> Result<(), SourceError> {
     let io = |source| SourceError::Io {
@@ -177,7 +218,7 @@ fn read_file(
         source,
     };
     if troupe_record::is_mcap(path).map_err(io)? {
-        return read_mcap(path, out, problems);
+        return read_mcap(path, out, bag, problems);
     }
     let bytes = read_bytes(path).map_err(io)?;
     let Ok(text) = std::str::from_utf8(&bytes) else {
@@ -241,12 +282,18 @@ fn wanted(i: Interface) -> bool {
 fn read_mcap(
     path: &Path,
     out: &mut Vec<Entry>,
+    bag: &mut Bag,
     problems: &mut Problems,
 ) -> Result<(), SourceError> {
     let name = path.display().to_string();
     let mut n = 0u64;
     troupe_record::each_message(path, |m| {
         n += 1;
+        if m.encoding == crate::ros2::CDR {
+            let place = || format!("{name}: message {n}");
+            crate::ros2::message(bag, m.topic, m.schema, m.data, place, out, problems);
+            return Ok(true);
+        }
         if m.encoding != troupe_record::ENCODING {
             return Ok(true);
         }
@@ -316,12 +363,22 @@ fn list(devices: impl IntoIterator<Item = Device>) -> String {
     }
 }
 
-fn choose(entries: &[Entry], select: &Select) -> Result<Recording, SourceError> {
+fn choose(entries: &[Entry], bag: &Bag, select: &Select) -> Result<Recording, SourceError> {
     let s = seen(entries);
-    let robot = |a: &DevAddr| a.device(a.robot.unwrap_or(DEFAULT_ROBOT));
+    let robot =
+        |flag: &str, a: &Pick| match a {
+            Pick::Device(a) => Ok(a.device(a.robot.unwrap_or(DEFAULT_ROBOT))),
+            Pick::Topic(t) => bag.topics.get(t).copied().ok_or_else(|| {
+                let read: Vec<&str> = bag.topics.keys().map(String::as_str).collect();
+                SourceError::Devices(format!(
+                "{flag} {t}: the log has no LaserScan or Odometry on that topic; topics read: {}",
+                if read.is_empty() { "none".to_owned() } else { read.join(", ") }
+            ))
+            }),
+        };
     let odom = match &select.odom {
         Some(a) => {
-            let d = robot(a);
+            let d = robot("--odom", a)?;
             if d.interface != Interface::Position2d {
                 return Err(SourceError::Devices(format!(
                     "--odom {d}: odometry comes from a position2d device"
@@ -363,7 +420,7 @@ fn choose(entries: &[Entry], select: &Select) -> Result<Recording, SourceError> 
     let scan =
         match &select.scan {
             Some(a) => {
-                let d = robot(a);
+                let d = robot("--scan", a)?;
                 match d.interface {
                     Interface::Laser if s.lasers.contains(&d) => d,
                     Interface::Ranger if s.rangers.contains(&d) && s.configured.contains(&d) => d,
@@ -467,23 +524,11 @@ fn collect(entries: &[Entry], rec: &mut Recording, problems: &mut Problems) {
         match &e.msg {
             AnyMsg::LaserScan(s) => {
                 out_of_order(problems, e.t, &mut last.1, &e.place, "scan");
-                rec.scans.push(Scan {
-                    t: e.t,
-                    min_angle: f64::from(s.min_angle),
-                    step: f64::from(s.resolution),
-                    max_range: f64::from(s.max_range),
-                    ranges: s.ranges.clone(),
-                });
+                rec.scans.push(Scan::of_laser(e.t, s));
             }
             AnyMsg::LaserScanPose(s) => {
                 out_of_order(problems, e.t, &mut last.1, &e.place, "scan");
-                rec.scans.push(Scan {
-                    t: e.t,
-                    min_angle: f64::from(s.scan.min_angle),
-                    step: f64::from(s.scan.resolution),
-                    max_range: f64::from(s.scan.max_range),
-                    ranges: s.scan.ranges.clone(),
-                });
+                rec.scans.push(Scan::of_laser(e.t, &s.scan));
             }
             AnyMsg::LaserGeom(g) => rec.sensor = Pose::new(g.pose.x, g.pose.y, g.pose.yaw),
             AnyMsg::RangerGeom(g) => rec.sensor = Pose::new(g.pose.x, g.pose.y, g.pose.yaw),
@@ -565,6 +610,9 @@ impl Recording {
             device_name(self.scan_device),
             span
         );
+        if !self.topics.is_empty() {
+            let _ = write!(s, "; ROS 2 topics {}", self.topics.join(", "));
+        }
         s
     }
 }
