@@ -39,20 +39,27 @@ impl Field {
         let w = (((hi.0 + margin - x0) / res).ceil() as usize).max(1);
         let h = (((hi.1 + margin - y0) / res).ceil() as usize).max(1);
         let mut cells = vec![0f32; w * h];
-        // Each cell within 3σ of a point takes the likelihood of its centre.
+        // Each cell within 3σ of a point takes the likelihood of its centre,
+        // exp(k dx²) exp(k dy²): one exp a row and one a column, not one a
+        // cell (exp was a fifth of a Freiburg 079 build).
         let reach = (3.0 * sigma / res).ceil() as i64;
         let k = -1.0 / (2.0 * sigma * sigma);
+        let mut across = Vec::with_capacity(2 * reach as usize + 1);
         for &(x, y) in points {
             let ci = ((x - x0) / res).floor() as i64;
             let cj = ((y - y0) / res).floor() as i64;
+            let (i0, i1) = ((ci - reach).max(0), (ci + reach).min(w as i64 - 1));
+            across.clear();
+            across.extend((i0..=i1).map(|i| {
+                let dx = x0 + (i as f64 + 0.5) * res - x;
+                (dx * dx * k).exp()
+            }));
             for j in (cj - reach).max(0)..=(cj + reach).min(h as i64 - 1) {
                 let dy = y0 + (j as f64 + 0.5) * res - y;
-                let row = &mut cells[j as usize * w..(j as usize + 1) * w];
-                for i in (ci - reach).max(0)..=(ci + reach).min(w as i64 - 1) {
-                    let dx = x0 + (i as f64 + 0.5) * res - x;
-                    let v = ((dx * dx + dy * dy) * k).exp() as f32;
-                    let c = &mut row[i as usize];
-                    *c = c.max(v);
+                let down = (dy * dy * k).exp();
+                let row = &mut cells[j as usize * w + i0 as usize..=j as usize * w + i1 as usize];
+                for (c, a) in row.iter_mut().zip(&across) {
+                    *c = c.max((a * down) as f32);
                 }
             }
         }
@@ -84,7 +91,7 @@ impl Field {
     pub fn at(&self, x: f64, y: f64) -> f64 {
         let fx = (x - self.x0) / self.res - 0.5;
         let fy = (y - self.y0) / self.res - 0.5;
-        let (i, j) = (fx.floor() as i64, fy.floor() as i64);
+        let (i, j) = (floor(fx), floor(fy));
         let (u, v) = ((fx - i as f64) as f32, (fy - j as f64) as f32);
         let a = self.cell(i, j) * (1.0 - u) + self.cell(i + 1, j) * u;
         let b = self.cell(i, j + 1) * (1.0 - u) + self.cell(i + 1, j + 1) * u;
@@ -105,6 +112,18 @@ impl Field {
             })
             .sum();
         sum / points.len() as f64
+    }
+}
+
+/// `x` rounded down, without libm's `floor` (a call on baseline x86_64,
+/// a tenth of a build's time in `Field::at`).
+#[inline]
+fn floor(x: f64) -> i64 {
+    let i = x as i64;
+    if (i as f64) > x {
+        i - 1
+    } else {
+        i
     }
 }
 
