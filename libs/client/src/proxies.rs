@@ -662,6 +662,10 @@ impl MapProxy {
         Ok(())
     }
 
+    /// Its size, resolution and origin, as the device said them.
+    pub fn info(&self) -> map::Info {
+        self.info
+    }
     /// Cells along x.
     pub fn width(&self) -> u32 {
         self.info.width

@@ -10,6 +10,14 @@ pub const UNKNOWN: i8 = 0;
 /// Cell value: occupied.
 pub const OCCUPIED: i8 = 1;
 
+/// ROS map_server's default thresholds: above `OCCUPIED_THRESH` a cell's
+/// probability of being occupied makes it occupied, below `FREE_THRESH`
+/// free, unknown between. The map files Troupe writes say them, and the
+/// map builder classifies its cells by them.
+pub const OCCUPIED_THRESH: f64 = 0.65;
+/// See [`OCCUPIED_THRESH`].
+pub const FREE_THRESH: f64 = 0.196;
+
 /// The index (row-major from the origin) of the cell of `info`'s grid that
 /// holds world point (x, y); `None` off the grid. One conversion for the
 /// map, amcl's distance field and wavefront's planner.
@@ -211,6 +219,14 @@ impl OccMap {
         }
         let res = self.resolution();
         g.iter().map(|&s| (s.sqrt() * res) as f32).collect()
+    }
+
+    /// The centres of its occupied cells, world frame.
+    pub fn occupied(&self) -> Vec<(f64, f64)> {
+        (0..self.cells.len())
+            .filter(|&k| self.cells[k] == OCCUPIED)
+            .map(|k| centre(&self.info, k))
+            .collect()
     }
 
     /// The world pose of the map's origin corner.

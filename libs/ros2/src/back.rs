@@ -57,8 +57,46 @@ fn decode<T: serde::de::DeserializeOwned>(ty: Type, data: &[u8]) -> Result<T, Ba
     })
 }
 
-fn secs(t: Time) -> f64 {
-    f64::from(t.sec) + f64::from(t.nanosec) * 1e-9
+/// A LaserScan as a laser's scan, its readings by ROS's rules (REP 117)
+/// in Player's: `+inf` or above `range_max` is no return, read as
+/// `range_max`; `-inf`, NaN or below `range_min` no reading, read as 0.
+pub fn laser_scan(s: &LaserScan) -> laser::Scan {
+    let (lo, hi) = (s.range_min.max(0.0), s.range_max);
+    laser::Scan {
+        min_angle: s.angle_min,
+        max_angle: s.angle_max,
+        resolution: s.angle_increment,
+        max_range: hi,
+        intensity: s
+            .intensities
+            .iter()
+            .map(|&i| i.clamp(0.0, 255.0) as u8)
+            .collect(),
+        ranges: s
+            .ranges
+            .iter()
+            .map(|&r| match r {
+                r if r.is_nan() || r < lo => 0.0,
+                r if r > hi => hi,
+                r => r,
+            })
+            .collect(),
+        id: 0,
+    }
+}
+
+/// An Odometry as a position2d's data: its planar pose and velocities.
+pub fn odometry(o: &Odometry) -> position2d::Data {
+    let t = o.twist.twist;
+    position2d::Data {
+        pose: o.pose.pose.planar(),
+        vel: Pose2d {
+            x: t.linear.x,
+            y: t.linear.y,
+            yaw: t.angular.z,
+        },
+        stall: false,
+    }
 }
 
 /// The sample (payload, as it travels) that carries the ROS 2 message
@@ -77,48 +115,25 @@ pub fn to_sample(ty: Type, key: &str, data: &[u8]) -> Result<Vec<u8>, BackError>
             return Err(no_form());
         }
         let c: Clock = decode(ty, data)?;
-        let time = secs(c.clock);
+        let time = c.clock.secs();
         return Ok(troupe_msgs::encode(&sim::Clock { time }, time));
     }
     let interface = keys::parse_data(key).map_err(|_| no_form())?.interface;
     Ok(match (ty, interface) {
         (Type::LaserScan, Interface::Laser) => {
             let s: LaserScan = decode(ty, data)?;
-            let scan = laser::Scan {
-                min_angle: s.angle_min,
-                max_angle: s.angle_max,
-                resolution: s.angle_increment,
-                max_range: s.range_max,
-                intensity: s
-                    .intensities
-                    .iter()
-                    .map(|&i| i.clamp(0.0, 255.0) as u8)
-                    .collect(),
-                ranges: s.ranges,
-                id: 0,
-            };
-            troupe_msgs::encode(&scan, secs(s.header.stamp))
+            troupe_msgs::encode(&laser_scan(&s), s.header.stamp.secs())
         }
         (Type::LaserScan, Interface::Ranger) => {
             let s: LaserScan = decode(ty, data)?;
             let r = ranger::Ranges {
                 ranges: s.ranges.iter().map(|&r| f64::from(r)).collect(),
             };
-            troupe_msgs::encode(&r, secs(s.header.stamp))
+            troupe_msgs::encode(&r, s.header.stamp.secs())
         }
         (Type::Odometry, Interface::Position2d) => {
             let o: Odometry = decode(ty, data)?;
-            let t = o.twist.twist;
-            let d = position2d::Data {
-                pose: o.pose.pose.planar(),
-                vel: Pose2d {
-                    x: t.linear.x,
-                    y: t.linear.y,
-                    yaw: t.angular.z,
-                },
-                stall: false,
-            };
-            troupe_msgs::encode(&d, secs(o.header.stamp))
+            troupe_msgs::encode(&odometry(&o), o.header.stamp.secs())
         }
         (Type::PoseWithCovarianceStamped, Interface::Localize) => {
             let p: PoseWithCovarianceStamped = decode(ty, data)?;
@@ -131,7 +146,7 @@ pub fn to_sample(ty: Type, key: &str, data: &[u8]) -> Result<Vec<u8>, BackError>
                 hypoths: vec![h],
                 ..Default::default()
             };
-            troupe_msgs::encode(&hs, secs(p.header.stamp))
+            troupe_msgs::encode(&hs, p.header.stamp.secs())
         }
         _ => return Err(no_form()),
     })

@@ -29,6 +29,11 @@ impl Time {
         }
     }
 
+    /// In seconds.
+    pub fn secs(self) -> f64 {
+        f64::from(self.sec) + f64::from(self.nanosec) * 1e-9
+    }
+
     /// Back to nanoseconds (a negative time is 0).
     pub fn ns(self) -> u64 {
         u64::try_from(self.sec).unwrap_or(0) * 1_000_000_000 + u64::from(self.nanosec)

@@ -493,3 +493,14 @@ fn camera_images_are_images_in_the_camera_s_frame() {
     assert!(one(picture(FORMAT_RGB888, 24, &[1, 2, 3])).is_none());
     assert!(one(picture(9, 24, &[0; 6])).is_none());
 }
+
+#[test]
+fn readings_follow_ros_rules() {
+    let s = back::laser_scan(&LaserScan {
+        range_min: 0.1,
+        range_max: 10.0,
+        ranges: vec![f32::INFINITY, f32::NAN, f32::NEG_INFINITY, 0.05, 12.0, 4.0],
+        ..Default::default()
+    });
+    assert_eq!(s.ranges, vec![10.0, 0.0, 0.0, 0.0, 10.0, 4.0]);
+}

@@ -4,7 +4,7 @@
 //! a map device serves it ([`Occupancy::to_occmap`]; `troupe_mapfile::save`
 //! writes it as map_server's PNG and YAML).
 
-use troupe_geom::occmap::{OccMap, FREE, OCCUPIED, UNKNOWN};
+use troupe_geom::occmap::{OccMap, FREE, FREE_THRESH, OCCUPIED, OCCUPIED_THRESH, UNKNOWN};
 use troupe_geom::Pose;
 use troupe_msgs::{map, Pose2d};
 
@@ -37,11 +37,6 @@ enum Ray {
     /// nothing, cut at [`MISSING_RAY`].
     Missing,
 }
-/// map_server's thresholds: above `occupied_thresh` a cell is occupied,
-/// below `free_thresh` free, unknown between.
-pub const OCCUPIED_THRESH: f64 = 0.65;
-/// See [`OCCUPIED_THRESH`].
-pub const FREE_THRESH: f64 = 0.196;
 
 /// A growing occupancy grid.
 #[derive(Debug, Clone)]

@@ -204,7 +204,7 @@ fn distinct(
 
 /// The points of `scan`, in the robot's frame (the sensor at `sensor` on
 /// it), one per `cell` metres: beams that hit nothing are left out.
-pub fn points(scan: &Scan, sensor: Pose, cell: f64) -> (Vec<(f64, f64)>, f64) {
+fn points(scan: &Scan, sensor: Pose, cell: f64) -> (Vec<(f64, f64)>, f64) {
     let place = sensor.applier();
     let mut seen = std::collections::HashSet::new();
     let mut out = Vec::with_capacity(scan.ranges.len());

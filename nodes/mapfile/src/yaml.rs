@@ -17,7 +17,7 @@
 
 use std::path::{Path, PathBuf};
 
-use troupe_geom::occmap::OccMap;
+use troupe_geom::occmap::{OccMap, FREE_THRESH, OCCUPIED_THRESH};
 
 use crate::{load_with, LoadError};
 
@@ -71,7 +71,8 @@ impl MapYaml {
             reason,
         };
         let (mut image, mut resolution, mut origin) = (None, None, (0.0, 0.0, 0.0));
-        let (mut negate, mut occupied_thresh, mut free_thresh) = (false, 0.65, 0.196);
+        let (mut negate, mut occupied_thresh, mut free_thresh) =
+            (false, OCCUPIED_THRESH, FREE_THRESH);
         for (n, raw) in text.lines().enumerate() {
             let line = raw.split('#').next().unwrap_or("").trim();
             if line.is_empty() || line == "---" {
@@ -204,15 +205,11 @@ pub struct SaveError {
     pub reason: String,
 }
 
-/// The thresholds a saved map is written with: map_server's defaults, which
-/// its three grey levels (0, 205, 254) fall well clear of.
-const OCCUPIED_THRESH: f64 = 0.65;
-const FREE_THRESH: f64 = 0.196;
-
 /// Writes `map` as `yaml` and the PNG it names (same stem), in
 /// map_server's trinary form: occupied black (0), free white (254),
-/// unknown grey (205), the top row the map's highest; `by` says on the
-/// YAML's first line what wrote it.
+/// unknown grey (205), the top row the map's highest, with map_server's
+/// default thresholds (which the three greys fall well clear of); `by`
+/// says on the YAML's first line what wrote it.
 ///
 /// # Errors
 ///

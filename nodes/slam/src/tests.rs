@@ -7,7 +7,6 @@ use troupe_geom::ray_to_box;
 use troupe_node::testing::Harness;
 
 use super::*;
-use troupe_geom::occmap::OCCUPIED;
 use troupe_msgs::Pose2d;
 
 const ODOM: Device = Device::new(6665, Interface::Position2d, 0);
@@ -103,11 +102,7 @@ fn the_map_grows_as_the_robot_drives_and_its_pose_is_corrected() {
     assert!(said.len() >= 3000 / 5, "{} refreshes said", said.len());
     assert_eq!(said.last(), Some(&info));
     assert!(said[0].width * said[0].height < info.width * info.height);
-    let m = h.driver().map();
-    let occupied: Vec<(f64, f64)> = (0..m.cells.len())
-        .filter(|&k| m.cells[k] == OCCUPIED)
-        .map(|k| troupe_geom::occmap::centre(&m.info, k))
-        .collect();
+    let occupied = h.driver().map().occupied();
     assert!(occupied.len() > 200, "{} occupied cells", occupied.len());
     // In the room's frame (the map's is the odometry's at the start).
     let on_walls = occupied
@@ -189,11 +184,7 @@ fn a_stage_error_log_of_stage_s_cave_maps_offline_and_online_to_the_figures() {
         0.1,
     );
     let h = replay(rec.sensor, rec.placed(), |_| {}).unwrap();
-    let m = h.driver().map();
-    let occupied: Vec<(f64, f64)> = (0..m.cells.len())
-        .filter(|&k| m.cells[k] == OCCUPIED)
-        .map(|k| troupe_geom::occmap::centre(&m.info, k))
-        .collect();
+    let occupied = h.driver().map().occupied();
     let online = eval::score(&occupied, &run.obstacles, &run.seen, f, 0.1);
     eprintln!(
         "cave, 905 s, {:.0} m: offline accuracy {:.3}, coverage {:.3}; online {:.3}, {:.3}; odometry alone {:.3}, {:.3}; {} closures",

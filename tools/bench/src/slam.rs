@@ -207,11 +207,7 @@ struct Online {
 fn online(rec: &Recording) -> anyhow::Result<Online> {
     let mut times = Vec::with_capacity(rec.scans.len());
     let h = troupe_slam_node::replay(rec.sensor, rec.placed(), |d| times.push(d))?;
-    let m = h.driver().map();
-    let occupied = (0..m.cells.len())
-        .filter(|&k| m.cells[k] == troupe_geom::occmap::OCCUPIED)
-        .map(|k| troupe_geom::occmap::centre(&m.info, k))
-        .collect();
+    let occupied = h.driver().map().occupied();
     let busy = times.iter().sum();
     times.sort();
     Ok(Online {

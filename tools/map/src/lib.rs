@@ -142,12 +142,7 @@ fn save(a: &SaveArgs, z: &ZenohArgs) -> anyhow::Result<()> {
         .request_map()
         .with_context(|| format!("asking {dev} for its map"))?;
     let map = troupe_geom::occmap::OccMap {
-        info: troupe_msgs::map::Info {
-            width: proxy.width(),
-            height: proxy.height(),
-            resolution: proxy.resolution() as f32,
-            origin: proxy.origin(),
-        },
+        info: proxy.info(),
         cells: proxy.cells().to_vec(),
     };
     let png = troupe_mapfile::save(&map, &a.output, &format!("`troupe map save` from {dev}"))?;

@@ -6,16 +6,17 @@
 //! A topic named as Troupe names its devices (`/robot_6665/laser_0`) is
 //! that device; any other (`/scan`, `/odom`) becomes one of robot 6665,
 //! numbered in the order the bag first shows it, and is chosen by its
-//! name (`--scan /scan`). A LaserScan's readings follow ROS's rules
-//! (REP 117): `+inf` or above `range_max` is no return, `-inf`, NaN or
+//! name (`--scan /scan`). Scans and odometry become Troupe's as `troupe
+//! play` makes them (`troupe_ros2::back`): a LaserScan's readings by ROS's
+//! rules (REP 117), `+inf` or above `range_max` no return, `-inf`, NaN or
 //! below `range_min` no reading.
 
 use std::collections::BTreeMap;
 
 use troupe_geom::Pose;
-use troupe_msgs::{laser, position2d, AnyMsg, Device, Interface, Pose2d, DEFAULT_ROBOT};
+use troupe_msgs::{AnyMsg, Device, Interface, DEFAULT_ROBOT};
 use troupe_ros2::msg::{LaserScan, Odometry, TfMessage, Transform};
-use troupe_ros2::Type;
+use troupe_ros2::{back, Type};
 
 use crate::source::{Entry, Problems};
 
@@ -90,34 +91,8 @@ impl Bag {
     }
 }
 
-fn secs(t: troupe_ros2::msg::Time) -> f64 {
-    f64::from(t.sec) + f64::from(t.nanosec) * 1e-9
-}
-
 fn planar(t: &Transform) -> Pose {
     Pose::new(t.translation.x, t.translation.y, t.rotation.yaw())
-}
-
-/// The scan a LaserScan is, by ROS's rules for its readings.
-fn scan(s: &LaserScan) -> laser::Scan {
-    let (lo, hi) = (s.range_min.max(0.0), s.range_max);
-    let ranges = s
-        .ranges
-        .iter()
-        .map(|&r| match r {
-            r if r.is_nan() || r < lo => 0.0,
-            r if r > hi => hi,
-            r => r,
-        })
-        .collect();
-    laser::Scan {
-        min_angle: s.angle_min,
-        max_angle: s.angle_max,
-        resolution: s.angle_increment,
-        max_range: hi,
-        ranges,
-        ..Default::default()
-    }
 }
 
 /// Takes one ROS 2 message (`schema`, CDR `data`, on `topic`): a scan or
@@ -146,9 +121,9 @@ pub(crate) fn message(
                 let device = bag.device(topic, Interface::Laser);
                 bag.frames.insert(device, s.header.frame_id.clone());
                 out.push(Entry {
-                    t: secs(s.header.stamp),
+                    t: s.header.stamp.secs(),
                     device,
-                    msg: AnyMsg::LaserScan(scan(&s)),
+                    msg: AnyMsg::LaserScan(back::laser_scan(&s)),
                     place: format!("{} on {topic}", place()),
                 });
             }
@@ -158,15 +133,10 @@ pub(crate) fn message(
             Ok(o) => {
                 let device = bag.device(topic, Interface::Position2d);
                 bag.frames.insert(device, o.child_frame_id.clone());
-                let v = o.twist.twist;
                 out.push(Entry {
-                    t: secs(o.header.stamp),
+                    t: o.header.stamp.secs(),
                     device,
-                    msg: AnyMsg::Position2dData(position2d::Data {
-                        pose: o.pose.pose.planar(),
-                        vel: Pose2d::new(v.linear.x, v.linear.y, v.angular.z),
-                        stall: false,
-                    }),
+                    msg: AnyMsg::Position2dData(back::odometry(&o)),
                     place: format!("{} on {topic}", place()),
                 });
             }
@@ -420,17 +390,6 @@ mod tests {
             "{:?}",
             ros.warnings
         );
-    }
-
-    #[test]
-    fn readings_follow_ros_rules() {
-        let s = scan(&LaserScan {
-            range_min: 0.1,
-            range_max: 10.0,
-            ranges: vec![f32::INFINITY, f32::NAN, f32::NEG_INFINITY, 0.05, 12.0, 4.0],
-            ..Default::default()
-        });
-        assert_eq!(s.ranges, vec![10.0, 0.0, 0.0, 0.0, 10.0, 4.0]);
     }
 
     #[test]

@@ -296,9 +296,8 @@ fn push(log: &mut String, t: f64, iface: Interface, msg: &AnyMsg) {
     }
 }
 
-/// The centres of the cells of the static models a laser sees, world frame.
 /// A world's static obstacles (what a laser sees and nothing moves), one
-/// point per 5 cm cell of their rasters.
+/// point per 5 cm cell of their rasters (the cell's centre, world frame).
 #[derive(Debug, Clone, Default)]
 pub struct Statics {
     /// Every cell of them.

@@ -365,17 +365,7 @@ fn list(devices: impl IntoIterator<Item = Device>) -> String {
 
 fn choose(entries: &[Entry], bag: &Bag, select: &Select) -> Result<Recording, SourceError> {
     let s = seen(entries);
-    let robot =
-        |flag: &str, a: &Pick| match a {
-            Pick::Device(a) => Ok(a.device(a.robot.unwrap_or(DEFAULT_ROBOT))),
-            Pick::Topic(t) => bag.topics.get(t).copied().ok_or_else(|| {
-                let read: Vec<&str> = bag.topics.keys().map(String::as_str).collect();
-                SourceError::Devices(format!(
-                "{flag} {t}: the log has no LaserScan or Odometry on that topic; topics read: {}",
-                if read.is_empty() { "none".to_owned() } else { read.join(", ") }
-            ))
-            }),
-        };
+    let robot = |flag: &str, a: &Pick| picked(bag, flag, a);
     let odom = match &select.odom {
         Some(a) => {
             let d = robot("--odom", a)?;
@@ -486,6 +476,24 @@ fn choose(entries: &[Entry], bag: &Bag, select: &Select) -> Result<Recording, So
         scan_device: Some(scan),
         ..Recording::default()
     })
+}
+
+/// The device `a` names: an address, or a topic the bag read.
+fn picked(bag: &Bag, flag: &str, a: &Pick) -> Result<Device, SourceError> {
+    match a {
+        Pick::Device(a) => Ok(a.device(a.robot.unwrap_or(DEFAULT_ROBOT))),
+        Pick::Topic(t) => bag.topics.get(t).copied().ok_or_else(|| {
+            let read: Vec<&str> = bag.topics.keys().map(String::as_str).collect();
+            let read = if read.is_empty() {
+                "none".to_owned()
+            } else {
+                read.join(", ")
+            };
+            SourceError::Devices(format!(
+                "{flag} {t}: the log has no LaserScan or Odometry on that topic; topics read: {read}"
+            ))
+        }),
+    }
 }
 
 /// Notes a stamp `t` that goes back from the latest seen, `last`.
