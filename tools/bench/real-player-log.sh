@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Writes a log with the real Player 3.1 and the real Stage 4.3, for
-# `troupe bench slam --player-logs DIR`: Stage's own simple.world (the 16 m
+# `troupe bench slam --player-log LOG`: Stage's own simple.world (the 16 m
 # cave), r0 alone with `localization "odom"` and `odom_error [0.03 0.03
 # 0.00 0.05]`, wandering with Stage's own `wander`; Player's rangertolaser
 # over the sicklaser ranger; writelog recording position2d:0 and laser:0.
