@@ -696,6 +696,21 @@ fn a_recorded_run_localizes_offline_as_it_did_live() {
         troupe_tests::troupe_output(&troupe_tests::strings(&["map", "build", &log, "-o", &yaml]));
     assert!(status.success(), "map build: {err}");
     assert!(out.contains("scans used"), "{out}");
+    // It says what it learnt of odometry's error: none, under gps.
+    let learnt = |what: &str| -> f64 {
+        let at = out
+            .find(what)
+            .unwrap_or_else(|| panic!("no `{what}` in {out}"));
+        out[at + what.len()..]
+            .split(|c: char| c == ',' || c.is_whitespace())
+            .next()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("no number after `{what}` in {out}"))
+    };
+    for what in ["distances x", "turns x"] {
+        let k = learnt(what);
+        assert!((k - 1.0).abs() < 0.02, "{what}{k}: {out}");
+    }
     let text = std::fs::read_to_string(&yaml).unwrap();
     assert!(
         text.contains("image: office.png") && text.contains("resolution: 0.05"),

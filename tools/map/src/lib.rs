@@ -277,6 +277,13 @@ fn build_cmd(a: &BuildArgs) -> anyhow::Result<()> {
         took,
         span / took.max(1e-9)
     )?;
+    let cal = built.slam.calibration;
+    writeln!(
+        out,
+        "  odometry's error as the matches found it: distances x{:.4}, turns x{:.4} (1: none)",
+        cal.distance(),
+        cal.turn()
+    )?;
     if built.unplaced > 0 {
         writeln!(
             out,
