@@ -386,6 +386,14 @@ const RUN_BY: &[(&str, &str)] = &[
         "troupe launch worlds/slam.cfg",
         "troupe_map_save_writes_the_live_slam_map",
     ),
+    (
+        "troupe launch worlds/log-slam.cfg",
+        "a_log_with_odometry_error_maps_and_the_builder_finds_the_error",
+    ),
+    (
+        "troupe map build r0.log -o room.yaml",
+        "a_log_with_odometry_error_maps_and_the_builder_finds_the_error",
+    ),
     ("troupe map save", "troupe_map_save_writes_the_live_slam_map"),
     (
         "troupe map",

@@ -650,6 +650,52 @@ fn mean_error(estimates: &[(f64, f64, f64)], logged: &[Logged], after: f64) -> (
     )
 }
 
+/// docs/logs-and-maps.md's logging for a map: worlds/log-slam.cfg records
+/// r0 wandering slam.world with odometry 3% long; `troupe map build` maps
+/// the log, says it found odometry's distances long, and the map has walls.
+#[test]
+fn a_log_with_odometry_error_maps_and_the_builder_finds_the_error() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let dir = std::env::temp_dir().join(troupe_tests::unique_namespace("logslam"));
+    copy_dir(&root.join("worlds"), &dir.join("worlds"));
+    let ns = troupe_tests::unique_namespace("logslam");
+    let mut rec = launch_in(&dir, &ns, "worlds/log-slam.cfg", &["--speedup", "4"]);
+    let (router, _) = troupe_tests::launch_ports(&mut rec);
+    let session = troupe_tests::client_at(&router, &ns);
+    let odom = data_of(&session, Interface::Position2d);
+    troupe_tests::wait_live(&session, &["6665:log:0"]);
+    while next::<position2d::Data>(&odom, "r0's odometry").stamp < 60.0 {}
+    drop(odom);
+    assert!(rec.terminate().success(), "{}", rec.stderr());
+
+    let log = dir.join("r0.log").display().to_string();
+    let yaml = dir.join("room.yaml");
+    let (status, out, err) = troupe_tests::troupe_output(&troupe_tests::strings(&[
+        "map",
+        "build",
+        &log,
+        "-o",
+        &yaml.display().to_string(),
+    ]));
+    assert!(status.success(), "map build: {err}");
+    let at = out.find("distances x").expect(&out) + "distances x".len();
+    let k: f64 = out[at..]
+        .split(',')
+        .next()
+        .and_then(|v| v.parse().ok())
+        .expect(&out);
+    // 3% long reads x0.971; the prior (5 m at x1) holds it nearer 1 early.
+    assert!(k < 0.99 && k > 0.95, "distances x{k}: {out}");
+    let map = troupe_mapfile::load_any(&yaml).unwrap();
+    let occupied = map
+        .cells
+        .iter()
+        .filter(|&&c| c == troupe_geom::occmap::OCCUPIED)
+        .count();
+    assert!(occupied > 200, "{occupied} occupied cells: {out}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// docs/logs-and-maps.md's "drive, record, localize offline": worlds/record.cfg records r0
 /// wandering (odometry, laser, the live amcl's estimates) with writelog;
 /// worlds/replay.cfg replays the log into amcl with no simulator running,
