@@ -650,24 +650,45 @@ fn mean_error(estimates: &[(f64, f64, f64)], logged: &[Logged], after: f64) -> (
     )
 }
 
+/// Runs `cfg` (under worlds/, copied into a new directory named after
+/// `name`) at four times real time until r0's odometry is stamped `until`
+/// simulated seconds, and stops it: writelog's r0.log is in the directory
+/// returned.
+fn record(name: &str, cfg: &str, until: f64) -> std::path::PathBuf {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let dir = std::env::temp_dir().join(troupe_tests::unique_namespace(name));
+    copy_dir(&root.join("worlds"), &dir.join("worlds"));
+    let ns = troupe_tests::unique_namespace(name);
+    let mut rec = launch_in(&dir, &ns, cfg, &["--speedup", "4"]);
+    let (router, _) = troupe_tests::launch_ports(&mut rec);
+    let session = troupe_tests::client_at(&router, &ns);
+    let odom = data_of(&session, Interface::Position2d);
+    troupe_tests::wait_live(&session, &["6665:log:0"]);
+    while next::<position2d::Data>(&odom, "r0's odometry").stamp < until {}
+    drop(odom);
+    assert!(rec.terminate().success(), "{}", rec.stderr());
+    dir
+}
+
+/// The scale `troupe map build`'s summary `out` gives after `what`
+/// (`distances x`, `turns x`): what it learnt of odometry's error.
+fn learnt(out: &str, what: &str) -> f64 {
+    let at = out
+        .find(what)
+        .unwrap_or_else(|| panic!("no `{what}` in {out}"));
+    out[at + what.len()..]
+        .split(|c: char| c == ',' || c.is_whitespace())
+        .next()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no number after `{what}` in {out}"))
+}
+
 /// docs/logs-and-maps.md's logging for a map: worlds/log-slam.cfg records
 /// r0 wandering slam.world with odometry 3% long; `troupe map build` maps
 /// the log, says it found odometry's distances long, and the map has walls.
 #[test]
 fn a_log_with_odometry_error_maps_and_the_builder_finds_the_error() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let dir = std::env::temp_dir().join(troupe_tests::unique_namespace("logslam"));
-    copy_dir(&root.join("worlds"), &dir.join("worlds"));
-    let ns = troupe_tests::unique_namespace("logslam");
-    let mut rec = launch_in(&dir, &ns, "worlds/log-slam.cfg", &["--speedup", "4"]);
-    let (router, _) = troupe_tests::launch_ports(&mut rec);
-    let session = troupe_tests::client_at(&router, &ns);
-    let odom = data_of(&session, Interface::Position2d);
-    troupe_tests::wait_live(&session, &["6665:log:0"]);
-    while next::<position2d::Data>(&odom, "r0's odometry").stamp < 60.0 {}
-    drop(odom);
-    assert!(rec.terminate().success(), "{}", rec.stderr());
-
+    let dir = record("logslam", "worlds/log-slam.cfg", 60.0);
     let log = dir.join("r0.log").display().to_string();
     let yaml = dir.join("room.yaml");
     let (status, out, err) = troupe_tests::troupe_output(&troupe_tests::strings(&[
@@ -678,12 +699,7 @@ fn a_log_with_odometry_error_maps_and_the_builder_finds_the_error() {
         &yaml.display().to_string(),
     ]));
     assert!(status.success(), "map build: {err}");
-    let at = out.find("distances x").expect(&out) + "distances x".len();
-    let k: f64 = out[at..]
-        .split(',')
-        .next()
-        .and_then(|v| v.parse().ok())
-        .expect(&out);
+    let k = learnt(&out, "distances x");
     // 3% long reads x0.971; the prior (5 m at x1) holds it nearer 1 early.
     assert!(k < 0.99 && k > 0.95, "distances x{k}: {out}");
     let map = troupe_mapfile::load_any(&yaml).unwrap();
@@ -703,20 +719,8 @@ fn a_log_with_odometry_error_maps_and_the_builder_finds_the_error() {
 /// log, and amcl localizes on that map as well.
 #[test]
 fn a_recorded_run_localizes_offline_as_it_did_live() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let dir = std::env::temp_dir().join(troupe_tests::unique_namespace("offline"));
-    copy_dir(&root.join("worlds"), &dir.join("worlds"));
-
-    // Drive and record 16 simulated seconds, at four times real time.
-    let ns = troupe_tests::unique_namespace("record");
-    let mut rec = launch_in(&dir, &ns, "worlds/record.cfg", &["--speedup", "4"]);
-    let (router, _) = troupe_tests::launch_ports(&mut rec);
-    let session = troupe_tests::client_at(&router, &ns);
-    let odom = data_of(&session, Interface::Position2d);
-    troupe_tests::wait_live(&session, &["6665:log:0"]);
-    while next::<position2d::Data>(&odom, "r0's odometry").stamp < 16.0 {}
-    drop(odom);
-    assert!(rec.terminate().success(), "{}", rec.stderr());
+    // Drive and record 16 simulated seconds.
+    let dir = record("offline", "worlds/record.cfg", 16.0);
     let logged = read_log(&std::fs::read_to_string(dir.join("r0.log")).unwrap());
     let live: Vec<(f64, f64, f64)> = logged
         .iter()
@@ -743,18 +747,8 @@ fn a_recorded_run_localizes_offline_as_it_did_live() {
     assert!(status.success(), "map build: {err}");
     assert!(out.contains("scans used"), "{out}");
     // It says what it learnt of odometry's error: none, under gps.
-    let learnt = |what: &str| -> f64 {
-        let at = out
-            .find(what)
-            .unwrap_or_else(|| panic!("no `{what}` in {out}"));
-        out[at + what.len()..]
-            .split(|c: char| c == ',' || c.is_whitespace())
-            .next()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or_else(|| panic!("no number after `{what}` in {out}"))
-    };
     for what in ["distances x", "turns x"] {
-        let k = learnt(what);
+        let k = learnt(&out, what);
         assert!((k - 1.0).abs() < 0.02, "{what}{k}: {out}");
     }
     let text = std::fs::read_to_string(&yaml).unwrap();
