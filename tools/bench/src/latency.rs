@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use clap::Args;
-use troupe_msgs::{codec, keys, laser};
+use troupe_msgs::{camera, codec, keys, laser};
 use troupe_node::zenoh::{Session, Wait};
 use troupe_node::{Mode, ZenohArgs};
 
@@ -282,6 +282,24 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
         drop(again);
     }
     coded.sort();
+    // The same on a camera frame of the payload's size: bytes, which the
+    // codec copies in one piece (msgs/src/bytes.rs).
+    let frame = codec::encode(
+        &camera::Data {
+            image: vec![7; size],
+            ..Default::default()
+        },
+        0.0,
+    );
+    let mut framed = Vec::with_capacity(a.samples);
+    for _ in 0..a.samples.max(1) {
+        let t0 = Instant::now();
+        let image = codec::decode::<camera::Data>(&frame)?;
+        let again = std::hint::black_box(codec::encode(&image.msg, image.stamp));
+        framed.push(t0.elapsed());
+        drop(again);
+    }
+    framed.sort();
     pubsub.sort();
     getreply.sort();
     tcp.sort();
@@ -309,6 +327,7 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
     row(&mut out, "get/reply round trip", &getreply, false)?;
     row(&mut out, "a copy of the payload", &copies, false)?;
     row(&mut out, "decode + encode of it", &coded, false)?;
+    row(&mut out, "the same, a camera frame", &framed, false)?;
     writeln!(
         out,
         "  p50 against TCP: one sample {:.2}x a TCP one way, get/reply {:.2}x a TCP round trip (target <= 1.3x each)",
