@@ -71,6 +71,21 @@ fn scan_of_size(size: usize) -> laser::Scan {
     }
 }
 
+/// `n` times (sorted) what decoding `payload` as an `M` and encoding it
+/// again takes.
+fn recoded<M: troupe_msgs::Message>(payload: &[u8], n: usize) -> anyhow::Result<Vec<Duration>> {
+    let mut times = Vec::with_capacity(n);
+    for _ in 0..n.max(1) {
+        let t0 = Instant::now();
+        let got = codec::decode::<M>(payload)?;
+        let again = std::hint::black_box(codec::encode(&got.msg, got.stamp));
+        times.push(t0.elapsed());
+        drop(again);
+    }
+    times.sort();
+    Ok(times)
+}
+
 /// Zenoh's settings for its fastest path: the `lowlatency` transport
 /// writes each message from the caller's thread (the default queues it
 /// for the link's transmit task), which needs QoS off. Troupe's sessions
@@ -273,15 +288,7 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
     copies.sort();
     // What Troupe's codec costs on it: a sample decoded where it arrives
     // and encoded again for the echo, as the round trips above do twice.
-    let mut coded = Vec::with_capacity(a.samples);
-    for _ in 0..a.samples.max(1) {
-        let t0 = Instant::now();
-        let scan = codec::decode::<laser::Scan>(&payload)?;
-        let again = std::hint::black_box(codec::encode(&scan.msg, scan.stamp));
-        coded.push(t0.elapsed());
-        drop(again);
-    }
-    coded.sort();
+    let coded = recoded::<laser::Scan>(&payload, a.samples)?;
     // The same on a camera frame of the payload's size: bytes, which the
     // codec copies in one piece (msgs/src/bytes.rs).
     let frame = codec::encode(
@@ -291,15 +298,7 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
         },
         0.0,
     );
-    let mut framed = Vec::with_capacity(a.samples);
-    for _ in 0..a.samples.max(1) {
-        let t0 = Instant::now();
-        let image = codec::decode::<camera::Data>(&frame)?;
-        let again = std::hint::black_box(codec::encode(&image.msg, image.stamp));
-        framed.push(t0.elapsed());
-        drop(again);
-    }
-    framed.sort();
+    let framed = recoded::<camera::Data>(&frame, a.samples)?;
     pubsub.sort();
     getreply.sort();
     tcp.sort();
