@@ -71,19 +71,56 @@ fn scan_of_size(size: usize) -> laser::Scan {
     }
 }
 
-/// `n` times (sorted) what decoding `payload` as an `M` and encoding it
-/// again takes.
-fn recoded<M: troupe_msgs::Message>(payload: &[u8], n: usize) -> anyhow::Result<Vec<Duration>> {
+/// `n` times (sorted) what `f` takes.
+fn timed(n: usize, mut f: impl FnMut() -> anyhow::Result<()>) -> anyhow::Result<Vec<Duration>> {
     let mut times = Vec::with_capacity(n);
     for _ in 0..n.max(1) {
         let t0 = Instant::now();
-        let got = codec::decode::<M>(payload)?;
-        let again = std::hint::black_box(codec::encode(&got.msg, got.stamp));
+        f()?;
         times.push(t0.elapsed());
-        drop(again);
     }
     times.sort();
     Ok(times)
+}
+
+/// What decoding `payload` as an `M` and encoding it again takes, as the
+/// round trips do at each end.
+fn recode<M: troupe_msgs::Message>(payload: &[u8]) -> anyhow::Result<()> {
+    let got = codec::decode::<M>(payload)?;
+    std::hint::black_box(codec::encode(&got.msg, got.stamp));
+    Ok(())
+}
+
+/// The payload's costs in one process, beside the round trips: a copy
+/// (the least a sample handed over by value can cost), Troupe's codec on
+/// it, and the codec on a camera frame of its size (bytes, which it copies
+/// in one piece: msgs/src/bytes.rs). Rows of `n` sorted times.
+fn in_memory(msg: &laser::Scan, n: usize) -> anyhow::Result<[(&'static str, Vec<Duration>); 3]> {
+    let payload = codec::encode(msg, 0.0);
+    let frame = codec::encode(
+        &camera::Data {
+            image: vec![7; payload.len()],
+            ..Default::default()
+        },
+        0.0,
+    );
+    Ok([
+        (
+            "a copy of the payload",
+            timed(n, || {
+                std::hint::black_box(payload.to_vec());
+                Ok(())
+            })?,
+        ),
+        (
+            "decode + encode of it",
+            timed(n, || recode::<laser::Scan>(&payload))?,
+        ),
+        (
+            "the same, a camera frame",
+            timed(n, || recode::<camera::Data>(&frame))?,
+        ),
+    ])
 }
 
 /// Zenoh's settings for its fastest path: the `lowlatency` transport
@@ -275,30 +312,12 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
         None if size <= FASTEST_MAX => Some(fastest(a, &zr, &prefix, &pong_net, &msg, &mut echo)?),
         _ => None,
     };
-    // What the payload costs to copy once in memory: the least a sample
-    // handed from one process to another by value can cost.
-    let mut copies = Vec::with_capacity(a.samples);
-    let payload = codec::encode(&msg, 0.0);
-    for _ in 0..a.samples.max(1) {
-        let t0 = Instant::now();
-        let copy = std::hint::black_box(payload.to_vec());
-        copies.push(t0.elapsed());
-        drop(copy);
-    }
-    copies.sort();
-    // What Troupe's codec costs on it: a sample decoded where it arrives
-    // and encoded again for the echo, as the round trips above do twice.
-    let coded = recoded::<laser::Scan>(&payload, a.samples)?;
-    // The same on a camera frame of the payload's size: bytes, which the
-    // codec copies in one piece (msgs/src/bytes.rs).
-    let frame = codec::encode(
-        &camera::Data {
-            image: vec![7; size],
-            ..Default::default()
-        },
-        0.0,
-    );
-    let framed = recoded::<camera::Data>(&frame, a.samples)?;
+    // The payload's own costs do not depend on the transport: measured
+    // once, beside the plain run.
+    let memory = match keys {
+        None => Some(in_memory(&msg, a.samples)?),
+        Some(_) => None,
+    };
     pubsub.sort();
     getreply.sort();
     tcp.sort();
@@ -324,9 +343,9 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
     row(&mut out, "put/sub round trip", &pubsub, false)?;
     row(&mut out, "one sample (round trip/2)", &pubsub, true)?;
     row(&mut out, "get/reply round trip", &getreply, false)?;
-    row(&mut out, "a copy of the payload", &copies, false)?;
-    row(&mut out, "decode + encode of it", &coded, false)?;
-    row(&mut out, "the same, a camera frame", &framed, false)?;
+    for (name, times) in memory.iter().flatten() {
+        row(&mut out, name, times, false)?;
+    }
     writeln!(
         out,
         "  p50 against TCP: one sample {:.2}x a TCP one way, get/reply {:.2}x a TCP round trip (target <= 1.3x each)",

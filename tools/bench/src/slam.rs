@@ -387,19 +387,11 @@ struct Truth {
 
 impl Truth {
     fn of(rec: &Recording) -> Truth {
-        let mut poses = Vec::new();
+        let poses: Vec<(f64, Pose)> = rec.placed().iter().map(|&(p, s)| (s.t, p)).collect();
         let mut seen = std::collections::HashSet::new();
-        let mut walls = Vec::new();
-        for (pose, scan) in rec.placed() {
-            poses.push((scan.t, pose));
-            let place = pose.compose(&rec.sensor).applier();
-            for (r, a) in scan.hits().filter(|&(r, _)| r <= 30.0) {
-                let (x, y) = place(r * a.cos(), r * a.sin());
-                if seen.insert(((x / 0.025).floor() as i64, (y / 0.025).floor() as i64)) {
-                    walls.push((x, y));
-                }
-            }
-        }
+        let walls = hits(rec, |_, odom| odom)
+            .filter(|&(x, y)| seen.insert(cell(x, y, 0.025)))
+            .collect();
         let length = poses
             .windows(2)
             .map(|w| (w[1].1.x - w[0].1.x).hypot(w[1].1.y - w[0].1.y))
@@ -440,15 +432,28 @@ impl Truth {
 /// reference is the blurrier of the two, and agreement with it is bounded
 /// by its own error, not the builder's.
 fn filled(rec: &Recording, pose: impl Fn(f64, Pose) -> Pose) -> usize {
-    let mut cells = std::collections::HashSet::new();
-    for (odom, scan) in rec.placed() {
-        let place = pose(scan.t, odom).compose(&rec.sensor).applier();
-        for (r, a) in scan.hits().filter(|&(r, _)| r <= 30.0) {
-            let (x, y) = place(r * a.cos(), r * a.sin());
-            cells.insert(((x / 0.05).floor() as i64, (y / 0.05).floor() as i64));
-        }
-    }
+    let cells: std::collections::HashSet<_> =
+        hits(rec, pose).map(|(x, y)| cell(x, y, 0.05)).collect();
     cells.len()
+}
+
+/// Where the scans' hits (to 30 m) land, each scan placed where `pose`
+/// (of its time and odometric pose) says.
+fn hits<'a>(
+    rec: &'a Recording,
+    pose: impl Fn(f64, Pose) -> Pose + 'a,
+) -> impl Iterator<Item = (f64, f64)> + 'a {
+    rec.placed().into_iter().flat_map(move |(odom, scan)| {
+        let place = pose(scan.t, odom).compose(&rec.sensor).applier();
+        scan.hits()
+            .filter(|&(r, _)| r <= 30.0)
+            .map(move |(r, a)| place(r * a.cos(), r * a.sin()))
+    })
+}
+
+/// The cell of `size` metres (x, y) lies in.
+fn cell(x: f64, y: f64, size: f64) -> (i64, i64) {
+    ((x / size).floor() as i64, (y / size).floor() as i64)
 }
 
 /// `rec` with its odometry made wrong as a wrong wheel diameter and
