@@ -17,8 +17,9 @@ pub struct NodeArgs {
     /// The Player driver name (see `troupe drivers`).
     pub driver: String,
 
-    /// The driver's section, as JSON text or a path to a JSON file.
-    #[arg(long, value_name = "JSON|FILE")]
+    /// The driver's section, as JSON text, a path to a JSON file, or `-`
+    /// to read it from stdin.
+    #[arg(long, value_name = "JSON|FILE|-")]
     pub section: Option<String>,
 
     /// A device this driver provides (repeatable), e.g. `laser:0`.
@@ -64,6 +65,11 @@ pub fn run(a: NodeArgs, z: &ZenohArgs, catalog: &Catalog) -> anyhow::Result<()> 
         Some(s) => {
             let text = if s.trim_start().starts_with('{') {
                 s.clone()
+            } else if s == "-" {
+                let mut text = String::new();
+                std::io::Read::read_to_string(&mut std::io::stdin(), &mut text)
+                    .context("reading the section from stdin")?;
+                text
             } else {
                 std::fs::read_to_string(Path::new(s))
                     .with_context(|| format!("reading section file {s}"))?

@@ -700,12 +700,21 @@ fn report_missing(states: &[Arc<NodeState>], missing: &[Device], timeout: Durati
             .collect();
         if !m.is_empty() {
             tracing::error!(
-                "node `{}` has not brought up {} after {:.0} s (see its log lines above)",
+                "node `{}` has not brought up {} after {:.0} s (see its log lines above; --ready-timeout sets the wait)",
                 s.spec.name,
-                m.join(", "),
+                listed(&m, 8),
                 timeout.as_secs_f64()
             );
         }
+    }
+}
+
+/// The first `most` of `items`, and how many more: a world of 10,000
+/// robots is not named device by device.
+fn listed(items: &[String], most: usize) -> String {
+    match items.len().checked_sub(most) {
+        Some(more) if more > 0 => format!("{} and {more} more", items[..most].join(", ")),
+        _ => items.join(", "),
     }
 }
 
@@ -725,6 +734,10 @@ fn troupe_child(exe: &std::path::Path, net: &[String]) -> Command {
         .kill_on_drop(true);
     cmd
 }
+
+/// The longest section passed as an argument; longer ones go through the
+/// node's stdin (`--section -`). Linux takes at most 128 KiB in one.
+const SECTION_ARG_MAX: usize = 100_000;
 
 /// A viewer the launcher may serve beside the stack.
 #[derive(Debug, Clone, Copy)]
@@ -899,7 +912,15 @@ async fn run_node(st: Arc<NodeState>, mut ctx: NodeCtx) {
             return;
         }
         let mut cmd = troupe_child(&ctx.exe, &ctx.net);
-        cmd.args(["node", &st.spec.driver, "--section", &section_json]);
+        // A large section (a world of 10,000 robots' stage sections) goes
+        // through the node's stdin: one argument may hold 128 KiB.
+        let piped = section_json.len() > SECTION_ARG_MAX;
+        if piped {
+            cmd.args(["node", &st.spec.driver, "--section", "-"])
+                .stdin(Stdio::piped());
+        } else {
+            cmd.args(["node", &st.spec.driver, "--section", &section_json]);
+        }
         if ctx.sim_time {
             cmd.arg("--sim-time");
         }
@@ -913,6 +934,14 @@ async fn run_node(st: Arc<NodeState>, mut ctx: NodeCtx) {
                 return;
             }
         };
+        if let Some(mut stdin) = child.stdin.take() {
+            let text = section_json.clone();
+            tokio::spawn(async move {
+                use tokio::io::AsyncWriteExt;
+                // A node that dies first is reported by its exit.
+                let _ = stdin.write_all(text.as_bytes()).await;
+            });
+        }
         *st.pid.lock().unwrap_or_else(|p| p.into_inner()) = child.id();
         tracing::info!(
             "started node `{name}` ({}) pid {}",
@@ -1154,6 +1183,18 @@ mod tests {
             let want = (n.driver == "stage").then(|| serde_json::json!(5.0));
             assert_eq!(n.options.get("speedup").cloned(), want, "{}", n.name);
         }
+    }
+
+    #[test]
+    fn a_long_list_is_cut_with_a_count() {
+        let items: Vec<String> = (0..20).map(|i| format!("{}:ranger:0", 6665 + i)).collect();
+        assert_eq!(
+            super::listed(&items[..2], 8),
+            "6665:ranger:0, 6666:ranger:0"
+        );
+        let said = super::listed(&items, 8);
+        assert!(said.ends_with("6672:ranger:0 and 12 more"), "{said}");
+        assert_eq!(super::listed(&items[..8], 8).matches(", ").count(), 7);
     }
 
     #[test]

@@ -151,6 +151,29 @@ fn launch_runs_the_stack_restarts_a_killed_node_and_stops_cleanly() {
 }
 
 #[test]
+fn a_section_too_long_for_an_argument_reaches_its_node_on_stdin() {
+    // Linux takes at most 128 KiB in one argument; a world of thousands of
+    // robots makes a stage section longer than that.
+    let long = "x".repeat(150_000);
+    let cfg = temp_cfg(
+        "long-section",
+        &format!("driver ( name \"dummy\" provides [\"ranger:0\"] rate 20 note \"{long}\" )\n"),
+    );
+    let (launcher, endpoint, ns) = launch(&cfg, &["--no-bridge"]);
+    let s = client_at(&endpoint, &ns);
+    let tokens = token_events(&s);
+    until_up(&tokens, 1, Instant::now() + DEADLINE);
+    let nodes = children(launcher.child.id(), "dummy");
+    assert_eq!(nodes.len(), 1, "one dummy child");
+    let cmd = cmdline(nodes[0]);
+    assert!(
+        cmd.contains("node dummy --section - "),
+        "{}",
+        &cmd[..cmd.len().min(300)]
+    );
+}
+
+#[test]
 fn a_killed_launcher_takes_its_nodes_with_it() {
     let cfg = temp_cfg("orphans", STACK);
     // The bridge starts once the devices are up: leave it out so the count is exact.

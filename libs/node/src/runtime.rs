@@ -112,6 +112,11 @@ impl Stop {
         }
     }
 
+    /// Whether a stop was asked for.
+    fn requested(&self) -> bool {
+        self.1.load(Ordering::Acquire)
+    }
+
     fn attach(&self, inbox: Arc<Inbox>) {
         if self.1.load(Ordering::Acquire) {
             inbox.shutdown();
@@ -229,7 +234,18 @@ pub fn spawn<D: Driver>(
         clock_pub: None,
         ros2: None,
     };
-    for dev in &provided {
+    for (i, dev) in provided.iter().enumerate() {
+        // Declaring 20,000 devices takes minutes (ARCHITECTURE.md): a stop
+        // asked meanwhile is heard between two.
+        if stop.requested() {
+            return Err(NodeError::Driver(
+                format!(
+                    "stopped while declaring its devices ({i} of {})",
+                    provided.len()
+                )
+                .into(),
+            ));
+        }
         bus.provide(dev, &clock, D::NAME)?;
     }
     if let Some(ros) = &cfg.ros2 {

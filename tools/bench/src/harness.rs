@@ -125,7 +125,7 @@ pub(crate) fn p100_stack_with(
         .flat_map(|i| ["position2d:0", "ranger:0", "ranger:1"].map(|d| format!("{}:{d}", 6665 + i)))
         .map(|d| d.parse::<troupe_msgs::DevAddr>())
         .collect::<Result<Vec<_>, _>>()?;
-    let ready = troupe_inspect::ready(
+    let ready = troupe_inspect::wait_ready(
         troupe_inspect::ReadyArgs {
             devices,
             robot: 6665,
@@ -395,7 +395,12 @@ pub(crate) fn echo(to: &str, size: usize) -> anyhow::Result<()> {
 
 /// A field of `/proc/self/status` given in kB, in MB (0 where unknown).
 pub(crate) fn status_mb(field: &str) -> f64 {
-    std::fs::read_to_string("/proc/self/status")
+    status_mb_of("self", field)
+}
+
+/// A field of `/proc/PID/status` given in kB, in MB (0 where unknown).
+pub(crate) fn status_mb_of(pid: &str, field: &str) -> f64 {
+    std::fs::read_to_string(format!("/proc/{pid}/status"))
         .ok()
         .and_then(|s| {
             s.lines().find(|l| l.starts_with(field)).and_then(|l| {
@@ -405,4 +410,62 @@ pub(crate) fn status_mb(field: &str) -> f64 {
             })
         })
         .map_or(0.0, |kb| kb / 1024.0)
+}
+
+/// The latest simulated time on `sim/clock`, while this lives.
+pub(crate) struct SimClock {
+    /// The time's bits (an `f64`).
+    last: std::sync::Arc<AtomicU64>,
+    _sub: troupe_node::zenoh::pubsub::Subscriber<()>,
+}
+
+impl SimClock {
+    pub(crate) fn watch(session: &troupe_node::zenoh::Session) -> anyhow::Result<SimClock> {
+        use troupe_msgs::{codec, keys, sim};
+        use troupe_node::zenoh::Wait;
+        let last = std::sync::Arc::new(AtomicU64::new(0));
+        let l = last.clone();
+        let _sub = session
+            .declare_subscriber(keys::SIM_CLOCK)
+            .callback(move |s| {
+                if let Ok(c) = codec::decode::<sim::Clock>(&s.payload().to_bytes()) {
+                    l.store(c.msg.time.to_bits(), Ordering::Relaxed);
+                }
+            })
+            .wait()
+            .map_err(|e| anyhow::anyhow!("subscribing to sim/clock: {e}"))?;
+        Ok(SimClock { last, _sub })
+    }
+
+    /// Simulated seconds (0 before the first tick).
+    pub(crate) fn now(&self) -> f64 {
+        f64::from_bits(self.last.load(Ordering::Relaxed))
+    }
+}
+
+/// The simulator's speed over `secs` wall seconds: simulated seconds per
+/// wall second, read from `sim/clock`.
+pub(crate) fn sim_speed(session: &troupe_node::zenoh::Session, secs: f64) -> anyhow::Result<f64> {
+    let clock = SimClock::watch(session)?;
+    std::thread::sleep(Duration::from_millis(500));
+    let (s0, t0) = (clock.now(), Instant::now());
+    std::thread::sleep(Duration::from_secs_f64(secs));
+    Ok((clock.now() - s0) / t0.elapsed().as_secs_f64())
+}
+
+/// The simulator process the launcher `parent` started.
+pub(crate) fn stage_pid(parent: u32) -> Option<u32> {
+    std::fs::read_dir("/proc").ok()?.flatten().find_map(|e| {
+        let pid = e.file_name().to_string_lossy().parse::<u32>().ok()?;
+        let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+        let ppid = stat
+            .rsplit_once(") ")?
+            .1
+            .split(' ')
+            .nth(1)?
+            .parse::<u32>()
+            .ok()?;
+        let cmd = std::fs::read_to_string(format!("/proc/{pid}/cmdline")).ok()?;
+        (ppid == parent && cmd.contains("\0node\0stage\0")).then_some(pid)
+    })
 }

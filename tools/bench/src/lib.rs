@@ -19,6 +19,7 @@ mod raw_player;
 mod ray;
 pub mod record;
 pub mod ros2;
+pub mod scale;
 pub mod serial;
 pub mod slam;
 pub mod stage;
@@ -79,6 +80,10 @@ pub enum BenchCmd {
     #[command(after_help = "Example:
   cargo run --release -- bench ros2 --seconds 3 --bitmaps ../shared/compat/stage/bitmaps")]
     Ros2(ros2::Ros2BenchArgs),
+    /// Costs by fleet size: 0, 10, 100, 1,000 and 10,000 robots on one generated map: time until ready, `troupe list`, simulator speed, CPU and memory per robot, samples delivered and lost to a `robot/**` subscriber, the router's CPU.
+    #[command(after_help = "Example:
+  cargo run --release -- bench scale --robots 10,100,1000,10000 --seconds 10")]
+    Scale(scale::ScaleArgs),
     /// The echo side of `bench latency` (started by it).
     #[command(hide = true)]
     Pong {
@@ -126,5 +131,6 @@ pub fn run(cmd: BenchCmd, z: &ZenohArgs) -> anyhow::Result<()> {
         BenchCmd::Slam(a) => slam::run(&a),
         BenchCmd::Python(a) => python::run(&a),
         BenchCmd::Ros2(a) => ros2::run(&a),
+        BenchCmd::Scale(a) => scale::run(&a),
     }
 }

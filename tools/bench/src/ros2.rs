@@ -24,7 +24,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
-use troupe_msgs::{codec, keys, laser, sim};
+use troupe_msgs::{codec, keys, laser};
 use troupe_node::zenoh::{Session, Wait};
 use troupe_node::{Mode, ZenohArgs};
 use troupe_ros2::msg::{LaserScan, Odometry};
@@ -228,45 +228,6 @@ fn laser_rounds(a: &Ros2BenchArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The simulator's speed over `secs` wall seconds: simulated seconds per
-/// wall second, read from `sim/clock`.
-fn sim_speed(session: &Session, secs: f64) -> anyhow::Result<f64> {
-    let last = Arc::new(Mutex::new(0.0f64));
-    let l = last.clone();
-    let _sub = session
-        .declare_subscriber(keys::SIM_CLOCK)
-        .callback(move |s| {
-            if let Ok(c) = codec::decode::<sim::Clock>(&s.payload().to_bytes()) {
-                *l.lock().unwrap_or_else(|p| p.into_inner()) = c.msg.time;
-            }
-        })
-        .wait()
-        .map_err(|e| anyhow::anyhow!("subscribing to sim/clock: {e}"))?;
-    std::thread::sleep(Duration::from_millis(500));
-    let s0 = *last.lock().unwrap_or_else(|p| p.into_inner());
-    let t0 = Instant::now();
-    std::thread::sleep(Duration::from_secs_f64(secs));
-    let s1 = *last.lock().unwrap_or_else(|p| p.into_inner());
-    Ok((s1 - s0) / t0.elapsed().as_secs_f64())
-}
-
-/// The simulator process the launcher `parent` started.
-fn stage_pid(parent: u32) -> Option<u32> {
-    std::fs::read_dir("/proc").ok()?.flatten().find_map(|e| {
-        let pid = e.file_name().to_string_lossy().parse::<u32>().ok()?;
-        let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
-        let ppid = stat
-            .rsplit_once(") ")?
-            .1
-            .split(' ')
-            .nth(1)?
-            .parse::<u32>()
-            .ok()?;
-        let cmd = std::fs::read_to_string(format!("/proc/{pid}/cmdline")).ok()?;
-        (ppid == parent && cmd.contains("\0node\0stage\0")).then_some(pid)
-    })
-}
-
 /// Samples and sequence gaps per publisher (by GID), of ROS 2 samples.
 #[derive(Default)]
 struct Seqs {
@@ -349,9 +310,9 @@ fn fleet(
                 );
             }
         }
-        let stage = stage_pid(_launcher.0.id());
+        let stage = crate::harness::stage_pid(_launcher.0.id());
         let cpu0 = stage.map(crate::harness::cpu_of);
-        let speed = sim_speed(&session, a.fleet_seconds)?;
+        let speed = crate::harness::sim_speed(&session, a.fleet_seconds)?;
         let cpu = match (stage, cpu0) {
             (Some(p), Some(c0)) => {
                 (crate::harness::cpu_of(p) - c0).as_secs_f64() / (speed * a.fleet_seconds).max(1e-9)

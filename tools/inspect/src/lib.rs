@@ -189,6 +189,13 @@ pub fn list(a: ListArgs, z: &ZenohArgs) -> anyhow::Result<()> {
 /// `troupe ready`: succeeds once every device named is live; with none,
 /// once the router answers.
 pub fn ready(a: ReadyArgs, z: &ZenohArgs) -> anyhow::Result<()> {
+    let said = wait_ready(a, z)?;
+    writeln!(std::io::stdout().lock(), "{said}")?;
+    Ok(())
+}
+
+/// What `troupe ready` does, saying nothing: the line it would print.
+pub fn wait_ready(a: ReadyArgs, z: &ZenohArgs) -> anyhow::Result<String> {
     use std::collections::BTreeSet;
     let want: BTreeSet<troupe_msgs::Device> = a.devices.iter().map(|d| d.device(a.robot)).collect();
     let session = z.open(Mode::Client)?;
@@ -227,16 +234,11 @@ pub fn ready(a: ReadyArgs, z: &ZenohArgs) -> anyhow::Result<()> {
             .map(ToString::to_string)
             .collect();
         if missing.is_empty() {
-            let mut out = std::io::stdout().lock();
-            if want.is_empty() {
-                writeln!(out, "ready: the router answers")?;
-            } else {
-                match (want.len(), want.iter().next()) {
-                    (1, Some(d)) => writeln!(out, "ready: {d} is live")?,
-                    (n, _) => writeln!(out, "ready: all {n} devices live")?,
-                }
-            }
-            return Ok(());
+            return Ok(match (want.len(), want.iter().next()) {
+                (0, _) => "ready: the router answers".to_owned(),
+                (1, Some(d)) => format!("ready: {d} is live"),
+                (n, _) => format!("ready: all {n} devices live"),
+            });
         }
         match sub.recv_deadline(deadline) {
             Ok(Some(s)) => note(
@@ -245,8 +247,12 @@ pub fn ready(a: ReadyArgs, z: &ZenohArgs) -> anyhow::Result<()> {
                 s.kind() == troupe_node::zenoh::sample::SampleKind::Put,
             ),
             _ => anyhow::bail!(
-                "not live: {} ({} of {} devices live)",
-                missing.join(", "),
+                "not live: {}{} ({} of {} devices live)",
+                missing[..missing.len().min(8)].join(", "),
+                match missing.len().saturating_sub(8) {
+                    0 => String::new(),
+                    more => format!(" and {more} more"),
+                },
                 want.len() - missing.len(),
                 want.len()
             ),
