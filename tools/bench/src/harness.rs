@@ -45,17 +45,29 @@ define bench_pioneer position (
 )
 "#;
 
-/// A small robot with 12 IR rangers around it, wandering.
-const SMALL: &str = r#"
-define bench_ir sensor ( size [0.01 0.01 0.01] range [0 1.0] fov 10 samples 1 )
-define bench_irs ranger (
-  bench_ir( pose [0.1 0 0 0] ) bench_ir( pose [0.087 0.05 0 30] ) bench_ir( pose [0.05 0.087 0 60] )
-  bench_ir( pose [0 0.1 0 90] ) bench_ir( pose [-0.05 0.087 0 120] ) bench_ir( pose [-0.087 0.05 0 150] )
-  bench_ir( pose [-0.1 0 0 180] ) bench_ir( pose [-0.087 -0.05 0 -150] ) bench_ir( pose [-0.05 -0.087 0 -120] )
-  bench_ir( pose [0 -0.1 0 -90] ) bench_ir( pose [0.05 -0.087 0 -60] ) bench_ir( pose [0.087 -0.05 0 -30] )
-)
-define bench_small position ( size [0.2 0.2 0.1] drive "diff" ctrl "wander" bench_irs( pose [0 0 -0.05 0] ) )
-"#;
+/// The world-file definition of robot model `name`: `size` m across, with
+/// a ring of 12 one-beam IR rangers on its edge, one every 30° (`range`
+/// m, `fov`°), driven by controller `ctrl`.
+pub(crate) fn ir_ring_robot(name: &str, size: f64, range: f64, fov: f64, ctrl: &str) -> String {
+    let r = size / 2.0;
+    let sensors: Vec<String> = (0..12)
+        .map(|k| {
+            let deg = if k > 6 { 30 * k - 360 } else { 30 * k };
+            let a = f64::from(deg).to_radians();
+            format!(
+                "{name}_ir( pose [{:.3} {:.3} 0 {deg}] )",
+                r * a.cos(),
+                r * a.sin()
+            )
+        })
+        .collect();
+    format!(
+        "define {name}_ir sensor ( size [0.01 0.01 0.01] range [0 {range}] fov {fov} samples 1 )\n\
+         define {name}_ring ranger ( {} )\n\
+         define {name} position ( size [{size} {size} 0.1] drive \"diff\" ctrl \"{ctrl}\" {name}_ring( pose [0 0 -0.05 0] ) )\n",
+        sensors.join(" ")
+    )
+}
 
 /// The first line of `child`'s stdout that starts with `prefix`, less it.
 pub(crate) fn line_after(child: &mut std::process::Child, prefix: &str) -> anyhow::Result<String> {
@@ -192,7 +204,7 @@ pub(crate) fn bench_world(
             "100 Pioneers (16 sonars + 180-beam laser), 16 m cave, all moving"
         }
         "hospital1000" => {
-            w.push_str(SMALL);
+            w.push_str(&ir_ring_robot("bench_small", 0.2, 1.0, 10.0, "wander"));
             w.push_str(&map("hospital_section.png", "140 60"));
             for i in 0..1000 {
                 let (x, y) = (-68.0 + 3.4 * (i % 40) as f64, -28.0 + 2.3 * (i / 40) as f64);
@@ -468,4 +480,24 @@ pub(crate) fn stage_pid(parent: u32) -> Option<u32> {
         let cmd = std::fs::read_to_string(format!("/proc/{pid}/cmdline")).ok()?;
         (ppid == parent && cmd.contains("\0node\0stage\0")).then_some(pid)
     })
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn an_ir_ring_robot_has_twelve_sensors_on_its_edge() {
+        let w = super::ir_ring_robot("small", 0.2, 1.0, 10.0, "wander");
+        let poses: Vec<&str> = w
+            .split("small_ir( pose [")
+            .skip(1)
+            .map(|p| p.split(']').next().unwrap_or_default())
+            .collect();
+        assert_eq!(poses.len(), 12, "{w}");
+        assert_eq!(poses[0], "0.100 0.000 0 0");
+        assert_eq!(poses[1], "0.087 0.050 0 30");
+        assert_eq!(poses[6], "-0.100 0.000 0 180");
+        assert_eq!(poses[7], "-0.087 -0.050 0 -150");
+        assert!(w.contains("range [0 1] fov 10 samples 1"), "{w}");
+        assert!(w.contains("size [0.2 0.2 0.1] drive \"diff\" ctrl \"wander\""), "{w}");
+    }
 }

@@ -61,18 +61,6 @@ const PER_ROOM: u32 = 64;
 /// Bitmap pixels per metre.
 const PX_PER_M: f64 = 10.0;
 
-/// Our own swarmbot: 0.1 m, 12 IR rangers around it (2 m, 30°).
-const SWARMBOT: &str = r#"
-define scale_ir sensor ( size [0.01 0.01 0.01] range [0 2.0] fov 30 samples 1 )
-define scale_ring ranger (
-  scale_ir( pose [0.05 0 0 0] ) scale_ir( pose [0.043 0.025 0 30] ) scale_ir( pose [0.025 0.043 0 60] )
-  scale_ir( pose [0 0.05 0 90] ) scale_ir( pose [-0.025 0.043 0 120] ) scale_ir( pose [-0.043 0.025 0 150] )
-  scale_ir( pose [-0.05 0 0 180] ) scale_ir( pose [-0.043 -0.025 0 -150] ) scale_ir( pose [-0.025 -0.043 0 -120] )
-  scale_ir( pose [0 -0.05 0 -90] ) scale_ir( pose [0.025 -0.043 0 -60] ) scale_ir( pose [0.043 -0.025 0 -30] )
-)
-define scale_bot position ( size [0.1 0.1 0.1] drive "diff" ctrl "expand_swarm" scale_ring( pose [0 0 -0.05 0] ) )
-"#;
-
 /// Rooms along each side of a map that holds `robots`.
 fn rooms_for(robots: u32) -> u32 {
     let rooms = robots.div_ceil(PER_ROOM).max(1);
@@ -111,9 +99,12 @@ fn write_stack(
     a: &ScaleArgs,
 ) -> anyhow::Result<PathBuf> {
     let size = f64::from(side) * ROOM;
+    // Our own swarmbot: 0.1 m, 12 IR rangers around it (2 m, 30°).
     let mut w = format!(
-        "resolution 0.02\ninterval_sim {STEP_MS}\nthreads {}\nspeedup {}\n{SWARMBOT}",
-        a.threads, a.speedup
+        "resolution 0.02\ninterval_sim {STEP_MS}\nthreads {}\nspeedup {}\n{}",
+        a.threads,
+        a.speedup,
+        crate::harness::ir_ring_robot("scale_bot", 0.1, 2.0, 30.0, "expand_swarm")
     );
     w.push_str(&format!(
         "model ( name \"map\" bitmap \"{}\" size [{size} {size} 0.5] color \"gray30\" boundary 1 )\n",
