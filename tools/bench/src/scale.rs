@@ -25,11 +25,12 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use clap::Args;
-use troupe_msgs::{codec, keys};
+use troupe_client::{Client, SimulationProxy};
+use troupe_msgs::{codec, keys, simulation};
 use troupe_node::zenoh::Wait;
 use troupe_node::ZenohArgs;
 
-use crate::harness::{cpu_of, line_after, stage_pid, status_mb_of, Kid, SimClock};
+use crate::harness::{cpu_of, line_after, stage_pid, status_mb_of, Kid};
 
 /// Flags of `troupe bench scale`.
 #[derive(Debug, Args)]
@@ -250,6 +251,17 @@ fn rows(a: &ScaleArgs, dir: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The simulator's time, from a request: its reply is written when the
+/// simulator takes it, so data queued on the link does not make it late,
+/// as it makes `sim/clock`'s samples late (by seconds under 60,000
+/// samples/s).
+fn sim_time(sim: &SimulationProxy) -> anyhow::Result<f64> {
+    match sim.get_property("map", "time")? {
+        simulation::Value::Int(us) => Ok(us as f64 / 1e6),
+        other => anyhow::bail!("the simulator's time came as {other:?}"),
+    }
+}
+
 /// Launches `robots` robots, waits until all are ready, and measures.
 fn row(a: &ScaleArgs, dir: &Path, map: &Path, side: u32, robots: u32) -> anyhow::Result<Row> {
     let cfg = write_stack(dir, map, side, robots, a)?;
@@ -306,7 +318,7 @@ fn row(a: &ScaleArgs, dir: &Path, map: &Path, side: u32, robots: u32) -> anyhow:
     // A peer, as tools that stay up join (ARCHITECTURE.md): samples come
     // straight from the simulator, not through the router.
     let session = z.open_peer()?;
-    let clock = SimClock::watch(&session)?;
+    let sim = SimulationProxy::new(&Client::with_session(session.clone(), 6665), 0);
     let seen = Arc::new(Mutex::new((Seen::new(), 0u64)));
     let s = seen.clone();
     let _sub = session
@@ -357,14 +369,11 @@ fn row(a: &ScaleArgs, dir: &Path, map: &Path, side: u32, robots: u32) -> anyhow:
     let stage = stage_pid(launcher.0.id()).context("no simulator process under the launcher")?;
     let pid = launcher.0.id();
     *seen.lock().unwrap_or_else(|p| p.into_inner()) = (Seen::new(), 0);
-    let (sim0, cpu0, lcpu0, w0) = (clock.now(), cpu_of(stage), cpu_of(pid), Instant::now());
+    let (w0, cpu0, lcpu0) = (Instant::now(), cpu_of(stage), cpu_of(pid));
+    let sim0 = sim_time(&sim)?;
     std::thread::sleep(Duration::from_secs_f64(a.seconds));
-    let (sim1, cpu1, lcpu1, wall) = (
-        clock.now(),
-        cpu_of(stage),
-        cpu_of(pid),
-        w0.elapsed().as_secs_f64(),
-    );
+    let (wall, cpu1, lcpu1) = (w0.elapsed().as_secs_f64(), cpu_of(stage), cpu_of(pid));
+    let sim1 = sim_time(&sim)?;
     let (seen, undecodable) = std::mem::take(&mut *seen.lock().unwrap_or_else(|p| p.into_inner()));
     let sim_mb = status_mb_of(&stage.to_string(), "VmRSS:");
     drop(_sub);
