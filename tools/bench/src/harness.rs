@@ -498,6 +498,9 @@ mod tests {
         assert_eq!(poses[6], "-0.100 0.000 0 180");
         assert_eq!(poses[7], "-0.087 -0.050 0 -150");
         assert!(w.contains("range [0 1] fov 10 samples 1"), "{w}");
-        assert!(w.contains("size [0.2 0.2 0.1] drive \"diff\" ctrl \"wander\""), "{w}");
+        assert!(
+            w.contains("size [0.2 0.2 0.1] drive \"diff\" ctrl \"wander\""),
+            "{w}"
+        );
     }
 }

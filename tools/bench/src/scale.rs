@@ -318,7 +318,6 @@ fn row(a: &ScaleArgs, dir: &Path, map: &Path, side: u32, robots: u32) -> anyhow:
     // A peer, as tools that stay up join (ARCHITECTURE.md): samples come
     // straight from the simulator, not through the router.
     let session = z.open_peer()?;
-    let sim = SimulationProxy::new(&Client::with_session(session.clone(), 6665), 0);
     let seen = Arc::new(Mutex::new((Seen::new(), 0u64)));
     let s = seen.clone();
     let _sub = session
@@ -366,6 +365,19 @@ fn row(a: &ScaleArgs, dir: &Path, map: &Path, side: u32, robots: u32) -> anyhow:
         std::thread::sleep(Duration::from_millis(100));
     }
     let flowing = t2.elapsed().as_secs_f64();
+    // The simulation device, once this session sees it: with no robots,
+    // nothing above waited for the session to join.
+    let simulation = "6665:simulation:0".parse::<troupe_msgs::DevAddr>()?;
+    let live = session
+        .liveliness()
+        .declare_subscriber(keys::token_any(&simulation.device(6665)))
+        .history(true)
+        .wait()
+        .map_err(|e| anyhow::anyhow!("watching the simulation device: {e}"))?;
+    live.recv_timeout(Duration::from_secs_f64(a.ready_within))
+        .map_err(|e| anyhow::anyhow!("{e}"))?
+        .context("this session never saw the simulation device")?;
+    let sim = SimulationProxy::new(&Client::with_session(session.clone(), 6665), 0);
     let stage = stage_pid(launcher.0.id()).context("no simulator process under the launcher")?;
     let pid = launcher.0.id();
     *seen.lock().unwrap_or_else(|p| p.into_inner()) = (Seen::new(), 0);
