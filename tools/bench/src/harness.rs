@@ -115,24 +115,7 @@ pub(crate) fn p100_stack_with(
         ));
     }
     std::fs::write(dir.join("p100.cfg"), cfg)?;
-    let mut launcher = Command::new(std::env::current_exe()?)
-        .args(["--no-multicast", "launch"])
-        .arg(dir.join("p100.cfg"))
-        .args(["--no-bridge", "--listen", "tcp/127.0.0.1:0"])
-        .args(extra)
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::null())
-        .spawn()?;
-    let router = line_after(&mut launcher, "troupe launch: router listening on ")?
-        .split_whitespace()
-        .next()
-        .unwrap_or_default()
-        .to_owned();
-    let z = ZenohArgs {
-        connect: vec![router.clone()],
-        no_multicast: true,
-        ..Default::default()
-    };
+    let (mut launcher, router, z) = launched(&dir.join("p100.cfg"), extra)?;
     let devices = (0..100u32)
         .flat_map(|i| ["position2d:0", "ranger:0", "ranger:1"].map(|d| format!("{}:{d}", 6665 + i)))
         .map(|d| d.parse::<troupe_msgs::DevAddr>())
@@ -151,6 +134,35 @@ pub(crate) fn p100_stack_with(
         return Err(e);
     }
     Ok((launcher, router))
+}
+
+/// `troupe launch CFG EXTRA…` with an embedded router on an ephemeral
+/// loopback port and no bridge: the launcher, the router's endpoint, and
+/// the flags that join it.
+pub(crate) fn launched(
+    cfg: &std::path::Path,
+    extra: &[&str],
+) -> anyhow::Result<(std::process::Child, String, ZenohArgs)> {
+    let mut launcher = Command::new(std::env::current_exe()?)
+        .args(["--no-multicast", "launch"])
+        .arg(cfg)
+        .args(["--no-bridge", "--listen", "tcp/127.0.0.1:0"])
+        .args(extra)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .context("starting `troupe launch`")?;
+    let router = line_after(&mut launcher, "troupe launch: router listening on ")?
+        .split_whitespace()
+        .next()
+        .unwrap_or_default()
+        .to_owned();
+    let z = ZenohArgs {
+        connect: vec![router.clone()],
+        no_multicast: true,
+        ..Default::default()
+    };
+    Ok((launcher, router, z))
 }
 
 /// Stage's sample bitmaps (cave.png, …): `given`, or where the repository

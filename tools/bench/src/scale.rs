@@ -28,9 +28,8 @@ use clap::Args;
 use troupe_client::{Client, SimulationProxy};
 use troupe_msgs::{codec, keys, simulation};
 use troupe_node::zenoh::Wait;
-use troupe_node::ZenohArgs;
 
-use crate::harness::{cpu_of, line_after, stage_pid, status_mb_of, Kid};
+use crate::harness::{cpu_of, launched, stage_pid, status_mb_of, Kid};
 
 /// Flags of `troupe bench scale`.
 #[derive(Debug, Args)]
@@ -266,24 +265,8 @@ fn sim_time(sim: &SimulationProxy) -> anyhow::Result<f64> {
 fn row(a: &ScaleArgs, dir: &Path, map: &Path, side: u32, robots: u32) -> anyhow::Result<Row> {
     let cfg = write_stack(dir, map, side, robots, a)?;
     let t0 = Instant::now();
-    let mut launcher = Kid(Command::new(std::env::current_exe()?)
-        .args(["--no-multicast", "launch"])
-        .arg(&cfg)
-        .args(["--no-bridge", "--listen", "tcp/127.0.0.1:0"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .context("starting `troupe launch`")?);
-    let router = line_after(&mut launcher.0, "troupe launch: router listening on ")?
-        .split_whitespace()
-        .next()
-        .unwrap_or_default()
-        .to_owned();
-    let z = ZenohArgs {
-        connect: vec![router.clone()],
-        no_multicast: true,
-        ..Default::default()
-    };
+    let (launcher, router, z) = launched(&cfg, &[])?;
+    let launcher = Kid(launcher);
     let mut devices = vec!["simulation:0".parse::<troupe_msgs::DevAddr>()?];
     for i in 0..robots {
         for d in ["position2d:0", "ranger:0"] {
