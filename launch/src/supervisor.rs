@@ -711,7 +711,7 @@ fn report_missing(states: &[Arc<NodeState>], missing: &[Device], timeout: Durati
 
 /// The first `most` of `items`, and how many more: a world of 10,000
 /// robots is not named device by device.
-fn listed(items: &[String], most: usize) -> String {
+pub fn listed(items: &[String], most: usize) -> String {
     match items.len().checked_sub(most) {
         Some(more) if more > 0 => format!("{} and {more} more", items[..most].join(", ")),
         _ => items.join(", "),

@@ -40,7 +40,6 @@ pub fn wait_live(session: &Session, dev: &Device, timeout: Duration) -> Result<(
         .history(true)
         .wait()
         .map_err(z(|| format!("watching liveliness of {dev}")))?;
-    tracing::info!("waiting for required device {dev}");
     let deadline = Instant::now() + timeout;
     loop {
         match sub.recv_deadline(deadline) {

@@ -687,6 +687,7 @@ fn declare_pub(
 /// do, and makes its `OccupancyGrid`.
 fn fetch_grid(session: &Session, dev: &Device) -> Result<Vec<u8>> {
     // The map answers once it is ready (its token is up).
+    tracing::info!("waiting for map {dev}, to show it to ROS 2");
     crate::net::wait_live(session, dev, Duration::from_secs(3600))?;
     let ask = |name: &str, payload: Vec<u8>| -> Result<Vec<u8>> {
         let key = keys::req(dev, name);

@@ -216,6 +216,7 @@ pub fn spawn<D: Driver>(
     };
 
     for slot in section.required() {
+        tracing::info!("waiting for required device {}", slot.device);
         wait_live(&session, &slot.device, cfg.requires_timeout)?;
     }
 

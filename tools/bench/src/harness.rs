@@ -436,47 +436,6 @@ pub(crate) fn status_mb_of(pid: &str, field: &str) -> f64 {
         .map_or(0.0, |kb| kb / 1024.0)
 }
 
-/// The latest simulated time on `sim/clock`, while this lives.
-pub(crate) struct SimClock {
-    /// The time's bits (an `f64`).
-    last: std::sync::Arc<AtomicU64>,
-    _sub: troupe_node::zenoh::pubsub::Subscriber<()>,
-}
-
-impl SimClock {
-    pub(crate) fn watch(session: &troupe_node::zenoh::Session) -> anyhow::Result<SimClock> {
-        use troupe_msgs::{codec, keys, sim};
-        use troupe_node::zenoh::Wait;
-        let last = std::sync::Arc::new(AtomicU64::new(0));
-        let l = last.clone();
-        let _sub = session
-            .declare_subscriber(keys::SIM_CLOCK)
-            .callback(move |s| {
-                if let Ok(c) = codec::decode::<sim::Clock>(&s.payload().to_bytes()) {
-                    l.store(c.msg.time.to_bits(), Ordering::Relaxed);
-                }
-            })
-            .wait()
-            .map_err(|e| anyhow::anyhow!("subscribing to sim/clock: {e}"))?;
-        Ok(SimClock { last, _sub })
-    }
-
-    /// Simulated seconds (0 before the first tick).
-    pub(crate) fn now(&self) -> f64 {
-        f64::from_bits(self.last.load(Ordering::Relaxed))
-    }
-}
-
-/// The simulator's speed over `secs` wall seconds: simulated seconds per
-/// wall second, read from `sim/clock`.
-pub(crate) fn sim_speed(session: &troupe_node::zenoh::Session, secs: f64) -> anyhow::Result<f64> {
-    let clock = SimClock::watch(session)?;
-    std::thread::sleep(Duration::from_millis(500));
-    let (s0, t0) = (clock.now(), Instant::now());
-    std::thread::sleep(Duration::from_secs_f64(secs));
-    Ok((clock.now() - s0) / t0.elapsed().as_secs_f64())
-}
-
 /// The simulator process the launcher `parent` started.
 pub(crate) fn stage_pid(parent: u32) -> Option<u32> {
     std::fs::read_dir("/proc").ok()?.flatten().find_map(|e| {

@@ -24,7 +24,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
-use troupe_msgs::{codec, keys, laser};
+use troupe_msgs::{codec, keys, laser, sim};
 use troupe_node::zenoh::{Session, Wait};
 use troupe_node::{Mode, ZenohArgs};
 use troupe_ros2::msg::{LaserScan, Odometry};
@@ -228,6 +228,28 @@ fn laser_rounds(a: &Ros2BenchArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The simulator's speed over `secs` wall seconds: simulated seconds per
+/// wall second, read from `sim/clock`.
+fn sim_speed(session: &Session, secs: f64) -> anyhow::Result<f64> {
+    let last = Arc::new(Mutex::new(0.0f64));
+    let l = last.clone();
+    let _sub = session
+        .declare_subscriber(keys::SIM_CLOCK)
+        .callback(move |s| {
+            if let Ok(c) = codec::decode::<sim::Clock>(&s.payload().to_bytes()) {
+                *l.lock().unwrap_or_else(|p| p.into_inner()) = c.msg.time;
+            }
+        })
+        .wait()
+        .map_err(|e| anyhow::anyhow!("subscribing to sim/clock: {e}"))?;
+    std::thread::sleep(Duration::from_millis(500));
+    let s0 = *last.lock().unwrap_or_else(|p| p.into_inner());
+    let t0 = Instant::now();
+    std::thread::sleep(Duration::from_secs_f64(secs));
+    let s1 = *last.lock().unwrap_or_else(|p| p.into_inner());
+    Ok((s1 - s0) / t0.elapsed().as_secs_f64())
+}
+
 /// Samples and sequence gaps per publisher (by GID), of ROS 2 samples.
 #[derive(Default)]
 struct Seqs {
@@ -312,7 +334,7 @@ fn fleet(
         }
         let stage = crate::harness::stage_pid(_launcher.0.id());
         let cpu0 = stage.map(crate::harness::cpu_of);
-        let speed = crate::harness::sim_speed(&session, a.fleet_seconds)?;
+        let speed = sim_speed(&session, a.fleet_seconds)?;
         let cpu = match (stage, cpu0) {
             (Some(p), Some(c0)) => {
                 (crate::harness::cpu_of(p) - c0).as_secs_f64() / (speed * a.fleet_seconds).max(1e-9)

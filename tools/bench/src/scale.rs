@@ -64,7 +64,7 @@ const PX_PER_M: f64 = 10.0;
 /// Rooms along each side of a map that holds `robots`.
 fn rooms_for(robots: u32) -> u32 {
     let rooms = robots.div_ceil(PER_ROOM).max(1);
-    (f64::from(rooms).sqrt().ceil() as u32).max(1)
+    f64::from(rooms).sqrt().ceil() as u32
 }
 
 /// Draws a map of `side` x `side` rooms into `path`: white floor, black
@@ -73,12 +73,12 @@ fn draw_map(side: u32, path: &Path) -> anyhow::Result<()> {
     let room_px = (ROOM * PX_PER_M) as u32;
     let n = side * room_px;
     let (wall, door) = (2, (2.0 * PX_PER_M) as u32);
+    let mid = |i: u32| (room_px - door) / 2 <= i && i < (room_px + door) / 2;
     let mut img = image::GrayImage::from_pixel(n, n, image::Luma([255]));
     for y in 0..n {
         for x in 0..n {
             let (ix, iy) = (x % room_px, y % room_px);
             let outer = x < wall || y < wall || x >= n - wall || y >= n - wall;
-            let mid = |i: u32| (room_px - door) / 2 <= i && i < (room_px + door) / 2;
             let v_wall = ix < wall && !mid(iy);
             let h_wall = iy < wall && !mid(ix);
             if outer || v_wall || h_wall {
@@ -317,15 +317,15 @@ fn row(a: &ScaleArgs, dir: &Path, map: &Path, side: u32, robots: u32) -> anyhow:
                 *undecodable += 1;
                 return;
             };
-            if !seen.contains_key(key) {
-                seen.insert(key.to_owned(), Vec::new());
-            }
-            let Some(streams) = seen.get_mut(key) else {
-                return;
-            };
-            match streams.iter_mut().find(|(s, _)| s == schema) {
-                Some((_, e)) => e.take(stamp),
-                None => streams.push((schema.to_owned(), Stamps(stamp, stamp, 1))),
+            let first = || (schema.to_owned(), Stamps(stamp, stamp, 1));
+            match seen.get_mut(key) {
+                None => {
+                    seen.insert(key.to_owned(), vec![first()]);
+                }
+                Some(streams) => match streams.iter_mut().find(|(s, _)| s == schema) {
+                    Some((_, e)) => e.take(stamp),
+                    None => streams.push(first()),
+                },
             }
         })
         .wait()
@@ -351,15 +351,11 @@ fn row(a: &ScaleArgs, dir: &Path, map: &Path, side: u32, robots: u32) -> anyhow:
     // The simulation device, once this session sees it: with no robots,
     // nothing above waited for the session to join.
     let simulation = "6665:simulation:0".parse::<troupe_msgs::DevAddr>()?;
-    let live = session
-        .liveliness()
-        .declare_subscriber(keys::token_any(&simulation.device(6665)))
-        .history(true)
-        .wait()
-        .map_err(|e| anyhow::anyhow!("watching the simulation device: {e}"))?;
-    live.recv_timeout(Duration::from_secs_f64(a.ready_within))
-        .map_err(|e| anyhow::anyhow!("{e}"))?
-        .context("this session never saw the simulation device")?;
+    troupe_node::wait_live(
+        &session,
+        &simulation.device(6665),
+        Duration::from_secs_f64(a.ready_within),
+    )?;
     let sim = SimulationProxy::new(&Client::with_session(session.clone(), 6665), 0);
     let stage = stage_pid(launcher.0.id()).context("no simulator process under the launcher")?;
     let pid = launcher.0.id();

@@ -247,12 +247,8 @@ pub fn wait_ready(a: ReadyArgs, z: &ZenohArgs) -> anyhow::Result<String> {
                 s.kind() == troupe_node::zenoh::sample::SampleKind::Put,
             ),
             _ => anyhow::bail!(
-                "not live: {}{} ({} of {} devices live)",
-                missing[..missing.len().min(8)].join(", "),
-                match missing.len().saturating_sub(8) {
-                    0 => String::new(),
-                    more => format!(" and {more} more"),
-                },
+                "not live: {} ({} of {} devices live)",
+                troupe_launch::supervisor::listed(&missing, 8),
                 want.len() - missing.len(),
                 want.len()
             ),
