@@ -663,3 +663,53 @@ fn a_launch_s_nodes_link_to_each_other_and_to_the_router() {
     }
     assert!(launcher.terminate().success(), "{}", launcher.stderr());
 }
+
+/// A camera frame (Player's dummy: 320 x 240 RGB, 230 KB) from a driver
+/// process reaches a subscriber in another process through shared memory,
+/// Zenoh's buffer handed over, not copied through a socket; with
+/// `--no-shm`, through the network (ARCHITECTURE.md, "Big samples"). (The
+/// first frames of a process may go through the network while Zenoh makes
+/// its pool.)
+#[test]
+fn a_big_sample_reaches_another_process_through_shared_memory_unless_told_not_to() {
+    use troupe_msgs::{camera, codec, keys, Device, Interface};
+    use troupe_node::zenoh::Wait;
+    let cfg = temp_cfg(
+        "shm",
+        "driver ( name \"dummy\" provides [\"camera:0\"] rate 20 )\n",
+    );
+    for (extra, shared) in [(&[][..], true), (&["--no-shm"][..], false)] {
+        let (mut launcher, endpoint, ns) = launch(&cfg, extra);
+        let session = client_at(&endpoint, &ns);
+        let frames = session
+            .declare_subscriber(keys::data(&Device::new(6665, Interface::Camera, 0)))
+            .wait()
+            .unwrap();
+        let next = || {
+            let s = frames
+                .recv_timeout(DEADLINE)
+                .unwrap()
+                .expect("a frame within the deadline");
+            let frame = codec::decode::<camera::Data>(&s.payload().to_bytes()).unwrap();
+            assert_eq!((frame.msg.width, frame.msg.height), (320, 240));
+            assert_eq!(frame.msg.image.len(), 320 * 240 * 3);
+            s.payload().as_shm().is_some()
+        };
+        if shared {
+            let deadline = Instant::now() + DEADLINE;
+            while !next() {
+                assert!(Instant::now() < deadline, "no frame through shared memory");
+            }
+        } else {
+            for _ in 0..10 {
+                assert!(
+                    !next(),
+                    "launched with --no-shm: a frame through shared memory"
+                );
+            }
+        }
+        drop(frames);
+        drop(session);
+        assert!(launcher.terminate().success(), "{}", launcher.stderr());
+    }
+}

@@ -227,6 +227,7 @@ fn the_view_draws_the_world_where_the_simulator_has_it() {
             && f["readings"]["6665:ranger:0"].is_object()
             && f["readings"]["6665:position2d:0"].is_object()
             && f["poses"]["6665:simulation:0"].is_object()
+            && f["worlds"] == 1
     });
     let world = json(&base, "/api/world");
     // The view watches its session's namespace, and may command.
@@ -447,6 +448,7 @@ fn the_view_gives_goals_and_sets_poses() {
             .is_some_and(|p| !p.is_empty())
             && f["nav"]["6665:localize:0"]["hypoths"].is_array()
             && f["nav"]["6665:planner:0"]["kind"] == "planner"
+            && f["worlds"] == 1
     });
     let world = json(&base, "/api/world");
     let r0 = world["worlds"][0]["models"]
@@ -743,9 +745,10 @@ fn one_view_watches_several_namespaces() {
     // metre off.
     let r0_at = |ns: usize, x: &dyn Fn(f64) -> bool| {
         frame_of(&base, &format!("/api/stream?ns={ns}"), |f| {
-            f["poses"]["6665:simulation:0"]["1"][0]
-                .as_f64()
-                .is_some_and(x)
+            f["worlds"] == 1
+                && f["poses"]["6665:simulation:0"]["1"][0]
+                    .as_f64()
+                    .is_some_and(x)
         })
     };
     r0_at(0, &|x| x == 0.0);

@@ -108,6 +108,13 @@ pub struct ZenohArgs {
     /// four times per lease.
     #[arg(long, value_name = "SECS", global = true, value_parser = crate::args::seconds)]
     pub lease: Option<f64>,
+
+    /// Send every sample through the network, even to a process on this
+    /// host. By default a sample of 3 KB or more (a map, a camera frame)
+    /// goes to a process on the same host through shared memory, a 1 MB
+    /// frame in a third of the time (ARCHITECTURE.md, "Big samples").
+    #[arg(long, global = true)]
+    pub no_shm: bool,
 }
 
 /// How often `--reconnect` retries: Zenoh's `connect/retry`, in milliseconds.
@@ -226,6 +233,9 @@ impl ZenohArgs {
             )?;
             set(&mut c, "connect/exit_on_failure", "false".into())?;
             set(&mut c, "connect/retry", RECONNECT_RETRY.into())?;
+        }
+        if self.no_shm {
+            set(&mut c, "transport/shared_memory/enabled", "false".into())?;
         }
         if let Some(secs) = self.lease {
             if !(secs.is_finite() && (0.1..=3600.0).contains(&secs)) {
@@ -358,6 +368,9 @@ impl ZenohArgs {
         }
         if let Some(l) = self.lease {
             v.extend(["--lease".to_owned(), l.to_string()]);
+        }
+        if self.no_shm {
+            v.push("--no-shm".to_owned());
         }
         v
     }
@@ -773,6 +786,7 @@ pub fn init_logging(filter: Option<&str>) {
             "zenoh_link_tls",
             "zenoh_link_commons",
             "zenoh_config",
+            "zenoh_shm",
         ];
         let quiet: Vec<String> = crates
             .iter()
@@ -905,6 +919,25 @@ mod tests {
             !at.is_empty() && at.iter().all(|l| l.starts_with("tcp/127.0.0.1:")),
             "{at:?}"
         );
+    }
+
+    #[test]
+    fn no_shm_turns_shared_memory_off_here_and_in_the_children() {
+        let on = ZenohArgs::default().config(Mode::Peer).unwrap();
+        assert_eq!(
+            on.get_json("transport/shared_memory/enabled").unwrap(),
+            "true"
+        );
+        let off = ZenohArgs {
+            no_shm: true,
+            ..Default::default()
+        };
+        let c = off.config(Mode::Peer).unwrap();
+        assert_eq!(
+            c.get_json("transport/shared_memory/enabled").unwrap(),
+            "false"
+        );
+        assert!(off.to_child_args().contains(&"--no-shm".to_owned()));
     }
 
     #[test]

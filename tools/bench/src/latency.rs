@@ -17,30 +17,73 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use clap::Args;
-use troupe_msgs::{camera, codec, keys, laser};
+use troupe_msgs::{camera, codec, keys, laser, Message};
 use troupe_node::zenoh::{Session, Wait};
 use troupe_node::{Mode, ZenohArgs};
 
 use crate::harness::{percentile, us};
 
-/// `troupe bench latency`: plain, and with `--secure` over TLS too.
+/// `troupe bench latency`: plain, over shared memory too when the sample
+/// is large enough to take it, beside a 64-byte sample when it is larger,
+/// and with `--secure` over TLS too.
 pub fn run(a: &LatencyArgs) -> anyhow::Result<()> {
-    latency(a, None)?;
+    let size = Msg::of(a.carry, a.size).encode(0.0).len();
+    let network = latency(a, None, false)?;
+    let shm = match size >= SHM_FROM {
+        true => Some(latency(a, None, true)?),
+        false => None,
+    };
+    if size > SMALL {
+        let small = LatencyArgs {
+            size: SMALL,
+            carry: Carry::Scan,
+            secure: false,
+            ..*a
+        };
+        let small_size = Msg::of(Carry::Scan, SMALL).encode(0.0).len();
+        let small = latency(&small, None, false)?;
+        let x = |d: Duration| d.as_secs_f64() / small.as_secs_f64().max(1e-9);
+        let mut line = format!(
+            "troupe bench latency: {size} bytes against {small_size}, same run: one sample one way p50 {} over the network ({:.1}x)",
+            us(network),
+            x(network)
+        );
+        if let Some(shm) = shm {
+            line += &format!(", {} over shared memory ({:.1}x)", us(shm), x(shm));
+        }
+        writeln!(
+            std::io::stdout().lock(),
+            "{line}; {small_size} bytes {} (target: 1 MB <= 3x)",
+            us(small)
+        )?;
+    }
     if a.secure {
         let dir = std::env::temp_dir().join(format!("troupe-bench-keys-{}", std::process::id()));
-        let r = latency(a, Some(&dir));
+        let r = latency(a, Some(&dir), false);
         let _ = std::fs::remove_dir_all(&dir);
         r?;
     }
     Ok(())
 }
 
+/// The smallest sample Zenoh puts in shared memory (its
+/// `transport_optimization/message_size_threshold`).
+const SHM_FROM: usize = 3072;
+
+/// The small sample a large one is compared with.
+const SMALL: usize = 64;
+
 /// Flags of `troupe bench latency`.
-#[derive(Debug, Args)]
+#[derive(Debug, Clone, Copy, Args)]
 pub struct LatencyArgs {
-    /// Payload size in bytes (a laser scan with as many beams as fit).
+    /// Payload size in bytes (a laser scan with as many beams as fit, or
+    /// with `--carry camera` an RGB image of as many bytes).
     #[arg(long, default_value_t = 1500)]
     pub size: usize,
+    /// What the samples carry: a laser scan (numbers, decoded one by one)
+    /// or a camera frame (bytes, copied in one piece).
+    #[arg(long, value_enum, default_value_t = Carry::Scan)]
+    pub carry: Carry,
     /// Timed round trips of each kind.
     #[arg(long, default_value_t = 5000)]
     pub samples: usize,
@@ -61,13 +104,68 @@ fn bench_keys(prefix: &str) -> [String; 4] {
 /// A robot port no stack uses, whose keys the secure bench runs under.
 const SECURE_ROBOT: u32 = 65_000;
 
-/// A scan whose encoded payload is about `size` bytes.
-fn scan_of_size(size: usize) -> laser::Scan {
-    let base = codec::encode(&laser::Scan::default(), 0.0).len();
-    let beams = size.saturating_sub(base + 2) / 4;
-    laser::Scan {
-        ranges: vec![4.2; beams],
-        ..Default::default()
+/// What the bench's samples carry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Carry {
+    /// `laser/scan@1`: ranges as numbers.
+    Scan,
+    /// `camera/data@1`: an RGB image, raw.
+    Camera,
+}
+
+/// A sample the bench sends: one of [`Carry`]'s messages.
+#[derive(Debug, Clone)]
+enum Msg {
+    Scan(laser::Scan),
+    Camera(camera::Data),
+}
+
+impl Msg {
+    /// A message of `carry` whose payload is about `size` bytes.
+    fn of(carry: Carry, size: usize) -> Msg {
+        match carry {
+            Carry::Scan => {
+                let base = codec::encode(&laser::Scan::default(), 0.0).len();
+                Msg::Scan(laser::Scan {
+                    ranges: vec![4.2; size.saturating_sub(base + 2) / 4],
+                    ..Default::default()
+                })
+            }
+            Carry::Camera => {
+                let base = codec::encode(&camera::Data::default(), 0.0).len();
+                let bytes = size.saturating_sub(base + 3);
+                Msg::Camera(camera::Data {
+                    width: u32::try_from(bytes / 3).unwrap_or(u32::MAX),
+                    height: 1,
+                    bpp: 24,
+                    format: camera::FORMAT_RGB888,
+                    image: vec![7; bytes],
+                    ..Default::default()
+                })
+            }
+        }
+    }
+
+    fn encode(&self, stamp: f64) -> Vec<u8> {
+        match self {
+            Msg::Scan(m) => codec::encode(m, stamp),
+            Msg::Camera(m) => codec::encode(m, stamp),
+        }
+    }
+
+    /// Decodes a payload as the message its schema names, as a node
+    /// decodes what it takes: its stamp and the message.
+    fn decode(payload: &[u8]) -> anyhow::Result<(f64, Msg)> {
+        Ok(match codec::schema_of(payload)? {
+            camera::Data::SCHEMA => {
+                let m = codec::decode::<camera::Data>(payload)?;
+                (m.stamp, Msg::Camera(m.msg))
+            }
+            _ => {
+                let m = codec::decode::<laser::Scan>(payload)?;
+                (m.stamp, Msg::Scan(m.msg))
+            }
+        })
     }
 }
 
@@ -83,28 +181,22 @@ fn timed(n: usize, mut f: impl FnMut() -> anyhow::Result<()>) -> anyhow::Result<
     Ok(times)
 }
 
-/// What decoding `payload` as an `M` and encoding it again takes, as the
-/// round trips do at each end.
-fn recode<M: troupe_msgs::Message>(payload: &[u8]) -> anyhow::Result<()> {
-    let got = codec::decode::<M>(payload)?;
-    std::hint::black_box(codec::encode(&got.msg, got.stamp));
+/// What decoding `payload` and encoding it again takes, as the round
+/// trips do at each end.
+fn recode(payload: &[u8]) -> anyhow::Result<()> {
+    let (stamp, msg) = Msg::decode(payload)?;
+    std::hint::black_box(msg.encode(stamp));
     Ok(())
 }
 
 /// The payload's costs in one process, beside the round trips: a copy
 /// (the least a sample handed over by value can cost), Troupe's codec on
-/// it, and the codec on a camera frame of its size (bytes, which it copies
-/// in one piece: msgs/src/bytes.rs). Rows of `n` sorted times.
-fn in_memory(msg: &laser::Scan, n: usize) -> anyhow::Result<[(&'static str, Vec<Duration>); 3]> {
-    let payload = codec::encode(msg, 0.0);
-    let frame = codec::encode(
-        &camera::Data {
-            image: vec![7; payload.len()],
-            ..Default::default()
-        },
-        0.0,
-    );
-    Ok([
+/// it, and for a scan the codec on a camera frame of its size (bytes,
+/// which it copies in one piece: msgs/src/bytes.rs). Rows of `n` sorted
+/// times.
+fn in_memory(msg: &Msg, n: usize) -> anyhow::Result<Vec<(&'static str, Vec<Duration>)>> {
+    let payload = msg.encode(0.0);
+    let mut rows = vec![
         (
             "a copy of the payload",
             timed(n, || {
@@ -112,15 +204,13 @@ fn in_memory(msg: &laser::Scan, n: usize) -> anyhow::Result<[(&'static str, Vec<
                 Ok(())
             })?,
         ),
-        (
-            "decode + encode of it",
-            timed(n, || recode::<laser::Scan>(&payload))?,
-        ),
-        (
-            "the same, a camera frame",
-            timed(n, || recode::<camera::Data>(&frame))?,
-        ),
-    ])
+        ("decode + encode of it", timed(n, || recode(&payload))?),
+    ];
+    if let Msg::Scan(_) = msg {
+        let frame = Msg::of(Carry::Camera, payload.len()).encode(0.0);
+        rows.push(("the same, a camera frame", timed(n, || recode(&frame))?));
+    }
+    Ok(rows)
 }
 
 /// Zenoh's settings for its fastest path: the `lowlatency` transport
@@ -208,8 +298,10 @@ impl Drop for Pong {
 
 /// Plain TCP with a namespace, or (`keys`: a directory for them) TLS with
 /// mutual authentication and access control, the pong a host of robot
-/// `SECURE_ROBOT` whose keys the bench uses.
-fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()> {
+/// `SECURE_ROBOT` whose keys the bench uses; samples through shared memory
+/// if `shm` (and large enough), else through the network. Prints a table
+/// and returns one sample's p50, one way.
+fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>, shm: bool) -> anyhow::Result<Duration> {
     let ns = format!("bench-{}", std::process::id());
     let (zr, prefix, pong_net) = match keys {
         None => (
@@ -217,14 +309,19 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
                 listen: vec!["tcp/127.0.0.1:0".into()],
                 no_multicast: true,
                 namespace: Some(ns.clone()),
+                no_shm: !shm,
                 ..Default::default()
             },
             keys::BENCH_PING.trim_end_matches("/ping").to_owned(),
-            vec![
-                "--no-multicast".to_owned(),
-                "--namespace".to_owned(),
-                ns.clone(),
-            ],
+            [
+                vec![
+                    "--no-multicast".to_owned(),
+                    "--namespace".to_owned(),
+                    ns.clone(),
+                ],
+                (!shm).then(|| "--no-shm".to_owned()).into_iter().collect(),
+            ]
+            .concat(),
         ),
         Some(dir) => {
             let (router, pong) = troupe_fleet::keys::bench_configs(dir, SECURE_ROBOT)?;
@@ -232,10 +329,15 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
                 ZenohArgs {
                     listen: vec!["tls/127.0.0.1:0".into()],
                     zenoh_config: Some(router),
+                    no_shm: true,
                     ..Default::default()
                 },
                 format!("robot/{SECURE_ROBOT}/bench"),
-                vec!["--zenoh-config".to_owned(), pong.display().to_string()],
+                vec![
+                    "--zenoh-config".to_owned(),
+                    pong.display().to_string(),
+                    "--no-shm".to_owned(),
+                ],
             )
         }
     };
@@ -254,8 +356,8 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
         .express(true)
         .wait()
         .map_err(|e| anyhow::anyhow!("{e}"))?;
-    let msg = scan_of_size(a.size);
-    let size = codec::encode(&msg, 0.0).len();
+    let msg = Msg::of(a.carry, a.size);
+    let size = msg.encode(0.0).len();
     let total = a.warmup + a.samples;
 
     // The floor: the same bytes between two processes over plain TCP,
@@ -264,7 +366,7 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
     let mut tcp = Vec::with_capacity(a.samples);
     let mut pubsub = Vec::with_capacity(a.samples);
     for i in 0..total {
-        let payload = codec::encode(&msg, i as f64);
+        let payload = msg.encode(i as f64);
         let t0 = Instant::now();
         publisher
             .put(payload)
@@ -275,8 +377,8 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
                 .recv_timeout(Duration::from_secs(5))
                 .map_err(|e| anyhow::anyhow!("{e}"))?
                 .context("no echo within 5 s")?;
-            let back = codec::decode::<laser::Scan>(&s.payload().to_bytes())?;
-            if back.stamp == i as f64 {
+            let (stamp, _) = Msg::decode(&s.payload().to_bytes())?;
+            if stamp == i as f64 {
                 break;
             }
         }
@@ -288,7 +390,7 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
 
     let mut getreply = Vec::with_capacity(a.samples);
     for i in 0..total {
-        let payload = codec::encode(&msg, i as f64);
+        let payload = msg.encode(i as f64);
         let t0 = Instant::now();
         let rx = session
             .get(&req_key)
@@ -300,7 +402,7 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
         let s = r
             .into_result()
             .map_err(|e| anyhow::anyhow!("refused: {e:?}"))?;
-        codec::decode::<laser::Scan>(&s.payload().to_bytes())?;
+        Msg::decode(&s.payload().to_bytes())?;
         if i >= a.warmup {
             getreply.push(t0.elapsed());
         }
@@ -309,14 +411,16 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
     // Zenoh at its fastest, over plain TCP only (the secure run compares
     // with the plain one).
     let best = match keys {
-        None if size <= FASTEST_MAX => Some(fastest(a, &zr, &prefix, &pong_net, &msg, &mut echo)?),
+        None if size <= FASTEST_MAX && !shm => {
+            Some(fastest(a, &zr, &prefix, &pong_net, &msg, &mut echo)?)
+        }
         _ => None,
     };
     // The payload's own costs do not depend on the transport: measured
     // once, beside the plain run.
     let memory = match keys {
-        None => Some(in_memory(&msg, a.samples)?),
-        Some(_) => None,
+        None if !shm => Some(in_memory(&msg, a.samples)?),
+        _ => None,
     };
     pubsub.sort();
     getreply.sort();
@@ -324,10 +428,16 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
     let mut out = std::io::stdout().lock();
     let over = if keys.is_some() {
         "tls/127.0.0.1, mutual authentication and access control"
+    } else if shm && size >= SHM_FROM {
+        "tcp/127.0.0.1, the samples through shared memory"
     } else {
         "tcp/127.0.0.1"
     };
-    writeln!(out, "troupe bench latency: {size}-byte laser/scan@1 payload, {} samples (+{} warm-up), two processes, Zenoh over {over}", a.samples, a.warmup)?;
+    let schema = match msg {
+        Msg::Scan(_) => laser::Scan::SCHEMA,
+        Msg::Camera(_) => camera::Data::SCHEMA,
+    };
+    writeln!(out, "troupe bench latency: {size}-byte {schema} payload, {} samples (+{} warm-up), two processes, Zenoh over {over}", a.samples, a.warmup)?;
     let row = |out: &mut std::io::StdoutLock, name: &str, v: &[Duration], half: bool| {
         let f = |d: Duration| if half { d / 2 } else { d };
         writeln!(
@@ -352,7 +462,7 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
         crate::harness::times_floor(&pubsub, &tcp),
         crate::harness::times_floor(&getreply, &tcp),
     )?;
-    if best.is_none() && keys.is_none() {
+    if best.is_none() && keys.is_none() && !shm {
         writeln!(
             out,
             "  Zenoh at its fastest: not run: its lowlatency transport carries no sample larger than one batch ({FASTEST_MAX} bytes) and closes the link on one"
@@ -372,7 +482,7 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>) -> anyhow::Result<()
             crate::harness::times_floor(&best, &tcp),
         )?;
     }
-    Ok(())
+    Ok(percentile(&pubsub, 0.5) / 2)
 }
 
 /// Put/sub round trips at Zenoh's fastest between two processes, each
@@ -388,7 +498,7 @@ fn fastest(
     zr: &ZenohArgs,
     prefix: &str,
     pong_net: &[String],
-    msg: &laser::Scan,
+    msg: &Msg,
     echo: &mut crate::harness::TcpEcho,
 ) -> anyhow::Result<(Vec<Duration>, Vec<Duration>)> {
     let [ping_key, pong_key, ..] = bench_keys(prefix);
@@ -400,7 +510,7 @@ fn fastest(
         .declare_subscriber(&pong_key)
         .callback(move |s| {
             // Decoded as the other rounds decode each echo.
-            if codec::decode::<laser::Scan>(&s.payload().to_bytes()).is_ok() {
+            if Msg::decode(&s.payload().to_bytes()).is_ok() {
                 count.fetch_add(1, Ordering::Release);
             }
         })
@@ -413,7 +523,7 @@ fn fastest(
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     let (mut best, mut tcp) = (Vec::with_capacity(a.samples), Vec::with_capacity(a.samples));
     for i in 0..(a.warmup + a.samples) as u64 {
-        let payload = codec::encode(msg, i as f64);
+        let payload = msg.encode(i as f64);
         let t0 = Instant::now();
         publisher
             .put(payload)
@@ -473,16 +583,14 @@ pub fn pong(z: &ZenohArgs, prefix: &str, fastest: bool) -> anyhow::Result<()> {
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     let _sub = session
         .declare_subscriber(ping_key)
-        .callback(
-            move |s| match codec::decode::<laser::Scan>(&s.payload().to_bytes()) {
-                Ok(m) => {
-                    if let Err(e) = back.put(codec::encode(&m.msg, m.stamp)).wait() {
-                        tracing::warn!("pong: {e}");
-                    }
+        .callback(move |s| match Msg::decode(&s.payload().to_bytes()) {
+            Ok((stamp, m)) => {
+                if let Err(e) = back.put(m.encode(stamp)).wait() {
+                    tracing::warn!("pong: {e}");
                 }
-                Err(e) => tracing::warn!("pong: {e}"),
-            },
-        )
+            }
+            Err(e) => tracing::warn!("pong: {e}"),
+        })
         .wait()
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     let _q = session
@@ -492,10 +600,8 @@ pub fn pong(z: &ZenohArgs, prefix: &str, fastest: bool) -> anyhow::Result<()> {
                 .payload()
                 .map(|p| p.to_bytes().into_owned())
                 .unwrap_or_default();
-            let sent = match codec::decode::<laser::Scan>(&bytes) {
-                Ok(m) => q
-                    .reply(q.key_expr().clone(), codec::encode(&m.msg, m.stamp))
-                    .wait(),
+            let sent = match Msg::decode(&bytes) {
+                Ok((stamp, m)) => q.reply(q.key_expr().clone(), m.encode(stamp)).wait(),
                 Err(e) => q.reply_err(e.to_string()).wait(),
             };
             if let Err(e) = sent {

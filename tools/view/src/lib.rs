@@ -407,6 +407,9 @@ impl Shared {
             "rates": rates,
             "speed": l.pace.speed,
             "devices": l.devices.len(),
+            // The worlds /api/world holds: a pose names a model of its
+            // simulator's world, which may come a moment after the poses.
+            "worlds": l.worlds.len(),
             "maps": l.maps.len(),
             "map_version": l.map_version,
             "poses": poses,
