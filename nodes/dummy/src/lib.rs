@@ -10,11 +10,12 @@
 //! | provides | any number of `laser`, `ranger`, `position2d`, `ptz`, `blobfinder`, `power`, `fiducial`, `dio`, `aio`, `camera`, `wsn` devices |
 //! | requires | nothing |
 //! | option `rate` | float, Hz, default 10 |
+//! | option `image_size` | `[width height]` of the camera's images, pixels, default `[320 240]` (Player's; not an option of Player's dummy) |
 //! | option `panic_in` | for testing supervision: `setup`, `tick`, `request` or `command`, the hook that panics (a request's hook runs on Zenoh's thread) |
 //!
 //! The data are Player's: a 361-beam laser scan at 8 m over ±90°, 361 ranger
 //! ranges of 8 m, a position2d at (1, 1, 1) moving at (1, 1, 1), a 320 x 240
-//! RGB image whose every byte is the count of images sent before it (modulo
+//! (or `image_size`) RGB image whose every byte is the count of images sent before it (modulo
 //! 256: it fades from black to white and again), and so on.
 //! Useful to test clients, tools and pipelines without a robot.
 
@@ -50,6 +51,8 @@ pub struct Options {
     pub rate: f64,
     /// The hook that panics, to test supervision.
     pub panic_in: Option<Hook>,
+    /// The camera's images, `[width, height]` in pixels.
+    pub image_size: [u32; 2],
 }
 
 impl Default for Options {
@@ -57,9 +60,13 @@ impl Default for Options {
         Options {
             rate: 10.0,
             panic_in: None,
+            image_size: [320, 240],
         }
     }
 }
+
+/// The largest image `image_size` may ask for: 64 MB of RGB.
+const MAX_IMAGE_BYTES: u64 = 64 << 20;
 
 /// A hook of the driver (`panic_in`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
@@ -81,6 +88,8 @@ pub struct Dummy {
     period: Duration,
     /// Ticks so far, modulo 256: the grey of the next camera image.
     ticks: u8,
+    /// The camera's images, `[width, height]`.
+    image_size: [u32; 2],
     panic_in: Option<Hook>,
 }
 
@@ -107,6 +116,16 @@ impl Driver for Dummy {
                 ),
             ));
         }
+        let [w, h] = options.image_size;
+        if w == 0 || h == 0 || u64::from(w) * u64::from(h) * 3 > MAX_IMAGE_BYTES {
+            return Err(NodeError::config(
+                Self::NAME,
+                format!(
+                    "option `image_size` [{w} {h}]: expected a width and a height of at least 1 pixel, at most {} MB of RGB",
+                    MAX_IMAGE_BYTES >> 20
+                ),
+            ));
+        }
         let devices: Vec<Device> = section.provided().into_iter().map(|s| s.device).collect();
         if devices.is_empty() {
             return Err(NodeError::config(Self::NAME, "`provides` is empty"));
@@ -123,6 +142,7 @@ impl Driver for Dummy {
             period: Duration::from_secs_f64(1.0 / options.rate),
             ticks: 0,
             panic_in: options.panic_in,
+            image_size: options.image_size,
         })
     }
 
@@ -137,7 +157,7 @@ impl Driver for Dummy {
             Event::Tick => {
                 self.hook(Hook::Tick);
                 for d in &self.devices {
-                    publish(ctx, d, self.ticks)?;
+                    publish(ctx, d, self.ticks, self.image_size)?;
                 }
                 self.ticks = self.ticks.wrapping_add(1);
                 Ok(())
@@ -156,7 +176,8 @@ impl Driver for Dummy {
     }
 }
 
-fn publish(ctx: &mut Ctx, d: &Device, tick: u8) -> Result<()> {
+/// Publishes `d`'s fixed data, tick `tick`, images `[width, height]`.
+fn publish(ctx: &mut Ctx, d: &Device, tick: u8, [w, h]: [u32; 2]) -> Result<()> {
     match d.interface {
         Interface::Laser => ctx.publish(
             d,
@@ -265,13 +286,13 @@ fn publish(ctx: &mut Ctx, d: &Device, tick: u8) -> Result<()> {
         Interface::Camera => ctx.publish(
             d,
             &camera::Data {
-                width: 320,
-                height: 240,
+                width: w,
+                height: h,
                 bpp: 24,
                 format: camera::FORMAT_RGB888,
                 fdiv: 0,
                 compression: camera::COMPRESS_RAW,
-                image: vec![tick; 320 * 240 * 3],
+                image: vec![tick; w as usize * h as usize * 3],
             },
         ),
         Interface::Wsn => ctx.publish(
@@ -363,5 +384,23 @@ mod tests {
             e(r#"{"name":"dummy","provides":["laser:0"],"options":{"rate":0}}"#).contains("rate")
         );
         assert!(e(r#"{"name":"dummy"}"#).contains("provides"));
+        for size in ["[0,240]", "[100000,100000]"] {
+            let j = format!(
+                r#"{{"name":"dummy","provides":["camera:0"],"options":{{"image_size":{size}}}}}"#
+            );
+            assert!(e(&j).contains("option `image_size`"), "{size}: {}", e(&j));
+        }
+    }
+
+    #[test]
+    fn image_size_sets_the_camera_s_images() {
+        let mut h = Harness::<Dummy>::from_json(
+            r#"{"name":"dummy","provides":["camera:0"],"options":{"image_size":[640,480]}}"#,
+        )
+        .unwrap();
+        h.tick().unwrap();
+        let images = h.published::<camera::Data>(Device::new(6665, Interface::Camera, 0));
+        assert_eq!((images[0].width, images[0].height), (640, 480));
+        assert_eq!(images[0].image.len(), 640 * 480 * 3);
     }
 }

@@ -438,6 +438,12 @@ pub(crate) fn status_mb_of(pid: &str, field: &str) -> f64 {
 
 /// The simulator process the launcher `parent` started.
 pub(crate) fn stage_pid(parent: u32) -> Option<u32> {
+    node_pid(parent, "stage")
+}
+
+/// The pid of `parent`'s child that runs a node of `driver`.
+pub(crate) fn node_pid(parent: u32, driver: &str) -> Option<u32> {
+    let marker = format!("\0node\0{driver}\0");
     std::fs::read_dir("/proc").ok()?.flatten().find_map(|e| {
         let pid = e.file_name().to_string_lossy().parse::<u32>().ok()?;
         let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
@@ -449,7 +455,7 @@ pub(crate) fn stage_pid(parent: u32) -> Option<u32> {
             .parse::<u32>()
             .ok()?;
         let cmd = std::fs::read_to_string(format!("/proc/{pid}/cmdline")).ok()?;
-        (ppid == parent && cmd.contains("\0node\0stage\0")).then_some(pid)
+        (ppid == parent && cmd.contains(&marker)).then_some(pid)
     })
 }
 

@@ -8,6 +8,7 @@
 //! the benchmarks are one crate at the top of the tree.
 
 pub mod bridge;
+pub mod camera;
 pub mod foxglove;
 mod harness;
 mod hostile;
@@ -36,6 +37,10 @@ pub enum BenchCmd {
     #[command(after_help = "Example:
   cargo run --release -- bench latency --size 1500 --samples 5000")]
     Latency(latency::LatencyArgs),
+    /// What a camera driver spends to deliver VGA frames at 30 Hz to two subscribers, over shared memory and through TCP.
+    #[command(after_help = "Example:
+  cargo run --release -- bench camera --seconds 10")]
+    Camera(camera::CameraArgs),
     /// Time from `troupe launch` to all devices live, and restart after a kill, for a 5-node plan.
     #[command(after_help = "Example:
   cargo run --release -- bench launch --runs 5")]
@@ -117,6 +122,7 @@ pub enum BenchCmd {
 pub fn run(cmd: BenchCmd, z: &ZenohArgs) -> anyhow::Result<()> {
     match cmd {
         BenchCmd::Latency(a) => latency::run(&a),
+        BenchCmd::Camera(a) => camera::run(&a),
         BenchCmd::Pong { prefix, fastest } => latency::pong(z, &prefix, fastest),
         BenchCmd::Echo { to, size } => harness::echo(&to, size),
         BenchCmd::Measure { cmd } => vs_stage::measure(&cmd),
