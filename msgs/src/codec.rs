@@ -94,10 +94,7 @@ pub struct Stamped<M> {
 /// byte at a time.
 pub fn encode<M: Message>(msg: &M, stamp: f64) -> Vec<u8> {
     let tag = M::SCHEMA.as_bytes();
-    // Serialising the plain data types of this crate cannot fail.
-    let body =
-        postcard::serialize_with_flavor(msg, postcard::ser_flavors::Size::default()).unwrap_or(0);
-    let mut out = Vec::with_capacity(1 + tag.len() + 8 + body);
+    let mut out = Vec::with_capacity(encoded_len(msg));
     // INVARIANT: schema tags are short literals in this crate (checked by a test).
     out.push(tag.len() as u8);
     out.extend_from_slice(tag);
@@ -106,6 +103,30 @@ pub fn encode<M: Message>(msg: &M, stamp: f64) -> Vec<u8> {
         Ok(out) => out,
         Err(e) => unreachable!("postcard into Vec failed: {e}"),
     }
+}
+
+/// The length of `msg`'s payload, as [`encode`] makes it.
+pub fn encoded_len<M: Message>(msg: &M) -> usize {
+    // Serialising the plain data types of this crate cannot fail.
+    let body =
+        postcard::serialize_with_flavor(msg, postcard::ser_flavors::Size::default()).unwrap_or(0);
+    1 + M::SCHEMA.len() + 8 + body
+}
+
+/// Encodes `msg` stamped `stamp` into `out`, as [`encode`] would: for
+/// memory the payload is sent from (a shared-memory buffer). `out` must be
+/// [`encoded_len`] bytes long; returns whether it was and is now filled.
+pub fn encode_into<M: Message>(msg: &M, stamp: f64, out: &mut [u8]) -> bool {
+    let tag = M::SCHEMA.as_bytes();
+    let Some((head, body)) = out.split_at_mut_checked(1 + tag.len() + 8) else {
+        return false;
+    };
+    // INVARIANT: schema tags are short literals in this crate (checked by a test).
+    head[0] = tag.len() as u8;
+    head[1..=tag.len()].copy_from_slice(tag);
+    head[1 + tag.len()..].copy_from_slice(&stamp.to_le_bytes());
+    let want = body.len();
+    matches!(postcard::to_slice(msg, body), Ok(b) if b.len() == want)
 }
 
 /// Postcard's output into a `Vec`, a run of bytes copied in one piece
@@ -216,6 +237,24 @@ mod tests {
         assert_eq!(got.stamp, 12.5);
         assert_eq!(got.msg, m);
         assert_eq!(schema_of(&bytes).unwrap(), "position2d/cmd_vel@1");
+    }
+
+    #[test]
+    fn encode_into_writes_what_encode_makes_and_refuses_a_wrong_length() {
+        let m = crate::camera::Data {
+            width: 2,
+            height: 1,
+            image: vec![1, 2, 3, 4, 5, 6],
+            ..Default::default()
+        };
+        let want = encode(&m, 3.5);
+        assert_eq!(encoded_len(&m), want.len());
+        let mut out = vec![0; want.len()];
+        assert!(encode_into(&m, 3.5, &mut out));
+        assert_eq!(out, want);
+        for n in [0, 5, want.len() - 1, want.len() + 1] {
+            assert!(!encode_into(&m, 3.5, &mut vec![0; n]), "{n} bytes");
+        }
     }
 
     #[test]

@@ -11,12 +11,29 @@ use crate::error::{NodeError, Result};
 use crate::event::RequestId;
 use crate::inbox::Inbox;
 
+/// The smallest payload encoded straight into memory the bus lends (one
+/// batch of Zenoh's): below it, a sample is one write to a socket, and
+/// Zenoh copies one of 3 KB or more into shared memory itself
+/// (ARCHITECTURE.md, "Big samples").
+const LEND_FROM: usize = 64 * 1024;
+
 /// How long a request waits for its answer: libplayerc's default.
 pub const REQUEST_TIMEOUT: Duration = Duration::from_secs(5);
 
 /// The transport under a [`Ctx`]: Zenoh in a node, a recorder in the harness.
 pub(crate) trait Bus: Send {
     fn publish(&mut self, dev: &Device, payload: Vec<u8>) -> Result<()>;
+    /// Publishes a payload of `len` bytes that `write` fills in memory the
+    /// bus lends (Zenoh's shared-memory pool), saving a copy of a large
+    /// sample. `Ok(false)`: nothing lent, nothing sent.
+    fn publish_lent(
+        &mut self,
+        _dev: &Device,
+        _len: usize,
+        _write: &mut dyn FnMut(&mut [u8]) -> bool,
+    ) -> Result<bool> {
+        Ok(false)
+    }
     fn subscribe(&mut self, dev: &Device) -> Result<()>;
     fn publish_clock(&mut self, payload: Vec<u8>) -> Result<()>;
     fn command(&mut self, dev: &Device, name: &str, payload: Vec<u8>) -> Result<()>;
@@ -183,6 +200,14 @@ impl Ctx {
     /// As [`Ctx::publish`].
     pub fn publish_at<M: Message>(&mut self, dev: &Device, msg: &M, stamp: f64) -> Result<()> {
         self.check_provided(dev)?;
+        let len = codec::encoded_len(msg);
+        if len >= LEND_FROM
+            && self
+                .bus
+                .publish_lent(dev, len, &mut |out| codec::encode_into(msg, stamp, out))?
+        {
+            return Ok(());
+        }
         self.bus.publish(dev, codec::encode(msg, stamp))
     }
 

@@ -765,23 +765,20 @@ impl ZenohBus {
     }
 }
 
-impl Bus for ZenohBus {
-    fn publish(&mut self, dev: &Device, payload: Vec<u8>) -> Result<()> {
-        let tag = codec::schema_of(&payload).unwrap_or("?");
-        let bytes = {
+impl ZenohBus {
+    /// Sends `bytes` (an encoded payload) on `dev` and keeps them as the
+    /// device's latest of their schema.
+    fn send(&mut self, dev: &Device, bytes: ZBytes) -> Result<()> {
+        {
+            let raw = bytes.to_bytes();
+            let tag = codec::schema_of(&raw).unwrap_or("?");
             let mut latest = self.latest.lock().unwrap_or_else(|p| p.into_inner());
             let held = latest.entry(*dev).or_default();
-            let slot = match held.iter().position(|(t, _)| t == tag) {
-                Some(i) => i,
-                None => {
-                    held.push((tag.to_owned(), ZBytes::default()));
-                    held.len() - 1
-                }
-            };
-            let bytes = ZBytes::from(payload);
-            held[slot].1 = bytes.clone();
-            bytes
-        };
+            match held.iter_mut().find(|(t, _)| *t == tag) {
+                Some(slot) => slot.1 = bytes.clone(),
+                None => held.push((tag.to_owned(), bytes.clone())),
+            }
+        }
         let publisher = self
             .publishers
             .get(dev)
@@ -795,6 +792,39 @@ impl Bus for ZenohBus {
             face.publish(Some(dev), &b.to_bytes());
         }
         Ok(())
+    }
+}
+
+impl Bus for ZenohBus {
+    fn publish(&mut self, dev: &Device, payload: Vec<u8>) -> Result<()> {
+        self.send(dev, ZBytes::from(payload))
+    }
+
+    fn publish_lent(
+        &mut self,
+        dev: &Device,
+        len: usize,
+        write: &mut dyn FnMut(&mut [u8]) -> bool,
+    ) -> Result<bool> {
+        use zenoh::shm::GarbageCollect;
+        // The pool Zenoh made for its own copies (none with --no-shm; not
+        // yet, while it is being made: the first large samples are copied).
+        let Some(pool) = self.session.get_shm_provider().into_option() else {
+            return Ok(false);
+        };
+        // Buffers the receivers have let go of first: the allocator then
+        // hands back memory still in the cache, where a pool cycled through
+        // before it is collected is cold at every write.
+        pool.garbage_collect();
+        // A full pool (its buffers held by subscribers) lends nothing.
+        let Ok(mut buf) = pool.alloc(len).with_policy::<GarbageCollect>().wait() else {
+            return Ok(false);
+        };
+        if !write(&mut buf) {
+            return Ok(false);
+        }
+        self.send(dev, ZBytes::from(buf))?;
+        Ok(true)
     }
 
     fn publish_clock(&mut self, payload: Vec<u8>) -> Result<()> {

@@ -28,13 +28,13 @@ pub struct CameraArgs {
     #[arg(long, default_value_t = 480)]
     pub height: u32,
     /// Frames a second.
-    #[arg(long, default_value_t = 30.0)]
+    #[arg(long, default_value_t = 30.0, value_name = "HZ", value_parser = troupe_node::args::finite)]
     pub rate: f64,
     /// Processes taking every frame.
     #[arg(long, default_value_t = 2)]
     pub subscribers: usize,
     /// Wall seconds each path is measured for.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, value_name = "SECS", value_parser = troupe_node::args::seconds)]
     pub seconds: f64,
 }
 
