@@ -791,6 +791,31 @@ fn bench_latency_prints_its_floor_and_zenoh_at_its_fastest_beside_the_figures() 
         2,
         "both ratios, the figures' and the fastest path's:\n{out}"
     );
+    // A camera frame large enough for shared memory: both paths, and a
+    // small sample beside them.
+    let (status, out, err) = troupe_output(&strings(&[
+        "bench",
+        "latency",
+        "--carry",
+        "camera",
+        "--size",
+        "100000",
+        "--samples",
+        "20",
+        "--warmup",
+        "5",
+    ]));
+    assert!(status.success(), "bench latency failed:\n{out}\n{err}");
+    assert!(
+        out.contains("camera/data@1 payload")
+            && out.contains("the samples through shared memory")
+            && out.contains("same run: one sample one way p50"),
+        "{out}"
+    );
+    for after in ["tcp/127.0.0.1\n", "through shared memory\n"] {
+        let p50 = p50_of(&out, after, "one sample (round trip/2)");
+        assert!(p50 > 0.0, "after {after:?}: p50 {p50} µs in:\n{out}");
+    }
 }
 
 /// A panic in any of a driver's hooks ends its process with status 101 and

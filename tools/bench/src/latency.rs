@@ -23,9 +23,9 @@ use troupe_node::{Mode, ZenohArgs};
 
 use crate::harness::{percentile, us};
 
-/// `troupe bench latency`: plain, over shared memory too when the sample
-/// is large enough to take it, beside a 64-byte sample when it is larger,
-/// and with `--secure` over TLS too.
+/// `troupe bench latency`: plain; a sample large enough to go through
+/// shared memory over it too, and beside a 64-byte sample; with
+/// `--secure` over TLS too.
 pub fn run(a: &LatencyArgs) -> anyhow::Result<()> {
     let size = Msg::of(a.carry, a.size).encode(0.0).len();
     let network = latency(a, None, false)?;
@@ -33,7 +33,7 @@ pub fn run(a: &LatencyArgs) -> anyhow::Result<()> {
         true => Some(latency(a, None, true)?),
         false => None,
     };
-    if size > SMALL {
+    if let Some(shm) = shm {
         let small = LatencyArgs {
             size: SMALL,
             carry: Carry::Scan,
@@ -43,17 +43,13 @@ pub fn run(a: &LatencyArgs) -> anyhow::Result<()> {
         let small_size = Msg::of(Carry::Scan, SMALL).encode(0.0).len();
         let small = latency(&small, None, false)?;
         let x = |d: Duration| d.as_secs_f64() / small.as_secs_f64().max(1e-9);
-        let mut line = format!(
-            "troupe bench latency: {size} bytes against {small_size}, same run: one sample one way p50 {} over the network ({:.1}x)",
-            us(network),
-            x(network)
-        );
-        if let Some(shm) = shm {
-            line += &format!(", {} over shared memory ({:.1}x)", us(shm), x(shm));
-        }
         writeln!(
             std::io::stdout().lock(),
-            "{line}; {small_size} bytes {} (target: 1 MB <= 3x)",
+            "troupe bench latency: {size} bytes against {small_size}, same run: one sample one way p50 {} over the network ({:.1}x), {} over shared memory ({:.1}x); {small_size} bytes {} (target: 1 MB <= 3x)",
+            us(network),
+            x(network),
+            us(shm),
+            x(shm),
             us(small)
         )?;
     }
