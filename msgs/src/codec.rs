@@ -93,8 +93,14 @@ pub struct Stamped<M> {
 /// allocation and one copy, not a vector grown twenty times and filled a
 /// byte at a time.
 pub fn encode<M: Message>(msg: &M, stamp: f64) -> Vec<u8> {
+    encode_sized(msg, stamp, encoded_len(msg))
+}
+
+/// [`encode`] for a caller that has measured the payload already: `len` is
+/// its [`encoded_len`], the capacity allocated.
+pub fn encode_sized<M: Message>(msg: &M, stamp: f64, len: usize) -> Vec<u8> {
     let tag = M::SCHEMA.as_bytes();
-    let mut out = Vec::with_capacity(encoded_len(msg));
+    let mut out = Vec::with_capacity(len);
     // INVARIANT: schema tags are short literals in this crate (checked by a test).
     out.push(tag.len() as u8);
     out.extend_from_slice(tag);

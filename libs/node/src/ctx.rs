@@ -208,7 +208,7 @@ impl Ctx {
         {
             return Ok(());
         }
-        self.bus.publish(dev, codec::encode(msg, stamp))
+        self.bus.publish(dev, codec::encode_sized(msg, stamp, len))
     }
 
     /// Publishes an already encoded sample (its schema tag and stamp

@@ -436,12 +436,8 @@ pub(crate) fn status_mb_of(pid: &str, field: &str) -> f64 {
         .map_or(0.0, |kb| kb / 1024.0)
 }
 
-/// The simulator process the launcher `parent` started.
-pub(crate) fn stage_pid(parent: u32) -> Option<u32> {
-    node_pid(parent, "stage")
-}
-
-/// The pid of `parent`'s child that runs a node of `driver`.
+/// The pid of `parent`'s child that runs a node of `driver` (the
+/// simulator: `stage`).
 pub(crate) fn node_pid(parent: u32, driver: &str) -> Option<u32> {
     let marker = format!("\0node\0{driver}\0");
     std::fs::read_dir("/proc").ok()?.flatten().find_map(|e| {

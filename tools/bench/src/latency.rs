@@ -29,11 +29,8 @@ use crate::harness::{percentile, us};
 pub fn run(a: &LatencyArgs) -> anyhow::Result<()> {
     let size = Msg::of(a.carry, a.size).encode(0.0).len();
     let network = latency(a, None, false)?;
-    let shm = match size >= SHM_FROM {
-        true => Some(latency(a, None, true)?),
-        false => None,
-    };
-    if let Some(shm) = shm {
+    if size >= SHM_FROM {
+        let shm = latency(a, None, true)?;
         let small = LatencyArgs {
             size: SMALL,
             carry: Carry::Scan,

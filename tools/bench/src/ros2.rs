@@ -332,7 +332,7 @@ fn fleet(
                 );
             }
         }
-        let stage = crate::harness::stage_pid(_launcher.0.id());
+        let stage = crate::harness::node_pid(_launcher.0.id(), "stage");
         let cpu0 = stage.map(crate::harness::cpu_of);
         let speed = sim_speed(&session, a.fleet_seconds)?;
         let cpu = match (stage, cpu0) {

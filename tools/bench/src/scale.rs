@@ -29,7 +29,7 @@ use troupe_client::{Client, SimulationProxy};
 use troupe_msgs::{codec, keys, simulation};
 use troupe_node::zenoh::Wait;
 
-use crate::harness::{cpu_of, launched, stage_pid, status_mb_of, Kid};
+use crate::harness::{cpu_of, launched, node_pid, status_mb_of, Kid};
 
 /// Flags of `troupe bench scale`.
 #[derive(Debug, Args)]
@@ -357,7 +357,8 @@ fn row(a: &ScaleArgs, dir: &Path, map: &Path, side: u32, robots: u32) -> anyhow:
         Duration::from_secs_f64(a.ready_within),
     )?;
     let sim = SimulationProxy::new(&Client::with_session(session.clone(), 6665), 0);
-    let stage = stage_pid(launcher.0.id()).context("no simulator process under the launcher")?;
+    let stage =
+        node_pid(launcher.0.id(), "stage").context("no simulator process under the launcher")?;
     let pid = launcher.0.id();
     *seen.lock().unwrap_or_else(|p| p.into_inner()) = (Seen::new(), 0);
     let (w0, cpu0, lcpu0) = (Instant::now(), cpu_of(stage), cpu_of(pid));
