@@ -23,8 +23,28 @@ pub struct Edge {
     pub to: usize,
     /// Where `to` is in `from`'s frame.
     pub z: Pose,
-    /// The measurement's information (inverse variances) in x, y and yaw.
-    pub info: [f64; 3],
+    /// The measurement's information (its covariance's inverse) in x, y
+    /// and yaw, in the frame of `to` as `from` sees it (where its error is
+    /// measured).
+    pub info: Matrix3<f64>,
+}
+
+impl Edge {
+    /// An edge whose x, y and yaw are independent, of these inverse variances.
+    pub fn diagonal(from: usize, to: usize, z: Pose, info: [f64; 3]) -> Edge {
+        Edge {
+            from,
+            to,
+            z,
+            info: Matrix3::from_diagonal(&Vector3::from(info)),
+        }
+    }
+
+    /// This edge's error at `poses`, weighted by its information.
+    pub fn chi2(&self, poses: &[Pose]) -> f64 {
+        let (err, _, _) = linearize(poses[self.from], poses[self.to], self.z);
+        err.dot(&(self.info * err))
+    }
 }
 
 /// Poses and the edges between them; node 0 stays where it is.
@@ -115,21 +135,17 @@ fn dot(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
 impl Graph {
     /// The weighted squared error of every edge.
     pub fn chi2(&self) -> f64 {
-        self.edges
-            .iter()
-            .map(|e| {
-                let (err, _, _) = linearize(self.poses[e.from], self.poses[e.to], e.z);
-                let o = Vector3::from(e.info);
-                err.component_mul(&err).dot(&o)
-            })
-            .sum()
+        self.edges.iter().map(|e| e.chi2(&self.poses)).sum()
     }
 
-    /// Up to `iterations` Gauss-Newton steps, stopping when a step changes
-    /// the error by less than a millionth; returns the final error.
+    /// Up to `iterations` Gauss-Newton steps (damped as Levenberg and
+    /// Marquardt do where a step would raise the error, which is then not
+    /// taken), stopping when a step lowers the error by less than a
+    /// millionth; returns the final error.
     pub fn optimize(&mut self, iterations: usize) -> f64 {
         let n = self.poses.len();
         let mut chi2 = self.chi2();
+        let mut damping = 0.0;
         if n < 2 {
             return chi2;
         }
@@ -140,7 +156,7 @@ impl Graph {
             let mut b = vec![Vector3::<f64>::zeros(); n];
             for e in &self.edges {
                 let (err, a, bj) = linearize(self.poses[e.from], self.poses[e.to], e.z);
-                let o = Matrix3::from_diagonal(&Vector3::from(e.info));
+                let o = e.info;
                 let (ato, bto) = (a.transpose() * o, bj.transpose() * o);
                 h.add(e.from, e.from, ato * a);
                 h.add(e.from, e.to, ato * bj);
@@ -149,12 +165,29 @@ impl Graph {
                 b[e.from] += ato * err;
                 b[e.to] += bto * err;
             }
+            // Levenberg-Marquardt: the diagonal raised by `damping` of
+            // itself, more after a step that made the error worse.
+            if damping > 0.0 {
+                for (i, row) in h.rows.iter_mut().enumerate() {
+                    if let Some((_, m)) = row.iter_mut().find(|(j, _)| *j == i) {
+                        let d = m.diagonal() * damping;
+                        *m += Matrix3::from_diagonal(&d);
+                    }
+                }
+            }
             let dx = solve(&h, &b);
+            let before = self.poses.clone();
             for (p, d) in self.poses.iter_mut().zip(&dx).skip(1) {
                 *p = Pose::new(p.x + d[0], p.y + d[1], normalize(p.yaw + d[2]));
             }
             let next = self.chi2();
-            let done = (chi2 - next).abs() <= 1e-6 * chi2.max(1e-12);
+            if next > chi2 {
+                self.poses = before;
+                damping = (damping * 10.0).max(1e-4);
+                continue;
+            }
+            damping /= 10.0;
+            let done = (chi2 - next) <= 1e-6 * chi2.max(1e-12);
             chi2 = next;
             if done {
                 break;
@@ -218,6 +251,41 @@ fn solve(h: &Blocks, b: &[Vector3<f64>]) -> Vec<Vector3<f64>> {
 mod tests {
     use super::*;
 
+    /// Ten steps of 1 m along x, then a closure from the first to the last
+    /// that says the last is 1 m farther and 0.5 m to the left: with no
+    /// information along x (a match along a wall) it moves the last pose
+    /// across, not along.
+    #[test]
+    fn a_closure_pulls_only_where_it_has_information() {
+        let run = |along: f64| {
+            let mut g = Graph {
+                poses: (0..=10).map(|k| Pose::new(k as f64, 0.0, 0.0)).collect(),
+                ..Default::default()
+            };
+            for k in 1..=10 {
+                g.edges.push(Edge::diagonal(
+                    k - 1,
+                    k,
+                    Pose::new(1.0, 0.0, 0.0),
+                    [100.0, 100.0, 100.0],
+                ));
+            }
+            g.edges.push(Edge::diagonal(
+                0,
+                10,
+                Pose::new(11.0, 0.5, 0.0),
+                [along, 1e4, 1e4],
+            ));
+            g.optimize(20);
+            g.poses[10]
+        };
+        let blind = run(0.0);
+        assert!((blind.x - 10.0).abs() < 0.05, "{blind:?}");
+        assert!((blind.y - 0.5).abs() < 0.05, "{blind:?}");
+        let sighted = run(1e4);
+        assert!(sighted.x > 10.8, "{sighted:?}");
+    }
+
     /// A square driven four times round: odometry that turns a little too
     /// little each corner, and one edge that says the end is the start.
     #[test]
@@ -244,12 +312,7 @@ mod tests {
             z.yaw -= 0.03; // the gyro under-reads
             pose = pose.compose(&z);
             g.poses.push(pose);
-            g.edges.push(Edge {
-                from: k - 1,
-                to: k,
-                z,
-                info,
-            });
+            g.edges.push(Edge::diagonal(k - 1, k, z, info));
         }
         let last = truth.len() - 1;
         let miss = |g: &Graph| {
@@ -258,12 +321,12 @@ mod tests {
         };
         let before = miss(&g);
         assert!(before > 0.5, "odometry alone misses by {before}");
-        g.edges.push(Edge {
-            from: 0,
-            to: last,
-            z: truth[0].inverse().compose(&truth[last]),
-            info: [1e4, 1e4, 1e4],
-        });
+        g.edges.push(Edge::diagonal(
+            0,
+            last,
+            truth[0].inverse().compose(&truth[last]),
+            [1e4, 1e4, 1e4],
+        ));
         g.optimize(20);
         let after = miss(&g);
         assert!(after < 0.05, "after the closure it misses by {after}");

@@ -3,12 +3,18 @@
 //! pose corrected from odometry's guess), an edge between consecutive
 //! keyframes, and a loop closure — an edge to a keyframe made long before —
 //! whenever the scan matches the map around an old keyframe nearby well
-//! enough. Each closure is followed by an optimisation of the whole graph.
+//! enough. Each closure is followed by an optimisation of the whole graph,
+//! and taken back if the optimised graph still disagrees with it. Each
+//! edge weighs what its match saw (see [`Field::information`]): a scan of
+//! a lone wall places the robot across the wall, not along it.
+//!
+//! [`Field::information`]: crate::matcher::Field::information
 //!
 //! The front end is pure: [`Slam::add`] takes one odometry pose and one
 //! scan's points, so the offline builder and the online driver feed it the
 //! same way.
 
+use nalgebra::Matrix3;
 use troupe_geom::Pose;
 
 use crate::graph::{Edge, Graph};
@@ -52,7 +58,7 @@ impl Default for Params {
             min_fit: 0.25,
             loop_radius: 3.0,
             loop_gap: 20.0,
-            loop_window: Window { xy: 0.75, yaw: 0.2 },
+            loop_window: Window { xy: 1.5, yaw: 0.2 },
             loop_fit: 0.7,
         }
     }
@@ -80,6 +86,22 @@ pub struct Keyframe {
     pub fit: f64,
 }
 
+/// A loop closure: keyframe `to` seen from keyframe `from`, made long
+/// before, and how far the match moved `to` from where the graph had it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Loop {
+    /// The old keyframe.
+    pub from: usize,
+    /// The new one.
+    pub to: usize,
+    /// Metres between the graph's pose of `to` and the matched one.
+    pub shift: f64,
+    /// Radians between them.
+    pub turn: f64,
+    /// How well the scan fit the old map.
+    pub score: f64,
+}
+
 /// The builder's state.
 #[derive(Debug, Clone)]
 pub struct Slam {
@@ -90,8 +112,12 @@ pub struct Slam {
     pub graph: Graph,
     /// Loop closures made.
     pub closures: usize,
+    /// Each loop closure, in order.
+    pub loops: Vec<Loop>,
     /// Local matches that fit too badly and kept odometry's guess.
     pub unmatched: usize,
+    /// Loop closures found but taken back: the graph would not agree.
+    pub rejected: usize,
     /// The keyframe of the last closure: the next waits a few keyframes,
     /// so driving along an old path does not optimise at every step.
     last_closure: Option<usize>,
@@ -155,6 +181,12 @@ impl Calibration {
     }
 }
 
+/// The largest weighted squared residual (chi², three degrees of freedom)
+/// a loop closure may keep once the graph is optimised with it: 99.7% of
+/// true closures lie within it, if their information is what the match
+/// says.
+const CLOSURE_GATE: f64 = 14.0;
+
 /// Keyframes between two loop closures.
 const CLOSURE_EVERY: usize = 8;
 
@@ -176,6 +208,27 @@ const DRIFT: Prior = Prior {
     yaw: 0.3,
     weight: 0.05,
 };
+
+/// What odometry's step `read` between keyframes is worth, as information
+/// (inverse variances) in x, y and yaw: 1 cm and 0.01 rad, and 5% of the
+/// distance and of the turn (its scale learnt, what is left of its error).
+fn odometry_info(read: Pose) -> Matrix3<f64> {
+    let xy = 0.01 + 0.05 * read.x.hypot(read.y);
+    let yaw = 0.01 + 0.05 * read.yaw.abs();
+    Matrix3::from_diagonal(&nalgebra::Vector3::new(
+        1.0 / (xy * xy),
+        1.0 / (xy * xy),
+        1.0 / (yaw * yaw),
+    ))
+}
+
+/// `info`, the information of a pose in the world frame (a match's), in
+/// the frame of the pose `at`, where an edge to it measures its error.
+fn in_frame_of(at: Pose, info: Matrix3<f64>) -> Matrix3<f64> {
+    let (s, c) = at.yaw.sin_cos();
+    let t = Matrix3::new(c, s, 0.0, -s, c, 0.0, 0.0, 0.0, 1.0);
+    t * info * t.transpose()
+}
 
 /// Whether a loop closure's match stands out: shifted 0.3 m any way or
 /// turned 0.1 rad, the scan fits clearly worse (it would not along a
@@ -227,7 +280,9 @@ impl Slam {
             keyframes: Vec::new(),
             graph: Graph::default(),
             closures: 0,
+            loops: Vec::new(),
             unmatched: 0,
+            rejected: 0,
             last_closure: None,
             calibration: Calibration::default(),
         }
@@ -282,6 +337,7 @@ impl Slam {
         let n = self.keyframes.len();
         let guess = self.pose_of(odom);
         let mut fit = 1.0;
+        let mut seen = Matrix3::zeros();
         let pose = if n == 0 {
             guess
         } else {
@@ -295,6 +351,7 @@ impl Slam {
                     last.odom.inverse().compose(&odom),
                     self.graph.poses[n - 1].inverse().compose(&found.pose),
                 );
+                seen = m.field().information(&points, found.pose, reach);
                 found.pose
             } else {
                 self.unmatched += 1;
@@ -311,11 +368,14 @@ impl Slam {
         self.graph.poses.push(pose);
         if n > 0 {
             let z = self.graph.poses[n - 1].inverse().compose(&pose);
+            // What the match saw, and what odometry read, of the step.
+            let read = self.keyframes[n - 1].odom.inverse().compose(&odom);
+            let info = in_frame_of(pose, seen) + odometry_info(read);
             self.graph.edges.push(Edge {
                 from: n - 1,
                 to: n,
                 z,
-                info: [400.0, 400.0, 1000.0],
+                info,
             });
         }
         self.keyframes.push(Keyframe {
@@ -330,11 +390,28 @@ impl Slam {
         });
         let rested = self.last_closure.is_none_or(|c| n >= c + CLOSURE_EVERY);
         if rested && self.close_loop(n) {
-            self.closures += 1;
-            self.last_closure = Some(n);
+            let before = self.graph.poses.clone();
             self.graph.optimize(10);
+            if self.consistent(self.graph.edges.len() - 1) {
+                self.closures += 1;
+                self.last_closure = Some(n);
+            } else {
+                self.graph.edges.pop();
+                self.loops.pop();
+                self.graph.poses = before;
+                self.rejected += 1;
+            }
         }
         true
+    }
+
+    /// Whether edge `e`, a loop closure, agrees with the graph optimised
+    /// with it: a false closure (a place that looked like an old one, or
+    /// one matched along a wall that fixed nothing across it, its pose
+    /// where the graph's guess had it) leaves a residual the rest of the
+    /// graph will not absorb.
+    fn consistent(&self, e: usize) -> bool {
+        self.graph.edges[e].chi2(&self.graph.poses) <= CLOSURE_GATE
     }
 
     /// The points of keyframes `range`, in the world frame.
@@ -381,11 +458,22 @@ impl Slam {
             return false;
         }
         let z = self.graph.poses[old].inverse().compose(&found.pose);
+        self.loops.push(Loop {
+            from: old,
+            to: n,
+            shift: (found.pose.x - here.x).hypot(found.pose.y - here.y),
+            turn: troupe_geom::normalize(found.pose.yaw - here.yaw).abs(),
+            score: found.score,
+        });
+        let info = in_frame_of(
+            found.pose,
+            m.field().information(&k.points, found.pose, k.reach),
+        );
         self.graph.edges.push(Edge {
             from: old,
             to: n,
             z,
-            info: [400.0, 400.0, 1000.0],
+            info,
         });
         true
     }
@@ -407,7 +495,26 @@ impl Slam {
 
     /// Optimises the graph once more, at the end of a run.
     pub fn finish(&mut self) {
-        if self.closures > 0 {
+        if self.closures == 0 {
+            return;
+        }
+        self.graph.optimize(20);
+        // A closure the whole graph no longer agrees with goes, the worst
+        // first, and the graph is optimised again without it.
+        for _ in 0..self.closures {
+            let worst = (0..self.graph.edges.len())
+                .filter(|&e| self.graph.edges[e].to != self.graph.edges[e].from + 1)
+                .map(|e| (e, self.graph.edges[e].chi2(&self.graph.poses)))
+                .max_by(|a, b| a.1.total_cmp(&b.1));
+            let Some((e, chi2)) = worst else { break };
+            if chi2 <= CLOSURE_GATE {
+                break;
+            }
+            let gone = self.graph.edges.remove(e);
+            self.loops
+                .retain(|l| (l.from, l.to) != (gone.from, gone.to));
+            self.closures -= 1;
+            self.rejected += 1;
             self.graph.optimize(20);
         }
     }

@@ -58,6 +58,15 @@ pub struct SlamBenchArgs {
     /// Seeds of the random part of the made-wrong odometry, per dataset.
     #[arg(long, default_value_t = 3, value_name = "N")]
     pub seeds: u64,
+    /// The simulated worlds to run, by name (office, loop, cave, autolab);
+    /// `none` for only the logs given by --datasets and --player-log.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "office,loop,cave,autolab",
+        value_name = "NAMES"
+    )]
+    pub worlds: Vec<String>,
 }
 
 /// Runs the bench.
@@ -99,13 +108,23 @@ pub fn run(a: &SlamBenchArgs) -> anyhow::Result<()> {
             stage.display()
         );
     }
+    if let Some(bad) = a
+        .worlds
+        .iter()
+        .find(|w| *w != "none" && !["office", "loop", "cave", "autolab"].contains(&w.as_str()))
+    {
+        anyhow::bail!("--worlds: no world named {bad:?} (office, loop, cave, autolab or none)");
+    }
+    worlds.retain(|w| a.worlds.iter().any(|n| n == w.0));
     let mut out = std::io::stdout().lock();
-    writeln!(
-        out,
-        "troupe bench slam: {:.0} simulated s a world, odometry {:+.0}% in yaw and +2% in x; accuracy = occupied cells within 10 cm of a wall, coverage = seen walls mapped",
-        a.seconds,
-        a.yaw_error * 100.0
-    )?;
+    if !worlds.is_empty() {
+        writeln!(
+            out,
+            "troupe bench slam: {:.0} simulated s a world, odometry {:+.0}% in yaw and +2% in x; accuracy = occupied cells within 10 cm of a wall, coverage = seen walls mapped",
+            a.seconds,
+            a.yaw_error * 100.0
+        )?;
+    }
     for (name, path, robot, driver) in worlds {
         let world = match troupe_stage::world::load(&path) {
             Ok(w) => w,
@@ -244,10 +263,16 @@ fn player_log(log: &Path, world: &Path, work: &Path, out: &mut impl Write) -> an
         &work.join("player-cave.yaml"),
         "`troupe bench slam`",
     )?;
+    overlay(
+        &work.join("player-cave-against-truth.png"),
+        &built.grid.occupied(),
+        &obstacles,
+        s.alignment,
+    )?;
     writeln!(
         out,
         "troupe bench slam: {} (the real Player + Stage, Stage's cave): {} scans, {span:.0} s; coverage = the cave's wall faces mapped\n  \
-         player   accuracy {:>5.1}% (odometry alone {:>5.1}%, online {:>5.1}%)  coverage {:>5.1}% ({:>5.1}%, online {:>5.1}%)  built {:>5.0}x the log's pace ({span:.0} s of log in {took:.2} s)  {} keyframes, {} loop closures",
+         player   accuracy {:>5.1}% (odometry alone {:>5.1}%, online {:>5.1}%)  coverage {:>5.1}% ({:>5.1}%, online {:>5.1}%)  built {:>5.0}x the log's pace ({span:.0} s of log in {took:.2} s)  {} keyframes, {}",
         log.display(),
         rec.scans.len(),
         100.0 * s.accuracy,
@@ -258,9 +283,67 @@ fn player_log(log: &Path, world: &Path, work: &Path, out: &mut impl Write) -> an
         100.0 * ls.coverage,
         span / took.max(1e-9),
         built.slam.keyframes.len(),
-        built.slam.closures,
+        closures(&built.slam),
     )?;
     Ok(())
+}
+
+/// Writes `path`, a picture of a map against its truth, 5 cm a pixel: the
+/// true walls grey, the map's occupied cells (laid in the truth's frame by
+/// `frame`) black where within 10 cm of a wall and red where not.
+fn overlay(
+    path: &Path,
+    occupied: &[(f64, f64)],
+    walls: &[(f64, f64)],
+    frame: Pose,
+) -> anyhow::Result<()> {
+    const RES: f64 = 0.05;
+    let place = frame.applier();
+    let map: Vec<(f64, f64)> = occupied.iter().map(|&(x, y)| place(x, y)).collect();
+    let (mut lo, mut hi) = ((f64::MAX, f64::MAX), (f64::MIN, f64::MIN));
+    for &(x, y) in walls.iter().chain(&map) {
+        lo = (lo.0.min(x), lo.1.min(y));
+        hi = (hi.0.max(x), hi.1.max(y));
+    }
+    let w = (((hi.0 - lo.0) / RES).ceil() as u32 + 1).min(8000);
+    let h = (((hi.1 - lo.1) / RES).ceil() as u32 + 1).min(8000);
+    let mut img = image::RgbImage::from_pixel(w, h, image::Rgb([255, 255, 255]));
+    let mut put = |x: f64, y: f64, c: [u8; 3]| {
+        let i = ((x - lo.0) / RES) as u32;
+        let j = ((y - lo.1) / RES) as u32;
+        if i < w && j < h {
+            img.put_pixel(i, h - 1 - j, image::Rgb(c));
+        }
+    };
+    for &(x, y) in walls {
+        put(x, y, [190, 190, 190]);
+    }
+    let near = eval::Near::new(walls, 0.1);
+    for &(x, y) in &map {
+        let c = if near.within(x, y, 0.1) {
+            [0, 0, 0]
+        } else {
+            [220, 0, 0]
+        };
+        put(x, y, c);
+    }
+    img.save(path)?;
+    Ok(())
+}
+
+/// The loop closures `slam` made and how far they moved the graph.
+fn closures(slam: &troupe_map::slam::Slam) -> String {
+    let mut shifts: Vec<f64> = slam.loops.iter().map(|l| l.shift).collect();
+    shifts.sort_by(f64::total_cmp);
+    match shifts.last() {
+        None => "no loop closures".to_owned(),
+        Some(max) => format!(
+            "{} loop closures (shifting the graph {:.2} m at the median, {max:.2} m at most; {} taken back)",
+            shifts.len(),
+            shifts[shifts.len() / 2],
+            slam.rejected
+        ),
+    }
 }
 
 /// The table of real robots' datasets: each CARMEN log of `dir` read with
@@ -337,7 +420,7 @@ fn datasets(dir: &Path, seeds: u64, work: &Path, out: &mut impl Write) -> anyhow
             let ls = eval::score(&live.occupied, &truth.walls, &truth.walls, same, 0.1);
             writeln!(
                 out,
-                "    {what:<25} accuracy {:>5.1}% (odometry alone {:>5.1}%, online {:>5.1}%)  coverage {:>5.1}% (online {:>5.1}%)  trajectory {:.2} m (odometry alone {:.2} m)  hits fill {} cells (the reference's {})  built {:>4.0}x the log's pace  {} loop closures",
+                "    {what:<25} accuracy {:>5.1}% (odometry alone {:>5.1}%, online {:>5.1}%)  coverage {:>5.1}% (online {:>5.1}%)  trajectory {:.2} m (odometry alone {:.2} m)  hits fill {} cells (the reference's {})  built {:>4.0}x the log's pace  {}",
                 100.0 * s.accuracy,
                 100.0 * raw.accuracy,
                 100.0 * ls.accuracy,
@@ -348,10 +431,17 @@ fn datasets(dir: &Path, seeds: u64, work: &Path, out: &mut impl Write) -> anyhow
                 sharp,
                 truth.filled,
                 span / took.max(1e-9),
-                built.slam.closures,
+                closures(&built.slam),
             )?;
-            let yaml = work.join(format!("{name}-{}.yaml", what.replace([' ', ','], "-")));
+            let stem = format!("{name}-{}", what.replace([' ', ','], "-"));
+            let yaml = work.join(format!("{stem}.yaml"));
             troupe_mapfile::save(&built.grid.to_occmap(), &yaml, "`troupe bench slam`")?;
+            overlay(
+                &work.join(format!("{stem}-against-truth.png")),
+                &built.grid.occupied(),
+                &truth.walls,
+                s.alignment,
+            )?;
         }
     }
     Ok(())
