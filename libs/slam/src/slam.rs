@@ -96,10 +96,6 @@ pub struct Loop {
     pub to: usize,
     /// Metres between the graph's pose of `to` and the matched one.
     pub shift: f64,
-    /// Radians between them.
-    pub turn: f64,
-    /// How well the scan fit the old map.
-    pub score: f64,
 }
 
 /// The builder's state.
@@ -110,9 +106,7 @@ pub struct Slam {
     pub keyframes: Vec<Keyframe>,
     /// Their poses and the edges between them.
     pub graph: Graph,
-    /// Loop closures made.
-    pub closures: usize,
-    /// Each loop closure, in order.
+    /// Each loop closure kept, in order.
     pub loops: Vec<Loop>,
     /// Local matches that fit too badly and kept odometry's guess.
     pub unmatched: usize,
@@ -279,7 +273,6 @@ impl Slam {
             params,
             keyframes: Vec::new(),
             graph: Graph::default(),
-            closures: 0,
             loops: Vec::new(),
             unmatched: 0,
             rejected: 0,
@@ -389,15 +382,19 @@ impl Slam {
             fit,
         });
         let rested = self.last_closure.is_none_or(|c| n >= c + CLOSURE_EVERY);
-        if rested && self.close_loop(n) {
+        if let Some((edge, closure)) = rested.then(|| self.close_loop(n)).flatten() {
+            // Kept only if the graph optimised with it agrees: a false
+            // closure (a place that looked like an old one, or one matched
+            // along a wall that fixed nothing along it) leaves a residual
+            // the rest of the graph will not absorb.
             let before = self.graph.poses.clone();
+            self.graph.edges.push(edge);
             self.graph.optimize(10);
-            if self.consistent(self.graph.edges.len() - 1) {
-                self.closures += 1;
+            if edge.chi2(&self.graph.poses) <= CLOSURE_GATE {
+                self.loops.push(closure);
                 self.last_closure = Some(n);
             } else {
                 self.graph.edges.pop();
-                self.loops.pop();
                 self.graph.poses = before;
                 self.rejected += 1;
             }
@@ -405,13 +402,9 @@ impl Slam {
         true
     }
 
-    /// Whether edge `e`, a loop closure, agrees with the graph optimised
-    /// with it: a false closure (a place that looked like an old one, or
-    /// one matched along a wall that fixed nothing across it, its pose
-    /// where the graph's guess had it) leaves a residual the rest of the
-    /// graph will not absorb.
-    fn consistent(&self, e: usize) -> bool {
-        self.graph.edges[e].chi2(&self.graph.poses) <= CLOSURE_GATE
+    /// Loop closures kept.
+    pub fn closures(&self) -> usize {
+        self.loops.len()
     }
 
     /// The points of keyframes `range`, in the world frame.
@@ -424,12 +417,12 @@ impl Slam {
         out
     }
 
-    /// Looks for a loop closure for keyframe `n`; adds its edge if found.
-    fn close_loop(&mut self, n: usize) -> bool {
+    /// Looks for a loop closure for keyframe `n`: its edge, if found.
+    fn close_loop(&self, n: usize) -> Option<(Edge, Loop)> {
         let p = &self.params;
         let here = self.graph.poses[n];
         let travelled = self.keyframes[n].travelled;
-        let Some(old) = (0..n)
+        let old = (0..n)
             .filter(|&i| travelled - self.keyframes[i].travelled >= p.loop_gap)
             .map(|i| {
                 let q = self.graph.poses[i];
@@ -437,10 +430,7 @@ impl Slam {
             })
             .filter(|&(_, d)| d <= p.loop_radius)
             .min_by(|a, b| a.1.total_cmp(&b.1))
-            .map(|(i, _)| i)
-        else {
-            return false;
-        };
+            .map(|(i, _)| i)?;
         // The map around the old keyframe: its neighbours made it too.
         let lo = old.saturating_sub(p.local / 2);
         let hi = (old + p.local / 2 + 1).min(n);
@@ -455,27 +445,26 @@ impl Slam {
         // A true closure fits the old map about as well as the scan fit
         // its own, and nowhere near as well a little way off.
         if found.score < p.loop_fit.max(0.9 * k.fit) || !distinct(m.field(), &k.points, found) {
-            return false;
+            return None;
         }
-        let z = self.graph.poses[old].inverse().compose(&found.pose);
-        self.loops.push(Loop {
+        let edge = Edge {
             from: old,
             to: n,
-            shift: (found.pose.x - here.x).hypot(found.pose.y - here.y),
-            turn: troupe_geom::normalize(found.pose.yaw - here.yaw).abs(),
-            score: found.score,
-        });
-        let info = in_frame_of(
-            found.pose,
-            m.field().information(&k.points, found.pose, k.reach),
-        );
-        self.graph.edges.push(Edge {
-            from: old,
-            to: n,
-            z,
-            info,
-        });
-        true
+            z: self.graph.poses[old].inverse().compose(&found.pose),
+            info: in_frame_of(
+                found.pose,
+                m.field().information(&k.points, found.pose, k.reach),
+            ),
+        };
+        let shift = (found.pose.x - here.x).hypot(found.pose.y - here.y);
+        Some((
+            edge,
+            Loop {
+                from: old,
+                to: n,
+                shift,
+            },
+        ))
     }
 
     /// Traces the scans of keyframes `range` into `grid`, each from its
@@ -495,13 +484,13 @@ impl Slam {
 
     /// Optimises the graph once more, at the end of a run.
     pub fn finish(&mut self) {
-        if self.closures == 0 {
+        if self.loops.is_empty() {
             return;
         }
         self.graph.optimize(20);
         // A closure the whole graph no longer agrees with goes, the worst
         // first, and the graph is optimised again without it.
-        for _ in 0..self.closures {
+        loop {
             let worst = (0..self.graph.edges.len())
                 .filter(|&e| self.graph.edges[e].to != self.graph.edges[e].from + 1)
                 .map(|e| (e, self.graph.edges[e].chi2(&self.graph.poses)))
@@ -513,7 +502,6 @@ impl Slam {
             let gone = self.graph.edges.remove(e);
             self.loops
                 .retain(|l| (l.from, l.to) != (gone.from, gone.to));
-            self.closures -= 1;
             self.rejected += 1;
             self.graph.optimize(20);
         }

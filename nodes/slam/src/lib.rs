@@ -136,11 +136,11 @@ impl SlamNode {
         if self.slam.add(odom, &scan, sensor) {
             self.slam.trace(&mut self.grid, n..n + 1);
         }
-        if self.slam.closures != self.closures {
+        if self.slam.closures() != self.closures {
             // The graph moved: trace every keyframe again from where it now
             // puts it, a share at each scan; one more round if it moves
             // again meanwhile.
-            self.closures = self.slam.closures;
+            self.closures = self.slam.closures();
             match &mut self.rebuild {
                 Some(r) => r.again = true,
                 None => self.rebuild = Some(Rebuild::new(res)),

@@ -125,7 +125,7 @@ fn the_map_grows_as_the_robot_drives_and_its_pose_is_corrected() {
         "the corrected pose ends {:.2} m off",
         miss(corrected)
     );
-    assert!(h.driver().slam().closures > 0);
+    assert!(h.driver().slam().closures() > 0);
 }
 
 #[test]
@@ -195,7 +195,7 @@ fn a_stage_error_log_of_stage_s_cave_maps_offline_and_online_to_the_figures() {
         online.coverage,
         raw.accuracy,
         raw.coverage,
-        built.slam.closures
+        built.slam.closures()
     );
     assert!(run.driven > 100.0, "r0 wandered {:.0} m", run.driven);
     // The test can fail: odometry alone is far from it.

@@ -271,7 +271,7 @@ fn build_cmd(a: &BuildArgs) -> anyhow::Result<()> {
         built.scans,
         built.slam.keyframes.len(),
         built.slam.unmatched,
-        built.slam.closures,
+        built.slam.closures(),
         built.slam.length(),
         span,
         took,

@@ -43,7 +43,7 @@ fn a_wander_through_the_office_makes_an_accurate_map() {
         s.accuracy,
         s.coverage,
         built.slam.keyframes.len(),
-        built.slam.closures
+        built.slam.closures()
     );
     assert!(s.accuracy >= 0.9, "accuracy {:.3}", s.accuracy);
     assert!(s.coverage >= 0.75, "coverage {:.3}", s.coverage);
@@ -100,11 +100,11 @@ fn a_loop_odometry_misses_by_half_a_metre_closes() {
     let slam = miss(built.slam.corrected(t_end, end_odom));
     eprintln!(
         "loop: odometry ends {raw:.2} m off, the map's trajectory {slam:.2} m; {} closures",
-        built.slam.closures
+        built.slam.closures()
     );
     assert!(raw >= 0.5, "odometry alone ends {raw:.2} m off");
     assert!(slam < 0.2, "the map's trajectory ends {slam:.2} m off");
-    assert!(built.slam.closures > 0);
+    assert!(built.slam.closures() > 0);
 }
 
 #[test]
@@ -177,7 +177,7 @@ fn a_long_loop_odometry_misses_by_metres_maps_without_a_double_wall_or_a_bent_wi
     eprintln!(
         "long loop, {:.0} m: back at the start odometry is {raw:.2} m off, the map's trajectory {slam:.2} m (RMS {rms:.3} m); \
          accuracy {:.3} (odometry alone {:.3}), coverage {:.3}; {} closures",
-        run.driven, s.accuracy, odometry.accuracy, s.coverage, built.slam.closures
+        run.driven, s.accuracy, odometry.accuracy, s.coverage, built.slam.closures()
     );
     assert!(
         raw >= 1.0,
@@ -188,7 +188,7 @@ fn a_long_loop_odometry_misses_by_metres_maps_without_a_double_wall_or_a_bent_wi
         "odometry alone {:.3}",
         odometry.accuracy
     );
-    assert!(built.slam.closures > 0);
+    assert!(built.slam.closures() > 0);
     assert!(
         slam < 0.15,
         "the map's trajectory is {slam:.2} m off where the loop closes"
