@@ -24,6 +24,7 @@ use pyo3::types::PyBytes;
 use troupe_client::{Client, ClientError};
 use troupe_msgs::{decode_any, encode_from, keys, schema_for, AnyMsg, Device, Interface, Stamped};
 use troupe_node::zenoh::pubsub::Subscriber;
+use troupe_node::zenoh::sample::SampleKind;
 use troupe_node::zenoh::{Session as ZenohSession, Wait};
 use troupe_node::{Mode, ZenohArgs};
 
@@ -209,17 +210,40 @@ impl Session {
     ) -> PyResult<Vec<(u32, String, u32, String)>> {
         let wait = seconds(timeout, "timeout")?;
         py.detach(|| {
+            let key = keys::tokens(robot);
+            // The router answers a subscriber's history before the query
+            // sent after it, on the same link: the two together, since a
+            // query alone once missed a token the history had just shown.
+            let history = self
+                .zenoh
+                .liveliness()
+                .declare_subscriber(&key)
+                .history(true)
+                .wait()
+                .map_err(|e| TroupeError::new_err(format!("watching devices: {e}")))?;
             let replies = self
                 .zenoh
                 .liveliness()
-                .get(keys::tokens(robot))
+                .get(&key)
                 .timeout(wait)
                 .wait()
                 .map_err(|e| TroupeError::new_err(format!("asking for devices: {e}")))?;
-            let mut out = Vec::new();
+            let mut live = Vec::new();
             while let Ok(r) = replies.recv() {
-                let Ok(sample) = r.result() else { continue };
-                if let Ok((d, driver)) = keys::parse_token(sample.key_expr().as_str()) {
+                if let Ok(sample) = r.result() {
+                    live.push(sample.key_expr().to_string());
+                }
+            }
+            while let Ok(Some(sample)) = history.try_recv() {
+                let key = sample.key_expr().to_string();
+                match sample.kind() {
+                    SampleKind::Put => live.push(key),
+                    SampleKind::Delete => live.retain(|k| *k != key),
+                }
+            }
+            let mut out = Vec::new();
+            for key in &live {
+                if let Ok((d, driver)) = keys::parse_token(key) {
                     out.push((d.robot, d.interface.to_string(), d.index, driver));
                 }
             }
@@ -252,6 +276,9 @@ impl Session {
                         missing.join(", ")
                     )));
                 };
+                if sample.kind() != SampleKind::Put {
+                    continue;
+                }
                 if let Ok((d, _)) = keys::parse_token(sample.key_expr().as_str()) {
                     let d = d.to_string();
                     missing.retain(|m| *m != d);
