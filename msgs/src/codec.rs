@@ -10,7 +10,7 @@
 //! The timestamp is the sample's time on the sender's clock (simulation time
 //! under Stage), in seconds, as in Player's message header.
 
-use serde::{de::DeserializeOwned, Serialize};
+use serde::{de::DeserializeOwned, Deserialize, Serialize};
 
 /// A typed message with a schema tag. Implemented by every message in this crate.
 pub trait Message: Serialize + DeserializeOwned + Clone + std::fmt::Debug + Send + 'static {
@@ -197,8 +197,12 @@ pub fn schema_of(payload: &[u8]) -> Result<&str, DecodeError> {
     split(payload).map(|(t, _, _)| t)
 }
 
-/// Decodes a body known to be of schema `schema`.
-pub(crate) fn decode_body<M: Message>(schema: &str, body: &[u8]) -> Result<M, DecodeError> {
+/// Decodes a body known to be of schema `schema` (a [`Message`], or a
+/// [`View`] borrowing from `body`).
+pub(crate) fn decode_body<'a, M: Deserialize<'a>>(
+    schema: &str,
+    body: &'a [u8],
+) -> Result<M, DecodeError> {
     match postcard::take_from_bytes::<M>(body) {
         Ok((msg, [])) => Ok(msg),
         Ok((_, rest)) => Err(DecodeError::Body {
@@ -227,10 +231,66 @@ pub fn decode<M: Message>(payload: &[u8]) -> Result<Stamped<M>, DecodeError> {
     })
 }
 
+/// A message read in place: its byte arrays borrow from the payload
+/// instead of being copied out (a camera frame in shared memory is read
+/// where it lies). It reads the wire of the [`Message`] it views.
+pub trait View<'a>: Deserialize<'a> {
+    /// The message whose payloads it reads.
+    type Owned: Message;
+}
+
+/// Decodes a payload as the view `V`, checking its schema tag first:
+/// [`decode`] without copying a byte array.
+pub fn decode_view<'a, V: View<'a>>(payload: &'a [u8]) -> Result<Stamped<V>, DecodeError> {
+    let (tag, stamp, body) = split(payload)?;
+    let expected = <V::Owned as Message>::SCHEMA;
+    if tag != expected {
+        return Err(DecodeError::SchemaMismatch {
+            expected,
+            got: tag.to_owned(),
+        });
+    }
+    Ok(Stamped {
+        stamp,
+        msg: decode_body(tag, body)?,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::{laser, position2d, Pose2d};
+
+    #[test]
+    fn a_view_reads_a_frame_where_it_lies_and_checks_what_it_reads() {
+        use crate::camera;
+        let frame = camera::Data {
+            width: 4,
+            height: 2,
+            bpp: 8,
+            format: camera::FORMAT_MONO8,
+            image: (0..8).collect(),
+            ..Default::default()
+        };
+        let payload = encode(&frame, 3.5);
+        let view = decode_view::<camera::DataView>(&payload).unwrap();
+        assert_eq!(view.stamp, 3.5);
+        assert_eq!(view.msg.to_data(), frame);
+        assert!(
+            payload.as_ptr_range().contains(&view.msg.image.as_ptr()),
+            "the image is borrowed from the payload, not copied"
+        );
+        let scan = encode(&laser::Scan::default(), 0.0);
+        assert!(matches!(
+            decode_view::<camera::DataView>(&scan),
+            Err(DecodeError::SchemaMismatch { .. })
+        ));
+        let cut = &payload[..payload.len() - 1];
+        assert!(matches!(
+            decode_view::<camera::DataView>(cut),
+            Err(DecodeError::Body { .. })
+        ));
+    }
 
     #[test]
     fn round_trip_keeps_message_and_stamp() {

@@ -809,13 +809,17 @@ fn bench_latency_prints_its_floor_and_zenoh_at_its_fastest_beside_the_figures() 
     assert!(
         out.contains("camera/data@1 payload")
             && out.contains("the samples through shared memory")
-            && out.contains("same run: one sample one way p50"),
+            && out.contains("same run, one sample one way p50 (throughput): over shared memory"),
         "{out}"
     );
+    // One way by the clock both processes read, beside half a round trip.
     for after in ["tcp/127.0.0.1\n", "through shared memory\n"] {
-        let p50 = p50_of(&out, after, "one sample (round trip/2)");
-        assert!(p50 > 0.0, "after {after:?}: p50 {p50} µs in:\n{out}");
+        for name in ["one sample (round trip/2)", "one sample one way"] {
+            let p50 = p50_of(&out, after, name);
+            assert!(p50 > 0.0, "{name} after {after:?}: p50 {p50} µs in:\n{out}");
+        }
     }
+    assert_eq!(out.matches("  throughput ").count(), 3, "{out}");
 }
 
 /// A panic in any of a driver's hooks ends its process with status 101 and

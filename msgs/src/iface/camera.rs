@@ -38,3 +38,43 @@ pub struct Data {
     pub image: Vec<u8>,
 }
 message!(Data, "camera/data@1");
+
+/// A [`Data`] read in place ([`crate::codec::decode_view`]): the image
+/// borrowed from the payload, not copied. A 1 MB frame that came through
+/// shared memory is read where the driver wrote it.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+pub struct DataView<'a> {
+    /// Pixels across.
+    pub width: u32,
+    /// Pixels down.
+    pub height: u32,
+    /// Bits per pixel.
+    pub bpp: u32,
+    /// As [`Data::format`].
+    pub format: u32,
+    /// As [`Data::fdiv`].
+    pub fdiv: u32,
+    /// As [`Data::compression`].
+    pub compression: u32,
+    /// The pixels, or the compressed file.
+    pub image: &'a [u8],
+}
+
+impl<'a> crate::codec::View<'a> for DataView<'a> {
+    type Owned = Data;
+}
+
+impl DataView<'_> {
+    /// The message, its image copied.
+    pub fn to_data(&self) -> Data {
+        Data {
+            width: self.width,
+            height: self.height,
+            bpp: self.bpp,
+            format: self.format,
+            fdiv: self.fdiv,
+            compression: self.compression,
+            image: self.image.to_vec(),
+        }
+    }
+}

@@ -18,6 +18,7 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use clap::Args;
 use troupe_msgs::{camera, codec, keys, laser, Message};
+use troupe_node::zenoh::qos::CongestionControl;
 use troupe_node::zenoh::{Session, Wait};
 use troupe_node::{Mode, ZenohArgs};
 
@@ -28,9 +29,9 @@ use crate::harness::{percentile, us};
 /// `--secure` over TLS too.
 pub fn run(a: &LatencyArgs) -> anyhow::Result<()> {
     let size = Msg::of(a.carry, a.size).encode(0.0).len();
-    let network = latency(a, None, false)?;
+    let network = latency(a, None, false)?.context("no one-way times")?;
     if size >= SHM_FROM {
-        let shm = latency(a, None, true)?;
+        let shm = latency(a, None, true)?.context("no one-way times")?;
         let small = LatencyArgs {
             size: SMALL,
             carry: Carry::Scan,
@@ -38,16 +39,30 @@ pub fn run(a: &LatencyArgs) -> anyhow::Result<()> {
             ..*a
         };
         let small_size = Msg::of(Carry::Scan, SMALL).encode(0.0).len();
-        let small = latency(&small, None, false)?;
-        let x = |d: Duration| d.as_secs_f64() / small.as_secs_f64().max(1e-9);
+        let small = latency(&small, None, false)?.context("no one-way times")?;
+        let p50 = |o: &OneWay| percentile(&o.times, 0.5);
+        let x = |o: &OneWay| p50(o).as_secs_f64() / p50(&small).as_secs_f64().max(1e-9);
+        // A plain memcpy of the payload into memory already written.
+        let from = vec![7u8; size];
+        let mut to = vec![0u8; size];
+        let copy = timed(a.samples, || {
+            to.copy_from_slice(std::hint::black_box(&from));
+            std::hint::black_box(&to);
+            Ok(())
+        })?;
+        let mb = |o: &OneWay| o.rate * size as f64 / 1e6;
         writeln!(
             std::io::stdout().lock(),
-            "troupe bench latency: {size} bytes against {small_size}, same run: one sample one way p50 {} over the network ({:.1}x), {} over shared memory ({:.1}x); {small_size} bytes {} (target: 1 MB <= 3x)",
-            us(network),
-            x(network),
-            us(shm),
-            x(shm),
-            us(small)
+            "troupe bench latency: {size} bytes against {small_size}, same run, one sample one way p50 (throughput): over shared memory {} ({:.1}x; {:.0} MB/s), over the network {} ({:.1}x; {:.0} MB/s); {small_size} bytes {} ({:.0} samples/s); a memcpy of {size} bytes {} (target: 1 MB <= 3x)",
+            us(p50(&shm)),
+            x(&shm),
+            mb(&shm),
+            us(p50(&network)),
+            x(&network),
+            mb(&network),
+            us(p50(&small)),
+            small.rate,
+            us(percentile(&copy, 0.5)),
         )?;
     }
     if a.secure {
@@ -89,9 +104,10 @@ pub struct LatencyArgs {
     pub secure: bool,
 }
 
-/// The bench's keys under `prefix`: ping, pong, req, ready.
-fn bench_keys(prefix: &str) -> [String; 4] {
-    ["ping", "pong", "req", "ready"].map(|k| format!("{prefix}/{k}"))
+/// The bench's keys under `prefix`: ping, pong, req, ready, and the one-way
+/// samples with their acks.
+fn bench_keys(prefix: &str) -> [String; 6] {
+    ["ping", "pong", "req", "ready", "oneway", "ack"].map(|k| format!("{prefix}/{k}"))
 }
 
 /// A robot port no stack uses, whose keys the secure bench runs under.
@@ -146,6 +162,15 @@ impl Msg {
         }
     }
 
+    /// Encodes into `out`, exactly [`Msg::encode`]'s length, as a driver
+    /// writes into a lent buffer.
+    fn encode_into(&self, stamp: f64, out: &mut [u8]) -> bool {
+        match self {
+            Msg::Scan(m) => codec::encode_into(m, stamp, out),
+            Msg::Camera(m) => codec::encode_into(m, stamp, out),
+        }
+    }
+
     /// Decodes a payload as the message its schema names, as a node
     /// decodes what it takes: its stamp and the message.
     fn decode(payload: &[u8]) -> anyhow::Result<(f64, Msg)> {
@@ -158,6 +183,22 @@ impl Msg {
                 let m = codec::decode::<laser::Scan>(payload)?;
                 (m.stamp, Msg::Scan(m.msg))
             }
+        })
+    }
+}
+
+impl Msg {
+    /// Reads a payload as a subscriber that keeps nothing reads it: a
+    /// camera frame in place ([`camera::DataView`]), a scan decoded. Its
+    /// stamp.
+    fn read(payload: &[u8]) -> anyhow::Result<f64> {
+        Ok(match codec::schema_of(payload)? {
+            camera::Data::SCHEMA => {
+                let frame = codec::decode_view::<camera::DataView>(payload)?;
+                std::hint::black_box(frame.msg);
+                frame.stamp
+            }
+            _ => Msg::decode(payload)?.0,
         })
     }
 }
@@ -253,7 +294,7 @@ impl Pong {
         prefix: &str,
         fastest: bool,
     ) -> anyhow::Result<Pong> {
-        let [_, _, _, ready_key] = bench_keys(prefix);
+        let [_, _, _, ready_key, ..] = bench_keys(prefix);
         let ready = session
             .liveliness()
             .declare_subscriber(&ready_key)
@@ -293,8 +334,12 @@ impl Drop for Pong {
 /// mutual authentication and access control, the pong a host of robot
 /// `SECURE_ROBOT` whose keys the bench uses; samples through shared memory
 /// if `shm` (and large enough), else through the network. Prints a table
-/// and returns one sample's p50, one way.
-fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>, shm: bool) -> anyhow::Result<Duration> {
+/// and returns one sample's times one way (none over TLS).
+fn latency(
+    a: &LatencyArgs,
+    keys: Option<&std::path::Path>,
+    shm: bool,
+) -> anyhow::Result<Option<OneWay>> {
     let ns = format!("bench-{}", std::process::id());
     let (zr, prefix, pong_net) = match keys {
         None => (
@@ -334,7 +379,7 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>, shm: bool) -> anyhow
             )
         }
     };
-    let [ping_key, pong_key, req_key, _] = bench_keys(&prefix);
+    let [ping_key, pong_key, req_key, ..] = bench_keys(&prefix);
     let session = zr.open(Mode::Router)?;
     // Certificates name `localhost`, not the address.
     let locator = locator_of(&session)?.replace("tls/127.0.0.1", "tls/localhost");
@@ -400,6 +445,10 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>, shm: bool) -> anyhow
             getreply.push(t0.elapsed());
         }
     }
+    let one = match keys {
+        None => Some(one_way(&session, &prefix, &msg, a, shm)?),
+        Some(_) => None,
+    };
     drop(pong);
     // Zenoh at its fastest, over plain TCP only (the secure run compares
     // with the plain one).
@@ -446,6 +495,22 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>, shm: bool) -> anyhow
     row(&mut out, "put/sub round trip", &pubsub, false)?;
     row(&mut out, "one sample (round trip/2)", &pubsub, true)?;
     row(&mut out, "get/reply round trip", &getreply, false)?;
+    if let Some(one) = &one {
+        row(&mut out, "one sample one way", &one.times, false)?;
+        writeln!(
+            out,
+            "  {:<26} {:.0} samples/s, {:.0} MB/s ({} back to back, each decoded{})",
+            "throughput",
+            one.rate,
+            one.rate * size as f64 / 1e6,
+            one.burst,
+            if one.copied > 0 {
+                format!("; {} not lent by the pool, copied", one.copied)
+            } else {
+                String::new()
+            }
+        )?;
+    }
     for (name, times) in memory.iter().flatten() {
         row(&mut out, name, times, false)?;
     }
@@ -475,7 +540,123 @@ fn latency(a: &LatencyArgs, keys: Option<&std::path::Path>, shm: bool) -> anyhow
             crate::harness::times_floor(&best, &tcp),
         )?;
     }
-    Ok(percentile(&pubsub, 0.5) / 2)
+    Ok(one)
+}
+
+/// The wall clock in seconds, which every process of a host reads alike:
+/// a one-way sample's stamp.
+fn wall() -> f64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0.0, |d| d.as_secs_f64())
+}
+
+/// One sample one way, as a driver publishes it and a subscriber takes
+/// it, timed by the clock both processes read: `msg` stamped, encoded
+/// (with `lend`, into a buffer of Zenoh's shared-memory pool, as
+/// `Bus::publish_lent` does; else into a `Vec`), put, and decoded by the
+/// pong, which acks with what it measured before the next is sent.
+struct OneWay {
+    /// Sorted, one per timed sample.
+    times: Vec<Duration>,
+    /// Samples a second sent back to back, none dropped (the publisher
+    /// blocks while the link is full), and how many that burst held.
+    rate: f64,
+    burst: usize,
+    /// Samples the pool could not lend, sent from a `Vec` instead.
+    copied: usize,
+}
+
+fn one_way(
+    session: &Session,
+    prefix: &str,
+    msg: &Msg,
+    a: &LatencyArgs,
+    lend: bool,
+) -> anyhow::Result<OneWay> {
+    use troupe_node::zenoh::bytes::ZBytes;
+    use troupe_node::zenoh::shm::GarbageCollect;
+    let [.., oneway_key, ack_key] = bench_keys(prefix);
+    let acks = session
+        .declare_subscriber(&ack_key)
+        .wait()
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let publisher = session
+        .declare_publisher(&oneway_key)
+        .express(true)
+        .congestion_control(CongestionControl::Block)
+        .wait()
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let len = msg.encode(0.0).len();
+    let mut copied = 0;
+    let mut send = |stamp: f64| -> anyhow::Result<()> {
+        let lent = lend
+            .then(|| session.get_shm_provider().into_option())
+            .flatten()
+            .and_then(|pool| {
+                pool.garbage_collect();
+                let mut buf = pool
+                    .alloc(len)
+                    .with_policy::<GarbageCollect>()
+                    .wait()
+                    .ok()?;
+                msg.encode_into(stamp, &mut buf).then_some(buf)
+            });
+        let payload = match lent {
+            Some(buf) => ZBytes::from(buf),
+            None => {
+                copied += usize::from(lend);
+                ZBytes::from(msg.encode(stamp))
+            }
+        };
+        publisher
+            .put(payload)
+            .wait()
+            .map_err(|e| anyhow::anyhow!("{e}"))
+    };
+    let ack = |wait: Duration| -> anyhow::Result<(f64, f64)> {
+        let s = acks
+            .recv_timeout(wait)
+            .map_err(|e| anyhow::anyhow!("{e}"))?
+            .context("no ack within 5 s")?;
+        let b = s.payload().to_bytes();
+        let word = |i: usize| -> anyhow::Result<f64> {
+            let w = b.get(i..i + 8).context("a short ack")?;
+            Ok(f64::from_le_bytes(w.try_into()?))
+        };
+        Ok((word(0)?, word(8)?))
+    };
+    let mut times = Vec::with_capacity(a.samples);
+    for i in 0..a.warmup + a.samples {
+        let stamp = wall();
+        send(stamp)?;
+        let took = loop {
+            let (answers, took) = ack(Duration::from_secs(5))?;
+            if answers == stamp {
+                break took;
+            }
+        };
+        if i >= a.warmup {
+            times.push(Duration::from_secs_f64(took.max(0.0)));
+        }
+    }
+    times.sort();
+    // Throughput: a burst sent back to back, every sample acked.
+    let burst = a.samples.min(1000);
+    let t0 = Instant::now();
+    for _ in 0..burst {
+        send(wall())?;
+    }
+    for _ in 0..burst {
+        ack(Duration::from_secs(5))?;
+    }
+    let rate = burst as f64 / t0.elapsed().as_secs_f64().max(1e-9);
+    Ok(OneWay {
+        times,
+        rate,
+        burst,
+        copied,
+    })
 }
 
 /// Put/sub round trips at Zenoh's fastest between two processes, each
@@ -563,7 +744,7 @@ impl WaitOrKill for std::process::Child {
 /// sends it back; with `fastest`, on Zenoh's fastest transport
 /// ([`FASTEST`]), as [`fastest`] times it.
 pub fn pong(z: &ZenohArgs, prefix: &str, fastest: bool) -> anyhow::Result<()> {
-    let [ping_key, pong_key, req_key, ready_key] = bench_keys(prefix);
+    let [ping_key, pong_key, req_key, ready_key, oneway_key, ack_key] = bench_keys(prefix);
     let session = if fastest {
         open_fastest(z, Mode::Peer)?
     } else {
@@ -579,6 +760,30 @@ pub fn pong(z: &ZenohArgs, prefix: &str, fastest: bool) -> anyhow::Result<()> {
         .callback(move |s| match Msg::decode(&s.payload().to_bytes()) {
             Ok((stamp, m)) => {
                 if let Err(e) = back.put(m.encode(stamp)).wait() {
+                    tracing::warn!("pong: {e}");
+                }
+            }
+            Err(e) => tracing::warn!("pong: {e}"),
+        })
+        .wait()
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    // One way: the time from the sender's stamp (the wall clock, which
+    // both processes read) to the message decoded here, sent back with
+    // the stamp it answers.
+    let ack = session
+        .declare_publisher(ack_key)
+        .express(true)
+        .congestion_control(CongestionControl::Block)
+        .wait()
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let _one_way = session
+        .declare_subscriber(oneway_key)
+        .callback(move |s| match Msg::read(&s.payload().to_bytes()) {
+            Ok(stamp) => {
+                let took = wall() - stamp;
+                let mut answer = stamp.to_le_bytes().to_vec();
+                answer.extend_from_slice(&took.to_le_bytes());
+                if let Err(e) = ack.put(answer).wait() {
                     tracing::warn!("pong: {e}");
                 }
             }
