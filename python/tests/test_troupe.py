@@ -179,6 +179,8 @@ def test_camera_images_raw_and_jpeg_are_arrays(launch):
     jpeg.read(timeout=10)
     assert (raw.width, raw.height, raw.bpp, raw.format) == (160, 120, 24, troupe.Camera.FORMAT_RGB888)
     assert raw.compression == troupe.Camera.COMPRESS_RAW and len(raw.image) == 160 * 120 * 3
+    # A frame's bytes reach Python as bytes, not as a list of ints.
+    assert isinstance(raw.latest("camera/data")["image"], bytes)
     assert jpeg.compression == troupe.Camera.COMPRESS_JPEG and jpeg.image[:2] == b"\xff\xd8"
     a, b = raw.pixels, jpeg.pixels
     assert a.shape == b.shape == (120, 160, 3) and a.dtype == np.uint8
