@@ -791,6 +791,26 @@ fn bench_latency_prints_its_floor_and_zenoh_at_its_fastest_beside_the_figures() 
         2,
         "both ratios, the figures' and the fastest path's:\n{out}"
     );
+    assert!(
+        out.contains("Troupe's path against Zenoh's fastest, p50, same run: put/sub round trip"),
+        "{out}"
+    );
+    // Zenoh settings reach both sides' sessions: a key Zenoh does not know
+    // is refused, named.
+    let (status, _, err) = troupe_output(&strings(&[
+        "bench",
+        "latency",
+        "--samples",
+        "5",
+        "--warmup",
+        "1",
+        "--zenoh-set",
+        "transport/no_such_key=1",
+    ]));
+    assert!(
+        !status.success() && err.contains("--zenoh-set transport/no_such_key=1"),
+        "{err}"
+    );
     // A camera frame large enough for shared memory: both paths, and a
     // small sample beside them.
     let (status, out, err) = troupe_output(&strings(&[

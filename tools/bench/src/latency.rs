@@ -36,7 +36,7 @@ pub fn run(a: &LatencyArgs) -> anyhow::Result<()> {
             size: SMALL,
             carry: Carry::Scan,
             secure: false,
-            ..*a
+            ..a.clone()
         };
         let small_size = Msg::of(Carry::Scan, SMALL).encode(0.0).len();
         let small = latency(&small, None, false)?.context("no one-way times")?;
@@ -82,7 +82,7 @@ const SHM_FROM: usize = 3072;
 const SMALL: usize = 64;
 
 /// Flags of `troupe bench latency`.
-#[derive(Debug, Clone, Copy, Args)]
+#[derive(Debug, Clone, Args)]
 pub struct LatencyArgs {
     /// Payload size in bytes (a laser scan with as many beams as fit, or
     /// with `--carry camera` an RGB image of as many bytes).
@@ -102,6 +102,48 @@ pub struct LatencyArgs {
     /// control, as `troupe fleet-keys` sets them up, and print both.
     #[arg(long)]
     pub secure: bool,
+    /// A Zenoh setting for both processes' sessions on Troupe's path, as
+    /// KEY=VALUE (a key of Zenoh's configuration, a JSON5 value);
+    /// repeatable. `--zenoh-set transport/unicast/lowlatency=true
+    /// --zenoh-set transport/unicast/qos/enabled=false` shows what Zenoh's
+    /// lowlatency transport would give Troupe's sessions.
+    #[arg(long = "zenoh-set", value_name = "KEY=VALUE", value_parser = key_value)]
+    pub zenoh_set: Vec<(String, String)>,
+}
+
+/// Parses `--zenoh-set`'s KEY=VALUE.
+pub fn key_value(s: &str) -> Result<(String, String), String> {
+    match s.split_once('=') {
+        Some((k, v)) if !k.is_empty() && !v.is_empty() => Ok((k.to_owned(), v.to_owned())),
+        _ => Err(format!(
+            "`{s}` is not KEY=VALUE (e.g. transport/unicast/qos/enabled=false)"
+        )),
+    }
+}
+
+/// A session of `z`'s in `mode` with `set`'s Zenoh settings on top.
+fn open_with(z: &ZenohArgs, mode: Mode, set: &[(String, String)]) -> anyhow::Result<Session> {
+    let mut c = z.config(mode)?;
+    for (key, value) in set {
+        c.insert_json5(key, value).map_err(|e| {
+            // Zenoh's message ends with its source's path.
+            // Zenoh's message ends with its source's path, and a JSON5
+            // parser's runs over lines: kept only when short.
+            let why = e.to_string();
+            let why = why.split(" at /").next().unwrap_or_default();
+            let why = if why.contains('\n') || why.len() > 60 {
+                String::new()
+            } else {
+                format!("{why}; ")
+            };
+            anyhow::anyhow!(
+                "--zenoh-set {key}={value}: not a key of Zenoh's configuration, or not a value for it ({why}the keys and their values: Zenoh's DEFAULT_CONFIG.json5)"
+            )
+        })?;
+    }
+    troupe_node::zenoh::open(c)
+        .wait()
+        .map_err(|e| anyhow::anyhow!("{e}"))
 }
 
 /// The bench's keys under `prefix`: ping, pong, req, ready, and the one-way
@@ -293,6 +335,7 @@ impl Pong {
         net: &[String],
         prefix: &str,
         fastest: bool,
+        set: &[(String, String)],
     ) -> anyhow::Result<Pong> {
         let [_, _, _, ready_key, ..] = bench_keys(prefix);
         let ready = session
@@ -307,6 +350,9 @@ impl Pong {
             .args(["bench", "pong", "--prefix", prefix]);
         if fastest {
             cmd.arg("--fastest");
+        }
+        for (key, value) in set {
+            cmd.arg("--zenoh-set").arg(format!("{key}={value}"));
         }
         let pong = Pong(
             cmd.stdin(Stdio::piped())
@@ -380,10 +426,10 @@ fn latency(
         }
     };
     let [ping_key, pong_key, req_key, ..] = bench_keys(&prefix);
-    let session = zr.open(Mode::Router)?;
+    let session = open_with(&zr, Mode::Router, &a.zenoh_set)?;
     // Certificates name `localhost`, not the address.
     let locator = locator_of(&session)?.replace("tls/127.0.0.1", "tls/localhost");
-    let pong = Pong::start(&session, &locator, &pong_net, &prefix, false)?;
+    let pong = Pong::start(&session, &locator, &pong_net, &prefix, false, &a.zenoh_set)?;
 
     let replies = session
         .declare_subscriber(&pong_key)
@@ -479,7 +525,17 @@ fn latency(
         Msg::Scan(_) => laser::Scan::SCHEMA,
         Msg::Camera(_) => camera::Data::SCHEMA,
     };
-    writeln!(out, "troupe bench latency: {size}-byte {schema} payload, {} samples (+{} warm-up), two processes, Zenoh over {over}", a.samples, a.warmup)?;
+    let settings = if a.zenoh_set.is_empty() {
+        String::new()
+    } else {
+        let kv: Vec<String> = a
+            .zenoh_set
+            .iter()
+            .map(|(k, v)| format!("{k}={v}"))
+            .collect();
+        format!(", with {}", kv.join(", "))
+    };
+    writeln!(out, "troupe bench latency: {size}-byte {schema} payload, {} samples (+{} warm-up), two processes, Zenoh over {over}{settings}", a.samples, a.warmup)?;
     let row = |out: &mut std::io::StdoutLock, name: &str, v: &[Duration], half: bool| {
         let f = |d: Duration| if half { d / 2 } else { d };
         writeln!(
@@ -538,6 +594,11 @@ fn latency(
             "  p50 against TCP: one sample {:.2}x a TCP one way in turn with it, {:.2}x the floor above (no session of Troupe's can do better: see ARCHITECTURE.md, \"What a hop costs\")",
             crate::harness::times_floor(&best, &beside),
             crate::harness::times_floor(&best, &tcp),
+        )?;
+        writeln!(
+            out,
+            "  Troupe's path against Zenoh's fastest, p50, same run: put/sub round trip {:.2}x (target <= 1.2x)",
+            percentile(&pubsub, 0.5).as_secs_f64() / percentile(&best, 0.5).as_secs_f64().max(1e-9)
         )?;
     }
     Ok(one)
@@ -677,7 +738,14 @@ fn fastest(
 ) -> anyhow::Result<(Vec<Duration>, Vec<Duration>)> {
     let [ping_key, pong_key, ..] = bench_keys(prefix);
     let session = open_fastest(zr, Mode::Router)?;
-    let _pong = Pong::start(&session, &locator_of(&session)?, pong_net, prefix, true)?;
+    let _pong = Pong::start(
+        &session,
+        &locator_of(&session)?,
+        pong_net,
+        prefix,
+        true,
+        &[],
+    )?;
     let echoed = Arc::new(AtomicU64::new(0));
     let count = echoed.clone();
     let _replies = session
@@ -743,12 +811,17 @@ impl WaitOrKill for std::process::Child {
 /// The echo side: decodes each ping as a node would, re-encodes it and
 /// sends it back; with `fastest`, on Zenoh's fastest transport
 /// ([`FASTEST`]), as [`fastest`] times it.
-pub fn pong(z: &ZenohArgs, prefix: &str, fastest: bool) -> anyhow::Result<()> {
+pub fn pong(
+    z: &ZenohArgs,
+    prefix: &str,
+    fastest: bool,
+    set: &[(String, String)],
+) -> anyhow::Result<()> {
     let [ping_key, pong_key, req_key, ready_key, oneway_key, ack_key] = bench_keys(prefix);
     let session = if fastest {
         open_fastest(z, Mode::Peer)?
     } else {
-        z.open(Mode::Peer)?
+        open_with(z, Mode::Peer, set)?
     };
     let back = session
         .declare_publisher(pong_key)

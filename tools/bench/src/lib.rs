@@ -98,6 +98,9 @@ pub enum BenchCmd {
         /// On Zenoh's fastest transport (lowlatency, QoS off).
         #[arg(long)]
         fastest: bool,
+        /// Zenoh settings, as `bench latency --zenoh-set` gives them.
+        #[arg(long = "zenoh-set", value_name = "KEY=VALUE", value_parser = latency::key_value)]
+        set: Vec<(String, String)>,
     },
     /// Runs a command and prints its wall time, CPU and peak memory (started by `bench stage --stage`).
     #[command(hide = true)]
@@ -123,7 +126,11 @@ pub fn run(cmd: BenchCmd, z: &ZenohArgs) -> anyhow::Result<()> {
     match cmd {
         BenchCmd::Latency(a) => latency::run(&a),
         BenchCmd::Camera(a) => camera::run(&a),
-        BenchCmd::Pong { prefix, fastest } => latency::pong(z, &prefix, fastest),
+        BenchCmd::Pong {
+            prefix,
+            fastest,
+            set,
+        } => latency::pong(z, &prefix, fastest, &set),
         BenchCmd::Echo { to, size } => harness::echo(&to, size),
         BenchCmd::Measure { cmd } => vs_stage::measure(&cmd),
         BenchCmd::Launch(a) => launch::run(&a),
