@@ -126,7 +126,6 @@ fn open_with(z: &ZenohArgs, mode: Mode, set: &[(String, String)]) -> anyhow::Res
     let mut c = z.config(mode)?;
     for (key, value) in set {
         c.insert_json5(key, value).map_err(|e| {
-            // Zenoh's message ends with its source's path.
             // Zenoh's message ends with its source's path, and a JSON5
             // parser's runs over lines: kept only when short.
             let why = e.to_string();
@@ -227,9 +226,7 @@ impl Msg {
             }
         })
     }
-}
 
-impl Msg {
     /// Reads a payload as a subscriber that keeps nothing reads it: a
     /// camera frame in place ([`camera::DataView`]), a scan decoded. Its
     /// stamp.
@@ -305,14 +302,8 @@ const FASTEST_MAX: usize = 65_000;
 
 /// A session of `z`'s in `mode`, with [`FASTEST`] set.
 fn open_fastest(z: &ZenohArgs, mode: Mode) -> anyhow::Result<Session> {
-    let mut c = z.config(mode)?;
-    for (key, value) in FASTEST {
-        c.insert_json5(key, value)
-            .map_err(|e| anyhow::anyhow!("{key}: {e}"))?;
-    }
-    troupe_node::zenoh::open(c)
-        .wait()
-        .map_err(|e| anyhow::anyhow!("{e}"))
+    let set = FASTEST.map(|(k, v)| (k.to_owned(), v.to_owned()));
+    open_with(z, mode, &set)
 }
 
 /// The first address the bench's router listens on.
@@ -604,16 +595,8 @@ fn latency(
     Ok(one)
 }
 
-/// The wall clock in seconds, which every process of a host reads alike:
-/// a one-way sample's stamp.
-fn wall() -> f64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0.0, |d| d.as_secs_f64())
-}
-
 /// One sample one way, as a driver publishes it and a subscriber takes
-/// it, timed by the clock both processes read: `msg` stamped, encoded
+/// it, timed by the wall clock, which every process of a host reads alike: `msg` stamped, encoded
 /// (with `lend`, into a buffer of Zenoh's shared-memory pool, as
 /// `Bus::publish_lent` does; else into a `Vec`), put, and decoded by the
 /// pong, which acks with what it measured before the next is sent.
@@ -638,6 +621,7 @@ fn one_way(
     use troupe_node::zenoh::bytes::ZBytes;
     use troupe_node::zenoh::shm::GarbageCollect;
     let [.., oneway_key, ack_key] = bench_keys(prefix);
+    let clock = troupe_node::Clock::wall();
     let acks = session
         .declare_subscriber(&ack_key)
         .wait()
@@ -689,7 +673,7 @@ fn one_way(
     };
     let mut times = Vec::with_capacity(a.samples);
     for i in 0..a.warmup + a.samples {
-        let stamp = wall();
+        let stamp = clock.now();
         send(stamp)?;
         let took = loop {
             let (answers, took) = ack(Duration::from_secs(5))?;
@@ -706,7 +690,7 @@ fn one_way(
     let burst = a.samples.min(1000);
     let t0 = Instant::now();
     for _ in 0..burst {
-        send(wall())?;
+        send(clock.now())?;
     }
     for _ in 0..burst {
         ack(Duration::from_secs(5))?;
@@ -849,11 +833,12 @@ pub fn pong(
         .congestion_control(CongestionControl::Block)
         .wait()
         .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let clock = troupe_node::Clock::wall();
     let _one_way = session
         .declare_subscriber(oneway_key)
         .callback(move |s| match Msg::read(&s.payload().to_bytes()) {
             Ok(stamp) => {
-                let took = wall() - stamp;
+                let took = clock.now() - stamp;
                 let mut answer = stamp.to_le_bytes().to_vec();
                 answer.extend_from_slice(&took.to_le_bytes());
                 if let Err(e) = ack.put(answer).wait() {
