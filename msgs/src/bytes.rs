@@ -17,16 +17,15 @@ use serde::{Deserialize, Serialize, Serializer};
 pub mod u8s {
     use super::*;
 
-    /// Bytes, or in a text format a list of numbers.
+    /// Bytes, whatever the format: JSON writes them as a list of numbers
+    /// all the same, and Python (pythonize) gets `bytes`, not a list of a
+    /// million ints for a VGA frame.
     pub fn serialize<S: Serializer>(v: &[u8], s: S) -> Result<S::Ok, S::Error> {
-        if s.is_human_readable() {
-            v.serialize(s)
-        } else {
-            s.serialize_bytes(v)
-        }
+        s.serialize_bytes(v)
     }
 
-    /// Reads what [`serialize`] writes.
+    /// Reads what [`serialize`] writes (in a text format, a list of
+    /// numbers).
     pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<u8>, D::Error> {
         if d.is_human_readable() {
             Vec::deserialize(d)

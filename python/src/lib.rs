@@ -22,9 +22,7 @@ use pyo3::exceptions::{PyException, PyTimeoutError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyBytes;
 use troupe_client::{Client, ClientError};
-use troupe_msgs::{
-    camera, decode_any, encode_from, keys, schema_for, AnyMsg, Device, Interface, Stamped,
-};
+use troupe_msgs::{decode_any, encode_from, keys, schema_for, AnyMsg, Device, Interface, Stamped};
 use troupe_node::zenoh::pubsub::Subscriber;
 use troupe_node::zenoh::sample::SampleKind;
 use troupe_node::zenoh::{Session as ZenohSession, Wait};
@@ -136,18 +134,6 @@ impl serde::Serialize for Body<'_> {
 }
 
 fn to_python<'py>(py: Python<'py>, msg: &AnyMsg) -> PyResult<Bound<'py, PyAny>> {
-    if let AnyMsg::CameraData(d) = msg {
-        // The image as `bytes`: pythonize makes a byte array a list of
-        // ints, a million of them for a VGA frame (and `bytes(list)` in
-        // `Camera.pixels` a second pass over them).
-        let fields = camera::Data {
-            image: Vec::new(),
-            ..*d
-        };
-        let dict = pythonize::pythonize(py, &fields)?;
-        dict.set_item("image", PyBytes::new(py, &d.image))?;
-        return Ok(dict);
-    }
     Ok(pythonize::pythonize(py, &Body(msg))?)
 }
 
