@@ -12,7 +12,7 @@
 //! wrong, against the trajectory it carries, its RMS error printed.
 //!
 //! The worlds: Troupe's office (worlds/wander.world, its robot driven by
-//! the map crate's explorer: Stage's `wander` wedges itself in the
+//! the simulator's `explore`: Stage's `wander` wedges itself in the
 //! office's doorways), Troupe's long loop (worlds/loop.world, driven round
 //! and round with the wall on its left), and where ../shared/compat is, Stage's own
 //! simple.world (the cave, its r0 with its own `wander`) and autolab.world
@@ -90,7 +90,7 @@ pub fn run(a: &SlamBenchArgs) -> anyhow::Result<()> {
             "office",
             root.join("worlds/wander.world"),
             "r0",
-            Driver::Explore,
+            Driver::Own,
         ),
         (
             "loop",

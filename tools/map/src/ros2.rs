@@ -303,7 +303,7 @@ mod tests {
                 seconds: 120.0,
                 odom_error: [0.02, 0.0, 0.04],
                 every: 0.1,
-                driver: Driver::Explore,
+                driver: Driver::Own,
             },
         )
         .unwrap();

@@ -68,12 +68,10 @@ pub struct Setup {
 /// Who drives the simulated robot.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Driver {
-    /// Its own controller, as the world file says (`ctrl "wander"`).
+    /// Its own controller, as the world file says (`ctrl "explore"`).
     Own,
     /// This Stage controller instead (`wander`).
     Ctrl(String),
-    /// [`Explorer`]: cruises, steers to open space, backs out of stalls.
-    Explore,
     /// [`follow_left`]: round a building, the wall on its left.
     FollowLeft,
 }
@@ -100,59 +98,6 @@ pub fn follow_left(ranges: &[f64], fov: f64) -> (f64, f64) {
     (0.45, (0.8 * (left - 1.2)).clamp(-0.5, 0.5))
 }
 
-/// A driver for exploring a building: Stage's `wander` turns in place
-/// where it meets something and wedges itself in doorways. This one
-/// cruises at 0.45 m/s steering towards the more open side, turns away
-/// from what is ahead, backs out of a stall, and every 40 s takes a turn
-/// of its own, so it sees the rooms, not one wall.
-#[derive(Debug, Clone, Default)]
-pub struct Explorer {
-    backing: u32,
-    turning: u32,
-    turn_left: bool,
-}
-
-impl Explorer {
-    /// The velocity (forward m/s, turn rad/s) for a scan of beams evenly
-    /// over `fov` radians (rightmost first), at step `k`.
-    pub fn drive(&mut self, ranges: &[f64], fov: f64, stalled: bool, k: u64) -> (f64, f64) {
-        let n = ranges.len().max(1);
-        let angle = |i: usize| -fov / 2.0 + fov * i as f64 / (n - 1).max(1) as f64;
-        let over = |lo: f64, hi: f64, f: fn(f64, f64) -> f64, init: f64| {
-            ranges
-                .iter()
-                .enumerate()
-                .filter(|&(i, _)| (lo..=hi).contains(&angle(i)))
-                .fold(init, |a, (_, &r)| f(a, r))
-        };
-        let front = over(-0.45, 0.45, f64::min, f64::INFINITY);
-        let left = over(0.5, 1.6, |a, r| a + r, 0.0);
-        let right = over(-1.6, -0.5, |a, r| a + r, 0.0);
-        if stalled && self.backing == 0 {
-            self.backing = 15;
-            self.turn_left = left > right;
-        }
-        if self.backing > 0 {
-            self.backing -= 1;
-            let w = if self.turn_left { 0.8 } else { -0.8 };
-            return (-0.15, w);
-        }
-        if k % 400 == 0 {
-            self.turning = 20;
-            self.turn_left = left > right;
-        }
-        if front < 0.8 || self.turning > 0 {
-            self.turning = self.turning.saturating_sub(1);
-            if front < 0.8 && self.turning == 0 {
-                self.turn_left = left > right;
-            }
-            return (0.05, if self.turn_left { 0.9 } else { -0.9 });
-        }
-        let steer = (0.15 * (left - right) / (left + right).max(1e-6) * 4.0).clamp(-0.4, 0.4);
-        (0.45, steer)
-    }
-}
-
 /// Runs `world` and logs `setup.robot`'s odometry and laser.
 ///
 /// # Errors
@@ -171,7 +116,7 @@ pub fn simulate(mut world: World, setup: &Setup) -> anyhow::Result<Run> {
     match &setup.driver {
         Driver::Own => {}
         Driver::Ctrl(c) => world.models[robot].ctrl = vec![c.clone()],
-        Driver::Explore | Driver::FollowLeft => world.models[robot].ctrl.clear(),
+        Driver::FollowLeft => world.models[robot].ctrl.clear(),
     }
     let laser = world.models[robot]
         .children
@@ -223,17 +168,9 @@ pub fn simulate(mut world: World, setup: &Setup) -> anyhow::Result<Run> {
     };
     let mut seen = std::collections::HashSet::new();
     let mut last: Option<Pose> = None;
-    let mut explorer = Explorer::default();
     for k in 1..=steps {
-        let reading = sim.readings[laser].first();
-        let vel = match (&setup.driver, reading) {
-            (Driver::Explore, Some(r)) => {
-                Some(explorer.drive(r.ranges, fov, sim.bases[base].stall, k))
-            }
-            (Driver::FollowLeft, Some(r)) => Some(follow_left(r.ranges, fov)),
-            _ => None,
-        };
-        if let Some((v, w)) = vel {
+        if let (Driver::FollowLeft, Some(r)) = (&setup.driver, sim.readings[laser].first()) {
+            let (v, w) = follow_left(r.ranges, fov);
             sim.bases[base].cmd = Some(Command::Vel(Pose::new(v, 0.0, w)));
         }
         sim.step();

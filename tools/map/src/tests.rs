@@ -1,6 +1,6 @@
 //! The builder end to end, on logs the simulator makes: Troupe's office
 //! (worlds/wander.world: bitmaps/office.png and a robot with its own
-//! `wander`) driven with odometry that reads its turns wrong, the map
+//! `explore`) driven with odometry that reads its turns wrong, the map
 //! judged against the world's own walls.
 
 use std::path::Path;
@@ -20,7 +20,7 @@ fn run(name: &str, seconds: f64, yaw_error: f64) -> (Run, Recording) {
             seconds,
             odom_error: [0.02, 0.0, yaw_error],
             every: 0.1,
-            driver: Driver::Explore,
+            driver: Driver::Own,
         },
     )
     .unwrap();

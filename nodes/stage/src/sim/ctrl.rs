@@ -30,6 +30,15 @@ pub enum Ctrl {
         /// else its first (none: it goes straight ahead).
         ranger: Option<usize>,
     },
+    /// `explore`: Troupe's own, not Stage's. Cruises at 0.45 m/s steering
+    /// towards the more open side, turns away from what is ahead, backs
+    /// out of a stall, and every 40 s takes a turn of its own, so it sees
+    /// a building's rooms where `wander` wedges itself in a doorway.
+    Explore {
+        /// The ranger it steers by, chosen as `wander` chooses (none: it
+        /// goes straight ahead).
+        ranger: Option<usize>,
+    },
     /// `expand_pioneer` (worlds/benchmark): steers along the sum of its
     /// first ranger's 16 sonar readings as vectors, ahead at 0.2 m/s when
     /// the front sonars are clear (0.75 m ahead, less to the sides).
@@ -136,8 +145,13 @@ pub struct Mind {
     pub want: Pose,
     /// `wander`'s way of turning from obstacles (+1 left, -1 right).
     pub turn: f64,
-    /// `wander_accel`'s and `fasr`'s updates left avoiding.
+    /// `wander_accel`'s and `fasr`'s updates left avoiding; `explore`'s
+    /// left turning.
     pub avoid: u32,
+    /// `explore`'s updates left backing out of a stall…
+    pub backing: u32,
+    /// …and its updates so far.
+    pub updates: u64,
     /// `fasr`'s mode.
     pub mode: Mode,
     /// The charger `fasr` sees now, or the last it saw.
@@ -154,6 +168,8 @@ impl Default for Mind {
             want: Pose::default(),
             turn: 1.0,
             avoid: 0,
+            backing: 0,
+            updates: 0,
             mode: Mode::Work,
             charger: Charger::default(),
             work_get: 0,
@@ -212,7 +228,7 @@ pub fn find(world: &World, tree: &[usize], m: usize, line: &str) -> Found {
         |what: &str| Found::Lacks(format!("\"{name}\" runs on a position model, not {what}"));
     let no = |what: &str| Found::Lacks(format!("\"{name}\" needs {what}"));
     match name {
-        "wander" if position => {
+        "wander" | "explore" if position => {
             let mut rangers = tree
                 .iter()
                 .copied()
@@ -221,7 +237,11 @@ pub fn find(world: &World, tree: &[usize], m: usize, line: &str) -> Found {
             let ranger = rangers
                 .find(|&k| world.models[k].sensors[0].samples > 1)
                 .or(first);
-            Found::Base(Ctrl::Wander { ranger })
+            Found::Base(if name == "wander" {
+                Ctrl::Wander { ranger }
+            } else {
+                Ctrl::Explore { ranger }
+            })
         }
         "expand_pioneer" | "expand_swarm" | "pioneer_flocking" if !position => {
             on_base(&format!("a {:?}", model.kind).to_lowercase())
@@ -324,6 +344,7 @@ impl Sim {
         }
         match ctrl {
             Ctrl::Wander { ranger } => mind.want = self.wander(ranger, mind),
+            Ctrl::Explore { ranger } => mind.want = self.explore(bi, ranger, mind),
             Ctrl::ExpandPioneer { ranger } => {
                 // Stage's SAFE_DIST 0.75, SAFE_ANGLE 0.5, VSPEED 0.2, WGAIN 1.
                 let s = 0.75;
@@ -591,7 +612,7 @@ impl Sim {
     /// The ranger base `bi`'s controller reads, if any.
     pub(super) fn ctrl_ranger(&self, bi: usize) -> Option<usize> {
         match self.bases[bi].ctrl? {
-            Ctrl::Wander { ranger } => ranger,
+            Ctrl::Wander { ranger } | Ctrl::Explore { ranger } => ranger,
             Ctrl::ExpandPioneer { ranger }
             | Ctrl::ExpandSwarm { ranger }
             | Ctrl::Flocking { ranger, .. } => Some(ranger),
@@ -633,6 +654,51 @@ impl Sim {
         } else {
             Pose::new(0.4, 0.0, 0.0)
         }
+    }
+
+    /// The built-in `explore` controller of base `bi` steering by `ranger`'s
+    /// first sensor: the velocity it asks for.
+    fn explore(&self, bi: usize, ranger: Option<usize>, mind: &mut Mind) -> Pose {
+        let reading = ranger.and_then(|r| {
+            let s = self.world.models[r].sensors.first()?;
+            Some((super::fan(s), self.readings[r].first()?.ranges))
+        });
+        let Some(((start, step), ranges)) = reading else {
+            return Pose::new(0.45, 0.0, 0.0);
+        };
+        mind.updates += 1;
+        let over = |lo: f64, hi: f64| {
+            let at = |k: usize| start + step * k as f64;
+            let n = ranges.len();
+            let from = super::first_where(n, |k| at(k) >= lo);
+            &ranges[from..super::first_where(n, |k| at(k) > hi).max(from)]
+        };
+        let front = nearest(over(-0.45, 0.45));
+        let left: f64 = over(0.5, 1.6).iter().sum();
+        let right: f64 = over(-1.6, -0.5).iter().sum();
+        let side = |left_more_open: bool| if left_more_open { 1.0 } else { -1.0 };
+        if self.bases[bi].stall && mind.backing == 0 {
+            mind.backing = 15;
+            mind.turn = side(left > right);
+        }
+        if mind.backing > 0 {
+            mind.backing -= 1;
+            return Pose::new(-0.15, 0.0, 0.8 * mind.turn);
+        }
+        // Every 40 s (400 updates of a 10 Hz ranger) a turn of its own.
+        if mind.updates % 400 == 0 {
+            mind.avoid = 20;
+            mind.turn = side(left > right);
+        }
+        if front < 0.8 || mind.avoid > 0 {
+            mind.avoid = mind.avoid.saturating_sub(1);
+            if front < 0.8 && mind.avoid == 0 {
+                mind.turn = side(left > right);
+            }
+            return Pose::new(0.05, 0.0, 0.9 * mind.turn);
+        }
+        let steer = (0.6 * (left - right) / (left + right).max(1e-6)).clamp(-0.4, 0.4);
+        Pose::new(0.45, 0.0, steer)
     }
 
     /// `lasernoise` on ranger `r`'s readings: each range of its first
@@ -869,6 +935,41 @@ mod tests {
         assert!(
             now > aligned + 0.3,
             "heading agreement {aligned:.2} → {now:.2}"
+        );
+    }
+
+    /// How r0 of worlds/wander.world (Troupe's office) gets on for 600
+    /// simulated s driven by `ctrl`: the square metres it passed through,
+    /// and the longest it stayed within a metre of one spot, in seconds.
+    fn office_tour(ctrl: &str) -> (usize, f64) {
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../worlds/wander.world");
+        let mut w = crate::world::load(&path).unwrap();
+        let r0 = w.names["r0"];
+        w.models[r0].ctrl = vec![ctrl.into()];
+        let mut s = Sim::new(w).unwrap();
+        let mut cells = std::collections::HashSet::new();
+        let (mut anchor, mut since, mut longest) = (spots(&s)[0], 0.0, 0.0_f64);
+        for _ in 0..6000 {
+            s.step();
+            let p = spots(&s)[0];
+            cells.insert((p.0.floor() as i64, p.1.floor() as i64));
+            if (p.0 - anchor.0).hypot(p.1 - anchor.1) > 1.0 {
+                (anchor, since) = (p, s.time);
+            }
+            longest = longest.max(s.time - since);
+        }
+        (cells.len(), longest)
+    }
+
+    #[test]
+    fn explore_tours_the_office_where_wander_wedges_itself() {
+        let (wander_cells, wander_still) = office_tour("wander");
+        let (cells, still) = office_tour("explore");
+        assert!(
+            cells >= 100 && cells >= 3 * wander_cells && still < 30.0,
+            "explore: {cells} m² passed, {still:.0} s at most in one spot; \
+             wander: {wander_cells} m², {wander_still:.0} s"
         );
     }
 
