@@ -7,22 +7,27 @@
 # Stage's world text is read from ../shared/compat/stage, edited in a copy
 # outside the repository; nothing of Player's or Stage's is committed.
 #
-#   tools/bench/real-player-log.sh PLAYER_GIT STAGE_GIT OUT_DIR [SECONDS]
+#   tools/bench/real-player-log.sh PLAYER_GIT STAGE_GIT OUT_DIR [SECONDS] [WORLD]
 #
 # PLAYER_GIT and STAGE_GIT are git directories of github:playerproject/player
 # and github:rtv/Stage (as the project's fetch brings them); both are built
 # once (about 17 minutes on two cores) under OUT_DIR/build and kept there.
 # SECONDS is simulated time (905 by default). The log is OUT_DIR/cave-r0.log.
+# WORLD, a world of ours in Stage's language (worlds/slam.world: its r0
+# drives with Stage's own `wander` and odometry 3% long), is run instead,
+# as written but ten times real time, beside the .inc files of its
+# directory; the log is then OUT_DIR/NAME-r0.log (NAME: WORLD's stem).
 set -euo pipefail
 
 if [ $# -lt 3 ]; then
-  sed -n '2,17p' "$0" | sed 's/^# \{0,1\}//'
+  sed -n '2,21p' "$0" | sed 's/^# \{0,1\}//'
   exit 2
 fi
 player_git=$(realpath "$1")
 stage_git=$(realpath "$2")
 out=$(realpath -m "$3")
 seconds=${4:-905}
+world=${5:+$(realpath "$5")}
 here=$(cd "$(dirname "$0")" && pwd)
 compat=$(realpath "$here/../../../shared/compat/stage")
 build=$out/build
@@ -69,10 +74,17 @@ plugin_dir=$(dirname "$(find "$prefix" -name stageplugin.so | head -1)")
 export PLAYERPATH=$plugin_dir:$prefix/lib:$prefix/lib64
 export STAGEPATH=$plugin_dir
 
-# The world: Stage's simple.world, r0 alone, its odometry off as the issue
-# that asked for this log says.
 work=$(mktemp -d)
 trap 'kill "${player_pid:-0}" 2>/dev/null || true; rm -rf "$work"' EXIT
+if [ -n "$world" ]; then
+  # A world of ours, as written, at ten times real time.
+  name=$(basename "$world" .world)
+  cp "$(dirname "$world")"/*.inc "$work/"
+  sed 's/^speedup .*/speedup 10/' "$world" >"$work/$name.world"
+else
+# The world: Stage's simple.world, r0 alone, its odometry off as the issue
+# that asked for this log says.
+name=cave
 cp -r "$compat"/*.inc "$compat/simple.world" "$compat/bitmaps" "$work/"
 python3 - "$work/simple.world" <<'EOF'
 import re, sys
@@ -92,11 +104,13 @@ if len(blocks) > 1:
 text = text.replace('localization "gps"', 'localization "odom"\n  odom_error [0.03 0.03 0.00 0.05]', 1)
 open(path, "w").write(text)
 EOF
+mv "$work/simple.world" "$work/cave.world"
+fi
 cat >"$work/log.cfg" <<EOF
-driver ( name "stage" provides ["simulation:0"] plugin "stageplugin" worldfile "simple.world" usegui 0 )
+driver ( name "stage" provides ["simulation:0"] plugin "stageplugin" worldfile "$name.world" usegui 0 )
 driver ( name "stage" provides ["position2d:0" "ranger:0" "ranger:1"] model "r0" )
 driver ( name "rangertolaser" provides ["laser:0"] requires ["ranger:1"] )
-driver ( name "writelog" provides ["log:0"] requires ["position2d:0" "laser:0"] filename "cave-r0.log" alwayson 1 )
+driver ( name "writelog" provides ["log:0"] requires ["position2d:0" "laser:0"] filename "$name-r0.log" alwayson 1 )
 EOF
 port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
 (cd "$work" && exec player -p "$port" log.cfg >"$work/player.out" 2>&1) &
@@ -105,9 +119,9 @@ player_pid=$!
 last=0
 while kill -0 "$player_pid" 2>/dev/null; do
   sleep 2
-  if [ -s "$work/cave-r0.log" ]; then
-    last=$(tail -c 2000 "$work/cave-r0.log" | awk 'NF > 7 && $1 !~ /^#/ { t = $1 } END { print t + 0 }')
-    first=$(awk 'NF > 7 && $1 !~ /^#/ { print $1; exit }' "$work/cave-r0.log")
+  if [ -s "$work/$name-r0.log" ]; then
+    last=$(tail -c 2000 "$work/$name-r0.log" | awk 'NF > 7 && $1 !~ /^#/ { t = $1 } END { print t + 0 }')
+    first=$(awk 'NF > 7 && $1 !~ /^#/ { print $1; exit }' "$work/$name-r0.log")
     if awk -v a="$last" -v b="$first" -v s="$seconds" 'BEGIN { exit !(a - b >= s) }'; then
       break
     fi
@@ -115,11 +129,11 @@ while kill -0 "$player_pid" 2>/dev/null; do
 done
 kill "$player_pid" 2>/dev/null || true
 wait "$player_pid" 2>/dev/null || true
-if [ ! -s "$work/cave-r0.log" ]; then
+if [ ! -s "$work/$name-r0.log" ]; then
   echo "Player wrote no log; it said:" >&2
   cat "$work/player.out" >&2
   exit 1
 fi
 mkdir -p "$out"
-cp "$work/cave-r0.log" "$out/cave-r0.log"
-echo "$out/cave-r0.log: $(wc -l <"$out/cave-r0.log") lines, $(awk 'NF > 7 && $1 !~ /^#/ { if (!f) f = $1; t = $1 } END { printf "%.0f", t - f }' "$out/cave-r0.log") simulated s"
+cp "$work/$name-r0.log" "$out/$name-r0.log"
+echo "$out/$name-r0.log: $(wc -l <"$out/$name-r0.log") lines, $(awk 'NF > 7 && $1 !~ /^#/ { if (!f) f = $1; t = $1 } END { printf "%.0f", t - f }' "$out/$name-r0.log") simulated s"

@@ -55,6 +55,10 @@ pub struct SlamBenchArgs {
     /// long), mapped and judged against the cave it was made in.
     #[arg(long, value_name = "LOG")]
     pub player_log: Option<PathBuf>,
+    /// The world --player-log was written in, its walls the truth (default:
+    /// Stage's simple.world; the script writes one of worlds/slam.world).
+    #[arg(long, value_name = "WORLD", requires = "player_log")]
+    pub player_world: Option<PathBuf>,
     /// Seeds of the random part of the made-wrong odometry, per dataset.
     #[arg(long, default_value_t = 3, value_name = "N")]
     pub seeds: u64,
@@ -191,7 +195,11 @@ pub fn run(a: &SlamBenchArgs) -> anyhow::Result<()> {
         )?;
     }
     if let Some(log) = &a.player_log {
-        player_log(log, &stage.join("simple.world"), &dir, &mut out)?;
+        let world = a
+            .player_world
+            .clone()
+            .unwrap_or_else(|| stage.join("simple.world"));
+        player_log(log, &world, &dir, &mut out)?;
     }
     if let Some(d) = &a.datasets {
         datasets(d, a.seeds, &dir, &mut out)?;
@@ -232,10 +240,13 @@ fn online(rec: &Recording) -> anyhow::Result<Online> {
     })
 }
 
-/// A real Player + Stage log of Stage's cave, mapped: its accuracy against
-/// the cave's walls after the best rigid alignment (Stage's odometry frame
-/// is the world's: simple.world sets `localization_origin [0 0 0 0]`), its
-/// coverage of all the cave's wall faces, offline and online.
+/// A real Player + Stage log of `world` (Stage's cave, or a world of
+/// ours), mapped: its accuracy against the world's walls after the best
+/// rigid alignment (Stage's odometry frame is the world's: simple.world
+/// and slam.world set `localization_origin [0 0 0 0]`), its coverage of
+/// all the world's wall faces, offline and online. The map and its
+/// picture against the walls are written to `work` as
+/// `player-WORLD.yaml` and `player-WORLD-against-truth.png`.
 fn player_log(log: &Path, world: &Path, work: &Path, out: &mut impl Write) -> anyhow::Result<()> {
     let w = troupe_stage::world::load(world).map_err(|e| anyhow::anyhow!("{e}"))?;
     let troupe_map::simulate::Statics {
@@ -252,22 +263,26 @@ fn player_log(log: &Path, world: &Path, work: &Path, out: &mut impl Write) -> an
     let (s, raw) = judged(&rec, &built, &obstacles, &faces, same);
     let live = online(&rec)?;
     let ls = eval::score(&live.occupied, &obstacles, &faces, same, 0.1);
+    let stem = world
+        .file_stem()
+        .map_or("world".into(), |s| s.to_string_lossy());
     troupe_mapfile::save(
         &built.grid.to_occmap(),
-        &work.join("player-cave.yaml"),
+        &work.join(format!("player-{stem}.yaml")),
         "`troupe bench slam`",
     )?;
     overlay(
-        &work.join("player-cave-against-truth.png"),
+        &work.join(format!("player-{stem}-against-truth.png")),
         &built.grid.occupied(),
         &obstacles,
         s.alignment,
     )?;
     writeln!(
         out,
-        "troupe bench slam: {} (the real Player + Stage, Stage's cave): {} scans, {span:.0} s; coverage = the cave's wall faces mapped\n  \
+        "troupe bench slam: {} (the real Player + Stage, {}): {} scans, {span:.0} s; coverage = the world's wall faces mapped\n  \
          player   accuracy {:>5.1}% (odometry alone {:>5.1}%, online {:>5.1}%)  coverage {:>5.1}% ({:>5.1}%, online {:>5.1}%)  built {:>5.0}x the log's pace ({span:.0} s of log in {took:.2} s)  {} keyframes, {}",
         log.display(),
+        world.display(),
         rec.scans.len(),
         100.0 * s.accuracy,
         100.0 * raw.accuracy,

@@ -265,10 +265,14 @@ pub fn statics(world: &World) -> anyhow::Result<Statics> {
         let map = sim.model_map(m)?;
         let (w, h) = map.size();
         let solid = |i: i64, j: i64| map.get(i, j).is_some_and(|c| c > 0);
+        // The body's raster lies in its own frame: a model turned in the
+        // world (slam.world's box, 30°) is turned here too.
+        let (o, r) = (map.info.origin, f64::from(map.info.resolution));
+        let place = Pose::new(o.x, o.y, o.yaw).applier();
         for j in 0..h as i64 {
             for i in 0..w as i64 {
                 if solid(i, j) {
-                    let at = troupe_geom::occmap::centre(&map.info, j as usize * w + i as usize);
+                    let at = place((i as f64 + 0.5) * r, (j as f64 + 0.5) * r);
                     all.push(at);
                     if !(solid(i - 1, j) && solid(i + 1, j) && solid(i, j - 1) && solid(i, j + 1)) {
                         faces.push(at);
