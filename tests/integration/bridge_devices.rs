@@ -1303,3 +1303,51 @@ fn an_open_of_a_device_the_bridge_has_not_heard_of_yet_asks_the_network() {
     let _ = stop.send(());
     thread.join().unwrap();
 }
+
+/// A goal a Player client sends once, while its planner's token is live but
+/// no subscription to its commands has reached the bridge yet (after a
+/// partition heals, the token can come seconds before it), is held and
+/// reaches the planner when its subscription comes; the client is not held
+/// up meanwhile.
+#[test]
+fn a_command_sent_before_its_driver_subscribes_reaches_it_when_it_does() {
+    let net = TestNet::new("bridge-held");
+    let s = net.peer();
+    let planner = Device::new(ROBOT, Interface::Planner, 0);
+    let _token = s
+        .liveliness()
+        .declare_token(keys::token(&planner, "fake"))
+        .wait()
+        .unwrap();
+    net.wait_live(&[planner.to_string().as_str()]);
+    let (addr, thread, stop) = bridge(&net);
+    let mut c = Player::connect(addr, ROBOT);
+    c.open(planner);
+    c.send(
+        u32::from(Interface::Planner.code()),
+        0,
+        2,
+        1,
+        &f64s(&[1.0, 2.0, 0.5]),
+    );
+    // Answered by the bridge itself, after it took the goal (a connection's
+    // messages are handled in order): the goal has found no one.
+    let list = c.devlist();
+    assert_eq!(list.kind(), 4, "not an ACK: {list:?}");
+    let (tx, rx) = mpsc::channel();
+    let _planner = s
+        .declare_subscriber(keys::cmd(&planner, "goal"))
+        .callback(move |x| {
+            let _ = tx.send(x.payload().to_bytes().to_vec());
+        })
+        .wait()
+        .unwrap();
+    let got = rx
+        .recv_timeout(DEADLINE)
+        .expect("the goal, held until the planner subscribed");
+    let g = decode::<planner::Goal>(&got).unwrap().msg.goal;
+    assert_eq!((g.x, g.y, g.yaw), (1.0, 2.0, 0.5));
+    drop(c);
+    let _ = stop.send(());
+    thread.join().unwrap();
+}

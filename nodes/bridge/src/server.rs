@@ -20,7 +20,7 @@ use tokio::net::TcpListener;
 use tokio::sync::{mpsc, oneshot, Notify};
 use troupe_msgs::codec::{self, schema_of, Message};
 use troupe_msgs::{common, decode_any, keys, sim, Device, Interface};
-use troupe_node::zenoh::pubsub::Subscriber;
+use troupe_node::zenoh::pubsub::{Publisher, Subscriber};
 use troupe_node::zenoh::query::Reply;
 use troupe_node::zenoh::sample::SampleKind;
 use troupe_node::zenoh::{Session, Wait};
@@ -431,9 +431,106 @@ struct Shared {
     max_clients: usize,
     limits: Limits,
     fault: Option<fn(&str)>,
+    /// A publisher for each command key clients have used.
+    commanders: Mutex<HashMap<String, Arc<Publisher<'static>>>>,
+    /// The latest command to each key no driver subscribes to yet, held
+    /// until one does (see [`Shared::command`]).
+    held: Mutex<HashMap<String, Vec<u8>>>,
+    /// Commands dropped after [`HOLD`] with no driver, by key: the first
+    /// of each is logged, the count at the end.
+    unheard: Mutex<std::collections::BTreeMap<String, u64>>,
 }
 
+/// How long a command waits for a driver to subscribe to its key. After a
+/// network partition heals, or right after a driver's device appears, its
+/// liveliness token can reach the bridge before its command subscription
+/// does (seconds, across routers), and a command put then reached no one: a
+/// Player client's goal, sent once, was lost.
+const HOLD: Duration = Duration::from_secs(10);
+
 impl Shared {
+    /// Sends a client's command `payload` on `key`. Where no driver
+    /// subscribes to the key yet, the command is held (a newer one to the
+    /// key replaces it, as Player's queue replaces a device's commands) and
+    /// sent as soon as one does, for up to [`HOLD`]; the client is not held
+    /// up meanwhile.
+    async fn command(self: &Arc<Self>, key: String, payload: Vec<u8>) {
+        let commander = lock(&self.commanders).get(&key).cloned();
+        let commander = match commander {
+            Some(c) => c,
+            None => match self.session.declare_publisher(key.clone()).await {
+                Ok(p) => lock(&self.commanders)
+                    .entry(key.clone())
+                    .or_insert_with(|| Arc::new(p))
+                    .clone(),
+                Err(e) => {
+                    tracing::warn!("sending {key}: {e}");
+                    return;
+                }
+            },
+        };
+        let heard = commander
+            .matching_status()
+            .await
+            .is_ok_and(|m| m.matching());
+        {
+            let mut held = lock(&self.held);
+            if let Some(h) = held.get_mut(&key) {
+                // Not sent ahead of the one held: it replaces it.
+                *h = payload;
+                return;
+            }
+            if !heard {
+                held.insert(key.clone(), payload);
+                drop(held);
+                tokio::spawn(self.clone().hold(key, commander));
+                return;
+            }
+        }
+        if let Err(e) = commander.put(payload).await {
+            tracing::warn!("sending {key}: {e}");
+        }
+    }
+
+    /// Sends the command held for `key` once a driver subscribes to it,
+    /// or drops it after [`HOLD`].
+    async fn hold(self: Arc<Self>, key: String, commander: Arc<Publisher<'static>>) {
+        let subscribed = async {
+            let listener = commander.matching_listener().await.ok()?;
+            // Asked after listening: a subscription that came between is
+            // not missed.
+            if commander.matching_status().await.ok()?.matching() {
+                return Some(());
+            }
+            while let Ok(m) = listener.recv_async().await {
+                if m.matching() {
+                    return Some(());
+                }
+            }
+            None
+        };
+        let heard = matches!(tokio::time::timeout(HOLD, subscribed).await, Ok(Some(())));
+        let Some(payload) = lock(&self.held).remove(&key) else {
+            return;
+        };
+        if heard {
+            tracing::debug!("{key}: a driver subscribed; the held command is sent");
+            if let Err(e) = commander.put(payload).await {
+                tracing::warn!("sending {key}: {e}");
+            }
+            return;
+        }
+        let mut unheard = lock(&self.unheard);
+        let n = unheard.entry(key.clone()).or_insert(0);
+        *n += 1;
+        if *n == 1 {
+            tracing::warn!(
+                "a command to {key} was dropped: no driver subscribed to it within {} s",
+                HOLD.as_secs()
+            );
+        }
+    }
+
     /// Player stamps its own replies with the server's time: simulation
     /// time under Stage, the wall clock otherwise.
     fn now(&self) -> f64 {
@@ -563,6 +660,9 @@ impl Bridge {
             max_clients: cfg.max_clients,
             limits: cfg.limits,
             fault: cfg.fault,
+            commanders: Mutex::default(),
+            held: Mutex::default(),
+            unheard: Mutex::default(),
         });
         // Changes first, then the current list: no token is missed, and the
         // port opens only once DEVLIST would be complete. The subscriber
@@ -693,6 +793,16 @@ impl Bridge {
             );
         }
         drop(dropped);
+        let unheard = lock(&self.shared.unheard);
+        if !unheard.is_empty() {
+            let each: Vec<String> = unheard.iter().map(|(k, n)| format!("{k} ×{n}")).collect();
+            tracing::warn!(
+                "commands dropped, no driver having subscribed within {} s: {}",
+                HOLD.as_secs(),
+                each.join(", ")
+            );
+        }
+        drop(unheard);
         let refused = lock(&self.shared.refused);
         let elsewhere = self.shared.refused_elsewhere.load(Ordering::Relaxed);
         if !refused.is_empty() {
@@ -1045,10 +1155,7 @@ impl Conn {
                 Ok(())
             }
             Ok(Some(ToDevice::Command { name, payload })) => {
-                let key = keys::cmd(&dev, name);
-                if let Err(e) = self.shared.session.put(&key, payload).await {
-                    tracing::warn!("sending {key}: {e}");
-                }
+                self.shared.command(keys::cmd(&dev, name), payload).await;
                 Ok(())
             }
             Ok(Some(ToDevice::Request {
