@@ -244,18 +244,20 @@ fn online(rec: &Recording) -> anyhow::Result<Online> {
 /// ours), mapped: its accuracy against the world's walls after the best
 /// rigid alignment (Stage's odometry frame is the world's: simple.world
 /// and slam.world set `localization_origin [0 0 0 0]`), its coverage of
-/// all the world's wall faces, offline and online. The map and its
+/// the world's wall faces that face the space the robot set off in,
+/// offline and online. The map and its
 /// picture against the walls are written to `work` as
 /// `player-WORLD.yaml` and `player-WORLD-against-truth.png`.
 fn player_log(log: &Path, world: &Path, work: &Path, out: &mut impl Write) -> anyhow::Result<()> {
     let w = troupe_stage::world::load(world).map_err(|e| anyhow::anyhow!("{e}"))?;
-    let troupe_map::simulate::Statics {
-        all: obstacles,
-        faces,
-    } = troupe_map::simulate::statics(&w)?;
+    let statics = troupe_map::simulate::statics(&w)?;
     let t0 = Instant::now();
     let rec = source::read(&[log.to_owned()], &Select::default())
         .map_err(|e| anyhow::anyhow!("{}: {e}", log.display()))?;
+    // Odometry starts where the robot does (the world's frame).
+    let start = rec.placed().first().map_or((0.0, 0.0), |(o, _)| (o.x, o.y));
+    let faces = statics.facing(start);
+    let obstacles = statics.all;
     let built = troupe_map::build(&rec, Params::default(), |_, _| {});
     let took = t0.elapsed().as_secs_f64();
     let span = rec.scans.last().map_or(0.0, |l| l.t) - rec.scans[0].t;
@@ -279,7 +281,7 @@ fn player_log(log: &Path, world: &Path, work: &Path, out: &mut impl Write) -> an
     )?;
     writeln!(
         out,
-        "troupe bench slam: {} (the real Player + Stage, {}): {} scans, {span:.0} s; coverage = the world's wall faces mapped\n  \
+        "troupe bench slam: {} (the real Player + Stage, {}): {} scans, {span:.0} s; coverage = the wall faces facing the robot's space mapped\n  \
          player   accuracy {:>5.1}% (odometry alone {:>5.1}%, online {:>5.1}%)  coverage {:>5.1}% ({:>5.1}%, online {:>5.1}%)  built {:>5.0}x the log's pace ({span:.0} s of log in {took:.2} s)  {} keyframes, {}",
         log.display(),
         world.display(),

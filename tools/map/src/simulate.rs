@@ -244,6 +244,51 @@ pub struct Statics {
     pub faces: Vec<(f64, f64)>,
 }
 
+impl Statics {
+    /// The faces that face the space around `from` (world frame): those
+    /// open to a cell that cell-to-cell steps through free space reach from
+    /// it. A wall's far side, outside the world, is left out: no laser in
+    /// the world sees it.
+    pub fn facing(&self, from: (f64, f64)) -> Vec<(f64, f64)> {
+        const CELL: f64 = 0.05;
+        let at = |(x, y): (f64, f64)| ((x / CELL).floor() as i64, (y / CELL).floor() as i64);
+        let solid: std::collections::HashSet<(i64, i64)> =
+            self.all.iter().map(|&p| at(p)).collect();
+        let (mut lo, mut hi) = (at(from), at(from));
+        for &(i, j) in &solid {
+            lo = (lo.0.min(i - 1), lo.1.min(j - 1));
+            hi = (hi.0.max(i + 1), hi.1.max(j + 1));
+        }
+        let w = (hi.0 - lo.0 + 1) as usize;
+        let index = |(i, j): (i64, i64)| (j - lo.1) as usize * w + (i - lo.0) as usize;
+        let mut reached = vec![false; w * (hi.1 - lo.1 + 1) as usize];
+        let mut todo = vec![at(from)];
+        reached[index(at(from))] = true;
+        while let Some((i, j)) = todo.pop() {
+            for c in [(i + 1, j), (i - 1, j), (i, j + 1), (i, j - 1)] {
+                let inside = c.0 >= lo.0 && c.0 <= hi.0 && c.1 >= lo.1 && c.1 <= hi.1;
+                if inside && !solid.contains(&c) && !reached[index(c)] {
+                    reached[index(c)] = true;
+                    todo.push(c);
+                }
+            }
+        }
+        let open = |c: (i64, i64)| {
+            c.0 >= lo.0 && c.0 <= hi.0 && c.1 >= lo.1 && c.1 <= hi.1 && reached[index(c)]
+        };
+        self.faces
+            .iter()
+            .copied()
+            .filter(|&p| {
+                let (i, j) = at(p);
+                [(i + 1, j), (i - 1, j), (i, j + 1), (i, j - 1)]
+                    .into_iter()
+                    .any(open)
+            })
+            .collect()
+    }
+}
+
 /// The static obstacles of `world`.
 ///
 /// # Errors
