@@ -198,3 +198,47 @@ fn a_long_loop_odometry_misses_by_metres_maps_without_a_double_wall_or_a_bent_wi
     assert!(s.accuracy >= 0.95, "accuracy {:.3}", s.accuracy);
     assert!(s.coverage >= 0.75, "coverage {:.3}", s.coverage);
 }
+
+/// worlds/slam.world's walls as the judge sees them: its box, turned 30°,
+/// turned in the truth too, and the faces that face the room (the outer
+/// walls' far sides, outside the world, left out).
+#[test]
+fn the_truth_of_a_world_turns_its_models_and_faces_the_room() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../worlds/slam.world");
+    let world = troupe_stage::world::load(&path).unwrap();
+    let statics = crate::simulate::statics(&world).unwrap();
+    // The 1 m box at (3, -3), turned 30°: its corners lie 0.68 m from its
+    // centre along 30° + 45° (and so on), not along 45°.
+    let corner = |deg: f64| {
+        let a = deg.to_radians();
+        (3.0 + 0.68 * a.cos(), -3.0 + 0.68 * a.sin())
+    };
+    let near = |p: (f64, f64)| {
+        statics
+            .all
+            .iter()
+            .any(|&(x, y)| (x - p.0).hypot(y - p.1) < 0.06)
+    };
+    assert!(near(corner(75.0)), "no cell at the turned box's corner");
+    assert!(
+        !near(corner(45.0)),
+        "a cell where the unturned box's corner would be"
+    );
+    // From r0's start, the room's faces: the north wall's inner face
+    // (y = 7.9), not its outer one (y = 8.1).
+    let facing = statics.facing((-6.0, -6.0));
+    let at = |y: f64| {
+        facing
+            .iter()
+            .any(|&(x, fy)| x.abs() < 1.0 && (fy - y).abs() < 0.05)
+    };
+    assert!(
+        at(7.92),
+        "the north wall's inner face is not facing the room"
+    );
+    assert!(
+        !at(8.08),
+        "the north wall's outer face counted as facing the room"
+    );
+    assert!(facing.len() < statics.faces.len());
+}
