@@ -263,6 +263,47 @@ fn read_loop(addr: SocketAddr, seconds: f64) -> anyhow::Result<Pulls> {
 }
 
 /// A 500x500 cave-like map as a PNG, for runs without `--map`.
+/// Velocity commands in [`commands`].
+const COMMANDS: usize = 20_000;
+
+/// `n` position2d velocity commands (zero speeds) sent back to back, a
+/// hundred a write, as a joystick client or a script can, then a DEVLIST
+/// that the bridge answers once it has handled them all: the time to the
+/// answer, and how many commands a subscriber of their key on the
+/// bridge's own session heard by then (delivered in the put, so all of
+/// them unless some were lost).
+fn commands(
+    s: &mut TcpStream,
+    router: &troupe_node::zenoh::Session,
+    n: usize,
+) -> anyhow::Result<(Duration, usize)> {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let heard = std::sync::Arc::new(AtomicUsize::new(0));
+    let h = heard.clone();
+    let key = keys::cmd(&Device::new(ROBOT, Interface::Position2d, 0), "vel");
+    let _tap = router
+        .declare_subscriber(key)
+        .callback(move |_| {
+            h.fetch_add(1, Ordering::Relaxed);
+        })
+        .wait()
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let mut vel = Writer::new();
+    vel.f64(0.0).f64(0.0).f64(0.0).u32(1);
+    let code = u32::from(Interface::Position2d.code());
+    let one = wire::message(
+        header([0, ROBOT, code, 0, u32::from(wire::CMD), 1]),
+        &vel.finish(),
+    );
+    let batch = one.repeat(100);
+    let t0 = Instant::now();
+    for _ in 0..n.div_ceil(100) {
+        s.write_all(&batch)?;
+    }
+    request(s, player_req(player::REQ_DEVLIST), &[])?;
+    Ok((t0.elapsed(), heard.load(Ordering::Relaxed)))
+}
+
 fn synthetic_map() -> anyhow::Result<PathBuf> {
     let img = image::GrayImage::from_fn(500, 500, |x, y| {
         let (x, y) = (f64::from(x), f64::from(y));
@@ -452,6 +493,7 @@ fn measure(a: &BridgeBenchArgs, router: &troupe_node::zenoh::Session) -> anyhow:
         fetches.push(t0.elapsed());
     }
     fetches.sort();
+    let (streamed, heard) = commands(&mut s, router, COMMANDS)?;
 
     // A program's `Read()` loop: every read one moment of the simulation.
     let pulls = read_loop(addr, a.seconds)?;
@@ -522,6 +564,13 @@ fn measure(a: &BridgeBenchArgs, router: &troupe_node::zenoh::Session) -> anyhow:
         &format!("full map fetch, {}x{} cells (zlib tiles)", size.0, size.1),
         &fetches,
         "Player 2.1-2.4 ms; target <= 4 ms",
+    )?;
+    writeln!(
+        out,
+        "  {:<48} {COMMANDS} in {:.1} ms: {:.0} a second, {heard} of them put on its key",
+        "position2d velocity commands, back to back",
+        streamed.as_secs_f64() * 1e3,
+        COMMANDS as f64 / streamed.as_secs_f64().max(1e-9),
     )?;
     let mut all: Vec<Duration> = readers.iter().flat_map(|r| r.reads.clone()).collect();
     all.sort();
