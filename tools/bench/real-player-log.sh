@@ -82,14 +82,13 @@ if [ -n "$world" ]; then
   cp "$(dirname "$world")"/*.inc "$work/"
   sed 's/^speedup .*/speedup 10/' "$world" >"$work/$name.world"
 else
-# The world: Stage's simple.world, r0 alone, its odometry off as the issue
-# that asked for this log says.
-name=cave
-cp -r "$compat"/*.inc "$compat/simple.world" "$compat/bitmaps" "$work/"
-python3 - "$work/simple.world" <<'EOF'
+  # Stage's simple.world as the cave, r0 alone, its odometry off as the
+  # issue that asked for this log says.
+  name=cave
+  cp -r "$compat"/*.inc "$compat/bitmaps" "$work/"
+  python3 - "$compat/simple.world" "$work/cave.world" <<'EOF'
 import re, sys
-path = sys.argv[1]
-text = open(path).read()
+text = open(sys.argv[1]).read()
 # r1 goes: the second pioneer2dx block.
 blocks = [m.start() for m in re.finditer(r"^pioneer2dx\s*\(", text, re.M)]
 if len(blocks) > 1:
@@ -102,9 +101,8 @@ if len(blocks) > 1:
             break
     text = text[:start] + text[i:]
 text = text.replace('localization "gps"', 'localization "odom"\n  odom_error [0.03 0.03 0.00 0.05]', 1)
-open(path, "w").write(text)
+open(sys.argv[2], "w").write(text)
 EOF
-mv "$work/simple.world" "$work/cave.world"
 fi
 cat >"$work/log.cfg" <<EOF
 driver ( name "stage" provides ["simulation:0"] plugin "stageplugin" worldfile "$name.world" usegui 0 )

@@ -596,10 +596,11 @@ fn latency(
 }
 
 /// One sample one way, as a driver publishes it and a subscriber takes
-/// it, timed by the wall clock, which every process of a host reads alike: `msg` stamped, encoded
-/// (with `lend`, into a buffer of Zenoh's shared-memory pool, as
-/// `Bus::publish_lent` does; else into a `Vec`), put, and decoded by the
-/// pong, which acks with what it measured before the next is sent.
+/// it, timed by the wall clock, which every process of a host reads
+/// alike: `msg` stamped, encoded (with `lend`, into a buffer of Zenoh's
+/// shared-memory pool, as `Bus::publish_lent` does; else into a `Vec`),
+/// put, and decoded by the pong, which acks with what it measured before
+/// the next is sent.
 struct OneWay {
     /// Sorted, one per timed sample.
     times: Vec<Duration>,

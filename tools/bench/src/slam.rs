@@ -245,9 +245,9 @@ fn online(rec: &Recording) -> anyhow::Result<Online> {
 /// rigid alignment (Stage's odometry frame is the world's: simple.world
 /// and slam.world set `localization_origin [0 0 0 0]`), its coverage of
 /// the world's wall faces that face the space the robot set off in,
-/// offline and online. The map and its
-/// picture against the walls are written to `work` as
-/// `player-WORLD.yaml` and `player-WORLD-against-truth.png`.
+/// offline and online. The map and its picture against the walls are
+/// written to `work` as `player-WORLD.yaml` and
+/// `player-WORLD-against-truth.png`.
 fn player_log(log: &Path, world: &Path, work: &Path, out: &mut impl Write) -> anyhow::Result<()> {
     let w = troupe_stage::world::load(world).map_err(|e| anyhow::anyhow!("{e}"))?;
     let statics = troupe_map::simulate::statics(&w)?;
@@ -427,13 +427,7 @@ fn datasets(dir: &Path, seeds: u64, work: &Path, out: &mut impl Write) -> anyhow
             let took = t0.elapsed().as_secs_f64();
             let same = Pose::new(0.0, 0.0, 0.0);
             let (s, raw) = judged(&rec, &built, &truth.walls, &truth.map, same);
-            let hits = eval::score(
-                &built.grid.occupied(),
-                &truth.walls,
-                &truth.walls,
-                same,
-                0.1,
-            );
+            let hits = eval::coverage(&built.grid.occupied(), s.alignment, &truth.walls, 0.1);
             let (rms, raw_rms) = truth.trajectory_error(&rec, &built.slam);
             let sharp = filled(&rec, |t, odom| built.slam.corrected(t, odom));
             let live = online(&rec)?;
@@ -446,7 +440,7 @@ fn datasets(dir: &Path, seeds: u64, work: &Path, out: &mut impl Write) -> anyhow
                 100.0 * ls.accuracy,
                 100.0 * s.coverage,
                 100.0 * ls.coverage,
-                100.0 * hits.coverage,
+                100.0 * hits,
                 rms,
                 raw_rms,
                 sharp,

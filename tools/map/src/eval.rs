@@ -82,22 +82,37 @@ pub fn score(
         guess
     };
     let place = alignment.applier();
-    let placed: Vec<(f64, f64)> = occupied.iter().map(|&(x, y)| place(x, y)).collect();
     let truth = Near::new(obstacles, tolerance.max(0.05));
-    let good = placed
+    let good = occupied
         .iter()
-        .filter(|&&(x, y)| truth.within(x, y, tolerance))
+        .map(|&(x, y)| place(x, y))
+        .filter(|&(x, y)| truth.within(x, y, tolerance))
         .count();
+    Score {
+        accuracy: good as f64 / occupied.len().max(1) as f64,
+        coverage: coverage(occupied, alignment, seen, tolerance),
+        alignment,
+    }
+}
+
+/// The share of the wall points `seen` with one of the map's `occupied`
+/// cells, laid in their frame by `alignment` ([`Score::alignment`]),
+/// within `tolerance` metres: a map's coverage of another set of walls
+/// without aligning it again.
+pub fn coverage(
+    occupied: &[(f64, f64)],
+    alignment: Pose,
+    seen: &[(f64, f64)],
+    tolerance: f64,
+) -> f64 {
+    let place = alignment.applier();
+    let placed: Vec<(f64, f64)> = occupied.iter().map(|&(x, y)| place(x, y)).collect();
     let map = Near::new(&placed, tolerance.max(0.05));
     let covered = seen
         .iter()
         .filter(|&&(x, y)| map.within(x, y, tolerance))
         .count();
-    Score {
-        accuracy: good as f64 / occupied.len().max(1) as f64,
-        coverage: covered as f64 / seen.len().max(1) as f64,
-        alignment,
-    }
+    covered as f64 / seen.len().max(1) as f64
 }
 
 /// The rigid transform that best lays `a` on `b` (pairs in order, least

@@ -252,38 +252,45 @@ impl Statics {
     pub fn facing(&self, from: (f64, f64)) -> Vec<(f64, f64)> {
         const CELL: f64 = 0.05;
         let at = |(x, y): (f64, f64)| ((x / CELL).floor() as i64, (y / CELL).floor() as i64);
-        let solid: std::collections::HashSet<(i64, i64)> =
-            self.all.iter().map(|&p| at(p)).collect();
+        // The obstacles' cells and the start, and a cell round them all,
+        // so the fill goes round the outside too.
         let (mut lo, mut hi) = (at(from), at(from));
-        for &(i, j) in &solid {
+        for &p in &self.all {
+            let (i, j) = at(p);
             lo = (lo.0.min(i - 1), lo.1.min(j - 1));
             hi = (hi.0.max(i + 1), hi.1.max(j + 1));
         }
-        let w = (hi.0 - lo.0 + 1) as usize;
-        let index = |(i, j): (i64, i64)| (j - lo.1) as usize * w + (i - lo.0) as usize;
-        let mut reached = vec![false; w * (hi.1 - lo.1 + 1) as usize];
+        let (w, h) = ((hi.0 - lo.0 + 1) as usize, (hi.1 - lo.1 + 1) as usize);
+        let index = |(i, j): (i64, i64)| {
+            let (x, y) = (i - lo.0, j - lo.1);
+            (x >= 0 && y >= 0 && (x as usize) < w && (y as usize) < h)
+                .then(|| y as usize * w + x as usize)
+        };
+        let mut solid = vec![false; w * h];
+        for k in self.all.iter().filter_map(|&p| index(at(p))) {
+            solid[k] = true;
+        }
+        let around = |(i, j): (i64, i64)| [(i + 1, j), (i - 1, j), (i, j + 1), (i, j - 1)];
+        let mut reached = vec![false; w * h];
         let mut todo = vec![at(from)];
-        reached[index(at(from))] = true;
-        while let Some((i, j)) = todo.pop() {
-            for c in [(i + 1, j), (i - 1, j), (i, j + 1), (i, j - 1)] {
-                let inside = c.0 >= lo.0 && c.0 <= hi.0 && c.1 >= lo.1 && c.1 <= hi.1;
-                if inside && !solid.contains(&c) && !reached[index(c)] {
-                    reached[index(c)] = true;
-                    todo.push(c);
+        if let Some(k) = index(at(from)) {
+            reached[k] = true;
+        }
+        while let Some(c) = todo.pop() {
+            for n in around(c) {
+                if let Some(k) = index(n).filter(|&k| !solid[k] && !reached[k]) {
+                    reached[k] = true;
+                    todo.push(n);
                 }
             }
         }
-        let open = |c: (i64, i64)| {
-            c.0 >= lo.0 && c.0 <= hi.0 && c.1 >= lo.1 && c.1 <= hi.1 && reached[index(c)]
-        };
         self.faces
             .iter()
             .copied()
             .filter(|&p| {
-                let (i, j) = at(p);
-                [(i + 1, j), (i - 1, j), (i, j + 1), (i, j - 1)]
+                around(at(p))
                     .into_iter()
-                    .any(open)
+                    .any(|n| index(n).is_some_and(|k| reached[k]))
             })
             .collect()
     }
