@@ -559,3 +559,27 @@ fn a_request_behind_a_running_hook_waits_and_sees_its_effect() {
     }
     node.stop().unwrap();
 }
+
+#[test]
+fn a_node_with_more_devices_than_zenoh_can_name_is_refused_with_the_reason() {
+    let net = TestNet::new("toomany");
+    let provides: Vec<String> = (0..16_001).map(|i| format!("\"ranger:{i}\"")).collect();
+    let section = Section::from_json(&format!(
+        r#"{{"name":"dummy","provides":[{}]}}"#,
+        provides.join(",")
+    ))
+    .unwrap();
+    let err = match spawn::<troupe_dummy::Dummy>(
+        net.peer(),
+        section,
+        &NodeConfig::default(),
+        Stop::default(),
+    ) {
+        Ok(_) => panic!("a node of 16,001 devices started"),
+        Err(e) => e.to_string(),
+    };
+    assert!(
+        err.contains("16001 devices") && err.contains("65,535"),
+        "{err}"
+    );
+}

@@ -41,7 +41,7 @@ pub use event::{Event, Reply, Request, RequestId, Responder, Sample};
 pub use mapfetch::MapFetch;
 pub use net::{ask, wait_live};
 pub use ros2::{Ros2, Ros2Args, Ros2Settings, DEFAULT_NAMESPACE as ROS2_NAMESPACE};
-pub use runtime::{check, run, spawn, NodeConfig, NodeHandle, Stop, Unused};
+pub use runtime::{check, run, spawn, NodeConfig, NodeHandle, Stop, Unused, MAX_DEVICES};
 pub use section::{NoOptions, Section, Slot, Switch};
 pub use setup::setup_answers;
 pub use zenoh;

@@ -73,7 +73,7 @@ pub fn run<D: Driver>(section: Section, zargs: &ZenohArgs, cfg: &NodeConfig) -> 
     let stop = Stop::default();
     install_signal_handlers(stop.clone())?;
     exit_on_panic();
-    let handle = spawn::<D>(session.clone(), section, cfg, stop)?;
+    let handle = start::<D>(session.clone(), section, cfg, stop, AfterStop::CloseSession)?;
     let result = handle.join();
     session
         .close()
@@ -193,11 +193,35 @@ impl NodeHandle {
 ///
 /// [`NodeError::Config`] for a bad section, [`NodeError::RequiresTimeout`]
 /// when a required device never appears, or what `setup` returned.
+///
+/// A node providing more than 16,000 devices is refused before it declares
+/// any.
 pub fn spawn<D: Driver>(
     session: Session,
     section: Section,
     cfg: &NodeConfig,
     stop: Stop,
+) -> Result<NodeHandle> {
+    start::<D>(session, section, cfg, stop, AfterStop::KeepSession)
+}
+
+/// What a node does with its session once its driver has stopped.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum AfterStop {
+    /// Leaves it open: others declared on it too.
+    KeepSession,
+    /// Closes it before its declarations are dropped, which drops them all
+    /// at once. One by one, each undeclaration looks through all the others
+    /// (zenoh 1.10), and 8,000 devices took 4.7 s to stop.
+    CloseSession,
+}
+
+fn start<D: Driver>(
+    session: Session,
+    section: Section,
+    cfg: &NodeConfig,
+    stop: Stop,
+    after: AfterStop,
 ) -> Result<NodeHandle> {
     let driver = build::<D>(&section)?;
     // Busy with `setup` until the loop first waits.
@@ -235,6 +259,18 @@ pub fn spawn<D: Driver>(
         clock_pub: None,
         ros2: None,
     };
+    if provided.len() > MAX_DEVICES {
+        return Err(NodeError::config(
+            D::NAME,
+            format!(
+                "provides {} devices, more than the {MAX_DEVICES} one process can declare: \
+                 each takes {KEYS_PER_DEVICE} of the 65,535 key expressions a Zenoh link can \
+                 name, and past that Zenoh 1.10 never finishes declaring \
+                 (docs/zenoh-declarations.md); give the devices to several processes",
+                provided.len()
+            ),
+        ));
+    }
     for (i, dev) in provided.iter().enumerate() {
         // Declaring 20,000 devices takes minutes (ARCHITECTURE.md): a stop
         // asked meanwhile is heard between two.
@@ -280,7 +316,15 @@ pub fn spawn<D: Driver>(
                 stats: Stats::default(),
                 fatal: None,
             };
-            run_loop(core, &inbox, &inline, &ticks, &thread_session, &provided)
+            run_loop(
+                core,
+                &inbox,
+                &inline,
+                &ticks,
+                &thread_session,
+                &provided,
+                after,
+            )
         })
         .map_err(|e| NodeError::Driver(format!("starting the driver thread: {e}").into()))?;
     Ok(NodeHandle { thread, stop })
@@ -316,6 +360,16 @@ pub fn check<D: Driver>(section: &Section) -> Result<Unused> {
 }
 
 /// Builds the driver from its section, warning about unused options.
+/// The key expressions Zenoh names on a link for each provided device: its
+/// data key, and the fixed parts of its commands', requests' and token's.
+const KEYS_PER_DEVICE: usize = 4;
+
+/// The most devices one node declares. Zenoh 1.10 names each key expression
+/// a link carries by a 16-bit id; the 65,536th on a link makes it search for
+/// a free id forever (docs/zenoh-declarations.md). 16,000 devices take
+/// 64,000, leaving the rest for what the link's other end declares.
+pub const MAX_DEVICES: usize = 16_000;
+
 pub(crate) fn build<D: Driver>(section: &Section) -> Result<D> {
     if section.name != D::NAME {
         return Err(NodeError::config(
@@ -426,6 +480,7 @@ fn run_loop<D: Driver>(
     ticks: &SimTicks,
     session: &Session,
     provided: &[Device],
+    after: AfterStop,
 ) -> Result<()> {
     let core = Arc::new(Mutex::new(core));
     inline.enable(&core, inbox);
@@ -521,6 +576,12 @@ fn run_loop<D: Driver>(
         replaced = inbox.replaced(),
         "stopped"
     );
+    drop(c);
+    if after == AfterStop::CloseSession {
+        if let Err(e) = session.close().wait() {
+            tracing::warn!(driver = D::NAME, "closing the session: {e}");
+        }
+    }
     result.and(down)
 }
 

@@ -216,6 +216,16 @@ fn rows(a: &ScaleArgs, dir: &Path) -> anyhow::Result<()> {
     )?;
     let mut base_mb = None;
     for robots in std::iter::once(0).chain(a.robots.iter().copied()) {
+        // Each robot gives the simulator two devices, and the map one.
+        let devices = 2 * robots as usize + 1;
+        if devices > troupe_node::MAX_DEVICES {
+            writeln!(
+                out,
+                "  {robots:>6} not run: {devices} devices in one simulator, more than the {} a process can declare (Zenoh names at most 65,535 keys on a link; docs/zenoh-declarations.md)",
+                troupe_node::MAX_DEVICES
+            )?;
+            continue;
+        }
         let row = row(a, dir, &map, side, robots)?;
         let base = *base_mb.get_or_insert(row.sim_mb);
         let per_robot = if robots == 0 {
