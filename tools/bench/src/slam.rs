@@ -50,6 +50,13 @@ pub struct SlamBenchArgs {
     /// long, turns 5% large, 2% random a step.
     #[arg(long, value_name = "DIR")]
     pub datasets: Option<PathBuf>,
+    /// Raw logs judged as the SLAM papers judge them: each log in DIR
+    /// (`intel.clf`, as CARMEN wrote it, odometry and all) beside the
+    /// relations of Kümmerle et al.'s benchmark for it (`intel.relations`),
+    /// mapped from its own odometry, its trajectory's error on each relation
+    /// printed beside what Cartographer and Graph Mapping reach.
+    #[arg(long, value_name = "DIR")]
+    pub relations: Option<PathBuf>,
     /// A log the real Player and Stage wrote of Stage's simple.world
     /// (tools/bench/real-player-log.sh writes one: r0 alone, odometry 3%
     /// long), mapped and judged against the cave it was made in.
@@ -63,7 +70,8 @@ pub struct SlamBenchArgs {
     #[arg(long, default_value_t = 3, value_name = "N")]
     pub seeds: u64,
     /// The simulated worlds to run, by name (office, loop, cave, autolab);
-    /// `none` for only the logs given by --datasets and --player-log.
+    /// `none` for only the logs given by --datasets, --relations and
+    /// --player-log.
     #[arg(
         long,
         value_delimiter = ',',
@@ -203,6 +211,9 @@ pub fn run(a: &SlamBenchArgs) -> anyhow::Result<()> {
     }
     if let Some(d) = &a.datasets {
         datasets(d, a.seeds, &dir, &mut out)?;
+    }
+    if let Some(d) = &a.relations {
+        relations(d, &mut out)?;
     }
     if a.keep.is_none() {
         let _ = std::fs::remove_dir_all(&dir);
@@ -585,4 +596,243 @@ fn made_wrong(rec: &Recording, seed: u64) -> Recording {
         o.pose = at;
     }
     out
+}
+
+/// A relation of Kümmerle et al.'s benchmark: the pose at time `b` in the
+/// frame of the pose at time `a`, as people who knew the building judged it.
+struct Relation {
+    a: f64,
+    b: f64,
+    rel: Pose,
+}
+
+/// Reads a `.relations` file: one relation a line, `t1 t2 x y z roll pitch
+/// yaw` (metres and radians), `#` comments.
+fn read_relations(path: &Path) -> anyhow::Result<Vec<Relation>> {
+    let text =
+        std::fs::read_to_string(path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    let mut out = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let f: Vec<f64> = line
+            .split_whitespace()
+            .map(str::parse)
+            .collect::<Result<_, _>>()
+            .map_err(|e| anyhow::anyhow!("{}:{}: {e}", path.display(), i + 1))?;
+        let [a, b, x, y, _, _, _, yaw] = f[..] else {
+            anyhow::bail!(
+                "{}:{}: {} numbers where a relation has 8 (t1 t2 x y z roll pitch yaw)",
+                path.display(),
+                i + 1,
+                f.len()
+            );
+        };
+        out.push(Relation {
+            a,
+            b,
+            rel: Pose::new(x, y, yaw),
+        });
+    }
+    Ok(out)
+}
+
+/// Mean and (sample) standard deviation.
+fn mean_std(v: &[f64]) -> (f64, f64) {
+    let n = v.len() as f64;
+    let mean = v.iter().sum::<f64>() / n.max(1.0);
+    let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
+    (mean, var.sqrt())
+}
+
+/// The errors of a trajectory (`pose` of a time) on `relations`: the
+/// translational (m) and rotational (rad) size of each relation's
+/// difference from what the trajectory says, for those whose two times it
+/// has a pose for.
+fn relation_errors(
+    relations: &[Relation],
+    pose: impl Fn(f64) -> Option<Pose>,
+) -> (Vec<f64>, Vec<f64>) {
+    let (mut trans, mut rot) = (Vec::new(), Vec::new());
+    for r in relations {
+        let (Some(a), Some(b)) = (pose(r.a), pose(r.b)) else {
+            continue;
+        };
+        // As Cartographer's relations metrics compute it: what is left of
+        // the trajectory's relative pose once the relation's is undone.
+        let e = a.inverse().compose(&b).compose(&r.rel.inverse());
+        trans.push(e.x.hypot(e.y));
+        rot.push(troupe_geom::normalize(e.yaw).abs());
+    }
+    (trans, rot)
+}
+
+/// What the papers report on the benchmark's datasets: the absolute
+/// translational (m) and rotational (°) error on their relations, mean ±
+/// standard deviation. Hess et al., "Real-Time Loop Closure in 2D LIDAR
+/// SLAM" (ICRA 2016), Table II: Cartographer beside Graph Mapping as
+/// Kümmerle et al. (2009) measured it.
+const PUBLISHED: [(&str, &str); 5] = [
+    (
+        "aces",
+        "Cartographer 0.0375 ± 0.0426 m, 0.373 ± 0.469°; Graph Mapping 0.044 ± 0.044 m, 0.4 ± 0.4°",
+    ),
+    (
+        "fr079",
+        "Cartographer 0.0452 ± 0.0354 m, 0.538 ± 0.718°; Graph Mapping 0.056 ± 0.042 m, 0.6 ± 0.6°",
+    ),
+    (
+        "intel",
+        "Cartographer 0.0229 ± 0.0239 m, 0.453 ± 1.335°; Graph Mapping 0.031 ± 0.026 m, 1.3 ± 4.7°",
+    ),
+    (
+        "mit-csail",
+        "Cartographer 0.0319 ± 0.0363 m, 0.369 ± 0.365°; Graph Mapping 0.004 ± 0.009 m, 0.05 ± 0.08°",
+    ),
+    (
+        "mit-killian",
+        "Cartographer 0.0395 ± 0.0488 m, 0.352 ± 0.353°; Graph Mapping 0.050 ± 0.056 m, 0.5 ± 0.5°",
+    ),
+];
+
+/// The table of raw logs with their relations: each log of `dir` mapped
+/// from its own odometry, as recorded, and its trajectory judged on the
+/// relations of the file of the same name (`intel.clf`, `intel.relations`).
+fn relations(dir: &Path, out: &mut impl Write) -> anyhow::Result<()> {
+    let mut logs: Vec<(PathBuf, PathBuf)> = std::fs::read_dir(dir)
+        .map_err(|e| anyhow::anyhow!("--relations {}: {e}", dir.display()))?
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| {
+            let n = p.to_string_lossy();
+            n.ends_with(".log") || n.ends_with(".clf") || n.ends_with(".gz")
+        })
+        .filter_map(|p| {
+            let name = p.file_name()?.to_string_lossy().into_owned();
+            let stem = name.split('.').next()?;
+            let rel = p.with_file_name(format!("{stem}.relations"));
+            rel.exists().then_some((p, rel))
+        })
+        .collect();
+    logs.sort();
+    let alone: Vec<String> = std::fs::read_dir(dir)?
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "relations"))
+        .filter(|p| !logs.iter().any(|(_, r)| r == p))
+        .map(|p| p.display().to_string())
+        .collect();
+    if !alone.is_empty() {
+        let _ = writeln!(
+            std::io::stderr(),
+            "bench slam: no log beside {}: left out",
+            alone.join(", ")
+        );
+    }
+    if logs.is_empty() {
+        anyhow::bail!(
+            "--relations {}: no log (.clf, .log, .gz) with a .relations file of its name beside it",
+            dir.display()
+        );
+    }
+    writeln!(
+        out,
+        "troupe bench slam: raw logs with Kümmerle et al.'s relations in {}; each mapped from its own odometry; \
+         error of a relation = how far the relative pose between its two times, on the built trajectory, is from the relation's (mean ± std over the relations, as the SLAM papers give it)",
+        dir.display()
+    )?;
+    for (log, rel) in logs {
+        let name = log
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let name = name.split('.').next().unwrap_or("?").to_owned();
+        let relations = read_relations(&rel)?;
+        let rec = source::read(std::slice::from_ref(&log), &Select::default())
+            .map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
+        let span = rec.scans.last().map_or(0.0, |l| l.t) - rec.scans.first().map_or(0.0, |s| s.t);
+        let t0 = Instant::now();
+        let built = troupe_map::build(&rec, Params::default(), |_, _| {});
+        let took = t0.elapsed().as_secs_f64();
+        let (trans, rot) = relation_errors(&relations, |t| {
+            Some(built.slam.corrected(t, rec.odom_at(t)?))
+        });
+        let (odom_trans, odom_rot) = relation_errors(&relations, |t| rec.odom_at(t));
+        let (t, ts) = mean_std(&trans);
+        let (r, rs) = mean_std(&rot);
+        let (ot, ots) = mean_std(&odom_trans);
+        let (or, ors) = mean_std(&odom_rot);
+        writeln!(
+            out,
+            "  {name:<11} {} scans, {span:.0} s; {} of {} relations: translation {t:.3} ± {ts:.3} m (odometry alone {ot:.3} ± {ots:.3}), rotation {:.2} ± {:.2}° ({:.2} ± {:.2}°)  built {:.0}x the log's pace  {}",
+            rec.scans.len(),
+            trans.len(),
+            relations.len(),
+            r.to_degrees(),
+            rs.to_degrees(),
+            or.to_degrees(),
+            ors.to_degrees(),
+            span / took.max(1e-9),
+            closures(&built.slam),
+        )?;
+        if let Some((_, said)) = PUBLISHED.iter().find(|(n, _)| *n == name) {
+            writeln!(
+                out,
+                "              published (Hess et al. 2016, Table II): {said}"
+            )?;
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::{FRAC_PI_2, PI};
+
+    #[test]
+    fn a_trajectory_is_judged_on_its_relative_poses_not_where_it_lies() {
+        let dir = std::env::temp_dir().join(format!("troupe-relations-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("t.relations");
+        // Straight on 1 m, then a quarter turn on the spot.
+        std::fs::write(
+            &path,
+            "# timestamp1 timestamp2 x y z roll pitch yaw\n\
+             1.0 2.0 1.0 0.0 0 0 0 0.0\n\
+             2.0 3.0 0.0 0.0 0 0 0 1.5707963\n\
+             9.0 10.0 1.0 0.0 0 0 0 0.0\n",
+        )
+        .unwrap();
+        let rel = read_relations(&path).unwrap();
+        assert_eq!(rel.len(), 3);
+        // The same motion, started elsewhere and heading north, its first
+        // step 10 cm long; nothing known at 9 and 10 s.
+        let pose = |t: f64| match t {
+            1.0 => Some(Pose::new(5.0, 5.0, FRAC_PI_2)),
+            2.0 => Some(Pose::new(5.0, 6.1, FRAC_PI_2)),
+            3.0 => Some(Pose::new(5.0, 6.1, PI)),
+            _ => None,
+        };
+        let (trans, rot) = relation_errors(&rel, pose);
+        assert_eq!(trans.len(), 2, "the relation of unknown times is left out");
+        assert!(
+            (trans[0] - 0.1).abs() < 1e-9 && trans[1] < 1e-6,
+            "{trans:?}"
+        );
+        assert!(rot.iter().all(|r| *r < 1e-6), "{rot:?}");
+
+        std::fs::write(&path, "1.0 2.0 1.0 0.0\n").unwrap();
+        let err = read_relations(&path).err().unwrap().to_string();
+        assert!(
+            err.contains("t.relations:1") && err.contains("4 numbers"),
+            "{err}"
+        );
+        std::fs::write(&path, "1.0 2.0 x 0 0 0 0 0\n").unwrap();
+        let err = read_relations(&path).err().unwrap().to_string();
+        assert!(err.contains("t.relations:1"), "{err}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }
