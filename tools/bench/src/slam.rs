@@ -372,16 +372,7 @@ fn closures(slam: &troupe_map::slam::Slam) -> String {
 /// its scans' poses (the corrected trajectory) as odometry, which is the
 /// reference, then mapped from that odometry made wrong.
 fn datasets(dir: &Path, seeds: u64, work: &Path, out: &mut impl Write) -> anyhow::Result<()> {
-    let mut logs: Vec<PathBuf> = std::fs::read_dir(dir)
-        .map_err(|e| anyhow::anyhow!("--datasets {}: {e}", dir.display()))?
-        .flatten()
-        .map(|e| e.path())
-        .filter(|p| {
-            let n = p.to_string_lossy();
-            n.ends_with(".log") || n.ends_with(".clf") || n.ends_with(".gz")
-        })
-        .collect();
-    logs.sort();
+    let logs = carmen_logs(dir, "--datasets")?;
     writeln!(
         out,
         "troupe bench slam: real robots' datasets in {} (CARMEN logs; reference: the corrected trajectory the log carries); \
@@ -392,12 +383,8 @@ fn datasets(dir: &Path, seeds: u64, work: &Path, out: &mut impl Write) -> anyhow
         dir.display()
     )?;
     for path in logs {
-        let name = path
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let name = name.split('.').next().unwrap_or("?");
-        let name = name.strip_suffix("-corrected").unwrap_or(name).to_owned();
+        let name = stem(&path);
+        let name = name.strip_suffix("-corrected").unwrap_or(&name).to_owned();
         let text =
             source::read_bytes(&path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
         let text = String::from_utf8_lossy(&text);
@@ -471,6 +458,31 @@ fn datasets(dir: &Path, seeds: u64, work: &Path, out: &mut impl Write) -> anyhow
         }
     }
     Ok(())
+}
+
+/// The logs in `dir` (`.clf`, `.log`, `.gz`: what `troupe map build`
+/// reads), in order; `flag` names the directory in the error.
+fn carmen_logs(dir: &Path, flag: &str) -> anyhow::Result<Vec<PathBuf>> {
+    let mut logs: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map_err(|e| anyhow::anyhow!("{flag} {}: {e}", dir.display()))?
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| {
+            let n = p.to_string_lossy();
+            n.ends_with(".log") || n.ends_with(".clf") || n.ends_with(".gz")
+        })
+        .collect();
+    logs.sort();
+    Ok(logs)
+}
+
+/// A log's name before its first dot: `intel` of `intel.clf.gz`.
+fn stem(path: &Path) -> String {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    name.split('.').next().unwrap_or("?").to_owned()
 }
 
 /// How `built` scores against `obstacles` and the walls `seen`, and how
@@ -701,22 +713,13 @@ const PUBLISHED: [(&str, &str); 5] = [
 /// from its own odometry, as recorded, and its trajectory judged on the
 /// relations of the file of the same name (`intel.clf`, `intel.relations`).
 fn relations(dir: &Path, out: &mut impl Write) -> anyhow::Result<()> {
-    let mut logs: Vec<(PathBuf, PathBuf)> = std::fs::read_dir(dir)
-        .map_err(|e| anyhow::anyhow!("--relations {}: {e}", dir.display()))?
-        .flatten()
-        .map(|e| e.path())
-        .filter(|p| {
-            let n = p.to_string_lossy();
-            n.ends_with(".log") || n.ends_with(".clf") || n.ends_with(".gz")
-        })
+    let logs: Vec<(PathBuf, PathBuf)> = carmen_logs(dir, "--relations")?
+        .into_iter()
         .filter_map(|p| {
-            let name = p.file_name()?.to_string_lossy().into_owned();
-            let stem = name.split('.').next()?;
-            let rel = p.with_file_name(format!("{stem}.relations"));
+            let rel = p.with_file_name(format!("{}.relations", stem(&p)));
             rel.exists().then_some((p, rel))
         })
         .collect();
-    logs.sort();
     let alone: Vec<String> = std::fs::read_dir(dir)?
         .flatten()
         .map(|e| e.path())
@@ -744,11 +747,7 @@ fn relations(dir: &Path, out: &mut impl Write) -> anyhow::Result<()> {
         dir.display()
     )?;
     for (log, rel) in logs {
-        let name = log
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let name = name.split('.').next().unwrap_or("?").to_owned();
+        let name = stem(&log);
         let relations = read_relations(&rel)?;
         let rec = source::read(std::slice::from_ref(&log), &Select::default())
             .map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
