@@ -73,13 +73,8 @@ pub fn run<D: Driver>(section: Section, zargs: &ZenohArgs, cfg: &NodeConfig) -> 
     let stop = Stop::default();
     install_signal_handlers(stop.clone())?;
     exit_on_panic();
-    let handle = start::<D>(session.clone(), section, cfg, stop, AfterStop::CloseSession)?;
-    let result = handle.join();
-    session
-        .close()
-        .wait()
-        .map_err(z(|| "closing the session".into()))?;
-    result
+    // The node's bus closes the session when the driver is done with it.
+    start::<D>(session, section, cfg, stop, true)?.join()
 }
 
 /// Ends the process on a panic in any of its threads, after the panic's
@@ -202,28 +197,32 @@ pub fn spawn<D: Driver>(
     cfg: &NodeConfig,
     stop: Stop,
 ) -> Result<NodeHandle> {
-    start::<D>(session, section, cfg, stop, AfterStop::KeepSession)
+    start::<D>(session, section, cfg, stop, false)
 }
 
-/// What a node does with its session once its driver has stopped.
-#[derive(Clone, Copy, PartialEq, Eq)]
-enum AfterStop {
-    /// Leaves it open: others declared on it too.
-    KeepSession,
-    /// Closes it before its declarations are dropped, which drops them all
-    /// at once. One by one, each undeclaration looks through all the others
-    /// (zenoh 1.10), and 8,000 devices took 4.7 s to stop.
-    CloseSession,
-}
-
+/// [`spawn`], and with `owns_session` the node closes the session once its
+/// driver has stopped (see `ZenohBus::owns_session`).
 fn start<D: Driver>(
     session: Session,
     section: Section,
     cfg: &NodeConfig,
     stop: Stop,
-    after: AfterStop,
+    owns_session: bool,
 ) -> Result<NodeHandle> {
     let driver = build::<D>(&section)?;
+    let provided: Vec<Device> = section.provided().into_iter().map(|s| s.device).collect();
+    if provided.len() > MAX_DEVICES {
+        return Err(NodeError::config(
+            D::NAME,
+            format!(
+                "provides {} devices, more than the {MAX_DEVICES} one process can declare: \
+                 each takes {KEYS_PER_DEVICE} of the 65,535 key expressions a Zenoh link can \
+                 name, and past that Zenoh 1.10 never finishes declaring \
+                 (docs/zenoh-declarations.md); give the devices to several processes",
+                provided.len()
+            ),
+        ));
+    }
     // Busy with `setup` until the loop first waits.
     let inbox = Arc::new(Inbox::busy());
     stop.attach(inbox.clone());
@@ -244,7 +243,6 @@ fn start<D: Driver>(
         wait_live(&session, &slot.device, cfg.requires_timeout)?;
     }
 
-    let provided: Vec<Device> = section.provided().into_iter().map(|s| s.device).collect();
     let ready = Arc::<ReadyAnswers>::default();
     let inline = Arc::<Inline>::default();
     let mut bus = ZenohBus {
@@ -258,19 +256,8 @@ fn start<D: Driver>(
         queryables: Vec::new(),
         clock_pub: None,
         ros2: None,
+        owns_session,
     };
-    if provided.len() > MAX_DEVICES {
-        return Err(NodeError::config(
-            D::NAME,
-            format!(
-                "provides {} devices, more than the {MAX_DEVICES} one process can declare: \
-                 each takes {KEYS_PER_DEVICE} of the 65,535 key expressions a Zenoh link can \
-                 name, and past that Zenoh 1.10 never finishes declaring \
-                 (docs/zenoh-declarations.md); give the devices to several processes",
-                provided.len()
-            ),
-        ));
-    }
     for (i, dev) in provided.iter().enumerate() {
         // Declaring 20,000 devices takes minutes (ARCHITECTURE.md): a stop
         // asked meanwhile is heard between two.
@@ -316,15 +303,7 @@ fn start<D: Driver>(
                 stats: Stats::default(),
                 fatal: None,
             };
-            run_loop(
-                core,
-                &inbox,
-                &inline,
-                &ticks,
-                &thread_session,
-                &provided,
-                after,
-            )
+            run_loop(core, &inbox, &inline, &ticks, &thread_session, &provided)
         })
         .map_err(|e| NodeError::Driver(format!("starting the driver thread: {e}").into()))?;
     Ok(NodeHandle { thread, stop })
@@ -359,7 +338,6 @@ pub fn check<D: Driver>(section: &Section) -> Result<Unused> {
     })
 }
 
-/// Builds the driver from its section, warning about unused options.
 /// The key expressions Zenoh names on a link for each provided device: its
 /// data key, and the fixed parts of its commands', requests' and token's.
 const KEYS_PER_DEVICE: usize = 4;
@@ -370,6 +348,7 @@ const KEYS_PER_DEVICE: usize = 4;
 /// 64,000, leaving the rest for what the link's other end declares.
 pub const MAX_DEVICES: usize = 16_000;
 
+/// Builds the driver from its section, warning about unused options.
 pub(crate) fn build<D: Driver>(section: &Section) -> Result<D> {
     if section.name != D::NAME {
         return Err(NodeError::config(
@@ -480,7 +459,6 @@ fn run_loop<D: Driver>(
     ticks: &SimTicks,
     session: &Session,
     provided: &[Device],
-    after: AfterStop,
 ) -> Result<()> {
     let core = Arc::new(Mutex::new(core));
     inline.enable(&core, inbox);
@@ -576,12 +554,6 @@ fn run_loop<D: Driver>(
         replaced = inbox.replaced(),
         "stopped"
     );
-    drop(c);
-    if after == AfterStop::CloseSession {
-        if let Err(e) = session.close().wait() {
-            tracing::warn!(driver = D::NAME, "closing the session: {e}");
-        }
-    }
     result.and(down)
 }
 
@@ -731,6 +703,23 @@ struct ZenohBus {
     clock_pub: Option<Publisher<'static>>,
     /// The devices as ROS 2 topics (`--ros2`).
     ros2: Option<Face>,
+    /// Whether the session is the node's alone (`troupe node`), to close
+    /// when the bus goes: that drops every declaration at once. One by one,
+    /// each undeclaration looks through all the others (zenoh 1.10), and
+    /// 8,000 devices took 4.7 s to stop.
+    owns_session: bool,
+}
+
+impl Drop for ZenohBus {
+    fn drop(&mut self) {
+        // Runs before the fields' own drops: their undeclarations then
+        // find the session closed and return at once.
+        if self.owns_session {
+            if let Err(e) = self.session.close().wait() {
+                tracing::warn!("closing the session: {e}");
+            }
+        }
+    }
 }
 
 struct ZenohSink(Query);

@@ -262,7 +262,6 @@ fn read_loop(addr: SocketAddr, seconds: f64) -> anyhow::Result<Pulls> {
     Ok(p)
 }
 
-/// A 500x500 cave-like map as a PNG, for runs without `--map`.
 /// Velocity commands in [`commands`].
 const COMMANDS: usize = 20_000;
 
@@ -304,6 +303,7 @@ fn commands(
     Ok((t0.elapsed(), heard.load(Ordering::Relaxed)))
 }
 
+/// A 500x500 cave-like map as a PNG, for runs without `--map`.
 fn synthetic_map() -> anyhow::Result<PathBuf> {
     let img = image::GrayImage::from_fn(500, 500, |x, y| {
         let (x, y) = (f64::from(x), f64::from(y));
