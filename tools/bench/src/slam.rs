@@ -372,7 +372,10 @@ fn closures(slam: &troupe_map::slam::Slam) -> String {
 /// its scans' poses (the corrected trajectory) as odometry, which is the
 /// reference, then mapped from that odometry made wrong.
 fn datasets(dir: &Path, seeds: u64, work: &Path, out: &mut impl Write) -> anyhow::Result<()> {
-    let logs = carmen_logs(dir, "--datasets")?;
+    let logs: Vec<PathBuf> = files(dir, "--datasets")?
+        .into_iter()
+        .filter(|p| is_log(p))
+        .collect();
     writeln!(
         out,
         "troupe bench slam: real robots' datasets in {} (CARMEN logs; reference: the corrected trajectory the log carries); \
@@ -460,20 +463,21 @@ fn datasets(dir: &Path, seeds: u64, work: &Path, out: &mut impl Write) -> anyhow
     Ok(())
 }
 
-/// The logs in `dir` (`.clf`, `.log`, `.gz`: what `troupe map build`
-/// reads), in order; `flag` names the directory in the error.
-fn carmen_logs(dir: &Path, flag: &str) -> anyhow::Result<Vec<PathBuf>> {
-    let mut logs: Vec<PathBuf> = std::fs::read_dir(dir)
+/// The files in `dir`, in order; `flag` names the directory in the error.
+fn files(dir: &Path, flag: &str) -> anyhow::Result<Vec<PathBuf>> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
         .map_err(|e| anyhow::anyhow!("{flag} {}: {e}", dir.display()))?
         .flatten()
         .map(|e| e.path())
-        .filter(|p| {
-            let n = p.to_string_lossy();
-            n.ends_with(".log") || n.ends_with(".clf") || n.ends_with(".gz")
-        })
         .collect();
-    logs.sort();
-    Ok(logs)
+    files.sort();
+    Ok(files)
+}
+
+/// Whether `path` is a log `troupe map build` reads (`.clf`, `.log`, `.gz`).
+fn is_log(path: &Path) -> bool {
+    let n = path.to_string_lossy();
+    n.ends_with(".log") || n.ends_with(".clf") || n.ends_with(".gz")
 }
 
 /// A log's name before its first dot: `intel` of `intel.clf.gz`.
@@ -618,11 +622,17 @@ struct Relation {
     rel: Pose,
 }
 
-/// Reads a `.relations` file: one relation a line, `t1 t2 x y z roll pitch
-/// yaw` (metres and radians), `#` comments.
+/// Reads a `.relations` file.
 fn read_relations(path: &Path) -> anyhow::Result<Vec<Relation>> {
     let text =
         std::fs::read_to_string(path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    parse_relations(&text, &path.display().to_string())
+}
+
+/// The relations of a `.relations` file's `text`: one a line, `t1 t2 x y z
+/// roll pitch yaw` (metres and radians), `#` comments; `place` names the
+/// file in errors.
+fn parse_relations(text: &str, place: &str) -> anyhow::Result<Vec<Relation>> {
     let mut out = Vec::new();
     for (i, line) in text.lines().enumerate() {
         let line = line.trim();
@@ -633,11 +643,10 @@ fn read_relations(path: &Path) -> anyhow::Result<Vec<Relation>> {
             .split_whitespace()
             .map(str::parse)
             .collect::<Result<_, _>>()
-            .map_err(|e| anyhow::anyhow!("{}:{}: {e}", path.display(), i + 1))?;
+            .map_err(|e| anyhow::anyhow!("{place}:{}: {e}", i + 1))?;
         let [a, b, x, y, _, _, _, yaw] = f[..] else {
             anyhow::bail!(
-                "{}:{}: {} numbers where a relation has 8 (t1 t2 x y z roll pitch yaw)",
-                path.display(),
+                "{place}:{}: {} numbers where a relation has 8 (t1 t2 x y z roll pitch yaw)",
                 i + 1,
                 f.len()
             );
@@ -713,18 +722,19 @@ const PUBLISHED: [(&str, &str); 5] = [
 /// from its own odometry, as recorded, and its trajectory judged on the
 /// relations of the file of the same name (`intel.clf`, `intel.relations`).
 fn relations(dir: &Path, out: &mut impl Write) -> anyhow::Result<()> {
-    let logs: Vec<(PathBuf, PathBuf)> = carmen_logs(dir, "--relations")?
-        .into_iter()
+    let all = files(dir, "--relations")?;
+    let logs: Vec<(PathBuf, PathBuf)> = all
+        .iter()
+        .filter(|p| is_log(p))
         .filter_map(|p| {
-            let rel = p.with_file_name(format!("{}.relations", stem(&p)));
-            rel.exists().then_some((p, rel))
+            let rel = p.with_file_name(format!("{}.relations", stem(p)));
+            all.contains(&rel).then(|| (p.clone(), rel))
         })
         .collect();
-    let alone: Vec<String> = std::fs::read_dir(dir)?
-        .flatten()
-        .map(|e| e.path())
+    let alone: Vec<String> = all
+        .iter()
         .filter(|p| p.extension().is_some_and(|x| x == "relations"))
-        .filter(|p| !logs.iter().any(|(_, r)| r == p))
+        .filter(|p| !logs.iter().any(|(_, r)| r == *p))
         .map(|p| p.display().to_string())
         .collect();
     if !alone.is_empty() {
@@ -793,19 +803,15 @@ mod tests {
 
     #[test]
     fn a_trajectory_is_judged_on_its_relative_poses_not_where_it_lies() {
-        let dir = std::env::temp_dir().join(format!("troupe-relations-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("t.relations");
         // Straight on 1 m, then a quarter turn on the spot.
-        std::fs::write(
-            &path,
+        let rel = parse_relations(
             "# timestamp1 timestamp2 x y z roll pitch yaw\n\
              1.0 2.0 1.0 0.0 0 0 0 0.0\n\
              2.0 3.0 0.0 0.0 0 0 0 1.5707963\n\
              9.0 10.0 1.0 0.0 0 0 0 0.0\n",
+            "t.relations",
         )
         .unwrap();
-        let rel = read_relations(&path).unwrap();
         assert_eq!(rel.len(), 3);
         // The same motion, started elsewhere and heading north, its first
         // step 10 cm long; nothing known at 9 and 10 s.
@@ -823,15 +829,18 @@ mod tests {
         );
         assert!(rot.iter().all(|r| *r < 1e-6), "{rot:?}");
 
-        std::fs::write(&path, "1.0 2.0 1.0 0.0\n").unwrap();
-        let err = read_relations(&path).err().unwrap().to_string();
+        let err = parse_relations("1.0 2.0 1.0 0.0\n", "t.relations")
+            .err()
+            .unwrap()
+            .to_string();
         assert!(
             err.contains("t.relations:1") && err.contains("4 numbers"),
             "{err}"
         );
-        std::fs::write(&path, "1.0 2.0 x 0 0 0 0 0\n").unwrap();
-        let err = read_relations(&path).err().unwrap().to_string();
+        let err = parse_relations("1.0 2.0 x 0 0 0 0 0\n", "t.relations")
+            .err()
+            .unwrap()
+            .to_string();
         assert!(err.contains("t.relations:1"), "{err}");
-        let _ = std::fs::remove_dir_all(&dir);
     }
 }
