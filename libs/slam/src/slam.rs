@@ -35,6 +35,11 @@ pub struct Params {
     pub local: usize,
     /// How far from odometry's guess a keyframe is looked for.
     pub window: Window,
+    /// …and, where the match there fits worse than [`WIDEN`] times the
+    /// last keyframes' usual fit, how far it is looked for again: odometry
+    /// that reads a reversing robot as going forward (Freiburg 079's) is
+    /// a metre off in a second.
+    pub wide_window: Window,
     /// A local match fitting worse than this keeps odometry's guess.
     pub min_fit: f64,
     /// Loop closures look this far (metres) from the keyframe.
@@ -55,6 +60,7 @@ impl Default for Params {
             keyframe_turn: 0.3,
             local: 15,
             window: Window { xy: 0.25, yaw: 0.2 },
+            wide_window: Window { xy: 1.0, yaw: 0.6 },
             min_fit: 0.25,
             loop_radius: 3.0,
             loop_gap: 20.0,
@@ -110,6 +116,8 @@ pub struct Slam {
     pub loops: Vec<Loop>,
     /// Local matches that fit too badly and kept odometry's guess.
     pub unmatched: usize,
+    /// Local matches found only in the wide window.
+    pub widened: usize,
     /// Loop closures found but taken back: the graph would not agree.
     pub rejected: usize,
     /// The keyframe of the last closure: the next waits a few keyframes,
@@ -194,6 +202,16 @@ const ODOMETRY: Prior = Prior {
     weight: 0.01,
 };
 
+/// A local match fitting worse than this share of the last keyframes'
+/// usual fit is looked for again in the wide window (Karto's "response
+/// expansion"), and the wider match is kept if it fits [`WIDER_BY`]
+/// better.
+const WIDEN: f64 = 0.8;
+/// …by this much of the fit.
+const WIDER_BY: f64 = 0.1;
+/// The keyframes whose median fit is the usual one.
+const USUAL_OVER: usize = 20;
+
 /// What the graph's pose is worth after a loop's length of travel: a
 /// closure pays 0.05 of fit for lying half a metre or 0.3 rad from it, so
 /// of two places that fit alike the one the graph expects wins.
@@ -275,6 +293,7 @@ impl Slam {
             graph: Graph::default(),
             loops: Vec::new(),
             unmatched: 0,
+            widened: 0,
             rejected: 0,
             last_closure: None,
             calibration: Calibration::default(),
@@ -336,7 +355,15 @@ impl Slam {
         } else {
             let local = self.world_points(n.saturating_sub(self.params.local)..n);
             let m = Matcher::new(&local, self.params.resolution, 1.0);
-            let found = m.search(&points, guess, self.params.window, reach, Some(ODOMETRY));
+            let mut found = m.search(&points, guess, self.params.window, reach, Some(ODOMETRY));
+            if found.score < WIDEN * self.usual_fit() {
+                // Odometry may be far off: look wider, trusting the scan.
+                let wide = m.search(&points, guess, self.params.wide_window, reach, None);
+                if wide.score > found.score + WIDER_BY {
+                    self.widened += 1;
+                    found = wide;
+                }
+            }
             fit = found.score;
             if found.score >= self.params.min_fit {
                 let last = &self.keyframes[n - 1];
@@ -400,6 +427,17 @@ impl Slam {
             }
         }
         true
+    }
+
+    /// The median fit of the last [`USUAL_OVER`] keyframes.
+    fn usual_fit(&self) -> f64 {
+        let n = self.keyframes.len();
+        let mut fits: Vec<f64> = self.keyframes[n.saturating_sub(USUAL_OVER)..]
+            .iter()
+            .map(|k| k.fit)
+            .collect();
+        fits.sort_by(|a, b| a.total_cmp(b));
+        fits.get(fits.len() / 2).copied().unwrap_or(0.0)
     }
 
     /// Loop closures kept.
@@ -508,18 +546,139 @@ impl Slam {
     }
 
     /// The robot's pose at odometric pose `odom` taken at time `t`, by the
-    /// graph: carried by odometry from the last keyframe before `t` (the
-    /// first, for a time before it).
+    /// graph: carried by odometry from the keyframes either side of `t`,
+    /// blended by time, so what odometry got wrong between them is shared
+    /// out rather than left to jump at the next keyframe (from the first
+    /// or the last alone, outside them). On MIT CSAIL, whose odometry turns
+    /// several degrees wrong between two keyframes, carrying from the last
+    /// one alone left 2.80° of error on the relations; blended, 1.30°.
     pub fn corrected(&self, t: f64, odom: Pose) -> Pose {
-        if self.keyframes.is_empty() {
+        let n = self.keyframes.len();
+        if n == 0 {
             return odom;
         }
         let i = self.keyframes.partition_point(|k| k.t <= t);
-        self.carried(i.saturating_sub(1), odom)
+        if i == 0 || i == n {
+            return self.carried(i.saturating_sub(1), odom);
+        }
+        let (before, after) = (&self.keyframes[i - 1], &self.keyframes[i]);
+        let s = ((t - before.t) / (after.t - before.t)).clamp(0.0, 1.0);
+        let (a, b) = (self.carried(i - 1, odom), self.carried(i, odom));
+        Pose::new(
+            a.x + s * (b.x - a.x),
+            a.y + s * (b.y - a.y),
+            a.yaw + s * troupe_geom::normalize(b.yaw - a.yaw),
+        )
     }
 
     /// Metres the corrected trajectory runs.
     pub fn length(&self) -> f64 {
         self.keyframes.last().map_or(0.0, |k| k.travelled)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An 8 x 6 m room with a box in it, as segments.
+    const ROOM: [((f64, f64), (f64, f64)); 8] = [
+        ((0.0, 0.0), (8.0, 0.0)),
+        ((8.0, 0.0), (8.0, 6.0)),
+        ((8.0, 6.0), (0.0, 6.0)),
+        ((0.0, 6.0), (0.0, 0.0)),
+        ((5.0, 1.0), (5.6, 1.0)),
+        ((5.6, 1.0), (5.6, 1.8)),
+        ((5.6, 1.8), (5.0, 1.8)),
+        ((5.0, 1.8), (5.0, 1.0)),
+    ];
+
+    /// A 181-beam, 180° scan of the room from `at`.
+    fn scan(t: f64, at: Pose) -> Scan {
+        let ranges = (0..181)
+            .map(|i| {
+                let a = at.yaw - std::f64::consts::FRAC_PI_2 + (i as f64).to_radians();
+                let (dx, dy) = (a.cos(), a.sin());
+                ROOM.iter()
+                    .filter_map(|&((ax, ay), (bx, by))| {
+                        // at + r d = a + u (b - a)
+                        let (ex, ey) = (bx - ax, by - ay);
+                        let den = dx * ey - dy * ex;
+                        if den.abs() < 1e-12 {
+                            return None;
+                        }
+                        let (wx, wy) = (ax - at.x, ay - at.y);
+                        let r = (wx * ey - wy * ex) / den;
+                        let u = (wx * dy - wy * dx) / den;
+                        (r > 0.0 && (0.0..=1.0).contains(&u)).then_some(r)
+                    })
+                    .fold(8.0f64, f64::min) as f32
+            })
+            .collect();
+        Scan {
+            t,
+            min_angle: -std::f64::consts::FRAC_PI_2,
+            step: 1f64.to_radians(),
+            max_range: 8.0,
+            ranges,
+        }
+    }
+
+    /// Drives 2.1 m along the room and 0.7 m back, with odometry that reads
+    /// the way back as forward (as Freiburg 079's does); the graph's pose of
+    /// the last keyframe, its truth, and the builder.
+    fn reversing(params: Params) -> (Pose, Pose, Slam) {
+        let mut slam = Slam::new(params);
+        let mut last = (Pose::new(0.0, 0.0, 0.0), Pose::new(0.0, 0.0, 0.0));
+        for i in 0..9 {
+            let forward = if i <= 6 { i } else { 12 - i };
+            let truth = Pose::new(1.0 + 0.35 * f64::from(forward), 3.0, 0.0);
+            let odom = Pose::new(0.35 * f64::from(i), 0.0, 0.0);
+            assert!(slam.add(odom, &scan(f64::from(i), truth), Pose::new(0.0, 0.0, 0.0)));
+            last = (truth, odom);
+        }
+        let got = slam.graph.poses[slam.keyframes.len() - 1];
+        // The graph starts where odometry does: put it in the room's frame.
+        let got = Pose::new(1.0, 3.0, 0.0).compose(&got);
+        (got, last.0, slam)
+    }
+
+    #[test]
+    fn odometry_a_metre_off_in_one_step_is_found_again_by_a_wider_search() {
+        let (got, truth, slam) = reversing(Params::default());
+        let miss = (got.x - truth.x).hypot(got.y - truth.y);
+        assert!(miss < 0.05, "{miss:.3} m off: {got:?} against {truth:?}");
+        assert!(slam.widened >= 1, "{} widened", slam.widened);
+        // Without the wider search the window cannot reach it: the test
+        // can fail.
+        let narrow = Params::default().window;
+        let (got, truth, slam) = reversing(Params {
+            wide_window: narrow,
+            ..Params::default()
+        });
+        let miss = (got.x - truth.x).hypot(got.y - truth.y);
+        assert!(miss > 0.3, "{miss:.3} m off with the window alone");
+        assert_eq!(slam.widened, 0);
+    }
+
+    #[test]
+    fn a_pose_between_keyframes_shares_out_what_odometry_got_wrong() {
+        let (_, _, slam) = reversing(Params::default());
+        // Halfway between the last two keyframes, by time, with odometry
+        // halfway too: the pose lies halfway between theirs.
+        let n = slam.keyframes.len();
+        let (a, b) = (&slam.keyframes[n - 2], &slam.keyframes[n - 1]);
+        let t = (a.t + b.t) / 2.0;
+        let odom = Pose::new((a.odom.x + b.odom.x) / 2.0, 0.0, 0.0);
+        let (pa, pb) = (slam.graph.poses[n - 2], slam.graph.poses[n - 1]);
+        let got = slam.corrected(t, odom);
+        let mid = ((pa.x + pb.x) / 2.0, (pa.y + pb.y) / 2.0);
+        assert!(
+            (got.x - mid.0).hypot(got.y - mid.1) < 0.01,
+            "{got:?} against {mid:?}"
+        );
+        // At a keyframe's own time and odometry, its own pose.
+        let at = slam.corrected(b.t, b.odom);
+        assert!((at.x - pb.x).hypot(at.y - pb.y) < 1e-9, "{at:?}");
     }
 }
