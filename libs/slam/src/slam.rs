@@ -125,6 +125,12 @@ pub struct Slam {
     last_closure: Option<usize>,
     /// Odometry's scale on distance and on turns, learnt from matches.
     pub calibration: Calibration,
+    /// Scans between keyframes matched by [`place`](Self::place): each
+    /// one's time, the keyframe before it, and its pose from that one.
+    placed: Vec<(f64, usize, Pose)>,
+    /// The map of the last keyframes that `place` matches against, and
+    /// the keyframes and closures there were when it was made.
+    local: Option<((usize, usize), Matcher)>,
 }
 
 /// Odometry's systematic error, as a wrong wheel diameter (distance) and
@@ -209,6 +215,11 @@ const ODOMETRY: Prior = Prior {
 const WIDEN: f64 = 0.8;
 /// …by this much of the fit.
 const WIDER_BY: f64 = 0.1;
+/// How far from where odometry carries it from the last keyframe a scan
+/// between keyframes is looked for: less than a keyframe's step of
+/// odometry's error.
+const BETWEEN: Window = Window { xy: 0.1, yaw: 0.1 };
+
 /// The keyframes whose median fit is the usual one.
 const USUAL_OVER: usize = 20;
 
@@ -297,6 +308,8 @@ impl Slam {
             rejected: 0,
             last_closure: None,
             calibration: Calibration::default(),
+            placed: Vec::new(),
+            local: None,
         }
     }
 
@@ -429,6 +442,40 @@ impl Slam {
         true
     }
 
+    /// Matches `scan`, one that made no keyframe, against the map of the
+    /// last keyframes, so the trajectory at its time ([`corrected`]) is
+    /// where its scan fits rather than where odometry carries the robot.
+    /// The map does not change. Returns whether it fit well enough to keep.
+    ///
+    /// [`corrected`]: Self::corrected
+    pub fn place(&mut self, odom: Pose, scan: &Scan, sensor: Pose) -> bool {
+        let n = self.keyframes.len();
+        if n == 0 {
+            return false;
+        }
+        let (points, reach) = points(scan, sensor, self.params.resolution);
+        if points.len() < 10 {
+            return false;
+        }
+        let key = (n, self.loops.len());
+        if self.local.as_ref().is_none_or(|(k, _)| *k != key) {
+            let local = self.world_points(n.saturating_sub(self.params.local)..n);
+            self.local = Some((key, Matcher::new(&local, self.params.resolution, 1.0)));
+        }
+        let usual = self.usual_fit();
+        let guess = self.pose_of(odom);
+        let Some((_, m)) = &self.local else {
+            return false;
+        };
+        let found = m.search(&points, guess, BETWEEN, reach, Some(ODOMETRY));
+        if found.score < WIDEN * usual {
+            return false;
+        }
+        let from = self.graph.poses[n - 1].inverse().compose(&found.pose);
+        self.placed.push((scan.t, n - 1, from));
+        true
+    }
+
     /// The median fit of the last [`USUAL_OVER`] keyframes.
     fn usual_fit(&self) -> f64 {
         let n = self.keyframes.len();
@@ -546,7 +593,8 @@ impl Slam {
     }
 
     /// The robot's pose at odometric pose `odom` taken at time `t`, by the
-    /// graph: carried by odometry from the keyframes either side of `t`,
+    /// graph: where its scan was [placed](Self::place) if it was; else
+    /// carried by odometry from the keyframes either side of `t`,
     /// blended by time, so what odometry got wrong between them is shared
     /// out rather than left to jump at the next keyframe (from the first
     /// or the last alone, outside them). On MIT CSAIL, whose odometry turns
@@ -556,6 +604,12 @@ impl Slam {
         let n = self.keyframes.len();
         if n == 0 {
             return odom;
+        }
+        let p = self.placed.partition_point(|&(at, _, _)| at < t);
+        if let Some(&(at, k, from)) = self.placed.get(p) {
+            if at == t {
+                return self.graph.poses[k].compose(&from);
+            }
         }
         let i = self.keyframes.partition_point(|k| k.t <= t);
         if i == 0 || i == n {
@@ -659,6 +713,37 @@ mod tests {
         let miss = (got.x - truth.x).hypot(got.y - truth.y);
         assert!(miss > 0.3, "{miss:.3} m off with the window alone");
         assert_eq!(slam.widened, 0);
+    }
+
+    #[test]
+    fn a_scan_between_keyframes_is_placed_where_it_fits_not_where_odometry_says() {
+        let (_, last, mut slam) = reversing(Params::default());
+        // 5 cm on from the last keyframe by odometry; truly 7 cm, 1 cm
+        // aside and turned 0.06 rad (odometry's turns err most).
+        let truth = Pose::new(last.x + 0.07, last.y + 0.01, 0.06);
+        let odom = slam
+            .keyframes
+            .last()
+            .unwrap()
+            .odom
+            .compose(&Pose::new(0.05, 0.0, 0.0));
+        let t = slam.keyframes.last().unwrap().t + 0.5;
+        let room = Pose::new(1.0, 3.0, 0.0);
+        let miss = |p: Pose| {
+            let p = room.compose(&p);
+            (
+                (p.x - truth.x).hypot(p.y - truth.y),
+                (p.yaw - truth.yaw).abs(),
+            )
+        };
+        // Carried by odometry it is off (the test can fail)…
+        let (carried, a) = miss(slam.corrected(t, odom));
+        assert!(a > 0.05, "carried: {carried:.3} m, {a:.3} rad");
+        // …placed by its scan it is not.
+        assert!(slam.place(odom, &scan(t, truth), Pose::new(0.0, 0.0, 0.0)));
+        let (d, a) = miss(slam.corrected(t, odom));
+        assert!(a < 0.01 && d <= carried, "placed: {d:.3} m, {a:.3} rad");
+        assert_eq!(slam.keyframes.len(), 9, "the map is not changed");
     }
 
     #[test]

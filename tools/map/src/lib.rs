@@ -180,7 +180,9 @@ pub fn build(rec: &Recording, params: Params, mut progress: impl FnMut(usize, f6
     let placed = rec.placed();
     let mut slam = Slam::new(params);
     for (k, (odom, scan)) in placed.iter().enumerate() {
-        slam.add(*odom, scan, rec.sensor);
+        if !slam.add(*odom, scan, rec.sensor) {
+            slam.place(*odom, scan, rec.sensor);
+        }
         if k % 50 == 0 {
             progress(k, scan.t);
         }
