@@ -319,14 +319,14 @@ impl Matcher {
             score: self.fine.score(points, guess),
         };
         let mut best_value = value(guess, best.score);
+        let lattice = |p: Pose, fit: f64| {
+            if inside(p) {
+                value(p, fit)
+            } else {
+                f64::MIN
+            }
+        };
         for (_, c) in coarse {
-            let lattice = |p: Pose, fit: f64| {
-                if inside(p) {
-                    value(p, fit)
-                } else {
-                    f64::MIN
-                }
-            };
             for m in grid_search(&self.fine, points, c.pose, around, fine_step, 1, lattice) {
                 if !inside(m.pose) {
                     continue;

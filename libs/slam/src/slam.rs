@@ -14,6 +14,8 @@
 //! scan's points, so the offline builder and the online driver feed it the
 //! same way.
 
+use std::sync::Arc;
+
 use nalgebra::Matrix3;
 use troupe_geom::Pose;
 
@@ -128,9 +130,10 @@ pub struct Slam {
     /// Scans between keyframes matched by [`place`](Self::place): each
     /// one's time, the keyframe before it, and its pose from that one.
     placed: Vec<(f64, usize, Pose)>,
-    /// The map of the last keyframes that `place` matches against, and
-    /// the keyframes and closures there were when it was made.
-    local: Option<((usize, usize), Matcher)>,
+    /// The map of the last keyframes, which the next keyframe and the
+    /// scans before it are matched against, and how many keyframes there
+    /// were when it was made; dropped when the graph moves.
+    local: Option<(usize, Arc<Matcher>)>,
 }
 
 /// Odometry's systematic error, as a wrong wheel diameter (distance) and
@@ -366,8 +369,7 @@ impl Slam {
         let pose = if n == 0 {
             guess
         } else {
-            let local = self.world_points(n.saturating_sub(self.params.local)..n);
-            let m = Matcher::new(&local, self.params.resolution, 1.0);
+            let m = self.local_matcher();
             let mut found = m.search(&points, guess, self.params.window, reach, Some(ODOMETRY));
             if found.score < WIDEN * self.usual_fit() {
                 // Odometry may be far off: look wider, trusting the scan.
@@ -433,6 +435,7 @@ impl Slam {
             if edge.chi2(&self.graph.poses) <= CLOSURE_GATE {
                 self.loops.push(closure);
                 self.last_closure = Some(n);
+                self.local = None;
             } else {
                 self.graph.edges.pop();
                 self.graph.poses = before;
@@ -457,23 +460,29 @@ impl Slam {
         if points.len() < 10 {
             return false;
         }
-        let key = (n, self.loops.len());
-        if self.local.as_ref().is_none_or(|(k, _)| *k != key) {
-            let local = self.world_points(n.saturating_sub(self.params.local)..n);
-            self.local = Some((key, Matcher::new(&local, self.params.resolution, 1.0)));
-        }
-        let usual = self.usual_fit();
-        let guess = self.pose_of(odom);
-        let Some((_, m)) = &self.local else {
-            return false;
-        };
-        let found = m.search(&points, guess, BETWEEN, reach, Some(ODOMETRY));
-        if found.score < WIDEN * usual {
+        let m = self.local_matcher();
+        let found = m.search(&points, self.pose_of(odom), BETWEEN, reach, Some(ODOMETRY));
+        if found.score < WIDEN * self.usual_fit() {
             return false;
         }
         let from = self.graph.poses[n - 1].inverse().compose(&found.pose);
         self.placed.push((scan.t, n - 1, from));
         true
+    }
+
+    /// The matcher of the last [`Params::local`] keyframes' points, made
+    /// once for the scans between two keyframes and the next keyframe.
+    fn local_matcher(&mut self) -> Arc<Matcher> {
+        let n = self.keyframes.len();
+        match &self.local {
+            Some((made, m)) if *made == n => m.clone(),
+            _ => {
+                let points = self.world_points(n.saturating_sub(self.params.local)..n);
+                let m = Arc::new(Matcher::new(&points, self.params.resolution, 1.0));
+                self.local = Some((n, m.clone()));
+                m
+            }
+        }
     }
 
     /// The median fit of the last [`USUAL_OVER`] keyframes.
@@ -572,6 +581,7 @@ impl Slam {
         if self.loops.is_empty() {
             return;
         }
+        self.local = None;
         self.graph.optimize(20);
         // A closure the whole graph no longer agrees with goes, the worst
         // first, and the graph is optimised again without it.
