@@ -269,11 +269,13 @@ fn build_cmd(a: &BuildArgs) -> anyhow::Result<()> {
     )?;
     writeln!(
         out,
-        "  {} scans used ({} keyframes, {} found only in a wider search, {} kept odometry's guess), {} loop closures, trajectory {:.1} m, {:.1} s of log in {:.2} s ({:.0}x)",
+        "  {} scans used ({} keyframes, {} found only in a wider search, {} kept odometry's guess; {} of the {} between them placed by their own match), {} loop closures, trajectory {:.1} m, {:.1} s of log in {:.2} s ({:.0}x)",
         built.scans,
         built.slam.keyframes.len(),
         built.slam.widened,
         built.slam.unmatched,
+        built.slam.placed(),
+        built.scans.saturating_sub(built.slam.keyframes.len()),
         built.slam.closures(),
         built.slam.length(),
         span,
