@@ -773,19 +773,20 @@ mod tests {
         assert_eq!(slam.widened, 0);
     }
 
+    /// Half a second after the last keyframe, 5 cm on from it by odometry:
+    /// the time and the odometric pose.
+    fn five_cm_on(slam: &Slam) -> (f64, Pose) {
+        let last = slam.keyframes.last().unwrap();
+        (last.t + 0.5, last.odom.compose(&Pose::new(0.05, 0.0, 0.0)))
+    }
+
     #[test]
     fn a_scan_between_keyframes_is_placed_where_it_fits_not_where_odometry_says() {
         let (_, last, mut slam) = reversing(Params::default());
         // 5 cm on from the last keyframe by odometry; truly 7 cm, 1 cm
         // aside and turned 0.06 rad (odometry's turns err most).
         let truth = Pose::new(last.x + 0.07, last.y + 0.01, 0.06);
-        let odom = slam
-            .keyframes
-            .last()
-            .unwrap()
-            .odom
-            .compose(&Pose::new(0.05, 0.0, 0.0));
-        let t = slam.keyframes.last().unwrap().t + 0.5;
+        let (t, odom) = five_cm_on(&slam);
         let room = Pose::new(1.0, 3.0, 0.0);
         let miss = |p: Pose| {
             let p = room.compose(&p);
@@ -814,13 +815,7 @@ mod tests {
         // MIT CSAIL's odometry turns 5-17° wrong within 0.4 s.
         let (_, last, mut slam) = reversing(Params::default());
         let truth = Pose::new(last.x + 0.05, last.y, 0.2);
-        let odom = slam
-            .keyframes
-            .last()
-            .unwrap()
-            .odom
-            .compose(&Pose::new(0.05, 0.0, 0.0));
-        let t = slam.keyframes.last().unwrap().t + 0.5;
+        let (t, odom) = five_cm_on(&slam);
         assert!(slam.place(odom, &scan(t, truth), Pose::new(0.0, 0.0, 0.0)));
         let got = Pose::new(1.0, 3.0, 0.0).compose(&slam.corrected(t, odom));
         let (d, a) = (
