@@ -94,14 +94,15 @@ pub struct Keyframe {
     pub fit: f64,
 }
 
-/// A scan between keyframes, matched by [`Slam::place`].
+/// A scan whose pose a match found: a keyframe's, or one between
+/// keyframes that [`Slam::place`] placed.
 #[derive(Debug, Clone, Copy, PartialEq)]
-struct Placed {
+struct Matched {
     /// Seconds.
     t: f64,
-    /// The keyframe before it.
+    /// The keyframe it is, or the one before it.
     keyframe: usize,
-    /// Its pose from that keyframe's.
+    /// Its pose from that keyframe's (none for the keyframe itself).
     from: Pose,
     /// The odometric pose it was taken at.
     odom: Pose,
@@ -140,8 +141,10 @@ pub struct Slam {
     last_closure: Option<usize>,
     /// Odometry's scale on distance and on turns, learnt from matches.
     pub calibration: Calibration,
-    /// Scans between keyframes matched by [`place`](Self::place), by time.
-    placed: Vec<Placed>,
+    /// Every scan a match placed, keyframes and scans between them
+    /// ([`place`](Self::place)), by time: what [`corrected`](Self::corrected)
+    /// carries poses from.
+    matched: Vec<Matched>,
     /// The map of the last keyframes, which the next keyframe and the
     /// scans before it are matched against, and how many keyframes there
     /// were when it was made; dropped when the graph moves.
@@ -238,6 +241,9 @@ const WIDER_BY: f64 = 0.1;
 /// 0.40°, building 2-5% slower than ±0.2.
 const BETWEEN: Window = Window { xy: 0.1, yaw: 0.3 };
 
+/// The fewest points a scan is matched with: fewer tell a match nothing.
+const FEWEST_POINTS: usize = 10;
+
 /// The keyframes whose median fit is the usual one.
 const USUAL_OVER: usize = 20;
 
@@ -326,7 +332,7 @@ impl Slam {
             rejected: 0,
             last_closure: None,
             calibration: Calibration::default(),
-            placed: Vec::new(),
+            matched: Vec::new(),
             local: None,
         }
     }
@@ -348,8 +354,13 @@ impl Slam {
     /// The robot at odometric pose `odom`, carried from keyframe `i`'s
     /// graph pose by odometry's step from it, calibrated.
     fn carried(&self, i: usize, odom: Pose) -> Pose {
-        let step = self.keyframes[i].odom.inverse().compose(&odom);
-        self.graph.poses[i].compose(&self.calibration.apply(step))
+        self.carry(self.graph.poses[i], self.keyframes[i].odom, odom)
+    }
+
+    /// The robot at odometric pose `odom`, carried from `pose`, where
+    /// odometry read `at`, by odometry's step since, calibrated.
+    fn carry(&self, pose: Pose, at: Pose, odom: Pose) -> Pose {
+        pose.compose(&self.calibration.apply(at.inverse().compose(&odom)))
     }
 
     /// Whether odometric pose `odom` is far enough from the last keyframe
@@ -373,7 +384,7 @@ impl Slam {
             return false;
         }
         let (points, reach) = points(scan, sensor, self.params.resolution);
-        if points.len() < 10 {
+        if points.len() < FEWEST_POINTS {
             return false;
         }
         let t = scan.t;
@@ -438,6 +449,12 @@ impl Slam {
             travelled,
             fit,
         });
+        self.matched.push(Matched {
+            t,
+            keyframe: n,
+            from: Pose::default(),
+            odom,
+        });
         let rested = self.last_closure.is_none_or(|c| n >= c + CLOSURE_EVERY);
         if let Some((edge, closure)) = rested.then(|| self.close_loop(n)).flatten() {
             // Kept only if the graph optimised with it agrees: a false
@@ -472,7 +489,7 @@ impl Slam {
             return false;
         }
         let (points, reach) = points(scan, sensor, self.params.resolution);
-        if points.len() < 10 {
+        if points.len() < FEWEST_POINTS {
             return false;
         }
         let m = self.local_matcher();
@@ -481,7 +498,7 @@ impl Slam {
             return false;
         }
         let from = self.graph.poses[n - 1].inverse().compose(&found.pose);
-        self.placed.push(Placed {
+        self.matched.push(Matched {
             t: scan.t,
             keyframe: n - 1,
             from,
@@ -519,7 +536,7 @@ impl Slam {
     /// Scans between keyframes that [`place`](Self::place) placed by
     /// their own match.
     pub fn placed(&self) -> usize {
-        self.placed.len()
+        self.matched.len() - self.keyframes.len()
     }
 
     /// Loop closures kept.
@@ -640,37 +657,18 @@ impl Slam {
     /// keyframe alone left 2.80° of error on the relations; blended
     /// between keyframes, 1.27°; between placed scans too, 0.74°.
     pub fn corrected(&self, t: f64, odom: Pose) -> Pose {
-        let n = self.keyframes.len();
-        if n == 0 {
-            return odom;
-        }
-        // The anchors either side: time, pose in the graph, odometry there.
-        let anchor = |i: usize| {
-            let k = &self.keyframes[i];
-            (k.t, self.graph.poses[i], k.odom)
+        let i = self.matched.partition_point(|m| m.t <= t);
+        // Where the graph has scan `m`, carried on to `odom`.
+        let carry = |m: &Matched| {
+            let pose = self.graph.poses[m.keyframe].compose(&m.from);
+            self.carry(pose, m.odom, odom)
         };
-        let placed = |p: &Placed| (p.t, self.graph.poses[p.keyframe].compose(&p.from), p.odom);
-        let i = self.keyframes.partition_point(|k| k.t <= t);
-        let p = self.placed.partition_point(|q| q.t <= t);
-        let later = |a: (f64, Pose, Pose), b: (f64, Pose, Pose)| if b.0 > a.0 { b } else { a };
-        let sooner = |a: (f64, Pose, Pose), b: (f64, Pose, Pose)| if b.0 < a.0 { b } else { a };
-        let before = match (
-            i.checked_sub(1).map(anchor),
-            p.checked_sub(1).map(|p| placed(&self.placed[p])),
+        match (
+            i.checked_sub(1).map(|i| &self.matched[i]),
+            self.matched.get(i),
         ) {
-            (Some(k), Some(q)) => Some(later(k, q)),
-            (k, q) => k.or(q),
-        };
-        let after = match ((i < n).then(|| anchor(i)), self.placed.get(p).map(placed)) {
-            (Some(k), Some(q)) => Some(sooner(k, q)),
-            (k, q) => k.or(q),
-        };
-        let carry = |(_, pose, at): (f64, Pose, Pose)| {
-            pose.compose(&self.calibration.apply(at.inverse().compose(&odom)))
-        };
-        match (before, after) {
             (Some(a), Some(b)) => {
-                let s = ((t - a.0) / (b.0 - a.0)).clamp(0.0, 1.0);
+                let s = ((t - a.t) / (b.t - a.t)).clamp(0.0, 1.0);
                 let (a, b) = (carry(a), carry(b));
                 Pose::new(
                     a.x + s * (b.x - a.x),
@@ -678,7 +676,7 @@ impl Slam {
                     a.yaw + s * troupe_geom::normalize(b.yaw - a.yaw),
                 )
             }
-            (Some(a), None) | (None, Some(a)) => carry(a),
+            (Some(m), None) | (None, Some(m)) => carry(m),
             (None, None) => odom,
         }
     }
