@@ -114,6 +114,7 @@ pub fn run(a: NodeArgs, z: &ZenohArgs, catalog: &Catalog) -> anyhow::Result<()> 
         sim_time: a.sim_time,
         requires_timeout: Duration::from_secs_f64(a.requires_timeout),
         ros2: a.ros2.config(None)?,
+        spin: z.spin(),
     };
     catalog.run(&a.driver, section, z, &cfg)
 }

@@ -59,6 +59,47 @@ fn ranger_data_flows_through_rangertolaser_to_a_laser_client() {
 }
 
 #[test]
+fn nodes_that_poll_before_they_sleep_pass_data_and_replies_and_stop() {
+    let net = TestNet::new("spin");
+    let cfg = NodeConfig {
+        spin: Duration::from_millis(2),
+        ..Default::default()
+    };
+    let spawn_polling = |section: &str| {
+        let section = Section::from_json(section).expect("section");
+        spawn::<troupe_dummy::Dummy>(net.peer(), section, &cfg, Stop::default())
+    };
+    let d = spawn_polling(r#"{"name":"dummy","provides":["ranger:0"],"options":{"rate":50}}"#)
+        .expect("dummy starts");
+    let section = r#"{"name":"rangertolaser","requires":["ranger:0"],"provides":["laser:0"]}"#;
+    let r = spawn::<troupe_rangertolaser::RangerToLaser>(
+        net.peer(),
+        Section::from_json(section).unwrap(),
+        &cfg,
+        Stop::default(),
+    )
+    .expect("converter starts");
+    net.wait_live(&["6665:ranger:0", "6665:laser:0"]);
+    let client = Client::with_session(net.client(), 6665);
+    let lp = LaserProxy::new(&client, 0).unwrap();
+    read_until(
+        &client,
+        "a laser scan through the polling converter",
+        || lp.count() == 361,
+    );
+    // The converter asks the dummy, which refuses: the refusal comes back
+    // through the converter's polling inbox to the client.
+    match lp.request_geom() {
+        Err(ClientError::Nack { reason, .. }) => {
+            assert!(reason.contains("dummy driver refuses"), "{reason}")
+        }
+        other => panic!("expected a NACK, got {other:?}"),
+    }
+    r.stop().unwrap();
+    d.stop().unwrap();
+}
+
+#[test]
 fn liveliness_lists_every_device_with_its_driver() {
     let net = TestNet::new("list");
     let (_d, _r) = dummy_and_converter(&net);

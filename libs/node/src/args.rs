@@ -1,6 +1,7 @@
 //! The Zenoh flags every `troupe` process shares, and how they become a session.
 
 use std::path::PathBuf;
+use std::time::Duration;
 
 use clap::{Args, ValueEnum};
 use zenoh::{Config, Session, Wait};
@@ -115,6 +116,15 @@ pub struct ZenohArgs {
     /// frame in a third of the time (ARCHITECTURE.md, "Big samples").
     #[arg(long, global = true)]
     pub no_shm: bool,
+
+    /// Microseconds a node's thread polls for its next sample, reply or
+    /// command before it sleeps (default 0: it sleeps at once). A thread
+    /// that sleeps takes tens of microseconds to wake, on a 2-core host
+    /// most of a round trip; one that polls answers a reply that comes
+    /// within this time at once, at the price of its core, busy that long
+    /// after each message (ARCHITECTURE.md, "What a hop costs").
+    #[arg(long, value_name = "MICROSECONDS", global = true, default_value_t = 0)]
+    pub spin: u64,
 }
 
 /// How often `--reconnect` retries: Zenoh's `connect/retry`, in milliseconds.
@@ -372,7 +382,15 @@ impl ZenohArgs {
         if self.no_shm {
             v.push("--no-shm".to_owned());
         }
+        if self.spin > 0 {
+            v.extend(["--spin".to_owned(), self.spin.to_string()]);
+        }
         v
+    }
+
+    /// How long a node's thread polls before it sleeps (`--spin`).
+    pub fn spin(&self) -> Duration {
+        Duration::from_micros(self.spin)
     }
 }
 
@@ -938,6 +956,22 @@ mod tests {
             "false"
         );
         assert!(off.to_child_args().contains(&"--no-shm".to_owned()));
+    }
+
+    #[test]
+    fn spin_reaches_the_children_and_only_when_asked() {
+        assert_eq!(ZenohArgs::default().spin(), Duration::ZERO);
+        assert!(!ZenohArgs::default()
+            .to_child_args()
+            .contains(&"--spin".to_owned()));
+        let a = ZenohArgs {
+            spin: 250,
+            ..Default::default()
+        };
+        assert_eq!(a.spin(), Duration::from_micros(250));
+        let args = a.to_child_args();
+        let at = args.iter().position(|s| s == "--spin").expect("--spin");
+        assert_eq!(args[at + 1], "250");
     }
 
     #[test]

@@ -11,8 +11,9 @@
 //! own thread. Hooks so stay one at a time and in arrival order.
 
 use std::collections::VecDeque;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Condvar, Mutex, MutexGuard};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use crate::event::{Event, Sample};
 
@@ -43,6 +44,11 @@ pub(crate) enum Popped {
 pub(crate) struct Inbox {
     state: Mutex<State>,
     ready: Condvar,
+    /// How long [`Inbox::pop`] polls for an event before it sleeps (see
+    /// `ZenohArgs::spin`); zero: it sleeps at once.
+    spin: Duration,
+    /// Bumped by every change a polling [`Inbox::pop`] must look at.
+    changes: AtomicU64,
 }
 
 impl Inbox {
@@ -51,6 +57,34 @@ impl Inbox {
         let inbox = Inbox::default();
         inbox.lock().busy = true;
         inbox
+    }
+
+    /// This inbox, polling `spin` for each event before it sleeps.
+    pub(crate) fn spinning(self, spin: Duration) -> Self {
+        Inbox { spin, ..self }
+    }
+
+    /// Tells a polling [`Inbox::pop`] to look again; with the state locked.
+    fn changed(&self) {
+        self.changes.fetch_add(1, Ordering::Release);
+    }
+
+    /// Polls until something changes, at most `spin` and not past
+    /// `deadline`: a thread that sleeps takes tens of microseconds to wake,
+    /// most of a round trip on a host (ARCHITECTURE.md, "What a hop costs").
+    fn poll(&self, seen: u64, deadline: Option<Instant>) {
+        let t0 = Instant::now();
+        let until = deadline.map_or(t0 + self.spin, |d| d.min(t0 + self.spin));
+        for k in 0u32.. {
+            if self.changes.load(Ordering::Acquire) != seen {
+                return;
+            }
+            std::hint::spin_loop();
+            // The clock now and then: reading it costs more than a poll.
+            if k % 64 == 63 && Instant::now() >= until {
+                return;
+            }
+        }
     }
 
     fn lock(&self) -> MutexGuard<'_, State> {
@@ -80,6 +114,7 @@ impl Inbox {
             }
             None => st.events.push_back(event),
         }
+        self.changed();
         let waiting = st.waiting;
         drop(st);
         if waiting {
@@ -89,6 +124,7 @@ impl Inbox {
 
     pub(crate) fn shutdown(&self) {
         self.lock().shutdown = true;
+        self.changed();
         self.ready.notify_all();
     }
 
@@ -100,8 +136,12 @@ impl Inbox {
     /// The next event, waiting until `deadline` (forever if `None`), once
     /// no hook is running; the caller is then the one running hooks until
     /// it calls [`Inbox::idle`]. `Shutdown` comes once no hook is running.
+    ///
+    /// With a spin (see [`Inbox::spinning`]), it first polls that long for
+    /// an event, once a call, and only then sleeps.
     pub(crate) fn pop(&self, deadline: Option<Instant>) -> Popped {
         let mut st = self.lock();
+        let mut spun = self.spin.is_zero();
         loop {
             if !st.busy {
                 if st.shutdown {
@@ -120,6 +160,14 @@ impl Inbox {
                     st.busy = true;
                     return p;
                 }
+            }
+            if !spun {
+                spun = true;
+                let seen = self.changes.load(Ordering::Acquire);
+                drop(st);
+                self.poll(seen, deadline);
+                st = self.lock();
+                continue;
             }
             st.waiting = true;
             st = match deadline {
@@ -152,6 +200,7 @@ impl Inbox {
         let mut st = self.lock();
         st.busy = false;
         st.recheck |= recheck;
+        self.changed();
         let waiting = st.waiting;
         drop(st);
         // The driver's thread may be waiting for the hook to end.
@@ -215,6 +264,45 @@ mod tests {
         inbox.idle(false);
         inbox.shutdown();
         assert!(!inbox.claim(), "a closed inbox runs no more hooks");
+    }
+
+    /// A spin far longer than any test: a poll that ended only when it ran
+    /// out would make these take minutes.
+    const LONG: Duration = Duration::from_secs(600);
+
+    #[test]
+    fn a_polling_pop_ends_with_what_comes_while_it_polls() {
+        let inbox = std::sync::Arc::new(Inbox::default().spinning(LONG));
+        for want in [1, 2] {
+            let pusher = {
+                let inbox = inbox.clone();
+                std::thread::spawn(move || inbox.push(scan(want)))
+            };
+            let t0 = Instant::now();
+            let Popped::Event(Event::Data(s)) = inbox.pop(None) else {
+                panic!("expected the scan")
+            };
+            assert_eq!(s.decode::<laser::Scan>().unwrap().msg.id, want);
+            assert!(t0.elapsed() < LONG / 10, "the poll ran out instead");
+            inbox.idle(false);
+            pusher.join().unwrap();
+        }
+        let stopper = {
+            let inbox = inbox.clone();
+            std::thread::spawn(move || inbox.shutdown())
+        };
+        assert!(matches!(inbox.pop(None), Popped::Shutdown));
+        stopper.join().unwrap();
+    }
+
+    #[test]
+    fn a_polling_pop_keeps_its_deadline() {
+        let inbox = Inbox::default().spinning(LONG);
+        let t0 = Instant::now();
+        let deadline = t0 + Duration::from_millis(20);
+        assert!(matches!(inbox.pop(Some(deadline)), Popped::Timeout));
+        assert!(Instant::now() >= deadline);
+        assert!(t0.elapsed() < LONG / 10, "polled past the deadline");
     }
 
     #[test]

@@ -47,6 +47,9 @@ pub struct NodeConfig {
     pub requires_timeout: Duration,
     /// Also show the devices to ROS 2 nodes (rmw_zenoh), as this says.
     pub ros2: Option<Ros2>,
+    /// How long the driver's thread polls for its next event before it
+    /// sleeps (`--spin`).
+    pub spin: Duration,
 }
 
 impl Default for NodeConfig {
@@ -55,6 +58,7 @@ impl Default for NodeConfig {
             sim_time: false,
             requires_timeout: Duration::from_secs(30),
             ros2: None,
+            spin: Duration::ZERO,
         }
     }
 }
@@ -224,7 +228,7 @@ fn start<D: Driver>(
         ));
     }
     // Busy with `setup` until the loop first waits.
-    let inbox = Arc::new(Inbox::busy());
+    let inbox = Arc::new(Inbox::busy().spinning(cfg.spin));
     stop.attach(inbox.clone());
 
     let ticks = Arc::new(SimTicks::default());

@@ -109,6 +109,37 @@ pub struct LatencyArgs {
     /// lowlatency transport would give Troupe's sessions.
     #[arg(long = "zenoh-set", value_name = "KEY=VALUE", value_parser = key_value)]
     pub zenoh_set: Vec<(String, String)>,
+    /// How long the near side's reader on Troupe's path polls for each
+    /// echo before it sleeps, as a node given `--spin` polls its inbox
+    /// (set by the global `--spin`).
+    #[arg(skip)]
+    pub spin: Duration,
+}
+
+/// Takes the next item: polled with `poll` (`Ok(None)`: none yet) for up
+/// to `spin`, then waited for with `wait`, as a node's thread waits with
+/// `--spin`; nothing within 5 s is an error.
+fn next<T, E: std::fmt::Display>(
+    spin: Duration,
+    mut poll: impl FnMut() -> Result<Option<T>, E>,
+    wait: impl FnOnce(Duration) -> Result<Option<T>, E>,
+) -> anyhow::Result<T> {
+    const WITHIN: Duration = Duration::from_secs(5);
+    let t0 = Instant::now();
+    if !spin.is_zero() {
+        for k in 0u32.. {
+            if let Some(t) = poll().map_err(|e| anyhow::anyhow!("{e}"))? {
+                return Ok(t);
+            }
+            std::hint::spin_loop();
+            if k % 64 == 63 && t0.elapsed() >= spin {
+                break;
+            }
+        }
+    }
+    wait(WITHIN.saturating_sub(t0.elapsed()))
+        .map_err(|e| anyhow::anyhow!("{e}"))?
+        .context("nothing within 5 s")
 }
 
 /// Parses `--zenoh-set`'s KEY=VALUE.
@@ -448,10 +479,8 @@ fn latency(
             .wait()
             .map_err(|e| anyhow::anyhow!("{e}"))?;
         loop {
-            let s = replies
-                .recv_timeout(Duration::from_secs(5))
-                .map_err(|e| anyhow::anyhow!("{e}"))?
-                .context("no echo within 5 s")?;
+            let s = next(a.spin, || replies.try_recv(), |t| replies.recv_timeout(t))
+                .context("no echo")?;
             let (stamp, _) = Msg::decode(&s.payload().to_bytes())?;
             if stamp == i as f64 {
                 break;
@@ -473,7 +502,7 @@ fn latency(
             .timeout(Duration::from_secs(5))
             .wait()
             .map_err(|e| anyhow::anyhow!("{e}"))?;
-        let r = rx.recv().map_err(|e| anyhow::anyhow!("no reply: {e}"))?;
+        let r = next(a.spin, || rx.try_recv(), |t| rx.recv_timeout(t)).context("no reply")?;
         let s = r
             .into_result()
             .map_err(|e| anyhow::anyhow!("refused: {e:?}"))?;
@@ -525,6 +554,14 @@ fn latency(
             .map(|(k, v)| format!("{k}={v}"))
             .collect();
         format!(", with {}", kv.join(", "))
+    };
+    let settings = if a.spin.is_zero() {
+        settings
+    } else {
+        format!(
+            "{settings}; the near reader polling {} µs before it sleeps (--spin)",
+            a.spin.as_micros()
+        )
     };
     writeln!(out, "troupe bench latency: {size}-byte {schema} payload, {} samples (+{} warm-up), two processes, Zenoh over {over}{settings}", a.samples, a.warmup)?;
     let row = |out: &mut std::io::StdoutLock, name: &str, v: &[Duration], half: bool| {

@@ -124,7 +124,10 @@ pub enum BenchCmd {
 /// Runs a `troupe bench` subcommand.
 pub fn run(cmd: BenchCmd, z: &ZenohArgs) -> anyhow::Result<()> {
     match cmd {
-        BenchCmd::Latency(a) => latency::run(&a),
+        BenchCmd::Latency(a) => latency::run(&latency::LatencyArgs {
+            spin: z.spin(),
+            ..a
+        }),
         BenchCmd::Camera(a) => camera::run(&a),
         BenchCmd::Pong {
             prefix,
