@@ -122,8 +122,10 @@ pub struct ZenohArgs {
     /// that sleeps takes tens of microseconds to wake, on a 2-core host
     /// most of a round trip; one that polls answers a reply that comes
     /// within this time at once, at the price of its core, busy that long
-    /// after each message (ARCHITECTURE.md, "What a hop costs").
-    #[arg(long, value_name = "MICROSECONDS", global = true, default_value_t = 0)]
+    /// after each message (ARCHITECTURE.md, "What a hop costs"). `troupe
+    /// bench latency`'s reader polls as long. At most 1,000,000 (1 s).
+    #[arg(long, value_name = "MICROSECONDS", global = true, default_value_t = 0,
+          value_parser = clap::value_parser!(u64).range(0..=1_000_000))]
     pub spin: u64,
 }
 
