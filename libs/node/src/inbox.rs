@@ -64,7 +64,8 @@ impl Inbox {
         Inbox { spin, ..self }
     }
 
-    /// Tells a polling [`Inbox::pop`] to look again; with the state locked.
+    /// Tells a polling [`Inbox::pop`] to look again: called after each
+    /// change to the state.
     fn changed(&self) {
         self.changes.fetch_add(1, Ordering::Release);
     }
@@ -75,13 +76,12 @@ impl Inbox {
     fn poll(&self, seen: u64, deadline: Option<Instant>) {
         let t0 = Instant::now();
         let until = deadline.map_or(t0 + self.spin, |d| d.min(t0 + self.spin));
-        for k in 0u32.. {
-            if self.changes.load(Ordering::Acquire) != seen {
-                return;
-            }
+        let mut k = 0u32;
+        while self.changes.load(Ordering::Acquire) == seen {
             std::hint::spin_loop();
             // The clock now and then: reading it costs more than a poll.
-            if k % 64 == 63 && Instant::now() >= until {
+            k = k.wrapping_add(1);
+            if k % 64 == 0 && Instant::now() >= until {
                 return;
             }
         }
