@@ -6,7 +6,7 @@ use serde::de::DeserializeOwned;
 
 use crate::ctx::Ctx;
 use crate::error::Result;
-use crate::event::{Event, Reply, Request};
+use crate::event::{Event, Request};
 use crate::section::Section;
 
 /// A Player driver, run as one node process by the runtime.
@@ -71,17 +71,6 @@ pub trait Driver: Sized + Send + 'static {
     fn quick(request: &Request) -> bool {
         let _ = request;
         true
-    }
-
-    /// True when the hook of `reply` (the answer to a request this driver
-    /// made) returns quickly, so that the runtime may run it at once on the
-    /// thread that received it, as [`Driver::quick`] lets requests run: a
-    /// driver that forwards a request and answers when the reply comes
-    /// then answers with no thread woken. False by default: a reply may
-    /// bring a map to work on.
-    fn quick_reply(reply: &Reply) -> bool {
-        let _ = reply;
-        false
     }
 
     /// Stops the driver: stop the motors, close the device.

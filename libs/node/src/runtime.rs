@@ -407,40 +407,32 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 /// instead of waking the driver's thread: a thread wake less per round trip.
 /// Hooks stay one at a time and in arrival order ([`Inbox::claim`]).
 #[derive(Default)]
-struct Inline(std::sync::OnceLock<Box<dyn Fn(Event) -> Option<Event> + Send + Sync>>);
+struct Inline(std::sync::OnceLock<Box<dyn Fn(Request) -> Option<Request> + Send + Sync>>);
 
 impl Inline {
-    /// Runs the hook of `event` (a request, or a reply to one of the
-    /// driver's) here if the driver is free and the hook quick, else
-    /// queues it.
-    fn deliver(&self, inbox: &Inbox, event: Event) {
-        let event = match self.0.get() {
-            Some(run) => match run(event) {
-                Some(e) => e,
+    /// Runs `request`'s hook here if the driver is free, else queues it.
+    fn deliver(&self, inbox: &Inbox, request: Request) {
+        let request = match self.0.get() {
+            Some(run) => match run(request) {
+                Some(r) => r,
                 None => return,
             },
-            None => event,
+            None => request,
         };
-        inbox.push(event);
+        inbox.push(Event::Request(request));
     }
 
-    /// Lets other threads run `core`'s quick request and reply hooks while
-    /// the loop is idle.
+    /// Lets other threads run `core`'s request hooks while the loop is idle.
     fn enable<D: Driver>(&self, core: &Arc<Mutex<Core<D>>>, inbox: &Arc<Inbox>) {
         let (core, inbox) = (Arc::downgrade(core), inbox.clone());
-        let run = move |event: Event| {
-            let quick = match &event {
-                Event::Request(r) => D::quick(r),
-                Event::Reply(r) => D::quick_reply(r),
-                _ => false,
-            };
-            if !quick || !inbox.claim() {
-                return Some(event);
+        let run = move |request: Request| {
+            if !D::quick(&request) || !inbox.claim() {
+                return Some(request);
             }
             // Claimed: the loop waits for `idle` before it drops the core.
             let Some(core) = core.upgrade() else {
                 inbox.idle(false);
-                return Some(event);
+                return Some(request);
             };
             let mut c = lock(&core);
             let before = c.watched();
@@ -448,7 +440,7 @@ impl Inline {
                 driver, ctx, stats, ..
             } = &mut *c;
             stats.inline += 1;
-            let result = dispatch(driver, ctx, event, stats);
+            let result = dispatch(driver, ctx, Event::Request(request), stats);
             let recheck = result.is_err() || c.watched() != before;
             if let Err(e) = result {
                 c.fatal = Some(e);
@@ -572,7 +564,7 @@ fn run_loop<D: Driver>(
 #[derive(Default)]
 pub(crate) struct Stats {
     pub(crate) events: u64,
-    /// Requests and replies whose hook ran on the thread that received them.
+    /// Requests whose hook ran on the thread that received them.
     pub(crate) inline: u64,
     pub(crate) malformed: u64,
 }
@@ -818,7 +810,7 @@ impl ZenohBus {
                     name,
                     responder,
                 };
-                inline.deliver(&inbox, Event::Request(request));
+                inline.deliver(&inbox, request);
             })
             .wait()
             .map_err(z(|| format!("declaring request queryable of {d}")))?;
@@ -964,7 +956,6 @@ impl Bus for ZenohBus {
             id,
             device: *dev,
             inbox: self.inbox.clone(),
-            inline: self.inline.clone(),
             started: Instant::now(),
             timeout,
             done: AtomicBool::new(false),
@@ -992,8 +983,6 @@ struct ReplyOnce {
     id: RequestId,
     device: Device,
     inbox: Arc<Inbox>,
-    /// Runs a quick reply's hook on the thread that received it.
-    inline: Arc<Inline>,
     started: Instant,
     timeout: Duration,
     done: AtomicBool,
@@ -1002,11 +991,10 @@ struct ReplyOnce {
 impl ReplyOnce {
     fn deliver(&self, result: std::result::Result<Sample, RequestError>) {
         if !self.done.swap(true, Ordering::AcqRel) {
-            let reply = Event::Reply(Reply {
+            self.inbox.push(Event::Reply(Reply {
                 id: self.id,
                 result,
-            });
-            self.inline.deliver(&self.inbox, reply);
+            }));
         }
     }
 }

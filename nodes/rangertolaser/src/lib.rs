@@ -28,7 +28,7 @@
 use std::collections::HashMap;
 
 use troupe_msgs::{common, laser, ranger, Device, Interface};
-use troupe_node::{Ctx, Driver, Event, NoOptions, Reply, RequestId, Responder, Result, Section};
+use troupe_node::{Ctx, Driver, Event, NoOptions, RequestId, Responder, Result, Section};
 
 /// The rangertolaser driver.
 pub struct RangerToLaser {
@@ -93,11 +93,6 @@ impl Driver for RangerToLaser {
             ranges: Vec::new(),
             pending: HashMap::new(),
         })
-    }
-
-    /// A ranger's reply is turned into the laser's answer at once.
-    fn quick_reply(_: &Reply) -> bool {
-        true
     }
 
     fn setup(&mut self, ctx: &mut Ctx) -> Result<()> {
