@@ -40,6 +40,22 @@ pub(crate) enum Popped {
     Shutdown,
 }
 
+/// Calls `done` on a spinning core until it says true (then true) or
+/// `until` has passed (then false): how a node given `--spin` waits
+/// before it sleeps.
+pub fn spin_until(until: Instant, mut done: impl FnMut() -> bool) -> bool {
+    let mut k = 0u32;
+    while !done() {
+        std::hint::spin_loop();
+        // The clock now and then: reading it costs more than a poll.
+        k = k.wrapping_add(1);
+        if k % 64 == 0 && Instant::now() >= until {
+            return false;
+        }
+    }
+    true
+}
+
 #[derive(Default)]
 pub(crate) struct Inbox {
     state: Mutex<State>,
@@ -74,17 +90,9 @@ impl Inbox {
     /// `deadline`: a thread that sleeps takes tens of microseconds to wake,
     /// most of a round trip on a host (ARCHITECTURE.md, "What a hop costs").
     fn poll(&self, seen: u64, deadline: Option<Instant>) {
-        let t0 = Instant::now();
-        let until = deadline.map_or(t0 + self.spin, |d| d.min(t0 + self.spin));
-        let mut k = 0u32;
-        while self.changes.load(Ordering::Acquire) == seen {
-            std::hint::spin_loop();
-            // The clock now and then: reading it costs more than a poll.
-            k = k.wrapping_add(1);
-            if k % 64 == 0 && Instant::now() >= until {
-                return;
-            }
-        }
+        let until = Instant::now() + self.spin;
+        let until = deadline.map_or(until, |d| d.min(until));
+        spin_until(until, || self.changes.load(Ordering::Acquire) != seen);
     }
 
     fn lock(&self) -> MutexGuard<'_, State> {

@@ -38,6 +38,7 @@ pub use ctx::{Ctx, Waker, REQUEST_TIMEOUT};
 pub use driver::{Driver, Unit};
 pub use error::{BoxError, NodeError, RequestError, Result};
 pub use event::{Event, Reply, Request, RequestId, Responder, Sample};
+pub use inbox::spin_until;
 pub use mapfetch::MapFetch;
 pub use net::{ask, wait_live};
 pub use ros2::{Ros2, Ros2Args, Ros2Settings, DEFAULT_NAMESPACE as ROS2_NAMESPACE};

@@ -126,15 +126,14 @@ fn next<T, E: std::fmt::Display>(
 ) -> anyhow::Result<T> {
     const WITHIN: Duration = Duration::from_secs(5);
     let t0 = Instant::now();
-    let mut k = 0u32;
-    while !spin.is_zero() {
-        if let Some(t) = poll().map_err(|e| anyhow::anyhow!("{e}"))? {
+    if !spin.is_zero() {
+        let mut got = Ok(None);
+        troupe_node::spin_until(t0 + spin, || {
+            got = poll();
+            !matches!(got, Ok(None))
+        });
+        if let Some(t) = got.map_err(|e| anyhow::anyhow!("{e}"))? {
             return Ok(t);
-        }
-        std::hint::spin_loop();
-        k = k.wrapping_add(1);
-        if k % 64 == 0 && t0.elapsed() >= spin {
-            break;
         }
     }
     wait(WITHIN.saturating_sub(t0.elapsed()))
