@@ -9,10 +9,11 @@
 //!   server update, so a round carried them all. Here devices publish from
 //!   their own processes, so before its `SYNCH` a round waits for a step
 //!   newer than the last round's (data of the last step that came late
-//!   goes out with it), then, at most [`ROUND_WAIT`], for all
-//!   data due at the newest stamp by the pace of its own stamps (a ranger's
-//!   ranges and intensities each). Data that misses the wait is not waited
-//!   for again until it comes. A device just opened is waited for longer,
+//!   goes out with it), then for all data due at the newest stamp by the
+//!   pace of its own stamps (a ranger's ranges and intensities each): at
+//!   most [`ROUND_WAIT`] once a newer step has come, at most [`QUIET_WAIT`]
+//!   while none has. Data that misses the wait is not waited for again
+//!   until it comes. A device just opened is waited for longer,
 //!   up to [`OPEN_WAIT`] from its opening, until its live samples come.
 //! - Replace rules (first match wins, -1 = any): ACCEPT, REPLACE the older
 //!   message of the same device/type/subtype, or IGNORE. Default: accept.
@@ -40,8 +41,18 @@ pub const DEFAULT_MAXLEN: usize = 1024;
 /// samples of one simulation step reach the bridge within a few
 /// milliseconds of each other (Stage's, then those drivers derive from
 /// them, such as rangertolaser's laser); the margin is for a loaded
-/// machine. A device that stops publishing costs one round this wait.
+/// machine. A device that stops publishing costs one round this wait
+/// after the next step comes.
 pub const ROUND_WAIT: Duration = Duration::from_millis(100);
+
+/// The longest a PULL round waits for a device's sample that is due while
+/// no newer step comes from any device. Samples of one step put back to
+/// back by one process reached the bridge more than [`ROUND_WAIT`] apart
+/// in a loaded CI run (the sender's thread was off its core), and the
+/// round went without the second; until a newer step comes, the step may
+/// still be arriving. A device that stops publishing when all others do
+/// too costs one round this wait.
+pub const QUIET_WAIT: Duration = Duration::from_secs(1);
 
 /// The longest a PULL round waits for a device the client has just opened
 /// until its live samples start, counted from the opening. The bridge
@@ -201,8 +212,10 @@ pub struct Queue {
     /// This round delivered data of a new step (see [`Queue::new_step`]):
     /// it may end.
     fresh: bool,
-    /// When this round began waiting for due data (it had a new step).
+    /// When this round began waiting for due data (it had a new step),
+    /// and the newest stamp then.
     waiting_since: Option<Instant>,
+    waiting_at: Option<f64>,
     /// Until when a round waits for a new step or for due data.
     waiting: Option<Instant>,
     dropped: u32,
@@ -230,6 +243,7 @@ impl Queue {
             round_stamp: f64::NEG_INFINITY,
             fresh: false,
             waiting_since: None,
+            waiting_at: None,
             waiting: None,
             dropped: 0,
             dropped_total: 0,
@@ -444,16 +458,19 @@ impl Queue {
 
     /// Whether a round must still wait at `now`: for a new step, as long as
     /// it takes, while it has delivered no data or only late parts of the
-    /// last round's (as a Player round with no data stays open); then, at
-    /// most [`ROUND_WAIT`] (for a device just opened, up to [`OPEN_WAIT`]
-    /// after its opening), for all data due at the newest stamp. Data still
-    /// due when that runs out is marked lagging.
+    /// last round's (as a Player round with no data stays open); then for
+    /// all data due at the newest stamp: at most [`QUIET_WAIT`] while no
+    /// newer step comes, at most [`ROUND_WAIT`] once one has (for a device
+    /// just opened, up to [`OPEN_WAIT`] after its opening). Data still due
+    /// when that runs out is marked lagging.
     fn must_wait(&mut self, now: Instant) -> bool {
         if !self.fresh {
             return true;
         }
         let t = self.paces.iter().map(|p| p.newest).fold(f64::MIN, f64::max);
-        let round = *self.waiting_since.get_or_insert(now) + ROUND_WAIT;
+        let since = *self.waiting_since.get_or_insert(now);
+        let newer = t > *self.waiting_at.get_or_insert(t);
+        let round = since + if newer { ROUND_WAIT } else { QUIET_WAIT };
         let until = self
             .paces
             .iter()
@@ -489,6 +506,7 @@ impl Queue {
         self.data_requested = true;
         self.fresh = false;
         self.waiting_since = None;
+        self.waiting_at = None;
         self.waiting = None;
     }
 
@@ -524,6 +542,7 @@ impl Queue {
         if self.pull && self.data_requested && !self.must_wait(now) {
             self.data_requested = false;
             self.waiting_since = None;
+            self.waiting_at = None;
             self.waiting = None;
             let h = Header {
                 interf: u32::from(PLAYER_CODE),
@@ -570,7 +589,12 @@ mod tests {
     }
 
     fn drain(q: &mut Queue) -> Vec<(u8, u32)> {
-        std::iter::from_fn(|| q.pop(Instant::now()))
+        drain_at(q, Instant::now())
+    }
+
+    /// What may go at `now`.
+    fn drain_at(q: &mut Queue, now: Instant) -> Vec<(u8, u32)> {
+        std::iter::from_fn(|| q.pop(now))
             .map(|m| (m.kind, m.interf))
             .collect()
     }
@@ -758,17 +782,40 @@ mod tests {
         q.push(data(4, 0.2));
         assert_eq!(drain(&mut q), [(A, 1), (D, 4), (S, 1)]);
         // Closed, it is forgotten; opened again, it is expected again,
-        // and long after its opening a round waits a round's wait for it.
+        // and long after its opening a round waits for it while no newer
+        // step comes, then a round's wait.
         q.forget(6, 0);
         let long_ago = Instant::now().checked_sub(2 * OPEN_WAIT).expect("uptime");
         q.expect(6, 0, long_ago);
         q.request_data(msg(A, 1, 4));
-        q.push(data(4, 0.3));
         let start = Instant::now();
-        assert_eq!(drain(&mut q), [(A, 1), (D, 4)]);
+        q.push(data(4, 0.3));
+        assert_eq!(drain_at(&mut q, start), [(A, 1), (D, 4)]);
         let until = q.deadline().expect("waiting for the laser");
-        assert!(until <= Instant::now() + ROUND_WAIT, "{:?}", until - start);
+        assert_eq!(until, start + QUIET_WAIT);
+        // A newer step: the laser is late, and gets a round's wait.
+        q.push(data(4, 0.4));
+        assert_eq!(drain_at(&mut q, start), [(D, 4)]);
+        let until = q.deadline().expect("waiting for the laser");
+        assert_eq!(until, start + ROUND_WAIT);
         assert_eq!(q.pop(until).map(|m| m.kind), Some(S));
+    }
+
+    #[test]
+    fn a_round_waits_longer_for_a_late_device_while_no_newer_step_comes() {
+        // Position and laser publish each step; this step's laser is late.
+        let mut q = paced_pull();
+        q.request_data(msg(A, 1, 4));
+        let start = Instant::now();
+        q.push(data(4, 0.2));
+        assert_eq!(drain_at(&mut q, start), [(A, 1), (D, 4)]);
+        // Past a round's wait, with no newer step, the step may still be
+        // on its way: the round still waits.
+        assert!(q.pop(start + 2 * ROUND_WAIT).is_none());
+        assert_eq!(q.deadline(), Some(start + QUIET_WAIT));
+        // The laser comes: the round carries it and ends.
+        q.push(data(6, 0.2));
+        assert_eq!(drain_at(&mut q, start + 2 * ROUND_WAIT), [(D, 6), (S, 1)]);
     }
 
     #[test]

@@ -70,8 +70,6 @@ pub struct Setup {
 pub enum Driver {
     /// Its own controller, as the world file says (`ctrl "explore"`).
     Own,
-    /// This Stage controller instead (`wander`).
-    Ctrl(String),
     /// [`follow_left`]: round a building, the wall on its left.
     FollowLeft,
 }
@@ -115,7 +113,6 @@ pub fn simulate(mut world: World, setup: &Setup) -> anyhow::Result<Run> {
     pos.odom_error = Some(setup.odom_error);
     match &setup.driver {
         Driver::Own => {}
-        Driver::Ctrl(c) => world.models[robot].ctrl = vec![c.clone()],
         Driver::FollowLeft => world.models[robot].ctrl.clear(),
     }
     let laser = world.models[robot]
