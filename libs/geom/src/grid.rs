@@ -28,6 +28,10 @@ const BLOCK: usize = 4;
 /// small enough that a change to the grid is redrawn in a small window.
 const CLEAR: u8 = 16;
 
+/// The fewest blocks a grid has for [`Grid::refresh_clearance_on`] to draw
+/// its clearance on several threads: fewer are drawn in under 2 ms on one.
+const BANDED: usize = 1 << 20;
+
 /// The least Chebyshev distance in cells from a cell of a block `d` blocks
 /// from the nearest occupied one to an occupied cell.
 #[inline(always)]
@@ -416,9 +420,57 @@ impl Grid {
     /// Brings [`Grid::clearance`] up to date with the cells changed since
     /// the last call: a window of blocks around them is redrawn.
     pub fn refresh_clearance(&mut self) {
+        self.refresh_clearance_on(1);
+    }
+
+    /// [`Grid::refresh_clearance`] on up to `threads` threads: a whole
+    /// grid of at least [`BANDED`] blocks is drawn in bands of rows side by
+    /// side, then the rows around each cut again (a block's clearance
+    /// depends on the blocks within [`CLEAR`] of it alone). Stage's
+    /// large.world (109 million blocks) is drawn in 0.16 s on one thread,
+    /// 0.09 s on two.
+    pub fn refresh_clearance_on(&mut self, threads: usize) {
+        self.refresh(threads, BANDED);
+    }
+
+    /// [`Grid::refresh_clearance_on`], in bands on a grid of at least
+    /// `banded` blocks.
+    fn refresh(&mut self, threads: usize, banded: usize) {
         let Some([i0, j0, i1, j1]) = self.stale.take() else {
             return;
         };
+        let (bw, bh) = (self.lat.w.div_ceil(BLOCK), self.lat.h.div_ceil(BLOCK));
+        let cap = usize::from(CLEAR);
+        // At least four times CLEAR rows a band, so that redrawing the
+        // rows around the cuts stays a small part of the work.
+        let bands = threads.min(bh / (4 * cap)).max(1);
+        if (i0, j0, i1 / BLOCK, j1 / BLOCK) == (0, 0, bw - 1, bh - 1)
+            && bands > 1
+            && bw * bh >= banded
+        {
+            let rows = bh.div_ceil(bands);
+            let (bits, tw) = (&self.bits, self.tw);
+            std::thread::scope(|s| {
+                for (b, band) in self.clear.chunks_mut(rows * bw).enumerate() {
+                    s.spawn(move || {
+                        fill_rows(bits, tw, b * rows, band, bw);
+                        chamfer(band, bw);
+                    });
+                }
+            });
+            // Each band saw only its own blocks: the rows within CLEAR of
+            // a cut may be nearer something across it.
+            for cut in (1..bands).map(|b| b * rows).filter(|&c| c < bh) {
+                self.redraw([0, cut, bw - 1, cut]);
+            }
+            return;
+        }
+        self.redraw([i0 / BLOCK, j0 / BLOCK, i1 / BLOCK, j1 / BLOCK]);
+    }
+
+    /// Redraws the clearance of the blocks within [`CLEAR`] of the box of
+    /// blocks `(i0, j0, i1, j1)`, from the blocks within CLEAR of those.
+    fn redraw(&mut self, [i0, j0, i1, j1]: [usize; 4]) {
         let (bw, bh) = (self.lat.w.div_ceil(BLOCK), self.lat.h.div_ceil(BLOCK));
         let cap = usize::from(CLEAR);
         let grow = |[i0, j0, i1, j1]: [usize; 4]| {
@@ -431,24 +483,13 @@ impl Grid {
         };
         // The blocks whose clearance may have changed, and the blocks that
         // decide it (within CLEAR of them).
-        let win = grow([i0 / BLOCK, j0 / BLOCK, i1 / BLOCK, j1 / BLOCK]);
+        let win = grow([i0, j0, i1, j1]);
         let src = grow(win);
         let (bits, tw) = (&self.bits, self.tw);
-        // A block's four rows of four bits, in one row of its tile each.
-        let of = |bi: usize, bj: usize| {
-            let (i, j) = (bi * BLOCK, bj * BLOCK);
-            let rows = bits[bit_row(tw, i, j)..][..BLOCK].iter();
-            if rows.fold(0, |any, &r| any | r >> (i % TILE) & 0xF) != 0 {
-                0
-            } else {
-                CLEAR
-            }
-        };
+        let of = |bi: usize, bj: usize| block_clear(bits, tw, bi, bj);
         if src == [0, 0, bw - 1, bh - 1] {
             // The whole grid: in place.
-            for (k, d) in self.clear.iter_mut().enumerate() {
-                *d = of(k % bw, k / bw);
-            }
+            fill_rows(bits, tw, 0, &mut self.clear, bw);
             chamfer(&mut self.clear, bw);
             return;
         }
@@ -464,12 +505,70 @@ impl Grid {
         }
     }
 
-    /// Marks every cell of the polygon with `id`.
+    /// Marks every cell of the polygon with `id` (the cells
+    /// [`Lattice::polygon_cells`] reports).
     pub fn fill_polygon(&mut self, pts: &[(f64, f64)], id: u16) {
+        if pts.len() >= 3 {
+            if let Some(rect) = upright_rect(pts) {
+                if let Some((lo, hi)) = self.lat.cells_of_box(rect) {
+                    self.fill_box(lo, hi, id);
+                }
+                return;
+            }
+        }
         let mut cells = Vec::new();
         self.lat.polygon_cells(pts, |i, j| cells.push((i, j)));
         for (i, j) in cells {
             self.set(i, j, id);
+        }
+    }
+
+    /// Marks the cells from `lo` to `hi` (corners included, in the grid)
+    /// with `id`: a tile's rows of bits at once where the tile holds
+    /// nothing else (a bitmap's dark runs, most of a floorplan: Stage's
+    /// large.world, cell by cell, took 0.6 s of its 2 s load).
+    fn fill_box(&mut self, lo: (usize, usize), hi: (usize, usize), id: u16) {
+        if id == EMPTY || id == MIXED {
+            for j in lo.1..=hi.1 {
+                for i in lo.0..=hi.0 {
+                    self.set(i, j, id);
+                }
+            }
+            return;
+        }
+        for tj in lo.1 / TILE..=hi.1 / TILE {
+            for ti in lo.0 / TILE..=hi.0 / TILE {
+                let t = tj * self.tw + ti;
+                let (i0, i1) = (lo.0.max(ti * TILE), hi.0.min(ti * TILE + TILE - 1));
+                let (j0, j1) = (lo.1.max(tj * TILE), hi.1.min(tj * TILE + TILE - 1));
+                if self.ids[t] != EMPTY && self.ids[t] != id {
+                    // Cells of other ids: kept cell by cell.
+                    for j in j0..=j1 {
+                        for i in i0..=i1 {
+                            self.set(i, j, id);
+                        }
+                    }
+                    continue;
+                }
+                let mask = ((1u32 << (i1 - i0 + 1)) - 1) << (i0 % TILE);
+                let mask = mask as u16;
+                let mut added = 0;
+                for j in j0..=j1 {
+                    let row = &mut self.bits[bit_row(self.tw, i0, j)];
+                    added += (mask & !*row).count_ones();
+                    *row |= mask;
+                }
+                if added > 0 {
+                    self.tiles[t] += added;
+                    self.ids[t] = id;
+                    if !self.clear.is_empty() {
+                        self.stale = Some(match self.stale {
+                            Some([a, b, c, d]) => [a.min(i0), b.min(j0), c.max(i1), d.max(j1)],
+                            None => [i0, j0, i1, j1],
+                        });
+                    }
+                }
+            }
         }
     }
 
@@ -955,50 +1054,93 @@ impl Aim {
     }
 }
 
+/// Block (bi, bj)'s clearance before the chamfer: 0 when one of its cells
+/// is occupied, [`CLEAR`] when none is. Its four rows of four bits lie in
+/// one row of its tile each.
+#[inline(always)]
+fn block_clear(bits: &[u16], tw: usize, bi: usize, bj: usize) -> u8 {
+    let (i, j) = (bi * BLOCK, bj * BLOCK);
+    let rows = bits[bit_row(tw, i, j)..][..BLOCK].iter();
+    if rows.fold(0, |any, &r| any | r >> (i % TILE) & 0xF) != 0 {
+        0
+    } else {
+        CLEAR
+    }
+}
+
+/// Fills `out`, rows of `bw` blocks from block row `first` on, with each
+/// block's [`block_clear`]: a tile's four rows of bits at once for the
+/// four blocks side by side in them.
+fn fill_rows(bits: &[u16], tw: usize, first: usize, out: &mut [u8], bw: usize) {
+    const PER_TILE: usize = TILE / BLOCK;
+    for (y, row) in (first..).zip(out.chunks_mut(bw)) {
+        let j = y * BLOCK;
+        for (tc, four) in row.chunks_mut(PER_TILE).enumerate() {
+            let at = bit_row(tw, tc * TILE, j);
+            let m = bits[at..at + BLOCK].iter().fold(0, |any, &r| any | r);
+            for (k, d) in four.iter_mut().enumerate() {
+                *d = if m >> (k * BLOCK) & 0xF != 0 {
+                    0
+                } else {
+                    CLEAR
+                };
+            }
+        }
+    }
+}
+
 /// Turns `d` (rows of `w` cells: 0 where occupied, [`CLEAR`] where not)
 /// into each cell's Chebyshev distance to the nearest 0, at most `CLEAR`:
 /// two passes of the 8-neighbour chamfer, which is exact for this metric.
+/// Each pass takes a row from its neighbour row at once (three cells of it
+/// a cell, with no dependency from cell to cell, which the compiler turns
+/// into vector instructions), then runs along the row. (Cell by cell with
+/// all four neighbours, and each block's bits read alone, Stage's
+/// large.world's clearance took 1.25 s on one thread; now 0.16 s.)
 fn chamfer(d: &mut [u8], w: usize) {
     let h = d.len() / w;
     for y in 0..h {
-        for x in 0..w {
-            let k = y * w + x;
-            let mut v = d[k];
-            if x > 0 {
-                v = v.min(d[k - 1] + 1);
-            }
-            if y > 0 {
-                let up = k - w;
-                v = v.min(d[up] + 1);
-                if x > 0 {
-                    v = v.min(d[up - 1] + 1);
-                }
-                if x + 1 < w {
-                    v = v.min(d[up + 1] + 1);
-                }
-            }
-            d[k] = v;
+        let (done, rest) = d.split_at_mut(y * w);
+        let row = &mut rest[..w];
+        if y > 0 {
+            from_row(row, &done[(y - 1) * w..]);
         }
+        along(row.iter_mut());
     }
     for y in (0..h).rev() {
-        for x in (0..w).rev() {
-            let k = y * w + x;
-            let mut v = d[k];
-            if x + 1 < w {
-                v = v.min(d[k + 1] + 1);
-            }
-            if y + 1 < h {
-                let down = k + w;
-                v = v.min(d[down] + 1);
-                if x + 1 < w {
-                    v = v.min(d[down + 1] + 1);
-                }
-                if x > 0 {
-                    v = v.min(d[down - 1] + 1);
-                }
-            }
-            d[k] = v;
+        let (row, done) = d[y * w..].split_at_mut(w);
+        if y + 1 < h {
+            from_row(row, &done[..w]);
         }
+        along(row.iter_mut().rev());
+    }
+}
+
+/// Each cell of `row` at most one more than its three neighbours in the
+/// row `next` to it.
+#[inline]
+fn from_row(row: &mut [u8], next: &[u8]) {
+    let w = row.len();
+    if w == 1 {
+        row[0] = row[0].min(next[0] + 1);
+        return;
+    }
+    row[0] = row[0].min(next[0].min(next[1]) + 1);
+    row[w - 1] = row[w - 1].min(next[w - 2].min(next[w - 1]) + 1);
+    let mid = row[1..w - 1].iter_mut();
+    let three = next.iter().zip(&next[1..]).zip(&next[2..w]);
+    for (v, ((&a, &b), &c)) in mid.zip(three) {
+        *v = (*v).min(a.min(b).min(c) + 1);
+    }
+}
+
+/// Each cell at most one more than the one before it.
+#[inline]
+fn along<'a>(cells: impl Iterator<Item = &'a mut u8>) {
+    let mut last = CLEAR;
+    for v in cells {
+        last = (*v).min(last + 1);
+        *v = last;
     }
 }
 
@@ -1329,6 +1471,85 @@ mod tests {
 
     /// The clearance is the exact Chebyshev distance to the nearest
     /// occupied cell (capped), kept right as cells fill and empty.
+    #[test]
+    fn rectangles_filled_tile_by_tile_are_the_cells_set_one_by_one() {
+        // Upright rectangles of three ids over each other, across tiles
+        // and within them, some over cells of another id, then a few
+        // emptied: every cell, tile count and clearance as cell by cell.
+        let mut rnd = uniform(23);
+        let rects: Vec<([(f64, f64); 4], u16)> = (0..60)
+            .map(|k| {
+                let (x, y) = (rnd() * 3.5, rnd() * 2.5);
+                let (w, h) = (rnd() * 0.6 + 0.001, rnd() * 0.6 + 0.001);
+                let id = [1, 2, 3][k % 3];
+                ([(x, y), (x + w, y), (x + w, y + h), (x, y + h)], id)
+            })
+            .collect();
+        let mut fast = Grid::new(0.0, 0.0, 4.0, 3.0, 0.02);
+        let mut slow = fast.clone();
+        fast.keep_clearance();
+        slow.keep_clearance();
+        let lat = slow.lat;
+        for (k, (pts, id)) in rects.iter().enumerate() {
+            fast.fill_polygon(pts, *id);
+            lat.polygon_cells(pts, |i, j| slow.set(i, j, *id));
+            if k % 20 == 19 {
+                fast.clear_polygon(&rects[k - 5].0, rects[k - 5].1);
+                slow.clear_polygon(&rects[k - 5].0, rects[k - 5].1);
+            }
+        }
+        let (w, h) = fast.lat.size();
+        for j in 0..h {
+            for i in 0..w {
+                assert_eq!(fast.get(i, j), slow.get(i, j), "cell ({i}, {j})");
+            }
+        }
+        assert_eq!(fast.tiles, slow.tiles);
+        assert_eq!(fast.ids, slow.ids);
+        assert!(fast.ids.contains(&MIXED), "some tile holds several ids");
+        fast.refresh_clearance();
+        slow.refresh_clearance();
+        assert_eq!(fast.clear, slow.clear);
+    }
+
+    #[test]
+    fn clearance_drawn_in_bands_is_the_clearance_drawn_whole() {
+        // 16 m × 16 m of 2 cm cells: 200 × 200 blocks (two or three bands
+        // of rows), random boxes, a wall along the first cut's row (at
+        // 8 m, or 5.36 m in three bands) and one just past it.
+        let walls = |g: &mut Grid| {
+            let mut rnd = uniform(5);
+            for _ in 0..40 {
+                let (x, y) = (rnd() * 15.0, rnd() * 15.0);
+                let (w, h) = (rnd() * 0.8 + 0.02, rnd() * 0.8 + 0.02);
+                g.fill_polygon(&[(x, y), (x + w, y), (x + w, y + h), (x, y + h)], 1);
+            }
+            for y in [5.36, 8.0] {
+                g.fill_polygon(&[(2.0, y), (9.0, y), (9.0, y + 0.02), (2.0, y + 0.02)], 2);
+                let y = y + 0.1;
+                g.fill_polygon(&[(3.0, y), (3.5, y), (3.5, y + 0.02), (3.0, y + 0.02)], 2);
+            }
+        };
+        let mut whole = Grid::new(0.0, 0.0, 16.0, 16.0, 0.02);
+        walls(&mut whole);
+        whole.keep_clearance();
+        whole.refresh_clearance();
+        for threads in [2, 3, 8] {
+            let mut banded = Grid::new(0.0, 0.0, 16.0, 16.0, 0.02);
+            walls(&mut banded);
+            banded.keep_clearance();
+            banded.refresh(threads, 0);
+            assert!(banded.stale.is_none());
+            let differ = (whole.clear.iter().zip(&banded.clear)).filter(|(a, b)| a != b);
+            assert_eq!(differ.count(), 0, "{threads} threads");
+        }
+        // A grid too short for two bands is drawn whole.
+        let mut flat = Grid::new(0.0, 0.0, 16.0, 1.0, 0.02);
+        flat.keep_clearance();
+        flat.refresh(2, 0);
+        assert!(flat.clear.iter().all(|&d| d == CLEAR));
+    }
+
     #[test]
     fn clearance_follows_the_cells() {
         let mut g = Grid::new(0.0, 0.0, 8.0, 6.0, 0.02);

@@ -498,7 +498,10 @@ impl Sim {
         // No more threads than cores: the helpers spin while the bases
         // move, and one without a core of its own would slow the moves.
         let cores = std::thread::available_parallelism().map_or(1, usize::from);
-        sim.set_threads(sim.world.threads.clamp(1, cores));
+        let threads = sim.world.threads.clamp(1, cores);
+        // A large map's clearance is drawn on the threads the world may use.
+        sim.statics.refresh_clearance_on(threads);
+        sim.set_threads(threads);
         sim.sense();
         Ok(sim)
     }

@@ -134,7 +134,9 @@ impl Sim {
     /// global pose `at`.
     pub(super) fn occupy(&mut self, m: usize, at: Pose) {
         self.unplace(m);
-        self.body_cells(m, at, |g, i, j| g.set(i, j, id(m)));
+        for pts in self.placed(m, at).body.polys() {
+            self.statics.fill_polygon(pts, id(m));
+        }
         self.written_at[m] = Some(at);
     }
 
