@@ -97,6 +97,15 @@ def test_callbacks_and_streams_deliver_every_message(launch):
     assert stamps == sorted(stamps) and len(stamps) >= 2
     streamed = [s for _, s in zip(range(4), laser.stream())]
     assert len(streamed) == 4
+    # From a count taken earlier, a stream starts with what came since:
+    # two steps' scans come before it is called (a step may bring two).
+    before, stamp = laser.count, laser.stamp_of("laser/scan")
+    for _ in range(2):
+        newer = stamp
+        while stamp <= newer:
+            stamp = laser.read().stamp_of("laser/scan")
+    first = next(s for s in laser.stream(since=before) if s.kind == "laser/scan")
+    assert first.stamp < stamp, (first.stamp, stamp)
 
 
 def test_map_comes_as_an_array(launch):
@@ -115,10 +124,14 @@ def test_nav_stack_localizes_and_plans(launch):
     truth = sim.get_pose2d("r0")
     # The hypotheses amcl draws on set_pose may come before set_pose returns
     # (its answer and its data travel apart), and the robot stands still, so
-    # nothing follows them: read what came so far, then the next message.
-    loc.read()
+    # nothing follows them: the stream starts from the count before it.
+    before = loc.count
     loc.set_pose(truth.x, truth.y, truth.yaw, cov=(0.05, 0.05, 0.01, 0, 0, 0))
-    est = loc.read(timeout=20).pose
+    est = None
+    for s in loc.stream(timeout=20, since=before):
+        if s.data["hypoths"]:
+            est = loc.pose
+            break
     assert est is not None and math.hypot(est.x - truth.x, est.y - truth.y) < 0.5, (est, truth)
     assert len(loc.particles()["particles"]) > 0
 

@@ -331,10 +331,17 @@ class Proxy:
         self._seen = max(after, self._feed.seq)
         return self
 
-    def stream(self, timeout: Optional[float] = READ_TIMEOUT) -> Iterator[Sample]:
+    def stream(self, timeout: Optional[float] = READ_TIMEOUT,
+               since: Optional[int] = None) -> Iterator[Sample]:
         """Every message from now on, in order; stops after ``timeout`` s without one
-        (``None``: never). A reader more than 256 messages behind skips the oldest."""
-        after = self._feed.seq
+        (``None``: never). A reader more than 256 messages behind skips the oldest.
+
+        ``since``: start after message number ``since`` instead (a ``count``
+        taken before a request): what a request makes a driver publish can
+        come before the request returns, and a stream begun after it would
+        miss that (``n = loc.count; loc.set_pose(...); loc.stream(since=n)``).
+        """
+        after = self._feed.seq if since is None else since
         while True:
             try:
                 after, kind, stamp, data = self._feed.next(after, 3600.0 if timeout is None else timeout)
