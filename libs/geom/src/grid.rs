@@ -377,12 +377,21 @@ impl Grid {
                 }
             }
         }
-        if (was == EMPTY) == (id == EMPTY) || self.clear.is_empty() {
+        if (was == EMPTY) != (id == EMPTY) {
+            self.mark_stale([i, j, i, j]);
+        }
+    }
+
+    /// Notes that cells of the box `(i0, j0, i1, j1)` were filled or
+    /// emptied, for the next [`Grid::refresh_clearance`] (when the grid
+    /// keeps a clearance).
+    fn mark_stale(&mut self, [i0, j0, i1, j1]: [usize; 4]) {
+        if self.clear.is_empty() {
             return;
         }
         self.stale = Some(match self.stale {
-            Some([i0, j0, i1, j1]) => [i0.min(i), j0.min(j), i1.max(i), j1.max(j)],
-            None => [i, j, i, j],
+            Some([a, b, c, d]) => [a.min(i0), b.min(j0), c.max(i1), d.max(j1)],
+            None => [i0, j0, i1, j1],
         });
     }
 
@@ -486,7 +495,6 @@ impl Grid {
         let win = grow([i0, j0, i1, j1]);
         let src = grow(win);
         let (bits, tw) = (&self.bits, self.tw);
-        let of = |bi: usize, bj: usize| block_clear(bits, tw, bi, bj);
         if src == [0, 0, bw - 1, bh - 1] {
             // The whole grid: in place.
             fill_rows(bits, tw, 0, &mut self.clear, bw);
@@ -495,7 +503,7 @@ impl Grid {
         }
         let sw = src[2] - src[0] + 1;
         let mut d: Vec<u8> = (src[1]..=src[3])
-            .flat_map(|y| (src[0]..src[0] + sw).map(move |x| of(x, y)))
+            .flat_map(|y| (src[0]..src[0] + sw).map(move |x| block_clear(bits, tw, x, y)))
             .collect();
         chamfer(&mut d, sw);
         let n = win[2] - win[0] + 1;
@@ -508,13 +516,11 @@ impl Grid {
     /// Marks every cell of the polygon with `id` (the cells
     /// [`Lattice::polygon_cells`] reports).
     pub fn fill_polygon(&mut self, pts: &[(f64, f64)], id: u16) {
-        if pts.len() >= 3 {
-            if let Some(rect) = upright_rect(pts) {
-                if let Some((lo, hi)) = self.lat.cells_of_box(rect) {
-                    self.fill_box(lo, hi, id);
-                }
-                return;
+        if let Some(rect) = upright_rect(pts) {
+            if let Some((lo, hi)) = self.lat.cells_of_box(rect) {
+                self.fill_box(lo, hi, id);
             }
+            return;
         }
         let mut cells = Vec::new();
         self.lat.polygon_cells(pts, |i, j| cells.push((i, j)));
@@ -528,21 +534,14 @@ impl Grid {
     /// nothing else (a bitmap's dark runs, most of a floorplan: Stage's
     /// large.world, cell by cell, took 0.6 s of its 2 s load).
     fn fill_box(&mut self, lo: (usize, usize), hi: (usize, usize), id: u16) {
-        if id == EMPTY || id == MIXED {
-            for j in lo.1..=hi.1 {
-                for i in lo.0..=hi.0 {
-                    self.set(i, j, id);
-                }
-            }
-            return;
-        }
+        let plain = id != EMPTY && id != MIXED;
         for tj in lo.1 / TILE..=hi.1 / TILE {
             for ti in lo.0 / TILE..=hi.0 / TILE {
                 let t = tj * self.tw + ti;
                 let (i0, i1) = (lo.0.max(ti * TILE), hi.0.min(ti * TILE + TILE - 1));
                 let (j0, j1) = (lo.1.max(tj * TILE), hi.1.min(tj * TILE + TILE - 1));
-                if self.ids[t] != EMPTY && self.ids[t] != id {
-                    // Cells of other ids: kept cell by cell.
+                if !plain || (self.ids[t] != EMPTY && self.ids[t] != id) {
+                    // Emptying, or cells of other ids: cell by cell.
                     for j in j0..=j1 {
                         for i in i0..=i1 {
                             self.set(i, j, id);
@@ -561,12 +560,7 @@ impl Grid {
                 if added > 0 {
                     self.tiles[t] += added;
                     self.ids[t] = id;
-                    if !self.clear.is_empty() {
-                        self.stale = Some(match self.stale {
-                            Some([a, b, c, d]) => [a.min(i0), b.min(j0), c.max(i1), d.max(j1)],
-                            None => [i0, j0, i1, j1],
-                        });
-                    }
+                    self.mark_stale([i0, j0, i1, j1]);
                 }
             }
         }
