@@ -214,8 +214,7 @@ pub struct Queue {
     fresh: bool,
     /// When this round began waiting for due data (it had a new step),
     /// and the newest stamp then.
-    waiting_since: Option<Instant>,
-    waiting_at: Option<f64>,
+    waiting_since: Option<(Instant, f64)>,
     /// Until when a round waits for a new step or for due data.
     waiting: Option<Instant>,
     dropped: u32,
@@ -243,7 +242,6 @@ impl Queue {
             round_stamp: f64::NEG_INFINITY,
             fresh: false,
             waiting_since: None,
-            waiting_at: None,
             waiting: None,
             dropped: 0,
             dropped_total: 0,
@@ -468,9 +466,8 @@ impl Queue {
             return true;
         }
         let t = self.paces.iter().map(|p| p.newest).fold(f64::MIN, f64::max);
-        let since = *self.waiting_since.get_or_insert(now);
-        let newer = t > *self.waiting_at.get_or_insert(t);
-        let round = since + if newer { ROUND_WAIT } else { QUIET_WAIT };
+        let (since, at) = *self.waiting_since.get_or_insert((now, t));
+        let round = since + if t > at { ROUND_WAIT } else { QUIET_WAIT };
         let until = self
             .paces
             .iter()
@@ -506,7 +503,6 @@ impl Queue {
         self.data_requested = true;
         self.fresh = false;
         self.waiting_since = None;
-        self.waiting_at = None;
         self.waiting = None;
     }
 
@@ -542,7 +538,6 @@ impl Queue {
         if self.pull && self.data_requested && !self.must_wait(now) {
             self.data_requested = false;
             self.waiting_since = None;
-            self.waiting_at = None;
             self.waiting = None;
             let h = Header {
                 interf: u32::from(PLAYER_CODE),
