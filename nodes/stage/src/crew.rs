@@ -194,7 +194,7 @@ impl Crew {
                     // The helpers finish about when this thread does: spin
                     // for them, or the scope's wait puts this thread to
                     // sleep, and waking it takes longer.
-                    spin_until(|| running.load(Ordering::Acquire) == 0);
+                    wait_for(|| running.load(Ordering::Acquire) == 0);
                 })
             }
             None => main(),
@@ -216,13 +216,10 @@ impl Crew {
 const SPIN: Duration = Duration::from_millis(1);
 const NAP: Duration = Duration::from_micros(100);
 
-/// Waits until `ready` says so: spinning, then napping.
-pub fn spin_until(ready: impl Fn() -> bool) {
-    let start = Instant::now();
-    while !ready() {
-        if start.elapsed() < SPIN {
-            std::hint::spin_loop();
-        } else {
+/// Waits until `ready` says so: spinning for [`SPIN`], then napping.
+pub fn wait_for(ready: impl Fn() -> bool) {
+    if !troupe_node::spin_until(Instant::now() + SPIN, &ready) {
+        while !ready() {
             std::thread::park_timeout(NAP);
         }
     }
@@ -230,13 +227,9 @@ pub fn spin_until(ready: impl Fn() -> bool) {
 
 /// Runs the pool's next job if one comes within [`SPIN`].
 fn stay_awake() {
-    let start = Instant::now();
-    while start.elapsed() < SPIN {
-        match rayon::yield_now() {
-            Some(rayon::Yield::Executed) => return,
-            _ => std::hint::spin_loop(),
-        }
-    }
+    troupe_node::spin_until(Instant::now() + SPIN, || {
+        matches!(rayon::yield_now(), Some(rayon::Yield::Executed))
+    });
 }
 
 /// Cuts each share `starts[t]..starts[t + 1]` into runs of items in a

@@ -30,7 +30,7 @@ use troupe_geom::raster::{self, Raster};
 use troupe_geom::{bounds, normalize, Grid, Hit, InTile, Lattice, OccMap, Pose, Transform, EMPTY};
 use troupe_msgs::{map, Color};
 
-use crate::crew::{spin_until, Crew, Job};
+use crate::crew::{wait_for, Crew, Job};
 use crate::movers::{Body, Fan, Movers, Outline, Sweep};
 use crate::world::{Drive, Kind, Localization, Sensor, World};
 
@@ -700,7 +700,7 @@ impl Sim {
             plan(&read());
             // Spinning while the moves are carried out: a sleeping thread
             // would wake after they end.
-            spin_until(|| sensing.load(Ordering::Acquire) || over.load(Ordering::Acquire));
+            wait_for(|| sensing.load(Ordering::Acquire) || over.load(Ordering::Acquire));
             if sensing.load(Ordering::Acquire) {
                 sense(&read());
             }
