@@ -19,6 +19,10 @@ pub struct StageBenchArgs {
     /// Run only this world (simple, pioneers100, hospital1000) in this process.
     #[arg(long, hide = true)]
     pub only: Option<String>,
+    /// With `--world`: the row's name and what it says the world is, for
+    /// a copy the bench wrote (the cave with `wander`).
+    #[arg(long, hide = true, num_args = 2, value_names = ["NAME", "WHAT"])]
+    pub label: Vec<String>,
     /// Worker threads (the world's `threads`); 1 = one core.
     #[arg(long, default_value_t = 1)]
     pub threads: usize,
@@ -32,7 +36,9 @@ pub struct StageBenchArgs {
     /// Also run Stage's own benchmark worlds from a Stage checkout (its
     /// top directory or its worlds/): benchmark/cave.world and
     /// benchmark/hospital.world, as their authors wrote them, models and
-    /// controllers included (`threads` as given here).
+    /// controllers included (`threads` as given here), and the cave with
+    /// every robot's controller Stage's `wander`, which reads its laser
+    /// every step (a copy written beside cave.world, removed after).
     #[arg(long, value_name = "DIR")]
     pub stage_worlds: Option<std::path::PathBuf>,
     /// Run just this world file instead, as its authors wrote it, models
@@ -83,17 +89,24 @@ pub fn run(a: &StageBenchArgs) -> anyhow::Result<()> {
         "--stage runs Stage on --world FILE or on --stage-worlds DIR: give one"
     );
     if let (Some(path), Some(stage)) = (&a.world, &a.stage) {
-        return crate::vs_stage::compare(&runs(a), stage, path);
+        return crate::vs_stage::compare(&runs(a), stage, path, None);
     }
     if let Some(path) = &a.world {
-        let name = path.file_name().unwrap_or_default().to_string_lossy();
+        let (name, what) = match &a.label[..] {
+            [name, what] => (name.clone(), what.clone()),
+            _ => (
+                path.file_name()
+                    .unwrap_or_default()
+                    .to_string_lossy()
+                    .into_owned(),
+                format!("{}, as Stage's authors wrote it", path.display()),
+            ),
+        };
         let t_load = Instant::now();
         let mut world = troupe_stage::world::load(path)?;
         world.threads = a.threads;
-        let what = format!(
-            "{}, as Stage's authors wrote it; sensors sensed as Stage senses them, while its controllers read them",
-            path.display()
-        );
+        let what =
+            format!("{what}; sensors sensed as Stage senses them, while its controllers read them");
         return run_world(a, &name, world, t_load, &what, false);
     }
     let bitmaps = crate::harness::stage_bitmaps(a.bitmaps.as_deref())?;
@@ -142,9 +155,23 @@ pub fn run(a: &StageBenchArgs) -> anyhow::Result<()> {
             })?;
         for file in ["benchmark/cave.world", "benchmark/hospital.world"] {
             match &a.stage {
-                Some(stage) => crate::vs_stage::compare(&runs(a), stage, &worlds.join(file))?,
+                Some(stage) => crate::vs_stage::compare(&runs(a), stage, &worlds.join(file), None)?,
                 None => run(&["--world".as_ref(), worlds.join(file).as_os_str()])?,
             }
+        }
+        let wander = crate::vs_stage::WanderCave::write(&worlds.join("benchmark/cave.world"))?;
+        let (name, what) = crate::vs_stage::WanderCave::LABEL;
+        match &a.stage {
+            Some(stage) => {
+                crate::vs_stage::compare(&runs(a), stage, wander.path(), Some((name, what)))?
+            }
+            None => run(&[
+                "--world".as_ref(),
+                wander.path().as_os_str(),
+                "--label".as_ref(),
+                name.as_ref(),
+                what.as_ref(),
+            ])?,
         }
     }
     if a.parry {

@@ -121,6 +121,19 @@ pub(crate) fn staged(text: &str, threads: usize, seconds: f64) -> String {
     out
 }
 
+/// Where `line`'s comment starts: its first `#` outside quotes.
+fn comment_at(line: &str) -> Option<usize> {
+    let mut quoted = false;
+    line.char_indices().find_map(|(i, c)| match c {
+        '"' => {
+            quoted = !quoted;
+            None
+        }
+        '#' if !quoted => Some(i),
+        _ => None,
+    })
+}
+
 /// `line` without its comment and its quoted strings (whose `#` and
 /// parentheses are text).
 fn code_of(line: &str) -> String {
@@ -135,6 +148,61 @@ fn code_of(line: &str) -> String {
         }
     }
     code
+}
+
+/// Stage's benchmark/cave.world with every robot's controller Stage's
+/// `wander` instead of `expand_pioneer`: `wander` reads the laser every
+/// step (180 rays a robot), where `expand_pioneer` reads only the sonars.
+/// The copy is written beside the original, whose includes it shares, and
+/// removed when this is dropped.
+pub struct WanderCave(Staged);
+
+impl WanderCave {
+    /// The row's name and what it says the world is.
+    pub const LABEL: (&'static str, &'static str) = (
+        "cave+wander",
+        "Stage's benchmark/cave.world with ctrl \"wander\" for \"expand_pioneer\": every robot reads its 180-beam laser every step",
+    );
+
+    /// Writes the copy of `cave` (Stage's benchmark/cave.world).
+    pub fn write(cave: &Path) -> anyhow::Result<WanderCave> {
+        let text = std::fs::read_to_string(cave)
+            .with_context(|| format!("cannot read {}", cave.display()))?;
+        let swapped = wandering(&text).with_context(|| {
+            format!(
+                "{}: no `ctrl \"expand_pioneer\"` to swap for `wander`",
+                cave.display()
+            )
+        })?;
+        let copy = cave.with_file_name(format!(
+            ".troupe-bench-{}-cave-wander.world",
+            std::process::id()
+        ));
+        std::fs::write(&copy, swapped)
+            .with_context(|| format!("cannot write {}", copy.display()))?;
+        Ok(WanderCave(Staged(copy)))
+    }
+
+    /// Where the copy is.
+    pub fn path(&self) -> &Path {
+        &self.0 .0
+    }
+}
+
+/// `text` with each `ctrl "expand_pioneer"` outside comments turned into
+/// `ctrl "wander"`; `None` when there is none.
+fn wandering(text: &str) -> Option<String> {
+    let mut swapped = 0;
+    let mut out = String::with_capacity(text.len());
+    for line in text.lines() {
+        let (code, comment) = line.split_at(comment_at(line).unwrap_or(line.len()));
+        let turned = code.replace("ctrl \"expand_pioneer\"", "ctrl \"wander\"");
+        swapped += usize::from(turned != code);
+        out.push_str(&turned);
+        out.push_str(comment);
+        out.push('\n');
+    }
+    (swapped > 0).then_some(out)
 }
 
 /// Removes the staged copy of a world, however the comparison ends.
@@ -170,15 +238,21 @@ pub struct Runs {
 /// beside it, so that its includes and bitmaps resolve) and with Troupe,
 /// `a.pairs` times each in turn, and prints Troupe's row and both sides'
 /// medians with their ratio.
-pub fn compare(a: &Runs, stage: &Path, world: &Path) -> anyhow::Result<()> {
-    let name = world
+pub fn compare(
+    a: &Runs,
+    stage: &Path,
+    world: &Path,
+    label: Option<(&str, &str)>,
+) -> anyhow::Result<()> {
+    let file_name = world
         .file_name()
         .context("a world file, not a directory")?
         .to_string_lossy()
         .into_owned();
+    let name = label.map_or(file_name.clone(), |(name, _)| name.to_owned());
     let text = std::fs::read_to_string(world)
         .with_context(|| format!("cannot read {}", world.display()))?;
-    let copy = world.with_file_name(format!(".troupe-bench-{}-{name}", std::process::id()));
+    let copy = world.with_file_name(format!(".troupe-bench-{}-{file_name}", std::process::id()));
     std::fs::write(&copy, staged(&text, a.threads, a.seconds))
         .with_context(|| format!("cannot write Stage's copy {}", copy.display()))?;
     let copy = Staged(copy);
@@ -196,6 +270,9 @@ pub fn compare(a: &Runs, stage: &Path, world: &Path) -> anyhow::Result<()> {
     let mut troupe: Vec<&OsStr> = vec![me.as_os_str()];
     troupe.extend(flags.iter().map(OsStr::new));
     troupe.push(world.as_os_str());
+    if let Some((name, what)) = label {
+        troupe.extend([OsStr::new("--label"), OsStr::new(name), OsStr::new(what)]);
+    }
     let stage_cmd = [stage.as_os_str(), OsStr::new("-g"), copy.0.as_os_str()];
     let stage_what = format!(
         "Stage ({} -g {}; its controllers need LD_LIBRARY_PATH on Stage's lib/ and STAGEPATH on its plugins)",
@@ -262,6 +339,18 @@ mod tests {
         );
         // Inside the model (its name's parenthesis is text): kept.
         assert!(s.contains("\n  paused 1 )\n"), "{s}");
+    }
+
+    #[test]
+    fn the_wander_cave_swaps_each_controller_and_no_comment() {
+        let cave = "define rob fancypioneer2dx\n(\n ctrl \"expand_pioneer\" # not \"wander\"\n)\n\
+                    # ctrl \"expand_pioneer\"\nrob( name \"a#1\" ctrl \"expand_pioneer\" )\n";
+        let w = wandering(cave).expect("swapped");
+        assert_eq!(w.matches("ctrl \"wander\"").count(), 2, "{w}");
+        assert!(w.contains(" ctrl \"wander\" # not \"wander\"\n"), "{w}");
+        assert!(w.contains("\n# ctrl \"expand_pioneer\"\n"), "{w}");
+        assert!(w.contains("rob( name \"a#1\" ctrl \"wander\" )"), "{w}");
+        assert_eq!(wandering("# ctrl \"expand_pioneer\"\nrob( )\n"), None);
     }
 
     #[test]
