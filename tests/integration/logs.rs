@@ -767,8 +767,28 @@ fn a_recorded_run_localizes_offline_as_it_did_live() {
     );
 
     // Replay into amcl, with no simulator: its estimates until the log's end.
+    // amcl starts where the log does, as the live one started where r0 did
+    // (-6, -6, 45°, replay.cfg's init_pose): on a loaded machine writelog can
+    // come up after r0 has wandered a second or two at four times real time.
+    let first = logged
+        .iter()
+        .find(|l| l.interface == "position2d" && l.kind == 1)
+        .expect("r0's odometry in the log");
+    let (x, y) = truth(&first.payload);
+    let yaw = 45.0 + first.payload[2].to_degrees();
+    let replay = std::fs::read_to_string(dir.join("worlds/replay.cfg")).unwrap();
+    let from_start = replay.replace(
+        "init_pose [-6 -6 45]",
+        &format!("init_pose [{x:.3} {y:.3} {yaw:.1}]"),
+    );
+    assert_ne!(from_start, replay, "replay.cfg's init_pose line changed");
+    std::fs::write(dir.join("worlds/replay-start.cfg"), from_start).unwrap();
+    eprintln!(
+        "logs: the log starts at {:.1} simulated s, r0 at ({x:.2}, {y:.2}, {yaw:.0}°)",
+        first.time
+    );
     let ns = troupe_tests::unique_namespace("replay");
-    let mut rep = launch_in(&dir, &ns, "worlds/replay.cfg", &[]);
+    let mut rep = launch_in(&dir, &ns, "worlds/replay-start.cfg", &[]);
     let (router, _) = troupe_tests::launch_ports(&mut rep);
     let session = troupe_tests::client_at(&router, &ns);
     let est = data_of(&session, Interface::Localize);
@@ -778,15 +798,18 @@ fn a_recorded_run_localizes_offline_as_it_did_live() {
 
     // The loop closed: amcl on the map built from the log (mapfile serves
     // the YAML), replaying the same log.
-    let replay = std::fs::read_to_string(dir.join("worlds/replay.cfg")).unwrap();
-    // The map's frame is the odometry's at the log's start: r0 starts at
-    // its origin there.
+    // The map's frame is the odometry's: r0 starts where its first reading
+    // says.
+    let (ox, oy, oyaw) = (first.payload[0], first.payload[1], first.payload[2]);
     let built = replay
         .replace(
             "filename \"bitmaps/office.png\" resolution 0.05",
             "filename \"../office.yaml\"",
         )
-        .replace("init_pose [-6 -6 45]", "init_pose [0 0 0]");
+        .replace(
+            "init_pose [-6 -6 45]",
+            &format!("init_pose [{ox:.3} {oy:.3} {:.1}]", oyaw.to_degrees()),
+        );
     assert_ne!(built, replay, "replay.cfg's mapfile line changed");
     std::fs::write(dir.join("worlds/replay-built.cfg"), built).unwrap();
     let ns = troupe_tests::unique_namespace("replay-built");
