@@ -727,14 +727,13 @@ fn a_recorded_run_localizes_offline_as_it_did_live() {
         .filter(|l| l.interface == "localize" && l.kind == 1 && l.payload[2] >= 1.0)
         .map(|l| (l.time, l.payload[3], l.payload[4]))
         .collect();
-    let end = logged
+    let odometry: Vec<&Logged> = logged
         .iter()
         .filter(|l| l.interface == "position2d" && l.kind == 1)
-        .map(|l| l.time)
-        .fold(0.0, f64::max);
-    let moved = logged
+        .collect();
+    let end = odometry.iter().map(|l| l.time).fold(0.0, f64::max);
+    let moved = odometry
         .iter()
-        .filter(|l| l.interface == "position2d" && l.kind == 1)
         .map(|l| l.payload[0].hypot(l.payload[1]))
         .fold(0.0, f64::max);
     assert!(moved > 1.0, "r0 wandered only {moved} m");
@@ -770,10 +769,7 @@ fn a_recorded_run_localizes_offline_as_it_did_live() {
     // amcl starts where the log does, as the live one started where r0 did
     // (-6, -6, 45°, replay.cfg's init_pose): on a loaded machine writelog can
     // come up after r0 has wandered a second or two at four times real time.
-    let first = logged
-        .iter()
-        .find(|l| l.interface == "position2d" && l.kind == 1)
-        .expect("r0's odometry in the log");
+    let first = odometry.first().expect("r0's odometry in the log");
     let (x, y) = truth(&first.payload);
     let yaw = 45.0 + first.payload[2].to_degrees();
     let replay = std::fs::read_to_string(dir.join("worlds/replay.cfg")).unwrap();

@@ -522,11 +522,8 @@ impl Grid {
             }
             return;
         }
-        let mut cells = Vec::new();
-        self.lat.polygon_cells(pts, |i, j| cells.push((i, j)));
-        for (i, j) in cells {
-            self.set(i, j, id);
-        }
+        let lat = self.lat;
+        lat.polygon_cells(pts, |i, j| self.set(i, j, id));
     }
 
     /// Marks the cells from `lo` to `hi` (corners included, in the grid)
@@ -568,13 +565,12 @@ impl Grid {
 
     /// Empties the cells of the polygon that hold `id`.
     pub fn clear_polygon(&mut self, pts: &[(f64, f64)], id: u16) {
-        let mut cells = Vec::new();
-        self.lat.polygon_cells(pts, |i, j| cells.push((i, j)));
-        for (i, j) in cells {
+        let lat = self.lat;
+        lat.polygon_cells(pts, |i, j| {
             if self.get(i, j) == id {
                 self.set(i, j, EMPTY);
             }
-        }
+        });
     }
 
     /// The first cell along the ray from (x, y) at `angle` whose id `accept`s,
@@ -1048,18 +1044,30 @@ impl Aim {
     }
 }
 
-/// Block (bi, bj)'s clearance before the chamfer: 0 when one of its cells
-/// is occupied, [`CLEAR`] when none is. Its four rows of four bits lie in
-/// one row of its tile each.
+/// The bits of the tile row of cells that block row `j / BLOCK` spans, at
+/// cell column `i`'s tile: its BLOCK rows of bits OR'd, each block a nibble.
 #[inline(always)]
-fn block_clear(bits: &[u16], tw: usize, bi: usize, bj: usize) -> u8 {
-    let (i, j) = (bi * BLOCK, bj * BLOCK);
-    let rows = bits[bit_row(tw, i, j)..][..BLOCK].iter();
-    if rows.fold(0, |any, &r| any | r >> (i % TILE) & 0xF) != 0 {
+fn block_bits(bits: &[u16], tw: usize, i: usize, j: usize) -> u16 {
+    let at = bit_row(tw, i, j);
+    bits[at..at + BLOCK].iter().fold(0, |any, &r| any | r)
+}
+
+/// A block's clearance before the chamfer from its nibble of
+/// [`block_bits`]: 0 when one of its cells is occupied, [`CLEAR`] when none is.
+#[inline(always)]
+fn clear_of(nibble: u16) -> u8 {
+    if nibble & 0xF != 0 {
         0
     } else {
         CLEAR
     }
+}
+
+/// Block (bi, bj)'s clearance before the chamfer (see [`clear_of`]).
+#[inline(always)]
+fn block_clear(bits: &[u16], tw: usize, bi: usize, bj: usize) -> u8 {
+    let (i, j) = (bi * BLOCK, bj * BLOCK);
+    clear_of(block_bits(bits, tw, i, j) >> (i % TILE))
 }
 
 /// Fills `out`, rows of `bw` blocks from block row `first` on, with each
@@ -1068,16 +1076,10 @@ fn block_clear(bits: &[u16], tw: usize, bi: usize, bj: usize) -> u8 {
 fn fill_rows(bits: &[u16], tw: usize, first: usize, out: &mut [u8], bw: usize) {
     const PER_TILE: usize = TILE / BLOCK;
     for (y, row) in (first..).zip(out.chunks_mut(bw)) {
-        let j = y * BLOCK;
         for (tc, four) in row.chunks_mut(PER_TILE).enumerate() {
-            let at = bit_row(tw, tc * TILE, j);
-            let m = bits[at..at + BLOCK].iter().fold(0, |any, &r| any | r);
+            let m = block_bits(bits, tw, tc * TILE, y * BLOCK);
             for (k, d) in four.iter_mut().enumerate() {
-                *d = if m >> (k * BLOCK) & 0xF != 0 {
-                    0
-                } else {
-                    CLEAR
-                };
+                *d = clear_of(m >> (k * BLOCK));
             }
         }
     }
@@ -1463,8 +1465,6 @@ mod tests {
         }
     }
 
-    /// The clearance is the exact Chebyshev distance to the nearest
-    /// occupied cell (capped), kept right as cells fill and empty.
     #[test]
     fn rectangles_filled_tile_by_tile_are_the_cells_set_one_by_one() {
         // Upright rectangles of three ids over each other, across tiles
@@ -1544,6 +1544,8 @@ mod tests {
         assert!(flat.clear.iter().all(|&d| d == CLEAR));
     }
 
+    /// The clearance is the exact Chebyshev distance to the nearest
+    /// occupied cell (capped), kept right as cells fill and empty.
     #[test]
     fn clearance_follows_the_cells() {
         let mut g = Grid::new(0.0, 0.0, 8.0, 6.0, 0.02);

@@ -153,25 +153,19 @@ pub fn run(a: &StageBenchArgs) -> anyhow::Result<()> {
                     dir.display()
                 )
             })?;
-        for file in ["benchmark/cave.world", "benchmark/hospital.world"] {
+        let cave = worlds.join("benchmark/cave.world");
+        let hospital = worlds.join("benchmark/hospital.world");
+        let wander = crate::vs_stage::WanderCave::write(&cave)?;
+        let label = Some(crate::vs_stage::WanderCave::LABEL);
+        for (world, label) in [(&*cave, None), (&*hospital, None), (wander.path(), label)] {
             match &a.stage {
-                Some(stage) => crate::vs_stage::compare(&runs(a), stage, &worlds.join(file), None)?,
-                None => run(&["--world".as_ref(), worlds.join(file).as_os_str()])?,
+                Some(stage) => crate::vs_stage::compare(&runs(a), stage, world, label)?,
+                None => {
+                    let mut args = vec!["--world".as_ref(), world.as_os_str()];
+                    args.extend(crate::vs_stage::label_args(label));
+                    run(&args)?
+                }
             }
-        }
-        let wander = crate::vs_stage::WanderCave::write(&worlds.join("benchmark/cave.world"))?;
-        let (name, what) = crate::vs_stage::WanderCave::LABEL;
-        match &a.stage {
-            Some(stage) => {
-                crate::vs_stage::compare(&runs(a), stage, wander.path(), Some((name, what)))?
-            }
-            None => run(&[
-                "--world".as_ref(),
-                wander.path().as_os_str(),
-                "--label".as_ref(),
-                name.as_ref(),
-                what.as_ref(),
-            ])?,
         }
     }
     if a.parry {

@@ -137,17 +137,9 @@ fn comment_at(line: &str) -> Option<usize> {
 /// `line` without its comment and its quoted strings (whose `#` and
 /// parentheses are text).
 fn code_of(line: &str) -> String {
-    let mut code = String::new();
-    let mut quoted = false;
-    for c in line.chars() {
-        match c {
-            '"' => quoted = !quoted,
-            '#' if !quoted => break,
-            _ if !quoted => code.push(c),
-            _ => {}
-        }
-    }
-    code
+    let code = &line[..comment_at(line).unwrap_or(line.len())];
+    // Quoted strings are the odd pieces between quotes.
+    code.split('"').step_by(2).collect()
 }
 
 /// Stage's benchmark/cave.world with every robot's controller Stage's
@@ -203,6 +195,14 @@ fn wandering(text: &str) -> Option<String> {
         out.push('\n');
     }
     (swapped > 0).then_some(out)
+}
+
+/// The hidden flags that give `troupe bench stage --world` a row's name
+/// and what it says the world is (none without a label).
+pub(crate) fn label_args<'a>(label: Option<(&'a str, &'a str)>) -> Vec<&'a OsStr> {
+    label.map_or_else(Vec::new, |(name, what)| {
+        vec![OsStr::new("--label"), OsStr::new(name), OsStr::new(what)]
+    })
 }
 
 /// Removes the staged copy of a world, however the comparison ends.
@@ -270,9 +270,7 @@ pub fn compare(
     let mut troupe: Vec<&OsStr> = vec![me.as_os_str()];
     troupe.extend(flags.iter().map(OsStr::new));
     troupe.push(world.as_os_str());
-    if let Some((name, what)) = label {
-        troupe.extend([OsStr::new("--label"), OsStr::new(name), OsStr::new(what)]);
-    }
+    troupe.extend(label_args(label));
     let stage_cmd = [stage.as_os_str(), OsStr::new("-g"), copy.0.as_os_str()];
     let stage_what = format!(
         "Stage ({} -g {}; its controllers need LD_LIBRARY_PATH on Stage's lib/ and STAGEPATH on its plugins)",

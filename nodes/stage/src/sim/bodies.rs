@@ -22,22 +22,6 @@ impl Sim {
         self.frames[m].met
     }
 
-    /// Calls `f(grid, i, j)` with the static grid for each cell model
-    /// `m`'s body covers at the global pose `at` (a cell may come more than
-    /// once).
-    pub(super) fn body_cells(
-        &mut self,
-        m: usize,
-        at: Pose,
-        mut f: impl FnMut(&mut Grid, usize, usize),
-    ) {
-        let body = self.placed(m, at);
-        let lat = *self.statics.lattice();
-        for pts in body.body.polys() {
-            lat.polygon_cells(pts, |i, j| f(&mut self.statics, i, j));
-        }
-    }
-
     /// (Re)writes model `m`'s body at its current pose: into the static
     /// grid, or filed with the moving bodies.
     pub(super) fn place(&mut self, m: usize) {
@@ -284,11 +268,9 @@ impl Sim {
         }
         self.drawn[m].clear();
         if let Some(at) = self.written_at[m].take() {
-            self.body_cells(m, at, |g, i, j| {
-                if g.get(i, j) == id(m) {
-                    g.set(i, j, EMPTY);
-                }
-            });
+            for pts in self.placed(m, at).body.polys() {
+                self.statics.clear_polygon(pts, id(m));
+            }
         }
     }
 }
