@@ -159,15 +159,18 @@ struct Pace {
     sig: (u32, u32, u8),
     /// Its newest sample's stamp.
     newest: f64,
-    /// The step between its last two stamps (0 until it has two).
+    /// The step between its last two live stamps (0 until it has two).
     period: f64,
+    /// `newest` came from the device's live feed, not from the latest
+    /// sample fetched at its opening: the next stamp minus it is a step.
+    live: bool,
     /// It missed a round's wait: not waited for until it publishes again.
     lagging: bool,
     /// The client opened the device and it had published once at most:
     /// its next sample is waited for (see [`Queue::expect`]).
     expected: bool,
-    /// When the client opened the device, until this kind's second sample
-    /// (its live feed has begun then): its wait runs to [`OPEN_WAIT`]
+    /// When the client opened the device, until this kind's second live
+    /// sample (its live feed has begun then): its wait runs to [`OPEN_WAIT`]
     /// after this.
     opened: Option<Instant>,
 }
@@ -300,6 +303,7 @@ impl Queue {
                 sig: (interf, index, ANY_SUBTYPE),
                 newest: f64::NEG_INFINITY,
                 period: 0.0,
+                live: false,
                 lagging: false,
                 expected: true,
                 opened: Some(now),
@@ -345,10 +349,23 @@ impl Queue {
 
     /// Queues a message under the replace rules and the length limit.
     pub fn push(&mut self, m: Out) {
+        self.queue(m, true);
+    }
+
+    /// Queues the latest sample a device's driver kept, fetched as the
+    /// client opened (or closed) it, as [`Queue::push`] does. Its stamp is
+    /// not a step of the device's pace: the live feed may begin several
+    /// steps after it, and a pace from that gap would let rounds end
+    /// without the device.
+    pub fn push_latest(&mut self, m: Out) {
+        self.queue(m, false);
+    }
+
+    fn queue(&mut self, m: Out, live: bool) {
         // Paces matter to PULL rounds only (an opened device stays
         // expected until a PULL round sees its data).
         if self.pull && m.kind == wire::DATA {
-            self.paced(&m);
+            self.paced(&m, live);
         }
         let op = self
             .rules
@@ -401,15 +418,19 @@ impl Queue {
     }
 
     /// Notes a data sample's stamp in its pace (dropped or not: it came,
-    /// so the round need not wait for it).
-    fn paced(&mut self, m: &Out) {
+    /// so the round need not wait for it); `live` when it came from the
+    /// device's feed.
+    fn paced(&mut self, m: &Out, live: bool) {
         let sig = (m.interf, m.index, m.subtype);
         match self.paces.iter_mut().find(|p| p.sig == sig) {
             Some(p) => {
                 if m.stamp > p.newest {
-                    p.period = m.stamp - p.newest;
+                    if p.live && live {
+                        p.period = m.stamp - p.newest;
+                        p.opened = None;
+                    }
                     p.newest = m.stamp;
-                    p.opened = None;
+                    p.live = live;
                 }
                 p.lagging = false;
             }
@@ -433,6 +454,7 @@ impl Queue {
                     sig,
                     newest: m.stamp,
                     period: 0.0,
+                    live,
                     lagging: false,
                     expected,
                     opened,
@@ -811,6 +833,34 @@ mod tests {
         // The laser comes: the round carries it and ends.
         q.push(data(6, 0.2));
         assert_eq!(drain_at(&mut q, start + 2 * ROUND_WAIT), [(D, 6), (S, 1)]);
+    }
+
+    #[test]
+    fn the_gap_from_a_latest_sample_to_a_late_live_feed_is_not_a_pace() {
+        // Opened at 0.1 s, both devices' latest samples come first; the
+        // laser's live feed starts two steps later (a loaded CI run).
+        let mut q = Queue::new(64);
+        q.set_pull(true);
+        q.expect(4, 0, Instant::now());
+        q.expect(6, 0, Instant::now());
+        q.push_latest(data(4, 0.1));
+        q.push_latest(data(6, 0.1));
+        for m in [data(4, 0.2), data(4, 0.3), data(6, 0.3)] {
+            q.push(m);
+        }
+        q.request_data(msg(A, 1, 4));
+        assert_eq!(
+            drain(&mut q),
+            [(A, 1), (D, 4), (D, 6), (D, 4), (D, 4), (D, 6), (S, 1)]
+        );
+        // The laser steps every 0.1 s, not 0.2 s: the next round waits for
+        // it (it went without it, as a laser 0.2 s apart is not due at 0.4).
+        q.request_data(msg(A, 1, 4));
+        q.push(data(4, 0.4));
+        assert_eq!(drain(&mut q), [(A, 1), (D, 4)]);
+        assert!(q.deadline().is_some(), "the round waits for the laser");
+        q.push(data(6, 0.4));
+        assert_eq!(drain(&mut q), [(D, 6), (S, 1)]);
     }
 
     #[test]

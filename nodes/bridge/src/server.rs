@@ -290,6 +290,12 @@ impl ClientQueue {
         self.with(|q| q.push(m));
     }
 
+    /// A device's latest sample, fetched as the client opened or closed it
+    /// (see [`Queue::push_latest`]).
+    fn push_latest(&self, m: Out) {
+        self.with(|q| q.push_latest(m));
+    }
+
     /// A device's sample, from the feed all its clients share: appended to
     /// the inbox for the writer task, whatever the client's state. Past
     /// the queue's length (a writer that is not run) it is dropped and
@@ -1457,7 +1463,7 @@ impl Conn {
         while let Ok(reply) = replies.recv() {
             if let Ok(sample) = reply.result() {
                 if let Ok(out) = data_message(dev, self.host, &sample.payload().to_bytes()) {
-                    self.queue.push(out);
+                    self.queue.push_latest(out);
                 }
             }
         }
