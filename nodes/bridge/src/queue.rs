@@ -349,7 +349,7 @@ impl Queue {
 
     /// Queues a message under the replace rules and the length limit.
     pub fn push(&mut self, m: Out) {
-        self.queue(m, true);
+        self.enqueue(m, true);
     }
 
     /// Queues the latest sample a device's driver kept, fetched as the
@@ -358,10 +358,10 @@ impl Queue {
     /// steps after it, and a pace from that gap would let rounds end
     /// without the device.
     pub fn push_latest(&mut self, m: Out) {
-        self.queue(m, false);
+        self.enqueue(m, false);
     }
 
-    fn queue(&mut self, m: Out, live: bool) {
+    fn enqueue(&mut self, m: Out, live: bool) {
         // Paces matter to PULL rounds only (an opened device stays
         // expected until a PULL round sees its data).
         if self.pull && m.kind == wire::DATA {
@@ -837,18 +837,15 @@ mod tests {
 
     #[test]
     fn the_gap_from_a_latest_sample_to_a_late_live_feed_is_not_a_pace() {
-        // Opened at 0.1 s, both devices' latest samples come first; the
-        // laser's live feed starts two steps later (a loaded CI run).
-        let mut q = Queue::new(64);
-        q.set_pull(true);
-        q.expect(4, 0, Instant::now());
-        q.expect(6, 0, Instant::now());
+        // Opened at 0.1 s and a round asked for: both devices' latest
+        // samples come first; the laser's live feed starts two steps later
+        // (a loaded CI run).
+        let mut q = opened_pull();
         q.push_latest(data(4, 0.1));
         q.push_latest(data(6, 0.1));
         for m in [data(4, 0.2), data(4, 0.3), data(6, 0.3)] {
             q.push(m);
         }
-        q.request_data(msg(A, 1, 4));
         assert_eq!(
             drain(&mut q),
             [(A, 1), (D, 4), (D, 6), (D, 4), (D, 4), (D, 6), (S, 1)]

@@ -158,21 +158,15 @@ impl WanderCave {
 
     /// Writes the copy of `cave` (Stage's benchmark/cave.world).
     pub fn write(cave: &Path) -> anyhow::Result<WanderCave> {
-        let text = std::fs::read_to_string(cave)
-            .with_context(|| format!("cannot read {}", cave.display()))?;
-        let swapped = wandering(&text).with_context(|| {
-            format!(
-                "{}: no `ctrl \"expand_pioneer\"` to swap for `wander`",
-                cave.display()
-            )
+        let copy = Staged::beside(cave, "cave-wander.world", |text| {
+            wandering(text).with_context(|| {
+                format!(
+                    "{}: no `ctrl \"expand_pioneer\"` to swap for `wander`",
+                    cave.display()
+                )
+            })
         })?;
-        let copy = cave.with_file_name(format!(
-            ".troupe-bench-{}-cave-wander.world",
-            std::process::id()
-        ));
-        std::fs::write(&copy, swapped)
-            .with_context(|| format!("cannot write {}", copy.display()))?;
-        Ok(WanderCave(Staged(copy)))
+        Ok(WanderCave(copy))
     }
 
     /// Where the copy is.
@@ -207,6 +201,23 @@ pub(crate) fn label_args<'a>(label: Option<(&'a str, &'a str)>) -> Vec<&'a OsStr
 
 /// Removes the staged copy of a world, however the comparison ends.
 struct Staged(PathBuf);
+
+impl Staged {
+    /// Writes `edit` of `world`'s text beside it (its includes and bitmaps
+    /// resolve from there), as `.troupe-bench-PID-name`.
+    fn beside(
+        world: &Path,
+        name: &str,
+        edit: impl FnOnce(&str) -> anyhow::Result<String>,
+    ) -> anyhow::Result<Staged> {
+        let text = std::fs::read_to_string(world)
+            .with_context(|| format!("cannot read {}", world.display()))?;
+        let copy = world.with_file_name(format!(".troupe-bench-{}-{name}", std::process::id()));
+        std::fs::write(&copy, edit(&text)?)
+            .with_context(|| format!("cannot write the copy {}", copy.display()))?;
+        Ok(Staged(copy))
+    }
+}
 
 impl Drop for Staged {
     fn drop(&mut self) {
@@ -249,13 +260,10 @@ pub fn compare(
         .context("a world file, not a directory")?
         .to_string_lossy()
         .into_owned();
-    let name = label.map_or(file_name.clone(), |(name, _)| name.to_owned());
-    let text = std::fs::read_to_string(world)
-        .with_context(|| format!("cannot read {}", world.display()))?;
-    let copy = world.with_file_name(format!(".troupe-bench-{}-{file_name}", std::process::id()));
-    std::fs::write(&copy, staged(&text, a.threads, a.seconds))
-        .with_context(|| format!("cannot write Stage's copy {}", copy.display()))?;
-    let copy = Staged(copy);
+    let name = label.map_or_else(|| file_name.clone(), |(name, _)| name.to_owned());
+    let copy = Staged::beside(world, &file_name, |text| {
+        Ok(staged(text, a.threads, a.seconds))
+    })?;
     let me = std::env::current_exe()?;
     let (seconds, threads) = (a.seconds.to_string(), a.threads.to_string());
     let flags = [
